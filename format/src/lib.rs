@@ -1,0 +1,27 @@
+//! The `.grotto` package: one file holding a cave's sparse voxel octree tiles, surfels, compressed
+//! colours, environment lighting, scene and provenance (spec: `docs/format.md`).
+//!
+//! - [`spec`]: raw `#[repr(C)]` mirrors of the on-disk structures.
+//! - [`Package`]: opens a file (memory map) or bytes, validates the header, section table and tile
+//!   directory once with checked arithmetic, then hands out views that cannot fail; section
+//!   checksums and contents are checked lazily on first read, all of them by [`Package::verify`].
+//! - [`PackageWriter`]: streams sections to a temp file and renames it into place atomically.
+//!
+//! This is a leaf crate: no GPU, threading or CLI dependencies. Its only `unsafe` is the memory map
+//! in `source.rs`.
+
+mod error;
+mod reader;
+mod scene;
+mod source;
+pub mod spec;
+pub mod svo;
+mod summary;
+mod writer;
+
+pub use error::{Error, Problem, Region, Result};
+pub use reader::{Element, Package, SectionInfo, Tile};
+pub use scene::{Camera, Environment, InputFile, Light, LightShape, Material, Provenance, Scene};
+pub use spec::{Codec, Scope, SectionKind};
+pub use summary::{KindSummary, SectionSummary, Summary, TileSummary};
+pub use writer::{Compression, PackageWriter, TileInfo};

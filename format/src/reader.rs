@@ -1,0 +1,731 @@
+//! Opening a package: every offset, length and count is validated once, with checked arithmetic,
+//! before anything is handed out; after that, the structural accessors cannot fail.
+//!
+//! Open cost is proportional to the section table and tile directory, never to the payload: section
+//! bytes are only touched when a section is first read, at which point its checksum and content are
+//! checked (once, cached) and zstd sections are decoded. [`Package::verify`] does that for all.
+
+use std::borrow::Cow;
+use std::fs::File;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use bytemuck::Pod;
+use xxhash_rust::xxh3::{Xxh3, xxh3_64};
+
+use crate::error::{Error, Problem, Region, Result};
+use crate::scene::{Provenance, Scene};
+use crate::source::Backing;
+use crate::spec::*;
+
+/// Largest header a reader accepts; bounds the work a lying `header_size` can cause.
+const MAX_HEADER_SIZE: u32 = 4096;
+/// Offset of `header_checksum` inside the header.
+const HEADER_CHECKSUM_OFFSET: usize = 64;
+
+/// A typed element of a section: ties a Rust type to the [`ElementType`] the spec gives it.
+pub trait Element: Pod {
+    const TYPE: ElementType;
+}
+
+macro_rules! element {
+    ($($t:ty => $e:ident),* $(,)?) => { $(impl Element for $t { const TYPE: ElementType = ElementType::$e; })* };
+}
+element!(
+    SvoNode => SvoNode, f32 => F32, Rgba8 => Rgba8, LeafNdf => LeafNdf, LeafEmission => LeafEmission,
+    Surfel => Surfel, Bc1Block => Bc1Block, ShRgb9 => ShRgb9, EnvMipLevel => EnvMipLevel,
+    Bc6hBlock => Bc6hBlock,
+);
+
+/// A validated section-table entry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SectionInfo {
+    /// Position in the section table.
+    pub index: u32,
+    /// `None` for kinds this reader does not know (they are skipped, not errors).
+    pub kind: Option<SectionKind>,
+    pub kind_raw: u32,
+    /// Always `Some` for known kinds.
+    pub codec: Option<Codec>,
+    pub scope: Scope,
+    pub item: u32,
+    pub offset: u64,
+    pub stored_len: u64,
+    pub raw_len: u64,
+    pub checksum: u64,
+}
+
+impl SectionInfo {
+    fn from_raw(index: u32, e: &RawSectionEntry) -> Self {
+        Self {
+            index,
+            kind: SectionKind::from_u32(e.kind),
+            kind_raw: e.kind,
+            codec: Codec::from_u32(e.codec),
+            scope: if e.tile == GLOBAL { Scope::Global } else { Scope::Tile(e.tile) },
+            item: e.item,
+            offset: e.offset,
+            stored_len: e.stored_len,
+            raw_len: e.raw_len,
+            checksum: e.checksum,
+        }
+    }
+
+    /// Human-readable kind, `unknown(N)` for kinds from a newer writer.
+    pub fn kind_name(&self) -> String {
+        self.kind.map_or_else(|| format!("unknown({})", self.kind_raw), |k| k.name().to_owned())
+    }
+}
+
+/// An open, structurally valid package.
+#[derive(Debug)]
+pub struct Package {
+    path: PathBuf,
+    backing: Backing,
+    header: RawHeader,
+    table: Range<usize>,
+    tiles: Range<usize>,
+    /// Per section: checksum and content checked (lazily, once).
+    checked: Box<[OnceLock<Result<(), Problem>>]>,
+}
+
+/// A tile of an open package.
+#[derive(Clone, Copy, Debug)]
+pub struct Tile<'a> {
+    package: &'a Package,
+    index: u32,
+    raw: &'a RawTileEntry,
+}
+
+impl Package {
+    /// Memory-maps and validates the package at `path`.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref().to_path_buf();
+        let io = |op, source| Error::Io { path: path.clone(), op, source };
+        let file = File::open(&path).map_err(|e| io("open", e))?;
+        let len = file.metadata().map_err(|e| io("stat", e))?.len();
+        // Some platforms refuse to map an empty file; it is invalid anyway.
+        let backing = if len < size_of::<RawHeader>() as u64 {
+            Backing::copy_of(&std::fs::read(&path).map_err(|e| io("read", e))?)
+        } else {
+            Backing::map(&file).map_err(|e| io("memory-map", e))?
+        };
+        Self::validate(path, backing)
+    }
+
+    /// Validates a package held in memory (copied once into 64-byte-aligned storage). `name` is used
+    /// in error messages.
+    pub fn from_bytes(name: impl Into<PathBuf>, bytes: &[u8]) -> Result<Self> {
+        Self::validate(name.into(), Backing::copy_of(bytes))
+    }
+
+    fn validate(path: PathBuf, backing: Backing) -> Result<Self> {
+        match check_structure(backing.bytes()) {
+            Ok((header, table, tiles)) => {
+                let checked = (0..header.section_count).map(|_| OnceLock::new()).collect();
+                Ok(Self { path, backing, header, table, tiles, checked })
+            }
+            Err(problem) => Err(Error::Invalid { path, problem }),
+        }
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// (major, minor) of the file.
+    pub fn version(&self) -> (u16, u16) {
+        (self.header.version_major, self.header.version_minor)
+    }
+
+    pub fn file_size(&self) -> u64 {
+        self.header.file_size
+    }
+
+    fn bytes(&self) -> &[u8] {
+        self.backing.bytes()
+    }
+
+    fn raw_sections(&self) -> &[RawSectionEntry] {
+        bytemuck::cast_slice(&self.bytes()[self.table.clone()])
+    }
+
+    fn raw_tiles(&self) -> &[RawTileEntry] {
+        bytemuck::cast_slice(&self.bytes()[self.tiles.clone()])
+    }
+
+    pub fn section_count(&self) -> u32 {
+        self.raw_sections().len() as u32
+    }
+
+    /// Every section, in table order, unknown kinds included.
+    pub fn sections(&self) -> impl ExactSizeIterator<Item = SectionInfo> + '_ {
+        self.raw_sections().iter().enumerate().map(|(i, e)| SectionInfo::from_raw(i as u32, e))
+    }
+
+    pub fn section(&self, index: u32) -> Option<SectionInfo> {
+        self.raw_sections().get(index as usize).map(|e| SectionInfo::from_raw(index, e))
+    }
+
+    /// The section of `kind` in `scope` with `item`, if the package has one.
+    pub fn find(&self, kind: SectionKind, scope: Scope, item: u32) -> Option<SectionInfo> {
+        match scope {
+            Scope::Global => self.sections().find(|s| s.kind == Some(kind) && s.scope == scope && s.item == item),
+            Scope::Tile(t) => self.tile(t)?.find(kind, item),
+        }
+    }
+
+    pub fn tile_count(&self) -> u32 {
+        self.raw_tiles().len() as u32
+    }
+
+    pub fn tile(&self, index: u32) -> Option<Tile<'_>> {
+        self.raw_tiles().get(index as usize).map(|raw| Tile { package: self, index, raw })
+    }
+
+    pub fn tiles(&self) -> impl ExactSizeIterator<Item = Tile<'_>> + '_ {
+        self.raw_tiles().iter().enumerate().map(|(i, raw)| Tile { package: self, index: i as u32, raw })
+    }
+
+    fn invalid(&self, problem: Problem) -> Error {
+        Error::Invalid { path: self.path.clone(), problem }
+    }
+
+    fn stored(&self, s: &SectionInfo) -> &[u8] {
+        // In bounds: checked at open.
+        &self.bytes()[s.offset as usize..(s.offset + s.stored_len) as usize]
+    }
+
+    /// The decoded bytes of a section, after its checksum (and, for known kinds, its content) has
+    /// been checked. Raw sections are borrowed from the map; zstd sections are decoded each call.
+    pub fn read_bytes(&self, s: &SectionInfo) -> Result<Cow<'_, [u8]>> {
+        self.read_checked::<u8>(s)
+    }
+
+    /// The elements of a section, cast in place for raw sections. Fails if the section does not
+    /// hold `T`.
+    pub fn read<T: Element>(&self, s: &SectionInfo) -> Result<Cow<'_, [T]>> {
+        if s.kind.map(SectionKind::element) != Some(T::TYPE) {
+            return Err(self.invalid(Problem::WrongElementType {
+                section: s.index,
+                kind: s.kind_name(),
+                requested: T::TYPE,
+            }));
+        }
+        self.read_checked::<T>(s)
+    }
+
+    fn read_checked<T: Pod>(&self, s: &SectionInfo) -> Result<Cow<'_, [T]>> {
+        let mut decoded = None;
+        let status = self.checked[s.index as usize].get_or_init(|| {
+            let data = self.check_section(s)?;
+            decoded = Some(data);
+            Ok(())
+        });
+        status.clone().map_err(|p| self.invalid(p))?;
+        let data = match decoded {
+            Some(d) => d,
+            None => self.decode(s).map_err(|p| self.invalid(p))?,
+        };
+        Ok(match data {
+            Cow::Borrowed(b) => Cow::Borrowed(bytemuck::cast_slice(b)),
+            Cow::Owned(v) => Cow::Owned(bytemuck::pod_collect_to_vec(&v)),
+        })
+    }
+
+    /// Checksum, decode, and content check of one section; returns the decoded bytes.
+    fn check_section(&self, s: &SectionInfo) -> Result<Cow<'_, [u8]>, Problem> {
+        let stored = self.stored(s);
+        let computed = xxh3_64(stored);
+        if computed != s.checksum {
+            return Err(Problem::SectionChecksum {
+                section: s.index,
+                kind: s.kind_name(),
+                stored: s.checksum,
+                computed,
+            });
+        }
+        let data = self.decode(s)?;
+        if let Some(kind) = s.kind {
+            let depth = match s.scope {
+                Scope::Tile(t) => self.raw_tiles()[t as usize].depth,
+                Scope::Global => 0,
+            };
+            check_content(kind, &data, depth).map_err(|reason| Problem::BadContent {
+                section: s.index,
+                kind: kind.name().to_owned(),
+                reason,
+            })?;
+        }
+        Ok(data)
+    }
+
+    fn decode(&self, s: &SectionInfo) -> Result<Cow<'_, [u8]>, Problem> {
+        let stored = self.stored(s);
+        match s.codec {
+            Some(Codec::Raw) | None => Ok(Cow::Borrowed(stored)),
+            Some(Codec::Zstd) => {
+                // raw_len was bounded at open by the largest expansion zstd can produce.
+                let mut out = vec![0u8; s.raw_len as usize];
+                let fail = |message: String| Problem::Decompress { section: s.index, kind: s.kind_name(), message };
+                let n = zstd::bulk::Decompressor::new()
+                    .and_then(|mut d| d.decompress_to_buffer(stored, &mut out[..]))
+                    .map_err(|e| fail(e.to_string()))?;
+                if n as u64 != s.raw_len {
+                    return Err(fail(format!("decoded {n} bytes, table says {}", s.raw_len)));
+                }
+                Ok(Cow::Owned(out))
+            }
+        }
+    }
+
+    /// The scene; an empty scene if the package has none.
+    pub fn scene(&self) -> Result<Scene> {
+        match self.find(SectionKind::Scene, Scope::Global, 0) {
+            Some(s) => self.read_json(&s),
+            None => Ok(Scene::default()),
+        }
+    }
+
+    /// How the package was built, if it says.
+    pub fn provenance(&self) -> Result<Option<Provenance>> {
+        self.find(SectionKind::Provenance, Scope::Global, 0).map(|s| self.read_json(&s)).transpose()
+    }
+
+    fn read_json<T: serde::de::DeserializeOwned>(&self, s: &SectionInfo) -> Result<T> {
+        let bytes = self.read_bytes(s)?;
+        // Content (including this parse) was checked by read_bytes; a failure here is impossible
+        // unless the types diverge, and is still reported rather than unwrapped.
+        serde_json::from_slice(&bytes).map_err(|e| {
+            self.invalid(Problem::BadContent { section: s.index, kind: s.kind_name(), reason: e.to_string() })
+        })
+    }
+
+    /// Checks every section's checksum and content. Returns all problems found (empty = valid).
+    pub fn verify(&self) -> Vec<Problem> {
+        self.sections()
+            .filter_map(|s| match self.read_bytes(&s) {
+                Ok(_) => None,
+                Err(Error::Invalid { problem, .. }) => Some(problem),
+                Err(other) => Some(Problem::BadContent {
+                    section: s.index,
+                    kind: s.kind_name(),
+                    reason: other.to_string(),
+                }),
+            })
+            .collect()
+    }
+}
+
+impl<'a> Tile<'a> {
+    pub fn index(&self) -> u32 {
+        self.index
+    }
+
+    /// World position of the minimum corner, metres.
+    pub fn origin_m(&self) -> [f64; 3] {
+        self.raw.origin_m
+    }
+
+    pub fn extent_m(&self) -> f64 {
+        self.raw.extent_m
+    }
+
+    pub fn grid(&self) -> [i32; 3] {
+        self.raw.grid
+    }
+
+    pub fn depth(&self) -> u32 {
+        self.raw.depth
+    }
+
+    pub fn point_count(&self) -> u64 {
+        self.raw.point_count
+    }
+
+    /// Edge length of a leaf voxel in metres.
+    pub fn leaf_size_m(&self) -> f64 {
+        self.raw.extent_m / f64::from(1u32 << self.raw.depth)
+    }
+
+    /// This tile's sections (a contiguous run of the table).
+    pub fn sections(&self) -> impl ExactSizeIterator<Item = SectionInfo> + 'a {
+        let first = self.raw.section_first;
+        let package = self.package;
+        (first..first + self.raw.section_count).map(move |i| package.section(i).expect("validated at open"))
+    }
+
+    pub fn find(&self, kind: SectionKind, item: u32) -> Option<SectionInfo> {
+        self.sections().find(|s| s.kind == Some(kind) && s.item == item)
+    }
+
+    /// Reads the tile's section of `kind` (item 0) as `T`; `Ok(None)` when the tile has none.
+    pub fn read<T: Element>(&self, kind: SectionKind) -> Result<Option<Cow<'a, [T]>>> {
+        self.find(kind, 0).map(|s| self.package.read::<T>(&s)).transpose()
+    }
+}
+
+/// Structural validation of the whole file. Returns the header and the byte ranges of the table
+/// and the tile directory. Touches only the header, table and directory.
+fn check_structure(bytes: &[u8]) -> Result<(RawHeader, Range<usize>, Range<usize>), Problem> {
+    let file_len = bytes.len() as u64;
+    let header_len = size_of::<RawHeader>();
+    if bytes.len() < header_len {
+        return Err(Problem::TooShort { len: file_len, needed: header_len as u64 });
+    }
+    let header: RawHeader = bytemuck::pod_read_unaligned(&bytes[..header_len]);
+    if header.magic != MAGIC {
+        return Err(Problem::BadMagic { found: header.magic });
+    }
+    // Before anything else: a different major may lay the header out differently.
+    if header.version_major != VERSION_MAJOR {
+        return Err(Problem::UnsupportedVersion {
+            found_major: header.version_major,
+            found_minor: header.version_minor,
+            supported_major: VERSION_MAJOR,
+            supported_minor: VERSION_MINOR,
+        });
+    }
+    let hs = header.header_size;
+    if hs < header_len as u32 || hs > MAX_HEADER_SIZE || u64::from(hs) > file_len {
+        return Err(Problem::BadHeaderSize { header_size: hs, minimum: header_len as u32, file_len });
+    }
+    let mut h = Xxh3::new();
+    h.update(&bytes[..HEADER_CHECKSUM_OFFSET]);
+    h.update(&[0u8; 8]);
+    h.update(&bytes[HEADER_CHECKSUM_OFFSET + 8..hs as usize]);
+    let computed = h.digest();
+    if computed != header.header_checksum {
+        return Err(Problem::HeaderChecksum { stored: header.header_checksum, computed });
+    }
+    if header.file_size != file_len {
+        return Err(Problem::Truncated { expected: header.file_size, actual: file_len });
+    }
+
+    let table = array_range(
+        Region::SectionTable,
+        header.section_table_offset,
+        header.section_count,
+        size_of::<RawSectionEntry>(),
+        file_len,
+    )?;
+    let tiles = array_range(
+        Region::TileDirectory,
+        header.tile_directory_offset,
+        header.tile_count,
+        size_of::<RawTileEntry>(),
+        file_len,
+    )?;
+    // Counts fit u32 (tile and section references are u32); any real file is far below this.
+    if header.section_count >= u64::from(u32::MAX) || header.tile_count >= u64::from(GLOBAL) {
+        return Err(Problem::Overflow { what: "section or tile count".into() });
+    }
+    let mut h = Xxh3::new();
+    h.update(&bytes[table.clone()]);
+    h.update(&bytes[tiles.clone()]);
+    let computed = h.digest();
+    if computed != header.table_checksum {
+        return Err(Problem::TableChecksum { stored: header.table_checksum, computed });
+    }
+
+    let sections: &[RawSectionEntry] = bytemuck::cast_slice(&bytes[table.clone()]);
+    let tile_entries: &[RawTileEntry] = bytemuck::cast_slice(&bytes[tiles.clone()]);
+    let mut regions = vec![
+        (0, u64::from(hs), Region::Header),
+        (table.start as u64, table.end as u64, Region::SectionTable),
+        (tiles.start as u64, tiles.end as u64, Region::TileDirectory),
+    ];
+    for (i, e) in sections.iter().enumerate() {
+        let s = SectionInfo::from_raw(i as u32, e);
+        let region = Region::Section(s.index);
+        let end = s
+            .offset
+            .checked_add(s.stored_len)
+            .ok_or_else(|| Problem::Overflow { what: format!("{region} offset + length") })?;
+        if end > file_len {
+            return Err(Problem::OutOfBounds { region, offset: s.offset, len: s.stored_len, file_len });
+        }
+        if s.offset % SECTION_ALIGN != 0 {
+            return Err(Problem::Misaligned { region, offset: s.offset, align: SECTION_ALIGN });
+        }
+        if let Scope::Tile(t) = s.scope
+            && u64::from(t) >= header.tile_count
+        {
+            return Err(Problem::NoSuchTile { section: s.index, tile: t, tile_count: header.tile_count });
+        }
+        regions.push((s.offset, end, region));
+        if let Some(kind) = s.kind {
+            check_known_entry(&s, kind)?;
+        }
+    }
+
+    // Overlaps: sort by start; empty regions overlap nothing.
+    regions.retain(|r| r.1 > r.0);
+    regions.sort_unstable_by_key(|r| (r.0, r.1));
+    for w in regions.windows(2) {
+        if w[1].0 < w[0].1 {
+            return Err(Problem::Overlap { first: w[0].2, second: w[1].2 });
+        }
+    }
+
+    // One section per (kind, scope, item) among known kinds.
+    let mut keys: Vec<_> = sections
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| SectionKind::from_u32(e.kind).is_some())
+        .map(|(i, e)| ((e.kind, e.tile, e.item), i as u32))
+        .collect();
+    keys.sort_unstable();
+    for w in keys.windows(2) {
+        if w[0].0 == w[1].0 {
+            let s = SectionInfo::from_raw(w[1].1, &sections[w[1].1 as usize]);
+            return Err(Problem::DuplicateSection {
+                first: w[0].1,
+                second: w[1].1,
+                kind: s.kind_name(),
+                scope: scope_name(s.scope),
+                item: s.item,
+            });
+        }
+    }
+
+    for (t, tile) in tile_entries.iter().enumerate() {
+        check_tile(t as u32, tile, sections)?;
+    }
+    // Every per-tile section sits in its tile's run.
+    for (i, e) in sections.iter().enumerate() {
+        if e.tile != GLOBAL {
+            let tile = &tile_entries[e.tile as usize];
+            let run = u64::from(tile.section_first)..u64::from(tile.section_first) + u64::from(tile.section_count);
+            if !run.contains(&(i as u64)) {
+                return Err(Problem::SectionOutsideTileRun { section: i as u32, tile: e.tile });
+            }
+        }
+    }
+    Ok((header, table, tiles))
+}
+
+fn scope_name(scope: Scope) -> String {
+    match scope {
+        Scope::Global => "the package".to_owned(),
+        Scope::Tile(t) => format!("tile {t}"),
+    }
+}
+
+/// Byte range of an array of `count` records of `size` bytes at `offset`, checked.
+fn array_range(region: Region, offset: u64, count: u64, size: usize, file_len: u64) -> Result<Range<usize>, Problem> {
+    let len = count
+        .checked_mul(size as u64)
+        .ok_or_else(|| Problem::Overflow { what: format!("{region} length ({count} entries)") })?;
+    let end = offset.checked_add(len).ok_or_else(|| Problem::Overflow { what: format!("{region} end") })?;
+    if end > file_len {
+        return Err(Problem::OutOfBounds { region, offset, len, file_len });
+    }
+    if offset % 8 != 0 {
+        return Err(Problem::Misaligned { region, offset, align: 8 });
+    }
+    Ok(offset as usize..end as usize)
+}
+
+fn check_known_entry(s: &SectionInfo, kind: SectionKind) -> Result<(), Problem> {
+    let name = || kind.name().to_owned();
+    let codec =
+        s.codec.ok_or_else(|| Problem::UnknownCodec { section: s.index, kind: name(), codec: s.kind_raw })?;
+    match codec {
+        Codec::Raw if s.stored_len != s.raw_len => {
+            return Err(Problem::RawLengthMismatch {
+                section: s.index,
+                kind: name(),
+                stored: s.stored_len,
+                raw: s.raw_len,
+            });
+        }
+        Codec::Zstd => {
+            let limit = s.stored_len.saturating_mul(MAX_ZSTD_RATIO).saturating_add(1 << 16);
+            if s.raw_len > limit {
+                return Err(Problem::ImplausibleLength {
+                    section: s.index,
+                    kind: name(),
+                    stored: s.stored_len,
+                    raw: s.raw_len,
+                });
+            }
+        }
+        Codec::Raw => {}
+    }
+    let element_size = kind.element().size();
+    if s.raw_len % element_size as u64 != 0 {
+        return Err(Problem::BadElementLength { section: s.index, kind: name(), len: s.raw_len, element_size });
+    }
+    match (kind.is_per_tile(), s.scope) {
+        (true, Scope::Global) => {
+            Err(Problem::WrongScope { section: s.index, kind: name(), found: scope_name(s.scope), expected: "a tile" })
+        }
+        (false, Scope::Tile(_)) => Err(Problem::WrongScope {
+            section: s.index,
+            kind: name(),
+            found: scope_name(s.scope),
+            expected: "the package",
+        }),
+        _ => Ok(()),
+    }
+}
+
+fn check_tile(t: u32, tile: &RawTileEntry, sections: &[RawSectionEntry]) -> Result<(), Problem> {
+    let bad = |reason: String| Problem::BadTile { tile: t, reason };
+    if !tile.origin_m.iter().all(|v| v.is_finite()) {
+        return Err(bad(format!("origin {:?} is not finite", tile.origin_m)));
+    }
+    if !(tile.extent_m.is_finite() && tile.extent_m > 0.0) {
+        return Err(bad(format!("extent {} m is not a positive number", tile.extent_m)));
+    }
+    if tile.depth > MAX_SVO_DEPTH {
+        return Err(bad(format!("SVO depth {} exceeds {MAX_SVO_DEPTH}", tile.depth)));
+    }
+    let end = u64::from(tile.section_first) + u64::from(tile.section_count);
+    if end > sections.len() as u64 {
+        return Err(bad(format!(
+            "section run {}..{end} exceeds the {}-entry table",
+            tile.section_first,
+            sections.len()
+        )));
+    }
+    for i in tile.section_first..end as u32 {
+        if sections[i as usize].tile != t {
+            return Err(bad(format!("section {i} in its run belongs to another scope")));
+        }
+    }
+    Ok(())
+}
+
+/// Checks that decoded section content is usable without further checks (no NaN, in-range
+/// indices), so the runtime can upload it as is.
+fn check_content(kind: SectionKind, data: &[u8], depth: u32) -> Result<(), String> {
+    fn finite(v: &[f32], what: &str, i: usize) -> Result<(), String> {
+        if v.iter().all(|x| x.is_finite()) { Ok(()) } else { Err(format!("{what} {i} is not finite: {v:?}")) }
+    }
+    fn cast<T: Pod>(data: &[u8]) -> Cow<'_, [T]> {
+        // In place when aligned (always for raw sections); a copy only for unaligned decoder output.
+        bytemuck::try_cast_slice(data).map_or_else(|_| Cow::Owned(bytemuck::pod_collect_to_vec(data)), Cow::Borrowed)
+    }
+    match kind {
+        SectionKind::SvoNodes => check_svo(&cast::<SvoNode>(data), depth),
+        SectionKind::LeafOpacity => {
+            for (i, v) in cast::<f32>(data).iter().enumerate() {
+                if !(0.0..=1.0).contains(v) {
+                    return Err(format!("opacity {i} is {v}, outside 0..=1"));
+                }
+            }
+            Ok(())
+        }
+        SectionKind::LeafNdf => {
+            for (i, n) in cast::<LeafNdf>(data).iter().enumerate() {
+                finite(&[n.mean[0], n.mean[1], n.mean[2], n.weight], "NDF", i)?;
+                let len = n.mean.iter().map(|c| c * c).sum::<f32>().sqrt();
+                if len > 1.0 + 1e-3 || n.weight < 0.0 {
+                    return Err(format!("NDF {i} has mean length {len} or negative weight {}", n.weight));
+                }
+            }
+            Ok(())
+        }
+        SectionKind::LeafEmission => {
+            for (i, e) in cast::<LeafEmission>(data).iter().enumerate() {
+                finite(&e.radiance, "emission", i)?;
+                if e.radiance.iter().any(|&c| c < 0.0) {
+                    return Err(format!("emission {i} is negative: {:?}", e.radiance));
+                }
+            }
+            Ok(())
+        }
+        SectionKind::Surfels => {
+            for (i, s) in cast::<Surfel>(data).iter().enumerate() {
+                finite(&s.position_tile_m, "surfel position", i)?;
+                finite(&s.normal, "surfel normal", i)?;
+                finite(&[s.radius_m, s.spread], "surfel radius/spread", i)?;
+                let len = s.normal.iter().map(|c| c * c).sum::<f32>().sqrt();
+                if (len - 1.0).abs() > 1e-3 || s.radius_m < 0.0 || !(0.0..=1.0).contains(&s.spread) {
+                    return Err(format!(
+                        "surfel {i}: normal length {len}, radius {} m, spread {}",
+                        s.radius_m, s.spread
+                    ));
+                }
+            }
+            Ok(())
+        }
+        SectionKind::EnvSh9 => {
+            for (i, sh) in cast::<ShRgb9>(data).iter().enumerate() {
+                finite(bytemuck::cast_slice(&sh.coeffs), "SH set", i)?;
+            }
+            Ok(())
+        }
+        SectionKind::EnvMipLevels => {
+            let mut next = 0u64;
+            for (i, l) in cast::<EnvMipLevel>(data).iter().enumerate() {
+                let blocks = u64::from(l.width.div_ceil(4)) * u64::from(l.height.div_ceil(4));
+                if l.width == 0 || l.height == 0 || blocks != u64::from(l.block_count) {
+                    return Err(format!("level {i} is {}x{} with {} blocks", l.width, l.height, l.block_count));
+                }
+                if u64::from(l.first_block) != next || !l.roughness.is_finite() {
+                    return Err(format!("level {i} starts at block {}, expected {next}", l.first_block));
+                }
+                next += blocks;
+            }
+            Ok(())
+        }
+        SectionKind::Scene => {
+            let scene: Scene = serde_json::from_slice(data).map_err(|e| e.to_string())?;
+            scene.check_finite()
+        }
+        SectionKind::Provenance => serde_json::from_slice::<Provenance>(data).map(drop).map_err(|e| e.to_string()),
+        SectionKind::LeafAlbedo | SectionKind::SurfelColorsRaw | SectionKind::SurfelColorsBc1 | SectionKind::EnvMipBc6h => {
+            Ok(())
+        }
+    }
+}
+
+/// The node array is level by level, sorted by Morton code within a level; the children of the
+/// inner nodes, taken in order, are exactly the nodes after the root (no orphans, no sharing) and
+/// match their parent's mask; leaves index the attribute arrays in order.
+fn check_svo(nodes: &[SvoNode], depth: u32) -> Result<(), String> {
+    let Some(root) = nodes.first() else { return Ok(()) };
+    if root.level != 0 || root.morton != 0 {
+        return Err("node 0 is not the root".into());
+    }
+    let mut leaf_index = 0u32;
+    let mut next_child = 1usize;
+    for (i, n) in nodes.iter().enumerate() {
+        // Claimed by an earlier parent, which checked its level and Morton code.
+        if i >= next_child {
+            return Err(format!("node {i} comes before its parent or has none"));
+        }
+        if u32::from(n.level) > depth {
+            return Err(format!("node {i} is at level {}, below the tile depth {depth}", n.level));
+        }
+        if u32::from(n.level) == depth {
+            if n.child_mask != 0 || n.first_child != leaf_index {
+                return Err(format!("leaf node {i} has children or leaf index {} (expected {leaf_index})", n.first_child));
+            }
+            leaf_index += 1;
+            continue;
+        }
+        let count = n.child_mask.count_ones() as usize;
+        if count == 0 || n.first_child as usize != next_child {
+            return Err(format!("inner node {i} has mask {:#010b} and first child {}, expected {next_child}", n.child_mask, n.first_child));
+        }
+        let children = nodes
+            .get(next_child..next_child + count)
+            .ok_or_else(|| format!("node {i}'s children {next_child}..+{count} are out of range"))?;
+        let octants = (0..8u64).filter(|o| n.child_mask & (1 << o) != 0);
+        for (c, o) in children.iter().zip(octants) {
+            if c.level != n.level + 1 || c.morton != (n.morton << 3 | o) {
+                return Err(format!("node {i}'s children do not match its mask at octant {o}"));
+            }
+        }
+        next_child += count;
+    }
+    if next_child != nodes.len() {
+        return Err(format!("{} nodes are nobody's children", nodes.len() - next_child));
+    }
+    Ok(())
+}

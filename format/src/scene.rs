@@ -1,0 +1,154 @@
+//! The two JSON sections: the scene (lights, materials, cameras, environment) and provenance (what
+//! built the package from what). They are small, read once, and change shape more often than the
+//! binary sections, so they are self-describing JSON rather than fixed records; unknown fields are
+//! ignored, which keeps them forward compatible within a major version.
+//!
+//! World positions are f64 metres in the package's world frame (survey coordinates can be ~5e6 m).
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+/// Everything in a package that is not geometry.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Scene {
+    pub lights: Vec<Light>,
+    pub materials: Vec<Material>,
+    pub cameras: Vec<Camera>,
+    pub environment: Option<Environment>,
+}
+
+/// A light source. Colours are linear RGB; `power_w` is radiant power in watts.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Light {
+    #[serde(default)]
+    pub name: String,
+    #[serde(flatten)]
+    pub shape: LightShape,
+    pub color: [f32; 3],
+    pub power_w: f32,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum LightShape {
+    Point {
+        position_m: [f64; 3],
+    },
+    Spot {
+        position_m: [f64; 3],
+        direction: [f32; 3],
+        inner_angle_rad: f32,
+        outer_angle_rad: f32,
+    },
+    /// A rectangle emitting on the side its normal faces; its samples are emissive leaves.
+    Area {
+        center_m: [f64; 3],
+        normal: [f32; 3],
+        size_m: [f32; 2],
+    },
+}
+
+/// Surface response for a named set of points (scans or regions chosen by the manifest).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Material {
+    pub name: String,
+    /// 0 = purely diffuse. Wet walls and water are specular.
+    #[serde(default)]
+    pub specular: f32,
+    /// GGX roughness of the specular lobe.
+    #[serde(default = "default_roughness")]
+    pub roughness: f32,
+}
+
+fn default_roughness() -> f32 {
+    0.5
+}
+
+/// A named viewpoint.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    pub name: String,
+    pub eye_m: [f64; 3],
+    pub look_at_m: [f64; 3],
+    #[serde(default = "default_up")]
+    pub up: [f64; 3],
+    pub fov_y_deg: f64,
+}
+
+fn default_up() -> [f64; 3] {
+    [0.0, 0.0, 1.0]
+}
+
+/// Environment light; its SH and prefiltered sections carry `item` = `index`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Environment {
+    pub index: u32,
+    pub intensity: f32,
+    /// The map it was computed from, as the manifest named it.
+    pub source: String,
+}
+
+/// How the package was made: enough to rebuild it and to tell two builds apart.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Provenance {
+    pub tool: String,
+    pub tool_version: String,
+    pub inputs: Vec<InputFile>,
+    /// Build parameters (depth, budgets, codecs, ...), by name.
+    pub parameters: BTreeMap<String, serde_json::Value>,
+}
+
+/// One input of a build.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct InputFile {
+    pub path: String,
+    pub bytes: u64,
+    /// XXH3-64 of the file, hex.
+    pub xxh3: String,
+}
+
+impl Scene {
+    /// The first non-finite number, if any, as a message (JSON cannot hold NaN, but it can hold
+    /// 1e400, which parses to infinity).
+    pub(crate) fn check_finite(&self) -> Result<(), String> {
+        let bad = |what: &str, v: &[f64]| {
+            if v.iter().all(|x| x.is_finite()) { Ok(()) } else { Err(format!("{what} is not finite: {v:?}")) }
+        };
+        let widen = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<_>>();
+        for l in &self.lights {
+            let name = format!("light '{}'", l.name);
+            bad(&name, &widen(&l.color))?;
+            bad(&name, &[f64::from(l.power_w)])?;
+            match &l.shape {
+                LightShape::Point { position_m } => bad(&name, position_m)?,
+                LightShape::Spot { position_m, direction, inner_angle_rad, outer_angle_rad } => {
+                    bad(&name, position_m)?;
+                    bad(&name, &widen(direction))?;
+                    bad(&name, &widen(&[*inner_angle_rad, *outer_angle_rad]))?;
+                }
+                LightShape::Area { center_m, normal, size_m } => {
+                    bad(&name, center_m)?;
+                    bad(&name, &widen(normal))?;
+                    bad(&name, &widen(size_m))?;
+                }
+            }
+        }
+        for c in &self.cameras {
+            let name = format!("camera '{}'", c.name);
+            bad(&name, &c.eye_m)?;
+            bad(&name, &c.look_at_m)?;
+            bad(&name, &c.up)?;
+            bad(&name, &[c.fov_y_deg])?;
+        }
+        for m in &self.materials {
+            bad(&format!("material '{}'", m.name), &widen(&[m.specular, m.roughness]))?;
+        }
+        if let Some(e) = &self.environment {
+            bad("environment intensity", &[f64::from(e.intensity)])?;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,356 @@
+//! Raw `#[repr(C)]` mirrors of the on-disk structures of format version 1 (see `docs/format.md`).
+//!
+//! Everything here is plain old data: these types are what the bytes *are*, little-endian, with no
+//! validation. The checked types in [`crate::reader`] sit above them. Keep this file and
+//! `docs/format.md` in sync: every size below is asserted at compile time.
+
+use bytemuck::{Pod, Zeroable};
+
+/// The first eight bytes of every package. The high byte and the trailing newline catch transfers
+/// that mangle binary files (the PNG trick).
+pub const MAGIC: [u8; 8] = *b"\x89GROTTO\n";
+/// Major version this crate writes and reads. A file with a larger major is refused.
+pub const VERSION_MAJOR: u16 = 1;
+/// Minor version this crate writes. Files with a larger minor open; the additions are ignored.
+pub const VERSION_MINOR: u16 = 0;
+/// Every section starts at a multiple of this, so a raw section can be cast to any element type in
+/// place (the mapping itself is page-aligned).
+pub const SECTION_ALIGN: u64 = 64;
+/// The `tile` field of a section that belongs to the whole package rather than to one tile.
+pub const GLOBAL: u32 = u32::MAX;
+/// Deepest SVO a tile may declare: 3 bits per level must fit a 64-bit Morton code.
+pub const MAX_SVO_DEPTH: u32 = 21;
+/// A zstd frame cannot expand more than this (one 128 KiB RLE block costs at least 4 bytes), so a
+/// claimed uncompressed length beyond `stored * MAX_ZSTD_RATIO + 64 KiB` is a lie we refuse before
+/// allocating for it.
+pub const MAX_ZSTD_RATIO: u64 = 32_768;
+
+/// File header, at offset 0. `header_size` bytes long (72 in version 1.0; a later minor may grow it).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+pub struct RawHeader {
+    pub magic: [u8; 8],
+    pub version_major: u16,
+    pub version_minor: u16,
+    /// Length of the header in bytes, at least `size_of::<RawHeader>()`.
+    pub header_size: u32,
+    /// Number of [`RawSectionEntry`] records in the section table.
+    pub section_count: u64,
+    pub section_table_offset: u64,
+    /// Number of [`RawTileEntry`] records in the tile directory.
+    pub tile_count: u64,
+    pub tile_directory_offset: u64,
+    /// Length of the whole file; a shorter file was truncated.
+    pub file_size: u64,
+    /// XXH3-64 of the section table bytes followed by the tile directory bytes.
+    pub table_checksum: u64,
+    /// XXH3-64 of the first `header_size` bytes with this field set to zero.
+    pub header_checksum: u64,
+}
+
+/// One entry of the section table. 48 bytes, 8-aligned.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+pub struct RawSectionEntry {
+    /// A [`SectionKind`] value; unknown values are skipped by readers.
+    pub kind: u32,
+    /// A [`Codec`] value.
+    pub codec: u32,
+    /// Tile index, or [`GLOBAL`].
+    pub tile: u32,
+    /// Distinguishes several sections of one kind in one scope (e.g. environment map 0, 1, ...).
+    pub item: u32,
+    /// Byte offset of the stored bytes; a multiple of [`SECTION_ALIGN`].
+    pub offset: u64,
+    /// Number of stored bytes (compressed length for zstd).
+    pub stored_len: u64,
+    /// Number of bytes after decoding; equals `stored_len` for raw sections.
+    pub raw_len: u64,
+    /// XXH3-64 of the stored bytes.
+    pub checksum: u64,
+}
+
+/// One entry of the tile directory. 64 bytes, 8-aligned.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct RawTileEntry {
+    /// World position (metres, f64: survey coordinates) of the tile's minimum corner.
+    pub origin_m: [f64; 3],
+    /// Edge length of the cubic tile in metres (a power of two times the grid's base unit).
+    pub extent_m: f64,
+    /// Integer position of the tile in the global tile grid of its extent.
+    pub grid: [i32; 3],
+    /// SVO depth D: leaves are `extent_m / 2^D` wide.
+    pub depth: u32,
+    /// Number of input points that landed in the tile (halo excluded).
+    pub point_count: u64,
+    /// First entry of this tile's contiguous run in the section table.
+    pub section_first: u32,
+    /// Length of that run.
+    pub section_count: u32,
+}
+
+/// How a section's bytes are stored.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Codec {
+    /// Stored as is; castable in place.
+    Raw = 0,
+    /// One zstd frame.
+    Zstd = 1,
+}
+
+impl Codec {
+    pub fn from_u32(v: u32) -> Option<Self> {
+        match v {
+            0 => Some(Self::Raw),
+            1 => Some(Self::Zstd),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Raw => "raw",
+            Self::Zstd => "zstd",
+        }
+    }
+}
+
+/// Where a section lives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Scope {
+    Global,
+    Tile(u32),
+}
+
+/// What a section holds. Values are stable across versions; new kinds get new numbers.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum SectionKind {
+    /// Per tile: [`SvoNode`] array, level by level, contiguous children.
+    SvoNodes = 1,
+    /// Per tile: `f32` opacity (coverage in 0..=1) per leaf.
+    LeafOpacity = 2,
+    /// Per tile: [`Rgba8`] albedo per leaf (RGB sRGB-encoded, averaged in linear light).
+    LeafAlbedo = 3,
+    /// Per tile: [`LeafNdf`] per leaf.
+    LeafNdf = 4,
+    /// Per tile: [`LeafEmission`] per leaf.
+    LeafEmission = 5,
+    /// Per tile: [`Surfel`] per point, Morton order.
+    Surfels = 6,
+    /// Per tile: [`Rgba8`] sRGB colour per surfel.
+    SurfelColorsRaw = 7,
+    /// Per tile: [`Bc1Block`] per 16 consecutive surfels.
+    SurfelColorsBc1 = 8,
+    /// Global, `item` = environment map: [`ShRgb9`], 9 RGB SH coefficients of radiance.
+    EnvSh9 = 9,
+    /// Global, `item` = environment map: [`EnvMipLevel`] per level of the prefiltered chain.
+    EnvMipLevels = 10,
+    /// Global, `item` = environment map: [`Bc6hBlock`] blocks of all levels.
+    EnvMipBc6h = 11,
+    /// Global: UTF-8 JSON [`crate::Scene`].
+    Scene = 12,
+    /// Global: UTF-8 JSON [`crate::Provenance`].
+    Provenance = 13,
+}
+
+/// The Rust type of one element of a section, used to check casts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ElementType {
+    SvoNode,
+    F32,
+    Rgba8,
+    LeafNdf,
+    LeafEmission,
+    Surfel,
+    Bc1Block,
+    ShRgb9,
+    EnvMipLevel,
+    Bc6hBlock,
+    Utf8Json,
+}
+
+impl ElementType {
+    pub const fn size(self) -> usize {
+        match self {
+            Self::SvoNode => size_of::<SvoNode>(),
+            Self::F32 => size_of::<f32>(),
+            Self::Rgba8 => size_of::<Rgba8>(),
+            Self::LeafNdf => size_of::<LeafNdf>(),
+            Self::LeafEmission => size_of::<LeafEmission>(),
+            Self::Surfel => size_of::<Surfel>(),
+            Self::Bc1Block => size_of::<Bc1Block>(),
+            Self::ShRgb9 => size_of::<ShRgb9>(),
+            Self::EnvMipLevel => size_of::<EnvMipLevel>(),
+            Self::Bc6hBlock => size_of::<Bc6hBlock>(),
+            Self::Utf8Json => 1,
+        }
+    }
+}
+
+impl SectionKind {
+    pub const ALL: [SectionKind; 13] = [
+        Self::SvoNodes,
+        Self::LeafOpacity,
+        Self::LeafAlbedo,
+        Self::LeafNdf,
+        Self::LeafEmission,
+        Self::Surfels,
+        Self::SurfelColorsRaw,
+        Self::SurfelColorsBc1,
+        Self::EnvSh9,
+        Self::EnvMipLevels,
+        Self::EnvMipBc6h,
+        Self::Scene,
+        Self::Provenance,
+    ];
+
+    pub fn from_u32(v: u32) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| *k as u32 == v)
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::SvoNodes => "svo-nodes",
+            Self::LeafOpacity => "leaf-opacity",
+            Self::LeafAlbedo => "leaf-albedo",
+            Self::LeafNdf => "leaf-ndf",
+            Self::LeafEmission => "leaf-emission",
+            Self::Surfels => "surfels",
+            Self::SurfelColorsRaw => "surfel-colors-raw",
+            Self::SurfelColorsBc1 => "surfel-colors-bc1",
+            Self::EnvSh9 => "env-sh9",
+            Self::EnvMipLevels => "env-mip-levels",
+            Self::EnvMipBc6h => "env-mip-bc6h",
+            Self::Scene => "scene",
+            Self::Provenance => "provenance",
+        }
+    }
+
+    pub fn element(self) -> ElementType {
+        match self {
+            Self::SvoNodes => ElementType::SvoNode,
+            Self::LeafOpacity => ElementType::F32,
+            Self::LeafAlbedo | Self::SurfelColorsRaw => ElementType::Rgba8,
+            Self::LeafNdf => ElementType::LeafNdf,
+            Self::LeafEmission => ElementType::LeafEmission,
+            Self::Surfels => ElementType::Surfel,
+            Self::SurfelColorsBc1 => ElementType::Bc1Block,
+            Self::EnvSh9 => ElementType::ShRgb9,
+            Self::EnvMipLevels => ElementType::EnvMipLevel,
+            Self::EnvMipBc6h => ElementType::Bc6hBlock,
+            Self::Scene | Self::Provenance => ElementType::Utf8Json,
+        }
+    }
+
+    /// Whether the kind belongs to a tile (true) or to the whole package (false).
+    pub fn is_per_tile(self) -> bool {
+        !matches!(
+            self,
+            Self::EnvSh9 | Self::EnvMipLevels | Self::EnvMipBc6h | Self::Scene | Self::Provenance
+        )
+    }
+}
+
+/// One SVO node. Nodes are stored level by level (root first), sorted by Morton code within a level;
+/// the children of a node are contiguous and in octant order, so `first_child + i` for
+/// `i < popcount(child_mask)` addresses them. At the leaf level (`level == depth`), `first_child` is
+/// the index into the tile's leaf attribute arrays.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+pub struct SvoNode {
+    /// Morton code of the node's cell at its own level (3 bits per level, x in the lowest bit).
+    pub morton: u64,
+    pub first_child: u32,
+    /// Bit `o` set when octant `o` (x + 2y + 4z) has a child; zero at the leaf level.
+    pub child_mask: u8,
+    /// 0 for the root, `depth` for leaves.
+    pub level: u8,
+    pub reserved: u16,
+}
+
+/// Four bytes of colour.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Pod, Zeroable, Default)]
+pub struct Rgba8(pub [u8; 4]);
+
+/// Normal distribution of a leaf, after Toksvig: `mean` is the average of unit normals, so its
+/// length `|mean|` in 0..=1 encodes the spread (1 = all normals agree).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable, Default)]
+pub struct LeafNdf {
+    pub mean: [f32; 3],
+    /// Sum of sample weights that went into the leaf.
+    pub weight: f32,
+}
+
+/// Emitted radiance of a leaf (area-light samples), linear RGB in W / (sr m^2).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable, Default)]
+pub struct LeafEmission {
+    pub radiance: [f32; 3],
+    pub reserved: f32,
+}
+
+/// A point sample for the G-buffer. Position is relative to the tile origin (f32 is enough there:
+/// tiles are at most a few hundred metres wide).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable, Default)]
+pub struct Surfel {
+    pub position_tile_m: [f32; 3],
+    pub radius_m: f32,
+    /// Unit normal, oriented toward the scanner (into the open cave).
+    pub normal: [f32; 3],
+    /// Spread of the normal distribution around `normal`: 1 - |mean of unit normals| (0 = flat).
+    pub spread: f32,
+}
+
+/// A BC1 (DXT1) block: two RGB565 endpoints and 16 2-bit indices.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable, Default)]
+pub struct Bc1Block(pub [u8; 8]);
+
+/// A BC6H (unsigned half float) block.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable, Default)]
+pub struct Bc6hBlock(pub [u8; 16]);
+
+/// Nine RGB spherical-harmonic coefficients of radiance (bands 0..=2), in the order
+/// L00, L1-1, L10, L11, L2-2, L2-1, L20, L21, L22.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable, Default)]
+pub struct ShRgb9 {
+    pub coeffs: [[f32; 3]; 9],
+}
+
+/// One level of a prefiltered lat-long environment map stored as BC6H blocks.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable, Default)]
+pub struct EnvMipLevel {
+    pub width: u32,
+    pub height: u32,
+    /// First block of this level in the matching [`SectionKind::EnvMipBc6h`] section.
+    pub first_block: u32,
+    /// `ceil(width / 4) * ceil(height / 4)`.
+    pub block_count: u32,
+    /// GGX roughness this level was prefiltered for.
+    pub roughness: f32,
+    pub reserved: [u32; 3],
+}
+
+// The sizes in docs/format.md; a change here is a format change.
+const _: () = assert!(size_of::<RawHeader>() == 72);
+const _: () = assert!(size_of::<RawSectionEntry>() == 48);
+const _: () = assert!(size_of::<RawTileEntry>() == 64);
+const _: () = assert!(size_of::<SvoNode>() == 16);
+const _: () = assert!(size_of::<Rgba8>() == 4);
+const _: () = assert!(size_of::<LeafNdf>() == 16);
+const _: () = assert!(size_of::<LeafEmission>() == 16);
+const _: () = assert!(size_of::<Surfel>() == 32);
+const _: () = assert!(size_of::<Bc1Block>() == 8);
+const _: () = assert!(size_of::<Bc6hBlock>() == 16);
+const _: () = assert!(size_of::<ShRgb9>() == 108);
+const _: () = assert!(size_of::<EnvMipLevel>() == 32);
+const _: () = assert!(align_of::<RawSectionEntry>() == 8 && align_of::<RawTileEntry>() == 8);

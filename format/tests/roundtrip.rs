@@ -1,0 +1,213 @@
+//! Everything written comes back: every section kind with both codecs, tiles, scene, provenance,
+//! and random packages (proptest).
+
+mod common;
+
+use std::borrow::Cow;
+
+use common::*;
+use grotto_format::spec::*;
+use grotto_format::*;
+use proptest::prelude::*;
+
+fn check_all_content(pkg: &Package) {
+    for kind in SectionKind::ALL {
+        let scopes: Vec<(Scope, u32)> =
+            if kind.is_per_tile() { vec![(Scope::Tile(0), 0), (Scope::Tile(1), 1)] } else { vec![(Scope::Global, 9)] };
+        for (scope, seed) in scopes {
+            let s = pkg.find(kind, scope, 0).unwrap_or_else(|| panic!("{kind:?} {scope:?} missing"));
+            assert_eq!(&*pkg.read_bytes(&s).unwrap(), content(kind, seed).as_slice(), "{kind:?} {scope:?}");
+        }
+    }
+}
+
+#[test]
+fn every_kind_round_trips_with_each_codec() {
+    for (name, codec) in [
+        ("raw", (|_, _| Compression::Raw) as fn(SectionKind, u32) -> Compression),
+        ("zstd", |_, _| Compression::Zstd(3)),
+        ("auto", |_, _| Compression::Auto(19)),
+        ("mixed", alternating),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let path = sample_package(dir.path(), codec);
+        let pkg = Package::open(&path).unwrap();
+        assert_eq!(pkg.version(), (VERSION_MAJOR, VERSION_MINOR));
+        check_all_content(&pkg);
+        assert!(pkg.verify().is_empty(), "{name}: {:?}", pkg.verify());
+        if name == "zstd" {
+            assert!(pkg.sections().filter(|s| s.kind.is_some()).all(|s| s.codec == Some(Codec::Zstd)));
+        }
+        if name == "raw" {
+            assert!(pkg.sections().all(|s| s.codec == Some(Codec::Raw)));
+        }
+        // Same bytes through the in-memory path.
+        let mem = Package::from_bytes("mem", &std::fs::read(&path).unwrap()).unwrap();
+        check_all_content(&mem);
+    }
+}
+
+#[test]
+fn typed_reads_cast_raw_sections_in_place_and_check_types() {
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = Package::open(sample_package(dir.path(), |_, _| Compression::Raw)).unwrap();
+    let tile = pkg.tile(1).unwrap();
+    let nodes = tile.read::<SvoNode>(SectionKind::SvoNodes).unwrap().unwrap();
+    assert!(matches!(nodes, Cow::Borrowed(_)), "raw sections are zero-copy");
+    assert_eq!(bytemuck::cast_slice::<SvoNode, u8>(&nodes), content(SectionKind::SvoNodes, 1).as_slice());
+    let surfels = tile.read::<Surfel>(SectionKind::Surfels).unwrap().unwrap();
+    assert_eq!(surfels[0].normal, [0.0, 0.0, 1.0]);
+    // Reading a section as the wrong type is a typed error, not a reinterpretation.
+    let s = tile.find(SectionKind::Surfels, 0).unwrap();
+    let err = pkg.read::<f32>(&s).unwrap_err();
+    assert!(matches!(err.problem(), Some(Problem::WrongElementType { .. })), "{err}");
+    assert!(tile.read::<f32>(SectionKind::LeafOpacity).unwrap().is_some());
+    assert!(pkg.tile(0).unwrap().read::<f32>(SectionKind::LeafOpacity).unwrap().is_some());
+}
+
+#[test]
+fn tiles_scene_and_provenance_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = Package::open(sample_package(dir.path(), alternating)).unwrap();
+    assert_eq!(pkg.tile_count(), 2);
+    let t = pkg.tile(1).unwrap();
+    assert_eq!(t.origin_m(), [512_344.0, 5_123_448.0, 336.0]);
+    assert_eq!((t.extent_m(), t.depth(), t.point_count(), t.grid()), (8.0, 3, 1001, [64_043, 640_431, 42]));
+    assert_eq!(t.leaf_size_m(), 1.0);
+    assert_eq!(t.sections().len(), SectionKind::ALL.iter().filter(|k| k.is_per_tile()).count() + 1);
+    assert!(t.sections().all(|s| s.scope == Scope::Tile(1)));
+    assert_eq!(pkg.scene().unwrap(), sample_scene());
+    let prov = pkg.provenance().unwrap().unwrap();
+    assert_eq!(prov.parameters["depth"], 7);
+}
+
+#[test]
+fn unknown_kinds_are_listed_and_skipped() {
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = Package::open(sample_package(dir.path(), alternating)).unwrap();
+    let unknown: Vec<_> = pkg.sections().filter(|s| s.kind.is_none()).collect();
+    assert_eq!(unknown.len(), 1);
+    assert_eq!(unknown[0].kind_name(), "unknown(4000)");
+    assert_eq!(&*pkg.read_bytes(&unknown[0]).unwrap(), b"from the future");
+    assert!(pkg.verify().is_empty());
+    let summary = pkg.summary();
+    assert!(summary.kinds.iter().any(|k| k.kind == "unknown(4000)"));
+}
+
+#[test]
+fn auto_compression_keeps_incompressible_sections_raw() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("a.grotto");
+    let mut w = PackageWriter::create(&path).unwrap();
+    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 1.0, grid: [0; 3], depth: 0, point_count: 0 }).unwrap();
+    // xorshift noise does not compress; zeros do.
+    let mut x = 0x9e37_79b9_7f4a_7c15u64;
+    let noise: Vec<u8> = (0..4096)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x as u8
+        })
+        .collect();
+    w.add_section(SectionKind::LeafAlbedo, Scope::Tile(0), 0, &noise, Compression::Auto(3)).unwrap();
+    w.add_section(SectionKind::SurfelColorsRaw, Scope::Tile(0), 0, &[0u8; 4096], Compression::Auto(3)).unwrap();
+    let pkg = Package::open(w.finish().unwrap()).unwrap();
+    let t = pkg.tile(0).unwrap();
+    assert_eq!(t.find(SectionKind::LeafAlbedo, 0).unwrap().codec, Some(Codec::Raw));
+    let zeros = t.find(SectionKind::SurfelColorsRaw, 0).unwrap();
+    assert_eq!(zeros.codec, Some(Codec::Zstd));
+    assert!(zeros.stored_len < 100);
+    assert!(pkg.summary().compression_ratio > 1.5);
+}
+
+#[test]
+fn empty_package_and_empty_tiles_are_valid() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("empty.grotto");
+    let pkg = Package::open(PackageWriter::create(&path).unwrap().finish().unwrap()).unwrap();
+    assert_eq!((pkg.tile_count(), pkg.section_count()), (0, 0));
+    assert_eq!(pkg.scene().unwrap(), Scene::default());
+    assert!(pkg.provenance().unwrap().is_none());
+
+    let mut w = PackageWriter::create(&path).unwrap();
+    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 4.0, grid: [0; 3], depth: 2, point_count: 0 }).unwrap();
+    w.add_section(SectionKind::SvoNodes, Scope::Tile(0), 0, &[], Compression::Zstd(1)).unwrap();
+    w.add_section(SectionKind::Surfels, Scope::Tile(0), 0, &[], Compression::Raw).unwrap();
+    let pkg = Package::open(w.finish().unwrap()).unwrap();
+    assert_eq!(pkg.tile(0).unwrap().read::<SvoNode>(SectionKind::SvoNodes).unwrap().unwrap().len(), 0);
+    assert!(pkg.verify().is_empty());
+}
+
+#[derive(Debug, Clone)]
+struct RandomSection {
+    kind: u32,
+    tile: Option<u8>,
+    item: u32,
+    len: usize,
+    seed: u8,
+    codec: u8,
+}
+
+fn random_bytes(kind: u32, len: usize, seed: u8) -> Vec<u8> {
+    match SectionKind::from_u32(kind) {
+        Some(SectionKind::LeafOpacity) => {
+            bytemuck::cast_slice(&(0..len).map(|i| ((i * 31 + seed as usize) % 101) as f32 / 100.0).collect::<Vec<_>>())
+                .to_vec()
+        }
+        Some(k) => content(k, u32::from(seed) + len as u32),
+        None => (0..len).map(|i| (i as u8).wrapping_mul(seed)).collect(),
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, failure_persistence: None, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_packages_round_trip(
+        tiles in prop::collection::vec((any::<[i32; 3]>(), prop_oneof![Just(3u32), 0u32..=MAX_SVO_DEPTH], any::<u64>()), 0..6),
+        sections in prop::collection::vec(
+            (prop_oneof![Just(1u32), Just(2), Just(3), Just(7), Just(8), Just(12), Just(13), 100u32..200],
+             any::<Option<u8>>(), 0u32..3, 0usize..3000, any::<u8>(), 0u8..3)
+                .prop_map(|(kind, tile, item, len, seed, codec)| RandomSection { kind, tile, item, len, seed, codec }),
+            0..24),
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("p.grotto");
+        let mut w = PackageWriter::create(&path).unwrap();
+        for (grid, depth, points) in &tiles {
+            let origin_m = grid.map(|g| f64::from(g) * 16.0 + 0.5);
+            w.add_tile(TileInfo { origin_m, extent_m: 16.0, grid: *grid, depth: *depth, point_count: *points }).unwrap();
+        }
+        let mut written = Vec::new();
+        for s in &sections {
+            let kind = SectionKind::from_u32(s.kind);
+            let scope = match (kind.map(SectionKind::is_per_tile), s.tile) {
+                (Some(false), _) => Scope::Global,
+                (_, Some(t)) if !tiles.is_empty() => Scope::Tile(u32::from(t) % tiles.len() as u32),
+                (Some(true), _) => continue,
+                (None, _) => Scope::Global,
+            };
+            // The fixture SVO is depth 3: only valid in tiles of that depth.
+            if kind == Some(SectionKind::SvoNodes) && !matches!(scope, Scope::Tile(t) if tiles[t as usize].1 == 3) {
+                continue;
+            }
+            let bytes = random_bytes(s.kind, s.len, s.seed);
+            let codec = [Compression::Raw, Compression::Zstd(1), Compression::Auto(3)][s.codec as usize];
+            if w.add_raw_section(s.kind, scope, s.item, &bytes, codec).is_ok() {
+                written.push((s.kind, scope, s.item, bytes));
+            }
+        }
+        let pkg = Package::open(w.finish().unwrap()).unwrap();
+        prop_assert_eq!(pkg.tile_count() as usize, tiles.len());
+        for (t, (grid, depth, points)) in pkg.tiles().zip(&tiles) {
+            prop_assert_eq!((t.grid(), t.depth(), t.point_count()), (*grid, *depth, *points));
+        }
+        prop_assert_eq!(pkg.section_count() as usize, written.len());
+        for (kind, scope, item, bytes) in &written {
+            let s = pkg.sections().find(|s| s.kind_raw == *kind && s.scope == *scope && s.item == *item).unwrap();
+            prop_assert_eq!(&*pkg.read_bytes(&s).unwrap(), bytes.as_slice());
+        }
+        prop_assert!(pkg.verify().is_empty());
+    }
+}
