@@ -51,13 +51,17 @@ pub enum Problem {
     Misaligned { region: Region, offset: u64, align: u64 },
     #[error("{first} and {second} overlap")]
     Overlap { first: Region, second: Region },
-    #[error("section table / tile directory checksum mismatch (stored {stored:016x}, computed {computed:016x})")]
+    #[error(
+        "section table / tile directory checksum mismatch (stored {stored:016x}, computed {computed:016x})"
+    )]
     TableChecksum { stored: u64, computed: u64 },
     #[error("section {section} ({kind}) uses unknown codec {codec}")]
     UnknownCodec { section: u32, kind: String, codec: u32 },
     #[error("section {section} ({kind}) is raw but its stored length {stored} differs from its length {raw}")]
     RawLengthMismatch { section: u32, kind: String, stored: u64, raw: u64 },
-    #[error("section {section} ({kind}) claims {raw} bytes from {stored} compressed bytes, more than zstd can expand")]
+    #[error(
+        "section {section} ({kind}) claims {raw} bytes from {stored} compressed bytes, more than zstd can expand"
+    )]
     ImplausibleLength { section: u32, kind: String, stored: u64, raw: u64 },
     #[error("section {section} ({kind}) is {len} bytes, not a multiple of its {element_size}-byte element")]
     BadElementLength { section: u32, kind: String, len: u64, element_size: usize },

@@ -15,8 +15,8 @@ mod reader;
 mod scene;
 mod source;
 pub mod spec;
-pub mod svo;
 mod summary;
+pub mod svo;
 mod writer;
 
 pub use error::{Error, Problem, Region, Result};

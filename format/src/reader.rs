@@ -171,7 +171,9 @@ impl Package {
     /// The section of `kind` in `scope` with `item`, if the package has one.
     pub fn find(&self, kind: SectionKind, scope: Scope, item: u32) -> Option<SectionInfo> {
         match scope {
-            Scope::Global => self.sections().find(|s| s.kind == Some(kind) && s.scope == scope && s.item == item),
+            Scope::Global => {
+                self.sections().find(|s| s.kind == Some(kind) && s.scope == scope && s.item == item)
+            }
             Scope::Tile(t) => self.tile(t)?.find(kind, item),
         }
     }
@@ -266,14 +268,20 @@ impl Package {
         match s.codec {
             Some(Codec::Raw) | None => Ok(Cow::Borrowed(stored)),
             Some(Codec::Zstd) => {
-                // raw_len was bounded at open by the largest expansion zstd can produce.
-                let mut out = vec![0u8; s.raw_len as usize];
-                let fail = |message: String| Problem::Decompress { section: s.index, kind: s.kind_name(), message };
-                let n = zstd::bulk::Decompressor::new()
-                    .and_then(|mut d| d.decompress_to_buffer(stored, &mut out[..]))
+                use std::io::Read;
+                let fail =
+                    |message: String| Problem::Decompress { section: s.index, kind: s.kind_name(), message };
+                // The table's length is a claim: reserve only what typical ratios justify and let the
+                // buffer grow with bytes that really decode, so a lie costs no memory.
+                let hint = s.raw_len.min(s.stored_len.saturating_mul(64)) as usize;
+                let mut out = Vec::with_capacity(hint);
+                zstd::stream::read::Decoder::with_buffer(stored)
+                    .map_err(|e| fail(e.to_string()))?
+                    .take(s.raw_len + 1)
+                    .read_to_end(&mut out)
                     .map_err(|e| fail(e.to_string()))?;
-                if n as u64 != s.raw_len {
-                    return Err(fail(format!("decoded {n} bytes, table says {}", s.raw_len)));
+                if out.len() as u64 != s.raw_len {
+                    return Err(fail(format!("decoded {} bytes, table says {}", out.len(), s.raw_len)));
                 }
                 Ok(Cow::Owned(out))
             }
@@ -497,7 +505,8 @@ fn check_structure(bytes: &[u8]) -> Result<(RawHeader, Range<usize>, Range<usize
     for (i, e) in sections.iter().enumerate() {
         if e.tile != GLOBAL {
             let tile = &tile_entries[e.tile as usize];
-            let run = u64::from(tile.section_first)..u64::from(tile.section_first) + u64::from(tile.section_count);
+            let run =
+                u64::from(tile.section_first)..u64::from(tile.section_first) + u64::from(tile.section_count);
             if !run.contains(&(i as u64)) {
                 return Err(Problem::SectionOutsideTileRun { section: i as u32, tile: e.tile });
             }
@@ -514,7 +523,13 @@ fn scope_name(scope: Scope) -> String {
 }
 
 /// Byte range of an array of `count` records of `size` bytes at `offset`, checked.
-fn array_range(region: Region, offset: u64, count: u64, size: usize, file_len: u64) -> Result<Range<usize>, Problem> {
+fn array_range(
+    region: Region,
+    offset: u64,
+    count: u64,
+    size: usize,
+    file_len: u64,
+) -> Result<Range<usize>, Problem> {
     let len = count
         .checked_mul(size as u64)
         .ok_or_else(|| Problem::Overflow { what: format!("{region} length ({count} entries)") })?;
@@ -556,12 +571,20 @@ fn check_known_entry(s: &SectionInfo, kind: SectionKind) -> Result<(), Problem> 
     }
     let element_size = kind.element().size();
     if s.raw_len % element_size as u64 != 0 {
-        return Err(Problem::BadElementLength { section: s.index, kind: name(), len: s.raw_len, element_size });
+        return Err(Problem::BadElementLength {
+            section: s.index,
+            kind: name(),
+            len: s.raw_len,
+            element_size,
+        });
     }
     match (kind.is_per_tile(), s.scope) {
-        (true, Scope::Global) => {
-            Err(Problem::WrongScope { section: s.index, kind: name(), found: scope_name(s.scope), expected: "a tile" })
-        }
+        (true, Scope::Global) => Err(Problem::WrongScope {
+            section: s.index,
+            kind: name(),
+            found: scope_name(s.scope),
+            expected: "a tile",
+        }),
         (false, Scope::Tile(_)) => Err(Problem::WrongScope {
             section: s.index,
             kind: name(),
@@ -607,7 +630,8 @@ fn check_content(kind: SectionKind, data: &[u8], depth: u32) -> Result<(), Strin
     }
     fn cast<T: Pod>(data: &[u8]) -> Cow<'_, [T]> {
         // In place when aligned (always for raw sections); a copy only for unaligned decoder output.
-        bytemuck::try_cast_slice(data).map_or_else(|_| Cow::Owned(bytemuck::pod_collect_to_vec(data)), Cow::Borrowed)
+        bytemuck::try_cast_slice(data)
+            .map_or_else(|_| Cow::Owned(bytemuck::pod_collect_to_vec(data)), Cow::Borrowed)
     }
     match kind {
         SectionKind::SvoNodes => check_svo(&cast::<SvoNode>(data), depth),
@@ -664,7 +688,10 @@ fn check_content(kind: SectionKind, data: &[u8], depth: u32) -> Result<(), Strin
             for (i, l) in cast::<EnvMipLevel>(data).iter().enumerate() {
                 let blocks = u64::from(l.width.div_ceil(4)) * u64::from(l.height.div_ceil(4));
                 if l.width == 0 || l.height == 0 || blocks != u64::from(l.block_count) {
-                    return Err(format!("level {i} is {}x{} with {} blocks", l.width, l.height, l.block_count));
+                    return Err(format!(
+                        "level {i} is {}x{} with {} blocks",
+                        l.width, l.height, l.block_count
+                    ));
                 }
                 if u64::from(l.first_block) != next || !l.roughness.is_finite() {
                     return Err(format!("level {i} starts at block {}, expected {next}", l.first_block));
@@ -677,10 +704,13 @@ fn check_content(kind: SectionKind, data: &[u8], depth: u32) -> Result<(), Strin
             let scene: Scene = serde_json::from_slice(data).map_err(|e| e.to_string())?;
             scene.check_finite()
         }
-        SectionKind::Provenance => serde_json::from_slice::<Provenance>(data).map(drop).map_err(|e| e.to_string()),
-        SectionKind::LeafAlbedo | SectionKind::SurfelColorsRaw | SectionKind::SurfelColorsBc1 | SectionKind::EnvMipBc6h => {
-            Ok(())
+        SectionKind::Provenance => {
+            serde_json::from_slice::<Provenance>(data).map(drop).map_err(|e| e.to_string())
         }
+        SectionKind::LeafAlbedo
+        | SectionKind::SurfelColorsRaw
+        | SectionKind::SurfelColorsBc1
+        | SectionKind::EnvMipBc6h => Ok(()),
     }
 }
 
@@ -704,14 +734,20 @@ fn check_svo(nodes: &[SvoNode], depth: u32) -> Result<(), String> {
         }
         if u32::from(n.level) == depth {
             if n.child_mask != 0 || n.first_child != leaf_index {
-                return Err(format!("leaf node {i} has children or leaf index {} (expected {leaf_index})", n.first_child));
+                return Err(format!(
+                    "leaf node {i} has children or leaf index {} (expected {leaf_index})",
+                    n.first_child
+                ));
             }
             leaf_index += 1;
             continue;
         }
         let count = n.child_mask.count_ones() as usize;
         if count == 0 || n.first_child as usize != next_child {
-            return Err(format!("inner node {i} has mask {:#010b} and first child {}, expected {next_child}", n.child_mask, n.first_child));
+            return Err(format!(
+                "inner node {i} has mask {:#010b} and first child {}, expected {next_child}",
+                n.child_mask, n.first_child
+            ));
         }
         let children = nodes
             .get(next_child..next_child + count)

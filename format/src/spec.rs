@@ -247,10 +247,7 @@ impl SectionKind {
 
     /// Whether the kind belongs to a tile (true) or to the whole package (false).
     pub fn is_per_tile(self) -> bool {
-        !matches!(
-            self,
-            Self::EnvSh9 | Self::EnvMipLevels | Self::EnvMipBc6h | Self::Scene | Self::Provenance
-        )
+        !matches!(self, Self::EnvSh9 | Self::EnvMipLevels | Self::EnvMipBc6h | Self::Scene | Self::Provenance)
     }
 }
 

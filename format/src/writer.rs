@@ -86,7 +86,11 @@ impl PackageWriter {
     }
 
     fn write_all(&mut self, bytes: &[u8]) -> Result<()> {
-        self.out.write_all(bytes).map_err(|source| Error::Io { path: self.target.clone(), op: "write", source })?;
+        self.out.write_all(bytes).map_err(|source| Error::Io {
+            path: self.target.clone(),
+            op: "write",
+            source,
+        })?;
         self.pos += bytes.len() as u64;
         Ok(())
     }
@@ -98,8 +102,12 @@ impl PackageWriter {
 
     /// Adds a tile to the directory and returns its index.
     pub fn add_tile(&mut self, info: TileInfo) -> Result<u32> {
-        if !(info.origin_m.iter().all(|v| v.is_finite()) && info.extent_m.is_finite() && info.extent_m > 0.0) {
-            return Err(self.refuse(format!("tile origin {:?} / extent {} is not finite", info.origin_m, info.extent_m)));
+        if !(info.origin_m.iter().all(|v| v.is_finite()) && info.extent_m.is_finite() && info.extent_m > 0.0)
+        {
+            return Err(self.refuse(format!(
+                "tile origin {:?} / extent {} is not finite",
+                info.origin_m, info.extent_m
+            )));
         }
         if info.depth > MAX_SVO_DEPTH {
             return Err(self.refuse(format!("SVO depth {} exceeds {MAX_SVO_DEPTH}", info.depth)));
@@ -130,7 +138,9 @@ impl PackageWriter {
         }
         match (kind.is_per_tile(), scope) {
             (true, Scope::Global) => return Err(self.refuse(format!("{} belongs to a tile", kind.name()))),
-            (false, Scope::Tile(_)) => return Err(self.refuse(format!("{} belongs to the package", kind.name()))),
+            (false, Scope::Tile(_)) => {
+                return Err(self.refuse(format!("{} belongs to the package", kind.name())));
+            }
             _ => {}
         }
         self.add_raw_section(kind as u32, scope, item, bytes, compression)
@@ -151,7 +161,8 @@ impl PackageWriter {
             Scope::Tile(t) => return Err(self.refuse(format!("section for tile {t}, which was not added"))),
         };
         if !self.keys.insert((kind, tile, item)) {
-            return Err(self.refuse(format!("a section of kind {kind} for tile {tile:#x} item {item} exists already")));
+            return Err(self
+                .refuse(format!("a section of kind {kind} for tile {tile:#x} item {item} exists already")));
         }
         let compressed = match compression {
             Compression::Raw => None,

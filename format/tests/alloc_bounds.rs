@@ -51,7 +51,9 @@ fn lying_counts_and_lengths_allocate_nothing_big() {
     let limit = 64 * 1024;
 
     let mut cases: Vec<Vec<u8>> = Vec::new();
-    for (tiles, sections) in [(1u64 << 40, None), (u64::MAX, None), (0, Some(1u64 << 40)), (0, Some(u64::MAX / 48))] {
+    for (tiles, sections) in
+        [(1u64 << 40, None), (u64::MAX, None), (0, Some(1u64 << 40)), (0, Some(u64::MAX / 48))]
+    {
         let mut b = bytes.clone();
         let mut h = header(&b);
         h.tile_count = if tiles == 0 { h.tile_count } else { tiles };

@@ -21,7 +21,8 @@ fn sections_of(bytes: &[u8]) -> Vec<SectionInfo> {
 fn truncation_at_every_boundary_and_mid_section_is_detected() {
     let bytes = sample_bytes();
     let h = header(&bytes);
-    let mut cuts = vec![0, 1, 8, 71, 72, h.section_table_offset, h.section_table_offset + 20, h.tile_directory_offset];
+    let mut cuts =
+        vec![0, 1, 8, 71, 72, h.section_table_offset, h.section_table_offset + 20, h.tile_directory_offset];
     cuts.push(h.tile_directory_offset + 10);
     cuts.push(bytes.len() as u64 - 1);
     for s in sections_of(&bytes) {
@@ -62,7 +63,10 @@ fn a_flipped_byte_in_a_section_names_that_section() {
         match err.problem() {
             Some(Problem::SectionChecksum { section, kind, .. }) => {
                 assert_eq!((*section, kind.as_str()), (s.index, s.kind_name().as_str()));
-                assert!(msg.contains(&format!("section {}", s.index)) && msg.contains(&s.kind_name()), "{msg}");
+                assert!(
+                    msg.contains(&format!("section {}", s.index)) && msg.contains(&s.kind_name()),
+                    "{msg}"
+                );
             }
             other => panic!("section {}: {other:?}", s.index),
         }
@@ -83,7 +87,12 @@ fn flipped_bytes_in_header_table_and_directory_are_detected() {
         bad[at] ^= 0x01;
         let p = open_problem(&bad);
         assert!(
-            matches!(p, Problem::HeaderChecksum { .. } | Problem::UnsupportedVersion { .. } | Problem::BadHeaderSize { .. }),
+            matches!(
+                p,
+                Problem::HeaderChecksum { .. }
+                    | Problem::UnsupportedVersion { .. }
+                    | Problem::BadHeaderSize { .. }
+            ),
             "byte {at}: {p}"
         );
     }
@@ -103,9 +112,12 @@ fn sections_outside_the_file_overflowing_or_overlapping_are_refused() {
     let len = bytes.len() as u64;
 
     let mut b = bytes.clone();
-    patch(&mut b, |_, t, _| t[3].offset = len - 64 + 0);
+    patch(&mut b, |_, t, _| t[3].offset = len - 64);
     let p = open_problem(&b);
-    assert!(matches!(p, Problem::OutOfBounds { region: Region::Section(3), .. } | Problem::Overlap { .. }), "{p}");
+    assert!(
+        matches!(p, Problem::OutOfBounds { region: Region::Section(3), .. } | Problem::Overlap { .. }),
+        "{p}"
+    );
 
     let mut b = bytes.clone();
     patch(&mut b, |_, t, _| t[2].offset = len.next_multiple_of(64) + 64);
@@ -135,7 +147,10 @@ fn sections_outside_the_file_overflowing_or_overlapping_are_refused() {
         t[unknown].raw_len = 8;
     });
     let p = open_problem(&b);
-    assert!(matches!(p, Problem::Overlap { first, second } if first == Region::Header || second == Region::Header), "{p}");
+    assert!(
+        matches!(p, Problem::Overlap { first, second } if first == Region::Header || second == Region::Header),
+        "{p}"
+    );
 
     let mut b = bytes.clone();
     patch(&mut b, |_, t, _| t[6].offset += 8);
@@ -166,7 +181,10 @@ fn table_and_directory_outside_the_file_are_refused() {
     b[..72].copy_from_slice(bytemuck::bytes_of(&h));
     reseal_header(&mut b);
     let p = open_problem(&b);
-    assert!(matches!(p, Problem::Misaligned { region: Region::SectionTable, .. } | Problem::OutOfBounds { .. }), "{p}");
+    assert!(
+        matches!(p, Problem::Misaligned { region: Region::SectionTable, .. } | Problem::OutOfBounds { .. }),
+        "{p}"
+    );
 }
 
 #[test]
@@ -182,7 +200,10 @@ fn absurd_counts_are_refused_before_allocating() {
     bytes[..72].copy_from_slice(bytemuck::bytes_of(&h));
     reseal_header(&mut bytes);
     let p = open_problem(&bytes);
-    assert!(matches!(p, Problem::OutOfBounds { region: Region::TileDirectory, len, .. } if len == 64 << 40), "{p}");
+    assert!(
+        matches!(p, Problem::OutOfBounds { region: Region::TileDirectory, len, .. } if len == 64 << 40),
+        "{p}"
+    );
 
     h.tile_count = 0;
     h.section_count = u64::MAX / 2;
@@ -232,7 +253,8 @@ fn lying_lengths_and_codecs_are_refused() {
     assert!(matches!(open_problem(&b), Problem::UnknownCodec { .. }));
 
     // A surfel section whose length is not whole surfels.
-    let surfels = secs.iter().find(|s| s.kind == Some(SectionKind::Surfels) && s.codec == Some(Codec::Raw)).unwrap();
+    let surfels =
+        secs.iter().find(|s| s.kind == Some(SectionKind::Surfels) && s.codec == Some(Codec::Raw)).unwrap();
     let mut b = bytes.clone();
     patch(&mut b, |_, t, _| {
         t[surfels.index as usize].stored_len -= 4;
@@ -310,7 +332,10 @@ fn versions_newer_minor_opens_newer_major_is_refused_with_both_versions() {
     });
     let err = Package::from_bytes("newer-major.grotto", &b).unwrap_err();
     let msg = err.to_string();
-    assert!(matches!(err.problem(), Some(Problem::UnsupportedVersion { found_major: 2, found_minor: 2, .. })));
+    assert!(matches!(
+        err.problem(),
+        Some(Problem::UnsupportedVersion { found_major: 2, found_minor: 2, .. })
+    ));
     assert!(msg.contains("2.2") && msg.contains("1.0") && msg.contains("newer-major.grotto"), "{msg}");
 }
 
@@ -319,14 +344,23 @@ fn bad_content_with_valid_checksums_is_refused_on_read() {
     // Write packages whose content is wrong but whose checksums are right.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("c.grotto");
-    let bad_surfel = Surfel { position_tile_m: [f32::NAN, 0.0, 0.0], radius_m: 0.1, normal: [0.0, 0.0, 1.0], spread: 0.0 };
+    let bad_surfel =
+        Surfel { position_tile_m: [f32::NAN, 0.0, 0.0], radius_m: 0.1, normal: [0.0, 0.0, 1.0], spread: 0.0 };
     let bad_node = SvoNode { morton: 0, first_child: 5, child_mask: 1, level: 0, reserved: 0 };
     let mut w = PackageWriter::create(&path).unwrap();
-    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 2.0, grid: [0; 3], depth: 1, point_count: 1 }).unwrap();
+    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 2.0, grid: [0; 3], depth: 1, point_count: 1 })
+        .unwrap();
     w.add_elements(SectionKind::Surfels, Scope::Tile(0), 0, &[bad_surfel], Compression::Raw).unwrap();
     w.add_elements(SectionKind::SvoNodes, Scope::Tile(0), 0, &[bad_node], Compression::Zstd(1)).unwrap();
     w.add_elements(SectionKind::LeafOpacity, Scope::Tile(0), 0, &[1.5f32], Compression::Raw).unwrap();
-    w.add_section(SectionKind::Scene, Scope::Global, 0, br#"{"cameras":[{"name":"c","eye_m":[1e999,0,0],"look_at_m":[0,0,0],"fov_y_deg":60}]}"#, Compression::Raw).unwrap();
+    w.add_section(
+        SectionKind::Scene,
+        Scope::Global,
+        0,
+        br#"{"cameras":[{"name":"c","eye_m":[1e999,0,0],"look_at_m":[0,0,0],"fov_y_deg":60}]}"#,
+        Compression::Raw,
+    )
+    .unwrap();
     w.add_section(SectionKind::Provenance, Scope::Global, 0, b"{not json", Compression::Raw).unwrap();
     let pkg = Package::open(w.finish().unwrap()).unwrap();
     let problems = pkg.verify();
@@ -346,11 +380,22 @@ fn writer_refuses_what_the_format_cannot_hold_and_leaves_no_file() {
     assert!(w.add_section(SectionKind::Surfels, Scope::Global, 0, &[], Compression::Raw).is_err());
     assert!(w.add_section(SectionKind::Scene, Scope::Tile(0), 0, b"{}", Compression::Raw).is_err());
     assert!(w.add_section(SectionKind::Surfels, Scope::Tile(3), 0, &[0; 32], Compression::Raw).is_err());
-    assert!(w.add_tile(TileInfo { origin_m: [f64::NAN; 3], extent_m: 1.0, grid: [0; 3], depth: 1, point_count: 0 }).is_err());
-    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 1.0, grid: [0; 3], depth: 1, point_count: 0 }).unwrap();
+    assert!(
+        w.add_tile(TileInfo {
+            origin_m: [f64::NAN; 3],
+            extent_m: 1.0,
+            grid: [0; 3],
+            depth: 1,
+            point_count: 0
+        })
+        .is_err()
+    );
+    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 1.0, grid: [0; 3], depth: 1, point_count: 0 })
+        .unwrap();
     assert!(w.add_section(SectionKind::Surfels, Scope::Tile(0), 0, &[0; 33], Compression::Raw).is_err());
     w.add_section(SectionKind::LeafAlbedo, Scope::Tile(0), 0, &[0; 4], Compression::Raw).unwrap();
-    let err = w.add_section(SectionKind::LeafAlbedo, Scope::Tile(0), 0, &[0; 4], Compression::Raw).unwrap_err();
+    let err =
+        w.add_section(SectionKind::LeafAlbedo, Scope::Tile(0), 0, &[0; 4], Compression::Raw).unwrap_err();
     assert!(err.to_string().contains("w.grotto"), "{err}");
     // Dropped without finish: no package and no temp file remain.
     drop(w);
@@ -363,7 +408,8 @@ fn an_unfinished_rewrite_keeps_the_previous_package() {
     let path = sample_package(dir.path(), alternating);
     let before = std::fs::read(&path).unwrap();
     let mut w = PackageWriter::create(&path).unwrap();
-    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 1.0, grid: [0; 3], depth: 1, point_count: 0 }).unwrap();
+    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 1.0, grid: [0; 3], depth: 1, point_count: 0 })
+        .unwrap();
     w.add_section(SectionKind::LeafAlbedo, Scope::Tile(0), 0, &[1; 4096], Compression::Raw).unwrap();
     // The partial file is beside the target, never at it.
     assert_eq!(std::fs::read(&path).unwrap(), before);
@@ -375,7 +421,10 @@ fn an_unfinished_rewrite_keeps_the_previous_package() {
 #[test]
 fn io_errors_name_the_file() {
     let err = Package::open("/nonexistent/dir/x.grotto").unwrap_err();
-    assert!(matches!(err, Error::Io { .. }) && err.to_string().contains("/nonexistent/dir/x.grotto"), "{err}");
+    assert!(
+        matches!(err, Error::Io { .. }) && err.to_string().contains("/nonexistent/dir/x.grotto"),
+        "{err}"
+    );
     let err = PackageWriter::create("/nonexistent/dir/x.grotto").unwrap_err();
     assert!(err.to_string().contains("/nonexistent/dir/x.grotto"), "{err}");
     let dir = tempfile::tempdir().unwrap();

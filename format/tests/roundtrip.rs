@@ -12,8 +12,11 @@ use proptest::prelude::*;
 
 fn check_all_content(pkg: &Package) {
     for kind in SectionKind::ALL {
-        let scopes: Vec<(Scope, u32)> =
-            if kind.is_per_tile() { vec![(Scope::Tile(0), 0), (Scope::Tile(1), 1)] } else { vec![(Scope::Global, 9)] };
+        let scopes: Vec<(Scope, u32)> = if kind.is_per_tile() {
+            vec![(Scope::Tile(0), 0), (Scope::Tile(1), 1)]
+        } else {
+            vec![(Scope::Global, 9)]
+        };
         for (scope, seed) in scopes {
             let s = pkg.find(kind, scope, 0).unwrap_or_else(|| panic!("{kind:?} {scope:?} missing"));
             assert_eq!(&*pkg.read_bytes(&s).unwrap(), content(kind, seed).as_slice(), "{kind:?} {scope:?}");
@@ -31,6 +34,11 @@ fn every_kind_round_trips_with_each_codec() {
     ] {
         let dir = tempfile::tempdir().unwrap();
         let path = sample_package(dir.path(), codec);
+        // `GROTTO_FUZZ_SEEDS=DIR` keeps these packages as seeds for the fuzzer (docs/fuzzing.md).
+        if let Some(seeds) = std::env::var_os("GROTTO_FUZZ_SEEDS") {
+            std::fs::create_dir_all(&seeds).unwrap();
+            std::fs::copy(&path, std::path::Path::new(&seeds).join(format!("sample-{name}.grotto"))).unwrap();
+        }
         let pkg = Package::open(&path).unwrap();
         assert_eq!(pkg.version(), (VERSION_MAJOR, VERSION_MINOR));
         check_all_content(&pkg);
@@ -99,7 +107,8 @@ fn auto_compression_keeps_incompressible_sections_raw() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("a.grotto");
     let mut w = PackageWriter::create(&path).unwrap();
-    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 1.0, grid: [0; 3], depth: 0, point_count: 0 }).unwrap();
+    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 1.0, grid: [0; 3], depth: 0, point_count: 0 })
+        .unwrap();
     // xorshift noise does not compress; zeros do.
     let mut x = 0x9e37_79b9_7f4a_7c15u64;
     let noise: Vec<u8> = (0..4096)
@@ -111,7 +120,8 @@ fn auto_compression_keeps_incompressible_sections_raw() {
         })
         .collect();
     w.add_section(SectionKind::LeafAlbedo, Scope::Tile(0), 0, &noise, Compression::Auto(3)).unwrap();
-    w.add_section(SectionKind::SurfelColorsRaw, Scope::Tile(0), 0, &[0u8; 4096], Compression::Auto(3)).unwrap();
+    w.add_section(SectionKind::SurfelColorsRaw, Scope::Tile(0), 0, &[0u8; 4096], Compression::Auto(3))
+        .unwrap();
     let pkg = Package::open(w.finish().unwrap()).unwrap();
     let t = pkg.tile(0).unwrap();
     assert_eq!(t.find(SectionKind::LeafAlbedo, 0).unwrap().codec, Some(Codec::Raw));
@@ -131,7 +141,8 @@ fn empty_package_and_empty_tiles_are_valid() {
     assert!(pkg.provenance().unwrap().is_none());
 
     let mut w = PackageWriter::create(&path).unwrap();
-    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 4.0, grid: [0; 3], depth: 2, point_count: 0 }).unwrap();
+    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 4.0, grid: [0; 3], depth: 2, point_count: 0 })
+        .unwrap();
     w.add_section(SectionKind::SvoNodes, Scope::Tile(0), 0, &[], Compression::Zstd(1)).unwrap();
     w.add_section(SectionKind::Surfels, Scope::Tile(0), 0, &[], Compression::Raw).unwrap();
     let pkg = Package::open(w.finish().unwrap()).unwrap();
@@ -151,10 +162,10 @@ struct RandomSection {
 
 fn random_bytes(kind: u32, len: usize, seed: u8) -> Vec<u8> {
     match SectionKind::from_u32(kind) {
-        Some(SectionKind::LeafOpacity) => {
-            bytemuck::cast_slice(&(0..len).map(|i| ((i * 31 + seed as usize) % 101) as f32 / 100.0).collect::<Vec<_>>())
-                .to_vec()
-        }
+        Some(SectionKind::LeafOpacity) => bytemuck::cast_slice(
+            &(0..len).map(|i| ((i * 31 + seed as usize) % 101) as f32 / 100.0).collect::<Vec<_>>(),
+        )
+        .to_vec(),
         Some(k) => content(k, u32::from(seed) + len as u32),
         None => (0..len).map(|i| (i as u8).wrapping_mul(seed)).collect(),
     }

@@ -16,13 +16,16 @@ pub fn content(kind: SectionKind, seed: u32) -> Vec<u8> {
     let f = |i: usize| ((i as u32).wrapping_mul(2_654_435_761).wrapping_add(seed) % 1000) as f32 / 1000.0;
     match kind {
         SectionKind::SvoNodes => {
-            let mut leaves: Vec<u64> = (0..n as u32).map(|i| morton_encode(i % 8, (i * 3) % 8, (i * 5 + seed) % 8)).collect();
+            let mut leaves: Vec<u64> =
+                (0..n as u32).map(|i| morton_encode(i % 8, (i * 3) % 8, (i * 5 + seed) % 8)).collect();
             leaves.sort_unstable();
             leaves.dedup();
             bytemuck::cast_slice(&nodes_from_leaves(&leaves, 3).unwrap()).to_vec()
         }
         SectionKind::LeafOpacity => bytemuck::cast_slice(&(0..n).map(f).collect::<Vec<f32>>()).to_vec(),
-        SectionKind::LeafAlbedo | SectionKind::SurfelColorsRaw => (0..n * 4).map(|i| (i as u32 + seed) as u8).collect(),
+        SectionKind::LeafAlbedo | SectionKind::SurfelColorsRaw => {
+            (0..n * 4).map(|i| (i as u32 + seed) as u8).collect()
+        }
         SectionKind::LeafNdf => bytemuck::cast_slice(
             &(0..n).map(|i| LeafNdf { mean: [0.0, f(i) * 0.9, 0.1], weight: 3.0 }).collect::<Vec<_>>(),
         )
@@ -33,7 +36,12 @@ pub fn content(kind: SectionKind, seed: u32) -> Vec<u8> {
         .to_vec(),
         SectionKind::Surfels => bytemuck::cast_slice(
             &(0..n)
-                .map(|i| Surfel { position_tile_m: [f(i), 1.0, 2.0], radius_m: 0.01, normal: [0.0, 0.0, 1.0], spread: 0.1 })
+                .map(|i| Surfel {
+                    position_tile_m: [f(i), 1.0, 2.0],
+                    radius_m: 0.01,
+                    normal: [0.0, 0.0, 1.0],
+                    spread: 0.1,
+                })
                 .collect::<Vec<_>>(),
         )
         .to_vec(),
@@ -42,14 +50,16 @@ pub fn content(kind: SectionKind, seed: u32) -> Vec<u8> {
             bytemuck::bytes_of(&ShRgb9 { coeffs: [[f(seed as usize), 0.5, 0.25]; 9] }).to_vec()
         }
         SectionKind::EnvMipLevels => {
-            let levels = [(8u32, 4u32, 0u32, 2u32), (4, 2, 2, 1)]
-                .map(|(width, height, first_block, block_count)| EnvMipLevel {
-                    width,
-                    height,
-                    first_block,
-                    block_count,
-                    roughness: first_block as f32 / 2.0,
-                    reserved: [0; 3],
+            let levels =
+                [(8u32, 4u32, 0u32, 2u32), (4, 2, 2, 1)].map(|(width, height, first_block, block_count)| {
+                    EnvMipLevel {
+                        width,
+                        height,
+                        first_block,
+                        block_count,
+                        roughness: first_block as f32 / 2.0,
+                        reserved: [0; 3],
+                    }
                 });
             bytemuck::cast_slice(&levels).to_vec()
         }

@@ -1,0 +1,16 @@
+//! The crate's error type: every variant says which file or which step failed.
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    #[error(transparent)]
+    Package(#[from] grotto_format::Error),
+    #[error("invalid parameter {name}: {reason}")]
+    Parameter { name: &'static str, reason: String },
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,9 @@
+//! grotto's offline preprocessing: registered scans in, one `.grotto` package out.
+//!
+//! Today this holds the built-in demo scene ([`demo`]); ingest, tiling, normals, SVO and encoding
+//! follow the design brief (`../shared/DESIGN.md`) and land module by module.
+
+pub mod demo;
+mod error;
+
+pub use error::{Error, Result};
