@@ -9,6 +9,9 @@ pub enum Error {
     Package(#[from] grotto_format::Error),
     #[error("invalid parameter {name}: {reason}")]
     Parameter { name: &'static str, reason: String },
+    /// A scan file that cannot be read as what it claims to be.
+    #[error("{path}: {format}: {reason}")]
+    Read { path: PathBuf, format: &'static str, reason: String },
     #[error("{path}: {source}")]
     Io { path: PathBuf, source: std::io::Error },
 }

@@ -5,5 +5,7 @@
 
 pub mod demo;
 mod error;
+pub mod ingest;
+pub mod pose;
 
 pub use error::{Error, Result};

@@ -1,0 +1,166 @@
+//! LAS 1.0-1.4 (point formats 0-10) and LAZ, through the `las` crate (parallel LAZ decoding).
+//!
+//! Colours: LAS stores 16-bit RGB, but many writers put 8-bit values in those fields. The first
+//! [`COLOR_PROBE`] points decide: if no channel exceeds 255 the file is taken as 8-bit. Files
+//! without colour get their intensity as grey (scaled the same way), or a neutral grey.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::Path;
+
+use las::{LazParallelism, PointData, Reader, ReaderOptions};
+
+use super::{NEUTRAL_GREY, PointChunk, PointSource, ScanFormat, SourceInfo, guard, read_error};
+use crate::Result;
+
+const COLOR_PROBE: u64 = 1 << 20;
+
+pub(super) struct LasSource {
+    info: SourceInfo,
+    reader: Reader,
+    data: PointData,
+    remaining: u64,
+    /// Set when the decoder panicked; its state is not trusted again.
+    poisoned: bool,
+    /// Divide raw colour by this to get 0..=255.
+    color_div: f32,
+    /// Same for intensity as grey; `None` when the file has no intensity (all zero).
+    grey_div: Option<f32>,
+}
+
+fn open_reader(path: &Path, format: ScanFormat) -> Result<Reader> {
+    guard(path, format, || open_reader_unguarded(path, format))
+}
+
+fn open_reader_unguarded(path: &Path, format: ScanFormat) -> Result<Reader> {
+    let file = File::open(path).map_err(|e| read_error(path, format, e))?;
+    Reader::with_options(BufReader::new(file), ReaderOptions::default().with_laz_parallelism(LazParallelism::Yes))
+        .map_err(|e| {
+            let message = e.to_string();
+            if message.contains("PointWise") {
+                // laz-rs reads only chunked LASzip streams; the old point-wise layout needs a
+                // re-compression, which every LASzip-based tool does.
+                read_error(path, format, "uses the non-chunked point-wise LASzip compressor, which is not supported; re-compress it (e.g. `laszip -i in.laz -o out.laz` or `pdal translate`)")
+            } else {
+                read_error(path, format, message)
+            }
+        })
+}
+
+impl LasSource {
+    pub(super) fn open(path: &Path, format: ScanFormat) -> Result<Self> {
+        let reader = open_reader(path, format)?;
+        let header = reader.header().clone();
+        let claimed = header.number_of_points();
+        let point_format = *header.point_format();
+        let file_len = std::fs::metadata(path).map_err(|e| read_error(path, format, e))?.len();
+        // An uncompressed file must hold every record it claims; a compressed one at least a byte
+        // per point is not guaranteed, so there the decoder's end-of-data error is the check.
+        if !point_format.is_compressed {
+            let file = File::open(path).map_err(|e| read_error(path, format, e))?;
+            let raw =
+                las::raw::Header::read_from(BufReader::new(file)).map_err(|e| read_error(path, format, e))?;
+            let record = u64::from(raw.point_data_record_length);
+            let needed =
+                claimed.checked_mul(record).and_then(|b| b.checked_add(u64::from(raw.offset_to_point_data)));
+            if needed.is_none_or(|n| n > file_len) {
+                return Err(read_error(
+                    path,
+                    format,
+                    format!(
+                        "header claims {claimed} points of {record} bytes, but the {file_len}-byte file holds at most {}",
+                        file_len.saturating_sub(u64::from(raw.offset_to_point_data)) / record.max(1)
+                    ),
+                ));
+            }
+        }
+        let (color_div, grey_div) =
+            guard(path, format, || probe_scales(path, format, point_format.has_color, claimed))?;
+        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let data = las::PointDataBuilder::new().for_header(reader.header()).build();
+        Ok(Self {
+            info: SourceInfo {
+                path: path.to_path_buf(),
+                format,
+                name,
+                claimed_points: claimed,
+                has_color: point_format.has_color,
+                has_normals: false,
+                file_pose: None,
+            },
+            reader,
+            data,
+            remaining: claimed,
+            poisoned: false,
+            color_div,
+            grey_div,
+        })
+    }
+}
+
+/// Looks at up to COLOR_PROBE points to tell 8-bit from 16-bit colour (and intensity) values.
+fn probe_scales(
+    path: &Path,
+    format: ScanFormat,
+    has_color: bool,
+    claimed: u64,
+) -> Result<(f32, Option<f32>)> {
+    let mut reader = open_reader(path, format)?;
+    let data = reader.read_points(claimed.min(COLOR_PROBE)).map_err(|e| read_error(path, format, e))?;
+    let max_color = data.rgb().map_or(0, |rgb| rgb.map(|(r, g, b)| r.max(g).max(b)).max().unwrap_or(0));
+    let max_intensity = data.intensity().max().unwrap_or(0);
+    let div = |max: u16| if max <= 255 { 1.0 } else { 257.0 };
+    Ok((if has_color { div(max_color) } else { 1.0 }, (max_intensity > 0).then(|| div(max_intensity))))
+}
+
+impl PointSource for LasSource {
+    fn info(&self) -> &SourceInfo {
+        &self.info
+    }
+
+    fn fill_chunk(&mut self, chunk: &mut PointChunk) -> Result<usize> {
+        chunk.clear();
+        if self.remaining == 0 {
+            return Ok(0);
+        }
+        let done = self.info.claimed_points - self.remaining;
+        let (path, format) = (&self.info.path, self.info.format);
+        if self.poisoned {
+            return Err(read_error(
+                path,
+                format,
+                format!("after {done} points: reading stopped at corrupt data"),
+            ));
+        }
+        let want = self.remaining.min(chunk.limit() as u64);
+        let (reader, data) = (&mut self.reader, &mut self.data);
+        let n = guard(path, format, || {
+            reader
+                .fill_points(want, data)
+                .map_err(|e| read_error(path, format, format!("after {done} points: {e}")))
+        })
+        .inspect_err(|_| self.poisoned = true)?;
+        if n == 0 {
+            return Err(read_error(
+                &self.info.path,
+                self.info.format,
+                format!(
+                    "ends after {} of the {} points its header claims",
+                    self.info.claimed_points - self.remaining,
+                    self.info.claimed_points
+                ),
+            ));
+        }
+        self.remaining -= n;
+        chunk.xyz.extend(self.data.x().zip(self.data.y()).zip(self.data.z()).map(|((x, y), z)| [x, y, z]));
+        let to_u8 = |v: u16, div: f32| (f32::from(v) / div).round().min(255.0) as u8;
+        match self.data.rgb() {
+            Some(rgb) => chunk.rgb.extend(rgb.map(|(r, g, b)| [r, g, b].map(|c| to_u8(c, self.color_div)))),
+            None => match self.grey_div {
+                Some(div) => chunk.rgb.extend(self.data.intensity().map(|i| [to_u8(i, div); 3])),
+                None => chunk.rgb.resize(chunk.xyz.len(), NEUTRAL_GREY),
+            },
+        }
+        Ok(chunk.len())
+    }
+}

@@ -1,0 +1,229 @@
+//! Every scan file in ../shared/data reads with the right point count and bounds, or fails with a
+//! typed error naming the file; hostile variants (lying counts, truncation, flipped bytes) never
+//! panic or allocate for what the file cannot hold.
+
+use std::path::{Path, PathBuf};
+
+use grotto_preprocess::Error;
+use grotto_preprocess::ingest::{self, PointChunk, ScanFormat};
+use grotto_tests::shared_data_dir;
+
+struct Read {
+    scans: Vec<(u64, [f64; 3], [f64; 3])>,
+    has_color: bool,
+}
+
+fn read(path: &Path) -> grotto_preprocess::Result<Read> {
+    let format = ScanFormat::detect(path)?;
+    let mut scans = Vec::new();
+    let mut has_color = false;
+    for i in 0..ingest::scan_count(path, format)? {
+        let mut src = ingest::open(path, format, i)?;
+        has_color |= src.info().has_color;
+        let mut chunk = PointChunk::new(1000);
+        let (mut n, mut lo, mut hi) = (0u64, [f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        while src.fill_chunk(&mut chunk)? > 0 {
+            assert_eq!(chunk.rgb.len(), chunk.len());
+            assert!(chunk.normal.is_empty() || chunk.normal.len() == chunk.len());
+            n += chunk.len() as u64;
+            for p in &chunk.xyz {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(p[a]);
+                    hi[a] = hi[a].max(p[a]);
+                }
+            }
+        }
+        assert!(n <= src.info().claimed_points, "{}: read more than claimed", path.display());
+        scans.push((n, lo, hi));
+    }
+    Ok(Read { scans, has_color })
+}
+
+fn files(data: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![data.join("las"), data.join("ply"), data.join("e57")];
+    while let Some(dir) = stack.pop() {
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if matches!(p.extension().and_then(|e| e.to_str()), Some("las" | "laz" | "ply" | "e57")) {
+                out.push(p);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// (file name, points per scan) for files whose counts are known from their provenance, and the
+/// files that must fail (with a word the message must contain).
+const EXPECTED: &[(&str, &[u64])] = &[
+    ("e57rs_bunnyDouble.e57", &[30571]),
+    ("e57rs_bunnyInt19.e57", &[30571]),
+    // Two of its three points are flagged invalid.
+    ("e57rs_cartesian_invalid_state_single.e57", &[1]),
+    ("e57rs_empty.e57", &[]),
+    ("e57rs_tinyCartesianFloatRgb.e57", &[2090]),
+    ("pdal_A_B.e57", &[2, 4]),
+    ("pdal_A_B_different_dims.e57", &[1, 1]),
+    ("pye57_translationWithoutRotation.e57", &[4]),
+    ("laspy_simple.las", &[1065]),
+    ("laspy_simple.laz", &[1065]),
+    ("laspy_1_4_w_evlr.las", &[1000]),
+    ("laspy_simple1_4.las", &[22600]),
+    ("pdal_autzen_trim.laz", &[110000]),
+    ("pdal_no-points.las", &[0]),
+    ("bun000.ply", &[40256]),
+    ("bun_zipper.ply", &[35947]),
+    ("greg_turk_example2_ok_ascii.ply", &[8]),
+    ("house_2_ok_little_endian.ply", &[5]),
+    ("empty_2_ok_little_endian.ply", &[0]),
+    ("trimesh_points_ascii_with_lists.ply", &[5]),
+];
+const MUST_FAIL: &[(&str, &str)] = &[
+    ("libe57fmt_ZeroPointsInvalid.e57", "E57"),
+    ("lazrs_point-version-1-point-wise.laz", "point-wise"),
+    ("sized_dims.ply", "no z"),
+    ("all_atomic_types_ok_ascii.ply", "no vertex element"),
+    ("single_elements_err_ascii.ply", "no vertex element"),
+];
+
+#[test]
+fn every_shared_scan_reads_or_fails_with_a_typed_error() {
+    let Some(data) = shared_data_dir() else {
+        eprintln!("../shared/data not found; skipping");
+        return;
+    };
+    let all = files(&data);
+    assert!(all.len() > 40, "expected the shared data set, found {} files", all.len());
+    for path in &all {
+        let name = path.file_name().unwrap().to_str().unwrap();
+        match (read(path), MUST_FAIL.iter().find(|f| f.0 == name)) {
+            (Ok(r), None) => {
+                if let Some((_, counts)) = EXPECTED.iter().find(|e| e.0 == name) {
+                    let got: Vec<u64> = r.scans.iter().map(|s| s.0).collect();
+                    assert_eq!(&got, counts, "{name}");
+                }
+                if path.extension().unwrap() != "e57" {
+                    assert_eq!(r.scans.len(), 1, "{name}");
+                }
+            }
+            (Err(e), Some((_, word))) => {
+                let msg = e.to_string();
+                assert!(matches!(e, Error::Read { .. }), "{name}: {e:?}");
+                assert!(msg.contains(name) && msg.contains(word), "{name}: {msg}");
+            }
+            (Ok(_), Some(_)) => panic!("{name} should have failed"),
+            (Err(e), None) => panic!("{name}: {e}"),
+        }
+    }
+}
+
+#[test]
+fn las_points_lie_within_their_header_bounds_and_colours_scale() {
+    let Some(data) = shared_data_dir() else { return };
+    for name in ["laspy_simple.las", "laspy_simple1_4.las", "pdal_autzen_trim.laz", "lazrs_point-color.las"] {
+        let path = data.join("las").join(name);
+        let header = las::Reader::from_path(&path).unwrap().header().bounds();
+        let r = read(&path).unwrap();
+        let (_, lo, hi) = r.scans[0];
+        let eps = 0.01;
+        assert!(lo[0] >= header.min.x - eps && hi[0] <= header.max.x + eps, "{name} x");
+        assert!(lo[1] >= header.min.y - eps && hi[1] <= header.max.y + eps, "{name} y");
+        assert!(lo[2] >= header.min.z - eps && hi[2] <= header.max.z + eps, "{name} z");
+        assert!(r.has_color, "{name}");
+    }
+    // 16-bit colours are scaled down, not clipped: a 16-bit file has mid-range values.
+    let path = data.join("las/pdal_autzen_trim.laz");
+    let mut src = ingest::open(&path, ScanFormat::Laz, 0).unwrap();
+    let all = ingest::read_all(src.as_mut()).unwrap();
+    let mean: f64 = all.rgb.iter().map(|c| f64::from(c[0])).sum::<f64>() / all.rgb.len() as f64;
+    let saturated = all.rgb.iter().filter(|c| c[0] == 255).count() as f64 / all.rgb.len() as f64;
+    assert!(mean > 30.0 && mean < 230.0 && saturated < 0.05, "mean {mean}, saturated {saturated}");
+}
+
+#[test]
+fn las_and_laz_pairs_read_identically() {
+    let Some(data) = shared_data_dir() else { return };
+    for stem in ["laspy_simple", "laspy_1_4_w_evlr", "lazrs_extra-bytes"] {
+        let las = data.join(format!("las/{stem}.las"));
+        let laz = data.join(format!("las/{stem}.laz"));
+        let a = ingest::read_all(ingest::open(&las, ScanFormat::Las, 0).unwrap().as_mut()).unwrap();
+        let b = ingest::read_all(ingest::open(&laz, ScanFormat::Laz, 0).unwrap().as_mut()).unwrap();
+        assert_eq!(a.xyz, b.xyz, "{stem}");
+        assert_eq!(a.rgb, b.rgb, "{stem}");
+    }
+}
+
+fn scratch(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+#[test]
+fn lying_point_counts_are_refused_without_allocating_for_them() {
+    let Some(data) = shared_data_dir() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    // LAS 1.2: legacy point count at byte 107; 1.4 also has a 64-bit count at 247.
+    let mut las = std::fs::read(data.join("las/laspy_simple.las")).unwrap();
+    las[107..111].copy_from_slice(&1_000_000_000u32.to_le_bytes());
+    let p = scratch(dir.path(), "billion.las", &las);
+    let e = read(&p).err().expect("a billion points in a small file");
+    assert!(e.to_string().contains("billion.las") && e.to_string().contains("holds at most"), "{e}");
+
+    let mut laz = std::fs::read(data.join("las/laspy_simple.laz")).unwrap();
+    laz[107..111].copy_from_slice(&1_000_000_000u32.to_le_bytes());
+    let p = scratch(dir.path(), "billion.laz", &laz);
+    assert!(read(&p).is_err());
+
+    let ply = b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\nproperty float x\nproperty float y\nproperty float z\nend_header\n\0\0\0\0\0\0\0\0\0\0\0\0";
+    let p = scratch(dir.path(), "billion.ply", ply);
+    let e = read(&p).err().unwrap();
+    assert!(e.to_string().contains("more than the"), "{e}");
+    let ply = b"ply\nformat ascii 1.0\nelement vertex 1000000000\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n4 5 6\n";
+    let e = read(&scratch(dir.path(), "billion-ascii.ply", ply)).err().unwrap();
+    assert!(e.to_string().contains("vertex 2 of 1000000000"), "{e}");
+}
+
+#[test]
+fn damaged_files_never_panic() {
+    let Some(data) = shared_data_dir() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let picks = [
+        "las/laspy_simple.las",
+        "las/laspy_simple.laz",
+        "las/laspy_1_4_w_evlr.laz",
+        "ply/pdal/simple_binary.ply",
+        "ply/ply-rs/house_ok_ascii.ply",
+        "ply/assimp_points.ply",
+        "e57/e57rs_tinyCartesianFloatRgb.e57",
+        "e57/pdal_A_B.e57",
+    ];
+    let mut x = 0x2545_f491_4f6c_dd1du64;
+    let mut rand = move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    for pick in picks {
+        let original = std::fs::read(data.join(pick)).unwrap();
+        let ext = Path::new(pick).extension().unwrap().to_str().unwrap();
+        for case in 0..40 {
+            let mut bytes = original.clone();
+            if case % 2 == 0 {
+                bytes.truncate((rand() as usize) % bytes.len());
+            } else {
+                for _ in 0..4 {
+                    let i = (rand() as usize) % bytes.len();
+                    bytes[i] = rand() as u8;
+                }
+            }
+            let p = scratch(dir.path(), &format!("damaged.{ext}"), &bytes);
+            let outcome = std::panic::catch_unwind(|| read(&p).map(|_| ()));
+            assert!(outcome.is_ok(), "{pick} case {case} panicked");
+        }
+    }
+}
