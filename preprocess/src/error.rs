@@ -12,6 +12,8 @@ pub enum Error {
     /// A scan file that cannot be read as what it claims to be.
     #[error("{path}: {format}: {reason}")]
     Read { path: PathBuf, format: &'static str, reason: String },
+    #[error("{path}: manifest: {reason}")]
+    Manifest { path: PathBuf, reason: String },
     #[error("{path}: {source}")]
     Io { path: PathBuf, source: std::io::Error },
 }

@@ -6,6 +6,8 @@
 pub mod demo;
 mod error;
 pub mod ingest;
+pub mod manifest;
 pub mod pose;
+pub mod tiling;
 
 pub use error::{Error, Result};

@@ -1,0 +1,444 @@
+//! Out-of-core tiling in two streaming passes, as the fastest point-cloud converters do.
+//!
+//! 1. **Count**: every scan is streamed once; each point is posed into the world (f64) and counted
+//!    into a fine grid of cells `min_tile_extent_m` wide. Memory grows with occupied cells, not
+//!    points.
+//! 2. **Plan**: counts are summed up a power-of-two pyramid; from the coarsest level
+//!    (`max_tile_extent_m`) down, a cell with at most `max_points_per_tile` points (or at the finest
+//!    level) becomes a tile, otherwise its occupied children are considered. Tiles are cubes of one
+//!    grid anchored at the lowest occupied fine cell, so the tiling of a cloud shifted by a multiple
+//!    of the fine cell (survey offsets are whole metres) is the same, tile for tile.
+//! 3. **Distribute**: every scan is streamed again; each point goes to its tile's bin on disk as
+//!    tile-local f32 (the f64 world position never leaves this module), and to neighbouring tiles
+//!    within `halo_m` as a halo copy, so normals and filtering see across tile borders. Per-tile
+//!    buffers are flushed when together they exceed `buffer_bytes`, which bounds memory.
+//!
+//! The plan is written to `WORK/plan.json` with a fingerprint of inputs and parameters; a run
+//! that finds a complete plan with the same fingerprint reuses the bins (resume).
+
+use std::collections::HashMap;
+use std::fs::{File, OpenOptions};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use bytemuck::{Pod, Zeroable};
+use serde::{Deserialize, Serialize};
+
+use crate::ingest::{self, PointChunk};
+use crate::manifest::ResolvedScan;
+use crate::{Error, Result};
+
+/// Tiling knobs.
+#[derive(Clone, Debug, Serialize)]
+pub struct TilingParams {
+    /// Finest tile edge, metres; a power of two.
+    pub min_tile_extent_m: f64,
+    /// Coarsest tile edge, metres; a power of two >= the finest.
+    pub max_tile_extent_m: f64,
+    /// A tile is split while it holds more points than this (unless it is at the finest level).
+    pub max_points_per_tile: u64,
+    /// Points this close to a tile's border are copied into the neighbour; <= the finest extent.
+    pub halo_m: f64,
+    /// Points per read.
+    pub chunk_points: usize,
+    /// Bin buffers are flushed to disk when they hold this many bytes together.
+    pub buffer_bytes: usize,
+}
+
+impl Default for TilingParams {
+    fn default() -> Self {
+        Self {
+            min_tile_extent_m: 1.0,
+            max_tile_extent_m: 256.0,
+            max_points_per_tile: 4_000_000,
+            halo_m: 0.25,
+            chunk_points: ingest::DEFAULT_CHUNK,
+            buffer_bytes: 256 << 20,
+        }
+    }
+}
+
+/// One point in a tile bin. 24 bytes; keep in sync with `docs/architecture.md`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct BinPoint {
+    /// Position relative to the tile origin, metres.
+    pub pos_tile_m: [f32; 3],
+    /// Input normal in the world frame as snorm16, or zero when the scan had none.
+    pub normal_snorm: [i16; 3],
+    /// sRGB colour.
+    pub rgb: [u8; 3],
+    /// Bit 0: halo copy (belongs to a neighbour tile).
+    pub flags: u8,
+    /// Index of the scan the point came from (for its scanner position).
+    pub scan: u16,
+}
+
+const _: () = assert!(size_of::<BinPoint>() == 24);
+
+pub const FLAG_HALO: u8 = 1;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PlannedTile {
+    /// Extent = min_extent * 2^level.
+    pub level: u32,
+    /// Cell index at that level, relative to the grid anchor.
+    pub key: [i64; 3],
+    /// Points owned by the tile (halo excluded).
+    pub points: u64,
+}
+
+/// The result of tiling: what the tiles are and where their bins are.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TilePlan {
+    pub fingerprint: String,
+    pub min_extent_m: f64,
+    /// Fine-grid cell of the grid origin.
+    pub anchor: [i64; 3],
+    pub tiles: Vec<PlannedTile>,
+    pub points: u64,
+    /// Points dropped for non-finite coordinates.
+    pub invalid_points: u64,
+    /// Halo copies written.
+    pub halo_points: u64,
+    /// Scanner positions (world), by scan index in the bins.
+    pub scanners_world_m: Vec<[f64; 3]>,
+    pub bins_complete: bool,
+}
+
+impl TilePlan {
+    pub fn extent_m(&self, tile: &PlannedTile) -> f64 {
+        self.min_extent_m * f64::from(1u32 << tile.level)
+    }
+
+    /// World position of the grid origin.
+    pub fn grid_origin_m(&self) -> [f64; 3] {
+        self.anchor.map(|a| a as f64 * self.min_extent_m)
+    }
+
+    pub fn origin_m(&self, tile: &PlannedTile) -> [f64; 3] {
+        let g = self.grid_origin_m();
+        let e = self.extent_m(tile);
+        std::array::from_fn(|a| g[a] + tile.key[a] as f64 * e)
+    }
+}
+
+/// Progress of a long step, for a bar in the binary.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress {
+    pub stage: &'static str,
+    pub done: u64,
+    pub total: u64,
+}
+
+pub fn bin_path(work_dir: &Path, tile: usize) -> PathBuf {
+    work_dir.join("bins").join(format!("{tile:07}.bin"))
+}
+
+/// Reads one tile's bin.
+pub fn read_bin(work_dir: &Path, tile: usize) -> Result<Vec<BinPoint>> {
+    let path = bin_path(work_dir, tile);
+    let bytes = match std::fs::read(&path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(source) => return Err(Error::Io { path, source }),
+    };
+    if bytes.len() % size_of::<BinPoint>() != 0 {
+        return Err(Error::Io {
+            path,
+            source: std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                "bin is not whole points (interrupted write?)",
+            ),
+        });
+    }
+    Ok(bytemuck::pod_collect_to_vec(&bytes))
+}
+
+fn check_params(p: &TilingParams) -> Result<()> {
+    let pow2 = |v: f64| v > 0.0 && v.is_finite() && v.log2().fract() == 0.0;
+    let bad = |name: &'static str, reason: String| Err(Error::Parameter { name, reason });
+    if !pow2(p.min_tile_extent_m) || !pow2(p.max_tile_extent_m) || p.max_tile_extent_m < p.min_tile_extent_m {
+        return bad(
+            "tile extents",
+            format!("{} .. {} m must be powers of two, min <= max", p.min_tile_extent_m, p.max_tile_extent_m),
+        );
+    }
+    if (p.max_tile_extent_m / p.min_tile_extent_m).log2() > 20.0 {
+        return bad("tile extents", "more than 20 levels between min and max".into());
+    }
+    if !(p.halo_m >= 0.0 && p.halo_m <= p.min_tile_extent_m) {
+        return bad("halo_m", format!("{} must be in 0..=min tile extent {}", p.halo_m, p.min_tile_extent_m));
+    }
+    if p.max_points_per_tile == 0 || p.chunk_points == 0 {
+        return bad("max_points_per_tile", "must be positive".into());
+    }
+    Ok(())
+}
+
+/// Fingerprint of the inputs (path, size, modification time, scan, pose) and the parameters.
+fn fingerprint(scans: &[ResolvedScan], params: &TilingParams) -> Result<String> {
+    let mut h = xxhash_rust::xxh3::Xxh3::new();
+    for s in scans {
+        let meta = std::fs::metadata(&s.path).map_err(|source| Error::Io { path: s.path.clone(), source })?;
+        let mtime = meta
+            .modified()
+            .ok()
+            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+            .map(|d| d.as_nanos());
+        h.update(
+            format!(
+                "{}|{}|{:?}|{}|{:?}|{:?}\n",
+                s.path.display(),
+                meta.len(),
+                mtime,
+                s.index,
+                s.world_from_scan,
+                s.scanner_world_m
+            )
+            .as_bytes(),
+        );
+    }
+    h.update(serde_json::to_string(params).unwrap_or_default().as_bytes());
+    Ok(format!("{:016x}", h.digest()))
+}
+
+fn write_json_atomic(path: &Path, value: &impl Serialize) -> Result<()> {
+    let io = |source| Error::Io { path: path.to_path_buf(), source };
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
+    serde_json::to_writer_pretty(&mut tmp, value).map_err(|e| io(e.into()))?;
+    tmp.as_file().sync_all().map_err(io)?;
+    tmp.persist(path).map_err(|e| io(e.error))?;
+    Ok(())
+}
+
+/// Streams every scan through `f(scan_index, chunk_in_world)`, posing points into the world.
+fn stream_world(
+    scans: &[ResolvedScan],
+    chunk_points: usize,
+    mut f: impl FnMut(usize, &PointChunk) -> Result<()>,
+) -> Result<()> {
+    let mut chunk = PointChunk::new(chunk_points);
+    for (si, scan) in scans.iter().enumerate() {
+        let mut source = ingest::open(&scan.path, scan.format, scan.index)?;
+        while source.fill_chunk(&mut chunk)? > 0 {
+            let pose = &scan.world_from_scan;
+            for p in &mut chunk.xyz {
+                *p = pose.apply(*p);
+            }
+            for n in &mut chunk.normal {
+                let r = pose.rotate(n.map(f64::from));
+                *n = r.map(|v| v as f32);
+            }
+            f(si, &chunk)?;
+        }
+    }
+    Ok(())
+}
+
+fn fine_key(p: &[f64; 3], inv_min_extent: f64) -> [i64; 3] {
+    p.map(|v| (v * inv_min_extent).floor() as i64)
+}
+
+/// Runs (or resumes) the tiling of `scans` into `work_dir`.
+pub fn tile_scans(
+    scans: &[ResolvedScan],
+    work_dir: &Path,
+    params: &TilingParams,
+    progress: &dyn Fn(Progress),
+) -> Result<TilePlan> {
+    check_params(params)?;
+    if scans.len() > usize::from(u16::MAX) {
+        return Err(Error::Parameter {
+            name: "scans",
+            reason: format!("{} scans; at most 65535 per build", scans.len()),
+        });
+    }
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| Error::Io { path, source }
+    };
+    std::fs::create_dir_all(work_dir.join("bins")).map_err(io(work_dir))?;
+    let fingerprint = fingerprint(scans, params)?;
+    let plan_path = work_dir.join("plan.json");
+    if let Ok(text) = std::fs::read_to_string(&plan_path)
+        && let Ok(plan) = serde_json::from_str::<TilePlan>(&text)
+        && plan.fingerprint == fingerprint
+        && plan.bins_complete
+    {
+        return Ok(plan);
+    }
+
+    // Pass 1: count.
+    let claimed: u64 = scans
+        .iter()
+        .map(|s| ingest::open(&s.path, s.format, s.index).map(|src| src.info().claimed_points))
+        .sum::<Result<u64>>()?;
+    let inv = 1.0 / params.min_tile_extent_m;
+    let mut fine: HashMap<[i64; 3], u64> = HashMap::new();
+    let (mut points, mut invalid, mut done) = (0u64, 0u64, 0u64);
+    stream_world(scans, params.chunk_points, |_, chunk| {
+        for p in &chunk.xyz {
+            if p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
+                *fine.entry(fine_key(p, inv)).or_default() += 1;
+                points += 1;
+            } else {
+                invalid += 1;
+            }
+        }
+        done += chunk.len() as u64;
+        progress(Progress { stage: "count", done, total: claimed });
+        Ok(())
+    })?;
+
+    // Plan: pyramid of counts relative to the anchor, tiles chosen top-down.
+    let anchor = fine.keys().fold([i64::MAX; 3], |a, k| std::array::from_fn(|i| a[i].min(k[i])));
+    let top = (params.max_tile_extent_m / params.min_tile_extent_m).log2() as u32;
+    let mut levels: Vec<HashMap<[i64; 3], u64>> = Vec::with_capacity(top as usize + 1);
+    levels.push(fine.iter().map(|(k, &n)| (std::array::from_fn(|i| k[i] - anchor[i]), n)).collect());
+    drop(fine);
+    for l in 1..=top as usize {
+        let mut up: HashMap<[i64; 3], u64> = HashMap::new();
+        for (k, &n) in &levels[l - 1] {
+            *up.entry(k.map(|v| v >> 1)).or_default() += n;
+        }
+        levels.push(up);
+    }
+    let mut tiles = Vec::new();
+    let mut stack: Vec<(u32, [i64; 3])> = levels[top as usize].keys().map(|k| (top, *k)).collect();
+    stack.sort_unstable();
+    while let Some((level, key)) = stack.pop() {
+        let n = levels[level as usize][&key];
+        if n <= params.max_points_per_tile || level == 0 {
+            tiles.push(PlannedTile { level, key, points: n });
+        } else {
+            for o in 0..8i64 {
+                let child = [key[0] * 2 + (o & 1), key[1] * 2 + (o >> 1 & 1), key[2] * 2 + (o >> 2 & 1)];
+                if levels[level as usize - 1].contains_key(&child) {
+                    stack.push((level - 1, child));
+                }
+            }
+        }
+    }
+    // Deterministic order: coarse first, then by position.
+    tiles.sort_unstable_by_key(|t| (std::cmp::Reverse(t.level), t.key));
+    drop(levels);
+    let mut plan = TilePlan {
+        fingerprint,
+        min_extent_m: params.min_tile_extent_m,
+        anchor: if tiles.is_empty() { [0; 3] } else { anchor },
+        tiles,
+        points,
+        invalid_points: invalid,
+        halo_points: 0,
+        scanners_world_m: scans.iter().map(|s| s.scanner_world_m).collect(),
+        bins_complete: false,
+    };
+    write_json_atomic(&plan_path, &plan)?;
+
+    // Pass 2: distribute.
+    let lookup: HashMap<(u32, [i64; 3]), usize> =
+        plan.tiles.iter().enumerate().map(|(i, t)| ((t.level, t.key), i)).collect();
+    let find = |p: &[f64; 3]| -> Option<usize> {
+        let k = fine_key(p, inv);
+        let rel: [i64; 3] = std::array::from_fn(|i| k[i] - plan.anchor[i]);
+        (0..=top).find_map(|l| lookup.get(&(l, rel.map(|v| v >> l))).copied())
+    };
+    for t in 0..plan.tiles.len() {
+        let _ = std::fs::remove_file(bin_path(work_dir, t));
+    }
+    let mut bins = Bins::new(work_dir, params.buffer_bytes);
+    let origins: Vec<[f64; 3]> = plan.tiles.iter().map(|t| plan.origin_m(t)).collect();
+    let extents: Vec<f64> = plan.tiles.iter().map(|t| plan.extent_m(t)).collect();
+    let h = params.halo_m;
+    let (mut done, mut halo) = (0u64, 0u64);
+    let mut neighbours: Vec<usize> = Vec::with_capacity(27);
+    stream_world(scans, params.chunk_points, |si, chunk| {
+        for (i, p) in chunk.xyz.iter().enumerate() {
+            let Some(t) = p.iter().all(|v| v.is_finite() && v.abs() < 1e15).then(|| find(p)).flatten() else {
+                continue;
+            };
+            let normal_snorm = chunk.normal.get(i).map_or([0; 3], |n| {
+                let len = n.iter().map(|c| c * c).sum::<f32>().sqrt();
+                if len.is_finite() && len > 1e-6 {
+                    n.map(|c| (c / len * 32767.0).round() as i16)
+                } else {
+                    [0; 3]
+                }
+            });
+            let mut point =
+                BinPoint { pos_tile_m: [0.0; 3], normal_snorm, rgb: chunk.rgb[i], flags: 0, scan: si as u16 };
+            let local =
+                |tile: usize| -> [f32; 3] { std::array::from_fn(|a| (p[a] - origins[tile][a]) as f32) };
+            point.pos_tile_m = local(t);
+            bins.push(t, point)?;
+            // Halo: only points near their tile's border can reach a neighbour.
+            let near = point.pos_tile_m.iter().any(|&c| f64::from(c) < h || f64::from(c) > extents[t] - h);
+            if h > 0.0 && near {
+                neighbours.clear();
+                for o in 0..27 {
+                    let d = [o % 3 - 1, o / 3 % 3 - 1, o / 9 - 1];
+                    if d == [0, 0, 0] {
+                        continue;
+                    }
+                    let q: [f64; 3] = std::array::from_fn(|a| p[a] + d[a] as f64 * h);
+                    if let Some(n) = find(&q)
+                        && n != t
+                        && !neighbours.contains(&n)
+                    {
+                        neighbours.push(n);
+                    }
+                }
+                for &n in &neighbours {
+                    bins.push(n, BinPoint { pos_tile_m: local(n), flags: FLAG_HALO, ..point })?;
+                    halo += 1;
+                }
+            }
+        }
+        done += chunk.len() as u64;
+        progress(Progress { stage: "distribute", done, total: points + invalid });
+        Ok(())
+    })?;
+    bins.flush_all()?;
+    plan.halo_points = halo;
+    plan.bins_complete = true;
+    write_json_atomic(&plan_path, &plan)?;
+    Ok(plan)
+}
+
+/// Per-tile append buffers with a shared byte budget.
+struct Bins {
+    dir: PathBuf,
+    buffers: HashMap<usize, Vec<BinPoint>>,
+    buffered: usize,
+    budget: usize,
+}
+
+impl Bins {
+    fn new(work_dir: &Path, budget: usize) -> Self {
+        Self {
+            dir: work_dir.to_path_buf(),
+            buffers: HashMap::new(),
+            buffered: 0,
+            budget: budget.max(1 << 16),
+        }
+    }
+
+    fn push(&mut self, tile: usize, p: BinPoint) -> Result<()> {
+        self.buffers.entry(tile).or_default().push(p);
+        self.buffered += size_of::<BinPoint>();
+        if self.buffered >= self.budget { self.flush_all() } else { Ok(()) }
+    }
+
+    fn flush_all(&mut self) -> Result<()> {
+        for (tile, points) in self.buffers.drain() {
+            let path = bin_path(&self.dir, tile);
+            let io = |source| Error::Io { path: path.clone(), source };
+            let mut f: File = OpenOptions::new().create(true).append(true).open(&path).map_err(io)?;
+            f.write_all(bytemuck::cast_slice(&points)).map_err(io)?;
+        }
+        self.buffered = 0;
+        Ok(())
+    }
+}
