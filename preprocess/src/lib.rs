@@ -3,11 +3,15 @@
 //! Today this holds the built-in demo scene ([`demo`]); ingest, tiling, normals, SVO and encoding
 //! follow the design brief (`../shared/DESIGN.md`) and land module by module.
 
+pub mod build;
 pub mod demo;
 mod error;
 pub mod ingest;
 pub mod manifest;
+pub mod normals;
 pub mod pose;
+pub mod scanwrite;
+pub mod synth;
 pub mod tiling;
 
 pub use error::{Error, Result};

@@ -1,10 +1,17 @@
-//! `grotto-pack`: builds `.grotto` packages.
+//! `grotto-pack`: builds `.grotto` packages from registered scans.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Duration;
 
-use anyhow::Context;
-use clap::{Parser, Subcommand};
-use grotto_preprocess::demo;
+use anyhow::{Context, bail};
+use clap::{Args, Parser, Subcommand};
+use grotto_preprocess::build::{self, BuildParams, BuildSummary};
+use grotto_preprocess::ingest::ScanFormat;
+use grotto_preprocess::manifest::Manifest;
+use grotto_preprocess::synth::{self, SynthParams};
+use grotto_preprocess::tiling::Progress;
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 #[derive(Parser, Debug)]
 #[command(name = "grotto-pack", version, about = "Build .grotto cave packages from registered scans")]
@@ -15,45 +22,260 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Build the built-in demo scene: a spherical chamber at survey coordinates.
-    Demo {
+    /// Build a package from a manifest (.toml, or a Stanford .conf) or from scan files (identity poses).
+    Build {
+        /// MANIFEST.toml | registration.conf | FILE...
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
         /// Output package.
-        #[arg(short, long, default_value = "demo.grotto")]
+        #[arg(short, long)]
         out: PathBuf,
-        /// Number of surface points.
-        #[arg(long, default_value_t = 50_000)]
-        points: u64,
-        /// Tile edge in metres (a power of two).
-        #[arg(long, default_value_t = 8.0)]
-        tile_extent_m: f64,
-        /// SVO depth per tile.
-        #[arg(long, default_value_t = 7)]
-        depth: u32,
+        #[command(flatten)]
+        opts: BuildOpts,
+    },
+    /// Write a synthetic cave (scans in LAS, LAZ, PLY and E57, and DIR/manifest.toml).
+    Synth {
+        /// Output directory.
+        #[arg(long)]
+        out: PathBuf,
+        #[command(flatten)]
+        synth: SynthOpts,
         /// Print the summary as JSON.
         #[arg(long)]
         json: bool,
     },
+    /// The main job on the built-in demo scene: synthesise a cave into DIR/demo-scans and build DIR/demo.grotto.
+    Demo {
+        /// Output directory.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        #[command(flatten)]
+        synth: SynthOpts,
+        #[command(flatten)]
+        opts: BuildOpts,
+    },
+}
+
+#[derive(Args, Debug)]
+struct SynthOpts {
+    /// Approximate number of points over all scans (10^4 to 10^8 and more).
+    #[arg(long, default_value_t = 400_000)]
+    points: u64,
+    /// Seed of the cave layout and the scanner noise.
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
+    /// Main passage segments (4 m each).
+    #[arg(long, default_value_t = 24)]
+    segments: usize,
+    /// Scan formats, assigned to scans in turn.
+    #[arg(long, value_delimiter = ',', default_value = "las,laz,ply,e57")]
+    formats: Vec<String>,
+}
+
+#[derive(Args, Debug)]
+struct BuildOpts {
+    /// Work directory for tile bins (kept for resume). Default: OUT's name + ".work".
+    #[arg(long)]
+    work_dir: Option<PathBuf>,
+    /// Memory budget, e.g. 2G, 512M.
+    #[arg(long, default_value = "2G")]
+    memory_budget: String,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// SVO depth per tile.
+    #[arg(long, default_value_t = 8)]
+    depth: u32,
+    /// Neighbours for normal estimation.
+    #[arg(long, default_value_t = 16)]
+    k: usize,
+    /// Smallest tile edge, metres (power of two).
+    #[arg(long, default_value_t = 1.0)]
+    min_tile_m: f64,
+    /// Largest tile edge, metres (power of two).
+    #[arg(long, default_value_t = 64.0)]
+    max_tile_m: f64,
+    /// Halo shared with neighbour tiles, metres.
+    #[arg(long, default_value_t = 0.25)]
+    halo_m: f64,
+    /// Remove the work directory after a successful build.
+    #[arg(long)]
+    clean: bool,
+    /// Print the summary as JSON (no progress bars).
+    #[arg(long)]
+    json: bool,
+}
+
+fn parse_bytes(s: &str) -> anyhow::Result<u64> {
+    let s = s.trim();
+    let (num, mult) = match s.chars().last() {
+        Some('k' | 'K') => (&s[..s.len() - 1], 1u64 << 10),
+        Some('m' | 'M') => (&s[..s.len() - 1], 1 << 20),
+        Some('g' | 'G') => (&s[..s.len() - 1], 1 << 30),
+        Some('t' | 'T') => (&s[..s.len() - 1], 1 << 40),
+        _ => (s, 1),
+    };
+    let v: f64 = num.parse().with_context(|| format!("memory budget '{s}' is not a size like 2G or 512M"))?;
+    if !(v > 0.0) {
+        bail!("memory budget '{s}' must be positive");
+    }
+    Ok((v * mult as f64) as u64)
+}
+
+fn parse_formats(names: &[String]) -> anyhow::Result<Vec<ScanFormat>> {
+    names
+        .iter()
+        .map(|n| match n.to_ascii_lowercase().as_str() {
+            "las" => Ok(ScanFormat::Las),
+            "laz" => Ok(ScanFormat::Laz),
+            "ply" => Ok(ScanFormat::Ply),
+            "e57" => Ok(ScanFormat::E57),
+            other => bail!("unknown format '{other}' (las, laz, ply, e57)"),
+        })
+        .collect()
+}
+
+/// Progress bars per stage, hidden for --json or when stderr is not a terminal.
+struct Bars {
+    multi: MultiProgress,
+    bars: Mutex<Vec<(&'static str, ProgressBar)>>,
+}
+
+impl Bars {
+    fn new(hidden: bool) -> Self {
+        let multi = MultiProgress::with_draw_target(if hidden {
+            ProgressDrawTarget::hidden()
+        } else {
+            ProgressDrawTarget::stderr()
+        });
+        Self { multi, bars: Mutex::new(Vec::new()) }
+    }
+
+    fn update(&self, p: Progress) {
+        let mut bars = self.bars.lock().expect("progress lock");
+        if let Some((_, bar)) = bars.iter().find(|(s, _)| *s == p.stage) {
+            bar.set_length(p.total.max(p.done));
+            bar.set_position(p.done);
+            return;
+        }
+        let unit = if p.stage == "tiles" { "tiles" } else { "points" };
+        let bar = self.multi.add(ProgressBar::new(p.total.max(p.done)));
+        bar.set_style(
+            ProgressStyle::with_template(&format!(
+                "{{prefix:>10}} [{{bar:30}}] {{human_pos}}/{{human_len}} {unit} {{per_sec}} {{eta}}"
+            ))
+            .expect("template")
+            .progress_chars("=> "),
+        );
+        bar.set_prefix(p.stage);
+        bar.enable_steady_tick(Duration::from_millis(200));
+        bar.set_position(p.done);
+        bars.push((p.stage, bar));
+    }
+
+    fn finish(&self) {
+        for (_, b) in self.bars.lock().expect("progress lock").iter() {
+            b.finish();
+        }
+    }
+}
+
+fn run_build(inputs: &[PathBuf], out: &Path, opts: &BuildOpts) -> anyhow::Result<BuildSummary> {
+    let (manifest, manifest_path) = match inputs {
+        [one] if matches!(one.extension().and_then(|e| e.to_str()), Some("toml" | "conf")) => {
+            (Manifest::load(one)?, one.clone())
+        }
+        files => (Manifest::from_files(files), PathBuf::from("<command line>")),
+    };
+    let work_dir = opts.work_dir.clone().unwrap_or_else(|| {
+        let mut name = out.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+        name.push(".work");
+        out.with_file_name(name)
+    });
+    let params = BuildParams {
+        work_dir: work_dir.clone(),
+        memory_budget_bytes: parse_bytes(&opts.memory_budget)?,
+        threads: opts.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from)),
+        depth: opts.depth,
+        k: opts.k,
+        min_tile_extent_m: opts.min_tile_m,
+        max_tile_extent_m: opts.max_tile_m,
+        halo_m: opts.halo_m,
+    };
+    let bars = Bars::new(opts.json);
+    let summary = build::build(&manifest, &manifest_path, out, &params, &|p| bars.update(p))
+        .with_context(|| format!("building {}", out.display()))?;
+    bars.finish();
+    if opts.clean {
+        std::fs::remove_dir_all(&work_dir).with_context(|| format!("removing {}", work_dir.display()))?;
+    }
+    Ok(summary)
+}
+
+fn print_build(summary: &BuildSummary, json: bool) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(summary)?);
+    } else {
+        println!(
+            "wrote {}: {} points from {} scans in {} tiles ({} halo copies, {} invalid points dropped), {:.2} MB in {:.1} s{}",
+            summary.package,
+            summary.points,
+            summary.scans,
+            summary.tiles,
+            summary.halo_points,
+            summary.invalid_points,
+            summary.bytes as f64 / 1e6,
+            summary.seconds,
+            if summary.resumed_tiling { " (tiling resumed)" } else { "" }
+        );
+    }
+    Ok(())
+}
+
+fn run_synth(dir: &Path, s: &SynthOpts, quiet: bool) -> anyhow::Result<synth::SynthSummary> {
+    let params =
+        SynthParams { seed: s.seed, points: s.points, segments: s.segments, ..SynthParams::default() };
+    let formats = parse_formats(&s.formats)?;
+    let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::new(0) };
+    bar.set_style(
+        ProgressStyle::with_template("{prefix:>10} [{bar:30}] {pos}/{len} scans {elapsed}")
+            .expect("template"),
+    );
+    bar.set_prefix("synth");
+    let summary = synth::write_dataset(dir, &params, &formats, &|done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })
+    .with_context(|| format!("writing the synthetic cave to {}", dir.display()))?;
+    bar.finish();
+    Ok(summary)
 }
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse().command {
-        Command::Demo { out, points, tile_extent_m, depth, json } => {
-            let params = demo::DemoParams { points, tile_extent_m, depth, ..Default::default() };
-            let start = std::time::Instant::now();
-            let summary =
-                demo::build(&out, &params).with_context(|| format!("building {}", out.display()))?;
+        Command::Build { inputs, out, opts } => {
+            let summary = run_build(&inputs, &out, &opts)?;
+            print_build(&summary, opts.json)?;
+        }
+        Command::Synth { out, synth, json } => {
+            let summary = run_synth(&out, &synth, json)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&summary)?);
             } else {
                 println!(
-                    "wrote {}: {} points in {} tiles, {:.2} MB, {:.2} s",
-                    summary.path,
-                    summary.points,
-                    summary.tiles,
-                    summary.bytes as f64 / 1e6,
-                    start.elapsed().as_secs_f64()
+                    "wrote {} scans, {} points, manifest {}",
+                    summary.scans, summary.points, summary.manifest
                 );
             }
+        }
+        Command::Demo { out, synth, opts } => {
+            let scans = out.join("demo-scans");
+            let s = run_synth(&scans, &synth, opts.json)?;
+            if !opts.json {
+                println!("wrote {} scans, {} points, manifest {}", s.scans, s.points, s.manifest);
+            }
+            let summary = run_build(&[PathBuf::from(&s.manifest)], &out.join("demo.grotto"), &opts)?;
+            print_build(&summary, opts.json)?;
         }
     }
     Ok(())
