@@ -67,6 +67,8 @@ pub struct BuildSummary {
     pub seconds: f64,
     /// Whether the tiling was reused from an interrupted or earlier run.
     pub resumed_tiling: bool,
+    /// Peak resident memory of the process (Linux), bytes.
+    pub peak_rss_bytes: Option<u64>,
 }
 
 /// One tile's sections, built off the writer thread.
@@ -260,5 +262,6 @@ pub fn build(
         bytes,
         seconds: start.elapsed().as_secs_f64(),
         resumed_tiling,
+        peak_rss_bytes: crate::bench::peak_rss_bytes(),
     })
 }

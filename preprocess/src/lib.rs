@@ -3,6 +3,7 @@
 //! Today this holds the built-in demo scene ([`demo`]); ingest, tiling, normals, SVO and encoding
 //! follow the design brief (`../shared/DESIGN.md`) and land module by module.
 
+pub mod bench;
 pub mod build;
 pub mod demo;
 mod error;

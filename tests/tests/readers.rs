@@ -227,3 +227,63 @@ fn damaged_files_never_panic() {
         }
     }
 }
+
+#[test]
+fn every_las_point_format_reads_with_colours_scaled_by_the_writers_depth() {
+    let dir = tempfile::tempdir().unwrap();
+    for format_id in 0u8..=10 {
+        for eight_bit in [false, true] {
+            let mut builder = las::Builder::from((1, 4));
+            builder.point_format = las::point::Format::new(format_id).unwrap();
+            builder.transforms = las::Vector {
+                x: las::Transform { scale: 0.001, offset: 500_000.0 },
+                y: las::Transform { scale: 0.001, offset: 5_000_000.0 },
+                z: las::Transform { scale: 0.001, offset: 0.0 },
+            };
+            let has_color = builder.point_format.has_color;
+            let header = builder.into_header().unwrap();
+            let path = dir.path().join(format!("f{format_id}-{eight_bit}.las"));
+            let mut w = las::Writer::from_path(&path, header).unwrap();
+            let pts = [
+                [500_001.5, 5_000_002.25, 12.125],
+                [500_003.0, 5_000_001.0, -4.5],
+                [499_999.0, 4_999_999.5, 0.0],
+            ];
+            let colour = |i: usize| -> [u8; 3] { [10 + i as u8 * 100, 200 - i as u8 * 50, 77] };
+            for (i, p) in pts.iter().enumerate() {
+                let c = colour(i).map(|v| if eight_bit { u16::from(v) } else { u16::from(v) * 257 });
+                let mut point = las::Point {
+                    x: p[0],
+                    y: p[1],
+                    z: p[2],
+                    intensity: 1000 * i as u16,
+                    ..las::Point::default()
+                };
+                if has_color {
+                    point.color = Some(las::Color { red: c[0], green: c[1], blue: c[2] });
+                }
+                if w.header().point_format().has_gps_time {
+                    point.gps_time = Some(1.0);
+                }
+                if w.header().point_format().has_nir {
+                    point.nir = Some(0);
+                }
+                if w.header().point_format().has_waveform {
+                    point.waveform = Some(las::raw::point::Waveform::default());
+                }
+                w.write_point(point).unwrap();
+            }
+            w.close().unwrap();
+            let got = ingest::read_all(ingest::open(&path, ScanFormat::Las, 0).unwrap().as_mut()).unwrap();
+            assert_eq!(got.xyz.len(), 3, "format {format_id}");
+            for (i, p) in pts.iter().enumerate() {
+                for (got, want) in got.xyz[i].iter().zip(p) {
+                    assert!((got - want).abs() < 1e-6, "format {format_id}");
+                }
+                if has_color {
+                    assert_eq!(got.rgb[i], colour(i), "format {format_id}, 8-bit {eight_bit}");
+                }
+            }
+        }
+    }
+}

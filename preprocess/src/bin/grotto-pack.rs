@@ -44,6 +44,16 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Measure ingest throughput per format on one synthetic scan (written once into DIR).
+    BenchIngest {
+        /// Directory for the test files (about 100 bytes per point over the four formats).
+        #[arg(long)]
+        dir: PathBuf,
+        #[arg(long, default_value_t = 10_000_000)]
+        points: u64,
+        #[arg(long)]
+        json: bool,
+    },
     /// The main job on the built-in demo scene: synthesise a cave into DIR/demo-scans and build DIR/demo.grotto.
     Demo {
         /// Output directory.
@@ -116,7 +126,7 @@ fn parse_bytes(s: &str) -> anyhow::Result<u64> {
         _ => (s, 1),
     };
     let v: f64 = num.parse().with_context(|| format!("memory budget '{s}' is not a size like 2G or 512M"))?;
-    if !(v > 0.0) {
+    if v.is_nan() || v <= 0.0 {
         bail!("memory budget '{s}' must be positive");
     }
     Ok((v * mult as f64) as u64)
@@ -217,7 +227,7 @@ fn print_build(summary: &BuildSummary, json: bool) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(summary)?);
     } else {
         println!(
-            "wrote {}: {} points from {} scans in {} tiles ({} halo copies, {} invalid points dropped), {:.2} MB in {:.1} s{}",
+            "wrote {}: {} points from {} scans in {} tiles ({} halo copies, {} invalid points dropped), {:.2} MB in {:.1} s, peak memory {}{}",
             summary.package,
             summary.points,
             summary.scans,
@@ -226,6 +236,7 @@ fn print_build(summary: &BuildSummary, json: bool) -> anyhow::Result<()> {
             summary.invalid_points,
             summary.bytes as f64 / 1e6,
             summary.seconds,
+            summary.peak_rss_bytes.map_or_else(|| "unknown".into(), |b| format!("{:.0} MB", b as f64 / 1e6)),
             if summary.resumed_tiling { " (tiling resumed)" } else { "" }
         );
     }
@@ -266,6 +277,28 @@ fn main() -> anyhow::Result<()> {
                     "wrote {} scans, {} points, manifest {}",
                     summary.scans, summary.points, summary.manifest
                 );
+            }
+        }
+        Command::BenchIngest { dir, points, json } => {
+            let figures = grotto_preprocess::bench::ingest(&dir, points, &|stage| {
+                if !json {
+                    eprintln!("{stage}...");
+                }
+            })?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&figures)?);
+            } else {
+                println!("| reader | points | file MB | seconds | points/s |\n|---|---:|---:|---:|---:|");
+                for f in &figures {
+                    println!(
+                        "| {} | {} | {:.1} | {:.2} | {:.2e} |",
+                        f.reader,
+                        f.points,
+                        f.file_bytes as f64 / 1e6,
+                        f.seconds,
+                        f.points_per_second
+                    );
+                }
             }
         }
         Command::Demo { out, synth, opts } => {

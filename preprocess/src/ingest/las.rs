@@ -22,6 +22,10 @@ pub(super) struct LasSource {
     remaining: u64,
     /// Set when the decoder panicked; its state is not trusted again.
     poisoned: bool,
+    /// Decoded points not yet handed out (LAZ decodes several chunks at once).
+    batch_xyz: Vec<[f64; 3]>,
+    batch_rgb: Vec<[u8; 3]>,
+    cursor: usize,
     /// Divide raw colour by this to get 0..=255.
     color_div: f32,
     /// Same for intensity as grey; `None` when the file has no intensity (all zero).
@@ -92,6 +96,9 @@ impl LasSource {
             data,
             remaining: claimed,
             poisoned: false,
+            batch_xyz: Vec::new(),
+            batch_rgb: Vec::new(),
+            cursor: 0,
             color_div,
             grey_div,
         })
@@ -120,47 +127,60 @@ impl PointSource for LasSource {
 
     fn fill_chunk(&mut self, chunk: &mut PointChunk) -> Result<usize> {
         chunk.clear();
+        if self.cursor == self.batch_xyz.len() {
+            // LASzip chunks hold 50 000 points: decoding several requests' worth at once lets the
+            // parallel decoder spread chunks over the cores.
+            let batch = if self.info.format == ScanFormat::Laz { chunk.limit() * LAZ_BATCH } else { chunk.limit() };
+            self.decode_batch(batch)?;
+        }
+        let end = (self.cursor + chunk.limit()).min(self.batch_xyz.len());
+        chunk.xyz.extend_from_slice(&self.batch_xyz[self.cursor..end]);
+        chunk.rgb.extend_from_slice(&self.batch_rgb[self.cursor..end]);
+        self.cursor = end;
+        Ok(chunk.len())
+    }
+}
+
+/// Requests' worth of points decoded at once from LAZ.
+const LAZ_BATCH: usize = 8;
+
+impl LasSource {
+    fn decode_batch(&mut self, batch: usize) -> Result<()> {
+        self.batch_xyz.clear();
+        self.batch_rgb.clear();
+        self.cursor = 0;
         if self.remaining == 0 {
-            return Ok(0);
+            return Ok(());
         }
         let done = self.info.claimed_points - self.remaining;
         let (path, format) = (&self.info.path, self.info.format);
         if self.poisoned {
-            return Err(read_error(
-                path,
-                format,
-                format!("after {done} points: reading stopped at corrupt data"),
-            ));
+            return Err(read_error(path, format, format!("after {done} points: reading stopped at corrupt data")));
         }
-        let want = self.remaining.min(chunk.limit() as u64);
+        let want = self.remaining.min(batch as u64);
         let (reader, data) = (&mut self.reader, &mut self.data);
         let n = guard(path, format, || {
-            reader
-                .fill_points(want, data)
-                .map_err(|e| read_error(path, format, format!("after {done} points: {e}")))
+            reader.fill_points(want, data).map_err(|e| read_error(path, format, format!("after {done} points: {e}")))
         })
         .inspect_err(|_| self.poisoned = true)?;
         if n == 0 {
             return Err(read_error(
-                &self.info.path,
-                self.info.format,
-                format!(
-                    "ends after {} of the {} points its header claims",
-                    self.info.claimed_points - self.remaining,
-                    self.info.claimed_points
-                ),
+                path,
+                format,
+                format!("ends after {done} of the {} points its header claims", self.info.claimed_points),
             ));
         }
         self.remaining -= n;
-        chunk.xyz.extend(self.data.x().zip(self.data.y()).zip(self.data.z()).map(|((x, y), z)| [x, y, z]));
+        let data = &self.data;
+        self.batch_xyz.extend(data.x().zip(data.y()).zip(data.z()).map(|((x, y), z)| [x, y, z]));
         let to_u8 = |v: u16, div: f32| (f32::from(v) / div).round().min(255.0) as u8;
-        match self.data.rgb() {
-            Some(rgb) => chunk.rgb.extend(rgb.map(|(r, g, b)| [r, g, b].map(|c| to_u8(c, self.color_div)))),
+        match data.rgb() {
+            Some(rgb) => self.batch_rgb.extend(rgb.map(|(r, g, b)| [r, g, b].map(|c| to_u8(c, self.color_div)))),
             None => match self.grey_div {
-                Some(div) => chunk.rgb.extend(self.data.intensity().map(|i| [to_u8(i, div); 3])),
-                None => chunk.rgb.resize(chunk.xyz.len(), NEUTRAL_GREY),
+                Some(div) => self.batch_rgb.extend(data.intensity().map(|i| [to_u8(i, div); 3])),
+                None => self.batch_rgb.resize(self.batch_xyz.len(), NEUTRAL_GREY),
             },
         }
-        Ok(chunk.len())
+        Ok(())
     }
 }

@@ -1,0 +1,76 @@
+//! The synthetic cave end to end: synth writes LAS, LAZ, PLY and E57 scans and a manifest; build
+//! merges them into a package whose surfels lie on the analytic wall with normals that agree with
+//! it (oriented into the open cave).
+
+use grotto_format::spec::Surfel;
+use grotto_format::{Package, SectionKind};
+use grotto_preprocess::build::{self, BuildParams};
+use grotto_preprocess::ingest::ScanFormat;
+use grotto_preprocess::manifest::Manifest;
+use grotto_preprocess::synth::{self, SynthCave, SynthParams};
+
+#[test]
+fn synthetic_cave_builds_with_accurate_oriented_normals() {
+    let dir = tempfile::tempdir().unwrap();
+    let params = SynthParams { points: 60_000, segments: 8, ..SynthParams::default() };
+    let formats = [ScanFormat::Las, ScanFormat::Laz, ScanFormat::Ply, ScanFormat::E57];
+    let summary = synth::write_dataset(&dir.path().join("scans"), &params, &formats, &|_, _| {}).unwrap();
+    assert!(summary.scans >= 4, "every format is used");
+    let manifest_path = std::path::PathBuf::from(&summary.manifest);
+    let manifest = Manifest::load(&manifest_path).unwrap();
+    let scans = manifest.resolve().unwrap();
+    // E57 poses come from the files; the others from the manifest.
+    for s in &scans {
+        assert_eq!(s.pose_from_file, s.format == ScanFormat::E57);
+    }
+    let out = dir.path().join("cave.grotto");
+    let bp = BuildParams {
+        work_dir: dir.path().join("work"),
+        memory_budget_bytes: 64 << 20,
+        threads: 2,
+        depth: 8,
+        k: 16,
+        min_tile_extent_m: 2.0,
+        max_tile_extent_m: 32.0,
+        halo_m: 0.25,
+    };
+    let built = build::build(&manifest, &manifest_path, &out, &bp, &|_| {}).unwrap();
+    assert_eq!(built.points, summary.points);
+    assert!(built.tiles > 1);
+
+    let pkg = Package::open(&out).unwrap();
+    assert!(pkg.verify().is_empty());
+    let cave = SynthCave::new(&params);
+    let (mut n, mut flipped, mut errors, mut off_wall) = (0usize, 0usize, Vec::new(), 0usize);
+    for tile in pkg.tiles() {
+        let o = tile.origin_m();
+        for s in tile.read::<Surfel>(SectionKind::Surfels).unwrap().unwrap().iter() {
+            let local: [f64; 3] =
+                std::array::from_fn(|a| o[a] + f64::from(s.position_tile_m[a]) - params.offset_m[a]);
+            if cave.eval(local).abs() > 0.03 {
+                off_wall += 1;
+            }
+            let truth = cave.normal(local);
+            let dot: f64 = (0..3).map(|a| truth[a] * f64::from(s.normal[a])).sum();
+            if dot < 0.0 {
+                flipped += 1;
+            }
+            errors.push(dot.abs().min(1.0).acos());
+            n += 1;
+        }
+    }
+    assert_eq!(n as u64, summary.points);
+    errors.sort_by(f64::total_cmp);
+    let mean = errors.iter().sum::<f64>() / n as f64;
+    let p95 = errors[n * 95 / 100];
+    let flipped_share = flipped as f64 / n as f64;
+    eprintln!(
+        "normals: mean {:.2} deg, p95 {:.2} deg, flipped {:.3}%, off-wall {off_wall}",
+        mean.to_degrees(),
+        p95.to_degrees(),
+        flipped_share * 100.0
+    );
+    assert!(off_wall as f64 / (n as f64) < 0.001, "surfels must lie on the wall: {off_wall}");
+    assert!(mean.to_degrees() < 4.0 && p95.to_degrees() < 15.0, "mean {mean}, p95 {p95}");
+    assert!(flipped_share < 0.005, "wrongly oriented: {flipped_share}");
+}
