@@ -284,7 +284,7 @@ mod tests {
             assert!((p.normal[2] - 1.0).abs() < 1e-6 && p.spread < 1e-6);
         }
         // Interior point: d_16 on a square lattice is sqrt(5) * s -> r ~ 0.70 s, enough to close gaps.
-        let r = out[210].radius_m / s as f32;
+        let r = out[210].radius_m / s;
         assert!((0.65..0.75).contains(&r), "{r}");
     }
 }

@@ -144,7 +144,10 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
         for p in tiling::read_bin(work.path(), i).unwrap() {
             let c = p.pos_tile_m;
             if p.flags & FLAG_HALO == 0 {
-                assert!(c.iter().all(|&v| (-1e-6..=e + 1e-6).contains(&v)), "own point outside its tile: {c:?}");
+                assert!(
+                    c.iter().all(|&v| (-1e-6..=e + 1e-6).contains(&v)),
+                    "own point outside its tile: {c:?}"
+                );
             } else {
                 // A halo copy belongs to a neighbour: outside this tile in some axis, within the halo in all.
                 assert!(c.iter().all(|&v| (-h..=e + h).contains(&v)), "halo copy too far: {c:?}");

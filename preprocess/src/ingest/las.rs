@@ -130,7 +130,8 @@ impl PointSource for LasSource {
         if self.cursor == self.batch_xyz.len() {
             // LASzip chunks hold 50 000 points: decoding several requests' worth at once lets the
             // parallel decoder spread chunks over the cores.
-            let batch = if self.info.format == ScanFormat::Laz { chunk.limit() * LAZ_BATCH } else { chunk.limit() };
+            let batch =
+                if self.info.format == ScanFormat::Laz { chunk.limit() * LAZ_BATCH } else { chunk.limit() };
             self.decode_batch(batch)?;
         }
         let end = (self.cursor + chunk.limit()).min(self.batch_xyz.len());
@@ -155,12 +156,18 @@ impl LasSource {
         let done = self.info.claimed_points - self.remaining;
         let (path, format) = (&self.info.path, self.info.format);
         if self.poisoned {
-            return Err(read_error(path, format, format!("after {done} points: reading stopped at corrupt data")));
+            return Err(read_error(
+                path,
+                format,
+                format!("after {done} points: reading stopped at corrupt data"),
+            ));
         }
         let want = self.remaining.min(batch as u64);
         let (reader, data) = (&mut self.reader, &mut self.data);
         let n = guard(path, format, || {
-            reader.fill_points(want, data).map_err(|e| read_error(path, format, format!("after {done} points: {e}")))
+            reader
+                .fill_points(want, data)
+                .map_err(|e| read_error(path, format, format!("after {done} points: {e}")))
         })
         .inspect_err(|_| self.poisoned = true)?;
         if n == 0 {
@@ -175,7 +182,9 @@ impl LasSource {
         self.batch_xyz.extend(data.x().zip(data.y()).zip(data.z()).map(|((x, y), z)| [x, y, z]));
         let to_u8 = |v: u16, div: f32| (f32::from(v) / div).round().min(255.0) as u8;
         match data.rgb() {
-            Some(rgb) => self.batch_rgb.extend(rgb.map(|(r, g, b)| [r, g, b].map(|c| to_u8(c, self.color_div)))),
+            Some(rgb) => {
+                self.batch_rgb.extend(rgb.map(|(r, g, b)| [r, g, b].map(|c| to_u8(c, self.color_div))))
+            }
             None => match self.grey_div {
                 Some(div) => self.batch_rgb.extend(data.intensity().map(|i| [to_u8(i, div); 3])),
                 None => self.batch_rgb.resize(self.batch_xyz.len(), NEUTRAL_GREY),
