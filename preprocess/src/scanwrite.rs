@@ -31,7 +31,12 @@ fn write_error(path: &Path, format: ScanFormat, reason: impl std::fmt::Display) 
 fn atomically(path: &Path, fill: impl FnOnce(File) -> Result<()>) -> Result<()> {
     let io = |source| Error::Io { path: path.to_path_buf(), source };
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let (file, temp) = tempfile::Builder::new().suffix(".partial").tempfile_in(dir).map_err(io)?.into_parts();
+    let mut builder = tempfile::Builder::new();
+    builder.suffix(".partial");
+    // Ordinary file permissions (0666 minus the umask), not tempfile's private 0600.
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    let (file, temp) = builder.tempfile_in(dir).map_err(io)?.into_parts();
     fill(file)?;
     temp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
