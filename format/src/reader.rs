@@ -194,6 +194,12 @@ impl Package {
         Error::Invalid { path: self.path.clone(), problem }
     }
 
+    /// The bytes of a section as stored in the file (compressed for zstd), unchecked. For copying
+    /// sections between packages; readers want [`Package::read`].
+    pub fn stored_bytes(&self, s: &SectionInfo) -> &[u8] {
+        self.stored(s)
+    }
+
     fn stored(&self, s: &SectionInfo) -> &[u8] {
         // In bounds: checked at open.
         &self.bytes()[s.offset as usize..(s.offset + s.stored_len) as usize]

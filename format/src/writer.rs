@@ -63,9 +63,11 @@ impl PackageWriter {
         // A package is an ordinary file: 0666 minus the umask, not tempfile's private 0600.
         #[cfg(unix)]
         builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
-        let temp = builder
-            .tempfile_in(&dir)
-            .map_err(|source| Error::Io { path: target.clone(), op: "create a temp file beside", source })?;
+        let temp = builder.tempfile_in(&dir).map_err(|source| Error::Io {
+            path: target.clone(),
+            op: "create a temp file beside",
+            source,
+        })?;
         let (file, temp) = temp.into_parts();
         let mut w = Self {
             target,
@@ -190,6 +192,54 @@ impl PackageWriter {
             stored_len: stored.len() as u64,
             raw_len: bytes.len() as u64,
             checksum: xxh3_64(stored),
+        };
+        self.write_all(stored)?;
+        self.sections.push(entry);
+        Ok(self.sections.len() as u32 - 1)
+    }
+
+    /// Copies a section of another package as stored (no re-encoding), after checking its checksum
+    /// and content, into `scope` here. This is how per-tile packages are assembled into one.
+    pub fn copy_section(
+        &mut self,
+        from: &crate::Package,
+        section: &crate::SectionInfo,
+        scope: Scope,
+    ) -> Result<u32> {
+        let kind = section
+            .kind
+            .ok_or_else(|| self.refuse(format!("cannot copy {} (unknown kind)", section.kind_name())))?;
+        // Checks checksum and content (decoding zstd once), so damage is not carried over.
+        from.read_bytes(section)?;
+        match (kind.is_per_tile(), scope) {
+            (true, Scope::Global) | (false, Scope::Tile(_)) => {
+                return Err(self.refuse(format!("{} cannot go to {scope:?}", kind.name())));
+            }
+            _ => {}
+        }
+        let tile = match scope {
+            Scope::Global => GLOBAL,
+            Scope::Tile(t) if (t as usize) < self.tiles.len() => t,
+            Scope::Tile(t) => return Err(self.refuse(format!("section for tile {t}, which was not added"))),
+        };
+        if !self.keys.insert((kind as u32, tile, section.item)) {
+            return Err(self.refuse(format!(
+                "a {} section for tile {tile:#x} item {} exists already",
+                kind.name(),
+                section.item
+            )));
+        }
+        let stored = from.stored_bytes(section);
+        self.pad_to(SECTION_ALIGN)?;
+        let entry = RawSectionEntry {
+            kind: kind as u32,
+            codec: section.codec.map_or(Codec::Raw as u32, |c| c as u32),
+            tile,
+            item: section.item,
+            offset: self.pos,
+            stored_len: section.stored_len,
+            raw_len: section.raw_len,
+            checksum: section.checksum,
         };
         self.write_all(stored)?;
         self.sections.push(entry);

@@ -222,3 +222,44 @@ proptest! {
         prop_assert!(pkg.verify().is_empty());
     }
 }
+
+#[test]
+fn sections_copy_between_packages_as_stored() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = Package::open(sample_package(dir.path(), alternating)).unwrap();
+    let out = dir.path().join("copy.grotto");
+    let mut w = PackageWriter::create(&out).unwrap();
+    let t = src.tile(1).unwrap();
+    let tile = w
+        .add_tile(TileInfo {
+            origin_m: t.origin_m(),
+            extent_m: t.extent_m(),
+            grid: t.grid(),
+            depth: t.depth(),
+            point_count: t.point_count(),
+        })
+        .unwrap();
+    for s in t.sections().filter(|s| s.kind.is_some()) {
+        w.copy_section(&src, &s, Scope::Tile(tile)).unwrap();
+    }
+    for s in src.sections().filter(|s| s.scope == Scope::Global) {
+        w.copy_section(&src, &s, Scope::Global).unwrap();
+    }
+    let copy = Package::open(w.finish().unwrap()).unwrap();
+    assert!(copy.verify().is_empty());
+    for s in t.sections().filter(|s| s.kind.is_some()) {
+        let c = copy.find(s.kind.unwrap(), Scope::Tile(0), 0).unwrap();
+        assert_eq!((c.codec, c.stored_len, c.checksum), (s.codec, s.stored_len, s.checksum));
+        assert_eq!(copy.read_bytes(&c).unwrap(), src.read_bytes(&s).unwrap());
+    }
+    assert_eq!(copy.scene().unwrap(), src.scene().unwrap());
+    // A damaged source section is not carried over.
+    let mut bytes = std::fs::read(src.path()).unwrap();
+    let victim = t.find(SectionKind::Surfels, 0).unwrap();
+    bytes[victim.offset as usize] ^= 1;
+    let damaged = Package::from_bytes("damaged", &bytes).unwrap();
+    let mut w = PackageWriter::create(dir.path().join("x.grotto")).unwrap();
+    w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 1.0, grid: [0; 3], depth: 3, point_count: 0 })
+        .unwrap();
+    assert!(w.copy_section(&damaged, &victim, Scope::Tile(0)).is_err());
+}

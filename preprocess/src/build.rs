@@ -1,9 +1,15 @@
 //! `grotto-pack build`: scans + manifest in, one `.grotto` package out.
 //!
-//! resolve scans -> tile them out of core ([`crate::tiling`]) -> per tile, in parallel batches of
-//! `threads` tiles: normals, spread and radii ([`crate::normals`]), surfels in Morton order,
-//! colours -> sections streamed through the atomic package writer, tile by tile in plan order
-//! (so the output is the same for the same input, whatever the thread count).
+//! Three steps, each resumable (the brief's plan / build-tile / assemble jobs):
+//! 1. plan: resolve scans and tile them out of core ([`crate::tiling`]);
+//! 2. build-tile: per tile, in parallel batches of `threads` tiles: normals, spread and radii
+//!    ([`crate::normals`]), surfels in Morton order, colours -> a one-tile package
+//!    `WORK/tiles/NNNNNNN.grotto`, whose provenance carries a fingerprint of the plan and the
+//!    build parameters. A tile package with the right fingerprint is kept, not rebuilt, so an
+//!    interrupted run resumes where it stopped;
+//! 3. assemble: the tile packages' sections are copied as stored (checksums checked) into the
+//!    output, in plan order, with scene and provenance; the output is written atomically and is
+//!    the same for the same input whatever the thread count.
 //!
 //! Memory: the tiler's buffers take a quarter of the budget; each tile being built costs about
 //! [`BUILD_BYTES_PER_POINT`] per point, so `max_points_per_tile = 3/4 budget / threads / that`.
@@ -12,7 +18,9 @@ use std::path::{Path, PathBuf};
 
 use grotto_format::spec::{Rgba8, Surfel};
 use grotto_format::svo::morton_encode;
-use grotto_format::{Compression, InputFile, PackageWriter, Provenance, Scope, SectionKind, TileInfo};
+use grotto_format::{
+    Compression, InputFile, Package, PackageWriter, Provenance, Scope, SectionKind, TileInfo,
+};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -67,6 +75,8 @@ pub struct BuildSummary {
     pub seconds: f64,
     /// Whether the tiling was reused from an interrupted or earlier run.
     pub resumed_tiling: bool,
+    /// Tiles whose tile package from an earlier run was kept.
+    pub reused_tiles: usize,
     /// Peak resident memory of the process (Linux), bytes.
     pub peak_rss_bytes: Option<u64>,
 }
@@ -147,6 +157,37 @@ fn build_tile(plan: &TilePlan, work_dir: &Path, t: usize, params: &BuildParams) 
     })
 }
 
+pub fn tile_package_path(work_dir: &Path, tile: usize) -> PathBuf {
+    work_dir.join("tiles").join(format!("{tile:07}.grotto"))
+}
+
+/// What a tile package depends on: the plan (inputs and tiling) and the per-tile parameters.
+fn tile_fingerprint(plan: &TilePlan, params: &BuildParams) -> String {
+    format!("{}-k{}-d{}-v{}", plan.fingerprint, params.k, params.depth, env!("CARGO_PKG_VERSION"))
+}
+
+fn tile_package_matches(path: &Path, fingerprint: &str) -> bool {
+    // Any problem (missing, damaged, other parameters) means: build it again.
+    Package::open(path).ok().and_then(|p| p.provenance().ok().flatten()).is_some_and(|prov| {
+        prov.parameters.get("tile_fingerprint").and_then(|v| v.as_str()) == Some(fingerprint)
+    })
+}
+
+fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str) -> Result<()> {
+    let mut w = PackageWriter::create(path)?;
+    let index = w.add_tile(tile.info)?;
+    w.add_elements(SectionKind::Surfels, Scope::Tile(index), 0, &tile.surfels, Compression::Raw)?;
+    w.add_elements(SectionKind::SurfelColorsRaw, Scope::Tile(index), 0, &tile.colors, Compression::Auto(3))?;
+    w.add_provenance(&Provenance {
+        tool: "grotto-pack build-tile".into(),
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+        inputs: Vec::new(),
+        parameters: [("tile_fingerprint".to_string(), serde_json::json!(fingerprint))].into(),
+    })?;
+    w.finish()?;
+    Ok(())
+}
+
 fn hash_file(path: &Path) -> Result<InputFile> {
     use std::io::Read;
     let io = |source| Error::Io { path: path.to_path_buf(), source };
@@ -194,35 +235,50 @@ pub fn build(
         .num_threads(params.threads.max(1))
         .build()
         .map_err(|e| Error::Parameter { name: "threads", reason: e.to_string() })?;
-    let mut writer = PackageWriter::create(out)?;
+    let tiles_dir = params.work_dir.join("tiles");
+    std::fs::create_dir_all(&tiles_dir).map_err(|source| Error::Io { path: tiles_dir.clone(), source })?;
+    let fingerprint = tile_fingerprint(&plan, params);
     let total = plan.tiles.len();
     let batch = params.threads.max(1);
+    let mut reused_tiles = 0usize;
     for first in (0..total).step_by(batch) {
-        let built: Vec<Result<BuiltTile>> = pool.install(|| {
+        let done: Vec<Result<bool>> = pool.install(|| {
             (first..(first + batch).min(total))
                 .into_par_iter()
-                .map(|t| build_tile(&plan, &params.work_dir, t, params))
+                .map(|t| {
+                    let path = tile_package_path(&params.work_dir, t);
+                    if tile_package_matches(&path, &fingerprint) {
+                        return Ok(true);
+                    }
+                    let built = build_tile(&plan, &params.work_dir, t, params)?;
+                    write_tile_package(&path, &built, &fingerprint)?;
+                    Ok(false)
+                })
                 .collect()
         });
-        for tile in built {
-            let tile = tile?;
-            let index = writer.add_tile(tile.info)?;
-            writer.add_elements(
-                SectionKind::Surfels,
-                Scope::Tile(index),
-                0,
-                &tile.surfels,
-                Compression::Raw,
-            )?;
-            writer.add_elements(
-                SectionKind::SurfelColorsRaw,
-                Scope::Tile(index),
-                0,
-                &tile.colors,
-                Compression::Auto(3),
-            )?;
-            progress(Progress { stage: "tiles", done: u64::from(index) + 1, total: total as u64 });
+        for (i, d) in done.into_iter().enumerate() {
+            reused_tiles += usize::from(d?);
+            progress(Progress { stage: "tiles", done: (first + i + 1) as u64, total: total as u64 });
         }
+    }
+    let mut writer = PackageWriter::create(out)?;
+    for t in 0..total {
+        let tile_pkg = Package::open(tile_package_path(&params.work_dir, t))?;
+        let tile = tile_pkg.tile(0).ok_or_else(|| Error::Parameter {
+            name: "tiles",
+            reason: format!("tile package {t} has no tile"),
+        })?;
+        let index = writer.add_tile(TileInfo {
+            origin_m: tile.origin_m(),
+            extent_m: tile.extent_m(),
+            grid: tile.grid(),
+            depth: tile.depth(),
+            point_count: tile.point_count(),
+        })?;
+        for s in tile.sections() {
+            writer.copy_section(&tile_pkg, &s, Scope::Tile(index))?;
+        }
+        progress(Progress { stage: "assemble", done: t as u64 + 1, total: total as u64 });
     }
     writer.add_scene(&scene)?;
     let mut inputs = Vec::new();
@@ -262,6 +318,7 @@ pub fn build(
         bytes,
         seconds: start.elapsed().as_secs_f64(),
         resumed_tiling,
+        reused_tiles,
         peak_rss_bytes: crate::bench::peak_rss_bytes(),
     })
 }

@@ -262,14 +262,33 @@ pub fn tile_scans(
     std::fs::create_dir_all(work_dir.join("bins")).map_err(io(work_dir))?;
     let fingerprint = fingerprint(scans, params)?;
     let plan_path = work_dir.join("plan.json");
-    if let Ok(text) = std::fs::read_to_string(&plan_path)
-        && let Ok(plan) = serde_json::from_str::<TilePlan>(&text)
-        && plan.fingerprint == fingerprint
-        && plan.bins_complete
-    {
-        return Ok(plan);
-    }
+    let earlier = std::fs::read_to_string(&plan_path)
+        .ok()
+        .and_then(|text| serde_json::from_str::<TilePlan>(&text).ok())
+        .filter(|plan| plan.fingerprint == fingerprint);
+    let mut plan = match earlier {
+        Some(plan) if plan.bins_complete => return Ok(plan),
+        // Interrupted while distributing: the plan stands, only the bins are redone.
+        Some(plan) => plan,
+        None => {
+            let plan = count_and_plan(scans, params, fingerprint, progress)?;
+            write_json_atomic(&plan_path, &plan)?;
+            plan
+        }
+    };
+    distribute(scans, work_dir, params, &mut plan, progress)?;
+    plan.bins_complete = true;
+    write_json_atomic(&plan_path, &plan)?;
+    Ok(plan)
+}
 
+/// Pass 1 and the plan.
+fn count_and_plan(
+    scans: &[ResolvedScan],
+    params: &TilingParams,
+    fingerprint: String,
+    progress: &dyn Fn(Progress),
+) -> Result<TilePlan> {
     // Pass 1: count.
     let claimed: u64 = scans
         .iter()
@@ -324,7 +343,7 @@ pub fn tile_scans(
     // Deterministic order: coarse first, then by position.
     tiles.sort_unstable_by_key(|t| (std::cmp::Reverse(t.level), t.key));
     drop(levels);
-    let mut plan = TilePlan {
+    Ok(TilePlan {
         fingerprint,
         min_extent_m: params.min_tile_extent_m,
         anchor: if tiles.is_empty() { [0; 3] } else { anchor },
@@ -334,10 +353,21 @@ pub fn tile_scans(
         halo_points: 0,
         scanners_world_m: scans.iter().map(|s| s.scanner_world_m).collect(),
         bins_complete: false,
-    };
-    write_json_atomic(&plan_path, &plan)?;
+    })
+}
 
-    // Pass 2: distribute.
+/// Pass 2: every point into its tile's bin (and halo copies into neighbours').
+fn distribute(
+    scans: &[ResolvedScan],
+    work_dir: &Path,
+    params: &TilingParams,
+    plan: &mut TilePlan,
+    progress: &dyn Fn(Progress),
+) -> Result<()> {
+    let inv = 1.0 / params.min_tile_extent_m;
+    let top = (params.max_tile_extent_m / params.min_tile_extent_m).log2() as u32;
+    let points = plan.points;
+    let invalid = plan.invalid_points;
     let lookup: HashMap<(u32, [i64; 3]), usize> =
         plan.tiles.iter().enumerate().map(|(i, t)| ((t.level, t.key), i)).collect();
     let find = |p: &[f64; 3]| -> Option<usize> {
@@ -402,9 +432,7 @@ pub fn tile_scans(
     })?;
     bins.flush_all()?;
     plan.halo_points = halo;
-    plan.bins_complete = true;
-    write_json_atomic(&plan_path, &plan)?;
-    Ok(plan)
+    Ok(())
 }
 
 /// Per-tile append buffers with a shared byte budget.

@@ -160,6 +160,23 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
     let again = tiling::tile_scans(&scans, work.path(), &params, &|_| {}).unwrap();
     assert_eq!(again, plan);
     assert_eq!(std::fs::metadata(tiling::bin_path(work.path(), 0)).unwrap().modified().unwrap(), before);
+    // Interrupted while distributing (plan written, bins incomplete and one damaged): only pass 2
+    // runs again, and the bins come back identical.
+    let plan_json = work.path().join("plan.json");
+    let text = std::fs::read_to_string(&plan_json)
+        .unwrap()
+        .replace("\"bins_complete\": true", "\"bins_complete\": false");
+    std::fs::write(&plan_json, text).unwrap();
+    let bin0 = std::fs::read(tiling::bin_path(work.path(), 0)).unwrap();
+    std::fs::write(tiling::bin_path(work.path(), 0), &bin0[..bin0.len() / 2]).unwrap();
+    let stages = std::sync::Mutex::new(std::collections::BTreeSet::new());
+    let resumed = tiling::tile_scans(&scans, work.path(), &params, &|p| {
+        stages.lock().unwrap().insert(p.stage);
+    })
+    .unwrap();
+    assert_eq!(resumed, plan);
+    assert_eq!(stages.into_inner().unwrap().into_iter().collect::<Vec<_>>(), vec!["distribute"]);
+    assert_eq!(std::fs::read(tiling::bin_path(work.path(), 0)).unwrap(), bin0);
     // Changed parameters redo the work.
     let other = TilingParams { max_points_per_tile: 9_000, ..params };
     let redone = tiling::tile_scans(&scans, work.path(), &other, &|_| {}).unwrap();

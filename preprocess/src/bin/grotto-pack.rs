@@ -237,7 +237,11 @@ fn print_build(summary: &BuildSummary, json: bool) -> anyhow::Result<()> {
             summary.bytes as f64 / 1e6,
             summary.seconds,
             summary.peak_rss_bytes.map_or_else(|| "unknown".into(), |b| format!("{:.0} MB", b as f64 / 1e6)),
-            if summary.resumed_tiling { " (tiling resumed)" } else { "" }
+            match (summary.resumed_tiling, summary.reused_tiles) {
+                (false, 0) => String::new(),
+                (r, n) =>
+                    format!(" (resumed: tiling {}, {n} tiles kept)", if r { "reused" } else { "redone" }),
+            }
         );
     }
     Ok(())
