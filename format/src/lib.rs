@@ -20,7 +20,7 @@ pub mod svo;
 mod writer;
 
 pub use error::{Error, Problem, Region, Result};
-pub use reader::{Element, Package, SectionInfo, Tile};
+pub use reader::{Element, Package, SectionInfo, SvoData, Tile};
 pub use scene::{Camera, Environment, InputFile, Light, LightShape, Material, Provenance, Scene};
 pub use spec::{Codec, Scope, SectionKind};
 pub use summary::{KindSummary, SectionSummary, Summary, TileSummary};

@@ -332,7 +332,52 @@ impl Package {
     }
 }
 
+/// A tile's octree with its leaf attributes, checked to fit together: one attribute per leaf.
+#[derive(Clone, Debug)]
+pub struct SvoData<'a> {
+    pub nodes: Cow<'a, [SvoNode]>,
+    pub opacity: Cow<'a, [f32]>,
+    pub albedo: Cow<'a, [Rgba8]>,
+    pub ndf: Cow<'a, [LeafNdf]>,
+    /// Absent when no leaf of the tile emits.
+    pub emission: Option<Cow<'a, [LeafEmission]>>,
+}
+
+impl SvoData<'_> {
+    pub fn leaf_count(&self) -> usize {
+        self.opacity.len()
+    }
+}
+
 impl<'a> Tile<'a> {
+    /// The tile's SVO and leaf attributes; `Ok(None)` when the tile has no SVO section.
+    pub fn svo(&self) -> Result<Option<SvoData<'a>>> {
+        let Some(nodes) = self.read::<SvoNode>(SectionKind::SvoNodes)? else { return Ok(None) };
+        let leaves = nodes.iter().filter(|n| u32::from(n.level) == self.raw.depth).count();
+        let bad = |kind: SectionKind, len: usize| {
+            self.package.invalid(Problem::BadContent {
+                section: self.find(kind, 0).map_or(u32::MAX, |s| s.index),
+                kind: kind.name().to_owned(),
+                reason: format!("tile {} has {leaves} leaves but {len} entries", self.index),
+            })
+        };
+        let opacity = self.read::<f32>(SectionKind::LeafOpacity)?.unwrap_or_default();
+        let albedo = self.read::<Rgba8>(SectionKind::LeafAlbedo)?.unwrap_or_default();
+        let ndf = self.read::<LeafNdf>(SectionKind::LeafNdf)?.unwrap_or_default();
+        let emission = self.read::<LeafEmission>(SectionKind::LeafEmission)?;
+        for (kind, len) in [
+            (SectionKind::LeafOpacity, opacity.len()),
+            (SectionKind::LeafAlbedo, albedo.len()),
+            (SectionKind::LeafNdf, ndf.len()),
+            (SectionKind::LeafEmission, emission.as_ref().map_or(leaves, |e| e.len())),
+        ] {
+            if len != leaves {
+                return Err(bad(kind, len));
+            }
+        }
+        Ok(Some(SvoData { nodes, opacity, albedo, ndf, emission }))
+    }
+
     pub fn index(&self) -> u32 {
         self.index
     }

@@ -263,3 +263,42 @@ fn sections_copy_between_packages_as_stored() {
         .unwrap();
     assert!(w.copy_section(&damaged, &victim, Scope::Tile(0)).is_err());
 }
+
+#[test]
+fn svo_view_checks_that_leaf_attributes_fit_the_nodes() {
+    use grotto_format::svo::{morton_encode, nodes_from_leaves};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("svo.grotto");
+    let leaves: Vec<u64> = vec![morton_encode(0, 0, 0), morton_encode(1, 2, 3), morton_encode(3, 3, 3)];
+    let nodes = nodes_from_leaves(&leaves, 2).unwrap();
+    let mut w = PackageWriter::create(&path).unwrap();
+    for (t, n_attr) in [(0u32, 3usize), (1, 2)] {
+        w.add_tile(TileInfo {
+            origin_m: [f64::from(t) * 4.0, 0.0, 0.0],
+            extent_m: 4.0,
+            grid: [t as i32, 0, 0],
+            depth: 2,
+            point_count: 3,
+        })
+        .unwrap();
+        let scope = Scope::Tile(t);
+        w.add_elements(SectionKind::SvoNodes, scope, 0, &nodes, Compression::Raw).unwrap();
+        w.add_elements(SectionKind::LeafOpacity, scope, 0, &vec![1.0f32; n_attr], Compression::Raw).unwrap();
+        w.add_elements(SectionKind::LeafAlbedo, scope, 0, &[Rgba8([1, 2, 3, 255]); 3], Compression::Zstd(1))
+            .unwrap();
+        w.add_elements(
+            SectionKind::LeafNdf,
+            scope,
+            0,
+            &[LeafNdf { mean: [0.0, 0.0, 1.0], weight: 1.0 }; 3],
+            Compression::Raw,
+        )
+        .unwrap();
+    }
+    let pkg = Package::open(w.finish().unwrap()).unwrap();
+    let svo = pkg.tile(0).unwrap().svo().unwrap().unwrap();
+    assert_eq!((svo.leaf_count(), svo.nodes.len()), (3, nodes.len()));
+    assert!(svo.emission.is_none());
+    let err = pkg.tile(1).unwrap().svo().unwrap_err();
+    assert!(err.to_string().contains("3 leaves but 2 entries"), "{err}");
+}

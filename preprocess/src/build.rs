@@ -19,19 +19,22 @@ use std::path::{Path, PathBuf};
 use grotto_format::spec::{Rgba8, Surfel};
 use grotto_format::svo::morton_encode;
 use grotto_format::{
-    Compression, InputFile, Package, PackageWriter, Provenance, Scope, SectionKind, TileInfo,
+    Compression, InputFile, LightShape, Package, PackageWriter, Provenance, Scene, Scope, SectionKind,
+    TileInfo,
 };
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::bc1;
 use crate::manifest::Manifest;
 use crate::normals::{self, TilePoints};
 use crate::tiling::{self, FLAG_HALO, Progress, TilePlan, TilingParams};
+use crate::voxels::{self, Sample, TileSvo};
 use crate::{Error, Result};
 
-/// Measured upper bound of what building one tile holds per input point: bin (24), kd-tree
-/// (~24), neighbour lists (k=16: 64), normals and radii in f64 (32), surfels and colours (36),
-/// sort keys (16), plus allocator slack.
+/// Upper bound of what building one tile holds per input point: bin (24), kd-tree (~24),
+/// neighbour lists (k=16: 64), normals and radii in f64 (32), surfels and colours (36), SVO
+/// samples (48) and sort keys (16); peak memory is measured in docs/benchmarks.md.
 pub const BUILD_BYTES_PER_POINT: u64 = 256;
 
 #[derive(Clone, Debug, Serialize)]
@@ -39,8 +42,11 @@ pub struct BuildParams {
     pub work_dir: PathBuf,
     pub memory_budget_bytes: u64,
     pub threads: usize,
-    /// SVO depth declared for each tile.
-    pub depth: u32,
+    /// Edge of a leaf voxel, metres; a power of two <= the smallest tile. Every tile's SVO depth is
+    /// `log2(tile extent / leaf)`, so all tiles share one voxel grid.
+    pub leaf_m: f64,
+    /// How surfel colours are stored.
+    pub colors: ColorCodec,
     /// Neighbours for normals.
     pub k: usize,
     pub min_tile_extent_m: f64,
@@ -61,6 +67,16 @@ impl BuildParams {
             buffer_bytes: (budget / 4) as usize,
         }
     }
+}
+
+/// Surfel colour storage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ColorCodec {
+    /// BC1 blocks of 16 surfels: 0.5 byte per surfel.
+    Bc1,
+    /// sRGB bytes: 4 bytes per surfel (zstd where it pays).
+    Raw,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -85,10 +101,83 @@ pub struct BuildSummary {
 struct BuiltTile {
     info: TileInfo,
     surfels: Vec<Surfel>,
-    colors: Vec<Rgba8>,
+    colors: Vec<[u8; 3]>,
+    svo: TileSvo,
 }
 
-fn build_tile(plan: &TilePlan, work_dir: &Path, t: usize, params: &BuildParams) -> Result<BuiltTile> {
+/// Depth of a tile's SVO for the build's leaf size.
+fn tile_depth(extent_m: f64, leaf_m: f64) -> Result<u32> {
+    let ratio = (extent_m / leaf_m).log2();
+    if ratio < 0.0 || ratio.fract() != 0.0 || ratio > f64::from(grotto_format::spec::MAX_SVO_DEPTH) {
+        return Err(Error::Parameter {
+            name: "leaf_m",
+            reason: format!("{leaf_m} m leaves do not divide a {extent_m} m tile into 2^0..2^21 cells"),
+        });
+    }
+    Ok(ratio as u32)
+}
+
+/// Emissive samples of the scene's area lights that fall inside a tile, spaced half a leaf apart.
+/// A Lambertian emitter of power P and area A has radiance P / (pi A).
+fn area_light_samples(scene: &Scene, origin: [f64; 3], extent: f64, leaf_m: f64) -> Vec<Sample> {
+    let mut out = Vec::new();
+    for light in &scene.lights {
+        let LightShape::Area { center_m, normal, size_m } = light.shape else { continue };
+        let n = normal.map(f64::from);
+        let nl = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !positive(nl) || !size_m.iter().all(|&s| positive(f64::from(s))) {
+            continue;
+        }
+        let n = n.map(|c| c / nl);
+        let helper = if n[2].abs() < 0.9 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] };
+        let cross = |a: [f64; 3], b: [f64; 3]| {
+            [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+        };
+        let t1 = cross(helper, n);
+        let l1 = (t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2]).sqrt();
+        let t1 = t1.map(|c| c / l1);
+        let t2 = cross(n, t1);
+        let area = f64::from(size_m[0]) * f64::from(size_m[1]);
+        let radiance = light
+            .color
+            .map(|c| (f64::from(c) * f64::from(light.power_w) / (std::f64::consts::PI * area)) as f32);
+        let step = leaf_m / 2.0;
+        let (nu, nv) = (
+            (f64::from(size_m[0]) / step).ceil().max(1.0) as usize,
+            (f64::from(size_m[1]) / step).ceil().max(1.0) as usize,
+        );
+        if nu * nv > 4_000_000 {
+            continue;
+        }
+        let (du, dv) = (f64::from(size_m[0]) / nu as f64, f64::from(size_m[1]) / nv as f64);
+        for i in 0..nu {
+            for j in 0..nv {
+                let u = -f64::from(size_m[0]) / 2.0 + (i as f64 + 0.5) * du;
+                let v = -f64::from(size_m[1]) / 2.0 + (j as f64 + 0.5) * dv;
+                let p: [f64; 3] = std::array::from_fn(|a| center_m[a] + u * t1[a] + v * t2[a] - origin[a]);
+                if p.iter().all(|&c| (0.0..extent).contains(&c)) {
+                    out.push(Sample {
+                        pos_tile_m: p.map(|c| c as f32),
+                        normal: n.map(|c| c as f32),
+                        area_m2: (du * dv) as f32,
+                        albedo_linear: [0.0; 3],
+                        emission: radiance,
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+fn build_tile(
+    plan: &TilePlan,
+    work_dir: &Path,
+    t: usize,
+    params: &BuildParams,
+    scene: &Scene,
+) -> Result<BuiltTile> {
     let tile = &plan.tiles[t];
     let origin = plan.origin_m(tile);
     let extent = plan.extent_m(tile);
@@ -133,10 +222,26 @@ fn build_tile(plan: &TilePlan, work_dir: &Path, t: usize, params: &BuildParams) 
             spread: estimated[i].spread,
         })
         .collect();
-    let colors = order.iter().map(|&(_, i)| {
-        let c = own_points[i].rgb;
-        Rgba8([c[0], c[1], c[2], 255])
-    });
+    let colors: Vec<[u8; 3]> = order.iter().map(|&(_, i)| own_points[i].rgb).collect();
+    let depth = tile_depth(extent, params.leaf_m)?;
+    // Each surfel stands for the area its radius was widened from (see normals.rs).
+    let cover = normals::RADIUS_COVER_FACTOR;
+    let mut samples: Vec<Sample> = order
+        .iter()
+        .zip(&colors)
+        .map(|(&(_, i), c)| {
+            let r = f64::from(estimated[i].radius_m) / cover;
+            Sample {
+                pos_tile_m: own_points[i].pos_tile_m,
+                normal: estimated[i].normal,
+                area_m2: (std::f64::consts::PI * r * r) as f32,
+                albedo_linear: c.map(|v| voxels::srgb_to_linear(f32::from(v) / 255.0)),
+                emission: [0.0; 3],
+            }
+        })
+        .collect();
+    samples.extend(area_light_samples(scene, origin, extent, params.leaf_m));
+    let svo = voxels::build(&samples, extent, depth);
     let grid: [i32; 3] = tile.key.map(|k| i32::try_from(k).unwrap_or(i32::MAX));
     if grid.contains(&i32::MAX) {
         return Err(Error::Parameter {
@@ -145,15 +250,10 @@ fn build_tile(plan: &TilePlan, work_dir: &Path, t: usize, params: &BuildParams) 
         });
     }
     Ok(BuiltTile {
-        info: TileInfo {
-            origin_m: origin,
-            extent_m: extent,
-            grid,
-            depth: params.depth,
-            point_count: tile.points,
-        },
+        info: TileInfo { origin_m: origin, extent_m: extent, grid, depth, point_count: tile.points },
         surfels,
-        colors: colors.collect(),
+        colors,
+        svo,
     })
 }
 
@@ -163,7 +263,15 @@ pub fn tile_package_path(work_dir: &Path, tile: usize) -> PathBuf {
 
 /// What a tile package depends on: the plan (inputs and tiling) and the per-tile parameters.
 fn tile_fingerprint(plan: &TilePlan, params: &BuildParams) -> String {
-    format!("{}-k{}-d{}-v{}", plan.fingerprint, params.k, params.depth, env!("CARGO_PKG_VERSION"))
+    // Scene lights matter too (area lights become emissive samples); hashed with the parameters.
+    format!(
+        "{}-k{}-leaf{}-{:?}-v{}",
+        plan.fingerprint,
+        params.k,
+        params.leaf_m,
+        params.colors,
+        env!("CARGO_PKG_VERSION")
+    )
 }
 
 fn tile_package_matches(path: &Path, fingerprint: &str) -> bool {
@@ -173,11 +281,35 @@ fn tile_package_matches(path: &Path, fingerprint: &str) -> bool {
     })
 }
 
-fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str) -> Result<()> {
+fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: ColorCodec) -> Result<()> {
     let mut w = PackageWriter::create(path)?;
     let index = w.add_tile(tile.info)?;
-    w.add_elements(SectionKind::Surfels, Scope::Tile(index), 0, &tile.surfels, Compression::Raw)?;
-    w.add_elements(SectionKind::SurfelColorsRaw, Scope::Tile(index), 0, &tile.colors, Compression::Auto(3))?;
+    let scope = Scope::Tile(index);
+    // Zero-copy (raw) where the runtime uploads as is; zstd where it pays on attributes.
+    w.add_elements(SectionKind::Surfels, scope, 0, &tile.surfels, Compression::Raw)?;
+    match colors {
+        ColorCodec::Bc1 => {
+            w.add_elements(
+                SectionKind::SurfelColorsBc1,
+                scope,
+                0,
+                &bc1::encode(&tile.colors),
+                Compression::Raw,
+            )?;
+        }
+        ColorCodec::Raw => {
+            let rgba: Vec<Rgba8> = tile.colors.iter().map(|c| Rgba8([c[0], c[1], c[2], 255])).collect();
+            w.add_elements(SectionKind::SurfelColorsRaw, scope, 0, &rgba, Compression::Auto(3))?;
+        }
+    }
+    let svo = &tile.svo;
+    w.add_elements(SectionKind::SvoNodes, scope, 0, &svo.nodes, Compression::Raw)?;
+    w.add_elements(SectionKind::LeafOpacity, scope, 0, &svo.opacity, Compression::Auto(3))?;
+    w.add_elements(SectionKind::LeafAlbedo, scope, 0, &svo.albedo, Compression::Auto(3))?;
+    w.add_elements(SectionKind::LeafNdf, scope, 0, &svo.ndf, Compression::Raw)?;
+    if svo.has_emission() {
+        w.add_elements(SectionKind::LeafEmission, scope, 0, &svo.emission, Compression::Auto(3))?;
+    }
     w.add_provenance(&Provenance {
         tool: "grotto-pack build-tile".into(),
         tool_version: env!("CARGO_PKG_VERSION").into(),
@@ -219,8 +351,17 @@ pub fn build(
     if !(3..=30).contains(&params.k) {
         return Err(Error::Parameter { name: "k", reason: format!("{} is not in 3..=30", params.k) });
     }
-    if params.depth > grotto_format::spec::MAX_SVO_DEPTH {
-        return Err(Error::Parameter { name: "depth", reason: format!("{} exceeds 21", params.depth) });
+    if !(params.leaf_m > 0.0
+        && params.leaf_m.log2().fract() == 0.0
+        && params.leaf_m <= params.min_tile_extent_m)
+    {
+        return Err(Error::Parameter {
+            name: "leaf_m",
+            reason: format!(
+                "{} must be a power of two no larger than the smallest tile ({} m)",
+                params.leaf_m, params.min_tile_extent_m
+            ),
+        });
     }
     let scans = manifest.resolve()?;
     let scene = manifest.scene(manifest_path)?;
@@ -250,8 +391,8 @@ pub fn build(
                     if tile_package_matches(&path, &fingerprint) {
                         return Ok(true);
                     }
-                    let built = build_tile(&plan, &params.work_dir, t, params)?;
-                    write_tile_package(&path, &built, &fingerprint)?;
+                    let built = build_tile(&plan, &params.work_dir, t, params, &scene)?;
+                    write_tile_package(&path, &built, &fingerprint, params.colors)?;
                     Ok(false)
                 })
                 .collect()
@@ -290,7 +431,8 @@ pub fn build(
     }
     let mut parameters = std::collections::BTreeMap::new();
     for (k, v) in [
-        ("depth", serde_json::json!(params.depth)),
+        ("leaf_m", serde_json::json!(params.leaf_m)),
+        ("colors", serde_json::json!(params.colors)),
         ("k", serde_json::json!(params.k)),
         ("min_tile_extent_m", serde_json::json!(params.min_tile_extent_m)),
         ("max_tile_extent_m", serde_json::json!(params.max_tile_extent_m)),

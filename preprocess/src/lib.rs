@@ -3,6 +3,7 @@
 //! Today this holds the built-in demo scene ([`demo`]); ingest, tiling, normals, SVO and encoding
 //! follow the design brief (`../shared/DESIGN.md`) and land module by module.
 
+pub mod bc1;
 pub mod bench;
 pub mod build;
 pub mod demo;
@@ -14,5 +15,6 @@ pub mod pose;
 pub mod scanwrite;
 pub mod synth;
 pub mod tiling;
+pub mod voxels;
 
 pub use error::{Error, Result};

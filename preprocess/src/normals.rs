@@ -19,6 +19,10 @@ use std::num::NonZero;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 
+/// Surfel radii are widened by this over the disc that covers the area per point, so neighbouring
+/// discs overlap without holes.
+pub const RADIUS_COVER_FACTOR: f64 = 1.25;
+
 /// The result for one point.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PointNormal {
@@ -167,7 +171,7 @@ pub fn estimate(tile: &TilePoints<'_>, k: usize) -> Vec<PointNormal> {
         }
         normals.push(normal);
         let d_k = found.last().map_or(0.0, |nb| f64::from(nb.distance).sqrt());
-        radii.push(1.25 * d_k / (k as f64).sqrt());
+        radii.push(RADIUS_COVER_FACTOR * d_k / (k as f64).sqrt());
     }
     own.iter()
         .map(|&i| {

@@ -4,7 +4,7 @@
 
 use grotto_format::spec::Surfel;
 use grotto_format::{Package, SectionKind};
-use grotto_preprocess::build::{self, BuildParams};
+use grotto_preprocess::build::{self, BuildParams, ColorCodec};
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::synth::{self, SynthCave, SynthParams};
@@ -28,7 +28,8 @@ fn synthetic_cave_builds_with_accurate_oriented_normals() {
         work_dir: dir.path().join("work"),
         memory_budget_bytes: 64 << 20,
         threads: 2,
-        depth: 8,
+        leaf_m: 0.125,
+        colors: ColorCodec::Raw,
         k: 16,
         min_tile_extent_m: 2.0,
         max_tile_extent_m: 32.0,
@@ -92,7 +93,8 @@ fn an_interrupted_build_resumes_and_gives_the_same_bytes() {
         work_dir: dir.path().join("work"),
         memory_budget_bytes: 64 << 20,
         threads: 2,
-        depth: 6,
+        leaf_m: 0.25,
+        colors: ColorCodec::Bc1,
         k: 12,
         min_tile_extent_m: 4.0,
         max_tile_extent_m: 16.0,

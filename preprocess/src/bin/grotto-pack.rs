@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
-use grotto_preprocess::build::{self, BuildParams, BuildSummary};
+use grotto_preprocess::build::{self, BuildParams, BuildSummary, ColorCodec};
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::synth::{self, SynthParams};
@@ -93,9 +93,12 @@ struct BuildOpts {
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
-    /// SVO depth per tile.
-    #[arg(long, default_value_t = 8)]
-    depth: u32,
+    /// Leaf voxel edge, metres (a power of two, at most --min-tile-m); sets each tile's SVO depth.
+    #[arg(long, default_value_t = 0.0625)]
+    leaf_m: f64,
+    /// Surfel colour storage: bc1 (0.5 byte per point) or raw (4 bytes).
+    #[arg(long, default_value = "bc1", value_parser = ["bc1", "raw"])]
+    colors: String,
     /// Neighbours for normal estimation.
     #[arg(long, default_value_t = 16)]
     k: usize,
@@ -206,7 +209,8 @@ fn run_build(inputs: &[PathBuf], out: &Path, opts: &BuildOpts) -> anyhow::Result
         work_dir: work_dir.clone(),
         memory_budget_bytes: parse_bytes(&opts.memory_budget)?,
         threads: opts.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from)),
-        depth: opts.depth,
+        leaf_m: opts.leaf_m,
+        colors: if opts.colors == "raw" { ColorCodec::Raw } else { ColorCodec::Bc1 },
         k: opts.k,
         min_tile_extent_m: opts.min_tile_m,
         max_tile_extent_m: opts.max_tile_m,
