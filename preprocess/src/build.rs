@@ -63,6 +63,8 @@ impl BuildParams {
             max_points_per_tile: (budget * 3 / 4 / self.threads.max(1) as u64 / BUILD_BYTES_PER_POINT)
                 .max(1000),
             halo_m: self.halo_m,
+            // Voxel faces fall on quanta, so voxel cells are exact integer shifts (see tiling.rs).
+            quantum_m: self.leaf_m / 2048.0,
             chunk_points: crate::ingest::DEFAULT_CHUNK,
             buffer_bytes: (budget / 4) as usize,
         }
@@ -93,6 +95,9 @@ pub struct BuildSummary {
     pub resumed_tiling: bool,
     /// Tiles whose tile package from an earlier run was kept.
     pub reused_tiles: usize,
+    /// Points near a tile border whose normal neighbourhood may reach past the halo (raise
+    /// `halo_m` if this is large: voxels there can differ from a build with bigger tiles).
+    pub seam_limited_points: u64,
     /// Peak resident memory of the process (Linux), bytes.
     pub peak_rss_bytes: Option<u64>,
 }
@@ -100,6 +105,8 @@ pub struct BuildSummary {
 /// One tile's sections, built off the writer thread.
 struct BuiltTile {
     info: TileInfo,
+    /// Own points near the border whose k-neighbourhood may reach past the halo.
+    seam_limited: u64,
     surfels: Vec<Surfel>,
     colors: Vec<[u8; 3]>,
     svo: TileSvo,
@@ -182,7 +189,8 @@ fn build_tile(
     let origin = plan.origin_m(tile);
     let extent = plan.extent_m(tile);
     let points = tiling::read_bin(work_dir, t)?;
-    let positions: Vec<[f32; 3]> = points.iter().map(|p| p.pos_tile_m).collect();
+    let quantum = plan.quantum_m;
+    let positions: Vec<[f32; 3]> = points.iter().map(|p| p.pos_tile_m(quantum)).collect();
     let own: Vec<bool> = points.iter().map(|p| p.flags & FLAG_HALO == 0).collect();
     let scanner_tile_m: Vec<[f64; 3]> = points
         .iter()
@@ -208,7 +216,7 @@ fn build_tile(
         .iter()
         .enumerate()
         .map(|(i, p)| {
-            let c = p.pos_tile_m.map(|v| (f64::from(v) * q).clamp(0.0, 65_535.0) as u32);
+            let c = p.pos_tile_m(quantum).map(|v| (f64::from(v) * q).clamp(0.0, 65_535.0) as u32);
             (morton_encode(c[0], c[1], c[2]), i)
         })
         .collect();
@@ -216,13 +224,28 @@ fn build_tile(
     let surfels = order
         .iter()
         .map(|&(_, i)| Surfel {
-            position_tile_m: own_points[i].pos_tile_m,
+            position_tile_m: own_points[i].pos_tile_m(quantum),
             radius_m: estimated[i].radius_m,
             normal: estimated[i].normal,
             spread: estimated[i].spread,
         })
         .collect();
     let colors: Vec<[u8; 3]> = order.iter().map(|&(_, i)| own_points[i].rgb).collect();
+    // The k-th neighbour distance, undone from the radius; a neighbourhood that reaches past the
+    // border by more than the halo may miss points the neighbour tile has (a possible seam).
+    let k_reach = |r: f32| f64::from(r) / normals::RADIUS_COVER_FACTOR * (params.k as f64).sqrt();
+    let seam_limited = own_points
+        .iter()
+        .zip(&estimated)
+        .filter(|(p, n)| {
+            let border = p
+                .pos_tile_m(quantum)
+                .iter()
+                .map(|&c| f64::from(c).min(extent - f64::from(c)))
+                .fold(f64::INFINITY, f64::min);
+            k_reach(n.radius_m) > border + params.halo_m
+        })
+        .count() as u64;
     let depth = tile_depth(extent, params.leaf_m)?;
     // Each surfel stands for the area its radius was widened from (see normals.rs).
     let cover = normals::RADIUS_COVER_FACTOR;
@@ -232,7 +255,7 @@ fn build_tile(
         .map(|(&(_, i), c)| {
             let r = f64::from(estimated[i].radius_m) / cover;
             Sample {
-                pos_tile_m: own_points[i].pos_tile_m,
+                pos_tile_m: own_points[i].pos_tile_m(quantum),
                 normal: estimated[i].normal,
                 area_m2: (std::f64::consts::PI * r * r) as f32,
                 albedo_linear: c.map(|v| voxels::srgb_to_linear(f32::from(v) / 255.0)),
@@ -251,6 +274,7 @@ fn build_tile(
     }
     Ok(BuiltTile {
         info: TileInfo { origin_m: origin, extent_m: extent, grid, depth, point_count: tile.points },
+        seam_limited,
         surfels,
         colors,
         svo,
@@ -274,11 +298,13 @@ fn tile_fingerprint(plan: &TilePlan, params: &BuildParams) -> String {
     )
 }
 
-fn tile_package_matches(path: &Path, fingerprint: &str) -> bool {
-    // Any problem (missing, damaged, other parameters) means: build it again.
-    Package::open(path).ok().and_then(|p| p.provenance().ok().flatten()).is_some_and(|prov| {
-        prov.parameters.get("tile_fingerprint").and_then(|v| v.as_str()) == Some(fingerprint)
-    })
+/// The seam-limited count of a finished tile package with this fingerprint, or `None` when it
+/// must be built (missing, damaged, other parameters).
+fn finished_tile_package(path: &Path, fingerprint: &str) -> Option<u64> {
+    let prov = Package::open(path).ok()?.provenance().ok()??;
+    (prov.parameters.get("tile_fingerprint")?.as_str()? == fingerprint)
+        .then(|| prov.parameters.get("seam_limited_points")?.as_u64())
+        .flatten()
 }
 
 fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: ColorCodec) -> Result<()> {
@@ -314,7 +340,11 @@ fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: 
         tool: "grotto-pack build-tile".into(),
         tool_version: env!("CARGO_PKG_VERSION").into(),
         inputs: Vec::new(),
-        parameters: [("tile_fingerprint".to_string(), serde_json::json!(fingerprint))].into(),
+        parameters: [
+            ("tile_fingerprint".to_string(), serde_json::json!(fingerprint)),
+            ("seam_limited_points".to_string(), serde_json::json!(tile.seam_limited)),
+        ]
+        .into(),
     })?;
     w.finish()?;
     Ok(())
@@ -381,24 +411,26 @@ pub fn build(
     let fingerprint = tile_fingerprint(&plan, params);
     let total = plan.tiles.len();
     let batch = params.threads.max(1);
-    let mut reused_tiles = 0usize;
+    let (mut reused_tiles, mut seam_limited_points) = (0usize, 0u64);
     for first in (0..total).step_by(batch) {
-        let done: Vec<Result<bool>> = pool.install(|| {
+        let done: Vec<Result<(bool, u64)>> = pool.install(|| {
             (first..(first + batch).min(total))
                 .into_par_iter()
                 .map(|t| {
                     let path = tile_package_path(&params.work_dir, t);
-                    if tile_package_matches(&path, &fingerprint) {
-                        return Ok(true);
+                    if let Some(limited) = finished_tile_package(&path, &fingerprint) {
+                        return Ok((true, limited));
                     }
                     let built = build_tile(&plan, &params.work_dir, t, params, &scene)?;
                     write_tile_package(&path, &built, &fingerprint, params.colors)?;
-                    Ok(false)
+                    Ok((false, built.seam_limited))
                 })
                 .collect()
         });
         for (i, d) in done.into_iter().enumerate() {
-            reused_tiles += usize::from(d?);
+            let (reused, limited) = d?;
+            reused_tiles += usize::from(reused);
+            seam_limited_points += limited;
             progress(Progress { stage: "tiles", done: (first + i + 1) as u64, total: total as u64 });
         }
     }
@@ -461,6 +493,7 @@ pub fn build(
         seconds: start.elapsed().as_secs_f64(),
         resumed_tiling,
         reused_tiles,
+        seam_limited_points,
         peak_rss_bytes: crate::bench::peak_rss_bytes(),
     })
 }

@@ -39,6 +39,10 @@ pub struct TilingParams {
     pub max_points_per_tile: u64,
     /// Points this close to a tile's border are copied into the neighbour; <= the finest extent.
     pub halo_m: f64,
+    /// Positions are quantised to this (a power of two, metres) once, from world coordinates:
+    /// tiles, halos and voxel cells all derive from the same integers, so they agree whatever the
+    /// tiling. The build sets it to leaf / 2^11.
+    pub quantum_m: f64,
     /// Points per read.
     pub chunk_points: usize,
     /// Bin buffers are flushed to disk when they hold this many bytes together.
@@ -52,6 +56,7 @@ impl Default for TilingParams {
             max_tile_extent_m: 256.0,
             max_points_per_tile: 4_000_000,
             halo_m: 0.25,
+            quantum_m: 1.0 / 65_536.0,
             chunk_points: ingest::DEFAULT_CHUNK,
             buffer_bytes: 256 << 20,
         }
@@ -62,8 +67,9 @@ impl Default for TilingParams {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct BinPoint {
-    /// Position relative to the tile origin, metres.
-    pub pos_tile_m: [f32; 3],
+    /// Position relative to the tile origin, in quanta (`TilePlan::quantum_m`); negative or past
+    /// the extent only for halo copies.
+    pub pos_q: [i32; 3],
     /// Input normal in the world frame as snorm16, or zero when the scan had none.
     pub normal_snorm: [i16; 3],
     /// sRGB colour.
@@ -77,6 +83,13 @@ pub struct BinPoint {
 const _: () = assert!(size_of::<BinPoint>() == 24);
 
 pub const FLAG_HALO: u8 = 1;
+
+impl BinPoint {
+    /// Tile-local position in metres (exact: quanta are powers of two and tiles < 2^24 quanta).
+    pub fn pos_tile_m(&self, quantum_m: f64) -> [f32; 3] {
+        self.pos_q.map(|q| (f64::from(q) * quantum_m) as f32)
+    }
+}
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PlannedTile {
@@ -93,6 +106,7 @@ pub struct PlannedTile {
 pub struct TilePlan {
     pub fingerprint: String,
     pub min_extent_m: f64,
+    pub quantum_m: f64,
     /// Fine-grid cell of the grid origin.
     pub anchor: [i64; 3],
     pub tiles: Vec<PlannedTile>,
@@ -170,6 +184,13 @@ fn check_params(p: &TilingParams) -> Result<()> {
     if !(p.halo_m >= 0.0 && p.halo_m <= p.min_tile_extent_m) {
         return bad("halo_m", format!("{} must be in 0..=min tile extent {}", p.halo_m, p.min_tile_extent_m));
     }
+    let steps = (p.min_tile_extent_m / p.quantum_m).log2();
+    if !pow2(p.quantum_m) || steps < 0.0 || (p.max_tile_extent_m / p.quantum_m).log2() > 24.0 {
+        return bad(
+            "quantum_m",
+            format!("{} m must be a power of two with tiles of at most 2^24 quanta", p.quantum_m),
+        );
+    }
     if p.max_points_per_tile == 0 || p.chunk_points == 0 {
         return bad("max_points_per_tile", "must be positive".into());
     }
@@ -237,8 +258,14 @@ fn stream_world(
     Ok(())
 }
 
-fn fine_key(p: &[f64; 3], inv_min_extent: f64) -> [i64; 3] {
-    p.map(|v| (v * inv_min_extent).floor() as i64)
+/// The point in global quanta: the one rounding every later decision shares.
+fn quantise(p: &[f64; 3], inv_quantum: f64) -> [i64; 3] {
+    p.map(|v| (v * inv_quantum).floor() as i64)
+}
+
+/// Fine cell of a quantised point (`shift` = log2(min extent / quantum); arithmetic shifts floor).
+fn fine_key(q: [i64; 3], shift: u32) -> [i64; 3] {
+    q.map(|v| v >> shift)
 }
 
 /// Runs (or resumes) the tiling of `scans` into `work_dir`.
@@ -294,13 +321,14 @@ fn count_and_plan(
         .iter()
         .map(|s| ingest::open(&s.path, s.format, s.index).map(|src| src.info().claimed_points))
         .sum::<Result<u64>>()?;
-    let inv = 1.0 / params.min_tile_extent_m;
+    let inv = 1.0 / params.quantum_m;
+    let shift = (params.min_tile_extent_m / params.quantum_m).log2() as u32;
     let mut fine: HashMap<[i64; 3], u64> = HashMap::new();
     let (mut points, mut invalid, mut done) = (0u64, 0u64, 0u64);
     stream_world(scans, params.chunk_points, |_, chunk| {
         for p in &chunk.xyz {
             if p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
-                *fine.entry(fine_key(p, inv)).or_default() += 1;
+                *fine.entry(fine_key(quantise(p, inv), shift)).or_default() += 1;
                 points += 1;
             } else {
                 invalid += 1;
@@ -346,6 +374,7 @@ fn count_and_plan(
     Ok(TilePlan {
         fingerprint,
         min_extent_m: params.min_tile_extent_m,
+        quantum_m: params.quantum_m,
         anchor: if tiles.is_empty() { [0; 3] } else { anchor },
         tiles,
         points,
@@ -364,14 +393,15 @@ fn distribute(
     plan: &mut TilePlan,
     progress: &dyn Fn(Progress),
 ) -> Result<()> {
-    let inv = 1.0 / params.min_tile_extent_m;
+    let inv = 1.0 / params.quantum_m;
+    let shift = (params.min_tile_extent_m / params.quantum_m).log2() as u32;
     let top = (params.max_tile_extent_m / params.min_tile_extent_m).log2() as u32;
     let points = plan.points;
     let invalid = plan.invalid_points;
     let lookup: HashMap<(u32, [i64; 3]), usize> =
         plan.tiles.iter().enumerate().map(|(i, t)| ((t.level, t.key), i)).collect();
-    let find = |p: &[f64; 3]| -> Option<usize> {
-        let k = fine_key(p, inv);
+    let find = |q: [i64; 3]| -> Option<usize> {
+        let k = fine_key(q, shift);
         let rel: [i64; 3] = std::array::from_fn(|i| k[i] - plan.anchor[i]);
         (0..=top).find_map(|l| lookup.get(&(l, rel.map(|v| v >> l))).copied())
     };
@@ -379,16 +409,23 @@ fn distribute(
         let _ = std::fs::remove_file(bin_path(work_dir, t));
     }
     let mut bins = Bins::new(work_dir, params.buffer_bytes);
-    let origins: Vec<[f64; 3]> = plan.tiles.iter().map(|t| plan.origin_m(t)).collect();
-    let extents: Vec<f64> = plan.tiles.iter().map(|t| plan.extent_m(t)).collect();
-    let h = params.halo_m;
+    // Tile origins and extents in quanta.
+    let origins: Vec<[i64; 3]> = plan
+        .tiles
+        .iter()
+        .map(|t| std::array::from_fn(|a| (plan.anchor[a] + (t.key[a] << t.level)) << shift))
+        .collect();
+    let extents: Vec<i64> = plan.tiles.iter().map(|t| 1i64 << (t.level + shift)).collect();
+    let h = (params.halo_m * inv).round() as i64;
     let (mut done, mut halo) = (0u64, 0u64);
     let mut neighbours: Vec<usize> = Vec::with_capacity(27);
     stream_world(scans, params.chunk_points, |si, chunk| {
         for (i, p) in chunk.xyz.iter().enumerate() {
-            let Some(t) = p.iter().all(|v| v.is_finite() && v.abs() < 1e15).then(|| find(p)).flatten() else {
+            if !p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
                 continue;
-            };
+            }
+            let q = quantise(p, inv);
+            let Some(t) = find(q) else { continue };
             let normal_snorm = chunk.normal.get(i).map_or([0; 3], |n| {
                 let len = n.iter().map(|c| c * c).sum::<f32>().sqrt();
                 if len.is_finite() && len > 1e-6 {
@@ -397,23 +434,23 @@ fn distribute(
                     [0; 3]
                 }
             });
-            let mut point =
-                BinPoint { pos_tile_m: [0.0; 3], normal_snorm, rgb: chunk.rgb[i], flags: 0, scan: si as u16 };
+            // In range: tiles are < 2^24 quanta and halos < one fine cell.
             let local =
-                |tile: usize| -> [f32; 3] { std::array::from_fn(|a| (p[a] - origins[tile][a]) as f32) };
-            point.pos_tile_m = local(t);
+                |tile: usize| -> [i32; 3] { std::array::from_fn(|a| (q[a] - origins[tile][a]) as i32) };
+            let point =
+                BinPoint { pos_q: local(t), normal_snorm, rgb: chunk.rgb[i], flags: 0, scan: si as u16 };
             bins.push(t, point)?;
             // Halo: only points near their tile's border can reach a neighbour.
-            let near = point.pos_tile_m.iter().any(|&c| f64::from(c) < h || f64::from(c) > extents[t] - h);
-            if h > 0.0 && near {
+            let near = point.pos_q.iter().any(|&c| i64::from(c) < h || i64::from(c) >= extents[t] - h);
+            if h > 0 && near {
                 neighbours.clear();
                 for o in 0..27 {
                     let d = [o % 3 - 1, o / 3 % 3 - 1, o / 9 - 1];
                     if d == [0, 0, 0] {
                         continue;
                     }
-                    let q: [f64; 3] = std::array::from_fn(|a| p[a] + d[a] as f64 * h);
-                    if let Some(n) = find(&q)
+                    let probe: [i64; 3] = std::array::from_fn(|a| q[a] + d[a] * h);
+                    if let Some(n) = find(probe)
                         && n != t
                         && !neighbours.contains(&n)
                     {
@@ -421,7 +458,7 @@ fn distribute(
                     }
                 }
                 for &n in &neighbours {
-                    bins.push(n, BinPoint { pos_tile_m: local(n), flags: FLAG_HALO, ..point })?;
+                    bins.push(n, BinPoint { pos_q: local(n), flags: FLAG_HALO, ..point })?;
                     halo += 1;
                 }
             }

@@ -28,7 +28,8 @@ fn world_points_by_scan(plan: &TilePlan, work: &Path, scans: usize) -> Vec<Vec<[
         let o = plan.origin_m(tile);
         for p in tiling::read_bin(work, t).unwrap() {
             if p.flags & FLAG_HALO == 0 {
-                out[p.scan as usize].push(std::array::from_fn(|a| o[a] + f64::from(p.pos_tile_m[a])));
+                let local = p.pos_tile_m(plan.quantum_m);
+                out[p.scan as usize].push(std::array::from_fn(|a| o[a] + f64::from(local[a])));
             }
         }
     }
@@ -115,7 +116,8 @@ fn a_cloud_shifted_to_survey_coordinates_tiles_identically() {
         for (x, y) in pa.iter().zip(&pb) {
             assert_eq!((x.scan, x.flags), (y.scan, y.flags));
             for k in 0..3 {
-                worst = worst.max(f64::from((x.pos_tile_m[k] - y.pos_tile_m[k]).abs()));
+                worst =
+                    worst.max(f64::from((x.pos_tile_m(a.quantum_m)[k] - y.pos_tile_m(b.quantum_m)[k]).abs()));
             }
         }
     }
@@ -142,7 +144,7 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
         let e = plan.extent_m(t) as f32;
         let h = params.halo_m as f32 + 1e-6;
         for p in tiling::read_bin(work.path(), i).unwrap() {
-            let c = p.pos_tile_m;
+            let c = p.pos_tile_m(plan.quantum_m);
             if p.flags & FLAG_HALO == 0 {
                 assert!(
                     c.iter().all(|&v| (-1e-6..=e + 1e-6).contains(&v)),
@@ -182,8 +184,11 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
     let redone = tiling::tile_scans(&scans, work.path(), &other, &|_| {}).unwrap();
     assert_ne!(redone.fingerprint, plan.fingerprint);
     // Neighbour search helper sanity: kd-tree over a tile finds itself.
-    let pts: Vec<[f64; 3]> =
-        tiling::read_bin(work.path(), 0).unwrap().iter().map(|p| p.pos_tile_m.map(f64::from)).collect();
+    let pts: Vec<[f64; 3]> = tiling::read_bin(work.path(), 0)
+        .unwrap()
+        .iter()
+        .map(|p| p.pos_tile_m(plan.quantum_m).map(f64::from))
+        .collect();
     let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&pts);
     assert_eq!(tree.nearest_n::<SquaredEuclidean>(&pts[0], NonZero::new(1).unwrap())[0].distance, 0.0);
 }
