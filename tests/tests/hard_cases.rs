@@ -41,12 +41,10 @@ fn voxels(pkg: &Package) -> HashMap<[i64; 3], (f32, [u8; 4], [f32; 3])> {
         let svo = t.svo().unwrap().unwrap();
         let leaf = t.leaf_size_m();
         let o = t.origin_m();
-        let mut li = 0;
-        for n in svo.nodes.iter().filter(|n| u32::from(n.level) == t.depth()) {
+        for (li, n) in svo.nodes.iter().filter(|n| u32::from(n.level) == t.depth()).enumerate() {
             let c = grotto_format::svo::morton_decode(n.morton);
             let key: [i64; 3] = std::array::from_fn(|a| ((o[a] / leaf).round() as i64) + i64::from(c[a]));
             out.insert(key, (svo.opacity[li], svo.albedo[li].0, svo.ndf[li].mean));
-            li += 1;
         }
     }
     out
@@ -199,8 +197,8 @@ fn degenerate_inputs_build_valid_packages_without_nan() {
     let lone = all.iter().find(|(_, _, w)| (w[0] - 20.5).abs() < 1e-4).unwrap();
     let toward = [-20.5f32, -0.5, -0.5];
     let l = toward.iter().map(|c| c * c).sum::<f32>().sqrt();
-    for i in 0..3 {
-        assert!((lone.1.normal[i] - toward[i] / l).abs() < 1e-5, "{:?}", lone.1.normal);
+    for (got, want) in lone.1.normal.iter().zip(toward) {
+        assert!((got - want / l).abs() < 1e-5, "{:?}", lone.1.normal);
     }
     for t in pkg.tiles() {
         let svo = t.svo().unwrap().unwrap();
