@@ -47,6 +47,8 @@ pub struct BuildParams {
     pub leaf_m: f64,
     /// How surfel colours are stored.
     pub colors: ColorCodec,
+    /// Window the environment's SH where a bright source would make irradiance negative.
+    pub sh_window: bool,
     /// Neighbours for normals.
     pub k: usize,
     pub min_tile_extent_m: f64,
@@ -434,6 +436,7 @@ pub fn build(
             progress(Progress { stage: "tiles", done: (first + i + 1) as u64, total: total as u64 });
         }
     }
+    let mut inputs_extra = Vec::new();
     let mut writer = PackageWriter::create(out)?;
     for t in 0..total {
         let tile_pkg = Package::open(tile_package_path(&params.work_dir, t))?;
@@ -453,8 +456,22 @@ pub fn build(
         }
         progress(Progress { stage: "assemble", done: t as u64 + 1, total: total as u64 });
     }
+    let mut env_window = None;
+    if let Some(env) = &manifest.environment {
+        let path = manifest.resolve_path(&env.map);
+        progress(Progress { stage: "environment", done: 0, total: 1 });
+        let map = crate::env::LatLong::read(&path)?;
+        let mut sh = map.project_sh9();
+        env_window = Some(if params.sh_window { crate::env::window(&mut sh) } else { 0.0 });
+        let (levels, blocks) = crate::env::encode_chain(&crate::env::prefilter(&map, 256, 6, 128));
+        writer.add_elements(SectionKind::EnvSh9, Scope::Global, 0, &[sh], Compression::Raw)?;
+        writer.add_elements(SectionKind::EnvMipLevels, Scope::Global, 0, &levels, Compression::Raw)?;
+        writer.add_elements(SectionKind::EnvMipBc6h, Scope::Global, 0, &blocks, Compression::Raw)?;
+        inputs_extra.push(hash_file(&path)?);
+        progress(Progress { stage: "environment", done: 1, total: 1 });
+    }
     writer.add_scene(&scene)?;
-    let mut inputs = Vec::new();
+    let mut inputs = std::mem::take(&mut inputs_extra);
     let mut seen = std::collections::BTreeSet::new();
     for s in &scans {
         if seen.insert(s.path.clone()) {
@@ -471,6 +488,8 @@ pub fn build(
         ("max_points_per_tile", serde_json::json!(tiling_params.max_points_per_tile)),
         ("halo_m", serde_json::json!(params.halo_m)),
         ("grid_origin_m", serde_json::json!(plan.grid_origin_m())),
+        ("quantum_m", serde_json::json!(plan.quantum_m)),
+        ("sh_window_strength", serde_json::json!(env_window)),
     ] {
         parameters.insert(k.to_string(), v);
     }

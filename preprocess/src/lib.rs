@@ -7,6 +7,7 @@ pub mod bc1;
 pub mod bench;
 pub mod build;
 pub mod demo;
+pub mod env;
 mod error;
 pub mod ingest;
 pub mod manifest;
@@ -18,3 +19,6 @@ pub mod tiling;
 pub mod voxels;
 
 pub use error::{Error, Result};
+
+// The BC6H encoder's prebuilt objects need the C++ runtime.
+use link_cplusplus as _;

@@ -200,7 +200,8 @@ impl Manifest {
         }
     }
 
-    fn resolve_path(&self, p: &Path) -> PathBuf {
+    /// A path from the manifest, relative to its directory.
+    pub fn resolve_path(&self, p: &Path) -> PathBuf {
         if p.is_absolute() { p.to_path_buf() } else { self.base_dir.join(p) }
     }
 

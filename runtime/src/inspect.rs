@@ -4,7 +4,8 @@
 
 use std::fmt::Write as _;
 
-use grotto_format::{Package, Problem, Provenance, Scene, Summary};
+use grotto_format::spec::ShRgb9;
+use grotto_format::{Package, Problem, Provenance, Scene, SectionKind, Summary};
 use serde::Serialize;
 
 /// `grotto inspect --json`: the summary plus scene and provenance.
@@ -15,13 +16,31 @@ pub struct Inspection {
     /// `None` when the scene section is damaged (`verify` says how).
     pub scene: Option<Scene>,
     pub provenance: Option<Provenance>,
+    /// Each environment map's 9 RGB SH coefficients of radiance (L00, L1-1, L10, L11, L2-2, L2-1,
+    /// L20, L21, L22).
+    pub environment_sh: Vec<EnvironmentSh>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct EnvironmentSh {
+    pub item: u32,
+    pub coeffs: [[f32; 3]; 9],
 }
 
 pub fn inspect(pkg: &Package) -> Inspection {
+    let environment_sh = pkg
+        .sections()
+        .filter(|s| s.kind == Some(SectionKind::EnvSh9))
+        .filter_map(|s| {
+            let sh = pkg.read::<ShRgb9>(&s).ok()?;
+            Some(EnvironmentSh { item: s.item, coeffs: sh.first()?.coeffs })
+        })
+        .collect();
     Inspection {
         summary: pkg.summary(),
         scene: pkg.scene().ok(),
         provenance: pkg.provenance().ok().flatten(),
+        environment_sh,
     }
 }
 
@@ -86,6 +105,14 @@ pub fn render_text(i: &Inspection, list_sections: bool) -> String {
             );
         }
         None => out.push_str("scene: damaged (run grotto verify)\n"),
+    }
+    for e in &i.environment_sh {
+        let c = e.coeffs[0];
+        let _ = writeln!(
+            out,
+            "environment {}: SH L00 = [{:.4}, {:.4}, {:.4}] (9 RGB coefficients in --json)",
+            e.item, c[0], c[1], c[2]
+        );
     }
     if let Some(p) = &i.provenance {
         let _ = writeln!(out, "built by {} {} from {} inputs", p.tool, p.tool_version, p.inputs.len());

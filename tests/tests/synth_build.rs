@@ -17,6 +17,13 @@ fn synthetic_cave_builds_with_accurate_oriented_normals() {
     let summary = synth::write_dataset(&dir.path().join("scans"), &params, &formats, &|_, _| {}).unwrap();
     assert!(summary.scans >= 4, "every format is used");
     let manifest_path = std::path::PathBuf::from(&summary.manifest);
+    // An environment map, when the shared data is there.
+    let env_map = grotto_tests::shared_data_dir().map(|d| d.join("envmaps/probulator_pisa.hdr"));
+    if let Some(map) = &env_map {
+        let mut text = std::fs::read_to_string(&manifest_path).unwrap();
+        text += &format!("[environment]\nmap = \"{}\"\nintensity = 1.5\n", map.display());
+        std::fs::write(&manifest_path, text).unwrap();
+    }
     let manifest = Manifest::load(&manifest_path).unwrap();
     let scans = manifest.resolve().unwrap();
     // E57 poses come from the files; the others from the manifest.
@@ -30,6 +37,7 @@ fn synthetic_cave_builds_with_accurate_oriented_normals() {
         threads: 2,
         leaf_m: 0.125,
         colors: ColorCodec::Raw,
+        sh_window: true,
         k: 16,
         min_tile_extent_m: 2.0,
         max_tile_extent_m: 32.0,
@@ -41,6 +49,21 @@ fn synthetic_cave_builds_with_accurate_oriented_normals() {
 
     let pkg = Package::open(&out).unwrap();
     assert!(pkg.verify().is_empty());
+    if env_map.is_some() {
+        use grotto_format::Scope;
+        use grotto_format::spec::{EnvMipLevel, ShRgb9};
+        let sh = pkg.read::<ShRgb9>(&pkg.find(SectionKind::EnvSh9, Scope::Global, 0).unwrap()).unwrap();
+        assert!(sh[0].coeffs[0].iter().all(|c| *c > 0.0));
+        let levels =
+            pkg.read::<EnvMipLevel>(&pkg.find(SectionKind::EnvMipLevels, Scope::Global, 0).unwrap()).unwrap();
+        assert_eq!((levels.len(), levels[0].width, levels[5].roughness), (6, 256, 1.0));
+        let env = pkg.scene().unwrap().environment.unwrap();
+        assert_eq!((env.index, env.intensity), (0, 1.5));
+    }
+    for t in pkg.tiles() {
+        let svo = t.svo().unwrap().unwrap();
+        assert!(svo.leaf_count() > 0 && svo.emission.is_none());
+    }
     let cave = SynthCave::new(&params);
     let (mut n, mut flipped, mut errors, mut off_wall) = (0usize, 0usize, Vec::new(), 0usize);
     for tile in pkg.tiles() {
@@ -95,6 +118,7 @@ fn an_interrupted_build_resumes_and_gives_the_same_bytes() {
         threads: 2,
         leaf_m: 0.25,
         colors: ColorCodec::Bc1,
+        sh_window: true,
         k: 12,
         min_tile_extent_m: 4.0,
         max_tile_extent_m: 16.0,

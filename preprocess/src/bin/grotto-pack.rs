@@ -111,6 +111,9 @@ struct BuildOpts {
     /// Halo shared with neighbour tiles, metres.
     #[arg(long, default_value_t = 0.25)]
     halo_m: f64,
+    /// Keep the environment's SH unwindowed even where a bright source makes irradiance ring negative.
+    #[arg(long)]
+    no_sh_window: bool,
     /// Remove the work directory after a successful build.
     #[arg(long)]
     clean: bool,
@@ -211,6 +214,7 @@ fn run_build(inputs: &[PathBuf], out: &Path, opts: &BuildOpts) -> anyhow::Result
         threads: opts.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from)),
         leaf_m: opts.leaf_m,
         colors: if opts.colors == "raw" { ColorCodec::Raw } else { ColorCodec::Bc1 },
+        sh_window: !opts.no_sh_window,
         k: opts.k,
         min_tile_extent_m: opts.min_tile_m,
         max_tile_extent_m: opts.max_tile_m,
