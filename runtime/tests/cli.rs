@@ -54,3 +54,57 @@ fn inspect_and_verify_a_demo_package() {
     assert!(!out.status.success());
     assert!(String::from_utf8(out.stderr).unwrap().contains("/nonexistent.grotto"));
 }
+
+#[test]
+fn export_writes_points_other_tools_read() {
+    use grotto_preprocess::ingest::{self, ScanFormat};
+    let dir = tempfile::tempdir().unwrap();
+    let scans = dir.path().join("scans");
+    let params = grotto_preprocess::synth::SynthParams { points: 8_000, segments: 3, ..Default::default() };
+    let s = grotto_preprocess::synth::write_dataset(&scans, &params, &[ScanFormat::Ply], &|_, _| {}).unwrap();
+    let pkg_path = dir.path().join("c.grotto");
+    let out = Command::new(env!("CARGO_BIN_EXE_grotto")).args(["--help"]).output().unwrap();
+    assert!(String::from_utf8(out.stdout).unwrap().contains("export"));
+    let manifest = grotto_preprocess::manifest::Manifest::load(std::path::Path::new(&s.manifest)).unwrap();
+    let bp = grotto_preprocess::build::BuildParams {
+        work_dir: dir.path().join("w"),
+        memory_budget_bytes: 64 << 20,
+        threads: 2,
+        leaf_m: 0.125,
+        colors: grotto_preprocess::build::ColorCodec::Bc1,
+        sh_window: true,
+        k: 16,
+        min_tile_extent_m: 4.0,
+        max_tile_extent_m: 16.0,
+        halo_m: 0.25,
+    };
+    grotto_preprocess::build::build(&manifest, std::path::Path::new(&s.manifest), &pkg_path, &bp, &|_| {})
+        .unwrap();
+    let p = pkg_path.to_str().unwrap();
+    for ext in ["ply", "las"] {
+        let target = dir.path().join(format!("points.{ext}"));
+        let out = grotto(&["export", p, "--points", target.to_str().unwrap(), "--json"]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(json["points"], s.points);
+        // Read back with the project's own readers (same parsers as for any scan).
+        let format = if ext == "ply" { ScanFormat::Ply } else { ScanFormat::Las };
+        let mut src = ingest::open(&target, format, 0).unwrap();
+        assert_eq!(src.info().has_normals, ext == "ply");
+        let all = ingest::read_all(src.as_mut()).unwrap();
+        assert_eq!(all.xyz.len() as u64, s.points);
+        assert!(all.xyz.iter().all(|p| p[0] > 511_000.0 && p[1] > 5_122_000.0), "world coordinates");
+        if ext == "ply" {
+            assert!(all.normal.iter().all(|n| (n.iter().map(|c| c * c).sum::<f32>() - 1.0).abs() < 1e-3));
+        }
+    }
+    // LAS extra bytes carry the normals under their names.
+    let reader = las::Reader::from_path(dir.path().join("points.las")).unwrap();
+    let vlr = reader.header().vlrs().iter().find(|v| v.record_id == 4).unwrap();
+    assert_eq!(vlr.data.len(), 5 * 192);
+    assert_eq!(&vlr.data[4..11], b"NormalX");
+    assert!(
+        grotto(&["export", p, "--points", dir.path().join("x.xyz").to_str().unwrap()]).status.code()
+            != Some(0)
+    );
+}

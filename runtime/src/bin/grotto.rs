@@ -26,6 +26,16 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Export the merged points with normals, colours, radii and spread (PLY or LAS, by extension).
+    Export {
+        package: PathBuf,
+        /// Output point file: .ply or .las.
+        #[arg(long)]
+        points: PathBuf,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Check a package's structure and every checksum and section; exits non-zero on any problem.
     Verify {
         package: PathBuf,
@@ -54,6 +64,16 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else {
                 print!("{}", inspect::render_text(&report, sections));
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Export { package, points, json } => {
+            let pkg = Package::open(&package)?;
+            let summary = grotto_runtime::export::export_points(&pkg, &points)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                println!("wrote {}: {} points from {} tiles", summary.path, summary.points, summary.tiles);
             }
             Ok(ExitCode::SUCCESS)
         }
