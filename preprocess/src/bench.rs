@@ -104,3 +104,153 @@ pub fn ingest(dir: &Path, points: u64, progress: &dyn Fn(&str)) -> Result<Vec<In
     })?;
     Ok(out)
 }
+
+/// Normal accuracy and speed for one configuration.
+#[derive(Clone, Debug, Serialize)]
+pub struct NormalFigure {
+    pub noise_scale: f64,
+    pub k: usize,
+    pub points: u64,
+    /// Angle between estimated and true (analytic) normal, degrees.
+    pub mean_deg: f64,
+    pub p95_deg: f64,
+    /// Estimated normals pointing into the rock, percent.
+    pub flipped_percent: f64,
+    pub threads: usize,
+    pub normals_seconds: f64,
+    pub normals_per_second: f64,
+    pub svo_seconds: f64,
+    pub svo_points_per_second: f64,
+}
+
+/// Synthesises a cave of `points` with `noise_scale`, tiles it, then times normal estimation and
+/// SVO construction over all tiles (`threads` workers) and scores the normals against the
+/// analytic surface. With `export`, also writes the cloud (cave frame, metres) with its true
+/// normals as binary PLY, for comparison with other tools.
+pub fn normals(
+    dir: &Path,
+    points: u64,
+    noise_scale: f64,
+    ks: &[usize],
+    threads: usize,
+    export: Option<&Path>,
+) -> Result<Vec<NormalFigure>> {
+    use rayon::prelude::*;
+
+    use crate::manifest::Manifest;
+    use crate::normals::{TilePoints, estimate};
+    use crate::tiling::{FLAG_HALO, TilingParams, read_bin, tile_scans};
+    use crate::voxels::{self, Sample};
+
+    let params = SynthParams { points, noise_scale, ..SynthParams::default() };
+    let scans = dir.join(format!("normals-{points}-{noise_scale}"));
+    let summary = if scans.join("manifest.toml").exists() {
+        None
+    } else {
+        Some(crate::synth::write_dataset(&scans, &params, &[ScanFormat::Las], &|_, _| {})?)
+    };
+    let _ = summary;
+    let manifest = Manifest::load(&scans.join("manifest.toml"))?;
+    let resolved = manifest.resolve()?;
+    let tiling = TilingParams { quantum_m: 1.0 / 32_768.0, min_tile_extent_m: 4.0, max_tile_extent_m: 16.0, ..TilingParams::default() };
+    let work = scans.join("work");
+    let plan = tile_scans(&resolved, &work, &tiling, &|_| {})?;
+    let cave = SynthCave::new(&params);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.max(1)).build().map_err(|e| Error::Parameter { name: "threads", reason: e.to_string() })?;
+    // Load every tile once (timed work excludes I/O).
+    struct Loaded {
+        positions: Vec<[f32; 3]>,
+        own: Vec<bool>,
+        scanners: Vec<[f64; 3]>,
+        inputs: Vec<[f32; 3]>,
+        origin: [f64; 3],
+        extent: f64,
+    }
+    let tiles: Vec<Loaded> = (0..plan.tiles.len())
+        .map(|t| -> Result<Loaded> {
+            let bin = read_bin(&work, t)?;
+            let origin = plan.origin_m(&plan.tiles[t]);
+            Ok(Loaded {
+                positions: bin.iter().map(|p| p.pos_tile_m(plan.quantum_m)).collect(),
+                own: bin.iter().map(|p| p.flags & FLAG_HALO == 0).collect(),
+                scanners: bin
+                    .iter()
+                    .map(|p| {
+                        let s = plan.scanners_world_m[p.scan as usize];
+                        std::array::from_fn(|a| s[a] - origin[a])
+                    })
+                    .collect(),
+                inputs: vec![[0.0; 3]; bin.len()],
+                origin,
+                extent: plan.extent_m(&plan.tiles[t]),
+            })
+        })
+        .collect::<Result<_>>()?;
+    let mut out = Vec::new();
+    for &k in ks {
+        let start = Instant::now();
+        let normals: Vec<Vec<crate::normals::PointNormal>> = pool.install(|| {
+            tiles
+                .par_iter()
+                .map(|t| estimate(&TilePoints { positions: &t.positions, own: &t.own, scanner_tile_m: &t.scanners, input_normals: &t.inputs }, k))
+                .collect()
+        });
+        let normals_seconds = start.elapsed().as_secs_f64();
+        let start = Instant::now();
+        let leaves: usize = pool.install(|| {
+            tiles
+                .par_iter()
+                .zip(&normals)
+                .map(|(t, n)| {
+                    let samples: Vec<Sample> = t
+                        .positions
+                        .iter()
+                        .zip(&t.own)
+                        .filter(|(_, own)| **own)
+                        .zip(n)
+                        .map(|((p, _), n)| Sample { pos_tile_m: *p, normal: n.normal, area_m2: n.radius_m * n.radius_m, albedo_linear: [0.5; 3], emission: [0.0; 3] })
+                        .collect();
+                    voxels::build(&samples, t.extent, (t.extent / 0.0625).log2() as u32).leaf_count()
+                })
+                .sum()
+        });
+        let svo_seconds = start.elapsed().as_secs_f64();
+        let _ = leaves;
+        let (mut errors, mut flipped) = (Vec::new(), 0usize);
+        let mut export_rows: Vec<([f64; 3], [f64; 3])> = Vec::new();
+        for (t, n) in tiles.iter().zip(&normals) {
+            for (p, est) in t.positions.iter().zip(&t.own).filter(|(_, own)| **own).map(|(p, _)| p).zip(n) {
+                let local: [f64; 3] = std::array::from_fn(|a| t.origin[a] + f64::from(p[a]) - params.offset_m[a]);
+                let truth = cave.normal(local);
+                let dot: f64 = (0..3).map(|a| truth[a] * f64::from(est.normal[a])).sum();
+                flipped += usize::from(dot < 0.0);
+                errors.push(dot.abs().min(1.0).acos().to_degrees());
+                if export.is_some() && k == ks[0] {
+                    export_rows.push((local, truth));
+                }
+            }
+        }
+        if let (Some(path), false) = (export, export_rows.is_empty()) {
+            let xyz: Vec<[f64; 3]> = export_rows.iter().map(|r| r.0).collect();
+            let nrm: Vec<[f32; 3]> = export_rows.iter().map(|r| r.1.map(|v| v as f32)).collect();
+            let rgb = vec![[128u8; 3]; xyz.len()];
+            write_scan(path, ScanFormat::Ply, &ScanData { xyz: &xyz, rgb: &rgb, intensity: &[], normals: &nrm, pose: None })?;
+        }
+        errors.sort_by(f64::total_cmp);
+        let n = errors.len().max(1);
+        out.push(NormalFigure {
+            noise_scale,
+            k,
+            points: errors.len() as u64,
+            mean_deg: errors.iter().sum::<f64>() / n as f64,
+            p95_deg: errors.get(n * 95 / 100).copied().unwrap_or(0.0),
+            flipped_percent: 100.0 * flipped as f64 / n as f64,
+            threads,
+            normals_seconds,
+            normals_per_second: errors.len() as f64 / normals_seconds,
+            svo_seconds,
+            svo_points_per_second: errors.len() as f64 / svo_seconds,
+        });
+    }
+    Ok(out)
+}

@@ -19,7 +19,7 @@ use std::collections::HashMap;
 use crate::pose::Pose;
 
 /// What to generate.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct SynthParams {
     pub seed: u64,
     /// Approximate number of points over all scans.
@@ -30,6 +30,13 @@ pub struct SynthParams {
     pub offset_m: [f64; 3],
     /// Maximum scanner range, metres.
     pub max_range_m: f64,
+    /// Multiplies the range noise (2 mm + 50 ppm of the range at 1; 0 = exact surface points).
+    #[serde(default = "one")]
+    pub noise_scale: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 impl Default for SynthParams {
@@ -40,6 +47,7 @@ impl Default for SynthParams {
             segments: 24,
             offset_m: [512_000.0, 5_123_000.0, 300.0],
             max_range_m: 60.0,
+            noise_scale: 1.0,
         }
     }
 }
@@ -404,7 +412,7 @@ pub fn scan(cave: &SynthCave, params: &SynthParams, s: usize, rays: u64) -> Synt
                     let az = (ai as f64 + 0.5) * std::f64::consts::TAU / n as f64;
                     let d = [el.cos() * az.cos(), el.cos() * az.sin(), el.sin()];
                     let t = cave.trace(station, d, params.max_range_m)?;
-                    let noisy = t + rng.gauss() * (0.002 + 50e-6 * t);
+                    let noisy = t + rng.gauss() * (0.002 + 50e-6 * t) * params.noise_scale;
                     let hit = [station[0] + d[0] * t, station[1] + d[1] * t, station[2] + d[2] * t];
                     let n = cave.normal(hit);
                     let cos_i = (-dot(n, d)).clamp(0.05, 1.0);

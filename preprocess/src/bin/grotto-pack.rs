@@ -54,6 +54,28 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Measure normal accuracy (against the synthetic cave's analytic surface) and the speed of
+    /// normal estimation and SVO construction.
+    BenchNormals {
+        /// Directory for the synthetic scans (kept and reused).
+        #[arg(long)]
+        dir: PathBuf,
+        #[arg(long, default_value_t = 1_000_000)]
+        points: u64,
+        /// Range-noise multipliers to test.
+        #[arg(long, value_delimiter = ',', default_value = "1")]
+        noise: Vec<f64>,
+        /// Neighbour counts to test.
+        #[arg(long, value_delimiter = ',', default_value = "16")]
+        k: Vec<usize>,
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Also write the cloud with its true normals (PLY) for other tools.
+        #[arg(long)]
+        export: Option<PathBuf>,
+        #[arg(long)]
+        json: bool,
+    },
     /// The main job on the built-in demo scene: synthesise a cave into DIR/demo-scans and build DIR/demo.grotto.
     Demo {
         /// Output directory.
@@ -309,6 +331,24 @@ fn main() -> anyhow::Result<()> {
                         f.file_bytes as f64 / 1e6,
                         f.seconds,
                         f.points_per_second
+                    );
+                }
+            }
+        }
+        Command::BenchNormals { dir, points, noise, k, threads, export, json } => {
+            let threads = threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
+            let mut figures = Vec::new();
+            for n in noise {
+                figures.extend(grotto_preprocess::bench::normals(&dir, points, n, &k, threads, export.as_deref())?);
+            }
+            if json {
+                println!("{}", serde_json::to_string_pretty(&figures)?);
+            } else {
+                println!("| noise | k | points | mean error deg | p95 deg | flipped % | threads | normals/s | SVO points/s |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+                for f in &figures {
+                    println!(
+                        "| {} | {} | {} | {:.2} | {:.2} | {:.3} | {} | {:.3e} | {:.3e} |",
+                        f.noise_scale, f.k, f.points, f.mean_deg, f.p95_deg, f.flipped_percent, f.threads, f.normals_per_second, f.svo_points_per_second
                     );
                 }
             }
