@@ -152,11 +152,19 @@ pub fn normals(
     let _ = summary;
     let manifest = Manifest::load(&scans.join("manifest.toml"))?;
     let resolved = manifest.resolve()?;
-    let tiling = TilingParams { quantum_m: 1.0 / 32_768.0, min_tile_extent_m: 4.0, max_tile_extent_m: 16.0, ..TilingParams::default() };
+    let tiling = TilingParams {
+        quantum_m: 1.0 / 32_768.0,
+        min_tile_extent_m: 4.0,
+        max_tile_extent_m: 16.0,
+        ..TilingParams::default()
+    };
     let work = scans.join("work");
     let plan = tile_scans(&resolved, &work, &tiling, &|_| {})?;
     let cave = SynthCave::new(&params);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads.max(1)).build().map_err(|e| Error::Parameter { name: "threads", reason: e.to_string() })?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.max(1))
+        .build()
+        .map_err(|e| Error::Parameter { name: "threads", reason: e.to_string() })?;
     // Load every tile once (timed work excludes I/O).
     struct Loaded {
         positions: Vec<[f32; 3]>,
@@ -192,7 +200,17 @@ pub fn normals(
         let normals: Vec<Vec<crate::normals::PointNormal>> = pool.install(|| {
             tiles
                 .par_iter()
-                .map(|t| estimate(&TilePoints { positions: &t.positions, own: &t.own, scanner_tile_m: &t.scanners, input_normals: &t.inputs }, k))
+                .map(|t| {
+                    estimate(
+                        &TilePoints {
+                            positions: &t.positions,
+                            own: &t.own,
+                            scanner_tile_m: &t.scanners,
+                            input_normals: &t.inputs,
+                        },
+                        k,
+                    )
+                })
                 .collect()
         });
         let normals_seconds = start.elapsed().as_secs_f64();
@@ -208,7 +226,13 @@ pub fn normals(
                         .zip(&t.own)
                         .filter(|(_, own)| **own)
                         .zip(n)
-                        .map(|((p, _), n)| Sample { pos_tile_m: *p, normal: n.normal, area_m2: n.radius_m * n.radius_m, albedo_linear: [0.5; 3], emission: [0.0; 3] })
+                        .map(|((p, _), n)| Sample {
+                            pos_tile_m: *p,
+                            normal: n.normal,
+                            area_m2: n.radius_m * n.radius_m,
+                            albedo_linear: [0.5; 3],
+                            emission: [0.0; 3],
+                        })
                         .collect();
                     voxels::build(&samples, t.extent, (t.extent / 0.0625).log2() as u32).leaf_count()
                 })
@@ -220,7 +244,8 @@ pub fn normals(
         let mut export_rows: Vec<([f64; 3], [f64; 3])> = Vec::new();
         for (t, n) in tiles.iter().zip(&normals) {
             for (p, est) in t.positions.iter().zip(&t.own).filter(|(_, own)| **own).map(|(p, _)| p).zip(n) {
-                let local: [f64; 3] = std::array::from_fn(|a| t.origin[a] + f64::from(p[a]) - params.offset_m[a]);
+                let local: [f64; 3] =
+                    std::array::from_fn(|a| t.origin[a] + f64::from(p[a]) - params.offset_m[a]);
                 let truth = cave.normal(local);
                 let dot: f64 = (0..3).map(|a| truth[a] * f64::from(est.normal[a])).sum();
                 flipped += usize::from(dot < 0.0);
@@ -234,7 +259,11 @@ pub fn normals(
             let xyz: Vec<[f64; 3]> = export_rows.iter().map(|r| r.0).collect();
             let nrm: Vec<[f32; 3]> = export_rows.iter().map(|r| r.1.map(|v| v as f32)).collect();
             let rgb = vec![[128u8; 3]; xyz.len()];
-            write_scan(path, ScanFormat::Ply, &ScanData { xyz: &xyz, rgb: &rgb, intensity: &[], normals: &nrm, pose: None })?;
+            write_scan(
+                path,
+                ScanFormat::Ply,
+                &ScanData { xyz: &xyz, rgb: &rgb, intensity: &[], normals: &nrm, pose: None },
+            )?;
         }
         errors.sort_by(f64::total_cmp);
         let n = errors.len().max(1);
@@ -253,4 +282,53 @@ pub fn normals(
         });
     }
     Ok(out)
+}
+
+/// BC1 against raw colours on a package built with `--colors raw`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Bc1Figure {
+    pub package: String,
+    pub points: u64,
+    pub psnr_db: f64,
+    pub max_error: u8,
+    /// sRGB bytes as stored raw (4 per point), zstd-compressed raw, and BC1.
+    pub raw_bytes: u64,
+    pub raw_zstd_bytes: u64,
+    pub bc1_bytes: u64,
+    pub encode_seconds: f64,
+}
+
+pub fn bc1(package: &Path) -> Result<Bc1Figure> {
+    use grotto_format::spec::Rgba8;
+    use grotto_format::{Package, SectionKind};
+    let pkg = Package::open(package)?;
+    let (mut all, mut decoded) = (Vec::new(), Vec::new());
+    let (mut raw_bytes, mut zstd_bytes, mut bc1_bytes, mut seconds) = (0u64, 0u64, 0u64, 0f64);
+    for t in pkg.tiles() {
+        let s = t.find(SectionKind::SurfelColorsRaw, 0).ok_or_else(|| Error::Parameter {
+            name: "package",
+            reason: format!("{} has no raw colours; build it with --colors raw", package.display()),
+        })?;
+        let raw = pkg.read::<Rgba8>(&s)?;
+        let rgb: Vec<[u8; 3]> = raw.iter().map(|c| [c.0[0], c.0[1], c.0[2]]).collect();
+        let start = Instant::now();
+        let blocks = crate::bc1::encode(&rgb);
+        seconds += start.elapsed().as_secs_f64();
+        decoded.extend(crate::bc1::decode(&blocks, rgb.len()));
+        raw_bytes += s.raw_len;
+        zstd_bytes += s.stored_len;
+        bc1_bytes += (blocks.len() * 8) as u64;
+        all.extend(rgb);
+    }
+    let (psnr_db, max_error) = crate::bc1::psnr(&all, &decoded);
+    Ok(Bc1Figure {
+        package: package.display().to_string(),
+        points: all.len() as u64,
+        psnr_db,
+        max_error,
+        raw_bytes,
+        raw_zstd_bytes: zstd_bytes,
+        bc1_bytes,
+        encode_seconds: seconds,
+    })
 }

@@ -76,6 +76,12 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Measure BC1 colours against raw ones on packages built with --colors raw.
+    BenchBc1 {
+        packages: Vec<PathBuf>,
+        #[arg(long)]
+        json: bool,
+    },
     /// The main job on the built-in demo scene: synthesise a cave into DIR/demo-scans and build DIR/demo.grotto.
     Demo {
         /// Output directory.
@@ -336,19 +342,61 @@ fn main() -> anyhow::Result<()> {
             }
         }
         Command::BenchNormals { dir, points, noise, k, threads, export, json } => {
-            let threads = threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
+            let threads =
+                threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
             let mut figures = Vec::new();
             for n in noise {
-                figures.extend(grotto_preprocess::bench::normals(&dir, points, n, &k, threads, export.as_deref())?);
+                figures.extend(grotto_preprocess::bench::normals(
+                    &dir,
+                    points,
+                    n,
+                    &k,
+                    threads,
+                    export.as_deref(),
+                )?);
             }
             if json {
                 println!("{}", serde_json::to_string_pretty(&figures)?);
             } else {
-                println!("| noise | k | points | mean error deg | p95 deg | flipped % | threads | normals/s | SVO points/s |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+                println!(
+                    "| noise | k | points | mean error deg | p95 deg | flipped % | threads | normals/s | SVO points/s |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+                );
                 for f in &figures {
                     println!(
                         "| {} | {} | {} | {:.2} | {:.2} | {:.3} | {} | {:.3e} | {:.3e} |",
-                        f.noise_scale, f.k, f.points, f.mean_deg, f.p95_deg, f.flipped_percent, f.threads, f.normals_per_second, f.svo_points_per_second
+                        f.noise_scale,
+                        f.k,
+                        f.points,
+                        f.mean_deg,
+                        f.p95_deg,
+                        f.flipped_percent,
+                        f.threads,
+                        f.normals_per_second,
+                        f.svo_points_per_second
+                    );
+                }
+            }
+        }
+        Command::BenchBc1 { packages, json } => {
+            let figures =
+                packages.iter().map(|p| grotto_preprocess::bench::bc1(p)).collect::<Result<Vec<_>, _>>()?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&figures)?);
+            } else {
+                println!(
+                    "| package | points | PSNR dB | max error | raw bytes | raw+zstd bytes | BC1 bytes | BC1 / raw |\n|---|---:|---:|---:|---:|---:|---:|---:|"
+                );
+                for f in &figures {
+                    println!(
+                        "| {} | {} | {:.2} | {} | {} | {} | {} | {:.3} |",
+                        f.package,
+                        f.points,
+                        f.psnr_db,
+                        f.max_error,
+                        f.raw_bytes,
+                        f.raw_zstd_bytes,
+                        f.bc1_bytes,
+                        f.bc1_bytes as f64 / f.raw_bytes as f64
                     );
                 }
             }
