@@ -31,6 +31,7 @@ fn exercise(data: &[u8]) {
         let _ = t.read::<SvoNode>(SectionKind::SvoNodes);
         let _ = t.read::<Surfel>(SectionKind::Surfels);
         let _ = t.read::<f32>(SectionKind::LeafOpacity);
+        let _ = t.svo();
     }
 }
 
