@@ -110,11 +110,9 @@ mod tests {
 
     #[test]
     fn matrix_and_quaternion_agree_and_bad_poses_are_refused() {
-        let q = Pose::from_quaternion(
-            [0.9, 0.1, -0.3, 0.2].map(|v: f64| v / 0.9944_f64.sqrt()),
-            [5e5, 5e6, 10.0],
-        )
-        .unwrap();
+        let raw = [0.9f64, 0.1, -0.3, 0.2];
+        let norm = raw.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let q = Pose::from_quaternion(raw.map(|v| v / norm), [5e5, 5e6, 10.0]).unwrap();
         let r = q.rotation;
         let t = q.translation;
         let m = Pose::from_matrix([
