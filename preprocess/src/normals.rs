@@ -151,7 +151,8 @@ pub fn estimate(tile: &TilePoints<'_>, k: usize) -> Vec<PointNormal> {
     let pts: Vec<[f32; 3]> = order.iter().map(|&i| tile.positions[i as usize]).collect();
     // u32 items (a tile's points are bounded by the memory budget) and 64-point leaves: measured
     // 10-15% faster than kiddo's default (u64, 32) for k = 16 on scan data.
-    let tree: kiddo::immutable::float::kdtree::ImmutableKdTree<f32, u32, 3, 64> = kiddo::immutable::float::kdtree::ImmutableKdTree::new_from_slice(&pts);
+    let tree: kiddo::immutable::float::kdtree::ImmutableKdTree<f32, u32, 3, 64> =
+        kiddo::immutable::float::kdtree::ImmutableKdTree::new_from_slice(&pts);
     let kk = NonZero::new(k).expect("k >= 3");
     let own: Vec<usize> = (0..n).filter(|&i| tile.own[i]).collect();
     // First pass, in parallel over runs of Morton-sorted points: oriented normals and radii for
@@ -176,7 +177,10 @@ pub fn estimate(tile: &TilePoints<'_>, k: usize) -> Vec<PointNormal> {
                     found = tree.nearest_n_within::<SquaredEuclidean>(q, f32::INFINITY, kk, false);
                 }
                 let i = order[j] as usize;
-                for (slot, nb) in list.iter_mut().zip(found.iter().map(|nb| order[nb.item as usize]).chain(std::iter::repeat(i as u32))) {
+                for (slot, nb) in list
+                    .iter_mut()
+                    .zip(found.iter().map(|nb| order[nb.item as usize]).chain(std::iter::repeat(i as u32)))
+                {
                     *slot = nb;
                 }
                 scratch.clear();
