@@ -94,8 +94,8 @@ pub enum Error {
     /// The package's bytes are malformed.
     #[error("{path}: {problem}")]
     Invalid { path: PathBuf, problem: Problem },
-    /// Reading or writing the file failed.
-    #[error("{path}: cannot {op}: {source}")]
+    /// Reading or writing the file failed. The OS error is the `source` (printed by `{:#}` chains).
+    #[error("{path}: cannot {op}")]
     Io { path: PathBuf, op: &'static str, source: std::io::Error },
     /// The writer was asked to write something the format cannot hold.
     #[error("{path}: cannot write: {reason}")]

@@ -26,7 +26,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bc1;
-use crate::manifest::Manifest;
+use crate::manifest::{Manifest, ResolvedScan};
 use crate::normals::{self, TilePoints};
 use crate::tiling::{self, FLAG_HALO, Progress, TilePlan, TilingParams};
 use crate::voxels::{self, Sample, TileSvo};
@@ -370,16 +370,29 @@ fn hash_file(path: &Path) -> Result<InputFile> {
     Ok(InputFile { path: path.display().to_string(), bytes, xxh3: format!("{:016x}", h.digest()) })
 }
 
-/// Builds `out` from the scans of `manifest`. `manifest_path` names the manifest in errors and
-/// resolves scene paths. `progress` receives every stage's progress.
-pub fn build(
-    manifest: &Manifest,
-    manifest_path: &Path,
-    out: &Path,
-    params: &BuildParams,
-    progress: &(dyn Fn(Progress) + Sync),
-) -> Result<BuildSummary> {
-    let start = std::time::Instant::now();
+/// Which tiles a `build-tile` job takes: those with `index % count == shard`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    pub const ALL: Shard = Shard { index: 0, count: 1 };
+
+    fn takes(&self, tile: usize) -> bool {
+        tile % self.count.max(1) == self.index
+    }
+}
+
+/// What the build-tile step did.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct TileStage {
+    pub built: usize,
+    pub reused: usize,
+}
+
+fn check_params(params: &BuildParams) -> Result<()> {
     if !(3..=30).contains(&params.k) {
         return Err(Error::Parameter { name: "k", reason: format!("{} is not in 3..=30", params.k) });
     }
@@ -395,15 +408,49 @@ pub fn build(
             ),
         });
     }
-    let scans = manifest.resolve()?;
-    let scene = manifest.scene(manifest_path)?;
-    let tiling_params = params.tiling();
-    let plan_file = params.work_dir.join("plan.json");
-    let existed = std::fs::read_to_string(&plan_file).ok();
-    let plan = tiling::tile_scans(&scans, &params.work_dir, &tiling_params, progress)?;
-    let resumed_tiling =
-        existed.is_some_and(|old| serde_json::from_str::<TilePlan>(&old).is_ok_and(|p| p == plan));
+    Ok(())
+}
 
+/// Step 1, plan: resolves the scans and tiles them out of core into the work directory (or finds
+/// that an earlier run did). Returns the plan and whether it was reused.
+pub fn plan(
+    manifest: &Manifest,
+    params: &BuildParams,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<(TilePlan, bool)> {
+    check_params(params)?;
+    let scans = manifest.resolve()?;
+    let tiling_params = params.tiling();
+    let earlier = tiling::existing_plan(&scans, &params.work_dir, &tiling_params)?;
+    let plan = tiling::tile_scans(&scans, &params.work_dir, &tiling_params, progress)?;
+    Ok((plan, earlier.is_some()))
+}
+
+/// The plan an earlier `plan` step left for these inputs and parameters, and the scans.
+fn planned(manifest: &Manifest, params: &BuildParams) -> Result<(TilePlan, Vec<ResolvedScan>)> {
+    check_params(params)?;
+    let scans = manifest.resolve()?;
+    let plan = tiling::existing_plan(&scans, &params.work_dir, &params.tiling())?.ok_or_else(|| Error::Parameter {
+        name: "work_dir",
+        reason: format!(
+            "{} holds no finished plan for these inputs and parameters; run the plan step first (with the same options)",
+            params.work_dir.display()
+        ),
+    })?;
+    Ok((plan, scans))
+}
+
+/// Step 2, build-tile: builds the shard's tiles that are not already built with these parameters.
+/// Jobs for different shards can run at once on different machines sharing the work directory.
+pub fn build_tiles(
+    manifest: &Manifest,
+    manifest_path: &Path,
+    params: &BuildParams,
+    shard: Shard,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<TileStage> {
+    let (plan, _) = planned(manifest, params)?;
+    let scene = manifest.scene(manifest_path)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(params.threads.max(1))
         .build()
@@ -411,35 +458,93 @@ pub fn build(
     let tiles_dir = params.work_dir.join("tiles");
     std::fs::create_dir_all(&tiles_dir).map_err(|source| Error::Io { path: tiles_dir.clone(), source })?;
     let fingerprint = tile_fingerprint(&plan, params);
-    let total = plan.tiles.len();
+    let mine: Vec<usize> = (0..plan.tiles.len()).filter(|&t| shard.takes(t)).collect();
     let batch = params.threads.max(1);
-    let (mut reused_tiles, mut seam_limited_points) = (0usize, 0u64);
-    for first in (0..total).step_by(batch) {
-        let done: Vec<Result<(bool, u64)>> = pool.install(|| {
-            (first..(first + batch).min(total))
-                .into_par_iter()
-                .map(|t| {
+    let mut stage = TileStage::default();
+    for (b, group) in mine.chunks(batch).enumerate() {
+        let done: Vec<Result<bool>> = pool.install(|| {
+            group
+                .par_iter()
+                .map(|&t| {
                     let path = tile_package_path(&params.work_dir, t);
-                    if let Some(limited) = finished_tile_package(&path, &fingerprint) {
-                        return Ok((true, limited));
+                    if finished_tile_package(&path, &fingerprint).is_some() {
+                        return Ok(true);
                     }
                     let built = build_tile(&plan, &params.work_dir, t, params, &scene)?;
                     write_tile_package(&path, &built, &fingerprint, params.colors)?;
-                    Ok((false, built.seam_limited))
+                    Ok(false)
                 })
                 .collect()
         });
         for (i, d) in done.into_iter().enumerate() {
-            let (reused, limited) = d?;
-            reused_tiles += usize::from(reused);
-            seam_limited_points += limited;
-            progress(Progress { stage: "tiles", done: (first + i + 1) as u64, total: total as u64 });
+            if d? {
+                stage.reused += 1
+            } else {
+                stage.built += 1
+            }
+            progress(Progress { stage: "tiles", done: (b * batch + i + 1) as u64, total: mine.len() as u64 });
         }
+    }
+    Ok(stage)
+}
+
+/// Builds `out` from the scans of `manifest`: plan, build every tile, assemble. `manifest_path`
+/// names the manifest in errors and resolves scene paths. `progress` receives every stage's
+/// progress.
+pub fn build(
+    manifest: &Manifest,
+    manifest_path: &Path,
+    out: &Path,
+    params: &BuildParams,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<BuildSummary> {
+    let start = std::time::Instant::now();
+    let (_, resumed_tiling) = plan(manifest, params, progress)?;
+    let stage = build_tiles(manifest, manifest_path, params, Shard::ALL, progress)?;
+    let mut summary = assemble(manifest, manifest_path, out, params, progress)?;
+    summary.resumed_tiling = resumed_tiling;
+    summary.reused_tiles = stage.reused;
+    summary.seconds = start.elapsed().as_secs_f64();
+    summary.peak_rss_bytes = crate::bench::peak_rss_bytes();
+    Ok(summary)
+}
+
+/// Step 3, assemble: copies every tile package into `out` (atomically), with the environment,
+/// scene and provenance. Fails, naming them, if tiles are missing or were built with other
+/// parameters.
+pub fn assemble(
+    manifest: &Manifest,
+    manifest_path: &Path,
+    out: &Path,
+    params: &BuildParams,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<BuildSummary> {
+    let start = std::time::Instant::now();
+    let (plan, scans) = planned(manifest, params)?;
+    let scene = manifest.scene(manifest_path)?;
+    let tiling_params = params.tiling();
+    let fingerprint = tile_fingerprint(&plan, params);
+    let total = plan.tiles.len();
+    let mut seam_limited_points = 0u64;
+    let missing: Vec<usize> = (0..total)
+        .filter(|&t| finished_tile_package(&tile_package_path(&params.work_dir, t), &fingerprint).is_none())
+        .collect();
+    if !missing.is_empty() {
+        return Err(Error::Parameter {
+            name: "tiles",
+            reason: format!(
+                "{} of {total} tiles are not built with these parameters (first: {:?}); run build-tile for them",
+                missing.len(),
+                &missing[..missing.len().min(8)]
+            ),
+        });
     }
     let mut inputs_extra = Vec::new();
     let mut writer = PackageWriter::create(out)?;
     for t in 0..total {
-        let tile_pkg = Package::open(tile_package_path(&params.work_dir, t))?;
+        let path = tile_package_path(&params.work_dir, t);
+        seam_limited_points += finished_tile_package(&path, &fingerprint).unwrap_or(0);
+        let tile_pkg = Package::open(&path)?;
         let tile = tile_pkg.tile(0).ok_or_else(|| Error::Parameter {
             name: "tiles",
             reason: format!("tile package {t} has no tile"),
@@ -510,8 +615,8 @@ pub fn build(
         tiles: total,
         bytes,
         seconds: start.elapsed().as_secs_f64(),
-        resumed_tiling,
-        reused_tiles,
+        resumed_tiling: false,
+        reused_tiles: 0,
         seam_limited_points,
         peak_rss_bytes: crate::bench::peak_rss_bytes(),
     })

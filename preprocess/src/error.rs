@@ -14,7 +14,8 @@ pub enum Error {
     Read { path: PathBuf, format: &'static str, reason: String },
     #[error("{path}: manifest: {reason}")]
     Manifest { path: PathBuf, reason: String },
-    #[error("{path}: {source}")]
+    /// The OS error is the `source` (printed by `{:#}` chains).
+    #[error("{path}: input/output failed")]
     Io { path: PathBuf, source: std::io::Error },
 }
 

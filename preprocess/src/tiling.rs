@@ -268,6 +268,20 @@ fn fine_key(q: [i64; 3], shift: u32) -> [i64; 3] {
     q.map(|v| v >> shift)
 }
 
+/// The complete plan in `work_dir` if it was made from exactly these scans and parameters.
+pub fn existing_plan(
+    scans: &[ResolvedScan],
+    work_dir: &Path,
+    params: &TilingParams,
+) -> Result<Option<TilePlan>> {
+    check_params(params)?;
+    let fingerprint = fingerprint(scans, params)?;
+    Ok(std::fs::read_to_string(work_dir.join("plan.json"))
+        .ok()
+        .and_then(|text| serde_json::from_str::<TilePlan>(&text).ok())
+        .filter(|plan| plan.fingerprint == fingerprint && plan.bins_complete))
+}
+
 /// Runs (or resumes) the tiling of `scans` into `work_dir`.
 pub fn tile_scans(
     scans: &[ResolvedScan],

@@ -151,3 +151,50 @@ fn an_interrupted_build_resumes_and_gives_the_same_bytes() {
     .unwrap();
     assert_eq!(third.reused_tiles, 0);
 }
+
+#[test]
+fn plan_shards_and_assemble_give_the_same_package_as_build() {
+    let dir = tempfile::tempdir().unwrap();
+    let params = SynthParams { points: 15_000, segments: 5, ..SynthParams::default() };
+    let summary =
+        synth::write_dataset(&dir.path().join("scans"), &params, &[ScanFormat::Ply], &|_, _| {}).unwrap();
+    let manifest_path = std::path::PathBuf::from(&summary.manifest);
+    let manifest = Manifest::load(&manifest_path).unwrap();
+    let bp = |work: &str| BuildParams {
+        work_dir: dir.path().join(work),
+        memory_budget_bytes: 64 << 20,
+        threads: 1,
+        leaf_m: 0.25,
+        colors: ColorCodec::Bc1,
+        sh_window: true,
+        k: 12,
+        min_tile_extent_m: 4.0,
+        max_tile_extent_m: 8.0,
+        halo_m: 0.25,
+    };
+    let whole = build::build(&manifest, &manifest_path, &dir.path().join("whole.grotto"), &bp("w1"), &|_| {})
+        .unwrap();
+    assert!(whole.tiles >= 4);
+
+    let cluster = bp("w2");
+    let err =
+        build::build_tiles(&manifest, &manifest_path, &cluster, build::Shard::ALL, &|_| {}).unwrap_err();
+    assert!(err.to_string().contains("run the plan step first"), "{err}");
+    let (plan, reused) = build::plan(&manifest, &cluster, &|_| {}).unwrap();
+    assert!(!reused && plan.tiles.len() == whole.tiles);
+    let first =
+        build::build_tiles(&manifest, &manifest_path, &cluster, build::Shard { index: 0, count: 2 }, &|_| {})
+            .unwrap();
+    let err = build::assemble(&manifest, &manifest_path, &dir.path().join("early.grotto"), &cluster, &|_| {})
+        .unwrap_err();
+    assert!(err.to_string().contains("run build-tile"), "{err}");
+    assert!(!dir.path().join("early.grotto").exists());
+    let second =
+        build::build_tiles(&manifest, &manifest_path, &cluster, build::Shard { index: 1, count: 2 }, &|_| {})
+            .unwrap();
+    assert_eq!(first.built + second.built, whole.tiles);
+    let out = dir.path().join("cluster.grotto");
+    let assembled = build::assemble(&manifest, &manifest_path, &out, &cluster, &|_| {}).unwrap();
+    assert_eq!(assembled.tiles, whole.tiles);
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(dir.path().join("whole.grotto")).unwrap());
+}

@@ -33,6 +33,32 @@ enum Command {
         #[command(flatten)]
         opts: BuildOpts,
     },
+    /// Cluster step 1 of 3: tile the scans into the work directory (same options as build).
+    Plan {
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        #[command(flatten)]
+        opts: BuildOpts,
+    },
+    /// Cluster step 2 of 3: build the tiles of one shard (run one job per shard, e.g. a Slurm array).
+    BuildTile {
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// This job's share, I/N: tiles whose index % N == I (default 0/1: all tiles).
+        #[arg(long, default_value = "0/1")]
+        shard: String,
+        #[command(flatten)]
+        opts: BuildOpts,
+    },
+    /// Cluster step 3 of 3: assemble the built tiles into the package.
+    Assemble {
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        #[arg(short, long)]
+        out: PathBuf,
+        #[command(flatten)]
+        opts: BuildOpts,
+    },
     /// Write a synthetic cave (scans in LAS, LAZ, PLY and E57, and DIR/manifest.toml).
     Synth {
         /// Output directory.
@@ -224,20 +250,29 @@ impl Bars {
     }
 }
 
-fn run_build(inputs: &[PathBuf], out: &Path, opts: &BuildOpts) -> anyhow::Result<BuildSummary> {
+/// The manifest and build parameters the build, plan, build-tile and assemble commands share.
+fn setup(
+    inputs: &[PathBuf],
+    out: Option<&Path>,
+    opts: &BuildOpts,
+) -> anyhow::Result<(Manifest, PathBuf, BuildParams)> {
     let (manifest, manifest_path) = match inputs {
         [one] if matches!(one.extension().and_then(|e| e.to_str()), Some("toml" | "conf")) => {
             (Manifest::load(one)?, one.clone())
         }
         files => (Manifest::from_files(files), PathBuf::from("<command line>")),
     };
-    let work_dir = opts.work_dir.clone().unwrap_or_else(|| {
-        let mut name = out.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-        name.push(".work");
-        out.with_file_name(name)
-    });
+    let work_dir = match (&opts.work_dir, out) {
+        (Some(dir), _) => dir.clone(),
+        (None, Some(out)) => {
+            let mut name = out.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+            name.push(".work");
+            out.with_file_name(name)
+        }
+        (None, None) => bail!("--work-dir is required for the plan and build-tile steps"),
+    };
     let params = BuildParams {
-        work_dir: work_dir.clone(),
+        work_dir,
         memory_budget_bytes: parse_bytes(&opts.memory_budget)?,
         threads: opts.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from)),
         leaf_m: opts.leaf_m,
@@ -248,6 +283,12 @@ fn run_build(inputs: &[PathBuf], out: &Path, opts: &BuildOpts) -> anyhow::Result
         max_tile_extent_m: opts.max_tile_m,
         halo_m: opts.halo_m,
     };
+    Ok((manifest, manifest_path, params))
+}
+
+fn run_build(inputs: &[PathBuf], out: &Path, opts: &BuildOpts) -> anyhow::Result<BuildSummary> {
+    let (manifest, manifest_path, params) = setup(inputs, Some(out), opts)?;
+    let work_dir = params.work_dir.clone();
     let bars = Bars::new(opts.json);
     let summary = build::build(&manifest, &manifest_path, out, &params, &|p| bars.update(p))
         .with_context(|| format!("building {}", out.display()))?;
@@ -302,10 +343,68 @@ fn run_synth(dir: &Path, s: &SynthOpts, quiet: bool) -> anyhow::Result<synth::Sy
     Ok(summary)
 }
 
-fn main() -> anyhow::Result<()> {
-    match Cli::parse().command {
+fn main() -> std::process::ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            // The error chain, not a backtrace: these are messages for people.
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
         Command::Build { inputs, out, opts } => {
             let summary = run_build(&inputs, &out, &opts)?;
+            print_build(&summary, opts.json)?;
+        }
+        Command::Plan { inputs, opts } => {
+            let (manifest, _, params) = setup(&inputs, None, &opts)?;
+            let bars = Bars::new(opts.json);
+            let (plan, reused) = build::plan(&manifest, &params, &|p| bars.update(p))?;
+            bars.finish();
+            let summary = serde_json::json!({
+                "work_dir": params.work_dir, "tiles": plan.tiles.len(), "points": plan.points,
+                "halo_points": plan.halo_points, "invalid_points": plan.invalid_points, "reused": reused,
+            });
+            if opts.json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                println!(
+                    "planned {} tiles for {} points in {}{}",
+                    plan.tiles.len(),
+                    plan.points,
+                    params.work_dir.display(),
+                    if reused { " (reused)" } else { "" }
+                );
+            }
+        }
+        Command::BuildTile { inputs, shard, opts } => {
+            let (manifest, manifest_path, params) = setup(&inputs, None, &opts)?;
+            let shard = match shard.split_once('/').map(|(i, n)| (i.parse::<usize>(), n.parse::<usize>())) {
+                Some((Ok(index), Ok(count))) if index < count => build::Shard { index, count },
+                _ => bail!("--shard '{shard}' is not I/N with I < N"),
+            };
+            let bars = Bars::new(opts.json);
+            let stage = build::build_tiles(&manifest, &manifest_path, &params, shard, &|p| bars.update(p))?;
+            bars.finish();
+            if opts.json {
+                println!("{}", serde_json::to_string_pretty(&stage)?);
+            } else {
+                println!(
+                    "shard {}/{}: built {} tiles, {} already built",
+                    shard.index, shard.count, stage.built, stage.reused
+                );
+            }
+        }
+        Command::Assemble { inputs, out, opts } => {
+            let (manifest, manifest_path, params) = setup(&inputs, Some(&out), &opts)?;
+            let bars = Bars::new(opts.json);
+            let summary = build::assemble(&manifest, &manifest_path, &out, &params, &|p| bars.update(p))
+                .with_context(|| format!("assembling {}", out.display()))?;
+            bars.finish();
             print_build(&summary, opts.json)?;
         }
         Command::Synth { out, synth, json } => {
