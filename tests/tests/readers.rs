@@ -173,6 +173,18 @@ fn lying_point_counts_are_refused_without_allocating_for_them() {
     let e = read(&p).err().expect("a billion points in a small file");
     assert!(e.to_string().contains("billion.las") && e.to_string().contains("holds at most"), "{e}");
 
+    // An EVLR whose length field claims 7e18 bytes (found by fuzzing: the las crate would try to
+    // allocate it and abort). LAS 1.4: start of first EVLR at byte 235, its length at +20.
+    let mut evlr = std::fs::read(data.join("las/laspy_1_4_w_evlr.las")).unwrap();
+    let start = u64::from_le_bytes(evlr[235..243].try_into().unwrap()) as usize;
+    evlr[start + 20..start + 28].copy_from_slice(&7_277_819_231_498_939_031u64.to_le_bytes());
+    let e = read(&scratch(dir.path(), "evlr.las", &evlr)).err().expect("lying EVLR length");
+    assert!(e.to_string().contains("EVLR 0 claims") && e.to_string().contains("evlr.las"), "{e}");
+    let mut vlr = std::fs::read(data.join("las/pdal_lots_of_vlr.las")).unwrap();
+    let header_size = usize::from(u16::from_le_bytes(vlr[94..96].try_into().unwrap()));
+    vlr[header_size + 20..header_size + 22].copy_from_slice(&u16::MAX.to_le_bytes());
+    assert!(read(&scratch(dir.path(), "vlr.las", &vlr)).is_err());
+
     let mut laz = std::fs::read(data.join("las/laspy_simple.laz")).unwrap();
     laz[107..111].copy_from_slice(&1_000_000_000u32.to_le_bytes());
     let p = scratch(dir.path(), "billion.laz", &laz);

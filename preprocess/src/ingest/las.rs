@@ -33,7 +33,54 @@ pub(super) struct LasSource {
 }
 
 fn open_reader(path: &Path, format: ScanFormat) -> Result<Reader> {
+    preflight(path, format)?;
     guard(path, format, || open_reader_unguarded(path, format))
+}
+
+/// Walks the header, VLR and EVLR records with checked arithmetic against the file's length before
+/// the `las` crate sees the file: it sizes record buffers from their length fields, so a lying
+/// length (found by fuzzing: 7e18 bytes) would abort the process on allocation, which no error
+/// handling can catch.
+fn preflight(path: &Path, format: ScanFormat) -> Result<()> {
+    use std::io::{Read, Seek, SeekFrom};
+    let err = |reason: String| read_error(path, format, reason);
+    let mut file = File::open(path).map_err(|e| err(e.to_string()))?;
+    let file_len = file.metadata().map_err(|e| err(e.to_string()))?.len();
+    let raw = las::raw::Header::read_from(BufReader::new(&file)).map_err(|e| err(e.to_string()))?;
+    let offset = u64::from(raw.offset_to_point_data);
+    if offset > file_len || u64::from(raw.header_size) > offset {
+        return Err(err(format!(
+            "header says points start at byte {offset} (header {} bytes) in a {file_len}-byte file",
+            raw.header_size
+        )));
+    }
+    // Record headers: 54 bytes for VLRs (u16 length at 20), 60 for EVLRs (u64 length at 20).
+    let mut walk = |start: u64, count: u64, header: u64, limit: u64, what: &str| -> Result<()> {
+        let mut pos = start;
+        for i in 0..count {
+            let end_of_header = pos.checked_add(header).filter(|&e| e <= limit);
+            let Some(end_of_header) = end_of_header else {
+                return Err(err(format!(
+                    "{what} {i} of {count} starts at byte {pos}, past the end of its area ({limit})"
+                )));
+            };
+            let mut buf = [0u8; 8];
+            file.seek(SeekFrom::Start(pos + 20)).map_err(|e| err(e.to_string()))?;
+            let width = if header == 54 { 2 } else { 8 };
+            file.read_exact(&mut buf[..width]).map_err(|e| err(e.to_string()))?;
+            let len = u64::from_le_bytes(buf);
+            pos = end_of_header
+                .checked_add(len)
+                .filter(|&e| e <= limit)
+                .ok_or_else(|| err(format!("{what} {i} claims {len} bytes, more than the file holds")))?;
+        }
+        Ok(())
+    };
+    walk(u64::from(raw.header_size), u64::from(raw.number_of_variable_length_records), 54, offset, "VLR")?;
+    if let Some(evlr) = raw.evlr {
+        walk(evlr.start_of_first_evlr, u64::from(evlr.number_of_evlrs), 60, file_len, "EVLR")?;
+    }
+    Ok(())
 }
 
 fn open_reader_unguarded(path: &Path, format: ScanFormat) -> Result<Reader> {
