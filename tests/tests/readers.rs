@@ -185,6 +185,14 @@ fn lying_point_counts_are_refused_without_allocating_for_them() {
     vlr[header_size + 20..header_size + 22].copy_from_slice(&u16::MAX.to_le_bytes());
     assert!(read(&scratch(dir.path(), "vlr.las", &vlr)).is_err());
 
+    // A LAZ chunk table claiming 3.7e9 chunks (found by fuzzing: 58 GB allocation in laz).
+    let mut chunks = std::fs::read(data.join("las/laspy_simple.laz")).unwrap();
+    let points_at = u32::from_le_bytes(chunks[96..100].try_into().unwrap()) as usize;
+    let table = i64::from_le_bytes(chunks[points_at..points_at + 8].try_into().unwrap()) as usize;
+    chunks[table + 4..table + 8].copy_from_slice(&3_669_783_654u32.to_le_bytes());
+    let e = read(&scratch(dir.path(), "chunks.laz", &chunks)).err().expect("lying chunk count");
+    assert!(e.to_string().contains("chunk table claims"), "{e}");
+
     let mut laz = std::fs::read(data.join("las/laspy_simple.laz")).unwrap();
     laz[107..111].copy_from_slice(&1_000_000_000u32.to_le_bytes());
     let p = scratch(dir.path(), "billion.laz", &laz);
