@@ -193,6 +193,17 @@ fn lying_point_counts_are_refused_without_allocating_for_them() {
     let e = read(&scratch(dir.path(), "chunks.laz", &chunks)).err().expect("lying chunk count");
     assert!(e.to_string().contains("chunk table claims"), "{e}");
 
+    // A layered (LAS 1.4) LAZ chunk declaring a 4 GB layer (found by fuzzing: laz allocated it
+    // before reading). The chunk starts after the 8-byte table offset with the first point raw
+    // (the record length), then a u32 point count, then the layer sizes.
+    let mut layered = std::fs::read(data.join("las/laspy_1_4_w_evlr.laz")).unwrap();
+    let points_at = u32::from_le_bytes(layered[96..100].try_into().unwrap()) as usize;
+    let record = usize::from(u16::from_le_bytes(layered[105..107].try_into().unwrap()));
+    let first_layer = points_at + 8 + record + 4;
+    layered[first_layer..first_layer + 4].copy_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+    let e = read(&scratch(dir.path(), "layered.laz", &layered)).err().expect("lying layer size");
+    assert!(e.to_string().contains("bytes of layers"), "{e}");
+
     let mut laz = std::fs::read(data.join("las/laspy_simple.laz")).unwrap();
     laz[107..111].copy_from_slice(&1_000_000_000u32.to_le_bytes());
     let p = scratch(dir.path(), "billion.laz", &laz);
