@@ -204,6 +204,15 @@ fn lying_point_counts_are_refused_without_allocating_for_them() {
     let e = read(&scratch(dir.path(), "layered.laz", &layered)).err().expect("lying layer size");
     assert!(e.to_string().contains("bytes of layers"), "{e}");
 
+    // A LASzip VLR declaring 4e9-point chunks (found by fuzzing: laz allocated 142 GB for the
+    // output of one chunk). The chunk size is at byte 12 of the VLR's data.
+    let mut big_chunks = std::fs::read(data.join("las/laspy_simple.laz")).unwrap();
+    let user_id = big_chunks.windows(14).position(|w| w == b"laszip encoded").unwrap();
+    let chunk_size_at = user_id - 2 + 54 + 12;
+    big_chunks[chunk_size_at..chunk_size_at + 4].copy_from_slice(&4_177_576_784u32.to_le_bytes());
+    let e = read(&scratch(dir.path(), "big-chunks.laz", &big_chunks)).err().expect("lying chunk size");
+    assert!(e.to_string().contains("chunk size"), "{e}");
+
     let mut laz = std::fs::read(data.join("las/laspy_simple.laz")).unwrap();
     laz[107..111].copy_from_slice(&1_000_000_000u32.to_le_bytes());
     let p = scratch(dir.path(), "billion.laz", &laz);

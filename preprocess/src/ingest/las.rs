@@ -141,6 +141,27 @@ fn preflight(path: &Path, format: ScanFormat) -> Result<()> {
             })?;
             if let Some(entries) = &entries {
                 check_layered_chunks(&mut file, offset + 8, entries.as_ref(), &vlr).map_err(err)?;
+                // Per-chunk point counts size the decoder's output buffers (found by fuzzing: 142
+                // GB). No chunk holds more points than the file claims, nor more than 256 points per
+                // compressed byte (real LASzip stays far below 1 point per byte).
+                let claimed = raw.large_file.map_or(u64::from(raw.number_of_point_records), |l| {
+                    l.number_of_point_records.max(u64::from(raw.number_of_point_records))
+                });
+                // Fixed-size tables list every chunk at the declared chunk size (LASzip's default is
+                // 50 000), even the last; a declared size beyond 5 million points is refused.
+                let fixed = if vlr.uses_variable_size_chunks() { 0 } else { u64::from(vlr.chunk_size()) };
+                if fixed > 5_000_000 {
+                    return Err(err(format!("LAZ chunk size {fixed} points is beyond any LASzip writer's")));
+                }
+                let allowed = claimed.max(fixed).max(1);
+                for (i, c) in entries.as_ref().iter().enumerate() {
+                    if c.point_count > allowed || c.point_count > c.byte_count.saturating_mul(256).max(1) {
+                        return Err(err(format!(
+                            "LAZ chunk {i} claims {} points in {} bytes (the file claims {claimed})",
+                            c.point_count, c.byte_count
+                        )));
+                    }
+                }
             }
             if let Some(entries) = entries {
                 let bytes = entries.as_ref().iter().try_fold(0u64, |acc, e| acc.checked_add(e.byte_count));
