@@ -419,10 +419,17 @@ pub fn plan(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<(TilePlan, bool)> {
     check_params(params)?;
-    let scans = manifest.resolve()?;
+    plan_scans(&manifest.resolve()?, params, progress)
+}
+
+fn plan_scans(
+    scans: &[ResolvedScan],
+    params: &BuildParams,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<(TilePlan, bool)> {
     let tiling_params = params.tiling();
-    let earlier = tiling::existing_plan(&scans, &params.work_dir, &tiling_params)?;
-    let plan = tiling::tile_scans(&scans, &params.work_dir, &tiling_params, progress)?;
+    let earlier = tiling::existing_plan(scans, &params.work_dir, &tiling_params)?;
+    let plan = tiling::tile_scans(scans, &params.work_dir, &tiling_params, progress)?;
     Ok((plan, earlier.is_some()))
 }
 
@@ -450,14 +457,23 @@ pub fn build_tiles(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<TileStage> {
     let (plan, _) = planned(manifest, params)?;
-    let scene = manifest.scene(manifest_path)?;
+    tile_stage(&plan, &manifest.scene(manifest_path)?, params, shard, progress)
+}
+
+fn tile_stage(
+    plan: &TilePlan,
+    scene: &Scene,
+    params: &BuildParams,
+    shard: Shard,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<TileStage> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(params.threads.max(1))
         .build()
         .map_err(|e| Error::Parameter { name: "threads", reason: e.to_string() })?;
     let tiles_dir = params.work_dir.join("tiles");
     std::fs::create_dir_all(&tiles_dir).map_err(|source| Error::Io { path: tiles_dir.clone(), source })?;
-    let fingerprint = tile_fingerprint(&plan, params);
+    let fingerprint = tile_fingerprint(plan, params);
     let mine: Vec<usize> = (0..plan.tiles.len()).filter(|&t| shard.takes(t)).collect();
     let batch = params.threads.max(1);
     let mut stage = TileStage::default();
@@ -470,7 +486,7 @@ pub fn build_tiles(
                     if finished_tile_package(&path, &fingerprint).is_some() {
                         return Ok(true);
                     }
-                    let built = build_tile(&plan, &params.work_dir, t, params, &scene)?;
+                    let built = build_tile(plan, &params.work_dir, t, params, scene)?;
                     write_tile_package(&path, &built, &fingerprint, params.colors)?;
                     Ok(false)
                 })
@@ -499,9 +515,13 @@ pub fn build(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<BuildSummary> {
     let start = std::time::Instant::now();
-    let (_, resumed_tiling) = plan(manifest, params, progress)?;
-    let stage = build_tiles(manifest, manifest_path, params, Shard::ALL, progress)?;
-    let mut summary = assemble(manifest, manifest_path, out, params, progress)?;
+    check_params(params)?;
+    // Resolved once for all three steps (E57 poses and headers are read here).
+    let scans = manifest.resolve()?;
+    let scene = manifest.scene(manifest_path)?;
+    let (plan, resumed_tiling) = plan_scans(&scans, params, progress)?;
+    let stage = tile_stage(&plan, &scene, params, Shard::ALL, progress)?;
+    let mut summary = assemble_plan(manifest, &plan, &scans, &scene, out, params, progress)?;
     summary.resumed_tiling = resumed_tiling;
     summary.reused_tiles = stage.reused;
     summary.seconds = start.elapsed().as_secs_f64();
@@ -519,11 +539,22 @@ pub fn assemble(
     params: &BuildParams,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<BuildSummary> {
-    let start = std::time::Instant::now();
     let (plan, scans) = planned(manifest, params)?;
-    let scene = manifest.scene(manifest_path)?;
+    assemble_plan(manifest, &plan, &scans, &manifest.scene(manifest_path)?, out, params, progress)
+}
+
+fn assemble_plan(
+    manifest: &Manifest,
+    plan: &TilePlan,
+    scans: &[ResolvedScan],
+    scene: &Scene,
+    out: &Path,
+    params: &BuildParams,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<BuildSummary> {
+    let start = std::time::Instant::now();
     let tiling_params = params.tiling();
-    let fingerprint = tile_fingerprint(&plan, params);
+    let fingerprint = tile_fingerprint(plan, params);
     let total = plan.tiles.len();
     let mut seam_limited_points = 0u64;
     let missing: Vec<usize> = (0..total)
@@ -575,10 +606,10 @@ pub fn assemble(
         inputs_extra.push(hash_file(&path)?);
         progress(Progress { stage: "environment", done: 1, total: 1 });
     }
-    writer.add_scene(&scene)?;
+    writer.add_scene(scene)?;
     let mut inputs = std::mem::take(&mut inputs_extra);
     let mut seen = std::collections::BTreeSet::new();
-    for s in &scans {
+    for s in scans {
         if seen.insert(s.path.clone()) {
             inputs.push(hash_file(&s.path)?);
         }

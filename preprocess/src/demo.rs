@@ -1,11 +1,13 @@
-//! The built-in demo scene: a spherical chamber at survey coordinates, sampled analytically.
+//! A tiny analytic package: a spherical chamber at survey coordinates, sampled directly (no scans,
+//! no tiling), used by tests as a fast, exactly known fixture. The README's demo is the synthetic
+//! cave (`grotto-pack demo`, see `synth.rs`).
 //!
 //! Points lie on a sphere of `radius_m` around a centre with UTM-sized coordinates (the hard case
 //! for precision), spread evenly by a Fibonacci lattice, with normals pointing into the chamber
 //! (towards the scanner at the centre) and banded limestone colours. They are binned into cubic
 //! tiles of a global power-of-two grid, stored tile-relative in f32 and sorted in Morton order.
 //! Because the surface is known exactly, tests can check what survives the package to the
-//! millimetre. The full synthetic cave (`grotto-pack synth`) replaces this once scans can be read.
+//! millimetre.
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -237,7 +237,7 @@ impl Manifest {
             };
             for index in indices {
                 let file_pose = if format == ScanFormat::E57 && manifest_pose.is_none() {
-                    ingest::open(&path, format, index)?.info().file_pose
+                    ingest::header(&path, format, index)?.file_pose
                 } else {
                     None
                 };

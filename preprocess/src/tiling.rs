@@ -333,7 +333,7 @@ fn count_and_plan(
     // Pass 1: count.
     let claimed: u64 = scans
         .iter()
-        .map(|s| ingest::open(&s.path, s.format, s.index).map(|src| src.info().claimed_points))
+        .map(|s| ingest::header(&s.path, s.format, s.index).map(|info| info.claimed_points))
         .sum::<Result<u64>>()?;
     let inv = 1.0 / params.quantum_m;
     let shift = (params.min_tile_extent_m / params.quantum_m).log2() as u32;

@@ -34,50 +34,58 @@ pub(super) struct E57Source {
     delivered: u64,
 }
 
+/// What the file says about scan `index` (pose, count, attributes), without decoding points.
+pub(super) fn header_info(path: &Path, index: usize) -> Result<SourceInfo> {
+    guard(path, ScanFormat::E57, || header_unguarded(path, index).map(|(info, _)| info))
+}
+
+/// The scan's info and whether it has intensity.
+fn header_unguarded(path: &Path, index: usize) -> Result<(SourceInfo, bool)> {
+    let err = |e: &dyn std::fmt::Display| read_error(path, ScanFormat::E57, e);
+    let reader = E57Reader::from_file(path).map_err(|e| err(&e))?;
+    let clouds = reader.pointclouds();
+    let pc = clouds.get(index).ok_or_else(|| err(&format!("has {} scans, no scan {index}", clouds.len())))?;
+    let file_pose = match &pc.transform {
+        Some(t) => {
+            let q = &t.rotation;
+            let tr = &t.translation;
+            Some(
+                Pose::from_quaternion([q.w, q.x, q.y, q.z], [tr.x, tr.y, tr.z])
+                    .map_err(|m| err(&format!("scan {index} pose: {m}")))?,
+            )
+        }
+        None => None,
+    };
+    if !(pc.has_cartesian() || pc.has_spherical()) {
+        return Err(err(&format!("scan {index} has neither cartesian nor spherical coordinates")));
+    }
+    let info = SourceInfo {
+        path: path.to_path_buf(),
+        format: ScanFormat::E57,
+        name: pc.name.clone().unwrap_or_else(|| format!("scan {index}")),
+        claimed_points: pc.records,
+        has_color: pc.has_color(),
+        has_normals: false,
+        file_pose,
+    };
+    Ok((info, pc.has_intensity()))
+}
+
 impl E57Source {
     pub(super) fn open(path: &Path, index: usize) -> Result<Self> {
         guard(path, ScanFormat::E57, || Self::open_unguarded(path, index))
     }
 
     fn open_unguarded(path: &Path, index: usize) -> Result<Self> {
-        let err = |e: &dyn std::fmt::Display| read_error(path, ScanFormat::E57, e);
-        let reader = E57Reader::from_file(path).map_err(|e| err(&e))?;
-        let clouds = reader.pointclouds();
-        let pc =
-            clouds.get(index).ok_or_else(|| err(&format!("has {} scans, no scan {index}", clouds.len())))?;
-        let file_pose = match &pc.transform {
-            Some(t) => {
-                let q = &t.rotation;
-                let tr = &t.translation;
-                Some(
-                    Pose::from_quaternion([q.w, q.x, q.y, q.z], [tr.x, tr.y, tr.z])
-                        .map_err(|m| err(&format!("scan {index} pose: {m}")))?,
-                )
-            }
-            None => None,
-        };
-        let has_cartesian_or_spherical = pc.has_cartesian() || pc.has_spherical();
-        if !has_cartesian_or_spherical {
-            return Err(err(&format!("scan {index} has neither cartesian nor spherical coordinates")));
-        }
-        let info = SourceInfo {
-            path: path.to_path_buf(),
-            format: ScanFormat::E57,
-            name: pc.name.clone().unwrap_or_else(|| format!("scan {index}")),
-            claimed_points: pc.records,
-            has_color: pc.has_color(),
-            has_normals: false,
-            file_pose,
-        };
+        let (info, has_intensity) = header_unguarded(path, index)?;
+        let has_color = info.has_color;
         let (fill_tx, filled) = sync_channel::<Filled>(2);
         let (empty, empty_rx) = sync_channel::<PointChunk>(3);
         let owned_path: PathBuf = path.to_path_buf();
-        let has_color = pc.has_color();
-        let has_intensity = pc.has_intensity();
         let worker = std::thread::Builder::new()
             .name(format!("e57 {}", path.display()))
             .spawn(move || decode(owned_path, index, has_color, has_intensity, fill_tx, empty_rx))
-            .map_err(|e| err(&e))?;
+            .map_err(|e| read_error(path, ScanFormat::E57, e))?;
         Ok(Self { info, filled, empty, worker: Some(worker), delivered: 0 })
     }
 }

@@ -32,16 +32,43 @@ pub(super) struct LasSource {
     grey_div: Option<f32>,
 }
 
+/// A `las` reader; call only after [`preflight`] accepted the file.
 fn open_reader(path: &Path, format: ScanFormat) -> Result<Reader> {
-    preflight(path, format)?;
     guard(path, format, || open_reader_unguarded(path, format))
+}
+
+/// Points the header claims and whether the format has colour, from the raw header.
+fn claimed_and_color(raw: &las::raw::Header) -> (u64, bool) {
+    let claimed = raw.large_file.map_or(u64::from(raw.number_of_point_records), |l| {
+        l.number_of_point_records.max(u64::from(raw.number_of_point_records))
+    });
+    let has_color = las::point::Format::new(raw.point_data_record_format & 0x3F).is_ok_and(|f| f.has_color);
+    (claimed, has_color)
+}
+
+/// What the header says, without decoding points.
+pub(super) fn header_info(path: &Path, format: ScanFormat) -> Result<SourceInfo> {
+    let raw = preflight(path, format)?;
+    let (claimed_points, has_color) = claimed_and_color(&raw);
+    Ok(SourceInfo {
+        path: path.to_path_buf(),
+        format,
+        name: path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+        claimed_points,
+        has_color,
+        has_normals: false,
+        file_pose: None,
+    })
 }
 
 /// Walks the header, VLR and EVLR records with checked arithmetic against the file's length before
 /// the `las` crate sees the file: it sizes record buffers from their length fields, so a lying
 /// length (found by fuzzing: 7e18 bytes) would abort the process on allocation, which no error
 /// handling can catch.
-fn preflight(path: &Path, format: ScanFormat) -> Result<()> {
+///
+/// Also refuses an uncompressed file that cannot hold the records its header claims. Returns the
+/// raw header.
+fn preflight(path: &Path, format: ScanFormat) -> Result<las::raw::Header> {
     use std::io::{Read, Seek, SeekFrom};
     let err = |reason: String| read_error(path, format, reason);
     let mut file = File::open(path).map_err(|e| err(e.to_string()))?;
@@ -52,6 +79,17 @@ fn preflight(path: &Path, format: ScanFormat) -> Result<()> {
         return Err(err(format!(
             "header says points start at byte {offset} (header {} bytes) in a {file_len}-byte file",
             raw.header_size
+        )));
+    }
+    let (claimed, _) = claimed_and_color(&raw);
+    let compressed = raw.point_data_record_format & 0xC0 != 0;
+    let record = u64::from(raw.point_data_record_length);
+    if !compressed
+        && claimed.checked_mul(record).and_then(|b| b.checked_add(offset)).is_none_or(|n| n > file_len)
+    {
+        return Err(err(format!(
+            "header claims {claimed} points of {record} bytes, but the {file_len}-byte file holds at most {}",
+            (file_len - offset) / record.max(1)
         )));
     }
     // Record headers: 54 bytes for VLRs (u16 length at 20), 60 for EVLRs (u64 length at 20).
@@ -99,7 +137,7 @@ fn preflight(path: &Path, format: ScanFormat) -> Result<()> {
     }
     // LAZ: the chunk table's entry count sizes an allocation in the laz crate (found by fuzzing:
     // 58 GB). Every chunk takes at least a byte, so more chunks than bytes is a lie.
-    if raw.point_data_record_format & 0xC0 != 0 && offset + 8 <= file_len {
+    if compressed && offset + 8 <= file_len {
         let mut read_i64 = |at: u64| -> Option<i64> {
             let mut b = [0u8; 8];
             file.seek(SeekFrom::Start(at)).ok()?;
@@ -144,9 +182,6 @@ fn preflight(path: &Path, format: ScanFormat) -> Result<()> {
                 // Per-chunk point counts size the decoder's output buffers (found by fuzzing: 142
                 // GB). No chunk holds more points than the file claims, nor more than 256 points per
                 // compressed byte (real LASzip stays far below 1 point per byte).
-                let claimed = raw.large_file.map_or(u64::from(raw.number_of_point_records), |l| {
-                    l.number_of_point_records.max(u64::from(raw.number_of_point_records))
-                });
                 // Fixed-size tables list every chunk at the declared chunk size (LASzip's default is
                 // 50 000), even the last; a declared size beyond 5 million points is refused.
                 let fixed = if vlr.uses_variable_size_chunks() { 0 } else { u64::from(vlr.chunk_size()) };
@@ -175,7 +210,7 @@ fn preflight(path: &Path, format: ScanFormat) -> Result<()> {
             }
         }
     }
-    Ok(())
+    Ok(raw)
 }
 
 /// LAS 1.4 layered LAZ chunks start with the first point raw, a u32 point count and one u32 byte
@@ -243,45 +278,15 @@ fn open_reader_unguarded(path: &Path, format: ScanFormat) -> Result<Reader> {
 
 impl LasSource {
     pub(super) fn open(path: &Path, format: ScanFormat) -> Result<Self> {
+        let info = header_info(path, format)?;
         let reader = open_reader(path, format)?;
-        let header = reader.header().clone();
-        let claimed = header.number_of_points();
-        let point_format = *header.point_format();
-        let file_len = std::fs::metadata(path).map_err(|e| read_error(path, format, e))?.len();
-        // An uncompressed file must hold every record it claims; a compressed one at least a byte
-        // per point is not guaranteed, so there the decoder's end-of-data error is the check.
-        if !point_format.is_compressed {
-            let file = File::open(path).map_err(|e| read_error(path, format, e))?;
-            let raw =
-                las::raw::Header::read_from(BufReader::new(file)).map_err(|e| read_error(path, format, e))?;
-            let record = u64::from(raw.point_data_record_length);
-            let needed =
-                claimed.checked_mul(record).and_then(|b| b.checked_add(u64::from(raw.offset_to_point_data)));
-            if needed.is_none_or(|n| n > file_len) {
-                return Err(read_error(
-                    path,
-                    format,
-                    format!(
-                        "header claims {claimed} points of {record} bytes, but the {file_len}-byte file holds at most {}",
-                        file_len.saturating_sub(u64::from(raw.offset_to_point_data)) / record.max(1)
-                    ),
-                ));
-            }
-        }
+        let claimed = reader.header().number_of_points();
+        let point_format = *reader.header().point_format();
         let (color_div, grey_div) =
             guard(path, format, || probe_scales(path, format, point_format.has_color, claimed))?;
-        let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         let data = las::PointDataBuilder::new().for_header(reader.header()).build();
         Ok(Self {
-            info: SourceInfo {
-                path: path.to_path_buf(),
-                format,
-                name,
-                claimed_points: claimed,
-                has_color: point_format.has_color,
-                has_normals: false,
-                file_pose: None,
-            },
+            info: SourceInfo { claimed_points: claimed, has_color: point_format.has_color, ..info },
             reader,
             data,
             remaining: claimed,

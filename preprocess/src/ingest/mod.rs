@@ -141,6 +141,17 @@ pub fn open(path: &Path, format: ScanFormat, index: usize) -> Result<Box<dyn Poi
     })
 }
 
+/// What scan `index` of `path` says about itself (point count, attributes, stored pose), read from
+/// its header alone: no points are decoded and no decoder is started.
+pub fn header(path: &Path, format: ScanFormat, index: usize) -> Result<SourceInfo> {
+    match format {
+        ScanFormat::Las | ScanFormat::Laz => las::header_info(path, format),
+        // Opening a PLY source parses only the header (and skips elements before the vertices).
+        ScanFormat::Ply => Ok(ply::PlySource::open(path)?.info().clone()),
+        ScanFormat::E57 => e57::header_info(path, index),
+    }
+}
+
 /// Reads every point of a source into memory (tests and small inputs only).
 pub fn read_all(source: &mut dyn PointSource) -> Result<PointChunk> {
     let mut all = PointChunk::new(DEFAULT_CHUNK);

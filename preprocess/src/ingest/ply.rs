@@ -406,6 +406,7 @@ impl PointSource for PlySource {
                     self.push(chunk, &v);
                 }
                 self.buf = buf;
+                self.read += n as u64;
             }
             _ => {
                 for _ in 0..n {
@@ -425,12 +426,11 @@ impl PointSource for PlySource {
                         }
                     }
                     self.push(chunk, &v);
+                    // Per vertex, so an error names the vertex it happened at.
                     self.read += 1;
                 }
-                self.read -= n as u64;
             }
         }
-        self.read += n as u64;
         self.remaining -= n as u64;
         Ok(n)
     }
