@@ -17,17 +17,7 @@ use std::path::Path;
 use grotto_format::spec::{Bc1Block, Rgba8, Surfel};
 use grotto_format::{Package, SectionKind};
 
-/// Why an export failed.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum ExportError {
-    #[error(transparent)]
-    Package(#[from] grotto_format::Error),
-    #[error("{path}: {reason}")]
-    Output { path: String, reason: String },
-    #[error("{path}: unknown point format (use .ply or .las)")]
-    Extension { path: String },
-}
+use crate::Error;
 
 /// What was exported.
 #[derive(Debug, serde::Serialize)]
@@ -43,7 +33,7 @@ struct Point {
     rgb: [u8; 3],
 }
 
-fn tile_colors(tile: &grotto_format::Tile<'_>, n: usize) -> Result<Vec<[u8; 3]>, ExportError> {
+pub(crate) fn tile_colors(tile: &grotto_format::Tile<'_>, n: usize) -> Result<Vec<[u8; 3]>, Error> {
     if let Some(bc1) = tile.read::<Bc1Block>(SectionKind::SurfelColorsBc1)? {
         let out: Vec<[u8; 3]> = bc1
             .iter()
@@ -59,7 +49,7 @@ fn tile_colors(tile: &grotto_format::Tile<'_>, n: usize) -> Result<Vec<[u8; 3]>,
     Ok(vec![[180; 3]; n])
 }
 
-fn points(pkg: &Package) -> Result<Vec<Point>, ExportError> {
+fn points(pkg: &Package) -> Result<Vec<Point>, Error> {
     let mut out = Vec::new();
     for tile in pkg.tiles() {
         let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? else { continue };
@@ -77,12 +67,12 @@ fn points(pkg: &Package) -> Result<Vec<Point>, ExportError> {
     Ok(out)
 }
 
-fn output_error(path: &Path, e: impl std::fmt::Display) -> ExportError {
-    ExportError::Output { path: path.display().to_string(), reason: e.to_string() }
+pub(crate) fn output_error(path: &Path, e: impl std::fmt::Display) -> Error {
+    Error::Output { path: path.display().to_string(), reason: e.to_string() }
 }
 
 /// Writes `out` by `fill` into a temp file beside it, then renames it into place.
-fn atomically(out: &Path, fill: impl FnOnce(File) -> Result<(), ExportError>) -> Result<(), ExportError> {
+pub(crate) fn atomically(out: &Path, fill: impl FnOnce(File) -> Result<(), Error>) -> Result<(), Error> {
     let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let mut builder = tempfile::Builder::new();
     builder.suffix(".partial");
@@ -94,10 +84,10 @@ fn atomically(out: &Path, fill: impl FnOnce(File) -> Result<(), ExportError>) ->
     Ok(())
 }
 
-pub fn export_points(pkg: &Package, out: &Path) -> Result<ExportSummary, ExportError> {
+pub fn export_points(pkg: &Package, out: &Path) -> Result<ExportSummary, Error> {
     let ext = out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     if !matches!(ext.as_deref(), Some("ply" | "las")) {
-        return Err(ExportError::Extension { path: out.display().to_string() });
+        return Err(Error::Extension { path: out.display().to_string() });
     }
     let pts = points(pkg)?;
     match ext.as_deref() {
@@ -107,7 +97,7 @@ pub fn export_points(pkg: &Package, out: &Path) -> Result<ExportSummary, ExportE
     Ok(ExportSummary { path: out.display().to_string(), points: pts.len() as u64, tiles: pkg.tile_count() })
 }
 
-fn write_ply(path: &Path, file: File, pts: &[Point]) -> Result<(), ExportError> {
+fn write_ply(path: &Path, file: File, pts: &[Point]) -> Result<(), Error> {
     let err = |e: std::io::Error| output_error(path, e);
     let mut w = BufWriter::with_capacity(1 << 20, file);
     write!(
@@ -151,7 +141,7 @@ const EXTRA: [(&str, &str); 5] = [
     ("Spread", "1 - |mean of unit normals|"),
 ];
 
-fn write_las(path: &Path, file: File, pts: &[Point]) -> Result<(), ExportError> {
+fn write_las(path: &Path, file: File, pts: &[Point]) -> Result<(), Error> {
     let err = |e: las::Error| output_error(path, e);
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];

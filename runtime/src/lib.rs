@@ -1,6 +1,23 @@
-//! The grotto runtime. Today: describing and verifying packages ([`inspect`]) and exporting their
-//! points ([`export`]); the wgpu passes, residency and effect plan of the design brief land here
-//! next.
+//! The grotto runtime: opens `.grotto` packages, keeps their tiles on the GPU and renders them with
+//! global illumination (wgpu, headless). Per frame it runs only the passes the effect plan asks
+//! for: shadow maps and light injection, anisotropic mipmapping, cone-traced propagation (one
+//! bounce per light update), the surfel G-buffer and deferred shading.
+//!
+//! Also: describing and verifying packages ([`inspect`]) and exporting their points ([`export`]).
 
+pub mod camera;
+pub mod cpu_ref;
+pub mod error;
 pub mod export;
+pub mod gpu;
+pub mod gpu_types;
+pub mod image_out;
 pub mod inspect;
+pub mod passes;
+pub mod plan;
+pub mod renderer;
+pub mod scene_data;
+pub mod shaders;
+pub mod testscenes;
+
+pub use error::{Error, Result};

@@ -1,0 +1,209 @@
+//! CPU reference of the mip and cone-gather passes: the same SVO walk, anisotropic compositing,
+//! quadrilinear sampling and cone marching as common.wgsl / mip.wgsl / propagate.wgsl, written
+//! plainly in f64 so the GPU results can be checked against it on small hand-built SVOs.
+
+use glam::{DVec3, IVec3, Vec3};
+
+use crate::gpu_types::{LeafLightGpu, Params};
+use crate::scene_data::SceneData;
+
+/// Closure of a cone that left the scene partly transparent (`close_cone` in common.wgsl).
+pub fn close_cone(acc: [f64; 4]) -> [f64; 4] {
+    const CLOSE_LO: f64 = 0.2;
+    const CLOSE_HI: f64 = 0.6;
+    if acc[3] <= 1e-6 {
+        return acc;
+    }
+    let x = ((acc[3] - CLOSE_LO) / (CLOSE_HI - CLOSE_LO)).clamp(0.0, 1.0);
+    let s = x * x * (3.0 - 2.0 * x);
+    let a = acc[3] + (1.0 - acc[3]) * s;
+    let k = a / acc[3];
+    [acc[0] * k, acc[1] * k, acc[2] * k, a]
+}
+
+/// The scene plus a radiance pyramid.
+#[derive(Debug)]
+pub struct CpuScene<'a> {
+    pub scene: &'a SceneData,
+    /// Six values per node, as in the GPU `faces` buffer.
+    pub faces: Vec<[f64; 4]>,
+}
+
+fn add(a: [f64; 4], b: [f64; 4], wb: f64) -> [f64; 4] {
+    [a[0] + wb * b[0], a[1] + wb * b[1], a[2] + wb * b[2], a[3] + wb * b[3]]
+}
+
+impl<'a> CpuScene<'a> {
+    /// Builds the pyramid from each leaf's outgoing radiance.
+    pub fn mip(scene: &'a SceneData, light: &[LeafLightGpu]) -> Self {
+        let mut faces = vec![[0.0f64; 4]; scene.nodes.len() * 6];
+        let (order, ranges) = scene.nodes_by_height();
+        for r in &ranges {
+            for &n in &order[r.first as usize..(r.first + r.count) as usize] {
+                let node = scene.nodes[n as usize];
+                if r.height == 0 {
+                    let leaf = node.first_child as usize;
+                    let a = f64::from(scene.leaves[leaf].albedo_opacity[3]);
+                    let o = light[leaf].out;
+                    let v = [f64::from(o[0]) * a, f64::from(o[1]) * a, f64::from(o[2]) * a, a];
+                    for f in 0..6 {
+                        faces[n as usize * 6 + f] = v;
+                    }
+                    continue;
+                }
+                let mask = node.child_mask();
+                let child = |o: u32, f: usize| -> [f64; 4] {
+                    if (mask >> o) & 1 == 0 {
+                        return [0.0; 4];
+                    }
+                    let c = node.first_child + (mask & ((1 << o) - 1)).count_ones();
+                    faces[c as usize * 6 + f]
+                };
+                let mut values = [[0.0f64; 4]; 6];
+                for (f, value) in values.iter_mut().enumerate() {
+                    let bit = 1u32 << (f / 2);
+                    let positive = f % 2 == 0;
+                    let mut sum = [0.0; 4];
+                    for o in (0..8u32).filter(|o| o & bit == 0) {
+                        let (lo, hi) = (child(o, f), child(o | bit, f));
+                        let (front, back) = if positive { (lo, hi) } else { (hi, lo) };
+                        sum = add(sum, add(front, back, 1.0 - front[3]), 1.0);
+                    }
+                    *value = sum.map(|v| v * 0.25);
+                }
+                faces[n as usize * 6..n as usize * 6 + 6].copy_from_slice(&values);
+            }
+        }
+        Self { scene, faces }
+    }
+
+    fn find_tile(&self, v_leaf: IVec3) -> Option<usize> {
+        self.scene.tiles.iter().position(|t| {
+            let rel = v_leaf - IVec3::from_array(t.origin_leaf);
+            let size = 1i32 << t.depth;
+            rel.cmpge(IVec3::ZERO).all() && rel.cmplt(IVec3::splat(size)).all()
+        })
+    }
+
+    /// Global node index of voxel `v` at `lod`, as `find_node` in common.wgsl.
+    pub fn find_node(&self, v: IVec3, lod: u32) -> Option<u32> {
+        let v_leaf = v << lod as i32;
+        let tile = self.scene.tiles[self.find_tile(v_leaf)?];
+        if lod > tile.depth {
+            return None;
+        }
+        let levels = tile.depth - lod;
+        let local = (v_leaf - IVec3::from_array(tile.origin_leaf)) >> lod as i32;
+        let mut n = tile.node_offset;
+        for level in 0..levels {
+            let b = levels - 1 - level;
+            let o = ((local.x >> b) & 1) | ((local.y >> b) & 1) << 1 | ((local.z >> b) & 1) << 2;
+            let node = self.scene.nodes[n as usize];
+            let mask = node.child_mask();
+            if (mask >> o) & 1 == 0 {
+                return None;
+            }
+            n = node.first_child + (mask & ((1 << o) - 1)).count_ones();
+        }
+        Some(n)
+    }
+
+    fn directional(&self, n: u32, dir: DVec3) -> [f64; 4] {
+        let base = n as usize * 6;
+        let w = dir * dir;
+        let fx = self.faces[base + if dir.x >= 0.0 { 0 } else { 1 }];
+        let fy = self.faces[base + if dir.y >= 0.0 { 2 } else { 3 }];
+        let fz = self.faces[base + if dir.z >= 0.0 { 4 } else { 5 }];
+        add(add(fx.map(|v| v * w.x), fy, w.y), fz, w.z)
+    }
+
+    /// Trilinear sample of level `lod` at `p_leaf` along `dir`.
+    pub fn sample_level(&self, p_leaf: DVec3, lod: u32, dir: DVec3) -> [f64; 4] {
+        let u = p_leaf / f64::from(1u32 << lod) - DVec3::splat(0.5);
+        let base = u.floor();
+        let f = u - base;
+        let i0 = base.as_ivec3();
+        let mut acc = [0.0; 4];
+        for c in 0..8 {
+            let o = IVec3::new(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+            let of = o.as_dvec3();
+            let w3 = (DVec3::ONE - f) * (DVec3::ONE - of) + f * of;
+            let w = w3.x * w3.y * w3.z;
+            if w <= 0.0 {
+                continue;
+            }
+            if let Some(n) = self.find_node(i0 + o, lod) {
+                acc = add(acc, self.directional(n, dir), w);
+            }
+        }
+        acc
+    }
+
+    /// Quadrilinear sample at fractional `lod`.
+    pub fn sample_lod(&self, p_leaf: DVec3, lod: f64, max_lod: u32, dir: DVec3) -> [f64; 4] {
+        let l = lod.clamp(0.0, f64::from(max_lod));
+        let l0 = l.floor() as u32;
+        let t = l - f64::from(l0);
+        let a = self.sample_level(p_leaf, l0, dir);
+        if t <= 0.0 || l0 >= max_lod {
+            return a;
+        }
+        let b = self.sample_level(p_leaf, l0 + 1, dir);
+        [0, 1, 2, 3].map(|k| a[k] + (b[k] - a[k]) * t)
+    }
+
+    /// One cone, as `trace_cone` in common.wgsl.
+    pub fn trace_cone(&self, p: &Params, origin_m: DVec3, dir: DVec3) -> [f64; 4] {
+        let leaf = f64::from(p.leaf_size_m);
+        let lo =
+            DVec3::new(p.scene_min_leaf[0].into(), p.scene_min_leaf[1].into(), p.scene_min_leaf[2].into());
+        let hi =
+            DVec3::new(p.scene_max_leaf[0].into(), p.scene_max_leaf[1].into(), p.scene_max_leaf[2].into());
+        let mut acc = [0.0f64; 4];
+        let mut t = leaf;
+        for _ in 0..p.max_steps {
+            if t > f64::from(p.max_distance_m) {
+                break;
+            }
+            let q = (origin_m + dir * t) / leaf;
+            if q.cmplt(lo).any() || q.cmpgt(hi).any() {
+                break;
+            }
+            let diameter = leaf.max(2.0 * t * f64::from(p.cone_tan_half));
+            let mut s = self.sample_lod(q, (diameter / leaf).log2(), p.max_lod, dir);
+            if s[3] > 1e-6 {
+                let a = 1.0 - (1.0 - s[3].min(1.0)).max(0.0).powf(f64::from(p.step_scale));
+                let k = a / s[3];
+                s = [s[0] * k, s[1] * k, s[2] * k, a];
+            }
+            acc = add(acc, s, 1.0 - acc[3]);
+            if acc[3] >= 0.995 {
+                return [acc[0] / acc[3], acc[1] / acc[3], acc[2] / acc[3], 1.0];
+            }
+            t += diameter * f64::from(p.step_scale);
+        }
+        close_cone(acc)
+    }
+
+    /// The gathered radiance of leaf `i` (irradiance / pi), as propagate.wgsl.
+    pub fn gather(&self, p: &Params, i: usize) -> DVec3 {
+        let leaf = &self.scene.leaves[i];
+        let mean = Vec3::from_slice(&leaf.normal_mean[..3]).as_dvec3();
+        let r = mean.length();
+        let n = if r < 1e-4 { DVec3::Z } else { mean / r };
+        let s = if n.z >= 0.0 { 1.0 } else { -1.0 };
+        let a = -1.0 / (s + n.z);
+        let b = n.x * n.y * a;
+        let t1 = DVec3::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
+        let t2 = DVec3::new(b, s + n.y * n.y * a, -n.y);
+        let origin = Vec3::from_slice(&leaf.center_m[..3]).as_dvec3() + n * f64::from(p.leaf_size_m);
+        let bg = DVec3::new(p.background[0].into(), p.background[1].into(), p.background[2].into());
+        let mut g = DVec3::ZERO;
+        for c in &p.cones[..p.cone_count as usize] {
+            let d = (t1 * f64::from(c[0]) + t2 * f64::from(c[1]) + n * f64::from(c[2])).normalize();
+            let s = self.trace_cone(p, origin, d);
+            g += f64::from(c[3]) * (DVec3::new(s[0], s[1], s[2]) + (1.0 - s[3]) * bg);
+        }
+        g
+    }
+}

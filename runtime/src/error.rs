@@ -1,0 +1,33 @@
+//! The runtime's one error type: every variant names what failed and, for GPU problems, what the
+//! user can do about it.
+
+/// Why a runtime operation failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    #[error(transparent)]
+    Package(#[from] grotto_format::Error),
+    #[error("{path}: {reason}")]
+    Output { path: String, reason: String },
+    #[error("{path}: unknown point format (use .ply or .las)")]
+    Extension { path: String },
+    #[error(
+        "no GPU adapter found (tried {tried}); install a Vulkan driver (on Debian: apt-get install \
+         mesa-vulkan-drivers libvulkan1 for the software rasteriser) or set WGPU_BACKEND=gl"
+    )]
+    NoAdapter { tried: String },
+    #[error("{adapter}: {what}; {hint}")]
+    Unsupported { adapter: String, what: String, hint: String },
+    #[error("GPU device: {0}")]
+    Device(String),
+    #[error("GPU error in {pass}: {message}")]
+    Gpu { pass: &'static str, message: String },
+    #[error("{package}: {problem}")]
+    Scene { package: String, problem: String },
+    #[error("camera: {0}")]
+    Camera(String),
+    #[error("setting {name}: {problem}")]
+    Setting { name: &'static str, problem: String },
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,182 @@
+//! The headless GPU context: instance, adapter choice, device with the limits grotto needs, and
+//! small helpers (uploads, read-back, captured validation errors).
+//!
+//! Adapter choice: `WGPU_BACKEND` (e.g. `vulkan`, `gl`) restricts the backends as in every wgpu
+//! program; `GROTTO_ADAPTER` picks an adapter whose name contains the given text. Otherwise a
+//! discrete GPU is preferred, then integrated, virtual, and the software rasteriser (Mesa's
+//! lavapipe or llvmpipe); tests ask for the software adapter first so their results do not depend
+//! on the machine. A missing adapter, feature or limit is an [`Error`] that says what to install or
+//! change, never a panic.
+//!
+//! Nothing here uses a 3D storage texture: voxel data lives in storage buffers, which sidesteps the
+//! GL backend's gap (it writes only slice 0 of a 3D storage texture).
+
+use std::sync::{Arc, Mutex};
+
+use wgpu::util::DeviceExt;
+
+use crate::error::{Error, Result};
+
+/// Storage buffers one compute stage binds at most (common.wgsl group 0 plus a pass's group 1).
+pub const STORAGE_BUFFERS_NEEDED: u32 = 10;
+
+/// How to choose the adapter.
+#[derive(Clone, Debug, Default)]
+pub struct GpuOptions {
+    /// Put the CPU (software) adapter first, for reproducible tests.
+    pub prefer_software: bool,
+    /// Restrict to these backends; `None` reads `WGPU_BACKEND` or allows all.
+    pub backends: Option<wgpu::Backends>,
+}
+
+/// A device and queue ready for grotto's passes.
+#[derive(Debug, Clone)]
+pub struct Gpu {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    /// Timestamp queries are available (per-pass GPU times); otherwise passes are timed on the CPU
+    /// around a blocking submit.
+    pub timestamps: bool,
+    errors: Arc<Mutex<Vec<String>>>,
+}
+
+fn rank(t: wgpu::DeviceType, prefer_software: bool) -> u32 {
+    use wgpu::DeviceType::*;
+    match (t, prefer_software) {
+        (Cpu, true) => 0,
+        (DiscreteGpu, _) => 1,
+        (IntegratedGpu, _) => 2,
+        (VirtualGpu, _) => 3,
+        (Cpu, false) => 4,
+        (Other, _) => 5,
+    }
+}
+
+impl Gpu {
+    /// Opens the best adapter under `opts` and creates a device on it.
+    pub fn new(opts: &GpuOptions) -> Result<Self> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        if let Some(b) = opts.backends {
+            desc.backends = b;
+        }
+        let backends = desc.backends;
+        let instance = wgpu::Instance::new(desc);
+        let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
+        if let Ok(name) = std::env::var("GROTTO_ADAPTER") {
+            let name = name.to_ascii_lowercase();
+            adapters.retain(|a| a.get_info().name.to_ascii_lowercase().contains(&name));
+        }
+        adapters.sort_by_key(|a| {
+            let info = a.get_info();
+            // Vulkan before GL on the same device: it has no storage-texture gaps and is faster.
+            let backend = u32::from(info.backend != wgpu::Backend::Vulkan);
+            (rank(info.device_type, opts.prefer_software), backend)
+        });
+        let adapter =
+            adapters.into_iter().next().ok_or_else(|| Error::NoAdapter { tried: format!("{backends:?}") })?;
+        let info = adapter.get_info();
+        let name = format!("{} ({:?})", info.name, info.backend);
+        let limits = adapter.limits();
+        if limits.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS_NEEDED {
+            return Err(Error::Unsupported {
+                adapter: name,
+                what: format!(
+                    "{} storage buffers per shader stage, grotto needs {STORAGE_BUFFERS_NEEDED}",
+                    limits.max_storage_buffers_per_shader_stage
+                ),
+                hint: "use a Vulkan, Metal or DX12 adapter (WGPU_BACKEND=vulkan)".into(),
+            });
+        }
+        let downlevel = adapter.get_downlevel_capabilities();
+        if !downlevel.flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS) {
+            return Err(Error::Unsupported {
+                adapter: name,
+                what: "no compute shaders".into(),
+                hint: "use a Vulkan, Metal, DX12 or OpenGL 4.3 / GLES 3.1 adapter".into(),
+            });
+        }
+        let mut features = wgpu::Features::empty();
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        if timestamps {
+            features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("grotto"),
+            required_features: features,
+            required_limits: limits,
+            ..Default::default()
+        }))
+        .map_err(|e| Error::Device(format!("{name}: {e}")))?;
+        let errors = Arc::new(Mutex::new(Vec::new()));
+        let sink = errors.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            if let Ok(mut v) = sink.lock() {
+                v.push(e.to_string());
+            }
+        }));
+        Ok(Self { device, queue, info, timestamps, errors })
+    }
+
+    /// "name (backend, type)" for logs and reports.
+    pub fn describe(&self) -> String {
+        format!("{} ({:?}, {:?})", self.info.name, self.info.backend, self.info.device_type)
+    }
+
+    /// Turns any validation error the device reported since the last check into an error naming
+    /// `pass`.
+    pub fn check(&self, pass: &'static str) -> Result<()> {
+        let mut v = self.errors.lock().map_err(|_| Error::Device("error sink poisoned".into()))?;
+        if v.is_empty() {
+            return Ok(());
+        }
+        let message = v.join("; ");
+        v.clear();
+        Err(Error::Gpu { pass, message })
+    }
+
+    pub fn buffer_init(&self, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        // wgpu refuses zero-sized bindings; an empty array still gets one 16-byte element.
+        let pad = [0u8; 16];
+        let contents = if bytes.is_empty() { &pad[..] } else { bytes };
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage,
+        })
+    }
+
+    /// Copies `size` bytes of `buffer` (which needs COPY_SRC) to the CPU, blocking.
+    pub fn read_buffer(&self, buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
+        let size = size.max(4).next_multiple_of(4);
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+        self.queue.submit([enc.finish()]);
+        let slice = staging.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| Error::Gpu { pass: "readback", message: e.to_string() })?;
+        self.check("readback")?;
+        let view =
+            slice.get_mapped_range().map_err(|e| Error::Gpu { pass: "readback", message: e.to_string() })?;
+        let out = view.to_vec();
+        drop(view);
+        staging.unmap();
+        Ok(out)
+    }
+
+    /// Blocks until all submitted work is done.
+    pub fn wait(&self) -> Result<()> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| Error::Gpu { pass: "wait", message: e.to_string() })?;
+        Ok(())
+    }
+}

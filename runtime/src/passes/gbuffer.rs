@@ -1,0 +1,106 @@
+//! G-buffer (splat.wgsl, `fs_gbuffer`): surfels as oriented discs with true depth into position,
+//! normal and albedo targets. Discs are grown to a minimum pixel radius so the demo's sampling
+//! leaves no holes.
+
+use crate::gpu::Gpu;
+use crate::gpu_types::SplatUniform;
+
+pub const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+pub const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+
+/// The targets of one image size.
+#[derive(Debug)]
+pub struct Targets {
+    pub width: u32,
+    pub height: u32,
+    pub position: wgpu::Texture,
+    pub normal: wgpu::Texture,
+    pub albedo: wgpu::Texture,
+    pub depth: wgpu::Texture,
+}
+
+impl Targets {
+    pub fn new(gpu: &Gpu, width: u32, height: u32) -> Self {
+        let make = |label, format| {
+            gpu.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            })
+        };
+        Self {
+            width,
+            height,
+            position: make("gbuffer position", POSITION_FORMAT),
+            normal: make("gbuffer normal", NORMAL_FORMAT),
+            albedo: make("gbuffer albedo", ALBEDO_FORMAT),
+            depth: make("gbuffer depth", super::shadow::DEPTH_FORMAT),
+        }
+    }
+}
+
+#[derive(Debug)]
+pub struct Gbuffer {
+    pipeline: wgpu::RenderPipeline,
+}
+
+impl Gbuffer {
+    pub fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout) -> Self {
+        let t =
+            |format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL });
+        let targets = [t(POSITION_FORMAT), t(NORMAL_FORMAT), t(ALBEDO_FORMAT)];
+        Self { pipeline: super::shadow::splat_pipeline(gpu, "gbuffer", layout, "fs_gbuffer", &targets) }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        targets: &Targets,
+        slot: u32,
+        uniforms: &wgpu::BindGroup,
+        surfels: &wgpu::Buffer,
+        surfel_count: u32,
+        timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
+    ) {
+        let views =
+            [&targets.position, &targets.normal, &targets.albedo].map(|t| t.create_view(&Default::default()));
+        let depth = targets.depth.create_view(&Default::default());
+        let attach = |view| {
+            Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })
+        };
+        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("gbuffer"),
+            color_attachments: &[attach(&views[0]), attach(&views[1]), attach(&views[2])],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: timestamps,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, uniforms, &[slot * size_of::<SplatUniform>() as u32]);
+        pass.set_vertex_buffer(0, surfels.slice(..));
+        pass.draw(0..6, 0..surfel_count);
+    }
+}

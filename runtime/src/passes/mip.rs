@@ -1,0 +1,57 @@
+//! Anisotropic mipmapping (mip.wgsl): one dispatch per node height, leaves first, so every level
+//! reads finished children (wgpu orders dispatches that write and read the same buffer).
+
+use wgpu::util::DeviceExt;
+
+use crate::gpu::Gpu;
+use crate::gpu_types::MipRange;
+
+#[derive(Debug)]
+pub struct Mip {
+    pipeline: wgpu::ComputePipeline,
+    levels: Vec<(wgpu::BindGroup, u32)>,
+}
+
+impl Mip {
+    pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout, by_height: &[u32], ranges: &[MipRange]) -> Self {
+        let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("mip"),
+            entries: &[
+                super::uniform_entry(0, wgpu::ShaderStages::COMPUTE, false),
+                super::storage_entry(1, true),
+            ],
+        });
+        let pipeline = super::compute_pipeline(gpu, "mip", crate::shaders::MIP, "mip", &[scene, &layout]);
+        let order =
+            gpu.buffer_init("mip order", bytemuck::cast_slice(by_height), wgpu::BufferUsages::STORAGE);
+        let levels = ranges
+            .iter()
+            .map(|r| {
+                let u = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("mip range"),
+                    contents: bytemuck::bytes_of(r),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
+                let bg = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("mip level"),
+                    layout: &layout,
+                    entries: &[
+                        wgpu::BindGroupEntry { binding: 0, resource: u.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: order.as_entire_binding() },
+                    ],
+                });
+                (bg, r.count)
+            })
+            .collect();
+        Self { pipeline, levels }
+    }
+
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, scene: &wgpu::BindGroup) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, scene, &[]);
+        for (bg, count) in &self.levels {
+            pass.set_bind_group(1, bg, &[]);
+            super::dispatch_linear(pass, *count);
+        }
+    }
+}

@@ -1,0 +1,35 @@
+// One bounce of propagation: every leaf gathers incoming radiance with cones over the hemisphere of
+// its mean normal (cosine-distributed directions, weights summing to 1, so the result is
+// irradiance / pi), then out = emission + direct + albedo * gather. Reads only the mip pyramid,
+// so leaves update independently; records the largest relative change for the effect plan.
+
+@compute @workgroup_size(64)
+fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear_index(gid, nwg);
+    if i >= params.leaf_count {
+        return;
+    }
+    let leaf = leaves[i];
+    let n = leaf_normal(leaf.normal_mean.xyz);
+    let frame = basis(n);
+    // Start one leaf off the surface so the cone does not see its own leaf first.
+    let origin = leaf.center_m.xyz + n * params.leaf_size_m;
+    var gathered = vec3<f32>(0.0);
+    for (var c = 0u; c < params.cone_count; c++) {
+        let cone = params.cones[c];
+        let dir = normalize(frame * cone.xyz);
+        let s = trace_cone(origin, dir, params.cone_tan_half);
+        gathered += cone.w * (s.rgb + (1.0 - s.a) * params.background.rgb);
+    }
+    var state = leaf_light[i];
+    let before = state.out.rgb;
+    let albedo = leaf.albedo_opacity.rgb;
+    let after = leaf.emission.rgb + state.direct.rgb + albedo * gathered;
+    state.gather = vec4<f32>(gathered, 0.0);
+    state.out = vec4<f32>(after, 0.0);
+    leaf_light[i] = state;
+    let scale = max(max(after.r, max(after.g, after.b)), 1e-6);
+    let diff = abs(after - before);
+    let change = max(diff.r, max(diff.g, diff.b)) / scale;
+    atomicMax(&stats.max_change_bits, bitcast<u32>(change));
+}

@@ -1,0 +1,114 @@
+// Deferred shading of the surfel G-buffer: emission + direct (analytic point and spot lights with
+// shadow maps) + indirect (albedo * gathered leaf radiance, trilinear or tricubic over leaves),
+// then exposure, ACES tonemap and sRGB. Writes linear HDR (for EXR) and packed sRGB8 (for PNG).
+
+@group(1) @binding(0) var gb_position: texture_2d<f32>;
+@group(1) @binding(1) var gb_normal: texture_2d<f32>;
+@group(1) @binding(2) var gb_albedo: texture_2d<f32>;
+@group(1) @binding(3) var<storage, read_write> out_hdr: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read_write> out_ldr: array<u32>;
+
+// Leaf gather and emission at `p_m`, interpolated over the leaves around it with weights
+// renormalised over the leaves that exist (empty cells carry no light to interpolate).
+fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 2> {
+    let u = p_m / params.leaf_size_m - vec3<f32>(0.5);
+    let base = floor(u);
+    let f = u - base;
+    let i0 = vec3<i32>(base);
+    var gather = vec3<f32>(0.0);
+    var emission = vec3<f32>(0.0);
+    var wsum = 0.0;
+    let cubic = (params.flags & FLAG_TRICUBIC) != 0u;
+    let lo = select(0, -1, cubic);
+    let hi = select(1, 2, cubic);
+    for (var z = lo; z <= hi; z++) {
+        for (var y = lo; y <= hi; y++) {
+            for (var x = lo; x <= hi; x++) {
+                let o = vec3<f32>(f32(x), f32(y), f32(z));
+                var w3: vec3<f32>;
+                if cubic {
+                    w3 = vec3<f32>(bspline(o.x - f.x), bspline(o.y - f.y), bspline(o.z - f.z));
+                } else {
+                    w3 = max(vec3<f32>(1.0) - abs(o - f), vec3<f32>(0.0));
+                }
+                let w = w3.x * w3.y * w3.z;
+                if w <= 0.0 {
+                    continue;
+                }
+                let leaf = find_leaf(i0 + vec3<i32>(x, y, z));
+                if leaf != EMPTY {
+                    gather += w * leaf_light[leaf].gather.rgb;
+                    emission += w * leaves[leaf].emission.rgb;
+                    wsum += w;
+                }
+            }
+        }
+    }
+    let inv = select(0.0, 1.0 / wsum, wsum > 1e-6);
+    return array<vec3<f32>, 2>(gather * inv, emission * inv);
+}
+
+// Cubic B-spline kernel (support 2): smooth, non-negative, sums to 1 over the 4 taps.
+fn bspline(x: f32) -> f32 {
+    let a = abs(x);
+    if a < 1.0 {
+        return (4.0 - 6.0 * a * a + 3.0 * a * a * a) / 6.0;
+    }
+    if a < 2.0 {
+        let t = 2.0 - a;
+        return t * t * t / 6.0;
+    }
+    return 0.0;
+}
+
+@compute @workgroup_size(8, 8)
+fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= params.width || gid.y >= params.height {
+        return;
+    }
+    let xy = vec2<i32>(gid.xy);
+    let idx = gid.y * params.width + gid.x;
+    let pos = textureLoad(gb_position, xy, 0);
+    var hdr = params.background.rgb;
+    if pos.w > 0.0 {
+        let p = pos.xyz;
+        let n = normalize(textureLoad(gb_normal, xy, 0).xyz);
+        let albedo = textureLoad(gb_albedo, xy, 0).rgb;
+        var color = vec3<f32>(0.0);
+        if (params.flags & FLAG_DIRECT) != 0u {
+            var irradiance = vec3<f32>(0.0);
+            for (var k = 0u; k < params.light_count; k++) {
+                let light = lights[k];
+                let to_light = light.position_kind.xyz - p;
+                let dist = max(length(to_light), 1e-4);
+                let l = to_light / dist;
+                let c = dot(n, l);
+                if c <= 0.0 {
+                    continue;
+                }
+                let falloff = spot_factor(light, l);
+                if falloff <= 0.0 {
+                    continue;
+                }
+                // Normal offset: the shadow maps hold the same discs, so look up a little in front.
+                let q = p + n * (0.25 * params.leaf_size_m);
+                let vis = shadow_visibility(light, q, distance(light.position_kind.xyz, q), params.shadow_bias_m * 0.5);
+                irradiance += light.intensity_layer.rgb * (c * falloff * vis / (dist * dist));
+            }
+            color += albedo / PI * irradiance;
+        }
+        if (params.flags & (FLAG_INDIRECT | FLAG_EMISSION)) != 0u {
+            let l = leaf_light_at(p + n * (0.5 * params.leaf_size_m));
+            if (params.flags & FLAG_INDIRECT) != 0u {
+                color += albedo * l[0];
+            }
+            if (params.flags & FLAG_EMISSION) != 0u {
+                color += l[1];
+            }
+        }
+        hdr = color;
+    }
+    out_hdr[idx] = vec4<f32>(hdr, 1.0);
+    let ldr = tonemap(hdr * params.exposure);
+    out_ldr[idx] = pack4x8unorm(vec4<f32>(ldr, 1.0));
+}

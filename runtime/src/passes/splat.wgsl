@@ -1,0 +1,95 @@
+// Surfel splatting, shared by the shadow and gbuffer passes: each surfel is an oriented disc (a
+// quad in its tangent plane, fragments outside the unit circle discarded), so depth is the disc's
+// true depth. A disc smaller than `viewport.z` pixels is grown to it so sparse samples leave no
+// holes. Keep `Splat` in sync with SplatUniform in runtime/src/gpu_types.rs.
+
+struct Splat {
+    view_proj: mat4x4<f32>,
+    eye_m: vec4<f32>,
+    // x, y: viewport size in pixels; z: smallest radius in pixels; w: proj[1][1].
+    viewport: vec4<f32>,
+    pad: array<vec4<f32>, 10>,
+}
+
+@group(0) @binding(0) var<uniform> splat: Splat;
+
+struct VsOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) disc: vec2<f32>,
+    @location(1) world: vec3<f32>,
+    @location(2) normal_spread: vec4<f32>,
+    @location(3) color: vec4<f32>,
+}
+
+fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
+    let lo = c / 12.92;
+    let hi = pow((c + vec3<f32>(0.055)) / 1.055, vec3<f32>(2.4));
+    return select(hi, lo, c <= vec3<f32>(0.04045));
+}
+
+@vertex
+fn vs(
+    @builtin(vertex_index) vi: u32,
+    @location(0) position_radius: vec4<f32>,
+    @location(1) normal_spread: vec4<f32>,
+    @location(2) color: vec4<f32>,
+) -> VsOut {
+    var corners = array<vec2<f32>, 6>(
+        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
+    );
+    let c = corners[vi];
+    let n = normalize(normal_spread.xyz);
+    let s = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    let t1 = vec3<f32>(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
+    let t2 = vec3<f32>(b, s + n.y * n.y * a, -n.y);
+    let center_clip = splat.view_proj * vec4<f32>(position_radius.xyz, 1.0);
+    var r = position_radius.w;
+    if center_clip.w > 0.0 {
+        let px = r * splat.viewport.w * splat.viewport.y * 0.5 / center_clip.w;
+        if px < splat.viewport.z {
+            r *= splat.viewport.z / max(px, 1e-6);
+        }
+    }
+    let world = position_radius.xyz + (t1 * c.x + t2 * c.y) * r;
+    var out: VsOut;
+    out.clip = splat.view_proj * vec4<f32>(world, 1.0);
+    out.disc = c;
+    out.world = world;
+    out.normal_spread = vec4<f32>(n, normal_spread.w);
+    out.color = vec4<f32>(srgb_to_linear(color.rgb), 1.0);
+    return out;
+}
+
+@fragment
+fn fs_shadow(in: VsOut) -> @location(0) vec4<f32> {
+    if dot(in.disc, in.disc) > 1.0 {
+        discard;
+    }
+    return vec4<f32>(distance(in.world, splat.eye_m.xyz), 0.0, 0.0, 0.0);
+}
+
+struct GbufferOut {
+    @location(0) position: vec4<f32>,
+    @location(1) normal: vec4<f32>,
+    @location(2) albedo: vec4<f32>,
+}
+
+@fragment
+fn fs_gbuffer(in: VsOut) -> GbufferOut {
+    if dot(in.disc, in.disc) > 1.0 {
+        discard;
+    }
+    var n = in.normal_spread.xyz;
+    // Shade both sides: a disc seen from behind shows its back face.
+    if dot(n, splat.eye_m.xyz - in.world) < 0.0 {
+        n = -n;
+    }
+    var out: GbufferOut;
+    out.position = vec4<f32>(in.world, 1.0);
+    out.normal = vec4<f32>(n, in.normal_spread.w);
+    out.albedo = in.color;
+    return out;
+}

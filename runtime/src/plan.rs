@@ -1,0 +1,207 @@
+//! The effect plan: which passes a frame runs, decided from the scene and the renderer's state, each
+//! with the reason. The renderer executes exactly the passes marked `run` and counts dispatches, so
+//! a test can prove a skipped pass is really skipped.
+//!
+//! Rules: no point or spot lights, no shadow maps and no injection (area lights are emissive
+//! leaves); static lights, shadow maps and injection once; no light at all or a zero bounce budget,
+//! no mip and no propagation; once the largest relative change of a bounce falls under the
+//! tolerance (or the budget is spent) propagation stops until something changes; the G-buffer is
+//! re-splatted only when the camera or image size changed.
+
+use serde::Serialize;
+
+/// A pass of the frame, in execution order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Pass {
+    Shadow,
+    Inject,
+    Mip,
+    Propagate,
+    Gbuffer,
+    Shade,
+}
+
+impl Pass {
+    pub const ALL: [Pass; 6] =
+        [Pass::Shadow, Pass::Inject, Pass::Mip, Pass::Propagate, Pass::Gbuffer, Pass::Shade];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Pass::Shadow => "shadow",
+            Pass::Inject => "inject",
+            Pass::Mip => "mip",
+            Pass::Propagate => "propagate",
+            Pass::Gbuffer => "gbuffer",
+            Pass::Shade => "shade",
+        }
+    }
+}
+
+/// One pass's decision.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Step {
+    pub pass: Pass,
+    pub run: bool,
+    pub reason: String,
+}
+
+/// The decisions for one frame.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EffectPlan {
+    pub steps: Vec<Step>,
+}
+
+impl EffectPlan {
+    pub fn runs(&self, pass: Pass) -> bool {
+        self.steps.iter().any(|s| s.pass == pass && s.run)
+    }
+
+    /// One line per pass: `run  inject   3 point lights changed` or `skip ...`.
+    pub fn explain(&self) -> String {
+        let mut s = String::new();
+        for step in &self.steps {
+            s += &format!(
+                "{:4}  {:9}  {}\n",
+                if step.run { "run" } else { "skip" },
+                step.pass.name(),
+                step.reason
+            );
+        }
+        s
+    }
+}
+
+/// What the plan is decided from.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanInputs {
+    pub point_lights: usize,
+    pub spot_lights: usize,
+    pub shadows_enabled: bool,
+    pub emissive_leaves: bool,
+    /// Shadow maps and injected direct light match the current lights.
+    pub direct_valid: bool,
+    pub bounces_done: u32,
+    pub bounce_budget: u32,
+    /// Largest relative change of the last bounce, if one ran since the last change.
+    pub last_change: Option<f32>,
+    pub convergence_tolerance: f32,
+    /// A frame (G-buffer + shade) is requested, not only a light update.
+    pub frame: bool,
+    /// The G-buffer matches the requested camera and size.
+    pub gbuffer_valid: bool,
+}
+
+/// Decides the passes for one frame or light update.
+pub fn plan(i: &PlanInputs) -> EffectPlan {
+    let analytic = i.point_lights + i.spot_lights;
+    let lights_text = format!("{} point, {} spot lights", i.point_lights, i.spot_lights);
+    let mut steps = Vec::new();
+    let shadow = if analytic == 0 {
+        Step { pass: Pass::Shadow, run: false, reason: "no point or spot lights".into() }
+    } else if !i.shadows_enabled {
+        Step { pass: Pass::Shadow, run: false, reason: "shadows disabled".into() }
+    } else if i.direct_valid {
+        Step { pass: Pass::Shadow, run: false, reason: "lights unchanged: shadow maps still valid".into() }
+    } else {
+        Step { pass: Pass::Shadow, run: true, reason: format!("{lights_text} cast shadows; lights changed") }
+    };
+    steps.push(shadow);
+    steps.push(if analytic == 0 {
+        Step {
+            pass: Pass::Inject,
+            run: false,
+            reason: "no point or spot lights (area lights are emissive leaves)".into(),
+        }
+    } else if i.direct_valid {
+        Step {
+            pass: Pass::Inject,
+            run: false,
+            reason: "lights unchanged: injected direct light still valid".into(),
+        }
+    } else {
+        Step { pass: Pass::Inject, run: true, reason: format!("{lights_text}; lights changed") }
+    });
+    let any_light = analytic > 0 || i.emissive_leaves;
+    let propagate = if i.bounce_budget == 0 {
+        (false, "bounce budget is 0 (direct light only)".to_string())
+    } else if !any_light {
+        (false, "no light in the scene: nothing to propagate".to_string())
+    } else if i.bounces_done >= i.bounce_budget {
+        (false, format!("converged by budget: {} of {} bounces done", i.bounces_done, i.bounce_budget))
+    } else if let Some(c) = i.last_change.filter(|&c| c < i.convergence_tolerance) {
+        (
+            false,
+            format!("converged: last bounce changed radiance by {c:.2e} < {:.0e}", i.convergence_tolerance),
+        )
+    } else {
+        (true, format!("bounce {} of {}", i.bounces_done + 1, i.bounce_budget))
+    };
+    steps.push(Step {
+        pass: Pass::Mip,
+        run: propagate.0,
+        reason: if propagate.0 {
+            "propagation needs the radiance pyramid".into()
+        } else {
+            propagate.1.clone()
+        },
+    });
+    steps.push(Step { pass: Pass::Propagate, run: propagate.0, reason: propagate.1 });
+    steps.push(if !i.frame {
+        Step { pass: Pass::Gbuffer, run: false, reason: "light update only, no image requested".into() }
+    } else if i.gbuffer_valid {
+        Step { pass: Pass::Gbuffer, run: false, reason: "camera and size unchanged".into() }
+    } else {
+        Step { pass: Pass::Gbuffer, run: true, reason: "camera or size changed".into() }
+    });
+    steps.push(if i.frame {
+        Step { pass: Pass::Shade, run: true, reason: "image requested".into() }
+    } else {
+        Step { pass: Pass::Shade, run: false, reason: "light update only, no image requested".into() }
+    });
+    EffectPlan { steps }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn base() -> PlanInputs {
+        PlanInputs {
+            point_lights: 1,
+            spot_lights: 0,
+            shadows_enabled: true,
+            emissive_leaves: false,
+            direct_valid: false,
+            bounces_done: 0,
+            bounce_budget: 4,
+            last_change: None,
+            convergence_tolerance: 1e-3,
+            frame: true,
+            gbuffer_valid: false,
+        }
+    }
+
+    #[test]
+    fn no_point_lights_no_shadow_or_inject() {
+        let p = plan(&PlanInputs { point_lights: 0, emissive_leaves: true, ..base() });
+        assert!(!p.runs(Pass::Shadow) && !p.runs(Pass::Inject));
+        assert!(p.runs(Pass::Propagate), "emission still propagates");
+    }
+
+    #[test]
+    fn converged_stops_propagation() {
+        let p = plan(&PlanInputs { direct_valid: true, bounces_done: 2, last_change: Some(1e-5), ..base() });
+        assert!(!p.runs(Pass::Mip) && !p.runs(Pass::Propagate) && !p.runs(Pass::Shadow));
+        assert!(p.explain().contains("converged"));
+        let p = plan(&PlanInputs { direct_valid: true, bounces_done: 2, last_change: Some(0.1), ..base() });
+        assert!(p.runs(Pass::Propagate));
+    }
+
+    #[test]
+    fn dark_scene_propagates_nothing() {
+        let p = plan(&PlanInputs { point_lights: 0, ..base() });
+        assert!(!p.runs(Pass::Propagate) && !p.runs(Pass::Mip));
+        assert!(p.runs(Pass::Shade));
+    }
+}

@@ -1,0 +1,786 @@
+//! The renderer: uploads a [`SceneData`], builds the passes once, and per call runs exactly the
+//! passes the effect plan marks `run` (counting each dispatch and timing it with GPU timestamps
+//! where the adapter has them).
+//!
+//! Light transport state lives on the GPU between calls: injected direct light, the gathered
+//! indirect light and the outgoing radiance of every leaf. Each light update adds one bounce:
+//! `out_(k+1) = emission + direct + albedo * gather(out_k)`, so with albedo < 1 the radiance stays
+//! bounded and converges to the fixed point.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use glam::{Mat4, Vec3};
+use serde::Serialize;
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::gpu::Gpu;
+use crate::gpu_types::{LeafLightGpu, LightGpu, MAX_CONES, Params, SplatUniform, flags};
+use crate::passes::{self, gbuffer, shade, shadow};
+use crate::plan::{self, EffectPlan, Pass, PlanInputs};
+use crate::scene_data::SceneData;
+
+/// How indirect light is filtered at a pixel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum IndirectFilter {
+    Trilinear,
+    Tricubic,
+    Off,
+}
+
+/// The quality knobs of the runtime.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Settings {
+    /// Cones per leaf gather, 1..=16.
+    pub cones: u32,
+    /// Multiplies each cone's half-angle (1 = cones just tile the hemisphere's solid angle).
+    pub cone_aperture_scale: f32,
+    /// Step along a cone as a fraction of its current diameter.
+    pub step_scale: f32,
+    /// Longest cone, metres (`None`: the scene diagonal).
+    pub max_distance_m: Option<f32>,
+    pub max_steps: u32,
+    /// Bounce budget: propagation passes before the plan stops them.
+    pub bounces: u32,
+    /// Propagation stops once a bounce changes no leaf's radiance by more than this (relative).
+    pub convergence_tolerance: f32,
+    pub shadows: bool,
+    pub shadow_map_size: u32,
+    pub indirect: IndirectFilter,
+    /// Direct light at pixels (off: only indirect and emission, for tests).
+    pub direct: bool,
+    pub exposure: f32,
+    /// Radiance where a pixel or a cone sees nothing (the environment before SH lands), linear RGB.
+    pub background: [f32; 3],
+    /// Smallest splat radius in pixels (hole filling).
+    pub min_splat_px: f32,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            cones: 6,
+            cone_aperture_scale: 1.0,
+            step_scale: 0.5,
+            max_distance_m: None,
+            max_steps: 256,
+            bounces: 8,
+            convergence_tolerance: 1e-3,
+            shadows: true,
+            shadow_map_size: 512,
+            indirect: IndirectFilter::Trilinear,
+            direct: true,
+            exposure: 1.0,
+            background: [0.0; 3],
+            min_splat_px: 0.75,
+        }
+    }
+}
+
+impl Settings {
+    pub fn validate(&self) -> Result<()> {
+        if !(1..=MAX_CONES as u32).contains(&self.cones) {
+            return Err(Error::Setting {
+                name: "cones",
+                problem: format!("{} is outside 1..=16", self.cones),
+            });
+        }
+        if !(self.step_scale > 0.05 && self.step_scale <= 4.0) {
+            return Err(Error::Setting {
+                name: "step_scale",
+                problem: format!("{} is outside 0.05..=4", self.step_scale),
+            });
+        }
+        if !(self.cone_aperture_scale > 0.05 && self.cone_aperture_scale <= 4.0) {
+            return Err(Error::Setting {
+                name: "cone_aperture_scale",
+                problem: "must be in 0.05..=4".into(),
+            });
+        }
+        if !(16..=8192).contains(&self.shadow_map_size) {
+            return Err(Error::Setting { name: "shadow_map_size", problem: "must be in 16..=8192".into() });
+        }
+        if !(self.exposure.is_finite() && self.exposure > 0.0) {
+            return Err(Error::Setting { name: "exposure", problem: "must be finite and positive".into() });
+        }
+        Ok(())
+    }
+}
+
+/// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
+/// to the hemisphere), equal weights summing to 1, and the half-angle tangent that makes the cones
+/// cover the hemisphere's solid angle (2 pi / n each).
+pub fn cone_set(n: u32, aperture_scale: f32) -> (Vec<[f32; 4]>, f32) {
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    let dirs = (0..n)
+        .map(|i| {
+            let u = (i as f32 + 0.5) / n as f32;
+            let r = u.sqrt();
+            let phi = i as f32 * golden;
+            let d = Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u).max(0.0).sqrt()).normalize();
+            [d.x, d.y, d.z, 1.0 / n as f32]
+        })
+        .collect();
+    let cos_half = 1.0 - 1.0 / n as f32;
+    let half = (cos_half.clamp(-1.0, 1.0).acos() * aperture_scale).min(1.45);
+    (dirs, half.tan())
+}
+
+/// One rendered image.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    /// Linear radiance, RGBA f32, rows top to bottom.
+    pub hdr: Vec<[f32; 4]>,
+    /// Tonemapped sRGB8 RGBA.
+    pub ldr: Vec<[u8; 4]>,
+}
+
+/// Per-pass counters and the last measured GPU time.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PassStats {
+    /// How many times each pass was recorded (a skipped pass stays at zero).
+    pub dispatches: BTreeMap<Pass, u64>,
+    /// GPU milliseconds of each pass's last run (timestamp queries), or CPU wall time of the
+    /// submission when the adapter has none.
+    pub last_ms: BTreeMap<Pass, f64>,
+    pub bounces_done: u32,
+    pub last_change: Option<f32>,
+}
+
+#[derive(Debug)]
+struct View {
+    camera: Camera,
+    targets: gbuffer::Targets,
+    outputs: shade::Outputs,
+}
+
+/// Uploaded scene, passes and light state.
+#[derive(Debug)]
+pub struct Renderer {
+    gpu: Gpu,
+    settings: Settings,
+    leaf_count: u32,
+    node_count: u32,
+    surfel_count: u32,
+    leaf_size_m: f32,
+    scene_diag_m: f32,
+    base_params: Params,
+    point_lights: usize,
+    spot_lights: usize,
+    emissive: bool,
+    shadow_layers: Vec<Mat4>,
+    lights_gpu: Vec<LightGpu>,
+    params: wgpu::Buffer,
+    leaf_light: wgpu::Buffer,
+    faces: wgpu::Buffer,
+    stats: wgpu::Buffer,
+    surfels: wgpu::Buffer,
+    splat_uniforms: wgpu::Buffer,
+    splat_group: wgpu::BindGroup,
+    shadow_distance: wgpu::Texture,
+    shadow_depth: wgpu::TextureView,
+    scene_group: wgpu::BindGroup,
+    inject: passes::inject::Inject,
+    mip: passes::mip::Mip,
+    propagate: passes::propagate::Propagate,
+    shadow: shadow::Shadow,
+    gbuffer: gbuffer::Gbuffer,
+    shade: shade::Shade,
+    view: Option<View>,
+    direct_valid: bool,
+    stats_now: PassStats,
+    queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+}
+
+const STORAGE: wgpu::BufferUsages =
+    wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC).union(wgpu::BufferUsages::COPY_DST);
+
+impl Renderer {
+    pub fn new(gpu: &Gpu, scene: &SceneData, settings: Settings) -> Result<Self> {
+        settings.validate()?;
+        let limits = gpu.device.limits();
+        let faces_bytes = scene.nodes.len() as u64 * 6 * 16;
+        if faces_bytes > limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) {
+            return Err(Error::Unsupported {
+                adapter: gpu.describe(),
+                what: format!(
+                    "the radiance pyramid needs a {faces_bytes}-byte storage buffer, the adapter binds at most {}",
+                    limits.max_storage_buffer_binding_size
+                ),
+                hint: "use a larger leaf size (grotto-pack build --leaf-m) or a GPU with larger buffers"
+                    .into(),
+            });
+        }
+        let (lo, hi) = scene.bounds_leaf();
+        let leaf = scene.leaf_size_m.max(1e-6);
+        let scene_diag_m = ((hi - lo) * leaf).length().max(leaf);
+
+        // Lights and their shadow layers.
+        let mut lights_gpu = Vec::new();
+        let mut shadow_layers = Vec::new();
+        // Light position and projection scale (1 / tan(fov / 2)) of each shadow layer.
+        let mut shadow_eyes: Vec<(Vec3, f32)> = Vec::new();
+        let near = (0.05 * leaf).max(1e-4);
+        let far = scene_diag_m * 2.0 + 1.0;
+        for l in &scene.lights {
+            let first = if settings.shadows { shadow_layers.len() as f32 } else { -1.0 };
+            let p = l.position_m;
+            match l.spot {
+                None => {
+                    if settings.shadows {
+                        for (fwd, up) in [
+                            (Vec3::X, Vec3::Y),
+                            (Vec3::NEG_X, Vec3::Y),
+                            (Vec3::Y, Vec3::Z),
+                            (Vec3::NEG_Y, Vec3::Z),
+                            (Vec3::Z, Vec3::Y),
+                            (Vec3::NEG_Z, Vec3::Y),
+                        ] {
+                            let proj = Mat4::perspective_rh(std::f32::consts::FRAC_PI_2, 1.0, near, far);
+                            shadow_layers.push(proj * Mat4::look_at_rh(p, p + fwd, up));
+                            shadow_eyes.push((p, 1.0));
+                        }
+                    }
+                    lights_gpu.push(LightGpu {
+                        position_kind: p.extend(0.0).to_array(),
+                        intensity_layer: l.intensity_w_sr.extend(first).to_array(),
+                        direction_cos_outer: [0.0, 0.0, -1.0, -1.0],
+                        params: [-1.0, 0.0, 0.0, 0.0],
+                    });
+                }
+                Some(s) => {
+                    let outer = s.outer_angle_rad.clamp(1e-3, 1.48);
+                    let inner = s.inner_angle_rad.clamp(0.0, outer);
+                    if settings.shadows {
+                        let up = if s.direction.cross(Vec3::Z).length() < 1e-3 { Vec3::Y } else { Vec3::Z };
+                        let proj = Mat4::perspective_rh(2.0 * outer, 1.0, near, far);
+                        shadow_layers.push(proj * Mat4::look_at_rh(p, p + s.direction, up));
+                        shadow_eyes.push((p, 1.0 / outer.tan()));
+                    }
+                    lights_gpu.push(LightGpu {
+                        position_kind: p.extend(1.0).to_array(),
+                        intensity_layer: l.intensity_w_sr.extend(first).to_array(),
+                        direction_cos_outer: s.direction.extend(outer.cos()).to_array(),
+                        params: [inner.cos(), 0.0, 0.0, 0.0],
+                    });
+                }
+            }
+        }
+        let point_lights = scene.lights.iter().filter(|l| l.spot.is_none()).count();
+        let spot_lights = scene.lights.len() - point_lights;
+
+        let (cones, tan_half) = cone_set(settings.cones, settings.cone_aperture_scale);
+        let mut cone_arr = [[0.0f32; 4]; MAX_CONES];
+        cone_arr[..cones.len()].copy_from_slice(&cones);
+        let base_params = Params {
+            leaf_size_m: leaf,
+            tile_count: scene.tiles.len() as u32,
+            leaf_count: scene.leaves.len() as u32,
+            light_count: lights_gpu.len() as u32,
+            cone_count: settings.cones,
+            cone_tan_half: tan_half,
+            step_scale: settings.step_scale,
+            max_distance_m: settings.max_distance_m.unwrap_or(scene_diag_m),
+            max_steps: settings.max_steps,
+            max_lod: scene.max_lod(),
+            shadow_size: settings.shadow_map_size,
+            flags: 0,
+            width: 0,
+            height: 0,
+            exposure: settings.exposure,
+            shadow_bias_m: 1.5 * leaf,
+            scene_min_leaf: lo.extend(0.0).to_array(),
+            scene_max_leaf: hi.extend(0.0).to_array(),
+            background: Vec3::from_array(settings.background).extend(0.0).to_array(),
+            cones: cone_arr,
+        };
+
+        let params = gpu.buffer_init(
+            "params",
+            bytemuck::bytes_of(&base_params),
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
+        let tiles = gpu.buffer_init("tiles", bytemuck::cast_slice(&scene.tiles), STORAGE);
+        let nodes = gpu.buffer_init("nodes", bytemuck::cast_slice(&scene.nodes), STORAGE);
+        let leaves = gpu.buffer_init("leaves", bytemuck::cast_slice(&scene.leaves), STORAGE);
+        // Initial light state: out = emission (no direct, no gather yet).
+        let initial: Vec<LeafLightGpu> =
+            scene.leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect();
+        let leaf_light = gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial), STORAGE);
+        let faces = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("faces"),
+            size: faces_bytes.max(16),
+            usage: STORAGE,
+            mapped_at_creation: false,
+        });
+        let lights_buf = gpu.buffer_init("lights", bytemuck::cast_slice(&lights_gpu), STORAGE);
+        let mats: Vec<[[f32; 4]; 4]> = shadow_layers.iter().map(|m| m.to_cols_array_2d()).collect();
+        let shadow_mats = gpu.buffer_init("shadow matrices", bytemuck::cast_slice(&mats), STORAGE);
+        let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE);
+        let surfels =
+            gpu.buffer_init("surfels", bytemuck::cast_slice(&scene.surfels), wgpu::BufferUsages::VERTEX);
+
+        let size = if shadow_layers.is_empty() { 1 } else { settings.shadow_map_size };
+        let shadow_distance = gpu.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("shadow distance"),
+            size: wgpu::Extent3d {
+                width: size,
+                height: size,
+                depth_or_array_layers: shadow_layers.len().max(1) as u32,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: shadow::DISTANCE_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let shadow_depth = gpu
+            .device
+            .create_texture(&wgpu::TextureDescriptor {
+                label: Some("shadow depth"),
+                size: wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: shadow::DEPTH_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            })
+            .create_view(&Default::default());
+        let shadow_view = shadow_distance.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+
+        let scene_layout = passes::scene_layout(gpu);
+        let buffers =
+            [&params, &tiles, &nodes, &leaves, &leaf_light, &faces, &lights_buf, &shadow_mats, &stats];
+        let mut entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+            .collect();
+        entries.push(wgpu::BindGroupEntry {
+            binding: 9,
+            resource: wgpu::BindingResource::TextureView(&shadow_view),
+        });
+        let scene_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("scene"),
+            layout: &scene_layout,
+            entries: &entries,
+        });
+
+        let splat_layout = shadow::splat_layout(gpu);
+        let splat_uniforms = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("splat uniforms"),
+            size: (shadow_layers.len() as u64 + 1) * size_of::<SplatUniform>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let splat_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("splat"),
+            layout: &splat_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &splat_uniforms,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(size_of::<SplatUniform>() as u64),
+                }),
+            }],
+        });
+        // Shadow layer uniforms never change for static lights: write them once.
+        for (i, (m, (eye, scale))) in shadow_layers.iter().zip(&shadow_eyes).enumerate() {
+            let u = SplatUniform {
+                view_proj: m.to_cols_array_2d(),
+                eye_m: eye.extend(1.0).to_array(),
+                viewport: [size as f32, size as f32, settings.min_splat_px, *scale],
+                pad: [[0.0; 4]; 10],
+            };
+            gpu.queue.write_buffer(
+                &splat_uniforms,
+                (i * size_of::<SplatUniform>()) as u64,
+                bytemuck::bytes_of(&u),
+            );
+        }
+
+        let (by_height, ranges) = scene.nodes_by_height();
+        let queries = gpu.timestamps.then(|| {
+            let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("pass times"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2 * Pass::ALL.len() as u32,
+            });
+            let buf = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pass times"),
+                size: 16 * Pass::ALL.len() as u64,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            (set, buf)
+        });
+        let r = Self {
+            inject: passes::inject::Inject::new(gpu, &scene_layout),
+            mip: passes::mip::Mip::new(gpu, &scene_layout, &by_height, &ranges),
+            propagate: passes::propagate::Propagate::new(gpu, &scene_layout),
+            shadow: shadow::Shadow::new(gpu, &splat_layout),
+            gbuffer: gbuffer::Gbuffer::new(gpu, &splat_layout),
+            shade: shade::Shade::new(gpu, &scene_layout),
+            gpu: gpu.clone(),
+            settings,
+            leaf_count: scene.leaves.len() as u32,
+            node_count: scene.nodes.len() as u32,
+            surfel_count: scene.surfels.len() as u32,
+            leaf_size_m: leaf,
+            scene_diag_m,
+            base_params,
+            point_lights,
+            spot_lights,
+            emissive: scene.has_emission(),
+            shadow_layers,
+            lights_gpu,
+            params,
+            leaf_light,
+            faces,
+            stats,
+            surfels,
+            splat_uniforms,
+            splat_group,
+            shadow_distance,
+            shadow_depth,
+            scene_group,
+            view: None,
+            direct_valid: false,
+            stats_now: PassStats::default(),
+            queries,
+        };
+        gpu.check("upload")?;
+        Ok(r)
+    }
+
+    /// The compute parameters of a light update (what the CPU reference needs).
+    pub fn params(&self) -> Params {
+        self.frame_params(None)
+    }
+
+    pub fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    pub fn stats(&self) -> &PassStats {
+        &self.stats_now
+    }
+
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
+    }
+
+    /// Forget converged light so propagation runs again (e.g. after the bounce budget changes).
+    pub fn set_bounce_budget(&mut self, bounces: u32) {
+        self.settings.bounces = bounces;
+    }
+
+    /// Marks the lights changed: the next update re-renders shadow maps and re-injects.
+    pub fn invalidate_lights(&mut self) {
+        self.direct_valid = false;
+        self.stats_now.last_change = None;
+    }
+
+    fn inputs(&self, frame: Option<(&Camera, u32, u32)>) -> PlanInputs {
+        let gbuffer_valid = match (frame, &self.view) {
+            (Some((c, w, h)), Some(v)) => v.camera == *c && v.targets.width == w && v.targets.height == h,
+            _ => false,
+        };
+        PlanInputs {
+            point_lights: self.point_lights,
+            spot_lights: self.spot_lights,
+            shadows_enabled: self.settings.shadows,
+            emissive_leaves: self.emissive,
+            direct_valid: self.direct_valid,
+            bounces_done: self.stats_now.bounces_done,
+            bounce_budget: self.settings.bounces,
+            last_change: self.stats_now.last_change,
+            convergence_tolerance: self.settings.convergence_tolerance,
+            frame: frame.is_some(),
+            gbuffer_valid,
+        }
+    }
+
+    /// The plan the next [`Renderer::update_light`] (no camera) or [`Renderer::render`] would run.
+    pub fn plan(&self, frame: Option<(&Camera, u32, u32)>) -> EffectPlan {
+        plan::plan(&self.inputs(frame))
+    }
+
+    /// Runs the light part of the plan (shadow, inject, one bounce); returns the plan it ran.
+    pub fn update_light(&mut self) -> Result<EffectPlan> {
+        let p = self.plan(None);
+        self.execute(&p, None)?;
+        Ok(p)
+    }
+
+    /// Runs light updates until the plan stops propagating (converged or budget spent); returns
+    /// the number of bounces run.
+    pub fn settle(&mut self, mut progress: impl FnMut(u32, Option<f32>)) -> Result<u32> {
+        let start = self.stats_now.bounces_done;
+        loop {
+            let p = self.update_light()?;
+            progress(self.stats_now.bounces_done, self.stats_now.last_change);
+            if !p.runs(Pass::Propagate) {
+                return Ok(self.stats_now.bounces_done - start);
+            }
+        }
+    }
+
+    /// Renders one frame (running whatever light work the plan asks for first: progressive, at
+    /// most one bounce per frame).
+    pub fn render(&mut self, camera: &Camera, width: u32, height: u32) -> Result<(Frame, EffectPlan)> {
+        camera.validate()?;
+        if width == 0 || height == 0 || width > 16384 || height > 16384 {
+            return Err(Error::Setting {
+                name: "size",
+                problem: format!("{width}x{height} is outside 1..=16384"),
+            });
+        }
+        let p = self.plan(Some((camera, width, height)));
+        self.execute(&p, Some((camera, width, height)))?;
+        let view = self.view.as_ref().ok_or(Error::Gpu { pass: "shade", message: "no view".into() })?;
+        let pixels = u64::from(width) * u64::from(height);
+        let hdr_bytes = self.gpu.read_buffer(&view.outputs.hdr, pixels * 16)?;
+        let ldr_bytes = self.gpu.read_buffer(&view.outputs.ldr, pixels * 4)?;
+        let hdr: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&hdr_bytes[..(pixels * 16) as usize]);
+        let ldr: Vec<[u8; 4]> = bytemuck::pod_collect_to_vec(&ldr_bytes[..(pixels * 4) as usize]);
+        Ok((Frame { width, height, hdr, ldr }, p))
+    }
+
+    fn frame_params(&self, size: Option<(u32, u32)>) -> Params {
+        let mut p = self.base_params;
+        let s = &self.settings;
+        let mut f = flags::EMISSION;
+        if s.direct && !self.lights_gpu.is_empty() {
+            f |= flags::DIRECT;
+        }
+        if s.shadows && !self.shadow_layers.is_empty() {
+            f |= flags::SHADOWS;
+        }
+        match s.indirect {
+            IndirectFilter::Trilinear => f |= flags::INDIRECT,
+            IndirectFilter::Tricubic => f |= flags::INDIRECT | flags::TRICUBIC,
+            IndirectFilter::Off => {}
+        }
+        p.flags = f;
+        if let Some((w, h)) = size {
+            p.width = w;
+            p.height = h;
+        }
+        p
+    }
+
+    fn timestamp_pair(&self, pass: Pass) -> Option<(&wgpu::QuerySet, u32)> {
+        let i = Pass::ALL.iter().position(|p| *p == pass).unwrap_or(0) as u32;
+        self.queries.as_ref().map(|(set, _)| (set, 2 * i))
+    }
+
+    fn execute(&mut self, plan: &EffectPlan, frame: Option<(&Camera, u32, u32)>) -> Result<()> {
+        let params = self.frame_params(frame.map(|(_, w, h)| (w, h)));
+        self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        if let Some((camera, w, h)) = frame
+            && plan.runs(Pass::Gbuffer)
+        {
+            let near = (0.02 * self.leaf_size_m).max(1e-4);
+            let far = (camera.eye_m.length() + self.scene_diag_m) * 2.0 + 1.0;
+            let m = camera.view_proj(w, h, near, far);
+            let u = SplatUniform {
+                view_proj: m.to_cols_array_2d(),
+                eye_m: camera.eye_m.extend(1.0).to_array(),
+                viewport: [
+                    w as f32,
+                    h as f32,
+                    self.settings.min_splat_px,
+                    1.0 / (camera.fov_y_deg.to_radians() * 0.5).tan(),
+                ],
+                pad: [[0.0; 4]; 10],
+            };
+            let slot = self.shadow_layers.len() as u64 * size_of::<SplatUniform>() as u64;
+            self.gpu.queue.write_buffer(&self.splat_uniforms, slot, bytemuck::bytes_of(&u));
+            let reuse = self.view.as_ref().is_some_and(|v| v.targets.width == w && v.targets.height == h);
+            if !reuse {
+                let targets = gbuffer::Targets::new(&self.gpu, w, h);
+                let outputs = self.shade.outputs(&self.gpu, &targets);
+                self.view = Some(View { camera: *camera, targets, outputs });
+            } else if let Some(v) = self.view.as_mut() {
+                v.camera = *camera;
+            }
+        }
+        let mut enc =
+            self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
+        let mut ran: Vec<Pass> = Vec::new();
+        let cpu_start = Instant::now();
+        if plan.runs(Pass::Propagate) {
+            enc.clear_buffer(&self.stats, 0, None);
+        }
+        for step in plan.steps.iter().filter(|s| s.run) {
+            let ts = self.timestamp_pair(step.pass);
+            match step.pass {
+                Pass::Shadow => {
+                    let n = self.shadow_layers.len() as u32;
+                    for layer in 0..n {
+                        let tw = ts.filter(|_| layer == 0 || layer + 1 == n).map(|(set, i)| {
+                            wgpu::RenderPassTimestampWrites {
+                                query_set: set,
+                                beginning_of_pass_write_index: (layer == 0).then_some(i),
+                                end_of_pass_write_index: (layer + 1 == n).then_some(i + 1),
+                            }
+                        });
+                        self.shadow.record(
+                            &mut enc,
+                            &self.shadow_distance,
+                            &self.shadow_depth,
+                            layer,
+                            &self.splat_group,
+                            &self.surfels,
+                            self.surfel_count,
+                            tw,
+                        );
+                    }
+                }
+                Pass::Gbuffer => {
+                    let v = self
+                        .view
+                        .as_ref()
+                        .ok_or(Error::Gpu { pass: "gbuffer", message: "no view".into() })?;
+                    let tw = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(i),
+                        end_of_pass_write_index: Some(i + 1),
+                    });
+                    let slot = self.shadow_layers.len() as u32;
+                    self.gbuffer.record(
+                        &mut enc,
+                        &v.targets,
+                        slot,
+                        &self.splat_group,
+                        &self.surfels,
+                        self.surfel_count,
+                        tw,
+                    );
+                }
+                compute => {
+                    let tw = ts.map(|(set, i)| wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(i),
+                        end_of_pass_write_index: Some(i + 1),
+                    });
+                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                        label: Some(compute.name()),
+                        timestamp_writes: tw,
+                    });
+                    match compute {
+                        Pass::Inject => self.inject.record(&mut pass, &self.scene_group, self.leaf_count),
+                        Pass::Mip => self.mip.record(&mut pass, &self.scene_group),
+                        Pass::Propagate => {
+                            self.propagate.record(&mut pass, &self.scene_group, self.leaf_count)
+                        }
+                        Pass::Shade => {
+                            let v = self
+                                .view
+                                .as_ref()
+                                .ok_or(Error::Gpu { pass: "shade", message: "no view".into() })?;
+                            self.shade.record(
+                                &mut pass,
+                                &self.scene_group,
+                                &v.outputs,
+                                v.targets.width,
+                                v.targets.height,
+                            );
+                        }
+                        Pass::Shadow | Pass::Gbuffer => {}
+                    }
+                }
+            }
+            *self.stats_now.dispatches.entry(step.pass).or_default() += 1;
+            ran.push(step.pass);
+        }
+        if let Some((set, buf)) = &self.queries
+            && !ran.is_empty()
+        {
+            enc.resolve_query_set(set, 0..2 * Pass::ALL.len() as u32, buf, 0);
+        }
+        self.gpu.queue.submit([enc.finish()]);
+        self.gpu.wait()?;
+        self.gpu.check("frame")?;
+        let cpu_ms = cpu_start.elapsed().as_secs_f64() * 1e3;
+        if let Some((_, buf)) = &self.queries {
+            if !ran.is_empty() {
+                let bytes = self.gpu.read_buffer(buf, 16 * Pass::ALL.len() as u64)?;
+                let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
+                let period = f64::from(self.gpu.queue.get_timestamp_period());
+                for pass in &ran {
+                    let i = Pass::ALL.iter().position(|p| p == pass).unwrap_or(0);
+                    let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period / 1e6;
+                    self.stats_now.last_ms.insert(*pass, dt);
+                }
+            }
+        } else if ran.len() == 1 {
+            self.stats_now.last_ms.insert(ran[0], cpu_ms);
+        }
+        if ran.contains(&Pass::Inject) || (self.point_lights + self.spot_lights == 0) {
+            self.direct_valid = true;
+        }
+        if ran.contains(&Pass::Propagate) {
+            let bytes = self.gpu.read_buffer(&self.stats, 16)?;
+            let bits = u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
+            self.stats_now.last_change = Some(f32::from_bits(bits));
+            self.stats_now.bounces_done += 1;
+        }
+        Ok(())
+    }
+
+    /// Each leaf's light state (direct, gather, out), for tests and the reference comparison.
+    pub fn read_leaf_light(&self) -> Result<Vec<LeafLightGpu>> {
+        let bytes = self.gpu.read_buffer(&self.leaf_light, u64::from(self.leaf_count) * 48)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes[..self.leaf_count as usize * 48]))
+    }
+
+    /// Overwrites each leaf's light state (tests: a known radiance field before a mip or gather).
+    pub fn write_leaf_light(&mut self, state: &[LeafLightGpu]) -> Result<()> {
+        if state.len() != self.leaf_count as usize {
+            return Err(Error::Setting {
+                name: "leaf light",
+                problem: "length differs from the leaf count".into(),
+            });
+        }
+        self.gpu.queue.write_buffer(&self.leaf_light, 0, bytemuck::cast_slice(state));
+        self.stats_now.last_change = None;
+        Ok(())
+    }
+
+    /// The six anisotropic values of every node (after a mip pass).
+    pub fn read_faces(&self) -> Result<Vec<[f32; 4]>> {
+        let n = self.node_count as usize * 6;
+        let bytes = self.gpu.read_buffer(&self.faces, n as u64 * 16)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes[..n * 16]))
+    }
+
+    /// Runs only the mip pass (tests).
+    pub fn run_mip(&mut self) -> Result<()> {
+        let p =
+            EffectPlan { steps: vec![plan::Step { pass: Pass::Mip, run: true, reason: "requested".into() }] };
+        self.execute(&p, None)
+    }
+
+    /// Runs only mip + propagate, i.e. one bounce regardless of the plan (tests).
+    pub fn run_bounce(&mut self) -> Result<()> {
+        let p = EffectPlan {
+            steps: vec![
+                plan::Step { pass: Pass::Mip, run: true, reason: "requested".into() },
+                plan::Step { pass: Pass::Propagate, run: true, reason: "requested".into() },
+            ],
+        };
+        self.execute(&p, None)
+    }
+}

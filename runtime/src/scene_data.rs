@@ -1,0 +1,306 @@
+//! The CPU-side scene the passes upload: tiles, SVO nodes with global indices, leaf attributes,
+//! surfels and lights, all in one *frame* whose origin is the first tile's f64 origin, so every
+//! f32 the GPU sees is small (survey coordinates stay f64 until here).
+//!
+//! Built from a package ([`SceneData::from_package`]) or from voxels ([`SceneData::from_voxels`],
+//! used by the test scenes and the reference). Several tiles are the normal case: tiles share one
+//! leaf grid, and each tile's origin is an integer leaf offset from the frame origin.
+
+use std::collections::BTreeMap;
+
+use glam::{DVec3, IVec3, Vec3};
+use grotto_format::spec::Rgba8;
+use grotto_format::spec::Surfel;
+use grotto_format::svo::{morton_decode, morton_encode, nodes_from_leaves};
+use grotto_format::{LightShape, Package, SectionKind};
+
+use crate::error::{Error, Result};
+use crate::gpu_types::{LeafGpu, MipRange, NodeGpu, SurfelGpu, TileGpu};
+
+/// A point or spot light in frame coordinates.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneLight {
+    pub name: String,
+    pub position_m: Vec3,
+    /// Radiant intensity per channel, W / sr (`color * power / 4 pi`; spots keep the point-light
+    /// intensity, so narrowing a spot does not brighten it).
+    pub intensity_w_sr: Vec3,
+    pub spot: Option<Spot>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spot {
+    pub direction: Vec3,
+    pub inner_angle_rad: f32,
+    pub outer_angle_rad: f32,
+}
+
+/// A named viewpoint in frame coordinates.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneCamera {
+    pub name: String,
+    pub eye_m: Vec3,
+    pub look_at_m: Vec3,
+    pub up: Vec3,
+    pub fov_y_deg: f32,
+}
+
+/// Attributes of one leaf for [`SceneData::from_voxels`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VoxelLeaf {
+    pub cell: IVec3,
+    pub albedo: Vec3,
+    pub opacity: f32,
+    /// Toksvig mean normal (zero: no preferred direction).
+    pub normal_mean: Vec3,
+    pub emission: Vec3,
+}
+
+/// Everything the renderer uploads.
+#[derive(Clone, Debug, Default)]
+pub struct SceneData {
+    pub name: String,
+    /// World position (f64) of the frame origin.
+    pub frame_origin_m: [f64; 3],
+    pub leaf_size_m: f32,
+    pub tiles: Vec<TileGpu>,
+    pub nodes: Vec<NodeGpu>,
+    pub leaves: Vec<LeafGpu>,
+    pub surfels: Vec<SurfelGpu>,
+    pub lights: Vec<SceneLight>,
+    pub cameras: Vec<SceneCamera>,
+}
+
+fn srgb_to_linear(c: u8) -> f32 {
+    let c = f32::from(c) / 255.0;
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+impl SceneData {
+    /// Frame-space bounds of all tiles in leaf units: (min, max).
+    pub fn bounds_leaf(&self) -> (Vec3, Vec3) {
+        let mut lo = Vec3::splat(f32::MAX);
+        let mut hi = Vec3::splat(f32::MIN);
+        for t in &self.tiles {
+            let o = IVec3::from_array(t.origin_leaf).as_vec3();
+            lo = lo.min(o);
+            hi = hi.max(o + Vec3::splat((1u64 << t.depth) as f32));
+        }
+        if self.tiles.is_empty() { (Vec3::ZERO, Vec3::ZERO) } else { (lo, hi) }
+    }
+
+    /// Deepest level every tile has: cones sample no coarser than this.
+    pub fn max_lod(&self) -> u32 {
+        self.tiles.iter().map(|t| t.depth).min().unwrap_or(0)
+    }
+
+    /// True when any leaf emits.
+    pub fn has_emission(&self) -> bool {
+        self.leaves.iter().any(|l| l.emission[..3].iter().any(|&e| e > 0.0))
+    }
+
+    /// Node indices ordered by height (0 = leaves) and the range of each height, for the mip pass.
+    pub fn nodes_by_height(&self) -> (Vec<u32>, Vec<MipRange>) {
+        let mut buckets: Vec<Vec<u32>> = Vec::new();
+        for t in &self.tiles {
+            for i in 0..t.node_count {
+                let n = t.node_offset + i;
+                let h = (t.depth - self.nodes[n as usize].level()) as usize;
+                if buckets.len() <= h {
+                    buckets.resize(h + 1, Vec::new());
+                }
+                buckets[h].push(n);
+            }
+        }
+        let mut order = Vec::with_capacity(self.nodes.len());
+        let mut ranges = Vec::with_capacity(buckets.len());
+        for (h, b) in buckets.into_iter().enumerate() {
+            ranges.push(MipRange {
+                first: order.len() as u32,
+                count: b.len() as u32,
+                height: h as u32,
+                pad: 0,
+            });
+            order.extend(b);
+        }
+        (order, ranges)
+    }
+
+    /// Reads every tile of `pkg` (checked SVO view, surfels, colours) and its scene.
+    pub fn from_package(pkg: &Package) -> Result<Self> {
+        let name = pkg.path().display().to_string();
+        let bad = |problem: String| Error::Scene { package: name.clone(), problem };
+        let scene = pkg.scene()?;
+        let mut out = SceneData { name: name.clone(), ..Default::default() };
+        let mut leaf_size: Option<f64> = None;
+        for tile in pkg.tiles() {
+            let Some(svo) = tile.svo()? else { continue };
+            if svo.nodes.is_empty() {
+                continue;
+            }
+            let origin = tile.origin_m();
+            let ls = tile.leaf_size_m();
+            match leaf_size {
+                None => {
+                    leaf_size = Some(ls);
+                    out.frame_origin_m = origin;
+                    out.leaf_size_m = ls as f32;
+                }
+                Some(l) if (l - ls).abs() > l * 1e-9 => {
+                    return Err(bad(format!("tile {} has leaf size {ls} m, tile 0 has {l} m", tile.index())));
+                }
+                _ => {}
+            }
+            let ls0 = leaf_size.unwrap_or(ls);
+            let mut origin_leaf = [0i32; 3];
+            for a in 0..3 {
+                let v = (origin[a] - out.frame_origin_m[a]) / ls0;
+                let r = v.round();
+                if (v - r).abs() > 1e-3 || r.abs() > f64::from(1 << 28) {
+                    return Err(bad(format!("tile {} origin is not on the shared leaf grid", tile.index())));
+                }
+                origin_leaf[a] = r as i32;
+            }
+            let depth = tile.depth();
+            let node_offset = out.nodes.len() as u32;
+            let leaf_offset = out.leaves.len() as u32;
+            for n in svo.nodes.iter() {
+                let first_child = if u32::from(n.level) == depth {
+                    leaf_offset + n.first_child
+                } else {
+                    node_offset + n.first_child
+                };
+                out.nodes.push(NodeGpu {
+                    first_child,
+                    mask_level: u32::from(n.child_mask) | u32::from(n.level) << 8,
+                });
+            }
+            let emission = svo.emission.as_deref();
+            for (li, n) in svo.nodes.iter().filter(|n| u32::from(n.level) == depth).enumerate() {
+                let cell = morton_decode(n.morton);
+                let center = (IVec3::from_array(origin_leaf)
+                    + IVec3::new(cell[0] as i32, cell[1] as i32, cell[2] as i32))
+                .as_vec3()
+                    + Vec3::splat(0.5);
+                let Rgba8(c) = svo.albedo[li];
+                let ndf = svo.ndf[li];
+                let e = emission.map_or([0.0; 3], |e| e[li].radiance);
+                out.leaves.push(LeafGpu {
+                    albedo_opacity: [
+                        srgb_to_linear(c[0]),
+                        srgb_to_linear(c[1]),
+                        srgb_to_linear(c[2]),
+                        svo.opacity[li],
+                    ],
+                    normal_mean: [ndf.mean[0], ndf.mean[1], ndf.mean[2], 0.0],
+                    center_m: (center * out.leaf_size_m).extend(0.0).to_array(),
+                    emission: [e[0], e[1], e[2], 0.0],
+                });
+            }
+            let leaf_count = out.leaves.len() as u32 - leaf_offset;
+            if leaf_count != svo.leaf_count() as u32 {
+                return Err(bad(format!("tile {}: leaf nodes and leaf arrays disagree", tile.index())));
+            }
+            out.tiles.push(TileGpu {
+                origin_leaf,
+                depth,
+                node_offset,
+                leaf_offset,
+                node_count: svo.nodes.len() as u32,
+                leaf_count,
+            });
+            // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
+            if let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? {
+                let colors = crate::export::tile_colors(&tile, surfels.len())?;
+                let shift = DVec3::from_array(origin) - DVec3::from_array(out.frame_origin_m);
+                for (s, c) in surfels.iter().zip(colors) {
+                    let p = (DVec3::from_array(s.position_tile_m.map(f64::from)) + shift).as_vec3();
+                    out.surfels.push(SurfelGpu {
+                        position_radius: p.extend(s.radius_m).to_array(),
+                        normal_spread: [s.normal[0], s.normal[1], s.normal[2], s.spread],
+                        color: [c[0], c[1], c[2], 255],
+                    });
+                }
+            }
+        }
+        let frame = DVec3::from_array(out.frame_origin_m);
+        let to_frame = |p: [f64; 3]| (DVec3::from_array(p) - frame).as_vec3();
+        for l in &scene.lights {
+            let intensity = Vec3::from_array(l.color) * (l.power_w / (4.0 * std::f32::consts::PI));
+            let (position_m, spot) = match &l.shape {
+                LightShape::Point { position_m } => (to_frame(*position_m), None),
+                LightShape::Spot { position_m, direction, inner_angle_rad, outer_angle_rad } => (
+                    to_frame(*position_m),
+                    Some(Spot {
+                        direction: Vec3::from_array(*direction).normalize_or(Vec3::NEG_Z),
+                        inner_angle_rad: *inner_angle_rad,
+                        outer_angle_rad: *outer_angle_rad,
+                    }),
+                ),
+                // Area lights are emissive leaves already.
+                LightShape::Area { .. } => continue,
+            };
+            out.lights.push(SceneLight { name: l.name.clone(), position_m, intensity_w_sr: intensity, spot });
+        }
+        for c in &scene.cameras {
+            out.cameras.push(SceneCamera {
+                name: c.name.clone(),
+                eye_m: to_frame(c.eye_m),
+                look_at_m: to_frame(c.look_at_m),
+                up: DVec3::from_array(c.up).as_vec3(),
+                fov_y_deg: c.fov_y_deg as f32,
+            });
+        }
+        Ok(out)
+    }
+
+    /// Builds tiles of `2^tile_depth` leaves from explicit leaf cells (global leaf coordinates,
+    /// frame origin at cell 0). Cells repeated keep the first.
+    pub fn from_voxels(name: &str, leaf_size_m: f32, tile_depth: u32, cells: &[VoxelLeaf]) -> Self {
+        let mut by_tile: BTreeMap<[i32; 3], Vec<(u64, VoxelLeaf)>> = BTreeMap::new();
+        for c in cells {
+            let t = c.cell >> tile_depth as i32;
+            let local = c.cell - (t << tile_depth as i32);
+            let m = morton_encode(local.x as u32, local.y as u32, local.z as u32);
+            by_tile.entry([t.z, t.y, t.x]).or_default().push((m, *c));
+        }
+        let mut out = SceneData { name: name.into(), leaf_size_m, ..Default::default() };
+        for (key, mut list) in by_tile {
+            list.sort_by_key(|(m, _)| *m);
+            list.dedup_by_key(|(m, _)| *m);
+            let codes: Vec<u64> = list.iter().map(|(m, _)| *m).collect();
+            let nodes = nodes_from_leaves(&codes, tile_depth).expect("sorted unique codes within the tile");
+            let origin = IVec3::new(key[2], key[1], key[0]) << tile_depth as i32;
+            let node_offset = out.nodes.len() as u32;
+            let leaf_offset = out.leaves.len() as u32;
+            for n in &nodes {
+                let first_child = if u32::from(n.level) == tile_depth {
+                    leaf_offset + n.first_child
+                } else {
+                    node_offset + n.first_child
+                };
+                out.nodes.push(NodeGpu {
+                    first_child,
+                    mask_level: u32::from(n.child_mask) | u32::from(n.level) << 8,
+                });
+            }
+            for (_, v) in &list {
+                out.leaves.push(LeafGpu {
+                    albedo_opacity: v.albedo.extend(v.opacity).to_array(),
+                    normal_mean: v.normal_mean.extend(0.0).to_array(),
+                    center_m: ((v.cell.as_vec3() + Vec3::splat(0.5)) * leaf_size_m).extend(0.0).to_array(),
+                    emission: v.emission.extend(0.0).to_array(),
+                });
+            }
+            out.tiles.push(TileGpu {
+                origin_leaf: origin.to_array(),
+                depth: tile_depth,
+                node_offset,
+                leaf_offset,
+                node_count: nodes.len() as u32,
+                leaf_count: list.len() as u32,
+            });
+        }
+        out
+    }
+}

@@ -1,0 +1,341 @@
+// Shared by every grotto compute pass: the scene bindings (group 0), SVO lookup, anisotropic
+// quadrilinear sampling and cone tracing. Prepended to each pass's WGSL by `shaders::compose`.
+// Keep the structs in sync with runtime/src/gpu_types.rs.
+
+const PI: f32 = 3.14159265358979;
+const EMPTY: u32 = 0xffffffffu;
+
+const FLAG_INDIRECT: u32 = 1u;
+const FLAG_DIRECT: u32 = 2u;
+const FLAG_SHADOWS: u32 = 4u;
+const FLAG_EMISSION: u32 = 8u;
+const FLAG_TRICUBIC: u32 = 16u;
+
+struct Tile {
+    origin_leaf: vec3<i32>,
+    depth: u32,
+    node_offset: u32,
+    leaf_offset: u32,
+    node_count: u32,
+    leaf_count: u32,
+}
+
+struct Node {
+    first_child: u32,
+    mask_level: u32,
+}
+
+struct Leaf {
+    albedo_opacity: vec4<f32>,
+    normal_mean: vec4<f32>,
+    center_m: vec4<f32>,
+    emission: vec4<f32>,
+}
+
+struct LeafLight {
+    direct: vec4<f32>,
+    gather: vec4<f32>,
+    out: vec4<f32>,
+}
+
+struct Light {
+    position_kind: vec4<f32>,
+    intensity_layer: vec4<f32>,
+    direction_cos_outer: vec4<f32>,
+    params: vec4<f32>,
+}
+
+struct Params {
+    leaf_size_m: f32,
+    tile_count: u32,
+    leaf_count: u32,
+    light_count: u32,
+    cone_count: u32,
+    cone_tan_half: f32,
+    step_scale: f32,
+    max_distance_m: f32,
+    max_steps: u32,
+    max_lod: u32,
+    shadow_size: u32,
+    flags: u32,
+    width: u32,
+    height: u32,
+    exposure: f32,
+    shadow_bias_m: f32,
+    scene_min_leaf: vec4<f32>,
+    scene_max_leaf: vec4<f32>,
+    background: vec4<f32>,
+    cones: array<vec4<f32>, 16>,
+}
+
+struct Stats {
+    // Largest relative change of any leaf's outgoing radiance in the last bounce, as f32 bits
+    // (non-negative floats order like their bit patterns, so atomicMax works).
+    max_change_bits: atomic<u32>,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read_write> tiles: array<Tile>;
+@group(0) @binding(2) var<storage, read_write> nodes: array<Node>;
+@group(0) @binding(3) var<storage, read_write> leaves: array<Leaf>;
+@group(0) @binding(4) var<storage, read_write> leaf_light: array<LeafLight>;
+// Six anisotropic values per node (premultiplied radiance, opacity), by travel direction:
+// 0 +x, 1 -x, 2 +y, 3 -y, 4 +z, 5 -z.
+@group(0) @binding(5) var<storage, read_write> faces: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read_write> lights: array<Light>;
+@group(0) @binding(7) var<storage, read_write> shadow_view_proj: array<mat4x4<f32>>;
+@group(0) @binding(8) var<storage, read_write> stats: Stats;
+// Distance from the light to the nearest surfel, one layer per cube face (point) or spot.
+@group(0) @binding(9) var shadow_dist: texture_2d_array<f32>;
+
+// The tile whose cube holds the leaf cell `v_leaf` (global leaf units), or EMPTY. A linear scan:
+// resident tile counts are small today; streaming will replace it with a tile grid.
+fn find_tile(v_leaf: vec3<i32>) -> u32 {
+    for (var t = 0u; t < params.tile_count; t++) {
+        let tile = tiles[t];
+        let rel = v_leaf - tile.origin_leaf;
+        let size = 1 << tile.depth;
+        if all(rel >= vec3<i32>(0)) && all(rel < vec3<i32>(size)) {
+            return t;
+        }
+    }
+    return EMPTY;
+}
+
+// The node covering voxel `v` of the global grid at `lod` (0 = leaves, voxel edge leaf * 2^lod),
+// or EMPTY where that space is empty or outside every tile.
+fn find_node(v: vec3<i32>, lod: u32) -> u32 {
+    let v_leaf = v << vec3<u32>(lod);
+    let t = find_tile(v_leaf);
+    if t == EMPTY {
+        return EMPTY;
+    }
+    let tile = tiles[t];
+    if lod > tile.depth {
+        return EMPTY;
+    }
+    let levels = tile.depth - lod;
+    let local = vec3<u32>(v_leaf - tile.origin_leaf) >> vec3<u32>(lod);
+    var n = tile.node_offset;
+    for (var level = 0u; level < levels; level++) {
+        let b = levels - 1u - level;
+        let o = ((local.x >> b) & 1u) | (((local.y >> b) & 1u) << 1u) | (((local.z >> b) & 1u) << 2u);
+        let node = nodes[n];
+        let mask = node.mask_level & 0xffu;
+        if ((mask >> o) & 1u) == 0u {
+            return EMPTY;
+        }
+        n = node.first_child + countOneBits(mask & ((1u << o) - 1u));
+    }
+    return n;
+}
+
+// Global leaf index of the leaf cell `v` (global leaf units), or EMPTY.
+fn find_leaf(v: vec3<i32>) -> u32 {
+    let n = find_node(v, 0u);
+    if n == EMPTY {
+        return EMPTY;
+    }
+    return nodes[n].first_child;
+}
+
+// The node's value seen by a ray travelling along unit `dir`: its three facing directional
+// values weighted by the squared direction components (the weights sum to 1).
+fn directional(n: u32, dir: vec3<f32>) -> vec4<f32> {
+    let w = dir * dir;
+    let base = n * 6u;
+    let fx = faces[base + select(1u, 0u, dir.x >= 0.0)];
+    let fy = faces[base + select(3u, 2u, dir.y >= 0.0)];
+    let fz = faces[base + select(5u, 4u, dir.z >= 0.0)];
+    return fx * w.x + fy * w.y + fz * w.z;
+}
+
+// Trilinear sample of level `lod` at `p_leaf` (leaf units from the frame origin): voxel centres
+// sit at (i + 0.5) * 2^lod. Empty space contributes zero radiance and zero opacity.
+fn sample_level(p_leaf: vec3<f32>, lod: u32, dir: vec3<f32>) -> vec4<f32> {
+    let scale = f32(1u << lod);
+    let u = p_leaf / scale - vec3<f32>(0.5);
+    let base = floor(u);
+    let f = u - base;
+    let i0 = vec3<i32>(base);
+    var acc = vec4<f32>(0.0);
+    for (var c = 0u; c < 8u; c++) {
+        let o = vec3<u32>(c & 1u, (c >> 1u) & 1u, (c >> 2u) & 1u);
+        let corner = vec3<f32>(o);
+        let w3 = mix(vec3<f32>(1.0) - f, f, corner);
+        let w = w3.x * w3.y * w3.z;
+        if w <= 0.0 {
+            continue;
+        }
+        let n = find_node(i0 + vec3<i32>(o), lod);
+        if n != EMPTY {
+            acc += w * directional(n, dir);
+        }
+    }
+    return acc;
+}
+
+// Quadrilinear sample: trilinear in the two levels around the fractional `lod`, blended.
+fn sample_lod(p_leaf: vec3<f32>, lod: f32, dir: vec3<f32>) -> vec4<f32> {
+    let l = clamp(lod, 0.0, f32(params.max_lod));
+    let l0 = u32(floor(l));
+    let t = l - f32(l0);
+    let a = sample_level(p_leaf, l0, dir);
+    if t <= 0.0 || l0 >= params.max_lod {
+        return a;
+    }
+    let b = sample_level(p_leaf, l0 + 1u, dir);
+    return mix(a, b, t);
+}
+
+fn outside_scene(p_leaf: vec3<f32>) -> bool {
+    return any(p_leaf < params.scene_min_leaf.xyz) || any(p_leaf > params.scene_max_leaf.xyz);
+}
+
+// Front-to-back composited cone from `origin_m` along unit `dir`: premultiplied radiance and
+// opacity. A cone that becomes opaque (>= 0.995) is renormalised by its opacity, i.e. what is
+// hidden behind the last surfaces is assumed to look like them; a cone that leaves the scene keeps
+// its transparency (the environment's share, added by the caller).
+fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32) -> vec4<f32> {
+    let leaf = params.leaf_size_m;
+    var acc = vec4<f32>(0.0);
+    var t = leaf;
+    for (var i = 0u; i < params.max_steps; i++) {
+        if t > params.max_distance_m {
+            break;
+        }
+        let p_leaf = (origin_m + dir * t) / leaf;
+        if outside_scene(p_leaf) {
+            break;
+        }
+        let diameter = max(leaf, 2.0 * t * tan_half);
+        let lod = log2(diameter / leaf);
+        var s = sample_lod(p_leaf, lod, dir);
+        // The mip values are for crossing one voxel of edge `diameter`; the step is a fraction
+        // `step_scale` of it, so correct opacity (and premultiplied radiance with it).
+        if s.a > 1e-6 {
+            let a = 1.0 - pow(max(1.0 - min(s.a, 1.0), 0.0), params.step_scale);
+            s = vec4<f32>(s.rgb * (a / s.a), a);
+        }
+        acc += (1.0 - acc.a) * s;
+        if acc.a >= 0.995 {
+            return vec4<f32>(acc.rgb / acc.a, 1.0);
+        }
+        t += diameter * params.step_scale;
+    }
+    return close_cone(acc);
+}
+
+// A cone that left the scene partly transparent after meeting surfaces has most likely seen
+// through a thin scanned wall at a coarse level (scans are shells; the rock behind them is empty
+// space in the SVO). Closure: from opacity CLOSE_LO to CLOSE_HI the missing share is filled with
+// what the cone saw (renormalised), so closed caves conserve energy; below CLOSE_LO the cone
+// escaped (an opening) and keeps its transparency for the environment.
+const CLOSE_LO: f32 = 0.2;
+const CLOSE_HI: f32 = 0.6;
+
+fn close_cone(acc: vec4<f32>) -> vec4<f32> {
+    if acc.a <= 1e-6 {
+        return acc;
+    }
+    let s = smoothstep(CLOSE_LO, CLOSE_HI, acc.a);
+    let a = mix(acc.a, 1.0, s);
+    return vec4<f32>(acc.rgb * (a / acc.a), a);
+}
+
+// Orthonormal basis around unit `n` (Duff et al. 2017, branchless).
+fn basis(n: vec3<f32>) -> mat3x3<f32> {
+    let s = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    let t1 = vec3<f32>(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
+    let t2 = vec3<f32>(b, s + n.y * n.y * a, -n.y);
+    return mat3x3<f32>(t1, t2, n);
+}
+
+// Unit mean normal of a leaf, or +z where its normals cancel (no preferred side).
+fn leaf_normal(mean: vec3<f32>) -> vec3<f32> {
+    let r = length(mean);
+    if r < 1e-4 {
+        return vec3<f32>(0.0, 0.0, 1.0);
+    }
+    return mean / r;
+}
+
+// Cosine term averaged over a leaf's normal distribution: a share |mean| of the normals at the
+// mean direction and the rest spread over its hemisphere, whose mean clamped cosine is (1 + c) / 4.
+fn ndf_cos(mean: vec3<f32>, l: vec3<f32>) -> f32 {
+    let r = min(length(mean), 1.0);
+    let c = dot(leaf_normal(mean), l);
+    return r * max(c, 0.0) + (1.0 - r) * max(1.0 + c, 0.0) * 0.25;
+}
+
+// Fraction of a light's shadow map that sees past `p` (3x3 percentage-closer filter).
+fn shadow_visibility(light: Light, p: vec3<f32>, dist: f32, bias_m: f32) -> f32 {
+    let first = light.intensity_layer.w;
+    if first < 0.0 || (params.flags & FLAG_SHADOWS) == 0u {
+        return 1.0;
+    }
+    let d = p - light.position_kind.xyz;
+    var face = 0u;
+    if light.position_kind.w < 0.5 {
+        let a = abs(d);
+        if a.x >= a.y && a.x >= a.z {
+            face = select(1u, 0u, d.x >= 0.0);
+        } else if a.y >= a.z {
+            face = select(3u, 2u, d.y >= 0.0);
+        } else {
+            face = select(5u, 4u, d.z >= 0.0);
+        }
+    }
+    let layer = u32(first) + face;
+    let clip = shadow_view_proj[layer] * vec4<f32>(p, 1.0);
+    if clip.w <= 0.0 {
+        return 1.0;
+    }
+    let ndc = clip.xy / clip.w;
+    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
+        return 1.0;
+    }
+    let size = i32(params.shadow_size);
+    let texel = clamp(vec2<i32>(uv * f32(size)), vec2<i32>(0), vec2<i32>(size - 1));
+    var lit = 0.0;
+    for (var dy = -1; dy <= 1; dy++) {
+        for (var dx = -1; dx <= 1; dx++) {
+            let q = clamp(texel + vec2<i32>(dx, dy), vec2<i32>(0), vec2<i32>(size - 1));
+            let stored = textureLoad(shadow_dist, q, i32(layer), 0).x;
+            lit += select(0.0, 1.0, dist - bias_m <= stored);
+        }
+    }
+    return lit / 9.0;
+}
+
+// Radiant intensity of a light toward `p` times its spot falloff, and the unit direction to it.
+fn spot_factor(light: Light, l: vec3<f32>) -> f32 {
+    if light.position_kind.w < 0.5 {
+        return 1.0;
+    }
+    let c = dot(-l, light.direction_cos_outer.xyz);
+    let outer = light.direction_cos_outer.w;
+    let inner = light.params.x;
+    return smoothstep(outer, max(inner, outer + 1e-4), c);
+}
+
+// ACES filmic curve (Narkowicz 2015 fit), then the sRGB transfer function.
+fn tonemap(hdr: vec3<f32>) -> vec3<f32> {
+    let x = max(hdr, vec3<f32>(0.0));
+    let mapped = clamp((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), vec3<f32>(0.0), vec3<f32>(1.0));
+    let lo = mapped * 12.92;
+    let hi = 1.055 * pow(mapped, vec3<f32>(1.0 / 2.4)) - 0.055;
+    return select(hi, lo, mapped <= vec3<f32>(0.0031308));
+}
+
+// Item index of a 1D workload dispatched as a 2D grid of 64-wide groups (dispatches are limited
+// to 65535 groups per dimension). Keep in sync with passes::dispatch_linear.
+fn linear_index(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
+    return gid.x + gid.y * nwg.x * 64u;
+}

@@ -1,0 +1,36 @@
+//! Every WGSL module the runtime creates parses and validates with naga, without a GPU.
+
+use grotto_runtime::shaders;
+
+#[test]
+fn every_wgsl_module_validates() {
+    let all = shaders::all();
+    assert_eq!(all.len(), 5, "a new shader module must be listed in shaders::all()");
+    for (name, src) in all {
+        let module = naga::front::wgsl::parse_str(&src)
+            .unwrap_or_else(|e| panic!("{name}.wgsl does not parse:\n{}", e.emit_to_string(&src)));
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::default(),
+        )
+        .validate(&module)
+        .unwrap_or_else(|e| panic!("{name}.wgsl does not validate: {e:?}"));
+    }
+}
+
+#[test]
+fn a_broken_shader_is_caught() {
+    // The check above must be able to fail: a type error in a composed module is reported.
+    let src = shaders::compose("fn f() -> u32 { return params.leaf_size_m; }");
+    let parsed = naga::front::wgsl::parse_str(&src);
+    let invalid = match parsed {
+        Err(_) => true,
+        Ok(m) => naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::default(),
+        )
+        .validate(&m)
+        .is_err(),
+    };
+    assert!(invalid);
+}
