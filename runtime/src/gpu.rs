@@ -136,8 +136,9 @@ impl Gpu {
     }
 
     pub fn buffer_init(&self, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
-        // wgpu refuses zero-sized bindings; an empty array still gets one 16-byte element.
-        let pad = [0u8; 16];
+        // wgpu refuses zero-sized bindings and shaders expect at least one element: an empty
+        // array gets 256 zero bytes, more than any element type.
+        let pad = [0u8; 256];
         let contents = if bytes.is_empty() { &pad[..] } else { bytes };
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(label),

@@ -105,11 +105,23 @@ pub struct Params {
     pub exposure: f32,
     pub shadow_bias_m: f32,
 
+    /// Shadow atlas: faces per row (each `shadow_size` texels square); yzw unused.
+    pub shadow_cols: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
+
     /// Scene bounds in leaf units (xyz), w unused.
     pub scene_min_leaf: [f32; 4],
     pub scene_max_leaf: [f32; 4],
     /// Background radiance (where a pixel sees nothing), w unused.
     pub background: [f32; 4],
+    /// Camera for shade's position reconstruction: eye (w unused), forward (w = tan of half the
+    /// vertical fov), right (w = aspect), up; frame metres.
+    pub camera_eye_m: [f32; 4],
+    pub camera_forward: [f32; 4],
+    pub camera_right: [f32; 4],
+    pub camera_up: [f32; 4],
     /// Unit cone directions in the tangent frame (z = normal), w = weight (weights sum to 1).
     pub cones: [[f32; 4]; MAX_CONES],
 }
@@ -149,7 +161,9 @@ pub struct SplatUniform {
     /// x, y: viewport size in pixels; z: smallest splat radius in pixels; w: projection scale
     /// (`proj[1][1]`) for the pixel-size estimate.
     pub viewport: [f32; 4],
-    pub pad: [[f32; 4]; 10],
+    /// x: surfel radius scale (discs overlap so sparse sampling closes); yzw unused.
+    pub splat: [f32; 4],
+    pub pad: [[f32; 4]; 9],
 }
 
 /// One surfel as an instance vertex: frame position and radius, unit normal and spread, sRGB colour.
@@ -167,7 +181,7 @@ const _: () = {
     assert!(size_of::<LeafGpu>() == 64);
     assert!(size_of::<LeafLightGpu>() == 48);
     assert!(size_of::<LightGpu>() == 64);
-    assert!(size_of::<Params>() == 64 + 48 + 16 * MAX_CONES);
+    assert!(size_of::<Params>() == 80 + 48 + 64 + 16 * MAX_CONES);
     assert!(size_of::<MipRange>() == 16);
     assert!(size_of::<SplatUniform>() == 256);
     assert!(size_of::<SurfelGpu>() == 36);

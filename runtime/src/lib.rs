@@ -15,6 +15,7 @@ pub mod image_out;
 pub mod inspect;
 pub mod passes;
 pub mod plan;
+pub mod render_job;
 pub mod renderer;
 pub mod scene_data;
 pub mod shaders;

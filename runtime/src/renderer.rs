@@ -56,6 +56,9 @@ pub struct Settings {
     pub background: [f32; 3],
     /// Smallest splat radius in pixels (hole filling).
     pub min_splat_px: f32,
+    /// Surfel radius multiplier for splatting. The stored radius (1.25 d_k / sqrt(k)) is about
+    /// 0.7 point spacings, which tiles a regular grid but leaves holes in scanner sampling.
+    pub splat_scale: f32,
 }
 
 impl Default for Settings {
@@ -75,6 +78,7 @@ impl Default for Settings {
             exposure: 1.0,
             background: [0.0; 3],
             min_splat_px: 0.75,
+            splat_scale: 1.5,
         }
     }
 }
@@ -180,8 +184,11 @@ pub struct Renderer {
     stats: wgpu::Buffer,
     surfels: wgpu::Buffer,
     splat_uniforms: wgpu::Buffer,
-    splat_group: wgpu::BindGroup,
+    /// Shadow layers' splat uniforms, then the camera's.
+    splat_groups: Vec<wgpu::BindGroup>,
     shadow_distance: wgpu::Texture,
+    shadow_face_size: u32,
+    shadow_cols: u32,
     shadow_depth: wgpu::TextureView,
     scene_group: wgpu::BindGroup,
     inject: passes::inject::Inject,
@@ -273,6 +280,17 @@ impl Renderer {
         let point_lights = scene.lights.iter().filter(|l| l.spot.is_none()).count();
         let spot_lights = scene.lights.len() - point_lights;
 
+        // Shadow atlas: faces in a near-square grid; faces shrink if the grid would exceed the
+        // adapter's largest 2D texture.
+        let layers = shadow_layers.len().max(1) as u32;
+        let shadow_cols = (f64::from(layers).sqrt().ceil() as u32).max(1);
+        let shadow_rows = layers.div_ceil(shadow_cols);
+        let max_dim = gpu.device.limits().max_texture_dimension_2d;
+        let face_size = if shadow_layers.is_empty() {
+            1
+        } else {
+            settings.shadow_map_size.min(max_dim / shadow_cols).min(max_dim / shadow_rows).max(1)
+        };
         let (cones, tan_half) = cone_set(settings.cones, settings.cone_aperture_scale);
         let mut cone_arr = [[0.0f32; 4]; MAX_CONES];
         cone_arr[..cones.len()].copy_from_slice(&cones);
@@ -287,15 +305,23 @@ impl Renderer {
             max_distance_m: settings.max_distance_m.unwrap_or(scene_diag_m),
             max_steps: settings.max_steps,
             max_lod: scene.max_lod(),
-            shadow_size: settings.shadow_map_size,
+            shadow_size: face_size,
             flags: 0,
             width: 0,
             height: 0,
             exposure: settings.exposure,
             shadow_bias_m: 1.5 * leaf,
+            shadow_cols,
+            pad0: 0,
+            pad1: 0,
+            pad2: 0,
             scene_min_leaf: lo.extend(0.0).to_array(),
             scene_max_leaf: hi.extend(0.0).to_array(),
             background: Vec3::from_array(settings.background).extend(0.0).to_array(),
+            camera_eye_m: [0.0; 4],
+            camera_forward: [0.0, 0.0, -1.0, 1.0],
+            camera_right: [1.0, 0.0, 0.0, 1.0],
+            camera_up: [0.0, 1.0, 0.0, 0.0],
             cones: cone_arr,
         };
 
@@ -324,26 +350,28 @@ impl Renderer {
         let surfels =
             gpu.buffer_init("surfels", bytemuck::cast_slice(&scene.surfels), wgpu::BufferUsages::VERTEX);
 
-        let size = if shadow_layers.is_empty() { 1 } else { settings.shadow_map_size };
+        let atlas_size = wgpu::Extent3d {
+            width: face_size * shadow_cols,
+            height: face_size * shadow_rows,
+            depth_or_array_layers: 1,
+        };
         let shadow_distance = gpu.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("shadow distance"),
-            size: wgpu::Extent3d {
-                width: size,
-                height: size,
-                depth_or_array_layers: shadow_layers.len().max(1) as u32,
-            },
+            label: Some("shadow atlas"),
+            size: atlas_size,
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: shadow::DISTANCE_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
             view_formats: &[],
         });
         let shadow_depth = gpu
             .device
             .create_texture(&wgpu::TextureDescriptor {
                 label: Some("shadow depth"),
-                size: wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 1 },
+                size: atlas_size,
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
@@ -352,10 +380,7 @@ impl Renderer {
                 view_formats: &[],
             })
             .create_view(&Default::default());
-        let shadow_view = shadow_distance.create_view(&wgpu::TextureViewDescriptor {
-            dimension: Some(wgpu::TextureViewDimension::D2Array),
-            ..Default::default()
-        });
+        let shadow_view = shadow_distance.create_view(&Default::default());
 
         let scene_layout = passes::scene_layout(gpu);
         let buffers =
@@ -382,25 +407,32 @@ impl Renderer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let splat_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("splat"),
-            layout: &splat_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &splat_uniforms,
-                    offset: 0,
-                    size: wgpu::BufferSize::new(size_of::<SplatUniform>() as u64),
-                }),
-            }],
-        });
+        // One bind group per uniform slot (static offsets: dynamic ones misbehave on some GL drivers).
+        let splat_groups: Vec<wgpu::BindGroup> = (0..=shadow_layers.len() as u64)
+            .map(|slot| {
+                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("splat"),
+                    layout: &splat_layout,
+                    entries: &[wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: &splat_uniforms,
+                            offset: slot * size_of::<SplatUniform>() as u64,
+                            size: wgpu::BufferSize::new(size_of::<SplatUniform>() as u64),
+                        }),
+                    }],
+                })
+            })
+            .collect();
         // Shadow layer uniforms never change for static lights: write them once.
+        let settings_splat = settings.splat_scale;
         for (i, (m, (eye, scale))) in shadow_layers.iter().zip(&shadow_eyes).enumerate() {
             let u = SplatUniform {
                 view_proj: m.to_cols_array_2d(),
                 eye_m: eye.extend(1.0).to_array(),
-                viewport: [size as f32, size as f32, settings.min_splat_px, *scale],
-                pad: [[0.0; 4]; 10],
+                viewport: [face_size as f32, face_size as f32, settings.min_splat_px, *scale],
+                splat: [settings_splat, 0.0, 0.0, 0.0],
+                pad: [[0.0; 4]; 9],
             };
             gpu.queue.write_buffer(
                 &splat_uniforms,
@@ -450,8 +482,10 @@ impl Renderer {
             stats,
             surfels,
             splat_uniforms,
-            splat_group,
+            splat_groups,
             shadow_distance,
+            shadow_face_size: face_size,
+            shadow_cols,
             shadow_depth,
             scene_group,
             view: None,
@@ -478,6 +512,11 @@ impl Renderer {
 
     pub fn gpu(&self) -> &Gpu {
         &self.gpu
+    }
+
+    /// Exposure of the next shade (the light state and G-buffer are kept).
+    pub fn set_exposure(&mut self, exposure: f32) {
+        self.settings.exposure = exposure;
     }
 
     /// Forget converged light so propagation runs again (e.g. after the bounce budget changes).
@@ -557,7 +596,7 @@ impl Renderer {
         Ok((Frame { width, height, hdr, ldr }, p))
     }
 
-    fn frame_params(&self, size: Option<(u32, u32)>) -> Params {
+    fn frame_params(&self, frame: Option<(&Camera, u32, u32)>) -> Params {
         let mut p = self.base_params;
         let s = &self.settings;
         let mut f = flags::EMISSION;
@@ -573,9 +612,16 @@ impl Renderer {
             IndirectFilter::Off => {}
         }
         p.flags = f;
-        if let Some((w, h)) = size {
+        if let Some((c, w, h)) = frame {
             p.width = w;
             p.height = h;
+            let forward = (c.look_at_m - c.eye_m).normalize();
+            let right = forward.cross(c.up).normalize();
+            let up = right.cross(forward);
+            p.camera_eye_m = c.eye_m.extend(0.0).to_array();
+            p.camera_forward = forward.extend((c.fov_y_deg.to_radians() * 0.5).tan()).to_array();
+            p.camera_right = right.extend(w as f32 / h as f32).to_array();
+            p.camera_up = up.extend(0.0).to_array();
         }
         p
     }
@@ -586,7 +632,7 @@ impl Renderer {
     }
 
     fn execute(&mut self, plan: &EffectPlan, frame: Option<(&Camera, u32, u32)>) -> Result<()> {
-        let params = self.frame_params(frame.map(|(_, w, h)| (w, h)));
+        let params = self.frame_params(frame);
         self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         if let Some((camera, w, h)) = frame
             && plan.runs(Pass::Gbuffer)
@@ -603,7 +649,8 @@ impl Renderer {
                     self.settings.min_splat_px,
                     1.0 / (camera.fov_y_deg.to_radians() * 0.5).tan(),
                 ],
-                pad: [[0.0; 4]; 10],
+                splat: [self.settings.splat_scale, 0.0, 0.0, 0.0],
+                pad: [[0.0; 4]; 9],
             };
             let slot = self.shadow_layers.len() as u64 * size_of::<SplatUniform>() as u64;
             self.gpu.queue.write_buffer(&self.splat_uniforms, slot, bytemuck::bytes_of(&u));
@@ -627,26 +674,23 @@ impl Renderer {
             let ts = self.timestamp_pair(step.pass);
             match step.pass {
                 Pass::Shadow => {
-                    let n = self.shadow_layers.len() as u32;
-                    for layer in 0..n {
-                        let tw = ts.filter(|_| layer == 0 || layer + 1 == n).map(|(set, i)| {
-                            wgpu::RenderPassTimestampWrites {
-                                query_set: set,
-                                beginning_of_pass_write_index: (layer == 0).then_some(i),
-                                end_of_pass_write_index: (layer + 1 == n).then_some(i + 1),
-                            }
-                        });
-                        self.shadow.record(
-                            &mut enc,
-                            &self.shadow_distance,
-                            &self.shadow_depth,
-                            layer,
-                            &self.splat_group,
-                            &self.surfels,
-                            self.surfel_count,
-                            tw,
-                        );
-                    }
+                    let tw = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(i),
+                        end_of_pass_write_index: Some(i + 1),
+                    });
+                    let layers = self.shadow_layers.len();
+                    self.shadow.record(
+                        &mut enc,
+                        &self.shadow_distance,
+                        &self.shadow_depth,
+                        self.shadow_face_size,
+                        self.shadow_cols,
+                        &self.splat_groups[..layers],
+                        &self.surfels,
+                        self.surfel_count,
+                        tw,
+                    );
                 }
                 Pass::Gbuffer => {
                     let v = self
@@ -658,12 +702,10 @@ impl Renderer {
                         beginning_of_pass_write_index: Some(i),
                         end_of_pass_write_index: Some(i + 1),
                     });
-                    let slot = self.shadow_layers.len() as u32;
                     self.gbuffer.record(
                         &mut enc,
                         &v.targets,
-                        slot,
-                        &self.splat_group,
+                        &self.splat_groups[self.shadow_layers.len()],
                         &self.surfels,
                         self.surfel_count,
                         tw,
@@ -764,6 +806,50 @@ impl Renderer {
         let n = self.node_count as usize * 6;
         let bytes = self.gpu.read_buffer(&self.faces, n as u64 * 16)?;
         Ok(bytemuck::pod_collect_to_vec(&bytes[..n * 16]))
+    }
+
+    /// Distances stored in one shadow face (row-major, face size squared), for tests.
+    pub fn read_shadow_layer(&self, layer: u32) -> Result<Vec<f32>> {
+        let size = self.shadow_face_size;
+        let row = (size * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let buf = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("shadow readback"),
+            size: u64::from(row) * u64::from(size),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        enc.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.shadow_distance,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: layer % self.shadow_cols * size,
+                    y: layer / self.shadow_cols * size,
+                    z: 0,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buf,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(size),
+                },
+            },
+            wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 1 },
+        );
+        self.gpu.queue.submit([enc.finish()]);
+        let bytes = self.gpu.read_buffer(&buf, u64::from(row) * u64::from(size))?;
+        let mut out = Vec::with_capacity((size * size) as usize);
+        for y in 0..size as usize {
+            for x in 0..size as usize {
+                let o = y * row as usize + x * 4;
+                out.push(f32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]));
+            }
+        }
+        Ok(out)
     }
 
     /// Runs only the mip pass (tests).

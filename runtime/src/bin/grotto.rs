@@ -36,6 +36,11 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Render a package with global illumination to PNG (tonemapped) or EXR (linear radiance).
+    ///
+    /// Plans the passes from the scene (see --explain), propagates light until it converges or the
+    /// bounce budget is spent, then renders the camera (or a path through named cameras).
+    Render(RenderArgs),
     /// Check a package's structure and every checksum and section; exits non-zero on any problem.
     Verify {
         package: PathBuf,
@@ -43,6 +48,202 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+}
+
+#[derive(clap::Args, Debug)]
+struct RenderArgs {
+    package: PathBuf,
+    /// A camera named in the package (default: its first camera).
+    #[arg(long, conflicts_with_all = ["eye", "path"])]
+    camera: Option<String>,
+    /// Eye position, world metres "x,y,z" (with --look-at).
+    #[arg(long, value_parser = parse_vec3, requires = "look_at")]
+    eye: Option<[f64; 3]>,
+    /// Point looked at, world metres "x,y,z".
+    #[arg(long, value_parser = parse_vec3, requires = "eye")]
+    look_at: Option<[f64; 3]>,
+    /// Up direction "x,y,z".
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,1")]
+    up: [f64; 3],
+    /// Vertical field of view, degrees (with --eye).
+    #[arg(long, default_value_t = 60.0)]
+    fov: f64,
+    /// Fly through these named cameras, comma-separated (with --frames).
+    #[arg(long, value_delimiter = ',')]
+    path: Vec<String>,
+    /// Frames along --path.
+    #[arg(long, default_value_t = 30)]
+    frames: u32,
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "800x600", value_parser = parse_size)]
+    size: (u32, u32),
+    /// Output image (.png or .exr); a path sequence appends _NNNN.
+    #[arg(long, short, default_value = "render.png")]
+    out: PathBuf,
+    /// Bounce budget (propagation passes; stops earlier once converged).
+    #[arg(long, default_value_t = 8)]
+    bounces: u32,
+    /// Cones per leaf gather (1..=16).
+    #[arg(long, default_value_t = 6)]
+    cones: u32,
+    /// Cone aperture scale (1 = cones tile the hemisphere).
+    #[arg(long, default_value_t = 1.0)]
+    aperture: f32,
+    /// Cone step as a fraction of its diameter.
+    #[arg(long, default_value_t = 0.5)]
+    step: f32,
+    /// Longest cone in metres (default: the scene diagonal).
+    #[arg(long)]
+    max_distance: Option<f32>,
+    /// Shadow map size in texels per face.
+    #[arg(long, default_value_t = 512)]
+    shadow_map: u32,
+    /// Render without shadow maps.
+    #[arg(long)]
+    no_shadows: bool,
+    /// Indirect light filter at pixels: trilinear, tricubic or off.
+    #[arg(long, default_value = "trilinear")]
+    indirect: String,
+    /// Exposure multiplier (default: automatic from the first frame).
+    #[arg(long)]
+    exposure: Option<f32>,
+    /// Relative change under which propagation counts as converged.
+    #[arg(long, default_value_t = 1e-3)]
+    tolerance: f32,
+    /// Prefer the software adapter (Mesa lavapipe/llvmpipe) over a GPU.
+    #[arg(long)]
+    software: bool,
+    /// Print the effect plan: which passes run and why.
+    #[arg(long)]
+    explain: bool,
+    /// Machine-readable summary (plan, per-pass times, dispatch counts) on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>().map_err(|e| format!("{t:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!("expected three finite numbers x,y,z, got {s:?}")),
+    }
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let w: u32 = w.parse().map_err(|e| format!("width {w:?}: {e}"))?;
+    let h: u32 = h.parse().map_err(|e| format!("height {h:?}: {e}"))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("size {w}x{h} is outside 1..=16384"));
+    }
+    Ok((w, h))
+}
+
+fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
+    use grotto_runtime::render_job::{self, CameraChoice, Progress, RenderOptions};
+    use grotto_runtime::renderer::{IndirectFilter, Settings};
+    let indirect = match a.indirect.as_str() {
+        "trilinear" => IndirectFilter::Trilinear,
+        "tricubic" => IndirectFilter::Tricubic,
+        "off" => IndirectFilter::Off,
+        other => anyhow::bail!("--indirect {other:?}: use trilinear, tricubic or off"),
+    };
+    let camera = match (a.camera, a.eye, a.look_at) {
+        (Some(name), _, _) => CameraChoice::Named(name),
+        (None, Some(eye_m), Some(look_at_m)) => {
+            CameraChoice::Explicit { eye_m, look_at_m, up: a.up, fov_y_deg: a.fov }
+        }
+        _ => CameraChoice::Default,
+    };
+    let opts = RenderOptions {
+        package: a.package,
+        camera,
+        path: a.path,
+        frames: a.frames,
+        width: a.size.0,
+        height: a.size.1,
+        out: a.out,
+        settings: Settings {
+            cones: a.cones,
+            cone_aperture_scale: a.aperture,
+            step_scale: a.step,
+            max_distance_m: a.max_distance,
+            bounces: a.bounces,
+            convergence_tolerance: a.tolerance,
+            shadows: !a.no_shadows,
+            shadow_map_size: a.shadow_map,
+            indirect,
+            ..Settings::default()
+        },
+        exposure: a.exposure,
+        gpu: grotto_runtime::gpu::GpuOptions { prefer_software: a.software, ..Default::default() },
+    };
+    let bounce_bar = indicatif::ProgressBar::new(u64::from(a.bounces)).with_style(
+        indicatif::ProgressStyle::with_template("{prefix:>9} [{bar:30}] {pos}/{len} {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bounce_bar.set_prefix("bounces");
+    let frame_bar = indicatif::ProgressBar::hidden();
+    let quiet = a.json;
+    if quiet {
+        bounce_bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let summary = render_job::run(&opts, |p| match p {
+        Progress::Bounce { done, change, .. } => {
+            bounce_bar.set_position(u64::from(done));
+            if let Some(c) = change {
+                bounce_bar.set_message(format!("change {c:.1e}"));
+            }
+        }
+        Progress::Frame { done, total } => {
+            if total > 1 && !quiet && frame_bar.is_hidden() {
+                frame_bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+                frame_bar.set_length(u64::from(total));
+                frame_bar.set_style(
+                    indicatif::ProgressStyle::with_template("{prefix:>9} [{bar:30}] {pos}/{len} {eta}")
+                        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+                );
+                frame_bar.set_prefix("frames");
+            }
+            frame_bar.set_position(u64::from(done));
+        }
+    })?;
+    bounce_bar.finish_and_clear();
+    frame_bar.finish_and_clear();
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    if a.explain {
+        println!("effect plan, first update:\n{}", summary.first_plan.explain());
+        println!("effect plan, last frame:\n{}", summary.last_plan.explain());
+    }
+    let times: Vec<String> =
+        summary.stats.last_ms.iter().map(|(p, ms)| format!("{} {ms:.1} ms", p.name())).collect();
+    println!(
+        "rendered {} ({}x{}) on {}: {} tiles, {} leaves, {} surfels; {} bounces (last change {}) in {:.1} s, frames in {:.1} s; exposure {:.3}",
+        summary.images.join(", "),
+        summary.width,
+        summary.height,
+        summary.device,
+        summary.tiles,
+        summary.leaves,
+        summary.surfels,
+        summary.bounces,
+        summary.last_change.map_or("-".into(), |c| format!("{c:.1e}")),
+        summary.settle_s,
+        summary.render_s,
+        summary.exposure
+    );
+    println!(
+        "last pass times ({}): {}",
+        if summary.timestamps { "GPU timestamps" } else { "CPU wall" },
+        times.join(", ")
+    );
+    Ok(ExitCode::SUCCESS)
 }
 
 fn main() -> ExitCode {
@@ -77,6 +278,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
+        Command::Render(args) => render(args),
         Command::Verify { package, json } => {
             let report = match Package::open(&package) {
                 Ok(pkg) => inspect::verify(&pkg),

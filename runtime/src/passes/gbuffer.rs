@@ -1,12 +1,12 @@
-//! G-buffer (splat.wgsl, `fs_gbuffer`): surfels as oriented discs with true depth into position,
+//! G-buffer (splat.wgsl, `fs_gbuffer`): surfels as oriented discs with true depth into distance,
 //! normal and albedo targets. Discs are grown to a minimum pixel radius so the demo's sampling
 //! leaves no holes.
 
 use crate::gpu::Gpu;
-use crate::gpu_types::SplatUniform;
 
-pub const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
-pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+/// Packed f32 distance and octahedral normal (splat.wgsl): 8-bit unorm targets render everywhere.
+pub const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 pub const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 
 /// The targets of one image size.
@@ -14,7 +14,7 @@ pub const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSr
 pub struct Targets {
     pub width: u32,
     pub height: u32,
-    pub position: wgpu::Texture,
+    pub distance: wgpu::Texture,
     pub normal: wgpu::Texture,
     pub albedo: wgpu::Texture,
     pub depth: wgpu::Texture,
@@ -37,7 +37,7 @@ impl Targets {
         Self {
             width,
             height,
-            position: make("gbuffer position", POSITION_FORMAT),
+            distance: make("gbuffer distance", DISTANCE_FORMAT),
             normal: make("gbuffer normal", NORMAL_FORMAT),
             albedo: make("gbuffer albedo", ALBEDO_FORMAT),
             depth: make("gbuffer depth", super::shadow::DEPTH_FORMAT),
@@ -54,7 +54,7 @@ impl Gbuffer {
     pub fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout) -> Self {
         let t =
             |format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL });
-        let targets = [t(POSITION_FORMAT), t(NORMAL_FORMAT), t(ALBEDO_FORMAT)];
+        let targets = [t(DISTANCE_FORMAT), t(NORMAL_FORMAT), t(ALBEDO_FORMAT)];
         Self { pipeline: super::shadow::splat_pipeline(gpu, "gbuffer", layout, "fs_gbuffer", &targets) }
     }
 
@@ -63,14 +63,13 @@ impl Gbuffer {
         &self,
         enc: &mut wgpu::CommandEncoder,
         targets: &Targets,
-        slot: u32,
         uniforms: &wgpu::BindGroup,
         surfels: &wgpu::Buffer,
         surfel_count: u32,
         timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
     ) {
         let views =
-            [&targets.position, &targets.normal, &targets.albedo].map(|t| t.create_view(&Default::default()));
+            [&targets.distance, &targets.normal, &targets.albedo].map(|t| t.create_view(&Default::default()));
         let depth = targets.depth.create_view(&Default::default());
         let attach = |view| {
             Some(wgpu::RenderPassColorAttachment {
@@ -99,7 +98,7 @@ impl Gbuffer {
             multiview_mask: None,
         });
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, uniforms, &[slot * size_of::<SplatUniform>() as u32]);
+        pass.set_bind_group(0, uniforms, &[]);
         pass.set_vertex_buffer(0, surfels.slice(..));
         pass.draw(0..6, 0..surfel_count);
     }

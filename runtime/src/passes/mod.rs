@@ -28,7 +28,7 @@ pub fn scene_layout(gpu: &Gpu) -> wgpu::BindGroupLayout {
     for b in 1..=8 {
         entries.push(storage_entry(b, false));
     }
-    entries.push(texture_entry(9, wgpu::TextureViewDimension::D2Array));
+    entries.push(texture_entry(9, wgpu::TextureViewDimension::D2));
     gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("scene"),
         entries: &entries,

@@ -52,7 +52,7 @@ impl Shade {
             mapped_at_creation: false,
         });
         let views =
-            [&targets.position, &targets.normal, &targets.albedo].map(|t| t.create_view(&Default::default()));
+            [&targets.distance, &targets.normal, &targets.albedo].map(|t| t.create_view(&Default::default()));
         let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("shade"),
             layout: &self.layout,

@@ -2,7 +2,7 @@
 // shadow maps) + indirect (albedo * gathered leaf radiance, trilinear or tricubic over leaves),
 // then exposure, ACES tonemap and sRGB. Writes linear HDR (for EXR) and packed sRGB8 (for PNG).
 
-@group(1) @binding(0) var gb_position: texture_2d<f32>;
+@group(1) @binding(0) var gb_distance: texture_2d<f32>;
 @group(1) @binding(1) var gb_normal: texture_2d<f32>;
 @group(1) @binding(2) var gb_albedo: texture_2d<f32>;
 @group(1) @binding(3) var<storage, read_write> out_hdr: array<vec4<f32>>;
@@ -68,11 +68,21 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let xy = vec2<i32>(gid.xy);
     let idx = gid.y * params.width + gid.x;
-    let pos = textureLoad(gb_position, xy, 0);
+    let d = unpack_f32(textureLoad(gb_distance, xy, 0));
     var hdr = params.background.rgb;
-    if pos.w > 0.0 {
-        let p = pos.xyz;
-        let n = normalize(textureLoad(gb_normal, xy, 0).xyz);
+    if d > 0.0 {
+        // Ray through the pixel centre, the same point the rasteriser interpolated.
+        let ndc = vec2<f32>(
+            (f32(gid.x) + 0.5) / f32(params.width) * 2.0 - 1.0,
+            1.0 - (f32(gid.y) + 0.5) / f32(params.height) * 2.0,
+        );
+        let t = params.camera_forward.w;
+        let ray = normalize(
+            params.camera_forward.xyz + params.camera_right.xyz * (ndc.x * t * params.camera_right.w)
+                + params.camera_up.xyz * (ndc.y * t),
+        );
+        let p = params.camera_eye_m.xyz + ray * d;
+        let n = unpack_normal(textureLoad(gb_normal, xy, 0));
         let albedo = textureLoad(gb_albedo, xy, 0).rgb;
         var color = vec3<f32>(0.0);
         if (params.flags & FLAG_DIRECT) != 0u {

@@ -3,16 +3,24 @@
 //! and shade read the layers with a 3x3 percentage-closer filter (common.wgsl).
 
 use crate::gpu::Gpu;
-use crate::gpu_types::{SplatUniform, SurfelGpu};
+use crate::gpu_types::SurfelGpu;
 
-pub const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
+/// Distance to the light as a packed f32 (splat.wgsl `pack_f32`): float targets do not render on GL.
+pub const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+
+/// Clear colour whose packed bytes read back as `f32` `v`.
+pub fn packed_clear(v: f32) -> wgpu::Color {
+    let b = v.to_bits().to_le_bytes();
+    let c = |i: usize| f64::from(b[i]) / 255.0;
+    wgpu::Color { r: c(0), g: c(1), b: c(2), a: c(3) }
+}
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// The uniform layout and instance layout both splat passes use.
 pub fn splat_layout(gpu: &Gpu) -> wgpu::BindGroupLayout {
     gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("splat"),
-        entries: &[super::uniform_entry(0, wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT, true)],
+        entries: &[super::uniform_entry(0, wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT, false)],
     })
 }
 
@@ -87,25 +95,22 @@ impl Shadow {
         Self { pipeline: splat_pipeline(gpu, "shadow", layout, "fs_shadow", &targets) }
     }
 
-    /// Renders layer `layer` (uniform slot `layer`) of `distance`.
+    /// Renders every face into its square of the atlas in one pass (one viewport per face);
+    /// `uniforms[i]` binds face i's splat uniform.
     #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
         enc: &mut wgpu::CommandEncoder,
-        distance: &wgpu::Texture,
+        atlas: &wgpu::Texture,
         depth: &wgpu::TextureView,
-        layer: u32,
-        uniforms: &wgpu::BindGroup,
+        face_size: u32,
+        cols: u32,
+        uniforms: &[wgpu::BindGroup],
         surfels: &wgpu::Buffer,
         surfel_count: u32,
         timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
     ) {
-        let view = distance.create_view(&wgpu::TextureViewDescriptor {
-            dimension: Some(wgpu::TextureViewDimension::D2),
-            base_array_layer: layer,
-            array_layer_count: Some(1),
-            ..Default::default()
-        });
+        let view = atlas.create_view(&Default::default());
         let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("shadow"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -113,7 +118,7 @@ impl Shadow {
                 depth_slice: None,
                 resolve_target: None,
                 ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color { r: 1e30, g: 0.0, b: 0.0, a: 0.0 }),
+                    load: wgpu::LoadOp::Clear(packed_clear(1e30)),
                     store: wgpu::StoreOp::Store,
                 },
             })],
@@ -130,8 +135,13 @@ impl Shadow {
             multiview_mask: None,
         });
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, uniforms, &[layer * size_of::<SplatUniform>() as u32]);
         pass.set_vertex_buffer(0, surfels.slice(..));
-        pass.draw(0..6, 0..surfel_count);
+        let s = face_size as f32;
+        for (i, group) in uniforms.iter().enumerate() {
+            let (x, y) = ((i as u32 % cols) as f32 * s, (i as u32 / cols) as f32 * s);
+            pass.set_viewport(x, y, s, s, 0.0, 1.0);
+            pass.set_bind_group(0, group, &[]);
+            pass.draw(0..6, 0..surfel_count);
+        }
     }
 }

@@ -8,7 +8,9 @@ struct Splat {
     eye_m: vec4<f32>,
     // x, y: viewport size in pixels; z: smallest radius in pixels; w: proj[1][1].
     viewport: vec4<f32>,
-    pad: array<vec4<f32>, 10>,
+    // x: surfel radius scale.
+    splat: vec4<f32>,
+    pad: array<vec4<f32>, 9>,
 }
 
 @group(0) @binding(0) var<uniform> splat: Splat;
@@ -46,7 +48,7 @@ fn vs(
     let t1 = vec3<f32>(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
     let t2 = vec3<f32>(b, s + n.y * n.y * a, -n.y);
     let center_clip = splat.view_proj * vec4<f32>(position_radius.xyz, 1.0);
-    var r = position_radius.w;
+    var r = position_radius.w * splat.splat.x;
     if center_clip.w > 0.0 {
         let px = r * splat.viewport.w * splat.viewport.y * 0.5 / center_clip.w;
         if px < splat.viewport.z {
@@ -63,16 +65,34 @@ fn vs(
     return out;
 }
 
+// f32 and unit vectors travel through Rgba8Unorm targets bit-exactly: float colour targets are not
+// renderable on every backend (GL), 8-bit unorm ones are. Unpacked in common.wgsl.
+fn pack_f32(v: f32) -> vec4<f32> {
+    return unpack4x8unorm(bitcast<u32>(v));
+}
+
+// Octahedral encoding of a unit vector in two 16-bit halves.
+fn pack_normal(n: vec3<f32>) -> vec4<f32> {
+    let l1 = abs(n.x) + abs(n.y) + abs(n.z);
+    var p = n.xy / l1;
+    if n.z < 0.0 {
+        p = (vec2<f32>(1.0) - abs(p.yx)) * select(vec2<f32>(-1.0), vec2<f32>(1.0), p >= vec2<f32>(0.0));
+    }
+    return unpack4x8unorm(pack2x16unorm(p * 0.5 + vec2<f32>(0.5)));
+}
+
 @fragment
 fn fs_shadow(in: VsOut) -> @location(0) vec4<f32> {
     if dot(in.disc, in.disc) > 1.0 {
         discard;
     }
-    return vec4<f32>(distance(in.world, splat.eye_m.xyz), 0.0, 0.0, 0.0);
+    return pack_f32(distance(in.world, splat.eye_m.xyz));
 }
 
 struct GbufferOut {
-    @location(0) position: vec4<f32>,
+    // Distance from the eye (0 = nothing), packed f32.
+    @location(0) distance: vec4<f32>,
+    // Octahedral unit normal, packed.
     @location(1) normal: vec4<f32>,
     @location(2) albedo: vec4<f32>,
 }
@@ -88,8 +108,8 @@ fn fs_gbuffer(in: VsOut) -> GbufferOut {
         n = -n;
     }
     var out: GbufferOut;
-    out.position = vec4<f32>(in.world, 1.0);
-    out.normal = vec4<f32>(n, in.normal_spread.w);
+    out.distance = pack_f32(distance(in.world, splat.eye_m.xyz));
+    out.normal = pack_normal(n);
     out.albedo = in.color;
     return out;
 }

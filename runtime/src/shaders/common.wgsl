@@ -62,9 +62,17 @@ struct Params {
     height: u32,
     exposure: f32,
     shadow_bias_m: f32,
+    shadow_cols: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
     scene_min_leaf: vec4<f32>,
     scene_max_leaf: vec4<f32>,
     background: vec4<f32>,
+    camera_eye_m: vec4<f32>,
+    camera_forward: vec4<f32>,
+    camera_right: vec4<f32>,
+    camera_up: vec4<f32>,
     cones: array<vec4<f32>, 16>,
 }
 
@@ -88,8 +96,10 @@ struct Stats {
 @group(0) @binding(6) var<storage, read_write> lights: array<Light>;
 @group(0) @binding(7) var<storage, read_write> shadow_view_proj: array<mat4x4<f32>>;
 @group(0) @binding(8) var<storage, read_write> stats: Stats;
-// Distance from the light to the nearest surfel, one layer per cube face (point) or spot.
-@group(0) @binding(9) var shadow_dist: texture_2d_array<f32>;
+// Shadow atlas: distance from the light to the nearest surfel (packed f32), one square face per
+// cube face of a point light or per spot light, `shadow_cols` faces per row. A 2D atlas rather
+// than an array texture: wgpu's GL backend neither renders nor copies into array layers.
+@group(0) @binding(9) var shadow_dist: texture_2d<f32>;
 
 // The tile whose cube holds the leaf cell `v_leaf` (global leaf units), or EMPTY. A linear scan:
 // resident tile counts are small today; streaming will replace it with a tile grid.
@@ -302,12 +312,13 @@ fn shadow_visibility(light: Light, p: vec3<f32>, dist: f32, bias_m: f32) -> f32 
         return 1.0;
     }
     let size = i32(params.shadow_size);
+    let tile = vec2<i32>(i32(layer % params.shadow_cols), i32(layer / params.shadow_cols)) * size;
     let texel = clamp(vec2<i32>(uv * f32(size)), vec2<i32>(0), vec2<i32>(size - 1));
     var lit = 0.0;
     for (var dy = -1; dy <= 1; dy++) {
         for (var dx = -1; dx <= 1; dx++) {
             let q = clamp(texel + vec2<i32>(dx, dy), vec2<i32>(0), vec2<i32>(size - 1));
-            let stored = textureLoad(shadow_dist, q, i32(layer), 0).x;
+            let stored = unpack_f32(textureLoad(shadow_dist, tile + q, 0));
             lit += select(0.0, 1.0, dist - bias_m <= stored);
         }
     }
@@ -338,4 +349,18 @@ fn tonemap(hdr: vec3<f32>) -> vec3<f32> {
 // to 65535 groups per dimension). Keep in sync with passes::dispatch_linear.
 fn linear_index(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
     return gid.x + gid.y * nwg.x * 64u;
+}
+
+// Inverses of pack_f32 / pack_normal in passes/splat.wgsl (values stored in Rgba8Unorm targets).
+fn unpack_f32(c: vec4<f32>) -> f32 {
+    return bitcast<f32>(pack4x8unorm(c));
+}
+
+fn unpack_normal(c: vec4<f32>) -> vec3<f32> {
+    let p = unpack2x16unorm(pack4x8unorm(c)) * 2.0 - vec2<f32>(1.0);
+    var n = vec3<f32>(p, 1.0 - abs(p.x) - abs(p.y));
+    let t = max(-n.z, 0.0);
+    n.x += select(t, -t, n.x >= 0.0);
+    n.y += select(t, -t, n.y >= 0.0);
+    return normalize(n);
 }

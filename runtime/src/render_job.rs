@@ -1,0 +1,216 @@
+//! `grotto render`: open a package, plan, settle the light (bounces until converged or the budget
+//! is spent), then render one image or a camera path, writing PNG or EXR atomically. The binary
+//! only parses arguments and draws progress; everything else is here so tests run the same code.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::{DVec3, Vec3};
+use grotto_format::Package;
+use serde::Serialize;
+
+use crate::camera::{self, Camera};
+use crate::error::{Error, Result};
+use crate::gpu::{Gpu, GpuOptions};
+use crate::image_out;
+use crate::plan::EffectPlan;
+use crate::renderer::{PassStats, Renderer, Settings};
+use crate::scene_data::SceneData;
+
+/// Where the camera comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CameraChoice {
+    /// A camera named in the package's scene.
+    Named(String),
+    /// World coordinates (f64, like the manifest).
+    Explicit { eye_m: [f64; 3], look_at_m: [f64; 3], up: [f64; 3], fov_y_deg: f64 },
+    /// The package's first camera, or a view of the whole scene if it has none.
+    Default,
+}
+
+/// Everything `grotto render` can be asked.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    pub package: PathBuf,
+    pub camera: CameraChoice,
+    /// Named cameras to fly through; with `frames`, renders a sequence.
+    pub path: Vec<String>,
+    pub frames: u32,
+    pub width: u32,
+    pub height: u32,
+    pub out: PathBuf,
+    pub settings: Settings,
+    /// `None`: automatic exposure (mean log luminance to middle grey).
+    pub exposure: Option<f32>,
+    pub gpu: GpuOptions,
+}
+
+/// What a render did, for `--json` and the summary line.
+#[derive(Clone, Debug, Serialize)]
+pub struct RenderSummary {
+    pub package: String,
+    pub device: String,
+    pub timestamps: bool,
+    pub images: Vec<String>,
+    pub width: u32,
+    pub height: u32,
+    pub leaves: usize,
+    pub surfels: usize,
+    pub tiles: usize,
+    pub bounces: u32,
+    pub last_change: Option<f32>,
+    pub exposure: f32,
+    pub settle_s: f64,
+    pub render_s: f64,
+    pub first_plan: EffectPlan,
+    pub last_plan: EffectPlan,
+    pub stats: PassStats,
+    pub settings: Settings,
+}
+
+/// Progress events for the binary's bars.
+#[derive(Clone, Copy, Debug)]
+pub enum Progress {
+    Bounce { done: u32, budget: u32, change: Option<f32> },
+    Frame { done: u32, total: u32 },
+}
+
+fn resolve_camera(scene: &SceneData, choice: &CameraChoice) -> Result<Camera> {
+    match choice {
+        CameraChoice::Named(name) => {
+            scene.cameras.iter().find(|c| &c.name == name).map(Camera::from_scene).ok_or_else(|| {
+                let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
+                Error::Camera(format!(
+                    "no camera named {name:?} in {} (it has: {})",
+                    scene.name,
+                    names.join(", ")
+                ))
+            })
+        }
+        CameraChoice::Explicit { eye_m, look_at_m, up, fov_y_deg } => {
+            let frame = DVec3::from_array(scene.frame_origin_m);
+            Ok(Camera {
+                eye_m: (DVec3::from_array(*eye_m) - frame).as_vec3(),
+                look_at_m: (DVec3::from_array(*look_at_m) - frame).as_vec3(),
+                up: DVec3::from_array(*up).as_vec3(),
+                fov_y_deg: *fov_y_deg as f32,
+            })
+        }
+        CameraChoice::Default => {
+            if let Some(c) = scene.cameras.first() {
+                return Ok(Camera::from_scene(c));
+            }
+            let (lo, hi) = scene.bounds_leaf();
+            let (lo, hi) = (lo * scene.leaf_size_m, hi * scene.leaf_size_m);
+            let center = (lo + hi) * 0.5;
+            Ok(Camera {
+                eye_m: center + (hi - lo) * Vec3::new(0.1, -0.9, 0.4),
+                look_at_m: center,
+                up: Vec3::Z,
+                fov_y_deg: 60.0,
+            })
+        }
+    }
+}
+
+/// `out` for frame `i` of `n`: `name_0007.png` when n > 1.
+pub fn frame_path(out: &Path, i: u32, n: u32) -> PathBuf {
+    if n <= 1 {
+        return out.to_path_buf();
+    }
+    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("frame");
+    let ext = out.extension().and_then(|s| s.to_str()).unwrap_or("png");
+    out.with_file_name(format!("{stem}_{i:04}.{ext}"))
+}
+
+/// Middle grey over the geometric mean luminance of the pixels that see something.
+pub fn auto_exposure(hdr: &[[f32; 4]]) -> f32 {
+    let mut sum = 0.0f64;
+    let mut n = 0usize;
+    for p in hdr {
+        let l = 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+        if l.is_finite() && l > 0.0 {
+            sum += f64::from(l.max(1e-6)).ln();
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return 1.0;
+    }
+    let mean = (sum / n as f64).exp();
+    (0.18 / mean).clamp(1e-6, 1e9) as f32
+}
+
+/// Runs a render job.
+pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<RenderSummary> {
+    image_out::kind_of(&opts.out)?;
+    let pkg = Package::open(&opts.package)?;
+    let scene = SceneData::from_package(&pkg)?;
+    if scene.leaves.is_empty() {
+        return Err(Error::Scene {
+            package: scene.name.clone(),
+            problem: "no voxels to render (empty package)".into(),
+        });
+    }
+    let cameras: Vec<Camera> = if opts.path.is_empty() {
+        vec![resolve_camera(&scene, &opts.camera)?]
+    } else {
+        let keys = opts
+            .path
+            .iter()
+            .map(|n| resolve_camera(&scene, &CameraChoice::Named(n.clone())))
+            .collect::<Result<Vec<_>>>()?;
+        camera::path(&keys, opts.frames.max(1))
+    };
+    for c in &cameras {
+        c.validate()?;
+    }
+    let gpu = Gpu::new(&opts.gpu)?;
+    let mut settings = opts.settings.clone();
+    settings.exposure = opts.exposure.unwrap_or(1.0);
+    let mut r = Renderer::new(&gpu, &scene, settings.clone())?;
+    let first_plan = r.plan(Some((&cameras[0], opts.width, opts.height)));
+    let t0 = Instant::now();
+    let budget = settings.bounces;
+    r.settle(|done, change| progress(Progress::Bounce { done, budget, change }))?;
+    let settle_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let mut images = Vec::new();
+    let mut exposure = settings.exposure;
+    let mut last_plan = first_plan.clone();
+    let n = cameras.len() as u32;
+    for (i, cam) in cameras.iter().enumerate() {
+        let (mut frame, plan) = r.render(cam, opts.width, opts.height)?;
+        last_plan = plan;
+        if opts.exposure.is_none() && i == 0 {
+            // Auto exposure from the first frame, kept for the sequence so it does not flicker.
+            exposure = auto_exposure(&frame.hdr);
+            r.set_exposure(exposure);
+            frame = r.render(cam, opts.width, opts.height)?.0;
+        }
+        let path = frame_path(&opts.out, i as u32, n);
+        image_out::write_frame(&frame, &path)?;
+        images.push(path.display().to_string());
+        progress(Progress::Frame { done: i as u32 + 1, total: n });
+    }
+    Ok(RenderSummary {
+        package: opts.package.display().to_string(),
+        device: gpu.describe(),
+        timestamps: gpu.timestamps,
+        images,
+        width: opts.width,
+        height: opts.height,
+        leaves: scene.leaves.len(),
+        surfels: scene.surfels.len(),
+        tiles: scene.tiles.len(),
+        bounces: r.stats().bounces_done,
+        last_change: r.stats().last_change,
+        exposure,
+        settle_s,
+        render_s: t1.elapsed().as_secs_f64(),
+        first_plan,
+        last_plan,
+        stats: r.stats().clone(),
+        settings: r.settings().clone(),
+    })
+}
