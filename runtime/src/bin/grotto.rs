@@ -40,7 +40,7 @@ enum Command {
     ///
     /// Plans the passes from the scene (see --explain), propagates light until it converges or the
     /// bounce budget is spent, then renders the camera (or a path through named cameras).
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
     /// Check a package's structure and every checksum and section; exits non-zero on any problem.
     Verify {
         package: PathBuf,
@@ -278,7 +278,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Command::Render(args) => render(args),
+        Command::Render(args) => render(*args),
         Command::Verify { package, json } => {
             let report = match Package::open(&package) {
                 Ok(pkg) => inspect::verify(&pkg),
