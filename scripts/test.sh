@@ -1,9 +1,22 @@
 #!/usr/bin/env bash
-# The test suite. Installs what the tests need on a fresh Debian machine, then runs every test of
-# the workspace. Tests that read third-party files expect ../shared/data beside the repository
-# (or GROTTO_SHARED_DATA).
+# The test suite. Installs what the tests need on a fresh Debian machine (Mesa's software Vulkan
+# driver lavapipe, and EGL + llvmpipe for wgpu's GL backend), then runs every test of the
+# workspace. Tests that read third-party files expect ../shared/data beside the repository (or
+# GROTTO_SHARED_DATA).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-# System packages the tests need are installed here as they are added (the runtime's GPU tests will
-# need Mesa's software Vulkan driver). Nothing beyond the Rust toolchain is needed yet.
+packages=(mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri)
+missing=()
+for p in "${packages[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+    echo "installing ${missing[*]} (GPU tests run on Mesa's software drivers)"
+    sudo=""
+    [ "$(id -u)" -ne 0 ] && sudo="sudo"
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+# No session bus or display here; wgpu's GL backend only needs a writable runtime dir for EGL.
+export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-$(mktemp -d)}
 cargo test --workspace --locked

@@ -199,6 +199,7 @@ pub struct Renderer {
     shade: shade::Shade,
     view: Option<View>,
     direct_valid: bool,
+    forced: Vec<Pass>,
     stats_now: PassStats,
     queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
 }
@@ -490,6 +491,7 @@ impl Renderer {
             scene_group,
             view: None,
             direct_valid: false,
+            forced: Vec::new(),
             stats_now: PassStats::default(),
             queries,
         };
@@ -552,7 +554,24 @@ impl Renderer {
 
     /// The plan the next [`Renderer::update_light`] (no camera) or [`Renderer::render`] would run.
     pub fn plan(&self, frame: Option<(&Camera, u32, u32)>) -> EffectPlan {
-        plan::plan(&self.inputs(frame))
+        let mut p = plan::plan(&self.inputs(frame));
+        for step in &mut p.steps {
+            if !step.run && self.forced.contains(&step.pass) {
+                // Shade needs a G-buffer and the light passes need nothing: any pass may be forced
+                // except gbuffer/shade without a frame.
+                if frame.is_some() || !matches!(step.pass, Pass::Gbuffer | Pass::Shade) {
+                    step.run = true;
+                    step.reason = format!("forced (plan said: {})", step.reason);
+                }
+            }
+        }
+        p
+    }
+
+    /// Runs these passes even where the plan would skip them (tests prove skipping changes
+    /// nothing; `--force` on the command line does the same for a user who doubts the plan).
+    pub fn set_forced(&mut self, passes: &[Pass]) {
+        self.forced = passes.to_vec();
     }
 
     /// Runs the light part of the plan (shadow, inject, one bounce); returns the plan it ran.

@@ -168,3 +168,76 @@ fn hidden_chamber_needs_several_bounces() {
     // Several bounces carry light around the three bends.
     assert!(many.0 > 10.0 * one.0, "several bounces must light the chamber");
 }
+
+fn max_abs_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
+    a.iter().zip(b).flat_map(|(p, q)| (0..3).map(move |k| (p[k] - q[k]).abs())).fold(0.0, f32::max)
+}
+
+#[test]
+fn skipped_passes_are_not_dispatched_and_change_nothing() {
+    use grotto_runtime::camera::Camera;
+    use grotto_runtime::plan::Pass;
+    // Emission only: no point or spot lights, so no shadow maps and no injection.
+    let scene = testscenes::furnace_sphere(4, 5.0, 0.5, 1.0);
+    let cam = Camera {
+        eye_m: Vec3::splat(0.8),
+        look_at_m: Vec3::new(1.2, 0.9, 0.7),
+        up: Vec3::Z,
+        fov_y_deg: 70.0,
+    };
+    let settings = Settings { bounces: 64, exposure: 0.1, ..Default::default() };
+    let mut r = Renderer::new(gpu(), &scene, settings.clone()).unwrap();
+    let explained = r.plan(Some((&cam, 64, 48))).explain();
+    assert!(explained.contains("skip  shadow") && explained.contains("skip  inject"), "{explained}");
+    r.settle(|_, _| {}).unwrap();
+    let bounces = r.stats().bounces_done;
+    assert!(bounces < 64, "propagation must stop once converged, ran {bounces}");
+    let (a, plan) = r.render(&cam, 64, 48).unwrap();
+    assert!(!plan.runs(Pass::Propagate) && !plan.runs(Pass::Mip), "{}", plan.explain());
+    // The same frame again: the G-buffer is kept too.
+    let (b, plan) = r.render(&cam, 64, 48).unwrap();
+    assert!(!plan.runs(Pass::Gbuffer));
+    assert_eq!(a.hdr, b.hdr);
+    let d = &r.stats().dispatches;
+    assert_eq!(d.get(&Pass::Shadow), None);
+    assert_eq!(d.get(&Pass::Inject), None);
+    assert_eq!(d.get(&Pass::Mip).copied(), Some(u64::from(bounces)));
+    assert_eq!(d.get(&Pass::Propagate).copied(), Some(u64::from(bounces)));
+    assert_eq!(d.get(&Pass::Gbuffer).copied(), Some(1));
+    assert_eq!(d.get(&Pass::Shade).copied(), Some(2));
+
+    // Forcing the skipped passes: shadow, inject, gbuffer and one more bounce.
+    r.set_forced(&[Pass::Shadow, Pass::Inject, Pass::Gbuffer, Pass::Mip, Pass::Propagate]);
+    let (c, plan) = r.render(&cam, 64, 48).unwrap();
+    assert!(plan.steps.iter().all(|s| s.run));
+    let d = &r.stats().dispatches;
+    assert_eq!(d.get(&Pass::Shadow).copied(), Some(1));
+    assert_eq!(d.get(&Pass::Inject).copied(), Some(1));
+    // Shadow and inject with no lights change nothing; the extra bounce changes the converged
+    // radiance by less than the convergence tolerance.
+    let scale = a.hdr.iter().map(|p| p[0]).fold(0.0, f32::max);
+    let diff = max_abs_diff(&a.hdr, &c.hdr);
+    eprintln!("forced passes changed the image by {diff:.2e} (peak {scale:.3})");
+    assert!(diff <= settings.convergence_tolerance * scale);
+}
+
+#[test]
+fn lights_and_shadows_run_once_for_static_lights() {
+    use grotto_runtime::plan::Pass;
+    let scene = testscenes::dogleg();
+    let mut r = Renderer::new(gpu(), &scene, Settings { bounces: 2, ..Default::default() }).unwrap();
+    let cam = grotto_runtime::camera::Camera::from_scene(&scene.cameras[0]);
+    let (first, plan) = r.render(&cam, 64, 48).unwrap();
+    assert!(plan.runs(Pass::Shadow) && plan.runs(Pass::Inject));
+    let (_, plan) = r.render(&cam, 64, 48).unwrap();
+    assert!(!plan.runs(Pass::Shadow) && !plan.runs(Pass::Inject) && plan.runs(Pass::Propagate));
+    let (third, plan) = r.render(&cam, 64, 48).unwrap();
+    assert!(!plan.runs(Pass::Propagate), "bounce budget of 2 spent: {}", plan.explain());
+    assert_eq!(r.stats().dispatches.get(&Pass::Shadow).copied(), Some(1));
+    // Shadowed direct light: room A is lit, the hidden chamber is not; bounces add light.
+    let sum = |f: &grotto_runtime::renderer::Frame| f.hdr.iter().map(|p| p[1] as f64).sum::<f64>();
+    assert!(sum(&third) > sum(&first));
+    r.invalidate_lights();
+    let (_, plan) = r.render(&cam, 64, 48).unwrap();
+    assert!(plan.runs(Pass::Shadow) && plan.runs(Pass::Inject));
+}
