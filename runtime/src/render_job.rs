@@ -214,3 +214,79 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         settings: r.settings().clone(),
     })
 }
+
+/// Per-pass GPU times of one configuration (`grotto bench`).
+#[derive(Clone, Debug, Serialize)]
+pub struct PassBench {
+    pub package: String,
+    pub device: String,
+    pub timestamps: bool,
+    pub width: u32,
+    pub height: u32,
+    pub tiles: usize,
+    pub leaves: usize,
+    pub nodes: usize,
+    pub surfels: usize,
+    pub max_depth: u32,
+    pub lights: usize,
+    /// Median milliseconds per pass over the repetitions (shadow and inject run once per light
+    /// change, mip and propagate once per bounce, gbuffer and shade once per frame).
+    pub median_ms: std::collections::BTreeMap<String, f64>,
+    pub repetitions: u32,
+    pub settings: Settings,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() { 0.0 } else { v[v.len() / 2] }
+}
+
+/// Times every pass `reps` times on the package's first camera (or a default view).
+pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
+    use crate::plan::Pass;
+    let pkg = Package::open(&opts.package)?;
+    let scene = SceneData::from_package(&pkg)?;
+    if scene.leaves.is_empty() {
+        return Err(Error::Scene {
+            package: scene.name.clone(),
+            problem: "no voxels to render (empty package)".into(),
+        });
+    }
+    let cam = resolve_camera(&scene, &opts.camera)?;
+    let gpu = Gpu::new(&opts.gpu)?;
+    let mut settings = opts.settings.clone();
+    settings.exposure = opts.exposure.unwrap_or(1.0);
+    settings.bounces = u32::MAX;
+    settings.convergence_tolerance = 0.0;
+    let mut r = Renderer::new(&gpu, &scene, settings)?;
+    let mut samples: std::collections::BTreeMap<Pass, Vec<f64>> = Default::default();
+    let reps = reps.max(1);
+    for i in 0..reps {
+        if i > 0 {
+            r.invalidate_lights();
+        }
+        // Each repetition: shadow + inject + one bounce, then a frame with a fresh G-buffer.
+        r.set_forced(&[Pass::Gbuffer]);
+        r.render(&cam, opts.width, opts.height)?;
+        for (p, ms) in &r.stats().last_ms {
+            samples.entry(*p).or_default().push(*ms);
+        }
+    }
+    let median_ms = samples.into_iter().map(|(p, v)| (p.name().to_string(), median(v))).collect();
+    Ok(PassBench {
+        package: opts.package.display().to_string(),
+        device: gpu.describe(),
+        timestamps: gpu.timestamps,
+        width: opts.width,
+        height: opts.height,
+        tiles: scene.tiles.len(),
+        leaves: scene.leaves.len(),
+        nodes: scene.nodes.len(),
+        surfels: scene.surfels.len(),
+        max_depth: scene.tiles.iter().map(|t| t.depth).max().unwrap_or(0),
+        lights: scene.lights.len(),
+        median_ms,
+        repetitions: reps,
+        settings: r.settings().clone(),
+    })
+}

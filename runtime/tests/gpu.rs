@@ -179,12 +179,8 @@ fn skipped_passes_are_not_dispatched_and_change_nothing() {
     use grotto_runtime::plan::Pass;
     // Emission only: no point or spot lights, so no shadow maps and no injection.
     let scene = testscenes::furnace_sphere(4, 5.0, 0.5, 1.0);
-    let cam = Camera {
-        eye_m: Vec3::splat(0.8),
-        look_at_m: Vec3::new(1.2, 0.9, 0.7),
-        up: Vec3::Z,
-        fov_y_deg: 70.0,
-    };
+    let cam =
+        Camera { eye_m: Vec3::splat(0.8), look_at_m: Vec3::new(1.2, 0.9, 0.7), up: Vec3::Z, fov_y_deg: 70.0 };
     let settings = Settings { bounces: 64, exposure: 0.1, ..Default::default() };
     let mut r = Renderer::new(gpu(), &scene, settings.clone()).unwrap();
     let explained = r.plan(Some((&cam, 64, 48))).explain();

@@ -71,7 +71,8 @@ pub mod golden {
         let bytes: Vec<u8> = pixels.iter().flatten().copied().collect();
         if std::env::var_os("GROTTO_BLESS").is_some() {
             std::fs::create_dir_all(golden.parent().expect("golden dir")).expect("create tests/golden");
-            image::save_buffer(&golden, &bytes, width, height, image::ExtendedColorType::Rgba8).expect("write golden");
+            image::save_buffer(&golden, &bytes, width, height, image::ExtendedColorType::Rgba8)
+                .expect("write golden");
             return ImageDiff { mean_abs: 0.0, p99_abs: 0, max_abs: 0 };
         }
         let img = image::open(&golden)
@@ -93,7 +94,8 @@ pub mod golden {
 
         #[test]
         fn tolerance_accepts_noise_and_rejects_a_shift() {
-            let a: Vec<[u8; 4]> = (0..10_000u32).map(|i| [(i % 251) as u8, (i % 13) as u8, 90, 255]).collect();
+            let a: Vec<[u8; 4]> =
+                (0..10_000u32).map(|i| [(i % 251) as u8, (i % 13) as u8, 90, 255]).collect();
             let mut noisy = a.clone();
             for (i, p) in noisy.iter_mut().enumerate().filter(|(i, _)| i % 97 == 0) {
                 p[0] = p[0].wrapping_add(40 + (i % 3) as u8);

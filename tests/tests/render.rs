@@ -59,7 +59,11 @@ fn demo_cave_renders_the_same_on_vulkan_and_gl() {
             let (w, h, pixels) = grotto_runtime::image_out::read_png(&out).unwrap();
             // No holes: every pixel of an enclosed cave view sees a wall.
             let lit = pixels.iter().filter(|p| p[0] > 0 || p[1] > 0 || p[2] > 0).count();
-            assert!(lit * 1000 >= pixels.len() * 995, "{camera} on {name}: {lit} of {} pixels lit", pixels.len());
+            assert!(
+                lit * 1000 >= pixels.len() * 995,
+                "{camera} on {name}: {lit} of {} pixels lit",
+                pixels.len()
+            );
             let d = golden::check(&format!("demo-{camera}"), w, h, &pixels);
             eprintln!("{camera} on {} ({}): {d:?}", name, summary.device);
             assert!(golden::within_tolerance(&d), "{camera} on {name} differs from the golden image: {d:?}");
@@ -69,7 +73,10 @@ fn demo_cave_renders_the_same_on_vulkan_and_gl() {
     if std::env::var_os("GROTTO_BLESS").is_none() {
         for (what, settings) in [
             ("no bounces", Settings { bounces: 0, shadow_map_size: 256, ..Settings::default() }),
-            ("no shadows", Settings { bounces: 3, shadows: false, shadow_map_size: 256, ..Settings::default() }),
+            (
+                "no shadows",
+                Settings { bounces: 3, shadows: false, shadow_map_size: 256, ..Settings::default() },
+            ),
         ] {
             let out = dir.path().join("wrong.png");
             let opts = RenderOptions {

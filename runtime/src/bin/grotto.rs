@@ -41,6 +41,9 @@ enum Command {
     /// Plans the passes from the scene (see --explain), propagates light until it converges or the
     /// bounce budget is spent, then renders the camera (or a path through named cameras).
     Render(Box<RenderArgs>),
+    /// Time every pass (GPU timestamps where the adapter has them) on a package: shadow maps,
+    /// injection, one bounce (mip + propagate), G-buffer and shading, repeated; median per pass.
+    Bench(Box<BenchArgs>),
     /// Check a package's structure and every checksum and section; exits non-zero on any problem.
     Verify {
         package: PathBuf,
@@ -121,6 +124,15 @@ struct RenderArgs {
     json: bool,
 }
 
+#[derive(clap::Args, Debug)]
+struct BenchArgs {
+    #[command(flatten)]
+    render: RenderArgs,
+    /// Repetitions (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    reps: u32,
+}
+
 fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
     let v: Vec<f64> = s
         .split(',')
@@ -142,8 +154,8 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
-fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
-    use grotto_runtime::render_job::{self, CameraChoice, Progress, RenderOptions};
+fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderOptions> {
+    use grotto_runtime::render_job::{CameraChoice, RenderOptions};
     use grotto_runtime::renderer::{IndirectFilter, Settings};
     let indirect = match a.indirect.as_str() {
         "trilinear" => IndirectFilter::Trilinear,
@@ -151,21 +163,21 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
         "off" => IndirectFilter::Off,
         other => anyhow::bail!("--indirect {other:?}: use trilinear, tricubic or off"),
     };
-    let camera = match (a.camera, a.eye, a.look_at) {
+    let camera = match (a.camera.clone(), a.eye, a.look_at) {
         (Some(name), _, _) => CameraChoice::Named(name),
         (None, Some(eye_m), Some(look_at_m)) => {
             CameraChoice::Explicit { eye_m, look_at_m, up: a.up, fov_y_deg: a.fov }
         }
         _ => CameraChoice::Default,
     };
-    let opts = RenderOptions {
-        package: a.package,
+    Ok(RenderOptions {
+        package: a.package.clone(),
         camera,
-        path: a.path,
+        path: a.path.clone(),
         frames: a.frames,
         width: a.size.0,
         height: a.size.1,
-        out: a.out,
+        out: a.out.clone(),
         settings: Settings {
             cones: a.cones,
             cone_aperture_scale: a.aperture,
@@ -180,7 +192,39 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
         },
         exposure: a.exposure,
         gpu: grotto_runtime::gpu::GpuOptions { prefer_software: a.software, ..Default::default() },
-    };
+    })
+}
+
+fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
+    let opts = options(&b.render)?;
+    let report = grotto_runtime::render_job::bench(&opts, b.reps)?;
+    if b.render.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!(
+            "{} on {} ({}): {} tiles, depth {}, {} leaves, {} nodes, {} surfels, {} lights, {}x{}",
+            report.package,
+            report.device,
+            if report.timestamps { "GPU timestamps" } else { "CPU wall" },
+            report.tiles,
+            report.max_depth,
+            report.leaves,
+            report.nodes,
+            report.surfels,
+            report.lights,
+            report.width,
+            report.height
+        );
+        for (pass, ms) in &report.median_ms {
+            println!("  {pass:10} {ms:10.2} ms");
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
+    use grotto_runtime::render_job::{self, Progress};
+    let opts = options(&a)?;
     let bounce_bar = indicatif::ProgressBar::new(u64::from(a.bounces)).with_style(
         indicatif::ProgressStyle::with_template("{prefix:>9} [{bar:30}] {pos}/{len} {msg}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
@@ -279,6 +323,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Render(args) => render(*args),
+        Command::Bench(args) => bench(*args),
         Command::Verify { package, json } => {
             let report = match Package::open(&package) {
                 Ok(pkg) => inspect::verify(&pkg),
