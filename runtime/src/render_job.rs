@@ -60,6 +60,8 @@ pub struct RenderSummary {
     pub bounces: u32,
     pub last_change: Option<f32>,
     pub exposure: f32,
+    /// Most pixels any frame left uncovered (background showing through: holes, or openings).
+    pub uncovered_pixels: usize,
     pub settle_s: f64,
     pub render_s: f64,
     pub first_plan: EffectPlan,
@@ -179,6 +181,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let mut exposure = settings.exposure;
     let mut last_plan = first_plan.clone();
     let n = cameras.len() as u32;
+    let mut uncovered_pixels = 0;
     for (i, cam) in cameras.iter().enumerate() {
         let (mut frame, plan) = r.render(cam, opts.width, opts.height)?;
         last_plan = plan;
@@ -188,6 +191,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             r.set_exposure(exposure);
             frame = r.render(cam, opts.width, opts.height)?.0;
         }
+        uncovered_pixels = uncovered_pixels.max(frame.hdr.iter().filter(|p| p[3] < 0.5).count());
         let path = frame_path(&opts.out, i as u32, n);
         image_out::write_frame(&frame, &path)?;
         images.push(path.display().to_string());
@@ -206,6 +210,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         bounces: r.stats().bounces_done,
         last_change: r.stats().last_change,
         exposure,
+        uncovered_pixels,
         settle_s,
         render_s: t1.elapsed().as_secs_f64(),
         first_plan,

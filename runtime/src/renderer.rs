@@ -57,7 +57,9 @@ pub struct Settings {
     /// Smallest splat radius in pixels (hole filling).
     pub min_splat_px: f32,
     /// Surfel radius multiplier for splatting. The stored radius (1.25 d_k / sqrt(k)) is about
-    /// 0.7 point spacings, which tiles a regular grid but leaves holes in scanner sampling.
+    /// 0.7 point spacings, which tiles a regular grid but leaves holes in scanner sampling
+    /// (measured on the demo chamber at 640x480: 510 uncovered pixels at 1.5, 30 at 2.0, 0 at 3.0;
+    /// with shade's hole filling, 105 at 1.5 and 0 at 2.0).
     pub splat_scale: f32,
 }
 
@@ -78,7 +80,7 @@ impl Default for Settings {
             exposure: 1.0,
             background: [0.0; 3],
             min_splat_px: 0.75,
-            splat_scale: 1.5,
+            splat_scale: 2.0,
         }
     }
 }
@@ -137,7 +139,8 @@ pub fn cone_set(n: u32, aperture_scale: f32) -> (Vec<[f32; 4]>, f32) {
 pub struct Frame {
     pub width: u32,
     pub height: u32,
-    /// Linear radiance, RGBA f32, rows top to bottom.
+    /// Linear radiance, rows top to bottom; alpha is 1 where a surfel covers the pixel, 0 where the
+    /// background shows.
     pub hdr: Vec<[f32; 4]>,
     /// Tonemapped sRGB8 RGBA.
     pub ldr: Vec<[u8; 4]>,

@@ -69,6 +69,38 @@ fn demo_cave_renders_the_same_on_vulkan_and_gl() {
             assert!(golden::within_tolerance(&d), "{camera} on {name} differs from the golden image: {d:?}");
         }
     }
+    // No holes at the demo's resolution, and linear radiance as EXR.
+    let exr_path = dir.path().join("chamber.exr");
+    let opts = RenderOptions {
+        package: package.clone(),
+        camera: CameraChoice::Named("chamber".into()),
+        path: Vec::new(),
+        frames: 1,
+        width: 640,
+        height: 480,
+        out: exr_path.clone(),
+        settings: Settings { bounces: 1, shadow_map_size: 256, ..Settings::default() },
+        exposure: Some(8.0),
+        gpu: GpuOptions { prefer_software: true, backends: Some(wgpu::Backends::VULKAN) },
+    };
+    render_job::run(&opts, |_| {}).unwrap();
+    let img = exr::prelude::read_first_rgba_layer_from_file(
+        &exr_path,
+        |res, _| vec![[0f32; 4]; res.width() * res.height()],
+        |px: &mut Vec<[f32; 4]>, pos, (r, g, b, a): (f32, f32, f32, f32)| {
+            px[pos.y() * 640 + pos.x()] = [r, g, b, a]
+        },
+    )
+    .unwrap();
+    let px = &img.layer_data.channel_data.pixels;
+    assert_eq!(px.len(), 640 * 480);
+    let covered = px.iter().filter(|p| p[3] > 0.5).count();
+    let holes = px.len() - covered;
+    eprintln!("640x480 chamber: {holes} uncovered pixels");
+    assert!(holes * 10_000 <= px.len(), "{holes} holes at 640x480");
+    assert!(px.iter().all(|p| p.iter().all(|v| v.is_finite() && *v >= 0.0)));
+    assert!(px.iter().map(|p| f64::from(p[1])).sum::<f64>() > 0.0);
+
     // The comparison can fail: dropping the bounces or the shadows leaves the tolerance.
     if std::env::var_os("GROTTO_BLESS").is_none() {
         for (what, settings) in [

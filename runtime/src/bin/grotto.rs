@@ -101,6 +101,9 @@ struct RenderArgs {
     /// Shadow map size in texels per face.
     #[arg(long, default_value_t = 512)]
     shadow_map: u32,
+    /// Surfel radius multiplier for splatting (discs overlap so sparse sampling leaves no holes).
+    #[arg(long, default_value_t = 2.0)]
+    splat_scale: f32,
     /// Render without shadow maps.
     #[arg(long)]
     no_shadows: bool,
@@ -188,6 +191,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
             shadows: !a.no_shadows,
             shadow_map_size: a.shadow_map,
             indirect,
+            splat_scale: a.splat_scale,
             ..Settings::default()
         },
         exposure: a.exposure,
@@ -268,10 +272,11 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
     let times: Vec<String> =
         summary.stats.last_ms.iter().map(|(p, ms)| format!("{} {ms:.1} ms", p.name())).collect();
     println!(
-        "rendered {} ({}x{}) on {}: {} tiles, {} leaves, {} surfels; {} bounces (last change {}) in {:.1} s, frames in {:.1} s; exposure {:.3}",
+        "rendered {} ({}x{}, {} pixels uncovered) on {}: {} tiles, {} leaves, {} surfels; {} bounces (last change {}) in {:.1} s, frames in {:.1} s; exposure {:.3}",
         summary.images.join(", "),
         summary.width,
         summary.height,
+        summary.uncovered_pixels,
         summary.device,
         summary.tiles,
         summary.leaves,

@@ -61,6 +61,10 @@ fn bspline(x: f32) -> f32 {
     return 0.0;
 }
 
+// Of the 24 neighbours in a 5x5 window, how many must be covered for a gap to be filled (15: a
+// true silhouette against open background has at most about half).
+const HOLE_MIN_COVERED: i32 = 15;
+
 @compute @workgroup_size(8, 8)
 fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= params.width || gid.y >= params.height {
@@ -68,9 +72,42 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let xy = vec2<i32>(gid.xy);
     let idx = gid.y * params.width + gid.x;
-    let d = unpack_f32(textureLoad(gb_distance, xy, 0));
+    var d = unpack_f32(textureLoad(gb_distance, xy, 0));
+    var src = xy;
+    if d <= 0.0 {
+        // Hole filling: an uncovered pixel whose 5x5 neighbourhood is mostly covered is a gap
+        // between discs, not background; it takes the nearest covered neighbour's surface.
+        var covered = 0;
+        var best = 1e9;
+        let size = vec2<i32>(i32(params.width), i32(params.height));
+        for (var dy = -2; dy <= 2; dy++) {
+            for (var dx = -2; dx <= 2; dx++) {
+                let q = xy + vec2<i32>(dx, dy);
+                if (dx == 0 && dy == 0) || any(q < vec2<i32>(0)) || any(q >= size) {
+                    continue;
+                }
+                let dq = unpack_f32(textureLoad(gb_distance, q, 0));
+                if dq > 0.0 {
+                    covered += 1;
+                    let r = f32(dx * dx + dy * dy);
+                    if r < best {
+                        best = r;
+                        src = q;
+                        d = dq;
+                    }
+                }
+            }
+        }
+        if covered < HOLE_MIN_COVERED {
+            d = 0.0;
+            src = xy;
+        }
+    }
     var hdr = params.background.rgb;
+    // Alpha: 1 where a surfel covers the pixel, 0 where the background shows (hole checks).
+    var coverage = 0.0;
     if d > 0.0 {
+        coverage = 1.0;
         // Ray through the pixel centre, the same point the rasteriser interpolated.
         let ndc = vec2<f32>(
             (f32(gid.x) + 0.5) / f32(params.width) * 2.0 - 1.0,
@@ -82,8 +119,8 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 + params.camera_up.xyz * (ndc.y * t),
         );
         let p = params.camera_eye_m.xyz + ray * d;
-        let n = unpack_normal(textureLoad(gb_normal, xy, 0));
-        let albedo = textureLoad(gb_albedo, xy, 0).rgb;
+        let n = unpack_normal(textureLoad(gb_normal, src, 0));
+        let albedo = textureLoad(gb_albedo, src, 0).rgb;
         var color = vec3<f32>(0.0);
         if (params.flags & FLAG_DIRECT) != 0u {
             var irradiance = vec3<f32>(0.0);
@@ -118,7 +155,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         hdr = color;
     }
-    out_hdr[idx] = vec4<f32>(hdr, 1.0);
+    out_hdr[idx] = vec4<f32>(hdr, coverage);
     let ldr = tonemap(hdr * params.exposure);
     out_ldr[idx] = pack4x8unorm(vec4<f32>(ldr, 1.0));
 }
