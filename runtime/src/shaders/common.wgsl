@@ -127,20 +127,8 @@ fn find_node(v: vec3<i32>, lod: u32) -> u32 {
     if lod > tile.depth {
         return EMPTY;
     }
-    let levels = tile.depth - lod;
     let local = vec3<u32>(v_leaf - tile.origin_leaf) >> vec3<u32>(lod);
-    var n = tile.node_offset;
-    for (var level = 0u; level < levels; level++) {
-        let b = levels - 1u - level;
-        let o = ((local.x >> b) & 1u) | (((local.y >> b) & 1u) << 1u) | (((local.z >> b) & 1u) << 2u);
-        let node = nodes[n];
-        let mask = node.mask_level & 0xffu;
-        if ((mask >> o) & 1u) == 0u {
-            return EMPTY;
-        }
-        n = node.first_child + countOneBits(mask & ((1u << o) - 1u));
-    }
-    return n;
+    return descend(tile.node_offset, local, tile.depth - lod);
 }
 
 // Global leaf index of the leaf cell `v` (global leaf units), or EMPTY.
@@ -163,15 +151,62 @@ fn directional(n: u32, dir: vec3<f32>) -> vec4<f32> {
     return fx * w.x + fy * w.y + fz * w.z;
 }
 
+// Descends `levels` levels from node `n` along the low bits of `local` (bit levels-1 first).
+fn descend(start: u32, local: vec3<u32>, levels: u32) -> u32 {
+    var n = start;
+    for (var level = 0u; level < levels; level++) {
+        let b = levels - 1u - level;
+        let o = ((local.x >> b) & 1u) | (((local.y >> b) & 1u) << 1u) | (((local.z >> b) & 1u) << 2u);
+        let node = nodes[n];
+        let mask = node.mask_level & 0xffu;
+        if ((mask >> o) & 1u) == 0u {
+            return EMPTY;
+        }
+        n = node.first_child + countOneBits(mask & ((1u << o) - 1u));
+    }
+    return n;
+}
+
 // Trilinear sample of level `lod` at `p_leaf` (leaf units from the frame origin): voxel centres
 // sit at (i + 0.5) * 2^lod. Empty space contributes zero radiance and zero opacity.
+// The eight corners share their ancestors down to where their coordinates' bits differ, so when
+// they lie in one tile the walk from the root is done once for all of them (same nodes as eight
+// find_node calls, which cpu_ref.rs does).
 fn sample_level(p_leaf: vec3<f32>, lod: u32, dir: vec3<f32>) -> vec4<f32> {
     let scale = f32(1u << lod);
     let u = p_leaf / scale - vec3<f32>(0.5);
     let base = floor(u);
     let f = u - base;
     let i0 = vec3<i32>(base);
+    let t = find_tile(i0 << vec3<u32>(lod));
+    let t1 = find_tile((i0 + vec3<i32>(1)) << vec3<u32>(lod));
     var acc = vec4<f32>(0.0);
+    if t != EMPTY && t == t1 && lod <= tiles[t].depth {
+        let tile = tiles[t];
+        let levels = tile.depth - lod;
+        let lo = vec3<u32>((i0 << vec3<u32>(lod)) - tile.origin_leaf) >> vec3<u32>(lod);
+        let hi = lo + vec3<u32>(1u);
+        let diff = (lo ^ hi).x | (lo ^ hi).y | (lo ^ hi).z;
+        let low_bits = min(32u - countLeadingZeros(diff), levels);
+        let ancestor = descend(tile.node_offset, lo >> vec3<u32>(low_bits), levels - low_bits);
+        if ancestor == EMPTY {
+            return acc;
+        }
+        let mask = (1u << low_bits) - 1u;
+        for (var c = 0u; c < 8u; c++) {
+            let o = vec3<u32>(c & 1u, (c >> 1u) & 1u, (c >> 2u) & 1u);
+            let w3 = mix(vec3<f32>(1.0) - f, f, vec3<f32>(o));
+            let w = w3.x * w3.y * w3.z;
+            if w <= 0.0 {
+                continue;
+            }
+            let n = descend(ancestor, (lo + o) & vec3<u32>(mask), low_bits);
+            if n != EMPTY {
+                acc += w * directional(n, dir);
+            }
+        }
+        return acc;
+    }
     for (var c = 0u; c < 8u; c++) {
         let o = vec3<u32>(c & 1u, (c >> 1u) & 1u, (c >> 2u) & 1u);
         let corner = vec3<f32>(o);
