@@ -237,3 +237,41 @@ fn lights_and_shadows_run_once_for_static_lights() {
     let (_, plan) = r.render(&cam, 64, 48).unwrap();
     assert!(plan.runs(Pass::Shadow) && plan.runs(Pass::Inject));
 }
+
+#[test]
+fn spot_light_lights_only_its_cone() {
+    use grotto_runtime::scene_data::{SceneLight, Spot};
+    let mut scene = testscenes::dogleg();
+    let leaf = scene.leaf_size_m;
+    // Room A spans cells x 2..10, y 1..9, z 2..10; aim at its -x wall (cells x = 1).
+    scene.lights = vec![SceneLight {
+        name: "spot".into(),
+        position_m: Vec3::new(8.0, 5.0, 6.0) * leaf,
+        intensity_w_sr: Vec3::splat(10.0),
+        spot: Some(Spot { direction: Vec3::NEG_X, inner_angle_rad: 0.2, outer_angle_rad: 0.3 }),
+    }];
+    let mut r = Renderer::new(gpu(), &scene, Settings { bounces: 0, ..Default::default() }).unwrap();
+    r.update_light().unwrap();
+    let light = r.read_leaf_light().unwrap();
+    let apex = Vec3::new(8.0, 5.0, 6.0) * leaf;
+    let (mut inside, mut outside, mut inside_lit, mut outside_lit) = (0, 0, 0, 0);
+    for (l, s) in scene.leaves.iter().zip(&light) {
+        let c = Vec3::from_slice(&l.center_m[..3]);
+        let cell = (c / leaf).floor();
+        if cell.x != 1.0 || cell.y < 1.0 || cell.y > 8.0 || cell.z < 2.0 || cell.z > 9.0 {
+            continue; // only room A's -x wall
+        }
+        let angle = (c - apex).normalize().dot(Vec3::NEG_X).acos();
+        let lit = s.direct[1] > 0.0;
+        if angle < 0.18 {
+            inside += 1;
+            inside_lit += usize::from(lit);
+        } else if angle > 0.35 {
+            outside += 1;
+            outside_lit += usize::from(lit);
+        }
+    }
+    eprintln!("spot: {inside_lit}/{inside} lit inside the cone, {outside_lit}/{outside} outside");
+    assert!(inside > 0 && inside_lit == inside);
+    assert!(outside > 0 && outside_lit == 0);
+}
