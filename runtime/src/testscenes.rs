@@ -97,7 +97,9 @@ pub fn furnace_sphere(depth: u32, radius_leaves: f32, albedo: f32, e: f32) -> Sc
                     emission: Vec3::splat(e),
                 });
                 if d < radius_leaves + 1.0 {
-                    let at = center - inward * radius_leaves;
+                    // At the leaf centre: the surfel lies in its own leaf (the reference takes
+                    // emission from the leaf a surfel is in).
+                    let at = p;
                     let rgb = srgb8(albedo);
                     surfels.push(SurfelGpu {
                         position_radius: (at * leaf_size_m).extend(0.75 * leaf_size_m).to_array(),

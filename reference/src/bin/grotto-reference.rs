@@ -1,0 +1,122 @@
+//! `grotto-reference`: ground-truth renders of a package (converged Monte Carlo path tracing on
+//! its surfels), to judge the runtime's images.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Parser;
+use glam::Vec3;
+use grotto_reference::{PathSettings, SurfelScene};
+use grotto_runtime::camera::Camera;
+use grotto_runtime::renderer::Frame;
+use grotto_runtime::scene_data::SceneData;
+
+/// Render a package's camera by path tracing its surfels (the runtime's scene, no voxels): linear
+/// radiance to EXR, or tonemapped PNG; prints the mean standard error of the estimate.
+#[derive(Parser, Debug)]
+#[command(name = "grotto-reference", version)]
+struct Cli {
+    package: PathBuf,
+    /// A camera named in the package (default: its first).
+    #[arg(long)]
+    camera: Option<String>,
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "160x120")]
+    size: String,
+    /// Paths per pixel.
+    #[arg(long, default_value_t = 256)]
+    spp: u32,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Surfel radius scale (the runtime's --splat-scale).
+    #[arg(long, default_value_t = 2.0)]
+    splat_scale: f32,
+    /// Exposure for the PNG's tonemap.
+    #[arg(long, default_value_t = 1.0)]
+    exposure: f32,
+    /// Output image: .exr (linear) or .png (tonemapped).
+    #[arg(long, short, default_value = "reference.exr")]
+    out: PathBuf,
+    /// Machine-readable summary.
+    #[arg(long)]
+    json: bool,
+}
+
+fn aces_srgb(x: f32) -> u8 {
+    let x = x.max(0.0);
+    let m = ((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)).clamp(0.0, 1.0);
+    let s = if m <= 0.003_130_8 { m * 12.92 } else { 1.055 * m.powf(1.0 / 2.4) - 0.055 };
+    (s * 255.0 + 0.5) as u8
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    let (w, h) = cli
+        .size
+        .split_once(['x', 'X'])
+        .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
+        .filter(|&(w, h)| w > 0 && h > 0 && w <= 16384 && h <= 16384)
+        .with_context(|| format!("--size {:?}: expected WIDTHxHEIGHT", cli.size))?;
+    grotto_runtime::image_out::kind_of(&cli.out)?;
+    let pkg = grotto_format::Package::open(&cli.package)?;
+    let scene_data = SceneData::from_package(&pkg)?;
+    let cam = match &cli.camera {
+        Some(name) => scene_data
+            .cameras
+            .iter()
+            .find(|c| &c.name == name)
+            .with_context(|| format!("no camera named {name:?} in {}", cli.package.display()))?,
+        None => {
+            scene_data.cameras.first().with_context(|| format!("{} has no cameras", cli.package.display()))?
+        }
+    };
+    let camera = Camera::from_scene(cam);
+    camera.validate()?;
+    let t0 = std::time::Instant::now();
+    let scene = SurfelScene::from_scene(&scene_data, cli.splat_scale);
+    let bar = indicatif::ProgressBar::new(u64::from(h));
+    if cli.json {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let est =
+        scene.render_with_progress(&camera, w, h, cli.spp, &PathSettings::default(), cli.seed, |rows| {
+            bar.set_position(u64::from(rows))
+        });
+    bar.finish_and_clear();
+    let frame = Frame {
+        width: w,
+        height: h,
+        hdr: est.iter().map(|e| [e.mean.x, e.mean.y, e.mean.z, 1.0]).collect(),
+        ldr: est
+            .iter()
+            .map(|e| {
+                let c = e.mean * cli.exposure;
+                [aces_srgb(c.x), aces_srgb(c.y), aces_srgb(c.z), 255]
+            })
+            .collect(),
+    };
+    grotto_runtime::image_out::write_frame(&frame, &cli.out)?;
+    let mean = est.iter().map(|e| e.mean).sum::<Vec3>() / est.len() as f32;
+    let se = est.iter().map(|e| e.std_err).sum::<Vec3>() / est.len() as f32;
+    let secs = t0.elapsed().as_secs_f64();
+    if cli.json {
+        println!(
+            "{{\"image\": {:?}, \"width\": {w}, \"height\": {h}, \"spp\": {}, \"mean\": {:?}, \"mean_std_err\": {:?}, \"seconds\": {secs:.3}}}",
+            cli.out.display().to_string(),
+            cli.spp,
+            mean.to_array(),
+            se.to_array()
+        );
+    } else {
+        println!(
+            "wrote {} ({w}x{h}, {} spp, {} discs) in {secs:.1} s: mean radiance {:.4}, mean standard error {:.4} ({:.2}%)",
+            cli.out.display(),
+            cli.spp,
+            scene.discs().len(),
+            mean.y,
+            se.y,
+            100.0 * se.y / mean.y.max(1e-12)
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,114 @@
+//! The reference checks itself: exact direct light, the furnace sphere's E / (1 - p) to 0.5%, and
+//! two seeds agreeing within their stated noise.
+
+use glam::Vec3;
+use grotto_reference::{Disc, PathSettings, SurfelScene};
+use grotto_runtime::camera::Camera;
+use grotto_runtime::scene_data::SceneLight;
+use grotto_runtime::testscenes;
+use rayon::prelude::*;
+
+/// A closed sphere of `n` discs (Fibonacci lattice, normals inward), each twice the radius that
+/// would tile the sphere's area, so no ray escapes between them.
+fn sphere(n: usize, radius: f32, albedo: f32, emission: f32) -> Vec<Disc> {
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    let r_disc = 2.0 * (4.0 * radius * radius / n as f32).sqrt();
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let rho = (1.0 - z * z).sqrt();
+            let phi = i as f32 * golden;
+            let p = Vec3::new(rho * phi.cos(), rho * phi.sin(), z) * radius;
+            Disc::new(p, -p.normalize(), r_disc, Vec3::splat(albedo), Vec3::splat(emission))
+        })
+        .collect()
+}
+
+#[test]
+fn direct_light_is_exact() {
+    let disc = Disc::new(Vec3::ZERO, Vec3::Z, 0.1, Vec3::splat(0.5), Vec3::ZERO);
+    let light = SceneLight {
+        name: "l".into(),
+        position_m: Vec3::new(0.0, 1.0, 2.0),
+        intensity_w_sr: Vec3::splat(10.0),
+        spot: None,
+    };
+    let scene = SurfelScene::new(vec![disc], vec![light], 0.01);
+    let e = scene.surface_radiance(0, 16, &PathSettings::default(), 1);
+    let d2 = 5.0f32;
+    let want = 0.5 / std::f32::consts::PI * 10.0 * (2.0 / d2.sqrt()) / d2;
+    assert!((e.mean.x - want).abs() < 1e-5 * want, "{} vs {want}", e.mean.x);
+    assert_eq!(e.std_err, Vec3::ZERO, "nothing to bounce off: no noise");
+}
+
+#[test]
+fn furnace_sphere_reaches_e_over_one_minus_albedo() {
+    for albedo in [0.5f32, 0.9] {
+        let discs = sphere(20_000, 1.0, albedo, 1.0);
+        let scene = SurfelScene::new(discs, Vec::new(), 0.01);
+        let exact = 1.0 / (1.0 - albedo);
+        // Path length grows as 1 / (1 - p): more paths at 0.9 for the same relative noise.
+        let paths = if albedo > 0.8 { 12_000 } else { 2_000 };
+        let samples: Vec<_> = (0..48usize)
+            .into_par_iter()
+            .map(|k| scene.surface_radiance(k * 397, paths, &PathSettings::default(), 7))
+            .collect();
+        let mean = samples.iter().map(|e| f64::from(e.mean.x)).sum::<f64>() / samples.len() as f64;
+        // Standard error of the pooled mean.
+        let se = (samples.iter().map(|e| f64::from(e.std_err.x).powi(2)).sum::<f64>()).sqrt()
+            / samples.len() as f64;
+        let rel = (mean - f64::from(exact)).abs() / f64::from(exact);
+        eprintln!(
+            "reference furnace, albedo {albedo}: {mean:.4} +- {se:.4} (exact {exact:.4}), error {:.3}%",
+            rel * 100.0
+        );
+        assert!(se / f64::from(exact) < 1.5e-3, "the check needs noise well below 0.5%");
+        assert!(rel < 0.005);
+    }
+}
+
+#[test]
+fn two_seeds_agree_within_their_noise() {
+    let scene_data = testscenes::dogleg();
+    let scene = SurfelScene::from_scene(&scene_data, 2.0);
+    let cam = Camera::from_scene(&scene_data.cameras[0]);
+    let (w, h) = (24, 18);
+    let a = scene.render(&cam, w, h, 64, &PathSettings::default(), 1);
+    let b = scene.render(&cam, w, h, 64, &PathSettings::default(), 2);
+    let mut z2 = 0.0f64;
+    let mut outliers = 0;
+    let mut n = 0;
+    for (p, q) in a.iter().zip(&b) {
+        let se = (p.std_err.y.powi(2) + q.std_err.y.powi(2)).sqrt();
+        if se <= 0.0 {
+            continue;
+        }
+        let z = f64::from((p.mean.y - q.mean.y) / se);
+        z2 += z * z;
+        outliers += usize::from(z.abs() > 4.0);
+        n += 1;
+    }
+    let mean_z2 = z2 / n as f64;
+    eprintln!("seeds 1 and 2: {n} pixels, mean z^2 {mean_z2:.3}, {outliers} beyond 4 sigma");
+    assert!(n > (w * h) as usize / 2);
+    // If the stated errors are right, z is about standard normal: E[z^2] = 1.
+    assert!((0.6..1.6).contains(&mean_z2), "stated noise does not match the seed-to-seed spread");
+    assert!(outliers * 100 <= n);
+}
+
+#[test]
+fn leaf_radiance_of_the_runtime_furnace_scene() {
+    // The runtime's furnace shell (testscenes), seen by the reference through its surfels.
+    let albedo = 0.5f32;
+    let scene_data = testscenes::furnace_sphere(5, 11.0, albedo, 1.0);
+    let scene = SurfelScene::from_scene(&scene_data, 2.0);
+    let leaves = scene.leaf_radiance(&scene_data, 64, &PathSettings::default(), 3);
+    let measured: Vec<_> = leaves.iter().flatten().collect();
+    assert!(measured.len() > 100, "surfels reach many leaves");
+    let mean = measured.iter().map(|e| f64::from(e.mean.x)).sum::<f64>() / measured.len() as f64;
+    eprintln!(
+        "reference leaf radiance in the runtime's furnace: {mean:.4} over {} leaves (exact 2)",
+        measured.len()
+    );
+    assert!((mean - 2.0).abs() < 0.02);
+}
