@@ -11,6 +11,8 @@
 //! disc whose box meets the query, so a short segment keeps the candidate set small in caves,
 //! where most rays end on a nearby wall.
 
+pub mod accuracy;
+
 use std::f32::consts::PI;
 
 use bvh::aabb::{Aabb, Bounded, IntersectsAabb};

@@ -85,7 +85,53 @@ impl Default for Settings {
     }
 }
 
+/// Named trade-offs between error and time (`--quality`); their measured error and time on every
+/// accuracy scene are in docs/accuracy.md, where the sweep checks each costs more time and has
+/// less error than the one below it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Quality {
+    Fast,
+    Balanced,
+    High,
+}
+
+impl Quality {
+    pub const ALL: [Quality; 3] = [Quality::Fast, Quality::Balanced, Quality::High];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::Fast => "fast",
+            Quality::Balanced => "balanced",
+            Quality::High => "high",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|q| q.name() == s)
+    }
+}
+
 impl Settings {
+    /// The knobs of a quality preset (everything else at its default).
+    pub fn preset(q: Quality) -> Self {
+        let d = Settings::default();
+        match q {
+            Quality::Fast => Settings { cones: 4, step_scale: 1.0, bounces: 2, shadow_map_size: 256, ..d },
+            Quality::Balanced => {
+                Settings { cones: 6, step_scale: 0.5, bounces: 4, shadow_map_size: 512, ..d }
+            }
+            Quality::High => Settings {
+                cones: 12,
+                step_scale: 0.35,
+                bounces: 8,
+                shadow_map_size: 1024,
+                indirect: IndirectFilter::Tricubic,
+                ..d
+            },
+        }
+    }
+
     pub fn validate(&self) -> Result<()> {
         if !(1..=MAX_CONES as u32).contains(&self.cones) {
             return Err(Error::Setting {
@@ -182,6 +228,8 @@ pub struct Renderer {
     shadow_layers: Vec<Mat4>,
     lights_gpu: Vec<LightGpu>,
     params: wgpu::Buffer,
+    /// Bytes of every buffer and texture created at upload (the G-buffer is added per view).
+    static_bytes: u64,
     leaf_light: wgpu::Buffer,
     faces: wgpu::Buffer,
     stats: wgpu::Buffer,
@@ -404,6 +452,23 @@ impl Renderer {
             entries: &entries,
         });
 
+        let atlas_bytes = u64::from(atlas_size.width) * u64::from(atlas_size.height) * 8;
+        let static_bytes = [
+            &params,
+            &tiles,
+            &nodes,
+            &leaves,
+            &leaf_light,
+            &faces,
+            &lights_buf,
+            &shadow_mats,
+            &stats,
+            &surfels,
+        ]
+        .iter()
+        .map(|b| b.size())
+        .sum::<u64>()
+            + atlas_bytes;
         let splat_layout = shadow::splat_layout(gpu);
         let splat_uniforms = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("splat uniforms"),
@@ -481,6 +546,7 @@ impl Renderer {
             shadow_layers,
             lights_gpu,
             params,
+            static_bytes,
             leaf_light,
             faces,
             stats,
@@ -505,6 +571,16 @@ impl Renderer {
     /// The compute parameters of a light update (what the CPU reference needs).
     pub fn params(&self) -> Params {
         self.frame_params(None)
+    }
+
+    /// GPU memory the renderer holds: scene buffers, radiance pyramid, shadow atlas (distance +
+    /// depth), and the current view's G-buffer and outputs.
+    pub fn gpu_bytes(&self) -> u64 {
+        let view = self.view.as_ref().map_or(0, |v| {
+            let px = u64::from(v.targets.width) * u64::from(v.targets.height);
+            px * 4 * 4 + v.outputs.hdr.size() + v.outputs.ldr.size()
+        });
+        self.static_bytes + view
     }
 
     pub fn settings(&self) -> &Settings {

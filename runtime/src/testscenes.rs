@@ -27,7 +27,7 @@ pub fn carved(
     tile_depth: u32,
     dims: IVec3,
     air: &dyn Fn(IVec3) -> bool,
-    albedo: Vec3,
+    albedo: &dyn Fn(IVec3) -> Vec3,
     emission: Vec3,
     normal_override: Option<&dyn Fn(IVec3) -> Vec3>,
 ) -> SceneData {
@@ -41,6 +41,7 @@ pub fn carved(
                 if air(c) {
                     continue;
                 }
+                let albedo = albedo(c);
                 let mut open = Vec3::ZERO;
                 for d in NEIGHBOURS {
                     let n = c + d;
@@ -140,8 +141,16 @@ pub fn dogleg_chamber(c: IVec3) -> bool {
 /// cross tile borders), albedo 0.8, one 200 W point light in room A.
 pub fn dogleg() -> SceneData {
     let leaf = 0.25;
-    let mut s =
-        carved("dogleg", leaf, 4, IVec3::new(24, 42, 12), &dogleg_air, Vec3::splat(0.8), Vec3::ZERO, None);
+    let mut s = carved(
+        "dogleg",
+        leaf,
+        4,
+        IVec3::new(24, 42, 12),
+        &dogleg_air,
+        &|_| Vec3::splat(0.8),
+        Vec3::ZERO,
+        None,
+    );
     s.lights.push(SceneLight {
         name: "lamp".into(),
         position_m: Vec3::new(6.0, 5.0, 6.0) * leaf,
@@ -154,6 +163,39 @@ pub fn dogleg() -> SceneData {
         look_at_m: Vec3::new(20.0, 6.0, 5.0) * leaf,
         up: Vec3::Z,
         fov_y_deg: 75.0,
+    });
+    s
+}
+
+/// A closed box (Cornell-like) for colour bleeding: 24 leaves of 0.1 m inside, red wall at -x,
+/// green at +x, the rest grey 0.7, one 30 W point light under the ceiling, a camera at the open
+/// side looking in. Rock is one leaf thick around it.
+pub fn colour_box() -> SceneData {
+    let n = 26;
+    let air = |c: IVec3| c.cmpge(IVec3::ONE).all() && c.cmplt(IVec3::splat(n - 1)).all();
+    let albedo = |c: IVec3| {
+        if c.x == 0 {
+            Vec3::new(0.75, 0.12, 0.1)
+        } else if c.x == n - 1 {
+            Vec3::new(0.12, 0.65, 0.15)
+        } else {
+            Vec3::splat(0.7)
+        }
+    };
+    let leaf = 0.1;
+    let mut s = carved("colour box", leaf, 5, IVec3::splat(n), &air, &albedo, Vec3::ZERO, None);
+    s.lights.push(SceneLight {
+        name: "lamp".into(),
+        position_m: Vec3::new(13.0, 13.0, 22.0) * leaf,
+        intensity_w_sr: Vec3::new(1.0, 0.9, 0.8) * (30.0 / (4.0 * std::f32::consts::PI)),
+        spot: None,
+    });
+    s.cameras.push(SceneCamera {
+        name: "front".into(),
+        eye_m: Vec3::new(13.0, 2.0, 13.0) * leaf,
+        look_at_m: Vec3::new(13.0, 24.0, 11.0) * leaf,
+        up: Vec3::Z,
+        fov_y_deg: 70.0,
     });
     s
 }

@@ -11,11 +11,36 @@ use grotto_runtime::camera::Camera;
 use grotto_runtime::renderer::Frame;
 use grotto_runtime::scene_data::SceneData;
 
-/// Render a package's camera by path tracing its surfels (the runtime's scene, no voxels): linear
-/// radiance to EXR, or tonemapped PNG; prints the mean standard error of the estimate.
+/// Ground truth for grotto: path-traced reference renders, and the accuracy-vs-time sweep.
 #[derive(Parser, Debug)]
 #[command(name = "grotto-reference", version)]
-struct Cli {
+enum Cli {
+    Render(RenderArgs),
+    Accuracy(AccuracyArgs),
+}
+
+/// Run the runtime over every quality knob and preset on the built-in scenes, compare each image
+/// with the path-traced reference, and write the report (docs/accuracy.md) and raw rows (JSON).
+#[derive(clap::Args, Debug)]
+struct AccuracyArgs {
+    /// The report to write.
+    #[arg(long, default_value = "docs/accuracy.md")]
+    out: PathBuf,
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "96x72")]
+    size: String,
+    /// Reference paths per pixel.
+    #[arg(long, default_value_t = 1024)]
+    spp: u32,
+    /// Prefer the software adapter.
+    #[arg(long)]
+    software: bool,
+}
+
+/// Render a package's camera by path tracing its surfels (the runtime's scene, no voxels): linear
+/// radiance to EXR, or tonemapped PNG; prints the mean standard error of the estimate.
+#[derive(clap::Args, Debug)]
+struct RenderArgs {
     package: PathBuf,
     /// A camera named in the package (default: its first).
     #[arg(long)]
@@ -49,14 +74,52 @@ fn aces_srgb(x: f32) -> u8 {
     (s * 255.0 + 0.5) as u8
 }
 
-fn main() -> anyhow::Result<()> {
-    let cli = Cli::parse();
-    let (w, h) = cli
-        .size
-        .split_once(['x', 'X'])
+fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
+    s.split_once(['x', 'X'])
         .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
         .filter(|&(w, h)| w > 0 && h > 0 && w <= 16384 && h <= 16384)
-        .with_context(|| format!("--size {:?}: expected WIDTHxHEIGHT", cli.size))?;
+        .with_context(|| format!("--size {s:?}: expected WIDTHxHEIGHT"))
+}
+
+fn main() -> anyhow::Result<()> {
+    match Cli::parse() {
+        Cli::Render(a) => render(a),
+        Cli::Accuracy(a) => accuracy(a),
+    }
+}
+
+fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
+    use grotto_reference::accuracy;
+    let (w, h) = parse_size(&a.size)?;
+    let gpu = grotto_runtime::gpu::Gpu::new(&grotto_runtime::gpu::GpuOptions {
+        prefer_software: a.software,
+        ..Default::default()
+    })?;
+    eprintln!("reference renders ({} spp, {w}x{h})...", a.spp);
+    let scenes = accuracy::scenes(w, h, a.spp);
+    let configs = accuracy::configs();
+    let bar = indicatif::ProgressBar::new((scenes.len() * configs.len()) as u64);
+    let rows = accuracy::sweep(&gpu, &scenes, &configs, w, h, |scene, config| {
+        bar.set_message(format!("{scene}: {config}"));
+        bar.inc(1);
+    })?;
+    bar.finish_and_clear();
+    let command = format!(
+        "cargo run --release -p grotto-reference -- accuracy --size {w}x{h} --spp {}{}",
+        a.spp,
+        if a.software { " --software" } else { "" }
+    );
+    let md = accuracy::report(&scenes, &rows, &gpu.describe(), w, h, &command);
+    let json = a.out.with_extension("json");
+    std::fs::write(&a.out, md).with_context(|| format!("writing {}", a.out.display()))?;
+    std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
+        .with_context(|| format!("writing {}", json.display()))?;
+    println!("wrote {} and {} ({} runs)", a.out.display(), json.display(), rows.len());
+    Ok(())
+}
+
+fn render(cli: RenderArgs) -> anyhow::Result<()> {
+    let (w, h) = parse_size(&cli.size)?;
     grotto_runtime::image_out::kind_of(&cli.out)?;
     let pkg = grotto_format::Package::open(&cli.package)?;
     let scene_data = SceneData::from_package(&pkg)?;

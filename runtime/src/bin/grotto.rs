@@ -83,24 +83,28 @@ struct RenderArgs {
     /// Output image (.png or .exr); a path sequence appends _NNNN.
     #[arg(long, short, default_value = "render.png")]
     out: PathBuf,
+    /// Quality preset: fast, balanced or high (measured error and time: docs/accuracy.md); the
+    /// knob options below override single settings of it.
+    #[arg(long, default_value = "balanced")]
+    quality: String,
     /// Bounce budget (propagation passes; stops earlier once converged).
-    #[arg(long, default_value_t = 8)]
-    bounces: u32,
+    #[arg(long)]
+    bounces: Option<u32>,
     /// Cones per leaf gather (1..=16).
-    #[arg(long, default_value_t = 6)]
-    cones: u32,
+    #[arg(long)]
+    cones: Option<u32>,
     /// Cone aperture scale (1 = cones tile the hemisphere).
-    #[arg(long, default_value_t = 1.0)]
-    aperture: f32,
+    #[arg(long)]
+    aperture: Option<f32>,
     /// Cone step as a fraction of its diameter.
-    #[arg(long, default_value_t = 0.5)]
-    step: f32,
+    #[arg(long)]
+    step: Option<f32>,
     /// Longest cone in metres (default: the scene diagonal).
     #[arg(long)]
     max_distance: Option<f32>,
     /// Shadow map size in texels per face.
-    #[arg(long, default_value_t = 512)]
-    shadow_map: u32,
+    #[arg(long)]
+    shadow_map: Option<u32>,
     /// Surfel radius multiplier for splatting (discs overlap so sparse sampling leaves no holes).
     #[arg(long, default_value_t = 2.0)]
     splat_scale: f32,
@@ -108,8 +112,8 @@ struct RenderArgs {
     #[arg(long)]
     no_shadows: bool,
     /// Indirect light filter at pixels: trilinear, tricubic or off.
-    #[arg(long, default_value = "trilinear")]
-    indirect: String,
+    #[arg(long)]
+    indirect: Option<String>,
     /// Exposure multiplier (default: automatic from the first frame).
     #[arg(long)]
     exposure: Option<f32>,
@@ -159,13 +163,27 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 
 fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderOptions> {
     use grotto_runtime::render_job::{CameraChoice, RenderOptions};
-    use grotto_runtime::renderer::{IndirectFilter, Settings};
-    let indirect = match a.indirect.as_str() {
-        "trilinear" => IndirectFilter::Trilinear,
-        "tricubic" => IndirectFilter::Tricubic,
-        "off" => IndirectFilter::Off,
-        other => anyhow::bail!("--indirect {other:?}: use trilinear, tricubic or off"),
-    };
+    use grotto_runtime::renderer::{IndirectFilter, Quality, Settings};
+    let quality = Quality::parse(&a.quality)
+        .ok_or_else(|| anyhow::anyhow!("--quality {:?}: use fast, balanced or high", a.quality))?;
+    let mut settings = Settings::preset(quality);
+    if let Some(i) = &a.indirect {
+        settings.indirect = match i.as_str() {
+            "trilinear" => IndirectFilter::Trilinear,
+            "tricubic" => IndirectFilter::Tricubic,
+            "off" => IndirectFilter::Off,
+            other => anyhow::bail!("--indirect {other:?}: use trilinear, tricubic or off"),
+        };
+    }
+    settings.cones = a.cones.unwrap_or(settings.cones);
+    settings.cone_aperture_scale = a.aperture.unwrap_or(settings.cone_aperture_scale);
+    settings.step_scale = a.step.unwrap_or(settings.step_scale);
+    settings.bounces = a.bounces.unwrap_or(settings.bounces);
+    settings.shadow_map_size = a.shadow_map.unwrap_or(settings.shadow_map_size);
+    settings.max_distance_m = a.max_distance;
+    settings.convergence_tolerance = a.tolerance;
+    settings.shadows = !a.no_shadows;
+    settings.splat_scale = a.splat_scale;
     let camera = match (a.camera.clone(), a.eye, a.look_at) {
         (Some(name), _, _) => CameraChoice::Named(name),
         (None, Some(eye_m), Some(look_at_m)) => {
@@ -181,19 +199,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
         width: a.size.0,
         height: a.size.1,
         out: a.out.clone(),
-        settings: Settings {
-            cones: a.cones,
-            cone_aperture_scale: a.aperture,
-            step_scale: a.step,
-            max_distance_m: a.max_distance,
-            bounces: a.bounces,
-            convergence_tolerance: a.tolerance,
-            shadows: !a.no_shadows,
-            shadow_map_size: a.shadow_map,
-            indirect,
-            splat_scale: a.splat_scale,
-            ..Settings::default()
-        },
+        settings,
         exposure: a.exposure,
         gpu: grotto_runtime::gpu::GpuOptions { prefer_software: a.software, ..Default::default() },
     })
@@ -229,7 +235,7 @@ fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
 fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
     use grotto_runtime::render_job::{self, Progress};
     let opts = options(&a)?;
-    let bounce_bar = indicatif::ProgressBar::new(u64::from(a.bounces)).with_style(
+    let bounce_bar = indicatif::ProgressBar::new(u64::from(opts.settings.bounces)).with_style(
         indicatif::ProgressStyle::with_template("{prefix:>9} [{bar:30}] {pos}/{len} {msg}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );

@@ -145,7 +145,10 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             color += albedo / PI * irradiance;
         }
         if (params.flags & (FLAG_INDIRECT | FLAG_EMISSION)) != 0u {
-            let l = leaf_light_at(p + n * (0.5 * params.leaf_size_m));
+            // A quarter leaf behind the surface: inside the leaf the surfel belongs to, so the
+            // trilinear weights land on leaves, not on the empty cells in front (measured: looking
+            // up in front lost the gather wherever a surfel sat on a cell face).
+            let l = leaf_light_at(p - n * (0.25 * params.leaf_size_m));
             if (params.flags & FLAG_INDIRECT) != 0u {
                 color += albedo * l[0];
             }
