@@ -57,8 +57,9 @@ pub struct Row {
     pub pass_ms: BTreeMap<String, f64>,
 }
 
-/// The built-in scenes: the furnace shell, the colour box, the hidden-chamber dogleg.
-pub fn scenes(width: u32, height: u32, spp: u32) -> Vec<SweepScene> {
+/// The built-in scenes: the furnace shell, the colour box, the hidden-chamber dogleg and the
+/// synthetic demo cave; `only` keeps the one with that name.
+pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<SweepScene> {
     let mut out = Vec::new();
     let mut furnace = testscenes::furnace_sphere(5, 11.0, 0.8, 1.0);
     let c = Vec3::splat(1.6);
@@ -82,6 +83,16 @@ pub fn scenes(width: u32, height: u32, spp: u32) -> Vec<SweepScene> {
             testscenes::dogleg(),
         ),
     ];
+    let mut defs: Vec<_> = defs.into_iter().filter(|d| only.is_none_or(|o| o == d.0)).collect();
+    match only.is_none_or(|o| o == "demo cave").then(demo_cave).transpose() {
+        Ok(None) => {}
+        Ok(Some(data)) => defs.push((
+            "demo cave",
+            "the synthetic demo cave (80k points, 0.25 m leaves, 14 lamps), camera at the entrance: a passage lit mostly indirectly",
+            data,
+        )),
+        Err(e) => eprintln!("demo cave scene skipped: {e}"),
+    }
     for (name, description, data) in defs {
         let camera = Camera::from_scene(&data.cameras[0]);
         let scene = SurfelScene::from_scene(&data, Settings::default().splat_scale);
@@ -99,6 +110,39 @@ pub fn scenes(width: u32, height: u32, spp: u32) -> Vec<SweepScene> {
         });
     }
     out
+}
+
+/// A small synthetic cave built through the whole pipeline (synth -> package -> scene).
+pub fn demo_cave() -> Result<SceneData, String> {
+    use grotto_preprocess::build::{self, BuildParams, ColorCodec};
+    use grotto_preprocess::ingest::ScanFormat;
+    use grotto_preprocess::manifest::Manifest;
+    use grotto_preprocess::synth::{self, SynthParams};
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let params = SynthParams { points: 80_000, segments: 6, ..SynthParams::default() };
+    let summary = synth::write_dataset(&dir.path().join("scans"), &params, &[ScanFormat::Las], &|_, _| {})
+        .map_err(|e| e.to_string())?;
+    let manifest_path = std::path::PathBuf::from(&summary.manifest);
+    let manifest = Manifest::load(&manifest_path).map_err(|e| e.to_string())?;
+    let out = dir.path().join("cave.grotto");
+    let bp = BuildParams {
+        work_dir: dir.path().join("work"),
+        memory_budget_bytes: 256 << 20,
+        threads: 2,
+        leaf_m: 0.25,
+        colors: ColorCodec::Bc1,
+        sh_window: true,
+        k: 16,
+        min_tile_extent_m: 4.0,
+        max_tile_extent_m: 16.0,
+        halo_m: 0.5,
+    };
+    build::build(&manifest, &manifest_path, &out, &bp, &|_| {}).map_err(|e| e.to_string())?;
+    let pkg = grotto_format::Package::open(&out).map_err(|e| e.to_string())?;
+    let mut scene = SceneData::from_package(&pkg).map_err(|e| e.to_string())?;
+    // The entrance camera first: it looks down a passage the lamps light mostly indirectly.
+    scene.cameras.sort_by_key(|c| c.name != "entrance");
+    Ok(scene)
 }
 
 /// Each knob alone around the balanced preset, and the three presets.
@@ -231,6 +275,11 @@ pub fn presets_monotone(rows: &[Row]) -> Option<bool> {
     Some(t(f) < t(b) && t(b) < t(h) && f.rel_rmse > b.rel_rmse && b.rel_rmse > h.rel_rmse)
 }
 
+/// File-name form of a scene name.
+pub fn slug(name: &str) -> String {
+    name.chars().map(|c| if c.is_ascii_alphanumeric() { c.to_ascii_lowercase() } else { '-' }).collect()
+}
+
 /// docs/accuracy.md.
 pub fn report(
     scenes: &[SweepScene],
@@ -258,6 +307,7 @@ pub fn report(
         let front = pareto(&mine);
         let noise = mine.first().map_or(0.0, |r| r.reference_noise);
         let _ = writeln!(s, "## {}\n", sc.name);
+        let _ = writeln!(s, "![{} error against time](accuracy/{}.svg)\n", sc.name, slug(&sc.name));
         let _ = writeln!(
             s,
             "{}. Reference: {} paths per pixel in {:.1} s, own noise {:.4} (relative RMSE scale). {} leaves, {} surfels.\n",
@@ -302,4 +352,55 @@ pub fn report(
         );
     }
     s
+}
+
+/// An SVG of error against total GPU time (log-log) for one scene's rows: every run as a point, the
+/// Pareto front as a line, the presets labelled.
+pub fn plot_svg(scene: &str, rows: &[Row]) -> String {
+    use plotters::prelude::*;
+    let mine: Vec<&Row> = rows.iter().filter(|r| r.scene == scene).collect();
+    let t = |r: &Row| (r.light_ms + r.frame_ms).max(0.1);
+    let (t_lo, t_hi) = mine.iter().fold((f64::MAX, f64::MIN), |(a, b), r| (a.min(t(r)), b.max(t(r))));
+    let (e_lo, e_hi) =
+        mine.iter().fold((f64::MAX, f64::MIN), |(a, b), r| (a.min(r.rel_rmse), b.max(r.rel_rmse)));
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (640, 420)).into_drawing_area();
+        let _ = root.fill(&WHITE);
+        let chart = ChartBuilder::on(&root)
+            .caption(format!("{scene}: error against GPU time"), ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(56)
+            .build_cartesian_2d(
+                (t_lo * 0.8..t_hi * 1.25).log_scale(),
+                (e_lo.max(1e-4) * 0.8..e_hi * 1.25).log_scale(),
+            );
+        let Ok(mut chart) = chart else { return svg_fallback(scene) };
+        let _ = chart
+            .configure_mesh()
+            .x_desc("GPU time to converge + one frame (ms)")
+            .y_desc("relative RMSE")
+            .draw();
+        let _ = chart.draw_series(mine.iter().map(|r| Circle::new((t(r), r.rel_rmse), 3, BLUE.filled())));
+        let owned: Vec<Row> = mine.iter().map(|r| (*r).clone()).collect();
+        let front = pareto(&owned);
+        let mut pts: Vec<(f64, f64)> =
+            owned.iter().zip(&front).filter(|(_, f)| **f).map(|(r, _)| (t(r), r.rel_rmse)).collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let _ = chart.draw_series(LineSeries::new(pts, &RED));
+        for r in mine.iter().filter(|r| r.knob == "preset") {
+            let _ = chart.draw_series(std::iter::once(Text::new(
+                r.config.clone(),
+                (t(r), r.rel_rmse),
+                ("sans-serif", 14).into_font().color(&BLACK),
+            )));
+        }
+        let _ = root.present();
+    }
+    svg
+}
+
+fn svg_fallback(scene: &str) -> String {
+    format!("<svg xmlns=\"http://www.w3.org/2000/svg\"><text x=\"10\" y=\"20\">{scene}: no data</text></svg>")
 }

@@ -117,14 +117,22 @@ fn leaf_radiance_of_the_runtime_furnace_scene() {
 fn presets_trade_time_for_error_on_the_colour_box() {
     use grotto_reference::accuracy;
     use grotto_runtime::gpu::{Gpu, GpuOptions};
-    let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() }).expect("GPU tests need an adapter");
+    let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })
+        .expect("GPU tests need an adapter");
     let (w, h) = (32, 24);
-    let scenes: Vec<_> = accuracy::scenes(w, h, 256).into_iter().filter(|s| s.name == "colour box").collect();
+    let scenes = accuracy::scenes(w, h, 256, Some("colour box"));
+    assert_eq!(scenes.len(), 1);
     let presets: Vec<_> = accuracy::configs().into_iter().filter(|c| c.knob == "preset").collect();
     let rows = accuracy::sweep(&gpu, &scenes, &presets, w, h, |_, _| {}).unwrap();
     let err: Vec<f64> = rows.iter().map(|r| r.rel_rmse).collect();
-    eprintln!("colour box, fast / balanced / high: relative RMSE {err:?}, reference noise {:.4}", rows[0].reference_noise);
+    eprintln!(
+        "colour box, fast / balanced / high: relative RMSE {err:?}, reference noise {:.4}",
+        rows[0].reference_noise
+    );
     // Errors only: times are measured by the sweep command, not in tests.
     assert!(err[0] > err[1] && err[1] > err[2], "{err:?}");
-    assert!(rows[0].reference_noise < 0.5 * (err[1] - err[2]).abs().max(err[2]), "reference noise too high to judge");
+    assert!(
+        rows[0].reference_noise < 0.5 * (err[1] - err[2]).abs().max(err[2]),
+        "reference noise too high to judge"
+    );
 }

@@ -74,6 +74,17 @@ fn aces_srgb(x: f32) -> u8 {
     (s * 255.0 + 0.5) as u8
 }
 
+/// Writes `bytes` to `path` through a temp file beside it and a rename (never half-written).
+fn write_atomically(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
+    use std::io::Write;
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+    let mut tmp =
+        tempfile::NamedTempFile::new_in(dir).with_context(|| format!("writing {}", path.display()))?;
+    tmp.write_all(bytes).with_context(|| format!("writing {}", path.display()))?;
+    tmp.persist(path).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
 fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
     s.split_once(['x', 'X'])
         .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
@@ -96,7 +107,7 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
         ..Default::default()
     })?;
     eprintln!("reference renders ({} spp, {w}x{h})...", a.spp);
-    let scenes = accuracy::scenes(w, h, a.spp);
+    let scenes = accuracy::scenes(w, h, a.spp, None);
     let configs = accuracy::configs();
     let bar = indicatif::ProgressBar::new((scenes.len() * configs.len()) as u64);
     let rows = accuracy::sweep(&gpu, &scenes, &configs, w, h, |scene, config| {
@@ -111,7 +122,13 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
     );
     let md = accuracy::report(&scenes, &rows, &gpu.describe(), w, h, &command);
     let json = a.out.with_extension("json");
-    std::fs::write(&a.out, md).with_context(|| format!("writing {}", a.out.display()))?;
+    write_atomically(&a.out, md.as_bytes())?;
+    let plots = a.out.with_extension("");
+    std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
+    for sc in &scenes {
+        let path = plots.join(format!("{}.svg", accuracy::slug(&sc.name)));
+        write_atomically(&path, accuracy::plot_svg(&sc.name, &rows).as_bytes())?;
+    }
     std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
         .with_context(|| format!("writing {}", json.display()))?;
     println!("wrote {} and {} ({} runs)", a.out.display(), json.display(), rows.len());
