@@ -35,6 +35,9 @@ struct AccuracyArgs {
     /// Prefer the software adapter.
     #[arg(long)]
     software: bool,
+    /// Only this scene (furnace, "colour box", dogleg, "demo cave"); the report then covers it alone.
+    #[arg(long)]
+    scene: Option<String>,
 }
 
 /// Render a package's camera by path tracing its surfels (the runtime's scene, no voxels): linear
@@ -107,7 +110,8 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
         ..Default::default()
     })?;
     eprintln!("reference renders ({} spp, {w}x{h})...", a.spp);
-    let scenes = accuracy::scenes(w, h, a.spp, None);
+    let scenes = accuracy::scenes(w, h, a.spp, a.scene.as_deref());
+    anyhow::ensure!(!scenes.is_empty(), "no scene named {:?}", a.scene);
     let configs = accuracy::configs();
     let bar = indicatif::ProgressBar::new((scenes.len() * configs.len()) as u64);
     let rows = accuracy::sweep(&gpu, &scenes, &configs, w, h, |scene, config| {
