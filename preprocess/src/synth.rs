@@ -596,3 +596,36 @@ pub fn write_dataset(
         files,
     })
 }
+
+/// The small synthetic cave that the runtime's tests, the golden images and the accuracy sweep
+/// share: LAS scans of about `points` points over `segments` passage segments, built with 0.25 m
+/// leaves and tiles of 4 m up to `max_tile_extent_m` into `dir/cave.grotto` (scans in `dir/scans`,
+/// work files in `dir/work`). Returns the package path.
+pub fn small_cave_package(
+    dir: &std::path::Path,
+    points: u64,
+    segments: usize,
+    colors: crate::build::ColorCodec,
+    max_tile_extent_m: f64,
+) -> crate::Result<std::path::PathBuf> {
+    use crate::build::{self, BuildParams};
+    let params = SynthParams { points, segments, ..SynthParams::default() };
+    let summary = write_dataset(&dir.join("scans"), &params, &[crate::ingest::ScanFormat::Las], &|_, _| {})?;
+    let manifest_path = std::path::PathBuf::from(&summary.manifest);
+    let manifest = crate::manifest::Manifest::load(&manifest_path)?;
+    let out = dir.join("cave.grotto");
+    let bp = BuildParams {
+        work_dir: dir.join("work"),
+        memory_budget_bytes: 64 << 20,
+        threads: 2,
+        leaf_m: 0.25,
+        colors,
+        sh_window: true,
+        k: 16,
+        min_tile_extent_m: 4.0,
+        max_tile_extent_m,
+        halo_m: 0.5,
+    };
+    build::build(&manifest, &manifest_path, &out, &bp, &|_| {})?;
+    Ok(out)
+}

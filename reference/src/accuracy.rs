@@ -114,30 +114,15 @@ pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<Swee
 
 /// A small synthetic cave built through the whole pipeline (synth -> package -> scene).
 pub fn demo_cave() -> Result<SceneData, String> {
-    use grotto_preprocess::build::{self, BuildParams, ColorCodec};
-    use grotto_preprocess::ingest::ScanFormat;
-    use grotto_preprocess::manifest::Manifest;
-    use grotto_preprocess::synth::{self, SynthParams};
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
-    let params = SynthParams { points: 80_000, segments: 6, ..SynthParams::default() };
-    let summary = synth::write_dataset(&dir.path().join("scans"), &params, &[ScanFormat::Las], &|_, _| {})
-        .map_err(|e| e.to_string())?;
-    let manifest_path = std::path::PathBuf::from(&summary.manifest);
-    let manifest = Manifest::load(&manifest_path).map_err(|e| e.to_string())?;
-    let out = dir.path().join("cave.grotto");
-    let bp = BuildParams {
-        work_dir: dir.path().join("work"),
-        memory_budget_bytes: 256 << 20,
-        threads: 2,
-        leaf_m: 0.25,
-        colors: ColorCodec::Bc1,
-        sh_window: true,
-        k: 16,
-        min_tile_extent_m: 4.0,
-        max_tile_extent_m: 16.0,
-        halo_m: 0.5,
-    };
-    build::build(&manifest, &manifest_path, &out, &bp, &|_| {}).map_err(|e| e.to_string())?;
+    let out = grotto_preprocess::synth::small_cave_package(
+        dir.path(),
+        80_000,
+        6,
+        grotto_preprocess::build::ColorCodec::Bc1,
+        16.0,
+    )
+    .map_err(|e| e.to_string())?;
     let pkg = grotto_format::Package::open(&out).map_err(|e| e.to_string())?;
     let mut scene = SceneData::from_package(&pkg).map_err(|e| e.to_string())?;
     // The entrance camera first: it looks down a passage the lamps light mostly indirectly.

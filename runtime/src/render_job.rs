@@ -143,10 +143,9 @@ pub fn auto_exposure(hdr: &[[f32; 4]]) -> f32 {
     (0.18 / mean).clamp(1e-6, 1e9) as f32
 }
 
-/// Runs a render job.
-pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<RenderSummary> {
-    image_out::kind_of(&opts.out)?;
-    let pkg = Package::open(&opts.package)?;
+/// Opens a package and reads its scene; an empty package is an error (nothing to render).
+pub fn load_scene(package: &Path) -> Result<SceneData> {
+    let pkg = Package::open(package)?;
     let scene = SceneData::from_package(&pkg)?;
     if scene.leaves.is_empty() {
         return Err(Error::Scene {
@@ -154,6 +153,13 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             problem: "no voxels to render (empty package)".into(),
         });
     }
+    Ok(scene)
+}
+
+/// Runs a render job.
+pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<RenderSummary> {
+    image_out::kind_of(&opts.out)?;
+    let scene = load_scene(&opts.package)?;
     let cameras: Vec<Camera> = if opts.path.is_empty() {
         vec![resolve_camera(&scene, &opts.camera)?]
     } else {
@@ -249,14 +255,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Times every pass `reps` times on the package's first camera (or a default view).
 pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
     use crate::plan::Pass;
-    let pkg = Package::open(&opts.package)?;
-    let scene = SceneData::from_package(&pkg)?;
-    if scene.leaves.is_empty() {
-        return Err(Error::Scene {
-            package: scene.name.clone(),
-            problem: "no voxels to render (empty package)".into(),
-        });
-    }
+    let scene = load_scene(&opts.package)?;
     let cam = resolve_camera(&scene, &opts.camera)?;
     let gpu = Gpu::new(&opts.gpu)?;
     let mut settings = opts.settings.clone();

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 
 use glam::{DVec3, IVec3, Vec3};
 use grotto_format::spec::Rgba8;
-use grotto_format::spec::Surfel;
+use grotto_format::spec::{Surfel, SvoNode};
 use grotto_format::svo::{morton_decode, morton_encode, nodes_from_leaves};
 use grotto_format::{LightShape, Package, SectionKind};
 
@@ -77,6 +77,18 @@ fn srgb_to_linear(c: u8) -> f32 {
 }
 
 impl SceneData {
+    /// Appends a tile's nodes with global indices: `first_child` becomes a global node index for
+    /// inner nodes and a global leaf index for leaves (the package stores tile-local ones).
+    fn push_nodes(&mut self, nodes: &[SvoNode], depth: u32, node_offset: u32, leaf_offset: u32) {
+        for n in nodes {
+            let base = if u32::from(n.level) == depth { leaf_offset } else { node_offset };
+            self.nodes.push(NodeGpu {
+                first_child: base + n.first_child,
+                mask_level: u32::from(n.child_mask) | u32::from(n.level) << 8,
+            });
+        }
+    }
+
     /// Frame-space bounds of all tiles in leaf units: (min, max).
     pub fn bounds_leaf(&self) -> (Vec3, Vec3) {
         let mut lo = Vec3::splat(f32::MAX);
@@ -164,17 +176,7 @@ impl SceneData {
             let depth = tile.depth();
             let node_offset = out.nodes.len() as u32;
             let leaf_offset = out.leaves.len() as u32;
-            for n in svo.nodes.iter() {
-                let first_child = if u32::from(n.level) == depth {
-                    leaf_offset + n.first_child
-                } else {
-                    node_offset + n.first_child
-                };
-                out.nodes.push(NodeGpu {
-                    first_child,
-                    mask_level: u32::from(n.child_mask) | u32::from(n.level) << 8,
-                });
-            }
+            out.push_nodes(svo.nodes.as_ref(), depth, node_offset, leaf_offset);
             let emission = svo.emission.as_deref();
             for (li, n) in svo.nodes.iter().filter(|n| u32::from(n.level) == depth).enumerate() {
                 let cell = morton_decode(n.morton);
@@ -273,17 +275,7 @@ impl SceneData {
             let origin = IVec3::new(key[2], key[1], key[0]) << tile_depth as i32;
             let node_offset = out.nodes.len() as u32;
             let leaf_offset = out.leaves.len() as u32;
-            for n in &nodes {
-                let first_child = if u32::from(n.level) == tile_depth {
-                    leaf_offset + n.first_child
-                } else {
-                    node_offset + n.first_child
-                };
-                out.nodes.push(NodeGpu {
-                    first_child,
-                    mask_level: u32::from(n.child_mask) | u32::from(n.level) << 8,
-                });
-            }
+            out.push_nodes(&nodes, tile_depth, node_offset, leaf_offset);
             for (_, v) in &list {
                 out.leaves.push(LeafGpu {
                     albedo_opacity: v.albedo.extend(v.opacity).to_array(),

@@ -5,10 +5,8 @@ use std::path::PathBuf;
 
 use glam::Vec3;
 use grotto_format::Package;
-use grotto_preprocess::build::{self, BuildParams, ColorCodec};
-use grotto_preprocess::ingest::ScanFormat;
-use grotto_preprocess::manifest::Manifest;
-use grotto_preprocess::synth::{self, SynthParams};
+use grotto_preprocess::build::ColorCodec;
+use grotto_preprocess::synth;
 use grotto_runtime::Error;
 use grotto_runtime::cpu_ref::CpuScene;
 use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
@@ -17,25 +15,7 @@ use grotto_runtime::scene_data::SceneData;
 
 /// A small synthetic cave at UTM-sized coordinates, several tiles.
 fn fixture(dir: &std::path::Path) -> PathBuf {
-    let params = SynthParams { points: 20_000, segments: 4, ..SynthParams::default() };
-    let summary = synth::write_dataset(&dir.join("scans"), &params, &[ScanFormat::Las], &|_, _| {}).unwrap();
-    let manifest_path = PathBuf::from(&summary.manifest);
-    let manifest = Manifest::load(&manifest_path).unwrap();
-    let out = dir.join("cave.grotto");
-    let bp = BuildParams {
-        work_dir: dir.join("work"),
-        memory_budget_bytes: 64 << 20,
-        threads: 2,
-        leaf_m: 0.25,
-        colors: ColorCodec::Raw,
-        sh_window: true,
-        k: 16,
-        min_tile_extent_m: 4.0,
-        max_tile_extent_m: 8.0,
-        halo_m: 0.5,
-    };
-    build::build(&manifest, &manifest_path, &out, &bp, &|_| {}).unwrap();
-    out
+    synth::small_cave_package(dir, 20_000, 4, ColorCodec::Raw, 8.0).unwrap()
 }
 
 fn opts(package: PathBuf, camera: CameraChoice, out: PathBuf) -> RenderOptions {

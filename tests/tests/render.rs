@@ -4,35 +4,15 @@
 
 use std::path::Path;
 
-use grotto_preprocess::build::{self, BuildParams, ColorCodec};
-use grotto_preprocess::ingest::ScanFormat;
-use grotto_preprocess::manifest::Manifest;
-use grotto_preprocess::synth::{self, SynthParams};
+use grotto_preprocess::build::ColorCodec;
+use grotto_preprocess::synth;
 use grotto_runtime::gpu::GpuOptions;
 use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
 use grotto_runtime::renderer::Settings;
 use grotto_tests::golden;
 
 fn build_small_cave(dir: &Path) -> std::path::PathBuf {
-    let params = SynthParams { points: 80_000, segments: 6, ..SynthParams::default() };
-    let summary = synth::write_dataset(&dir.join("scans"), &params, &[ScanFormat::Las], &|_, _| {}).unwrap();
-    let manifest_path = std::path::PathBuf::from(&summary.manifest);
-    let manifest = Manifest::load(&manifest_path).unwrap();
-    let out = dir.join("cave.grotto");
-    let bp = BuildParams {
-        work_dir: dir.join("work"),
-        memory_budget_bytes: 64 << 20,
-        threads: 2,
-        leaf_m: 0.25,
-        colors: ColorCodec::Bc1,
-        sh_window: true,
-        k: 16,
-        min_tile_extent_m: 4.0,
-        max_tile_extent_m: 16.0,
-        halo_m: 0.5,
-    };
-    build::build(&manifest, &manifest_path, &out, &bp, &|_| {}).unwrap();
-    out
+    synth::small_cave_package(dir, 80_000, 6, ColorCodec::Bc1, 16.0).unwrap()
 }
 
 #[test]
