@@ -21,7 +21,7 @@ use bvh::bvh::Bvh;
 use glam::{IVec3, Vec3};
 use grotto_runtime::camera::Camera;
 use grotto_runtime::cpu_ref::CpuScene;
-use grotto_runtime::scene_data::{SceneData, SceneLight};
+use grotto_runtime::scene_data::{SceneData, SceneLight, srgb_to_linear};
 use nalgebra::Point3;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -136,15 +136,26 @@ pub struct Estimate {
     pub std_err: Vec3,
 }
 
-fn srgb_to_linear(c: u8) -> f32 {
-    let c = f32::from(c) / 255.0;
-    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
-}
-
 /// The leaf cell a surfel belongs to: a quarter leaf behind its surface, so a surfel lying exactly
 /// on a cell face (hand-built scenes) finds the solid side's leaf.
 fn surface_cell(center_m: Vec3, normal: Vec3, leaf_m: f32) -> IVec3 {
     ((center_m - normal.normalize_or_zero() * (0.25 * leaf_m)) / leaf_m).floor().as_ivec3()
+}
+
+impl Estimate {
+    /// Sample mean and its standard error (sample variance / n, square-rooted).
+    fn of(samples: impl Iterator<Item = Vec3>) -> Self {
+        let (mut sum, mut sum2, mut n) = (Vec3::ZERO, Vec3::ZERO, 0u32);
+        for v in samples {
+            sum += v;
+            sum2 += v * v;
+            n += 1;
+        }
+        let k = n.max(1) as f32;
+        let mean = sum / k;
+        let var = (sum2 / k - mean * mean).max(Vec3::ZERO) / (k - 1.0).max(1.0);
+        Estimate { mean, std_err: var.powf(0.5) }
+    }
 }
 
 /// Cosine-distributed direction around unit `n`.
@@ -324,17 +335,11 @@ impl SurfelScene {
         let p = disc.center_m;
         let mut rng = SmallRng::seed_from_u64(seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
         let base = disc.emission + self.direct(p, n, disc.albedo);
-        let (mut sum, mut sum2) = (Vec3::ZERO, Vec3::ZERO);
-        for _ in 0..paths {
+        let e = Estimate::of((0..paths).map(|_| {
             let d = cosine_sample(n, rng.random(), rng.random());
-            let v = disc.albedo * self.trace(p + n * self.epsilon_m, d, settings, &mut rng);
-            sum += v;
-            sum2 += v * v;
-        }
-        let k = paths.max(1) as f32;
-        let mean = sum / k;
-        let var = (sum2 / k - mean * mean).max(Vec3::ZERO) / (k - 1.0).max(1.0);
-        Estimate { mean: base + mean, std_err: var.powf(0.5) }
+            disc.albedo * self.trace(p + n * self.epsilon_m, d, settings, &mut rng)
+        }));
+        Estimate { mean: base + e.mean, std_err: e.std_err }
     }
 
     /// Outgoing radiance per leaf of `scene` (the scene this was built from): the mean over the
@@ -432,19 +437,12 @@ impl SurfelScene {
                 let (x, y) = (idx % width, idx / width);
                 let mut rng =
                     SmallRng::seed_from_u64(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ u64::from(idx));
-                let (mut sum, mut sum2) = (Vec3::ZERO, Vec3::ZERO);
-                for _ in 0..spp {
+                Estimate::of((0..spp).map(|_| {
                     let sx = (x as f32 + rng.random::<f32>()) / width as f32 * 2.0 - 1.0;
                     let sy = 1.0 - (y as f32 + rng.random::<f32>()) / height as f32 * 2.0;
                     let d = (forward + right * (sx * t * aspect) + up * (sy * t)).normalize();
-                    let v = self.trace(camera.eye_m, d, settings, &mut rng);
-                    sum += v;
-                    sum2 += v * v;
-                }
-                let k = spp.max(1) as f32;
-                let mean = sum / k;
-                let var = (sum2 / k - mean * mean).max(Vec3::ZERO) / (k - 1.0).max(1.0);
-                Estimate { mean, std_err: var.powf(0.5) }
+                    self.trace(camera.eye_m, d, settings, &mut rng)
+                }))
             })
             .collect()
     }

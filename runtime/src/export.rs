@@ -67,12 +67,18 @@ fn points(pkg: &Package) -> Result<Vec<Point>, Error> {
     Ok(out)
 }
 
-pub(crate) fn output_error(path: &Path, e: impl std::fmt::Display) -> Error {
+pub fn output_error(path: &Path, e: impl std::fmt::Display) -> Error {
     Error::Output { path: path.display().to_string(), reason: e.to_string() }
 }
 
-/// Writes `out` by `fill` into a temp file beside it, then renames it into place.
-pub(crate) fn atomically(out: &Path, fill: impl FnOnce(File) -> Result<(), Error>) -> Result<(), Error> {
+/// Writes `bytes` to `out` atomically (see [`atomically`]).
+pub fn write_atomically(out: &Path, bytes: &[u8]) -> Result<(), Error> {
+    atomically(out, |mut f| f.write_all(bytes).map_err(|e| output_error(out, e)))
+}
+
+/// Writes `out` by `fill` into a temp file beside it, then renames it into place. Every output
+/// of the runtime and the reference goes through here.
+pub fn atomically(out: &Path, fill: impl FnOnce(File) -> Result<(), Error>) -> Result<(), Error> {
     let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let mut builder = tempfile::Builder::new();
     builder.suffix(".partial");

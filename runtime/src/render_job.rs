@@ -115,6 +115,17 @@ fn resolve_camera(scene: &SceneData, choice: &CameraChoice) -> Result<Camera> {
     }
 }
 
+/// Parses an image size `WIDTHxHEIGHT` (each 1..=16384), for both command lines.
+pub fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let w: u32 = w.parse().map_err(|e| format!("width {w:?}: {e}"))?;
+    let h: u32 = h.parse().map_err(|e| format!("height {h:?}: {e}"))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("size {w}x{h} is outside 1..=16384"));
+    }
+    Ok((w, h))
+}
+
 /// `out` for frame `i` of `n`: `name_0007.png` when n > 1.
 pub fn frame_path(out: &Path, i: u32, n: u32) -> PathBuf {
     if n <= 1 {

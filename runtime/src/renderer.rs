@@ -58,8 +58,8 @@ pub struct Settings {
     pub min_splat_px: f32,
     /// Surfel radius multiplier for splatting. The stored radius (1.25 d_k / sqrt(k)) is about
     /// 0.7 point spacings, which tiles a regular grid but leaves holes in scanner sampling
-    /// (measured on the demo chamber at 640x480: 510 uncovered pixels at 1.5, 30 at 2.0, 0 at 3.0;
-    /// with shade's hole filling, 105 at 1.5 and 0 at 2.0).
+    /// (`grotto render out/demo.grotto --camera chamber --size 640x480 --bounces 0 --no-shadows
+    /// --splat-scale S` prints the uncovered pixels: 105 at S = 1.5, 0 at 2.0).
     pub splat_scale: f32,
 }
 
@@ -197,8 +197,8 @@ pub struct Frame {
 pub struct PassStats {
     /// How many times each pass was recorded (a skipped pass stays at zero).
     pub dispatches: BTreeMap<Pass, u64>,
-    /// GPU milliseconds of each pass's last run (timestamp queries), or CPU wall time of the
-    /// submission when the adapter has none.
+    /// GPU milliseconds of each pass's last run (timestamp queries), or, where the adapter has
+    /// none, CPU wall time from recording the pass to the end of its own blocking submit.
     pub last_ms: BTreeMap<Pass, f64>,
     pub bounces_done: u32,
     pub last_change: Option<f32>,
@@ -414,9 +414,7 @@ impl Renderer {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: shadow::DISTANCE_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
             view_formats: &[],
         });
         let shadow_depth = gpu
@@ -476,7 +474,7 @@ impl Renderer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        // One bind group per uniform slot (static offsets: dynamic ones misbehave on some GL drivers).
+        // One bind group per uniform slot, each bound at its slot's static offset.
         let splat_groups: Vec<wgpu::BindGroup> = (0..=shadow_layers.len() as u64)
             .map(|slot| {
                 gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -591,18 +589,9 @@ impl Renderer {
         &self.stats_now
     }
 
-    pub fn gpu(&self) -> &Gpu {
-        &self.gpu
-    }
-
     /// Exposure of the next shade (the light state and G-buffer are kept).
     pub fn set_exposure(&mut self, exposure: f32) {
         self.settings.exposure = exposure;
-    }
-
-    /// Forget converged light so propagation runs again (e.g. after the bounce budget changes).
-    pub fn set_bounce_budget(&mut self, bounces: u32) {
-        self.settings.bounces = bounces;
     }
 
     /// Marks the lights changed: the next update re-renders shadow maps and re-injects.
@@ -764,11 +753,11 @@ impl Renderer {
         let mut enc =
             self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
         let mut ran: Vec<Pass> = Vec::new();
-        let cpu_start = Instant::now();
         if plan.runs(Pass::Propagate) {
             enc.clear_buffer(&self.stats, 0, None);
         }
         for step in plan.steps.iter().filter(|s| s.run) {
+            let recorded = Instant::now();
             let ts = self.timestamp_pair(step.pass);
             match step.pass {
                 Pass::Shadow => {
@@ -844,6 +833,20 @@ impl Renderer {
             }
             *self.stats_now.dispatches.entry(step.pass).or_default() += 1;
             ran.push(step.pass);
+            if self.queries.is_none() {
+                // No timestamp queries: time each pass on the CPU, recording to completion of its
+                // own blocking submit.
+                let done = std::mem::replace(
+                    &mut enc,
+                    self.gpu
+                        .device
+                        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") }),
+                );
+                self.gpu.queue.submit([done.finish()]);
+                self.gpu.wait()?;
+                let ms = recorded.elapsed().as_secs_f64() * 1e3;
+                self.stats_now.last_ms.insert(step.pass, ms);
+            }
         }
         if let Some((set, buf)) = &self.queries
             && !ran.is_empty()
@@ -853,7 +856,6 @@ impl Renderer {
         self.gpu.queue.submit([enc.finish()]);
         self.gpu.wait()?;
         self.gpu.check("frame")?;
-        let cpu_ms = cpu_start.elapsed().as_secs_f64() * 1e3;
         if let Some((_, buf)) = &self.queries {
             if !ran.is_empty() {
                 let bytes = self.gpu.read_buffer(buf, 16 * Pass::ALL.len() as u64)?;
@@ -865,8 +867,6 @@ impl Renderer {
                     self.stats_now.last_ms.insert(*pass, dt);
                 }
             }
-        } else if ran.len() == 1 {
-            self.stats_now.last_ms.insert(ran[0], cpu_ms);
         }
         if ran.contains(&Pass::Inject) || (self.point_lights + self.spot_lights == 0) {
             self.direct_valid = true;
@@ -904,50 +904,6 @@ impl Renderer {
         let n = self.node_count as usize * 6;
         let bytes = self.gpu.read_buffer(&self.faces, n as u64 * 16)?;
         Ok(bytemuck::pod_collect_to_vec(&bytes[..n * 16]))
-    }
-
-    /// Distances stored in one shadow face (row-major, face size squared), for tests.
-    pub fn read_shadow_layer(&self, layer: u32) -> Result<Vec<f32>> {
-        let size = self.shadow_face_size;
-        let row = (size * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let buf = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("shadow readback"),
-            size: u64::from(row) * u64::from(size),
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-        enc.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &self.shadow_distance,
-                mip_level: 0,
-                origin: wgpu::Origin3d {
-                    x: layer % self.shadow_cols * size,
-                    y: layer / self.shadow_cols * size,
-                    z: 0,
-                },
-                aspect: wgpu::TextureAspect::All,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buf,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row),
-                    rows_per_image: Some(size),
-                },
-            },
-            wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 1 },
-        );
-        self.gpu.queue.submit([enc.finish()]);
-        let bytes = self.gpu.read_buffer(&buf, u64::from(row) * u64::from(size))?;
-        let mut out = Vec::with_capacity((size * size) as usize);
-        for y in 0..size as usize {
-            for x in 0..size as usize {
-                let o = y * row as usize + x * 4;
-                out.push(f32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]]));
-            }
-        }
-        Ok(out)
     }
 
     /// Runs only the mip pass (tests).

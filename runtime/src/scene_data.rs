@@ -71,7 +71,8 @@ pub struct SceneData {
     pub cameras: Vec<SceneCamera>,
 }
 
-fn srgb_to_linear(c: u8) -> f32 {
+/// sRGB byte to linear (the IEC 61966-2-1 curve), as the GPU decodes colours.
+pub fn srgb_to_linear(c: u8) -> f32 {
     let c = f32::from(c) / 255.0;
     if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
 }

@@ -77,24 +77,6 @@ fn aces_srgb(x: f32) -> u8 {
     (s * 255.0 + 0.5) as u8
 }
 
-/// Writes `bytes` to `path` through a temp file beside it and a rename (never half-written).
-fn write_atomically(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
-    use std::io::Write;
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
-    let mut tmp =
-        tempfile::NamedTempFile::new_in(dir).with_context(|| format!("writing {}", path.display()))?;
-    tmp.write_all(bytes).with_context(|| format!("writing {}", path.display()))?;
-    tmp.persist(path).with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
-}
-
-fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
-    s.split_once(['x', 'X'])
-        .and_then(|(a, b)| Some((a.parse::<u32>().ok()?, b.parse::<u32>().ok()?)))
-        .filter(|&(w, h)| w > 0 && h > 0 && w <= 16384 && h <= 16384)
-        .with_context(|| format!("--size {s:?}: expected WIDTHxHEIGHT"))
-}
-
 fn main() -> anyhow::Result<()> {
     match Cli::parse() {
         Cli::Render(a) => render(a),
@@ -104,7 +86,7 @@ fn main() -> anyhow::Result<()> {
 
 fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
     use grotto_reference::accuracy;
-    let (w, h) = parse_size(&a.size)?;
+    let (w, h) = grotto_runtime::render_job::parse_size(&a.size).map_err(anyhow::Error::msg)?;
     let gpu = grotto_runtime::gpu::Gpu::new(&grotto_runtime::gpu::GpuOptions {
         prefer_software: a.software,
         ..Default::default()
@@ -126,12 +108,12 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
     );
     let md = accuracy::report(&scenes, &rows, &gpu.describe(), w, h, &command);
     let json = a.out.with_extension("json");
-    write_atomically(&a.out, md.as_bytes())?;
+    grotto_runtime::export::write_atomically(&a.out, md.as_bytes())?;
     let plots = a.out.with_extension("");
     std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
     for sc in &scenes {
         let path = plots.join(format!("{}.svg", accuracy::slug(&sc.name)));
-        write_atomically(&path, accuracy::plot_svg(&sc.name, &rows).as_bytes())?;
+        grotto_runtime::export::write_atomically(&path, accuracy::plot_svg(&sc.name, &rows).as_bytes())?;
     }
     std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
         .with_context(|| format!("writing {}", json.display()))?;
@@ -140,7 +122,7 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
 }
 
 fn render(cli: RenderArgs) -> anyhow::Result<()> {
-    let (w, h) = parse_size(&cli.size)?;
+    let (w, h) = grotto_runtime::render_job::parse_size(&cli.size).map_err(anyhow::Error::msg)?;
     grotto_runtime::image_out::kind_of(&cli.out)?;
     let pkg = grotto_format::Package::open(&cli.package)?;
     let scene_data = SceneData::from_package(&pkg)?;

@@ -78,7 +78,7 @@ struct RenderArgs {
     #[arg(long, default_value_t = 30)]
     frames: u32,
     /// Image size WIDTHxHEIGHT.
-    #[arg(long, default_value = "800x600", value_parser = parse_size)]
+    #[arg(long, default_value = "800x600", value_parser = grotto_runtime::render_job::parse_size)]
     size: (u32, u32),
     /// Output image (.png or .exr); a path sequence appends _NNNN.
     #[arg(long, short, default_value = "render.png")]
@@ -149,16 +149,6 @@ fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
         _ => Err(format!("expected three finite numbers x,y,z, got {s:?}")),
     }
-}
-
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
-    let w: u32 = w.parse().map_err(|e| format!("width {w:?}: {e}"))?;
-    let h: u32 = h.parse().map_err(|e| format!("height {h:?}: {e}"))?;
-    if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!("size {w}x{h} is outside 1..=16384"));
-    }
-    Ok((w, h))
 }
 
 fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderOptions> {

@@ -85,14 +85,7 @@ impl Gbuffer {
         let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("gbuffer"),
             color_attachments: &[attach(&views[0]), attach(&views[1]), attach(&views[2])],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &depth,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
+            depth_stencil_attachment: Some(super::shadow::depth_cleared(&depth)),
             timestamp_writes: timestamps,
             occlusion_query_set: None,
             multiview_mask: None,
