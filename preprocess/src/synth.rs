@@ -598,7 +598,7 @@ pub fn write_dataset(
 }
 
 /// The small synthetic cave that the runtime's tests, the golden images and the accuracy sweep
-/// share: LAS scans of about `points` points over `segments` passage segments, built with 0.25 m
+/// share: LAS scans of about `points` points over `segments` passage segments, built with `leaf_m`
 /// leaves and tiles of 4 m up to `max_tile_extent_m` into `dir/cave.grotto` (scans in `dir/scans`,
 /// work files in `dir/work`). Returns the package path.
 pub fn small_cave_package(
@@ -606,6 +606,7 @@ pub fn small_cave_package(
     points: u64,
     segments: usize,
     colors: crate::build::ColorCodec,
+    leaf_m: f64,
     max_tile_extent_m: f64,
 ) -> crate::Result<std::path::PathBuf> {
     use crate::build::{self, BuildParams};
@@ -618,7 +619,7 @@ pub fn small_cave_package(
         work_dir: dir.join("work"),
         memory_budget_bytes: 64 << 20,
         threads: 2,
-        leaf_m: 0.25,
+        leaf_m,
         colors,
         sh_window: true,
         k: 16,

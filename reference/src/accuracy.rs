@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use glam::Vec3;
+use grotto_preprocess::build::ColorCodec;
 use grotto_runtime::camera::Camera;
 use grotto_runtime::gpu::Gpu;
 use grotto_runtime::plan::Pass;
@@ -27,7 +28,16 @@ pub struct SweepScene {
     pub reference: Vec<Estimate>,
     pub reference_s: f64,
     pub spp: u32,
+    /// References cut after k indirect bounces, for k in `TRUNCATED_BOUNCES`: the runtime with k
+    /// bounces is compared with these to judge propagation alone, without the missing bounces.
+    pub truncated: Vec<(u32, Vec<Estimate>)>,
+    /// The same surfels built into other packages (SVO depth, colour codec): (config name, knob,
+    /// scene), each rendered with the balanced preset and judged against this scene's reference.
+    pub variants: Vec<(String, String, SceneData)>,
 }
+
+/// Bounce counts with a truncated reference.
+pub const TRUNCATED_BOUNCES: [u32; 4] = [0, 1, 2, 4];
 
 /// One runtime configuration.
 #[derive(Clone, Debug, Serialize)]
@@ -48,6 +58,16 @@ pub struct Row {
     pub rel_rmse: f64,
     /// The reference's own noise on the same scale: sqrt(sum se^2 / sum |reference|^2).
     pub reference_noise: f64,
+    /// Signed error of the mean: sum(runtime) / sum(reference) - 1 over the same pixels and channels
+    /// (positive: the runtime is too bright).
+    pub bias: f64,
+    /// Mean FLIP (NVIDIA's perceptual difference, 0 = identical, 1 = maximal; `nv-flip`, default
+    /// 67 pixels per degree) between the tonemapped runtime and reference images, both at the
+    /// exposure that auto-exposure picks for the reference.
+    pub flip: f64,
+    /// For "bounces k" runs with a truncated reference: (relative RMSE, bias) against the reference
+    /// cut after the same k bounces.
+    pub truncated: Option<(f64, f64)>,
     /// GPU milliseconds to converge the light (shadow + inject + every bounce) and to draw a
     /// frame (gbuffer + shade).
     pub light_ms: f64,
@@ -83,22 +103,43 @@ pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<Swee
             testscenes::dogleg(),
         ),
     ];
-    let mut defs: Vec<_> = defs.into_iter().filter(|d| only.is_none_or(|o| o == d.0)).collect();
-    match only.is_none_or(|o| o == "demo cave").then(demo_cave).transpose() {
-        Ok(None) => {}
-        Ok(Some(data)) => defs.push((
-            "demo cave",
-            "the synthetic demo cave (80k points, 0.25 m leaves, 14 lamps), camera at the entrance: a passage lit mostly indirectly",
-            data,
-        )),
-        Err(e) => eprintln!("demo cave scene skipped: {e}"),
+    let defs: Vec<_> = defs.into_iter().filter(|d| only.is_none_or(|o| o == d.0)).collect();
+    let mut defs: Vec<_> = defs.into_iter().map(|(a, b, c)| (a, b, c, Vec::new())).collect();
+    if only.is_none_or(|o| o == "bunny") {
+        match bunny() {
+            Ok(data) => defs.push((
+                "bunny",
+                "a real scan: the Stanford bunny's ten range scans (362k points) merged with the poses of bun.conf, 2 mm leaves, one lamp above and in front; indirect light is its own interreflection",
+                data,
+                Vec::new(),
+            )),
+            Err(e) => eprintln!("bunny scene skipped: {e}"),
+        }
     }
-    for (name, description, data) in defs {
+    if only.is_none_or(|o| o == "demo cave") {
+        match demo_cave_variants() {
+            Ok((data, variants)) => defs.push((
+                "demo cave",
+                "the synthetic demo cave (80k points, 0.25 m leaves, raw colours, 14 lamps), camera at the entrance: a passage lit mostly indirectly",
+                data,
+                variants,
+            )),
+            Err(e) => eprintln!("demo cave scene skipped: {e}"),
+        }
+    }
+    for (name, description, data, variants) in defs {
         let camera = Camera::from_scene(&data.cameras[0]);
         let scene = SurfelScene::from_scene(&data, Settings::default().splat_scale);
         let t0 = std::time::Instant::now();
         let reference = scene.render(&camera, width, height, spp, &PathSettings::default(), 1);
         let reference_s = t0.elapsed().as_secs_f64();
+        let truncated = TRUNCATED_BOUNCES
+            .iter()
+            .map(|&k| {
+                let cut = PathSettings { max_bounces: k + 1, ..PathSettings::default() };
+                (k, scene.render(&camera, width, height, spp, &cut, 2))
+            })
+            .collect();
         out.push(SweepScene {
             name: name.into(),
             description: description.into(),
@@ -107,27 +148,97 @@ pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<Swee
             reference,
             reference_s,
             spp,
+            truncated,
+            variants,
         });
     }
     out
 }
 
 /// A small synthetic cave built through the whole pipeline (synth -> package -> scene).
-pub fn demo_cave() -> Result<SceneData, String> {
+pub fn demo_cave(colors: ColorCodec, leaf_m: f64) -> Result<SceneData, String> {
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
-    let out = grotto_preprocess::synth::small_cave_package(
-        dir.path(),
-        80_000,
-        6,
-        grotto_preprocess::build::ColorCodec::Bc1,
-        16.0,
-    )
-    .map_err(|e| e.to_string())?;
+    let out = grotto_preprocess::synth::small_cave_package(dir.path(), 80_000, 6, colors, leaf_m, 16.0)
+        .map_err(|e| e.to_string())?;
     let pkg = grotto_format::Package::open(&out).map_err(|e| e.to_string())?;
     let mut scene = SceneData::from_package(&pkg).map_err(|e| e.to_string())?;
     // The entrance camera first: it looks down a passage the lamps light mostly indirectly.
     scene.cameras.sort_by_key(|c| c.name != "entrance");
     Ok(scene)
+}
+
+/// `../shared/data` beside the repository (the real third-party scans).
+pub fn shared_data() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data")
+}
+
+/// The Stanford bunny's range scans, registered by bun.conf and built into a package with 2 mm
+/// leaves; a lamp and a camera are placed from its bounds (the scans carry neither).
+pub fn bunny() -> Result<SceneData, String> {
+    use grotto_preprocess::build::{self, BuildParams};
+    let conf = shared_data().join("ply/stanford-bunny/data/bun.conf");
+    let manifest = grotto_preprocess::manifest::Manifest::load(&conf).map_err(|e| e.to_string())?;
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let out = dir.path().join("bunny.grotto");
+    let bp = BuildParams {
+        work_dir: dir.path().join("work"),
+        memory_budget_bytes: 256 << 20,
+        threads: 2,
+        leaf_m: 1.0 / 512.0,
+        colors: ColorCodec::Raw,
+        sh_window: true,
+        k: 16,
+        min_tile_extent_m: 1.0 / 16.0,
+        max_tile_extent_m: 0.25,
+        halo_m: 0.004,
+    };
+    build::build(&manifest, &conf, &out, &bp, &|_| {}).map_err(|e| e.to_string())?;
+    let pkg = grotto_format::Package::open(&out).map_err(|e| e.to_string())?;
+    let mut scene = SceneData::from_package(&pkg).map_err(|e| e.to_string())?;
+    let (lo, hi) = scene.surfels.iter().fold((Vec3::MAX, Vec3::MIN), |(lo, hi), s| {
+        let p = Vec3::from_slice(&s.position_radius[..3]);
+        (lo.min(p), hi.max(p))
+    });
+    let (c, size) = ((lo + hi) * 0.5, (hi - lo).max_element());
+    let light_m = c + Vec3::new(0.6, 1.2, 1.0) * size;
+    scene.lights.push(grotto_runtime::scene_data::SceneLight {
+        name: "lamp".into(),
+        position_m: light_m,
+        // About 3 W/m^2 on the bunny.
+        intensity_w_sr: Vec3::splat(3.0 * (light_m - c).length_squared()),
+        spot: None,
+    });
+    scene.cameras.push(grotto_runtime::scene_data::SceneCamera {
+        name: "front".into(),
+        eye_m: c + Vec3::new(0.3, 0.25, 1.8) * size,
+        look_at_m: c,
+        up: Vec3::Y,
+        fov_y_deg: 45.0,
+    });
+    Ok(scene)
+}
+
+/// The demo cave with raw colours and 0.25 m leaves (the reference's scene), and the package
+/// knobs around it: one SVO level coarser and finer, BC1 colours.
+fn demo_cave_variants() -> Result<(SceneData, Vec<(String, String, SceneData)>), String> {
+    let base = demo_cave(ColorCodec::Raw, 0.25)?;
+    let mut variants = Vec::new();
+    for (name, knob, colors, leaf_m) in [
+        ("leaf 0.5 m (depth -1)", "svo depth", ColorCodec::Raw, 0.5),
+        ("leaf 0.125 m (depth +1)", "svo depth", ColorCodec::Raw, 0.125),
+        ("BC1 colours", "colours", ColorCodec::Bc1, 0.25),
+    ] {
+        let v = demo_cave(colors, leaf_m)?;
+        if v.surfels.len() != base.surfels.len() {
+            return Err(format!(
+                "{name}: {} surfels against {} in the reference scene",
+                v.surfels.len(),
+                base.surfels.len()
+            ));
+        }
+        variants.push((name.to_string(), knob.to_string(), v));
+    }
+    Ok((base, variants))
 }
 
 /// Each knob alone around the balanced preset, and the three presets.
@@ -140,27 +251,76 @@ pub fn configs() -> Vec<Config> {
     for q in Quality::ALL {
         add("preset", q.name().into(), Settings::preset(q));
     }
-    for cones in [4u32, 9, 16] {
+    for cones in [4u32, 6, 16] {
         add("cones", format!("cones {cones}"), Settings { cones, ..base.clone() });
     }
-    for a in [0.7f32, 1.4] {
+    for a in [0.5f32, 1.0] {
         add("aperture", format!("aperture {a}"), Settings { cone_aperture_scale: a, ..base.clone() });
     }
     for s in [0.25f32, 1.0] {
         add("step", format!("step {s}"), Settings { step_scale: s, ..base.clone() });
     }
-    for b in [0u32, 1, 2, 8, 16] {
+    for b in [0u32, 1, 2, 4, 8, 16] {
         add("bounces", format!("bounces {b}"), Settings { bounces: b, ..base.clone() });
     }
     add("filter", "tricubic".into(), Settings { indirect: IndirectFilter::Tricubic, ..base.clone() });
     for m in [128u32, 1024] {
         add("shadow map", format!("shadow map {m}"), Settings { shadow_map_size: m, ..base.clone() });
     }
+    add("radiance", "radiance f16".into(), Settings { radiance_f16: true, ..base.clone() });
     v
 }
 
-fn rel_rmse(got: &[[f32; 4]], reference: &[Estimate]) -> (f64, f64) {
+/// Runtime samples per pixel side when it is compared with the reference.
+pub const SUPERSAMPLE: u32 = 4;
+
+/// Box filter of a `width*k` x `height*k` image down to `width` x `height`; alpha = covered share,
+/// colour = mean over the covered samples.
+fn box_downsample(big: &[[f32; 4]], width: u32, height: u32, k: u32) -> Vec<[f32; 4]> {
+    let big_w = (width * k) as usize;
+    let mut out = Vec::with_capacity((width * height) as usize);
+    for y in 0..height as usize {
+        for x in 0..width as usize {
+            let mut acc = [0.0f32; 4];
+            for j in 0..k as usize {
+                for i in 0..k as usize {
+                    let p = big[(y * k as usize + j) * big_w + x * k as usize + i];
+                    if p[3] >= 0.5 {
+                        for c in 0..3 {
+                            acc[c] += p[c];
+                        }
+                        acc[3] += 1.0;
+                    }
+                }
+            }
+            let n = acc[3].max(1.0);
+            out.push([acc[0] / n, acc[1] / n, acc[2] / n, acc[3] / (k * k) as f32]);
+        }
+    }
+    out
+}
+
+/// Mean FLIP of the runtime's `got` against `reference`, both tonemapped (ACES, sRGB) at the
+/// reference's auto-exposure; pixels the runtime leaves uncovered take the reference's value.
+fn flip_mean(got: &[[f32; 4]], reference: &[Estimate], width: u32, height: u32) -> f64 {
+    let ref_hdr: Vec<[f32; 4]> = reference.iter().map(|e| [e.mean.x, e.mean.y, e.mean.z, 1.0]).collect();
+    let exposure = grotto_runtime::render_job::auto_exposure(&ref_hdr);
+    let ldr = |p: &[f32; 4]| [0, 1, 2].map(|c| crate::aces_srgb(p[c] * exposure));
+    let r8: Vec<u8> = ref_hdr.iter().flat_map(ldr).collect();
+    let t8: Vec<u8> =
+        got.iter().zip(&ref_hdr).flat_map(|(g, r)| if g[3] >= 0.5 { ldr(g) } else { ldr(r) }).collect();
+    let map = nv_flip::flip(
+        nv_flip::FlipImageRgb8::with_data(width, height, &r8),
+        nv_flip::FlipImageRgb8::with_data(width, height, &t8),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    );
+    f64::from(nv_flip::FlipPool::from_image(&map).mean())
+}
+
+/// (relative RMSE, reference noise on that scale, bias of the mean).
+fn rel_rmse(got: &[[f32; 4]], reference: &[Estimate]) -> (f64, f64, f64) {
     let (mut num, mut den, mut noise) = (0.0f64, 0.0f64, 0.0f64);
+    let (mut sum_got, mut sum_ref) = (0.0f64, 0.0f64);
     for (g, r) in got.iter().zip(reference) {
         if g[3] < 0.5 {
             continue;
@@ -170,13 +330,15 @@ fn rel_rmse(got: &[[f32; 4]], reference: &[Estimate]) -> (f64, f64) {
             num += d * d;
             den += f64::from(r.mean[k]).powi(2);
             noise += f64::from(r.std_err[k]).powi(2);
+            sum_got += f64::from(v);
+            sum_ref += f64::from(r.mean[k]);
         }
     }
     let den = den.max(1e-30);
-    ((num / den).sqrt(), (noise / den).sqrt())
+    ((num / den).sqrt(), (noise / den).sqrt(), sum_got / sum_ref.max(1e-30) - 1.0)
 }
 
-/// Runs every config on every scene.
+/// Runs every config on every scene, then the balanced preset on each scene's package variants.
 pub fn sweep(
     gpu: &Gpu,
     scenes: &[SweepScene],
@@ -186,6 +348,7 @@ pub fn sweep(
     mut progress: impl FnMut(&str, &str),
 ) -> grotto_runtime::Result<Vec<Row>> {
     let mut rows = Vec::new();
+    let balanced = Config { name: "balanced".into(), knob: "preset".into(), settings: Settings::preset(Quality::Balanced) };
     for s in scenes {
         // Warm-up: the first run on a device compiles pipelines inside the driver; not measured.
         if let Some(c) = configs.first() {
@@ -195,48 +358,82 @@ pub fn sweep(
         }
         for c in configs {
             progress(&s.name, &c.name);
-            let mut settings = c.settings.clone();
-            settings.exposure = 1.0;
-            let mut r = Renderer::new(gpu, &s.data, settings)?;
-            let mut light_ms = 0.0;
-            let mut pass_ms: BTreeMap<String, f64> = BTreeMap::new();
-            // Light until converged or the budget is spent, summing each pass's GPU time.
-            loop {
-                let plan = r.update_light()?;
-                for step in plan.steps.iter().filter(|st| st.run) {
-                    let ms = r.stats().last_ms.get(&step.pass).copied().unwrap_or(0.0);
-                    light_ms += ms;
-                    *pass_ms.entry(step.pass.name().into()).or_default() += ms;
-                }
-                if !plan.runs(Pass::Propagate) {
-                    break;
-                }
-            }
-            let (frame, _) = r.render(&s.camera, width, height)?;
-            let frame_ms: f64 = [Pass::Gbuffer, Pass::Shade]
-                .iter()
-                .map(|p| {
-                    let ms = r.stats().last_ms.get(p).copied().unwrap_or(0.0);
-                    *pass_ms.entry(p.name().into()).or_default() += ms;
-                    ms
-                })
-                .sum();
-            let (err, noise) = rel_rmse(&frame.hdr, &s.reference);
-            rows.push(Row {
-                scene: s.name.clone(),
-                config: c.name.clone(),
-                knob: c.knob.clone(),
-                rel_rmse: err,
-                reference_noise: noise,
-                light_ms,
-                frame_ms,
-                bounces: r.stats().bounces_done,
-                gpu_bytes: r.gpu_bytes(),
-                pass_ms,
-            });
+            rows.push(run_one(gpu, s, &s.data, c, width, height)?);
+        }
+        for (name, knob, data) in &s.variants {
+            progress(&s.name, name);
+            let c = Config { name: name.clone(), knob: knob.clone(), ..balanced.clone() };
+            rows.push(run_one(gpu, s, data, &c, width, height)?);
         }
     }
     Ok(rows)
+}
+
+/// One runtime run of `config` on `data` (the scene `s` or a package variant of it), judged
+/// against `s`'s reference.
+fn run_one(
+    gpu: &Gpu,
+    s: &SweepScene,
+    data: &SceneData,
+    c: &Config,
+    width: u32,
+    height: u32,
+) -> grotto_runtime::Result<Row> {
+    let mut settings = c.settings.clone();
+    settings.exposure = 1.0;
+    let mut r = Renderer::new(gpu, data, settings)?;
+    let mut light_ms = 0.0;
+    let mut pass_ms: BTreeMap<String, f64> = BTreeMap::new();
+    // Light until converged or the budget is spent, summing each pass's GPU time.
+    loop {
+        let plan = r.update_light()?;
+        for step in plan.steps.iter().filter(|st| st.run) {
+            let ms = r.stats().last_ms.get(&step.pass).copied().unwrap_or(0.0);
+            light_ms += ms;
+            *pass_ms.entry(step.pass.name().into()).or_default() += ms;
+        }
+        if !plan.runs(Pass::Propagate) {
+            break;
+        }
+    }
+    r.render(&s.camera, width, height)?;
+    let frame_ms: f64 = [Pass::Gbuffer, Pass::Shade]
+        .iter()
+        .map(|p| {
+            let ms = r.stats().last_ms.get(p).copied().unwrap_or(0.0);
+            *pass_ms.entry(p.name().into()).or_default() += ms;
+            ms
+        })
+        .sum();
+    // The reference integrates each pixel's area; the runtime samples pixel centres. Compare like
+    // with like: the error image is the runtime at SUPERSAMPLE^2 samples per pixel, box-filtered
+    // (the frame above is the one timed).
+    let (big, _) = r.render(&s.camera, width * SUPERSAMPLE, height * SUPERSAMPLE)?;
+    let hdr = box_downsample(&big.hdr, width, height, SUPERSAMPLE);
+    let (err, noise, bias) = rel_rmse(&hdr, &s.reference);
+    let flip = flip_mean(&hdr, &s.reference, width, height);
+    let truncated = (c.knob == "bounces")
+        .then(|| s.truncated.iter().find(|(k, _)| *k == c.settings.bounces))
+        .flatten()
+        .map(|(_, img)| {
+            let (e, _, b) = rel_rmse(&hdr, img);
+            (e, b)
+        });
+    Ok(Row {
+        scene: s.name.clone(),
+        config: c.name.clone(),
+        knob: c.knob.clone(),
+        rel_rmse: err,
+        reference_noise: noise,
+        bias,
+        flip,
+        truncated,
+        light_ms,
+        frame_ms,
+        bounces: r.stats().bounces_done,
+        gpu_bytes: r.gpu_bytes(),
+        pass_ms,
+    })
 }
 
 /// Rows on the Pareto front of (total time, error) within one scene.
@@ -279,13 +476,50 @@ pub fn report(
     let _ = writeln!(
         s,
         "Generated by `{command}` (do not edit by hand). Device for the runtime's GPU times: {device}. \
-         Images {width}x{height}. Error: relative RMSE of the runtime's linear radiance against the Monte Carlo \
-         reference (`grotto-reference`, path tracing on the same surfels, lights and albedo), over the pixels \
-         the runtime covers; the reference's own noise on the same scale is listed so it can be seen to be far \
-         below the errors it judges. Time: GPU milliseconds (timestamp queries) to converge the light \
-         (shadow maps, injection, every bounce until converged or the budget is spent) and to draw one frame. \
-         Memory: GPU buffers and textures the renderer holds. Knobs vary one at a time around the balanced \
-         preset. Pareto-optimal rows (no other row is both faster and more accurate) are marked *.\n"
+         Images {width}x{height}. Reference: `grotto-reference`, Monte Carlo path tracing on the same surfels, \
+         lights and albedo, each pixel integrated over its area; the runtime is rendered at {SUPERSAMPLE}x{SUPERSAMPLE} \
+         samples per pixel and box-filtered so both estimate the same pixel values (the frame time is for one \
+         frame at {width}x{height}). Error over the pixels the runtime covers: relative RMSE of linear radiance \
+         (the reference's own noise on the same scale is listed so it can be seen to be far below the errors \
+         it judges), bias = sum(runtime) / sum(reference) - 1, and mean FLIP (NVIDIA's perceptual metric, \
+         `nv-flip`, 67 pixels per degree) of both images tonemapped at the reference's auto-exposure. Time: GPU \
+         milliseconds (timestamp queries) to converge the light (shadow maps, injection, every bounce until \
+         converged or the budget is spent) and to draw one frame. Memory: GPU buffers and textures the \
+         renderer holds. Knobs vary one at a time around the balanced preset; package knobs (SVO depth, \
+         colour codec) rebuild the scene's package and run the balanced preset on it, against the same \
+         reference. Pareto-optimal rows (no other row is both faster and more accurate) are marked *.\n"
+    );
+    let _ = writeln!(s, "## Presets (`grotto render --quality fast|balanced|high`)\n");
+    let _ = writeln!(s, "Relative RMSE / GPU ms to converge and draw one frame, per scene.\n");
+    let _ = writeln!(
+        s,
+        "| preset | {} |",
+        scenes.iter().map(|sc| sc.name.as_str()).collect::<Vec<_>>().join(" | ")
+    );
+    let _ = writeln!(s, "|---|{}", "---:|".repeat(scenes.len()));
+    for q in Quality::ALL {
+        let cells: Vec<String> = scenes
+            .iter()
+            .map(|sc| {
+                rows.iter()
+                    .find(|r| r.scene == sc.name && r.knob == "preset" && r.config == q.name())
+                    .map_or("-".into(), |r| format!("{:.4} / {:.0}", r.rel_rmse, r.light_ms + r.frame_ms))
+            })
+            .collect();
+        let _ = writeln!(s, "| {} | {} |", q.name(), cells.join(" | "));
+    }
+    let monotone: Vec<&str> = scenes
+        .iter()
+        .filter(|sc| {
+            let mine: Vec<Row> = rows.iter().filter(|r| r.scene == sc.name).cloned().collect();
+            presets_monotone(&mine) != Some(true)
+        })
+        .map(|sc| sc.name.as_str())
+        .collect();
+    let _ = writeln!(
+        s,
+        "\nEach preset slower and more accurate than the one below it on every scene: {}\n",
+        if monotone.is_empty() { "yes".to_string() } else { format!("**no** ({})", monotone.join(", ")) }
     );
     for sc in scenes {
         let mine: Vec<Row> = rows.iter().filter(|r| r.scene == sc.name).cloned().collect();
@@ -304,8 +538,8 @@ pub fn report(
             sc.data.surfels.len()
         );
         let _ =
-            writeln!(s, "| config | knob | rel. RMSE | light ms | frame ms | bounces | GPU MiB | Pareto |");
-        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|:-:|");
+            writeln!(s, "| config | knob | rel. RMSE | bias | FLIP | light ms | frame ms | bounces | GPU MiB | Pareto |");
+        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|:-:|");
         let mut order: Vec<usize> = (0..mine.len()).collect();
         order.sort_by(|&a, &b| {
             (mine[a].light_ms + mine[a].frame_ms).total_cmp(&(mine[b].light_ms + mine[b].frame_ms))
@@ -314,10 +548,12 @@ pub fn report(
             let r = &mine[i];
             let _ = writeln!(
                 s,
-                "| {} | {} | {:.4} | {:.1} | {:.1} | {} | {:.1} | {} |",
+                "| {} | {} | {:.4} | {:+.3} | {:.4} | {:.1} | {:.1} | {} | {:.1} | {} |",
                 r.config,
                 r.knob,
                 r.rel_rmse,
+                r.bias,
+                r.flip,
                 r.light_ms,
                 r.frame_ms,
                 r.bounces,
@@ -335,6 +571,21 @@ pub fn report(
                 None => "not measured",
             }
         );
+        let cut: Vec<&Row> = mine.iter().filter(|r| r.truncated.is_some()).collect();
+        if !cut.is_empty() {
+            let _ = writeln!(
+                s,
+                "Propagation alone: the runtime after k bounces against the reference cut after the same k \
+                 bounces (the rows above compare with full transport, so they also count the bounces not run).\n"
+            );
+            let _ = writeln!(s, "| bounces | rel. RMSE (cut reference) | bias (cut reference) |");
+            let _ = writeln!(s, "|---:|---:|---:|");
+            for r in cut {
+                let (e, b) = r.truncated.unwrap_or_default();
+                let _ = writeln!(s, "| {} | {e:.4} | {b:+.3} |", r.bounces);
+            }
+            let _ = writeln!(s);
+        }
     }
     s
 }

@@ -447,3 +447,11 @@ impl SurfelScene {
             .collect()
     }
 }
+
+/// ACES filmic tonemap and sRGB encoding of linear `x` (the runtime's shade pass, on the CPU).
+pub fn aces_srgb(x: f32) -> u8 {
+    let x = x.max(0.0);
+    let m = ((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)).clamp(0.0, 1.0);
+    let s = if m <= 0.003_130_8 { m * 12.92 } else { 1.055 * m.powf(1.0 / 2.4) - 0.055 };
+    (s * 255.0 + 0.5) as u8
+}

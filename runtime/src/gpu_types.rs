@@ -63,8 +63,12 @@ pub struct LeafLightGpu {
     pub direct: [f32; 4],
     /// Cosine-weighted mean incoming radiance from the cones (irradiance / pi).
     pub gather: [f32; 4],
-    /// Outgoing radiance `emission + direct + albedo * gather`, what the mip pass filters.
+    /// Outgoing radiance `emission + direct + env + albedo * gather`, what the mip pass filters.
     pub out: [f32; 4],
+    /// Environment light reflected by the leaf, `albedo * E_sh(n) / pi * V` (rgb), and its sky
+    /// visibility V in 0..=1 (w): the radiance-weighted share of the cones that leave the scene.
+    /// Written by the env pass; zero without an environment map.
+    pub env: [f32; 4],
 }
 
 /// A point or spot light in frame metres.
@@ -124,6 +128,9 @@ pub struct Params {
     pub camera_up: [f32; 4],
     /// Unit cone directions in the tangent frame (z = normal), w = weight (weights sum to 1).
     pub cones: [[f32; 4]; MAX_CONES],
+    /// Environment radiance as 9 real SH coefficients (rgb, w unused), order L00, L1-1, L10, L11,
+    /// L2-2, L2-1, L20, L21, L22, already scaled by the scene's environment intensity.
+    pub env_sh: [[f32; 4]; 9],
 }
 
 /// `Params::flags` bits. Keep in sync with common.wgsl.
@@ -138,6 +145,8 @@ pub mod flags {
     pub const EMISSION: u32 = 8;
     /// Indirect uses tricubic (B-spline) instead of trilinear filtering.
     pub const TRICUBIC: u32 = 16;
+    /// An environment map lights the scene through its SH coefficients (`Params::env_sh`).
+    pub const ENV: u32 = 32;
 }
 
 /// Mip dispatch range: nodes `first .. first + count` of the height-ordered node list.
@@ -179,9 +188,9 @@ const _: () = {
     assert!(size_of::<TileGpu>() == 32);
     assert!(size_of::<NodeGpu>() == 8);
     assert!(size_of::<LeafGpu>() == 64);
-    assert!(size_of::<LeafLightGpu>() == 48);
+    assert!(size_of::<LeafLightGpu>() == 64);
     assert!(size_of::<LightGpu>() == 64);
-    assert!(size_of::<Params>() == 80 + 48 + 64 + 16 * MAX_CONES);
+    assert!(size_of::<Params>() == 80 + 48 + 64 + 16 * MAX_CONES + 16 * 9);
     assert!(size_of::<MipRange>() == 16);
     assert!(size_of::<SplatUniform>() == 256);
     assert!(size_of::<SurfelGpu>() == 36);

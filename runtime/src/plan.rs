@@ -3,8 +3,9 @@
 //! a test can prove a skipped pass is really skipped.
 //!
 //! Rules: no point or spot lights, no shadow maps and no injection (area lights are emissive
-//! leaves); static lights, shadow maps and injection once; no light at all or a zero bounce budget,
-//! no mip and no propagation; once the largest relative change of a bounce falls under the
+//! leaves); static lights, shadow maps and injection once; no environment map, no env (SH) pass,
+//! and with one, the env pass once (the sky visibility does not change with the light); no light at
+//! all or a zero bounce budget, no propagation (the mip runs only for a pass that reads it); once the largest relative change of a bounce falls under the
 //! tolerance (or the budget is spent) propagation stops until something changes; the G-buffer is
 //! re-splatted only when the camera or image size changed.
 
@@ -17,20 +18,22 @@ pub enum Pass {
     Shadow,
     Inject,
     Mip,
+    Env,
     Propagate,
     Gbuffer,
     Shade,
 }
 
 impl Pass {
-    pub const ALL: [Pass; 6] =
-        [Pass::Shadow, Pass::Inject, Pass::Mip, Pass::Propagate, Pass::Gbuffer, Pass::Shade];
+    pub const ALL: [Pass; 7] =
+        [Pass::Shadow, Pass::Inject, Pass::Mip, Pass::Env, Pass::Propagate, Pass::Gbuffer, Pass::Shade];
 
     pub fn name(self) -> &'static str {
         match self {
             Pass::Shadow => "shadow",
             Pass::Inject => "inject",
             Pass::Mip => "mip",
+            Pass::Env => "env",
             Pass::Propagate => "propagate",
             Pass::Gbuffer => "gbuffer",
             Pass::Shade => "shade",
@@ -79,6 +82,12 @@ pub struct PlanInputs {
     pub spot_lights: usize,
     pub shadows_enabled: bool,
     pub emissive_leaves: bool,
+    /// The scene has an environment map (SH coefficients) and it is enabled.
+    pub environment: bool,
+    /// A non-zero constant background radiance lights what the cones see escape.
+    pub ambient: bool,
+    /// The env pass has run for the current environment.
+    pub env_valid: bool,
     /// Shadow maps and injected direct light match the current lights.
     pub direct_valid: bool,
     pub bounces_done: u32,
@@ -122,7 +131,18 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
     } else {
         Step { pass: Pass::Inject, run: true, reason: format!("{lights_text}; lights changed") }
     });
-    let any_light = analytic > 0 || i.emissive_leaves;
+    let env = if !i.environment {
+        Step { pass: Pass::Env, run: false, reason: "no environment map".into() }
+    } else if i.env_valid {
+        Step { pass: Pass::Env, run: false, reason: "environment unchanged: sky visibility still valid".into() }
+    } else {
+        Step {
+            pass: Pass::Env,
+            run: true,
+            reason: "environment map: SH irradiance through the openings the cones find".into(),
+        }
+    };
+    let any_light = analytic > 0 || i.emissive_leaves || i.environment || i.ambient;
     let propagate = if i.bounce_budget == 0 {
         (false, "bounce budget is 0 (direct light only)".to_string())
     } else if !any_light {
@@ -139,13 +159,16 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
     };
     steps.push(Step {
         pass: Pass::Mip,
-        run: propagate.0,
+        run: propagate.0 || env.run,
         reason: if propagate.0 {
             "propagation needs the radiance pyramid".into()
+        } else if env.run {
+            "the env pass needs the pyramid's opacity".into()
         } else {
             propagate.1.clone()
         },
     });
+    steps.push(env);
     steps.push(Step { pass: Pass::Propagate, run: propagate.0, reason: propagate.1 });
     steps.push(if !i.frame {
         Step { pass: Pass::Gbuffer, run: false, reason: "light update only, no image requested".into() }
@@ -172,6 +195,9 @@ mod tests {
             spot_lights: 0,
             shadows_enabled: true,
             emissive_leaves: false,
+            environment: false,
+            ambient: false,
+            env_valid: false,
             direct_valid: false,
             bounces_done: 0,
             bounce_budget: 4,
@@ -196,6 +222,20 @@ mod tests {
         assert!(p.explain().contains("converged"));
         let p = plan(&PlanInputs { direct_valid: true, bounces_done: 2, last_change: Some(0.1), ..base() });
         assert!(p.runs(Pass::Propagate));
+    }
+
+    #[test]
+    fn environment_runs_its_pass_once_and_lights_a_lampless_scene() {
+        let p = plan(&base());
+        assert!(!p.runs(Pass::Env), "no environment map, no env pass");
+        let sky = PlanInputs { point_lights: 0, environment: true, ..base() };
+        let p = plan(&sky);
+        assert!(p.runs(Pass::Env) && p.runs(Pass::Mip) && p.runs(Pass::Propagate));
+        let p = plan(&PlanInputs { env_valid: true, bounces_done: 1, last_change: Some(0.5), ..sky.clone() });
+        assert!(!p.runs(Pass::Env) && p.runs(Pass::Propagate));
+        // Direct-only with a sky: the env pass still needs the pyramid, propagation does not run.
+        let p = plan(&PlanInputs { bounce_budget: 0, ..sky });
+        assert!(p.runs(Pass::Env) && p.runs(Pass::Mip) && !p.runs(Pass::Propagate));
     }
 
     #[test]

@@ -61,6 +61,11 @@ pub struct Settings {
     /// (`grotto render out/demo.grotto --camera chamber --size 640x480 --bounces 0 --no-shadows
     /// --splat-scale S` prints the uncovered pixels: 105 at S = 1.5, 0 at 2.0).
     pub splat_scale: f32,
+    /// Store the radiance pyramid (six directional values per node) as f16 instead of f32: half
+    /// the memory and bandwidth of the largest buffer; values above 65504 are clamped.
+    pub radiance_f16: bool,
+    /// Light the scene with its environment map's SH coefficients (when it has one).
+    pub environment: bool,
 }
 
 impl Default for Settings {
@@ -81,6 +86,8 @@ impl Default for Settings {
             background: [0.0; 3],
             min_splat_px: 0.75,
             splat_scale: 2.0,
+            radiance_f16: false,
+            environment: true,
         }
     }
 }
@@ -118,11 +125,17 @@ impl Settings {
         let d = Settings::default();
         match q {
             Quality::Fast => Settings { cones: 4, step_scale: 1.0, bounces: 2, shadow_map_size: 256, ..d },
-            Quality::Balanced => {
-                Settings { cones: 6, step_scale: 0.5, bounces: 4, shadow_map_size: 512, ..d }
-            }
+            Quality::Balanced => Settings {
+                cones: 9,
+                cone_aperture_scale: 0.7,
+                step_scale: 0.5,
+                bounces: 4,
+                shadow_map_size: 512,
+                ..d
+            },
             Quality::High => Settings {
-                cones: 12,
+                cones: 16,
+                cone_aperture_scale: 0.7,
                 step_scale: 0.35,
                 bounces: 8,
                 shadow_map_size: 1024,
@@ -225,6 +238,9 @@ pub struct Renderer {
     point_lights: usize,
     spot_lights: usize,
     emissive: bool,
+    /// An environment map lights the scene (it has SH coefficients and the setting allows it).
+    environment: bool,
+    env_valid: bool,
     shadow_layers: Vec<Mat4>,
     lights_gpu: Vec<LightGpu>,
     params: wgpu::Buffer,
@@ -242,9 +258,10 @@ pub struct Renderer {
     shadow_cols: u32,
     shadow_depth: wgpu::TextureView,
     scene_group: wgpu::BindGroup,
-    inject: passes::inject::Inject,
+    inject: passes::LeafPass,
+    env: passes::LeafPass,
     mip: passes::mip::Mip,
-    propagate: passes::propagate::Propagate,
+    propagate: passes::LeafPass,
     shadow: shadow::Shadow,
     gbuffer: gbuffer::Gbuffer,
     shade: shade::Shade,
@@ -262,7 +279,8 @@ impl Renderer {
     pub fn new(gpu: &Gpu, scene: &SceneData, settings: Settings) -> Result<Self> {
         settings.validate()?;
         let limits = gpu.device.limits();
-        let faces_bytes = scene.nodes.len() as u64 * 6 * 16;
+        let face_bytes: u64 = if settings.radiance_f16 { 8 } else { 16 };
+        let faces_bytes = scene.nodes.len() as u64 * 6 * face_bytes;
         if faces_bytes > limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) {
             return Err(Error::Unsupported {
                 adapter: gpu.describe(),
@@ -346,6 +364,7 @@ impl Renderer {
         let (cones, tan_half) = cone_set(settings.cones, settings.cone_aperture_scale);
         let mut cone_arr = [[0.0f32; 4]; MAX_CONES];
         cone_arr[..cones.len()].copy_from_slice(&cones);
+        let environment_on = scene.environment_sh.is_some() && settings.environment;
         let base_params = Params {
             leaf_size_m: leaf,
             tile_count: scene.tiles.len() as u32,
@@ -375,6 +394,10 @@ impl Renderer {
             camera_right: [1.0, 0.0, 0.0, 1.0],
             camera_up: [0.0, 1.0, 0.0, 0.0],
             cones: cone_arr,
+            env_sh: match (&scene.environment_sh, settings.environment) {
+                (Some(sh), true) => sh.map(|c| [c[0], c[1], c[2], 0.0]),
+                _ => [[0.0; 4]; 9],
+            },
         };
 
         let params = gpu.buffer_init(
@@ -433,6 +456,7 @@ impl Renderer {
         let shadow_view = shadow_distance.create_view(&Default::default());
 
         let scene_layout = passes::scene_layout(gpu);
+        let f16 = settings.radiance_f16;
         let buffers =
             [&params, &tiles, &nodes, &leaves, &leaf_light, &faces, &lights_buf, &shadow_mats, &stats];
         let mut entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
@@ -524,12 +548,13 @@ impl Renderer {
             (set, buf)
         });
         let r = Self {
-            inject: passes::inject::Inject::new(gpu, &scene_layout),
-            mip: passes::mip::Mip::new(gpu, &scene_layout, &by_height, &ranges),
-            propagate: passes::propagate::Propagate::new(gpu, &scene_layout),
+            inject: passes::inject::new(gpu, &scene_layout, f16),
+            env: passes::env::new(gpu, &scene_layout, f16),
+            mip: passes::mip::Mip::new(gpu, &scene_layout, &by_height, &ranges, f16),
+            propagate: passes::propagate::new(gpu, &scene_layout, f16),
             shadow: shadow::Shadow::new(gpu, &splat_layout),
             gbuffer: gbuffer::Gbuffer::new(gpu, &splat_layout),
-            shade: shade::Shade::new(gpu, &scene_layout),
+            shade: shade::Shade::new(gpu, &scene_layout, f16),
             gpu: gpu.clone(),
             settings,
             leaf_count: scene.leaves.len() as u32,
@@ -541,6 +566,8 @@ impl Renderer {
             point_lights,
             spot_lights,
             emissive: scene.has_emission(),
+            environment: environment_on,
+            env_valid: false,
             shadow_layers,
             lights_gpu,
             params,
@@ -610,6 +637,9 @@ impl Renderer {
             spot_lights: self.spot_lights,
             shadows_enabled: self.settings.shadows,
             emissive_leaves: self.emissive,
+            environment: self.environment,
+            ambient: self.settings.background.iter().any(|&b| b > 0.0),
+            env_valid: self.env_valid,
             direct_valid: self.direct_valid,
             bounces_done: self.stats_now.bounces_done,
             bounce_budget: self.settings.bounces,
@@ -697,6 +727,9 @@ impl Renderer {
             IndirectFilter::Trilinear => f |= flags::INDIRECT,
             IndirectFilter::Tricubic => f |= flags::INDIRECT | flags::TRICUBIC,
             IndirectFilter::Off => {}
+        }
+        if self.environment {
+            f |= flags::ENV;
         }
         p.flags = f;
         if let Some((c, w, h)) = frame {
@@ -810,6 +843,7 @@ impl Renderer {
                     });
                     match compute {
                         Pass::Inject => self.inject.record(&mut pass, &self.scene_group, self.leaf_count),
+                        Pass::Env => self.env.record(&mut pass, &self.scene_group, self.leaf_count),
                         Pass::Mip => self.mip.record(&mut pass, &self.scene_group),
                         Pass::Propagate => {
                             self.propagate.record(&mut pass, &self.scene_group, self.leaf_count)
@@ -871,6 +905,9 @@ impl Renderer {
         if ran.contains(&Pass::Inject) || (self.point_lights + self.spot_lights == 0) {
             self.direct_valid = true;
         }
+        if ran.contains(&Pass::Env) {
+            self.env_valid = true;
+        }
         if ran.contains(&Pass::Propagate) {
             let bytes = self.gpu.read_buffer(&self.stats, 16)?;
             let bits = u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
@@ -882,8 +919,9 @@ impl Renderer {
 
     /// Each leaf's light state (direct, gather, out), for tests and the reference comparison.
     pub fn read_leaf_light(&self) -> Result<Vec<LeafLightGpu>> {
-        let bytes = self.gpu.read_buffer(&self.leaf_light, u64::from(self.leaf_count) * 48)?;
-        Ok(bytemuck::pod_collect_to_vec(&bytes[..self.leaf_count as usize * 48]))
+        let size = size_of::<LeafLightGpu>();
+        let bytes = self.gpu.read_buffer(&self.leaf_light, u64::from(self.leaf_count) * size as u64)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes[..self.leaf_count as usize * size]))
     }
 
     /// Overwrites each leaf's light state (tests: a known radiance field before a mip or gather).
@@ -902,6 +940,11 @@ impl Renderer {
     /// The six anisotropic values of every node (after a mip pass).
     pub fn read_faces(&self) -> Result<Vec<[f32; 4]>> {
         let n = self.node_count as usize * 6;
+        if self.settings.radiance_f16 {
+            let bytes = self.gpu.read_buffer(&self.faces, n as u64 * 8)?;
+            let halves: Vec<half::f16> = bytemuck::pod_collect_to_vec(&bytes[..n * 8]);
+            return Ok(halves.chunks_exact(4).map(|c| [0, 1, 2, 3].map(|k| c[k].to_f32())).collect());
+        }
         let bytes = self.gpu.read_buffer(&self.faces, n as u64 * 16)?;
         Ok(bytemuck::pod_collect_to_vec(&bytes[..n * 16]))
     }

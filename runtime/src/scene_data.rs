@@ -10,9 +10,9 @@ use std::collections::BTreeMap;
 
 use glam::{DVec3, IVec3, Vec3};
 use grotto_format::spec::Rgba8;
-use grotto_format::spec::{Surfel, SvoNode};
+use grotto_format::spec::{ShRgb9, Surfel, SvoNode};
 use grotto_format::svo::{morton_decode, morton_encode, nodes_from_leaves};
-use grotto_format::{LightShape, Package, SectionKind};
+use grotto_format::{LightShape, Package, Scope, SectionKind};
 
 use crate::error::{Error, Result};
 use crate::gpu_types::{LeafGpu, MipRange, NodeGpu, SurfelGpu, TileGpu};
@@ -69,6 +69,9 @@ pub struct SceneData {
     pub surfels: Vec<SurfelGpu>,
     pub lights: Vec<SceneLight>,
     pub cameras: Vec<SceneCamera>,
+    /// Environment radiance as 9 real SH coefficients (RGB, world axes, which the frame shares),
+    /// scaled by the scene's environment intensity; None without an environment map.
+    pub environment_sh: Option<[[f32; 3]; 9]>,
 }
 
 /// sRGB byte to linear (the IEC 61966-2-1 curve), as the GPU decodes colours.
@@ -244,6 +247,17 @@ impl SceneData {
                 LightShape::Area { .. } => continue,
             };
             out.lights.push(SceneLight { name: l.name.clone(), position_m, intensity_w_sr: intensity, spot });
+        }
+        if let Some(env) = &scene.environment {
+            let section = pkg.find(SectionKind::EnvSh9, Scope::Global, env.index).ok_or_else(|| {
+                bad(format!("the scene's environment {} has no env-sh9 section", env.index))
+            })?;
+            let sh = pkg.read::<ShRgb9>(&section)?;
+            let first = sh.first().ok_or_else(|| bad("the env-sh9 section is empty".into()))?;
+            if !(env.intensity.is_finite() && env.intensity >= 0.0) {
+                return Err(bad(format!("environment intensity {} is not a finite number >= 0", env.intensity)));
+            }
+            out.environment_sh = Some(first.coeffs.map(|c| c.map(|v| v * env.intensity)));
         }
         for c in &scene.cameras {
             out.cameras.push(SceneCamera {

@@ -2,6 +2,7 @@
 //! render passes stand alone. `ALL` lists every composed module so one naga test validates them.
 
 pub const COMMON: &str = include_str!("shaders/common.wgsl");
+pub const ENV: &str = include_str!("passes/env.wgsl");
 pub const INJECT: &str = include_str!("passes/inject.wgsl");
 pub const MIP: &str = include_str!("passes/mip.wgsl");
 pub const PROPAGATE: &str = include_str!("passes/propagate.wgsl");
@@ -16,6 +17,7 @@ pub fn compose(pass: &str) -> String {
 /// (name, complete module source) of every shader module the runtime creates.
 pub fn all() -> Vec<(&'static str, String)> {
     vec![
+        ("env", compose(ENV)),
         ("inject", compose(INJECT)),
         ("mip", compose(MIP)),
         ("propagate", compose(PROPAGATE)),

@@ -75,6 +75,12 @@ pub fn carved(
 /// `e / (1 - albedo)`. Like a scanned cave, the shell is thin: coarse levels see through it in
 /// part, which the cone closure rule (common.wgsl, `trace_cone`) has to handle.
 pub fn furnace_sphere(depth: u32, radius_leaves: f32, albedo: f32, e: f32) -> SceneData {
+    open_sphere(depth, radius_leaves, albedo, e, f32::INFINITY)
+}
+
+/// The furnace shell with a round opening: leaves whose direction from the centre has a z
+/// component above `cap_cos` are left out (`cap_cos` >= 1: closed).
+pub fn open_sphere(depth: u32, radius_leaves: f32, albedo: f32, e: f32, cap_cos: f32) -> SceneData {
     let n = 1i32 << depth;
     let center = Vec3::splat(n as f32 * 0.5);
     let leaf_size_m = 0.1;
@@ -86,7 +92,7 @@ pub fn furnace_sphere(depth: u32, radius_leaves: f32, albedo: f32, e: f32) -> Sc
                 let c = IVec3::new(x, y, z);
                 let p = c.as_vec3() + Vec3::splat(0.5);
                 let d = (p - center).length();
-                if d < radius_leaves || d >= radius_leaves + 2.0 {
+                if d < radius_leaves || d >= radius_leaves + 2.0 || (p.z - center.z) / d > cap_cos {
                     continue;
                 }
                 let inward = (center - p).normalize_or(Vec3::Z);

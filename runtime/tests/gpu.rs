@@ -58,6 +58,40 @@ fn mip_matches_cpu_reference() {
 }
 
 #[test]
+fn f16_radiance_pyramid_matches_cpu_within_half_precision_and_stays_finite() {
+    let scene = testscenes::dogleg();
+    let settings = Settings { radiance_f16: true, ..Default::default() };
+    let mut r = Renderer::new(gpu(), &scene, settings.clone()).unwrap();
+    let light = random_light(scene.leaves.len(), 7);
+    r.write_leaf_light(&light).unwrap();
+    r.run_mip().unwrap();
+    let got = r.read_faces().unwrap();
+    let want = CpuScene::mip(&scene, &light).faces;
+    let mut worst = 0.0f64;
+    for (g, w) in got.iter().zip(&want) {
+        for k in 0..4 {
+            worst = worst.max((f64::from(g[k]) - w[k]).abs() / w[k].abs().max(1.0));
+        }
+    }
+    eprintln!("mip (f16): worst error {worst:.2e} over {} node values", got.len());
+    // Stated tolerance: one f16 rounding (2^-11 relative) per level stored, the tile depth being 5.
+    assert!(worst > 1e-6, "f16 storage must round: {worst}");
+    assert!(worst < 6.0 * 2f64.powi(-11), "f16 mip differs from the CPU reference by {worst}");
+
+    // Radiance beyond f16's range (a very bright lamp) is clamped, never infinite or NaN.
+    let bright: Vec<LeafLightGpu> =
+        light.iter().map(|l| LeafLightGpu { out: [1e7, l.out[1], 1e5, 0.0], ..*l }).collect();
+    let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+    r.write_leaf_light(&bright).unwrap();
+    r.run_mip().unwrap();
+    r.run_bounce().unwrap();
+    let faces = r.read_faces().unwrap();
+    assert!(faces.iter().flatten().all(|v| v.is_finite()), "f16 pyramid overflowed");
+    assert!(faces.iter().any(|f| f[0] == 65504.0), "bright radiance should clamp at the f16 maximum");
+    assert!(r.read_leaf_light().unwrap().iter().all(|l| l.gather.iter().all(|v| v.is_finite())));
+}
+
+#[test]
 fn cone_gather_matches_cpu_reference() {
     let scene = testscenes::dogleg();
     for cones in [4u32, 16] {
@@ -91,8 +125,11 @@ fn cone_gather_matches_cpu_reference() {
 }
 
 fn furnace(albedo: f32, bounces: u32) -> (f32, f32, bool) {
+    furnace_with(albedo, Settings { bounces, convergence_tolerance: 1e-7, ..Default::default() })
+}
+
+fn furnace_with(albedo: f32, settings: Settings) -> (f32, f32, bool) {
     let scene = testscenes::furnace_sphere(5, 11.0, albedo, 1.0);
-    let settings = Settings { bounces, convergence_tolerance: 1e-7, ..Default::default() };
     let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
     r.settle(|_, _| {}).unwrap();
     let light = r.read_leaf_light().unwrap();
@@ -114,6 +151,16 @@ fn furnace_converges_to_e_over_one_minus_albedo() {
         assert!(finite);
         assert!((lo - exact).abs() / exact < 0.02 && (hi - exact).abs() / exact < 0.02);
     }
+}
+
+#[test]
+fn furnace_with_f16_radiance_converges_within_two_percent() {
+    let settings =
+        Settings { bounces: 200, convergence_tolerance: 1e-7, radiance_f16: true, ..Default::default() };
+    let (lo, hi, finite) = furnace_with(0.9, settings);
+    eprintln!("furnace albedo 0.9, f16 radiance: {lo:.4} .. {hi:.4}, exact 10");
+    assert!(finite);
+    assert!((lo - 10.0).abs() / 10.0 < 0.02 && (hi - 10.0).abs() / 10.0 < 0.02);
 }
 
 #[test]
@@ -274,4 +321,143 @@ fn spot_light_lights_only_its_cone() {
     eprintln!("spot: {inside_lit}/{inside} lit inside the cone, {outside_lit}/{outside} outside");
     assert!(inside > 0 && inside_lit == inside);
     assert!(outside > 0 && outside_lit == 0);
+}
+
+/// A pseudo-random environment (9 RGB SH coefficients) whose irradiance stays positive: a strong
+/// constant term under random higher bands.
+fn random_sky(seed: u32) -> [[f32; 3]; 9] {
+    let light = random_light(9, seed);
+    let mut sh = [[0.0f32; 3]; 9];
+    for (i, c) in sh.iter_mut().enumerate() {
+        for k in 0..3 {
+            let v = light[i].out[k] / [3.0, 1.0, 0.5][k] - 0.5;
+            c[k] = if i == 0 { 4.0 + v } else { 0.8 * v };
+        }
+    }
+    sh
+}
+
+#[test]
+fn sh_irradiance_on_the_gpu_matches_the_cpu_for_ten_thousand_normals() {
+    use grotto_runtime::scene_data::{SceneData, VoxelLeaf};
+    // Isolated leaves on a sparse grid with random unit normals; cones end at once (max distance
+    // below a leaf), so every leaf sees the whole sky (V = 1) and gets exactly albedo * E(n) / pi.
+    let normals = random_light(10_000, 5);
+    let cells: Vec<VoxelLeaf> = normals
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            let i = i as i32;
+            let v = Vec3::new(l.out[0] / 3.0 - 0.5, l.out[1] - 0.5, l.out[2] * 2.0 - 0.5);
+            VoxelLeaf {
+                cell: glam::IVec3::new(i % 32, (i / 32) % 32, i / 1024) * 3,
+                albedo: Vec3::new(0.8, 0.5, 0.3),
+                opacity: 1.0,
+                normal_mean: v.normalize_or(Vec3::Z),
+                emission: Vec3::ZERO,
+            }
+        })
+        .collect();
+    let mut scene = SceneData::from_voxels("sh probes", 0.1, 7, &cells);
+    let sky = random_sky(3);
+    scene.environment_sh = Some(sky);
+    let settings = Settings { max_distance_m: Some(0.05), bounces: 1, ..Default::default() };
+    let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+    let plan = r.update_light().unwrap();
+    assert!(plan.runs(grotto_runtime::plan::Pass::Env), "{}", plan.explain());
+    let light = r.read_leaf_light().unwrap();
+    let sh = grotto_format::spec::ShRgb9 { coeffs: sky };
+    let mut worst = 0.0f64;
+    for (leaf, state) in scene.leaves.iter().zip(&light) {
+        let n = Vec3::from_slice(&leaf.normal_mean[..3]).normalize().as_dvec3().to_array();
+        let e = grotto_preprocess::env::irradiance(&sh, n);
+        assert!(e.iter().all(|&v| v > 0.0), "the test sky must stay positive");
+        for k in 0..3 {
+            let want = f64::from(leaf.albedo_opacity[k]) * e[k] / std::f64::consts::PI;
+            worst = worst.max((f64::from(state.env[k]) - want).abs() / want);
+        }
+        assert_eq!(state.env[3], 1.0, "an unoccluded leaf sees all of the sky");
+    }
+    eprintln!("SH irradiance, {} normals: worst relative error {worst:.2e}", light.len());
+    assert!(worst < 1e-4, "GPU SH irradiance differs from the CPU by {worst}");
+}
+
+#[test]
+fn constant_environment_equals_an_equal_ambient_term() {
+    use grotto_runtime::camera::Camera;
+    use grotto_runtime::scene_data::SceneCamera;
+    let ambient = [0.3f32, 0.45, 0.6];
+    // The shell with an opening, seen from inside with the opening in view: walls lit through it
+    // and sky behind it.
+    let plain = testscenes::open_sphere(5, 11.0, 0.6, 0.0, 0.8);
+    let mut with_env = plain.clone();
+    // A constant map: only L00, with L00 * Y00 = the radiance.
+    let mut sh = [[0.0f32; 3]; 9];
+    sh[0] = ambient.map(|a| a / 0.282_094_8);
+    with_env.environment_sh = Some(sh);
+    let c = Vec3::splat(1.6);
+    let camera = Camera::from_scene(&SceneCamera {
+        name: "up".into(),
+        eye_m: c,
+        look_at_m: c + Vec3::new(0.5, 0.2, 1.0),
+        up: Vec3::Y,
+        fov_y_deg: 80.0,
+    });
+    let (w, h) = (64, 48);
+    let base = Settings { bounces: 3, convergence_tolerance: 0.0, exposure: 1.0, ..Default::default() };
+    let render = |scene, settings: Settings| {
+        let mut r = Renderer::new(gpu(), scene, settings).unwrap();
+        r.settle(|_, _| {}).unwrap();
+        let l = r.read_leaf_light().unwrap();
+        eprintln!("DEBUG out0 {:?} {:?} {:?}", l[100].out, l[100].gather, l[100].env);
+        r.render(&camera, w, h).unwrap().0.hdr
+    };
+    let a = render(&with_env, base.clone());
+    let b = render(&plain, Settings { background: ambient, ..base });
+    let (mut worst, mut peak) = (0.0f32, 0.0f32);
+    for (p, q) in a.iter().zip(&b) {
+        if (p[0] - q[0]).abs() > 1e-3 { eprintln!("DEBUG {p:?} {q:?}"); }
+        for k in 0..3 {
+            worst = worst.max((p[k] - q[k]).abs());
+            peak = peak.max(q[k]);
+        }
+    }
+    eprintln!("constant env vs ambient: worst difference {worst:.2e} of peak {peak:.3}");
+    let sky_pixels = a.iter().filter(|p| p[3] < 0.5).count();
+    assert!(peak > 0.1 && sky_pixels > 100 && sky_pixels < a.len() / 2, "{sky_pixels} sky pixels");
+    assert!(worst < 1e-4 * peak, "constant environment and ambient differ by {worst}");
+}
+
+#[test]
+fn a_closed_cave_stays_dark_under_a_sky_and_an_opening_lets_it_in() {
+    let sky = {
+        let mut sh = [[0.0f32; 3]; 9];
+        sh[0] = [1.0 / 0.282_094_8; 3];
+        // Brighter overhead: a sky, not a uniform furnace.
+        sh[2] = [1.5; 3];
+        sh
+    };
+    let inside = |cap_cos: f32| {
+        let mut scene = testscenes::open_sphere(5, 11.0, 0.6, 0.0, cap_cos);
+        scene.environment_sh = Some(sky);
+        let settings: Settings = Settings { bounces: 4, ..Settings::preset(grotto_runtime::renderer::Quality::Balanced) };
+        let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+        r.settle(|_, _| {}).unwrap();
+        let light = r.read_leaf_light().unwrap();
+        let n = light.len() as f32;
+        let out = light.iter().map(|l| l.out[1]).sum::<f32>() / n;
+        let vmean = light.iter().map(|l| l.env[3]).sum::<f32>() / n;
+        eprintln!("DEBUG cap {cap_cos} out {out:.3e} vmean {vmean:.3e}");
+        let v_max = light.iter().map(|l| l.env[3]).fold(0.0f32, f32::max);
+        (out, v_max)
+    };
+    let (closed, closed_v) = inside(f32::INFINITY);
+    let (open, open_v) = inside(0.8);
+    inside(0.5);
+    eprintln!(
+        "sky on a shell: closed mean radiance {closed:.2e} (largest sky visibility {closed_v:.3}), \
+         with an opening {open:.3} ({open_v:.3})"
+    );
+    assert!(open > 0.05 && open_v > 0.3, "the opening should let the sky in");
+    assert!(closed < 1e-3 * open, "light leaked through the closed shell: {closed} vs {open}");
 }

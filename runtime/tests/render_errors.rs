@@ -15,7 +15,7 @@ use grotto_runtime::scene_data::SceneData;
 
 /// A small synthetic cave at UTM-sized coordinates, several tiles.
 fn fixture(dir: &std::path::Path) -> PathBuf {
-    synth::small_cave_package(dir, 20_000, 4, ColorCodec::Raw, 8.0).unwrap()
+    synth::small_cave_package(dir, 20_000, 4, ColorCodec::Raw, 0.25, 8.0).unwrap()
 }
 
 fn opts(package: PathBuf, camera: CameraChoice, out: PathBuf) -> RenderOptions {

@@ -12,7 +12,7 @@ use grotto_runtime::renderer::Settings;
 use grotto_tests::golden;
 
 fn build_small_cave(dir: &Path) -> std::path::PathBuf {
-    synth::small_cave_package(dir, 80_000, 6, ColorCodec::Bc1, 16.0).unwrap()
+    synth::small_cave_package(dir, 80_000, 6, ColorCodec::Bc1, 0.25, 16.0).unwrap()
 }
 
 #[test]

@@ -35,7 +35,7 @@ struct AccuracyArgs {
     /// Prefer the software adapter.
     #[arg(long)]
     software: bool,
-    /// Only this scene (furnace, "colour box", dogleg, "demo cave"); the report then covers it alone.
+    /// Only this scene (furnace, "colour box", dogleg, bunny, "demo cave"); the report then covers it alone.
     #[arg(long)]
     scene: Option<String>,
 }
@@ -70,12 +70,6 @@ struct RenderArgs {
     json: bool,
 }
 
-fn aces_srgb(x: f32) -> u8 {
-    let x = x.max(0.0);
-    let m = ((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)).clamp(0.0, 1.0);
-    let s = if m <= 0.003_130_8 { m * 12.92 } else { 1.055 * m.powf(1.0 / 2.4) - 0.055 };
-    (s * 255.0 + 0.5) as u8
-}
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse() {
@@ -157,7 +151,7 @@ fn render(cli: RenderArgs) -> anyhow::Result<()> {
             .iter()
             .map(|e| {
                 let c = e.mean * cli.exposure;
-                [aces_srgb(c.x), aces_srgb(c.y), aces_srgb(c.z), 255]
+                [grotto_reference::aces_srgb(c.x), grotto_reference::aces_srgb(c.y), grotto_reference::aces_srgb(c.z), 255]
             })
             .collect(),
     };

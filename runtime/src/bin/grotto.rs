@@ -111,6 +111,9 @@ struct RenderArgs {
     /// Render without shadow maps.
     #[arg(long)]
     no_shadows: bool,
+    /// Store the radiance pyramid as f16 (half its memory; values above 65504 clamp).
+    #[arg(long)]
+    radiance_f16: bool,
     /// Indirect light filter at pixels: trilinear, tricubic or off.
     #[arg(long)]
     indirect: Option<String>,
@@ -173,6 +176,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
     settings.max_distance_m = a.max_distance;
     settings.convergence_tolerance = a.tolerance;
     settings.shadows = !a.no_shadows;
+    settings.radiance_f16 = a.radiance_f16;
     settings.splat_scale = a.splat_scale;
     let camera = match (a.camera.clone(), a.eye, a.look_at) {
         (Some(name), _, _) => CameraChoice::Named(name),

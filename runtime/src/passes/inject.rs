@@ -2,19 +2,7 @@
 
 use crate::gpu::Gpu;
 
-#[derive(Debug)]
-pub struct Inject {
-    pipeline: wgpu::ComputePipeline,
-}
-
-impl Inject {
-    pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout) -> Self {
-        Self { pipeline: super::compute_pipeline(gpu, "inject", crate::shaders::INJECT, "inject", &[scene]) }
-    }
-
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, scene: &wgpu::BindGroup, leaf_count: u32) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, scene, &[]);
-        super::dispatch_linear(pass, leaf_count);
-    }
+/// The inject pipeline: one invocation per leaf, scene bindings only.
+pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout, radiance_f16: bool) -> super::LeafPass {
+    super::LeafPass::new(gpu, "inject", crate::shaders::INJECT, scene, radiance_f16)
 }

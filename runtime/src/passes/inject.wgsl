@@ -1,6 +1,6 @@
 // Light injection: direct light from point and spot lights at every leaf (NDF-weighted diffuse,
 // shadowed by the surfel shadow maps), then the leaf's outgoing radiance
-// out = emission + direct + albedo * gather. Area lights are already emissive leaves.
+// out = emission + direct + env + albedo * gather. Area lights are already emissive leaves.
 
 @compute @workgroup_size(64)
 fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -31,6 +31,6 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let direct = albedo / PI * irradiance;
     var state = leaf_light[i];
     state.direct = vec4<f32>(direct, 0.0);
-    state.out = vec4<f32>(leaf.emission.rgb + direct + albedo * state.gather.rgb, 0.0);
+    state.out = vec4<f32>(leaf.emission.rgb + direct + state.env.rgb + albedo * state.gather.rgb, 0.0);
     leaf_light[i] = state;
 }

@@ -13,7 +13,13 @@ pub struct Mip {
 }
 
 impl Mip {
-    pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout, by_height: &[u32], ranges: &[MipRange]) -> Self {
+    pub fn new(
+        gpu: &Gpu,
+        scene: &wgpu::BindGroupLayout,
+        by_height: &[u32],
+        ranges: &[MipRange],
+        radiance_f16: bool,
+    ) -> Self {
         let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("mip"),
             entries: &[
@@ -21,7 +27,7 @@ impl Mip {
                 super::storage_entry(1, true),
             ],
         });
-        let pipeline = super::compute_pipeline(gpu, "mip", crate::shaders::MIP, "mip", &[scene, &layout]);
+        let pipeline = super::compute_pipeline(gpu, "mip", crate::shaders::MIP, "mip", &[scene, &layout], radiance_f16);
         let order =
             gpu.buffer_init("mip order", bytemuck::cast_slice(by_height), wgpu::BufferUsages::STORAGE);
         let levels = ranges

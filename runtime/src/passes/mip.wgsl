@@ -20,7 +20,7 @@ fn child_face(node: Node, o: u32, f: u32) -> vec4<f32> {
         return vec4<f32>(0.0);
     }
     let c = node.first_child + countOneBits(mask & ((1u << o) - 1u));
-    return faces[c * 6u + f];
+    return load_face(c * 6u + f);
 }
 
 @compute @workgroup_size(64)
@@ -36,7 +36,7 @@ fn mip(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) n
         let a = leaves[leaf].albedo_opacity.a;
         let v = vec4<f32>(leaf_light[leaf].out.rgb * a, a);
         for (var f = 0u; f < 6u; f++) {
-            faces[n * 6u + f] = v;
+            store_face(n * 6u + f, v);
         }
         return;
     }
@@ -57,6 +57,6 @@ fn mip(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) n
             let back = select(low, high, positive);
             sum += front + (1.0 - front.a) * back;
         }
-        faces[n * 6u + f] = sum * 0.25;
+        store_face(n * 6u + f, sum * 0.25);
     }
 }

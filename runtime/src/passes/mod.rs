@@ -4,6 +4,7 @@
 //! Compute passes share bind group 0 (the scene, declared in shaders/common.wgsl); a pass's own
 //! resources are group 1.
 
+pub mod env;
 pub mod gbuffer;
 pub mod inject;
 pub mod mip;
@@ -78,13 +79,15 @@ pub fn texture_entry(binding: u32, dim: wgpu::TextureViewDimension) -> wgpu::Bin
     }
 }
 
-/// A compute pipeline from common.wgsl + `pass_src`, entry point `entry`.
+/// A compute pipeline from common.wgsl + `pass_src`, entry point `entry`; `radiance_f16` sets the
+/// pipeline constant of the same name (the radiance pyramid's storage precision).
 pub fn compute_pipeline(
     gpu: &Gpu,
     label: &str,
     pass_src: &str,
     entry: &str,
     layouts: &[&wgpu::BindGroupLayout],
+    radiance_f16: bool,
 ) -> wgpu::ComputePipeline {
     let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(label),
@@ -101,9 +104,37 @@ pub fn compute_pipeline(
         layout: Some(&layout),
         module: &module,
         entry_point: Some(entry),
-        compilation_options: Default::default(),
+        compilation_options: wgpu::PipelineCompilationOptions {
+            constants: &[("radiance_f16", if radiance_f16 { 1.0 } else { 0.0 })],
+            ..Default::default()
+        },
         cache: None,
     })
+}
+
+/// A compute pass with one invocation per leaf that binds only the scene (inject, env,
+/// propagate); its WGSL entry point has the pass's name.
+#[derive(Debug)]
+pub struct LeafPass {
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl LeafPass {
+    pub fn new(
+        gpu: &Gpu,
+        name: &str,
+        pass_src: &str,
+        scene: &wgpu::BindGroupLayout,
+        radiance_f16: bool,
+    ) -> Self {
+        Self { pipeline: compute_pipeline(gpu, name, pass_src, name, &[scene], radiance_f16) }
+    }
+
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, scene: &wgpu::BindGroup, leaf_count: u32) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, scene, &[]);
+        dispatch_linear(pass, leaf_count);
+    }
 }
 
 /// Dispatches 64-wide groups covering `n` items as a 2D grid (at most 65535 groups per

@@ -2,27 +2,7 @@
 
 use crate::gpu::Gpu;
 
-#[derive(Debug)]
-pub struct Propagate {
-    pipeline: wgpu::ComputePipeline,
-}
-
-impl Propagate {
-    pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout) -> Self {
-        Self {
-            pipeline: super::compute_pipeline(
-                gpu,
-                "propagate",
-                crate::shaders::PROPAGATE,
-                "propagate",
-                &[scene],
-            ),
-        }
-    }
-
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, scene: &wgpu::BindGroup, leaf_count: u32) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, scene, &[]);
-        super::dispatch_linear(pass, leaf_count);
-    }
+/// The propagate pipeline: one invocation per leaf, scene bindings only.
+pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout, radiance_f16: bool) -> super::LeafPass {
+    super::LeafPass::new(gpu, "propagate", crate::shaders::PROPAGATE, scene, radiance_f16)
 }

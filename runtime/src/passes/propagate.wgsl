@@ -1,6 +1,7 @@
 // One bounce of propagation: every leaf gathers incoming radiance with cones over the hemisphere of
 // its mean normal (cosine-distributed directions, weights summing to 1, so the result is
-// irradiance / pi), then out = emission + direct + albedo * gather. Reads only the mip pyramid,
+// irradiance / pi), then out = emission + direct + env + albedo * gather (env: the env pass's
+// reflected environment light; a cone's escaped share adds only the constant background here). Reads only the mip pyramid,
 // so leaves update independently; records the largest relative change for the effect plan.
 
 @compute @workgroup_size(64)
@@ -24,7 +25,7 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     var state = leaf_light[i];
     let before = state.out.rgb;
     let albedo = leaf.albedo_opacity.rgb;
-    let after = leaf.emission.rgb + state.direct.rgb + albedo * gathered;
+    let after = leaf.emission.rgb + state.direct.rgb + state.env.rgb + albedo * gathered;
     state.gather = vec4<f32>(gathered, 0.0);
     state.out = vec4<f32>(after, 0.0);
     leaf_light[i] = state;

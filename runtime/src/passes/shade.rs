@@ -19,7 +19,7 @@ pub struct Outputs {
 }
 
 impl Shade {
-    pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout) -> Self {
+    pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout, radiance_f16: bool) -> Self {
         let d2 = wgpu::TextureViewDimension::D2;
         let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("shade"),
@@ -32,7 +32,7 @@ impl Shade {
             ],
         });
         let pipeline =
-            super::compute_pipeline(gpu, "shade", crate::shaders::SHADE, "shade", &[scene, &layout]);
+            super::compute_pipeline(gpu, "shade", crate::shaders::SHADE, "shade", &[scene, &layout], radiance_f16);
         Self { pipeline, layout }
     }
 

@@ -8,15 +8,16 @@
 @group(1) @binding(3) var<storage, read_write> out_hdr: array<vec4<f32>>;
 @group(1) @binding(4) var<storage, read_write> out_ldr: array<u32>;
 
-// Leaf gather and emission at `p_m`, interpolated over the leaves around it with weights
-// renormalised over the leaves that exist (empty cells carry no light to interpolate).
-fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 2> {
+// Leaf gather, emission and sky visibility (x of the third) at `p_m`, interpolated over the leaves
+// around it with weights renormalised over the leaves that exist (empty cells carry no light).
+fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 3> {
     let u = p_m / params.leaf_size_m - vec3<f32>(0.5);
     let base = floor(u);
     let f = u - base;
     let i0 = vec3<i32>(base);
     var gather = vec3<f32>(0.0);
     var emission = vec3<f32>(0.0);
+    var sky = 0.0;
     var wsum = 0.0;
     let cubic = (params.flags & FLAG_TRICUBIC) != 0u;
     let lo = select(0, -1, cubic);
@@ -39,13 +40,14 @@ fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 2> {
                 if leaf != EMPTY {
                     gather += w * leaf_light[leaf].gather.rgb;
                     emission += w * leaves[leaf].emission.rgb;
+                    sky += w * leaf_light[leaf].env.w;
                     wsum += w;
                 }
             }
         }
     }
     let inv = select(0.0, 1.0 / wsum, wsum > 1e-6);
-    return array<vec3<f32>, 2>(gather * inv, emission * inv);
+    return array<vec3<f32>, 3>(gather * inv, emission * inv, vec3<f32>(sky * inv, 0.0, 0.0));
 }
 
 // Cubic B-spline kernel (support 2): smooth, non-negative, sums to 1 over the 4 taps.
@@ -103,21 +105,25 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             src = xy;
         }
     }
+    // Ray through the pixel centre, the same point the rasteriser interpolated.
+    let ndc = vec2<f32>(
+        (f32(gid.x) + 0.5) / f32(params.width) * 2.0 - 1.0,
+        1.0 - (f32(gid.y) + 0.5) / f32(params.height) * 2.0,
+    );
+    let t = params.camera_forward.w;
+    let ray = normalize(
+        params.camera_forward.xyz + params.camera_right.xyz * (ndc.x * t * params.camera_right.w)
+            + params.camera_up.xyz * (ndc.y * t),
+    );
     var hdr = params.background.rgb;
+    if (params.flags & FLAG_ENV) != 0u {
+        // The sky behind the geometry: the environment's SH radiance (band-limited).
+        hdr += max(sh_eval(ray, vec3<f32>(1.0)), vec3<f32>(0.0));
+    }
     // Alpha: 1 where a surfel covers the pixel, 0 where the background shows (hole checks).
     var coverage = 0.0;
     if d > 0.0 {
         coverage = 1.0;
-        // Ray through the pixel centre, the same point the rasteriser interpolated.
-        let ndc = vec2<f32>(
-            (f32(gid.x) + 0.5) / f32(params.width) * 2.0 - 1.0,
-            1.0 - (f32(gid.y) + 0.5) / f32(params.height) * 2.0,
-        );
-        let t = params.camera_forward.w;
-        let ray = normalize(
-            params.camera_forward.xyz + params.camera_right.xyz * (ndc.x * t * params.camera_right.w)
-                + params.camera_up.xyz * (ndc.y * t),
-        );
         let p = params.camera_eye_m.xyz + ray * d;
         let n = unpack_normal(textureLoad(gb_normal, src, 0));
         let albedo = textureLoad(gb_albedo, src, 0).rgb;
@@ -144,7 +150,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             color += albedo / PI * irradiance;
         }
-        if (params.flags & (FLAG_INDIRECT | FLAG_EMISSION)) != 0u {
+        if (params.flags & (FLAG_INDIRECT | FLAG_EMISSION | FLAG_ENV)) != 0u {
             // A quarter leaf behind the surface: inside the leaf the surfel belongs to, so the
             // trilinear weights land on leaves, not on the empty cells in front (measured: looking
             // up in front lost the gather wherever a surfel sat on a cell face).
@@ -154,6 +160,11 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             if (params.flags & FLAG_EMISSION) != 0u {
                 color += l[1];
+            }
+            if (params.flags & FLAG_ENV) != 0u {
+                // Environment light at the surfel's own normal (Ramamoorthi-Hanrahan), times the
+                // sky visibility the env pass found for the leaves around it.
+                color += albedo * sh_irradiance_ndf_over_pi(n) * l[2].x;
             }
         }
         hdr = color;

@@ -10,6 +10,7 @@ const FLAG_DIRECT: u32 = 2u;
 const FLAG_SHADOWS: u32 = 4u;
 const FLAG_EMISSION: u32 = 8u;
 const FLAG_TRICUBIC: u32 = 16u;
+const FLAG_ENV: u32 = 32u;
 
 struct Tile {
     origin_leaf: vec3<i32>,
@@ -36,6 +37,8 @@ struct LeafLight {
     direct: vec4<f32>,
     gather: vec4<f32>,
     out: vec4<f32>,
+    // rgb: albedo * E_sh(n) / pi * V; w: sky visibility V (env pass).
+    env: vec4<f32>,
 }
 
 struct Light {
@@ -74,6 +77,8 @@ struct Params {
     camera_right: vec4<f32>,
     camera_up: vec4<f32>,
     cones: array<vec4<f32>, 16>,
+    // Environment radiance, 9 real SH coefficients (rgb), L00, L1-1, L10, L11, L2-2 .. L22.
+    env_sh: array<vec4<f32>, 9>,
 }
 
 struct Stats {
@@ -91,8 +96,13 @@ struct Stats {
 @group(0) @binding(3) var<storage, read_write> leaves: array<Leaf>;
 @group(0) @binding(4) var<storage, read_write> leaf_light: array<LeafLight>;
 // Six anisotropic values per node (premultiplied radiance, opacity), by travel direction:
-// 0 +x, 1 -x, 2 +y, 3 -y, 4 +z, 5 -z.
-@group(0) @binding(5) var<storage, read_write> faces: array<vec4<f32>>;
+// 0 +x, 1 -x, 2 +y, 3 -y, 4 +z, 5 -z. Stored as raw words, 4 per value as f32 or 2 as packed f16
+// (`radiance_f16`, set by the renderer's `radiance_f16` setting): halves the pyramid's memory and
+// bandwidth; see load_face/store_face.
+@group(0) @binding(5) var<storage, read_write> faces: array<u32>;
+override radiance_f16: bool = false;
+// Largest finite f16: brighter values are clamped rather than turned into infinity.
+const F16_MAX: f32 = 65504.0;
 @group(0) @binding(6) var<storage, read_write> lights: array<Light>;
 @group(0) @binding(7) var<storage, read_write> shadow_view_proj: array<mat4x4<f32>>;
 @group(0) @binding(8) var<storage, read_write> stats: Stats;
@@ -140,14 +150,37 @@ fn find_leaf(v: vec3<i32>) -> u32 {
     return nodes[n].first_child;
 }
 
+fn load_face(i: u32) -> vec4<f32> {
+    if radiance_f16 {
+        return vec4<f32>(unpack2x16float(faces[2u * i]), unpack2x16float(faces[2u * i + 1u]));
+    }
+    let b = 4u * i;
+    return bitcast<vec4<f32>>(vec4<u32>(faces[b], faces[b + 1u], faces[b + 2u], faces[b + 3u]));
+}
+
+fn store_face(i: u32, v: vec4<f32>) {
+    if radiance_f16 {
+        let c = min(v, vec4<f32>(F16_MAX));
+        faces[2u * i] = pack2x16float(c.xy);
+        faces[2u * i + 1u] = pack2x16float(c.zw);
+        return;
+    }
+    let u = bitcast<vec4<u32>>(v);
+    let b = 4u * i;
+    faces[b] = u.x;
+    faces[b + 1u] = u.y;
+    faces[b + 2u] = u.z;
+    faces[b + 3u] = u.w;
+}
+
 // The node's value seen by a ray travelling along unit `dir`: its three facing directional
 // values weighted by the squared direction components (the weights sum to 1).
 fn directional(n: u32, dir: vec3<f32>) -> vec4<f32> {
     let w = dir * dir;
     let base = n * 6u;
-    let fx = faces[base + select(1u, 0u, dir.x >= 0.0)];
-    let fy = faces[base + select(3u, 2u, dir.y >= 0.0)];
-    let fz = faces[base + select(5u, 4u, dir.z >= 0.0)];
+    let fx = load_face(base + select(1u, 0u, dir.x >= 0.0));
+    let fy = load_face(base + select(3u, 2u, dir.y >= 0.0));
+    let fz = load_face(base + select(5u, 4u, dir.z >= 0.0));
     return fx * w.x + fy * w.y + fz * w.z;
 }
 
@@ -398,4 +431,40 @@ fn unpack_normal(c: vec4<f32>) -> vec3<f32> {
     n.x += select(t, -t, n.x >= 0.0);
     n.y += select(t, -t, n.y >= 0.0);
     return normalize(n);
+}
+
+// Real SH basis constants (same order and signs as preprocess/src/env.rs, which projects the map).
+const SH_Y0: f32 = 0.282094791773878;
+const SH_Y1: f32 = 0.488602511902920;
+const SH_Y2: f32 = 1.092548430592079;
+const SH_Y20: f32 = 0.315391565252520;
+const SH_Y22: f32 = 0.546274215296040;
+
+// Environment SH convolved per band: sum_l band[l] sum_m L_lm Y_lm(d). band = (1, 1, 1) is the
+// radiance itself; (1, 2/3, 1/4) is irradiance / pi (Ramamoorthi & Hanrahan 2001); a cone of
+// half-angle t averages band l by the mean of P_l over its cap: (1, (1+c)/2, c(1+c)/2), c = cos t.
+fn sh_eval(d: vec3<f32>, band: vec3<f32>) -> vec3<f32> {
+    let s = params.env_sh;
+    var e = s[0].rgb * (SH_Y0 * band.x);
+    e += (s[1].rgb * d.y + s[2].rgb * d.z + s[3].rgb * d.x) * (SH_Y1 * band.y);
+    e += (s[4].rgb * (SH_Y2 * d.x * d.y) + s[5].rgb * (SH_Y2 * d.y * d.z)
+        + s[6].rgb * (SH_Y20 * (3.0 * d.z * d.z - 1.0)) + s[7].rgb * (SH_Y2 * d.x * d.z)
+        + s[8].rgb * (SH_Y22 * (d.x * d.x - d.y * d.y))) * band.z;
+    return e;
+}
+
+// Mean environment radiance over a cone around unit `d` whose half-angle has cosine `c`.
+fn sh_cone_radiance(d: vec3<f32>, c: f32) -> vec3<f32> {
+    return max(sh_eval(d, vec3<f32>(1.0, 0.5 * (1.0 + c), 0.5 * c * (1.0 + c))), vec3<f32>(0.0));
+}
+
+// Irradiance / pi from the environment alone for a leaf or surfel whose normals have mean vector
+// `mean` (|mean| = r in 0..=1, Toksvig): the NDF mixture of ndf_cos, a share r of clamped cosine
+// at the mean normal (bands pi, 2pi/3, pi/4) and 1 - r of (1 + cos) / 4 (bands pi, pi/3, 0).
+// r = 1 is Ramamoorthi & Hanrahan's formula.
+fn sh_irradiance_ndf_over_pi(mean: vec3<f32>) -> vec3<f32> {
+    let r = clamp(length(mean), 0.0, 1.0);
+    let n = leaf_normal(mean);
+    let band = vec3<f32>(1.0, r * (2.0 / 3.0) + (1.0 - r) / 3.0, 0.25 * r);
+    return max(sh_eval(n, band), vec3<f32>(0.0));
 }

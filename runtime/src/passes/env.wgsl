@@ -1,0 +1,38 @@
+// Environment light through openings: every leaf traces its cone set over the hemisphere of its
+// mean normal against the opacity of the radiance pyramid and keeps its sky visibility
+// V = sum_c w_c (1 - a_c) L_c / sum_c w_c L_c, where L_c is the environment's mean radiance over
+// cone c (SH, cap-filtered): the radiance-weighted share of the hemisphere that sees out of the
+// scene. The reflected environment light is albedo * E_sh / pi * V, with E_sh the exact
+// Ramamoorthi-Hanrahan irradiance of the 9 coefficients (for the leaf's normal distribution, see
+// sh_irradiance_ndf_over_pi): unoccluded leaves get exactly that, a leaf whose cones all end on
+// rock gets nothing. Runs once per environment (geometry is static).
+
+@compute @workgroup_size(64)
+fn env(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear_index(gid, nwg);
+    if i >= params.leaf_count {
+        return;
+    }
+    let leaf = leaves[i];
+    let n = leaf_normal(leaf.normal_mean.xyz);
+    let frame = basis(n);
+    let origin = leaf.center_m.xyz + n * params.leaf_size_m;
+    let cos_half = 1.0 / sqrt(1.0 + params.cone_tan_half * params.cone_tan_half);
+    var open = 0.0;
+    var all = 0.0;
+    for (var c = 0u; c < params.cone_count; c++) {
+        let cone = params.cones[c];
+        let dir = normalize(frame * cone.xyz);
+        let sky = dot(sh_cone_radiance(dir, cos_half), vec3<f32>(0.2126, 0.7152, 0.0722));
+        let s = trace_cone(origin, dir, params.cone_tan_half);
+        open += cone.w * (1.0 - s.a) * sky;
+        all += cone.w * sky;
+    }
+    let v = select(0.0, clamp(open / all, 0.0, 1.0), all > 1e-12);
+    let albedo = leaf.albedo_opacity.rgb;
+    let env_light = albedo * sh_irradiance_ndf_over_pi(leaf.normal_mean.xyz) * v;
+    var state = leaf_light[i];
+    state.env = vec4<f32>(env_light, v);
+    state.out = vec4<f32>(leaf.emission.rgb + state.direct.rgb + env_light + albedo * state.gather.rgb, 0.0);
+    leaf_light[i] = state;
+}
