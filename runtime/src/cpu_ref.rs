@@ -7,10 +7,10 @@ use glam::{DVec3, IVec3, Vec3};
 use crate::gpu_types::{LeafLightGpu, Params};
 use crate::scene_data::SceneData;
 
-/// Closure of a cone that left the scene partly transparent (`close_cone` in common.wgsl).
+/// Closure of a cone that left the scene nearly opaque (`close_cone` in common.wgsl).
 pub fn close_cone(acc: [f64; 4]) -> [f64; 4] {
-    const CLOSE_LO: f64 = 0.2;
-    const CLOSE_HI: f64 = 0.6;
+    const CLOSE_LO: f64 = 0.8;
+    const CLOSE_HI: f64 = 0.95;
     if acc[3] <= 1e-6 {
         return acc;
     }
@@ -19,6 +19,21 @@ pub fn close_cone(acc: [f64; 4]) -> [f64; 4] {
     let a = acc[3] + (1.0 - acc[3]) * s;
     let k = a / acc[3];
     [acc[0] * k, acc[1] * k, acc[2] * k, a]
+}
+
+/// A cone whose axis entered rock (`enter_rock` in common.wgsl): it ends opaque; what is hidden
+/// behind the surfaces it met looks like them (or, having met none, like the rock cell's own
+/// filtered radiance `s`).
+pub fn enter_rock(acc: [f64; 4], s: [f64; 4]) -> [f64; 4] {
+    let behind = if acc[3] > 1e-6 {
+        [acc[0] / acc[3], acc[1] / acc[3], acc[2] / acc[3]]
+    } else if s[3] > 1e-6 {
+        [s[0] / s[3], s[1] / s[3], s[2] / s[3]]
+    } else {
+        [0.0; 3]
+    };
+    let rest = 1.0 - acc[3];
+    [acc[0] + rest * behind[0], acc[1] + rest * behind[1], acc[2] + rest * behind[2], 1.0]
 }
 
 /// The scene plus a radiance pyramid.
@@ -78,11 +93,7 @@ impl<'a> CpuScene<'a> {
     }
 
     fn find_tile(&self, v_leaf: IVec3) -> Option<usize> {
-        self.scene.tiles.iter().position(|t| {
-            let rel = v_leaf - IVec3::from_array(t.origin_leaf);
-            let size = 1i32 << t.depth;
-            rel.cmpge(IVec3::ZERO).all() && rel.cmplt(IVec3::splat(size)).all()
-        })
+        self.scene.tile_of(v_leaf)
     }
 
     /// Global node index of voxel `v` at `lod`, as `find_node` in common.wgsl.
@@ -161,15 +172,28 @@ impl<'a> CpuScene<'a> {
             DVec3::new(p.scene_max_leaf[0].into(), p.scene_max_leaf[1].into(), p.scene_max_leaf[2].into());
         let mut acc = [0.0f64; 4];
         let mut t = leaf;
+        let mut t_prev = 0.0;
+        let tan_half = f64::from(p.cone_tan_half);
         for _ in 0..p.max_steps {
             if t > f64::from(p.max_distance_m) {
                 break;
+            }
+            let cell_m = leaf * f64::from(1u32 << crate::rock::ROCK_LEVEL);
+            let n = (((t - t_prev) / cell_m).ceil() as u32).min(64);
+            for k in 1..=n {
+                let tk = t_prev + (t - t_prev) * f64::from(k) / f64::from(n);
+                let qk = (origin_m + dir * tk) / leaf;
+                if crate::rock::in_rock(self.scene, qk.floor().as_ivec3()) {
+                    let d = leaf.max(2.0 * tk * tan_half);
+                    let lod = ((d / leaf).log2() + 1.0).max(f64::from(crate::rock::ROCK_LEVEL + 1));
+                    return enter_rock(acc, self.sample_lod(qk, lod, p.max_lod, dir));
+                }
             }
             let q = (origin_m + dir * t) / leaf;
             if q.cmplt(lo).any() || q.cmpgt(hi).any() {
                 break;
             }
-            let diameter = leaf.max(2.0 * t * f64::from(p.cone_tan_half));
+            let diameter = leaf.max(2.0 * t * tan_half);
             let mut s = self.sample_lod(q, (diameter / leaf).log2(), p.max_lod, dir);
             if s[3] > 1e-6 {
                 let a = 1.0 - (1.0 - s[3].min(1.0)).max(0.0).powf(f64::from(p.step_scale));
@@ -180,6 +204,7 @@ impl<'a> CpuScene<'a> {
             if acc[3] >= 0.995 {
                 return [acc[0] / acc[3], acc[1] / acc[3], acc[2] / acc[3], 1.0];
             }
+            t_prev = t;
             t += diameter * f64::from(p.step_scale);
         }
         close_cone(acc)

@@ -20,6 +20,9 @@ pub struct TileGpu {
     pub leaf_offset: u32,
     pub node_count: u32,
     pub leaf_count: u32,
+    /// First word of this tile's rock bits in the rock buffer (rock.rs), or `rock::NO_ROCK`.
+    pub rock_offset: u32,
+    pub pad: [u32; 3],
 }
 
 /// An SVO node with global indices: `first_child` is the global node index of the first child for
@@ -185,7 +188,7 @@ pub struct SurfelGpu {
 }
 
 const _: () = {
-    assert!(size_of::<TileGpu>() == 32);
+    assert!(size_of::<TileGpu>() == 48);
     assert!(size_of::<NodeGpu>() == 8);
     assert!(size_of::<LeafGpu>() == 64);
     assert!(size_of::<LeafLightGpu>() == 64);

@@ -17,6 +17,7 @@ pub mod passes;
 pub mod plan;
 pub mod render_job;
 pub mod renderer;
+pub mod rock;
 pub mod scene_data;
 pub mod shaders;
 pub mod testscenes;

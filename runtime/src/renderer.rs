@@ -468,6 +468,8 @@ impl Renderer {
             binding: 9,
             resource: wgpu::BindingResource::TextureView(&shadow_view),
         });
+        let rock = gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock_words), STORAGE);
+        entries.push(wgpu::BindGroupEntry { binding: 10, resource: rock.as_entire_binding() });
         let scene_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("scene"),
             layout: &scene_layout,
@@ -486,6 +488,7 @@ impl Renderer {
             &shadow_mats,
             &stats,
             &surfels,
+            &rock,
         ]
         .iter()
         .map(|b| b.size())

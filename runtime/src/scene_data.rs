@@ -72,6 +72,8 @@ pub struct SceneData {
     /// Environment radiance as 9 real SH coefficients (RGB, world axes, which the frame shares),
     /// scaled by the scene's environment intensity; None without an environment map.
     pub environment_sh: Option<[[f32; 3]; 9]>,
+    /// Rock bits of every tile (rock.rs; `TileGpu::rock_offset` points into it).
+    pub rock_words: Vec<u32>,
 }
 
 /// sRGB byte to linear (the IEC 61966-2-1 curve), as the GPU decodes colours.
@@ -91,6 +93,16 @@ impl SceneData {
                 mask_level: u32::from(n.child_mask) | u32::from(n.level) << 8,
             });
         }
+    }
+
+    /// The tile whose cube holds leaf cell `v_leaf` (global leaf units), as `find_tile` in
+    /// common.wgsl.
+    pub fn tile_of(&self, v_leaf: IVec3) -> Option<usize> {
+        self.tiles.iter().position(|t| {
+            let rel = v_leaf - IVec3::from_array(t.origin_leaf);
+            let size = 1i32 << t.depth;
+            rel.cmpge(IVec3::ZERO).all() && rel.cmplt(IVec3::splat(size)).all()
+        })
     }
 
     /// Frame-space bounds of all tiles in leaf units: (min, max).
@@ -214,6 +226,8 @@ impl SceneData {
                 leaf_offset,
                 node_count: svo.nodes.len() as u32,
                 leaf_count,
+                rock_offset: crate::rock::NO_ROCK,
+                pad: [0; 3],
             });
             // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
             if let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? {
@@ -268,6 +282,7 @@ impl SceneData {
                 fov_y_deg: c.fov_y_deg as f32,
             });
         }
+        crate::rock::classify(&mut out);
         Ok(out)
     }
 
@@ -306,8 +321,11 @@ impl SceneData {
                 leaf_offset,
                 node_count: nodes.len() as u32,
                 leaf_count: list.len() as u32,
+                rock_offset: crate::rock::NO_ROCK,
+                pad: [0; 3],
             });
         }
+        crate::rock::classify(&mut out);
         out
     }
 }

@@ -5,7 +5,11 @@ use grotto_runtime::shaders;
 #[test]
 fn every_wgsl_module_validates() {
     let all = shaders::all();
-    assert_eq!(all.len(), 5, "a new shader module must be listed in shaders::all()");
+    let pass_files = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/src/passes"))
+        .unwrap()
+        .filter(|e| e.as_ref().is_ok_and(|e| e.path().extension().is_some_and(|x| x == "wgsl")))
+        .count();
+    assert_eq!(all.len(), pass_files, "every passes/*.wgsl must be listed in shaders::all()");
     for (name, src) in all {
         let module = naga::front::wgsl::parse_str(&src)
             .unwrap_or_else(|e| panic!("{name}.wgsl does not parse:\n{}", e.emit_to_string(&src)));

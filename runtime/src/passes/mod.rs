@@ -30,6 +30,7 @@ pub fn scene_layout(gpu: &Gpu) -> wgpu::BindGroupLayout {
         entries.push(storage_entry(b, false));
     }
     entries.push(texture_entry(9, wgpu::TextureViewDimension::D2));
+    entries.push(storage_entry(10, false));
     gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("scene"),
         entries: &entries,

@@ -19,6 +19,11 @@ struct Tile {
     leaf_offset: u32,
     node_count: u32,
     leaf_count: u32,
+    // First word of the tile's rock bits (rock.rs), EMPTY for none.
+    rock_offset: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 struct Node {
@@ -110,6 +115,44 @@ const F16_MAX: f32 = 65504.0;
 // cube face of a point light or per spot light, `shadow_cols` faces per row. A 2D atlas rather
 // than an array texture: wgpu's GL backend neither renders nor copies into array layers.
 @group(0) @binding(9) var shadow_dist: texture_2d<f32>;
+// Rock behind the scanned surfaces: one bit per cell of 2x2x2 leaves over each tile and a margin
+// of ROCK_MARGIN cells around it (runtime/src/rock.rs).
+@group(0) @binding(10) var<storage, read_write> rock: array<u32>;
+const ROCK_LEVEL: u32 = 1u;
+const ROCK_MARGIN: i32 = 4;
+
+// Rock bit of `cell` (global cell units) in tile `t`'s grid: 1 rock, 0 not, -1 outside the grid.
+fn rock_bit(t: u32, cell: vec3<i32>) -> i32 {
+    let tile = tiles[t];
+    if tile.rock_offset == EMPTY {
+        return -1;
+    }
+    let g = (1 << (tile.depth - ROCK_LEVEL)) + 2 * ROCK_MARGIN;
+    let c = cell - (tile.origin_leaf >> vec3<u32>(ROCK_LEVEL)) + vec3<i32>(ROCK_MARGIN);
+    if any(c < vec3<i32>(0)) || any(c >= vec3<i32>(g)) {
+        return -1;
+    }
+    let bit = u32(c.x + g * (c.y + g * c.z));
+    return i32((rock[tile.rock_offset + bit / 32u] >> (bit % 32u)) & 1u);
+}
+
+// Whether the leaf cell holding `p_leaf` lies in rock (rock.rs, `in_rock`): the tile holding it
+// decides; outside every tile, the first tile whose margin holds it.
+fn in_rock(p_leaf: vec3<f32>) -> bool {
+    let v = vec3<i32>(floor(p_leaf));
+    let cell = v >> vec3<u32>(ROCK_LEVEL);
+    let t = find_tile(v);
+    if t != EMPTY {
+        return rock_bit(t, cell) == 1;
+    }
+    for (var k = 0u; k < params.tile_count; k++) {
+        let b = rock_bit(k, cell);
+        if b >= 0 {
+            return b == 1;
+        }
+    }
+    return false;
+}
 
 // The tile whose cube holds the leaf cell `v_leaf` (global leaf units), or EMPTY. A linear scan:
 // resident tile counts are small today; streaming will replace it with a tile grid.
@@ -275,15 +318,28 @@ fn outside_scene(p_leaf: vec3<f32>) -> bool {
 
 // Front-to-back composited cone from `origin_m` along unit `dir`: premultiplied radiance and
 // opacity. A cone that becomes opaque (>= 0.995) is renormalised by its opacity, i.e. what is
-// hidden behind the last surfaces is assumed to look like them; a cone that leaves the scene keeps
-// its transparency (the environment's share, added by the caller).
+// hidden behind the last surfaces is assumed to look like them; one whose axis enters rock ends
+// there the same way (enter_rock); a cone that leaves the scene keeps its transparency (the
+// environment's share, added by the caller).
 fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32) -> vec4<f32> {
     let leaf = params.leaf_size_m;
     var acc = vec4<f32>(0.0);
     var t = leaf;
+    var t_prev = 0.0;
     for (var i = 0u; i < params.max_steps; i++) {
         if t > params.max_distance_m {
             break;
+        }
+        // Rock anywhere since the last sample: coarse steps are many rock cells long and would
+        // jump over the rock right behind a thin wall.
+        let t_rock = rock_on_segment(origin_m, dir, t_prev, t);
+        if t_rock >= 0.0 {
+            // The sample that stands for what lies behind: one level coarser than the footprint
+            // and at least 4 leaves wide, so that it still sees the wall in front of this rock
+            // when the step jumped it.
+            let q = (origin_m + dir * t_rock) / leaf;
+            let d = max(leaf, 2.0 * t_rock * tan_half);
+            return enter_rock(acc, sample_lod(q, max(log2(d / leaf) + 1.0, f32(ROCK_LEVEL + 1u)), dir));
         }
         let p_leaf = (origin_m + dir * t) / leaf;
         if outside_scene(p_leaf) {
@@ -302,18 +358,18 @@ fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32) -> vec4<f32> {
         if acc.a >= 0.995 {
             return vec4<f32>(acc.rgb / acc.a, 1.0);
         }
+        t_prev = t;
         t += diameter * params.step_scale;
     }
     return close_cone(acc);
 }
 
-// A cone that left the scene partly transparent after meeting surfaces has most likely seen
-// through a thin scanned wall at a coarse level (scans are shells; the rock behind them is empty
-// space in the SVO). Closure: from opacity CLOSE_LO to CLOSE_HI the missing share is filled with
-// what the cone saw (renormalised), so closed caves conserve energy; below CLOSE_LO the cone
-// escaped (an opening) and keeps its transparency for the environment.
-const CLOSE_LO: f32 = 0.2;
-const CLOSE_HI: f32 = 0.6;
+// A cone that leaves the scene nearly opaque has crossed solid matter whose coarse, blurred
+// opacity never quite saturates (trilinear weights toward the empty space outside): from opacity
+// CLOSE_LO to CLOSE_HI its missing share is filled with what it saw. Far below the thresholds of
+// a closure that had to stand in for rock (0.2 to 0.6 before rock.rs): openings keep their sky.
+const CLOSE_LO: f32 = 0.8;
+const CLOSE_HI: f32 = 0.95;
 
 fn close_cone(acc: vec4<f32>) -> vec4<f32> {
     if acc.a <= 1e-6 {
@@ -322,6 +378,34 @@ fn close_cone(acc: vec4<f32>) -> vec4<f32> {
     let s = smoothstep(CLOSE_LO, CLOSE_HI, acc.a);
     let a = mix(acc.a, 1.0, s);
     return vec4<f32>(acc.rgb * (a / acc.a), a);
+}
+
+// The first distance in (t0, t1] (metres along the cone axis) at which the axis lies in rock,
+// probed once per rock cell length (at most 64 probes), or -1.
+fn rock_on_segment(origin_m: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32) -> f32 {
+    let cell_m = params.leaf_size_m * f32(1u << ROCK_LEVEL);
+    let n = min(u32(ceil((t1 - t0) / cell_m)), 64u);
+    for (var k = 1u; k <= n; k++) {
+        let t = t0 + (t1 - t0) * f32(k) / f32(n);
+        if in_rock((origin_m + dir * t) / params.leaf_size_m) {
+            return t;
+        }
+    }
+    return -1.0;
+}
+
+// A cone whose axis entered rock: scans are shells, so at a coarse level a wall is partly
+// transparent and the cone would go on through the empty rock behind it (a leak). It ends opaque;
+// what is hidden behind the surfaces it met looks like them (or, having met none, like the rock
+// cell's own filtered radiance `s`). Mirrored by cpu_ref::enter_rock.
+fn enter_rock(acc: vec4<f32>, s: vec4<f32>) -> vec4<f32> {
+    var behind = vec3<f32>(0.0);
+    if acc.a > 1e-6 {
+        behind = acc.rgb / acc.a;
+    } else if s.a > 1e-6 {
+        behind = s.rgb / s.a;
+    }
+    return vec4<f32>(acc.rgb + (1.0 - acc.a) * behind, 1.0);
 }
 
 // Orthonormal basis around unit `n` (Duff et al. 2017, branchless).
