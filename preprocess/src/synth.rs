@@ -598,33 +598,59 @@ pub fn write_dataset(
 }
 
 /// The small synthetic cave that the runtime's tests, the golden images and the accuracy sweep
-/// share: LAS scans of about `points` points over `segments` passage segments, built with `leaf_m`
-/// leaves and tiles of 4 m up to `max_tile_extent_m` into `dir/cave.grotto` (scans in `dir/scans`,
-/// work files in `dir/work`). Returns the package path.
-pub fn small_cave_package(
-    dir: &std::path::Path,
-    points: u64,
-    segments: usize,
-    colors: crate::build::ColorCodec,
-    leaf_m: f64,
-    max_tile_extent_m: f64,
-) -> crate::Result<std::path::PathBuf> {
+/// share (see [`small_cave_package`]).
+#[derive(Clone, Debug)]
+pub struct SmallCave {
+    /// About this many points, in LAS scans.
+    pub points: u64,
+    /// Passage segments.
+    pub segments: usize,
+    pub colors: crate::build::ColorCodec,
+    pub leaf_m: f64,
+    /// Tiles from 4 m up to this.
+    pub max_tile_extent_m: f64,
+    /// An environment map that lights the cave too.
+    pub sky: Option<std::path::PathBuf>,
+    /// Window the sky's SH.
+    pub sh_window: bool,
+}
+
+impl Default for SmallCave {
+    fn default() -> Self {
+        Self {
+            points: 80_000,
+            segments: 6,
+            colors: crate::build::ColorCodec::Bc1,
+            leaf_m: 0.25,
+            max_tile_extent_m: 16.0,
+            sky: None,
+            sh_window: true,
+        }
+    }
+}
+
+/// Synthesises `cave` and builds it into `dir/cave.grotto` (scans in `dir/scans`, work files in
+/// `dir/work`). Returns the package path.
+pub fn small_cave_package(dir: &std::path::Path, cave: &SmallCave) -> crate::Result<std::path::PathBuf> {
     use crate::build::{self, BuildParams};
-    let params = SynthParams { points, segments, ..SynthParams::default() };
+    let params = SynthParams { points: cave.points, segments: cave.segments, ..SynthParams::default() };
     let summary = write_dataset(&dir.join("scans"), &params, &[crate::ingest::ScanFormat::Las], &|_, _| {})?;
     let manifest_path = std::path::PathBuf::from(&summary.manifest);
-    let manifest = crate::manifest::Manifest::load(&manifest_path)?;
+    let mut manifest = crate::manifest::Manifest::load(&manifest_path)?;
+    if let Some(map) = &cave.sky {
+        manifest.environment = Some(crate::manifest::EnvironmentSpec { map: map.clone(), intensity: 1.0 });
+    }
     let out = dir.join("cave.grotto");
     let bp = BuildParams {
         work_dir: dir.join("work"),
         memory_budget_bytes: 64 << 20,
         threads: 2,
-        leaf_m,
-        colors,
-        sh_window: true,
+        leaf_m: cave.leaf_m,
+        colors: cave.colors,
+        sh_window: cave.sh_window,
         k: 16,
         min_tile_extent_m: 4.0,
-        max_tile_extent_m,
+        max_tile_extent_m: cave.max_tile_extent_m,
         halo_m: 0.5,
     };
     build::build(&manifest, &manifest_path, &out, &bp, &|_| {})?;

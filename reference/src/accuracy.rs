@@ -31,9 +31,18 @@ pub struct SweepScene {
     /// References cut after k indirect bounces, for k in `TRUNCATED_BOUNCES`: the runtime with k
     /// bounces is compared with these to judge propagation alone, without the missing bounces.
     pub truncated: Vec<(u32, Vec<Estimate>)>,
-    /// The same surfels built into other packages (SVO depth, colour codec): (config name, knob,
-    /// scene), each rendered with the balanced preset and judged against this scene's reference.
-    pub variants: Vec<(String, String, SceneData)>,
+    /// The same surfels built into other packages (SVO depth, colour codec, SH window), each
+    /// rendered with the balanced preset and judged against this scene's reference.
+    pub variants: Vec<Variant>,
+}
+
+/// A package variant of a sweep scene.
+#[derive(Debug)]
+pub struct Variant {
+    /// Config name in the report.
+    pub name: String,
+    pub knob: String,
+    pub data: SceneData,
 }
 
 /// Bounce counts with a truncated reference.
@@ -116,6 +125,21 @@ pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<Swee
             Err(e) => eprintln!("bunny scene skipped: {e}"),
         }
     }
+    if only.is_none_or(|o| o == "cave with sky") {
+        let sky = shared_data().join("envmaps/probulator_grace.hdr");
+        match demo_cave(ColorCodec::Raw, 0.25, Some(&sky), false).and_then(|raw| {
+            let windowed = demo_cave(ColorCodec::Raw, 0.25, Some(&sky), true)?;
+            Ok((raw, windowed))
+        }) {
+            Ok((raw, windowed)) => defs.push((
+                "cave with sky",
+                "the demo cave lit also by an environment map (Grace Cathedral, probulator) through its entrance, SH unwindowed; the reference's sky is the same 9 coefficients",
+                raw,
+                vec![Variant { name: "SH windowed".into(), knob: "sh window".into(), data: windowed }],
+            )),
+            Err(e) => eprintln!("cave with sky scene skipped: {e}"),
+        }
+    }
     if only.is_none_or(|o| o == "demo cave") {
         match demo_cave_variants() {
             Ok((data, variants)) => defs.push((
@@ -131,12 +155,12 @@ pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<Swee
         let camera = Camera::from_scene(&data.cameras[0]);
         let scene = SurfelScene::from_scene(&data, Settings::default().splat_scale);
         let t0 = std::time::Instant::now();
-        let reference = scene.render(&camera, width, height, spp, &PathSettings::default(), 1);
+        let reference = scene.render(&camera, width, height, spp, &PathSettings::for_scene(&data), 1);
         let reference_s = t0.elapsed().as_secs_f64();
         let truncated = TRUNCATED_BOUNCES
             .iter()
             .map(|&k| {
-                let cut = PathSettings { max_bounces: k + 1, ..PathSettings::default() };
+                let cut = PathSettings { max_bounces: k + 1, ..PathSettings::for_scene(&data) };
                 (k, scene.render(&camera, width, height, spp, &cut, 2))
             })
             .collect();
@@ -156,10 +180,21 @@ pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<Swee
 }
 
 /// A small synthetic cave built through the whole pipeline (synth -> package -> scene).
-pub fn demo_cave(colors: ColorCodec, leaf_m: f64) -> Result<SceneData, String> {
+pub fn demo_cave(
+    colors: ColorCodec,
+    leaf_m: f64,
+    sky: Option<&std::path::Path>,
+    sh_window: bool,
+) -> Result<SceneData, String> {
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
-    let out = grotto_preprocess::synth::small_cave_package(dir.path(), 80_000, 6, colors, leaf_m, 16.0)
-        .map_err(|e| e.to_string())?;
+    let cave = grotto_preprocess::synth::SmallCave {
+        colors,
+        leaf_m,
+        sky: sky.map(std::path::Path::to_path_buf),
+        sh_window,
+        ..Default::default()
+    };
+    let out = grotto_preprocess::synth::small_cave_package(dir.path(), &cave).map_err(|e| e.to_string())?;
     let pkg = grotto_format::Package::open(&out).map_err(|e| e.to_string())?;
     let mut scene = SceneData::from_package(&pkg).map_err(|e| e.to_string())?;
     // The entrance camera first: it looks down a passage the lamps light mostly indirectly.
@@ -220,15 +255,15 @@ pub fn bunny() -> Result<SceneData, String> {
 
 /// The demo cave with raw colours and 0.25 m leaves (the reference's scene), and the package
 /// knobs around it: one SVO level coarser and finer, BC1 colours.
-fn demo_cave_variants() -> Result<(SceneData, Vec<(String, String, SceneData)>), String> {
-    let base = demo_cave(ColorCodec::Raw, 0.25)?;
+fn demo_cave_variants() -> Result<(SceneData, Vec<Variant>), String> {
+    let base = demo_cave(ColorCodec::Raw, 0.25, None, true)?;
     let mut variants = Vec::new();
     for (name, knob, colors, leaf_m) in [
         ("leaf 0.5 m (depth -1)", "svo depth", ColorCodec::Raw, 0.5),
         ("leaf 0.125 m (depth +1)", "svo depth", ColorCodec::Raw, 0.125),
         ("BC1 colours", "colours", ColorCodec::Bc1, 0.25),
     ] {
-        let v = demo_cave(colors, leaf_m)?;
+        let v = demo_cave(colors, leaf_m, None, true)?;
         if v.surfels.len() != base.surfels.len() {
             return Err(format!(
                 "{name}: {} surfels against {} in the reference scene",
@@ -236,7 +271,7 @@ fn demo_cave_variants() -> Result<(SceneData, Vec<(String, String, SceneData)>),
                 base.surfels.len()
             ));
         }
-        variants.push((name.to_string(), knob.to_string(), v));
+        variants.push(Variant { name: name.into(), knob: knob.into(), data: v });
     }
     Ok((base, variants))
 }
@@ -348,7 +383,11 @@ pub fn sweep(
     mut progress: impl FnMut(&str, &str),
 ) -> grotto_runtime::Result<Vec<Row>> {
     let mut rows = Vec::new();
-    let balanced = Config { name: "balanced".into(), knob: "preset".into(), settings: Settings::preset(Quality::Balanced) };
+    let balanced = Config {
+        name: "balanced".into(),
+        knob: "preset".into(),
+        settings: Settings::preset(Quality::Balanced),
+    };
     for s in scenes {
         // Warm-up: the first run on a device compiles pipelines inside the driver; not measured.
         if let Some(c) = configs.first() {
@@ -360,10 +399,10 @@ pub fn sweep(
             progress(&s.name, &c.name);
             rows.push(run_one(gpu, s, &s.data, c, width, height)?);
         }
-        for (name, knob, data) in &s.variants {
-            progress(&s.name, name);
-            let c = Config { name: name.clone(), knob: knob.clone(), ..balanced.clone() };
-            rows.push(run_one(gpu, s, data, &c, width, height)?);
+        for v in &s.variants {
+            progress(&s.name, &v.name);
+            let c = Config { name: v.name.clone(), knob: v.knob.clone(), ..balanced.clone() };
+            rows.push(run_one(gpu, s, &v.data, &c, width, height)?);
         }
     }
     Ok(rows)
@@ -537,8 +576,10 @@ pub fn report(
             sc.data.leaves.len(),
             sc.data.surfels.len()
         );
-        let _ =
-            writeln!(s, "| config | knob | rel. RMSE | bias | FLIP | light ms | frame ms | bounces | GPU MiB | Pareto |");
+        let _ = writeln!(
+            s,
+            "| config | knob | rel. RMSE | bias | FLIP | light ms | frame ms | bounces | GPU MiB | Pareto |"
+        );
         let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|:-:|");
         let mut order: Vec<usize> = (0..mine.len()).collect();
         order.sort_by(|&a, &b| {

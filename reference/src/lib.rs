@@ -107,11 +107,34 @@ pub struct PathSettings {
     pub max_bounces: u32,
     /// Radiance of rays that leave the scene (the runtime's background).
     pub background: Vec3,
+    /// Environment radiance as 9 SH coefficients (the package's env-sh9 times its intensity):
+    /// rays that leave the scene add its radiance in their direction, clamped at 0.
+    pub env_sh: Option<[[f32; 3]; 9]>,
+}
+
+impl PathSettings {
+    /// The defaults with the scene's environment.
+    pub fn for_scene(scene: &SceneData) -> Self {
+        Self { env_sh: scene.environment_sh, ..Self::default() }
+    }
+
+    /// Radiance arriving from outside the scene along unit `d`.
+    pub fn sky(&self, d: Vec3) -> Vec3 {
+        let Some(sh) = &self.env_sh else { return self.background };
+        let y = grotto_preprocess::env::sh_basis(d.as_dvec3().to_array());
+        let mut l = [0.0f64; 3];
+        for (c, yi) in sh.iter().zip(y) {
+            for k in 0..3 {
+                l[k] += f64::from(c[k]) * yi;
+            }
+        }
+        self.background + Vec3::new(l[0].max(0.0) as f32, l[1].max(0.0) as f32, l[2].max(0.0) as f32)
+    }
 }
 
 impl Default for PathSettings {
     fn default() -> Self {
-        Self { min_bounces: 3, max_bounces: 4096, background: Vec3::ZERO }
+        Self { min_bounces: 3, max_bounces: 4096, background: Vec3::ZERO, env_sh: None }
     }
 }
 
@@ -305,7 +328,7 @@ impl SurfelScene {
         let (mut o, mut d) = (o, d);
         for bounce in 0..settings.max_bounces {
             let Some((t, i)) = self.intersect(o, d, f32::INFINITY) else {
-                radiance += throughput * settings.background;
+                radiance += throughput * settings.sky(d);
                 break;
             };
             let disc = &self.discs[i];

@@ -96,6 +96,13 @@ impl Gpu {
                 hint: "use a Vulkan, Metal, DX12 or OpenGL 4.3 / GLES 3.1 adapter".into(),
             });
         }
+        if !downlevel.flags.contains(wgpu::DownlevelFlags::SHADER_F16_IN_F32) {
+            return Err(Error::Unsupported {
+                adapter: name,
+                what: "no pack2x16float / unpack2x16float (the f16 radiance pyramid)".into(),
+                hint: "use a Vulkan, Metal, DX12 or GLES 3.0+ adapter".into(),
+            });
+        }
         let mut features = wgpu::Features::empty();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         if timestamps {

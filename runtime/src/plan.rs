@@ -134,7 +134,11 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
     let env = if !i.environment {
         Step { pass: Pass::Env, run: false, reason: "no environment map".into() }
     } else if i.env_valid {
-        Step { pass: Pass::Env, run: false, reason: "environment unchanged: sky visibility still valid".into() }
+        Step {
+            pass: Pass::Env,
+            run: false,
+            reason: "environment unchanged: sky visibility still valid".into(),
+        }
     } else {
         Step {
             pass: Pass::Env,

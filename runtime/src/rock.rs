@@ -182,7 +182,8 @@ fn bit_index(tile: &crate::gpu_types::TileGpu, cell: IVec3) -> Option<u32> {
         return None;
     }
     let g = grid_side(tile.depth) as i32;
-    let c = cell - (IVec3::from_array(tile.origin_leaf) >> ROCK_LEVEL as i32) + IVec3::splat(ROCK_REACH_CELLS);
+    let c =
+        cell - (IVec3::from_array(tile.origin_leaf) >> ROCK_LEVEL as i32) + IVec3::splat(ROCK_REACH_CELLS);
     if c.cmplt(IVec3::ZERO).any() || c.cmpge(IVec3::splat(g)).any() {
         return None;
     }
@@ -194,7 +195,8 @@ fn bit_index(tile: &crate::gpu_types::TileGpu, cell: IVec3) -> Option<u32> {
 pub fn in_rock(scene: &SceneData, v_leaf: IVec3) -> bool {
     let cell = v_leaf >> ROCK_LEVEL as i32;
     let test = |tile: &crate::gpu_types::TileGpu| {
-        bit_index(tile, cell).map(|bit| scene.rock_words[(tile.rock_offset + bit / 32) as usize] >> (bit % 32) & 1 == 1)
+        bit_index(tile, cell)
+            .map(|bit| scene.rock_words[(tile.rock_offset + bit / 32) as usize] >> (bit % 32) & 1 == 1)
     };
     match scene.tile_of(v_leaf) {
         Some(t) => test(&scene.tiles[t]).unwrap_or(false),

@@ -269,7 +269,10 @@ impl SceneData {
             let sh = pkg.read::<ShRgb9>(&section)?;
             let first = sh.first().ok_or_else(|| bad("the env-sh9 section is empty".into()))?;
             if !(env.intensity.is_finite() && env.intensity >= 0.0) {
-                return Err(bad(format!("environment intensity {} is not a finite number >= 0", env.intensity)));
+                return Err(bad(format!(
+                    "environment intensity {} is not a finite number >= 0",
+                    env.intensity
+                )));
             }
             out.environment_sh = Some(first.coeffs.map(|c| c.map(|v| v * env.intensity)));
         }

@@ -372,8 +372,8 @@ fn sh_irradiance_on_the_gpu_matches_the_cpu_for_ten_thousand_normals() {
         let n = Vec3::from_slice(&leaf.normal_mean[..3]).normalize().as_dvec3().to_array();
         let e = grotto_preprocess::env::irradiance(&sh, n);
         assert!(e.iter().all(|&v| v > 0.0), "the test sky must stay positive");
-        for k in 0..3 {
-            let want = f64::from(leaf.albedo_opacity[k]) * e[k] / std::f64::consts::PI;
+        for (k, e_k) in e.iter().enumerate() {
+            let want = f64::from(leaf.albedo_opacity[k]) * e_k / std::f64::consts::PI;
             worst = worst.max((f64::from(state.env[k]) - want).abs() / want);
         }
         assert_eq!(state.env[3], 1.0, "an unoccluded leaf sees all of the sky");

@@ -15,7 +15,17 @@ use grotto_runtime::scene_data::SceneData;
 
 /// A small synthetic cave at UTM-sized coordinates, several tiles.
 fn fixture(dir: &std::path::Path) -> PathBuf {
-    synth::small_cave_package(dir, 20_000, 4, ColorCodec::Raw, 0.25, 8.0).unwrap()
+    synth::small_cave_package(
+        dir,
+        &synth::SmallCave {
+            points: 20_000,
+            segments: 4,
+            colors: ColorCodec::Raw,
+            max_tile_extent_m: 8.0,
+            ..Default::default()
+        },
+    )
+    .unwrap()
 }
 
 fn opts(package: PathBuf, camera: CameraChoice, out: PathBuf) -> RenderOptions {

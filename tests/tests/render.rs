@@ -4,7 +4,6 @@
 
 use std::path::Path;
 
-use grotto_preprocess::build::ColorCodec;
 use grotto_preprocess::synth;
 use grotto_runtime::gpu::GpuOptions;
 use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
@@ -12,7 +11,7 @@ use grotto_runtime::renderer::Settings;
 use grotto_tests::golden;
 
 fn build_small_cave(dir: &Path) -> std::path::PathBuf {
-    synth::small_cave_package(dir, 80_000, 6, ColorCodec::Bc1, 0.25, 16.0).unwrap()
+    synth::small_cave_package(dir, &synth::SmallCave::default()).unwrap()
 }
 
 #[test]

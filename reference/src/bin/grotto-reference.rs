@@ -35,7 +35,8 @@ struct AccuracyArgs {
     /// Prefer the software adapter.
     #[arg(long)]
     software: bool,
-    /// Only this scene (furnace, "colour box", dogleg, bunny, "demo cave"); the report then covers it alone.
+    /// Only this scene (furnace, "colour box", dogleg, bunny, "cave with sky", "demo cave"); the
+    /// report then covers it alone.
     #[arg(long)]
     scene: Option<String>,
 }
@@ -69,7 +70,6 @@ struct RenderArgs {
     #[arg(long)]
     json: bool,
 }
-
 
 fn main() -> anyhow::Result<()> {
     match Cli::parse() {
@@ -138,10 +138,15 @@ fn render(cli: RenderArgs) -> anyhow::Result<()> {
     if cli.json {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
-    let est =
-        scene.render_with_progress(&camera, w, h, cli.spp, &PathSettings::default(), cli.seed, |rows| {
-            bar.set_position(u64::from(rows))
-        });
+    let est = scene.render_with_progress(
+        &camera,
+        w,
+        h,
+        cli.spp,
+        &PathSettings::for_scene(&scene_data),
+        cli.seed,
+        |rows| bar.set_position(u64::from(rows)),
+    );
     bar.finish_and_clear();
     let frame = Frame {
         width: w,
@@ -151,7 +156,12 @@ fn render(cli: RenderArgs) -> anyhow::Result<()> {
             .iter()
             .map(|e| {
                 let c = e.mean * cli.exposure;
-                [grotto_reference::aces_srgb(c.x), grotto_reference::aces_srgb(c.y), grotto_reference::aces_srgb(c.z), 255]
+                [
+                    grotto_reference::aces_srgb(c.x),
+                    grotto_reference::aces_srgb(c.y),
+                    grotto_reference::aces_srgb(c.z),
+                    255,
+                ]
             })
             .collect(),
     };

@@ -27,7 +27,8 @@ impl Mip {
                 super::storage_entry(1, true),
             ],
         });
-        let pipeline = super::compute_pipeline(gpu, "mip", crate::shaders::MIP, "mip", &[scene, &layout], radiance_f16);
+        let pipeline =
+            super::compute_pipeline(gpu, "mip", crate::shaders::MIP, "mip", &[scene, &layout], radiance_f16);
         let order =
             gpu.buffer_init("mip order", bytemuck::cast_slice(by_height), wgpu::BufferUsages::STORAGE);
         let levels = ranges

@@ -31,8 +31,14 @@ impl Shade {
                 super::storage_entry(4, false),
             ],
         });
-        let pipeline =
-            super::compute_pipeline(gpu, "shade", crate::shaders::SHADE, "shade", &[scene, &layout], radiance_f16);
+        let pipeline = super::compute_pipeline(
+            gpu,
+            "shade",
+            crate::shaders::SHADE,
+            "shade",
+            &[scene, &layout],
+            radiance_f16,
+        );
         Self { pipeline, layout }
     }
 
