@@ -150,6 +150,11 @@ pub struct SurfelScene {
     extent_m: f32,
     /// Offset of secondary rays from the surface, metres.
     epsilon_m: f32,
+    /// Offset of shadow and bounce rays along the normal: a quarter of the feature size (the
+    /// leaf), as the runtime's shade pass offsets its shadow lookups. The discs are enlarged to
+    /// close gaps between samples, so on a curved surface a ray leaving one disc at a grazing angle
+    /// would otherwise hit its overlapping neighbour (measured on the bunny: 10% darker direct light).
+    offset_m: f32,
 }
 
 /// A mean with its standard error.
@@ -236,7 +241,7 @@ impl SurfelScene {
         }
         let extent_m = if discs.is_empty() { 1.0 } else { (hi - lo).length().max(1e-3) };
         let feature = feature_m.max(extent_m * 1e-5);
-        Self { discs, bvh, lights, step_m: 4.0 * feature, extent_m, epsilon_m: 1e-3 * feature }
+        Self { discs, bvh, lights, step_m: 4.0 * feature, extent_m, epsilon_m: 1e-3 * feature, offset_m: 0.25 * feature }
     }
 
     pub fn discs(&self) -> &[Disc] {
@@ -313,7 +318,7 @@ impl SurfelScene {
                     x * x * (3.0 - 2.0 * x)
                 }
             };
-            if spot <= 0.0 || self.occluded(p + n * self.epsilon_m, l.position_m) {
+            if spot <= 0.0 || self.occluded(p + n * self.offset_m, l.position_m) {
                 continue;
             }
             e += l.intensity_w_sr * (c * spot / (dist * dist));
@@ -344,7 +349,7 @@ impl SurfelScene {
                 }
                 throughput /= q;
             }
-            o = p + n * self.epsilon_m;
+            o = p + n * self.offset_m;
             d = cosine_sample(n, rng.random(), rng.random());
         }
         radiance
@@ -360,7 +365,7 @@ impl SurfelScene {
         let base = disc.emission + self.direct(p, n, disc.albedo);
         let e = Estimate::of((0..paths).map(|_| {
             let d = cosine_sample(n, rng.random(), rng.random());
-            disc.albedo * self.trace(p + n * self.epsilon_m, d, settings, &mut rng)
+            disc.albedo * self.trace(p + n * self.offset_m, d, settings, &mut rng)
         }));
         Estimate { mean: base + e.mean, std_err: e.std_err }
     }

@@ -120,7 +120,7 @@ fn presets_trade_time_for_error_on_the_colour_box() {
     let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })
         .expect("GPU tests need an adapter");
     let (w, h) = (32, 24);
-    let scenes = accuracy::scenes(w, h, 256, Some("colour box"));
+    let scenes = accuracy::scenes(w, h, 1024, Some("colour box"));
     assert_eq!(scenes.len(), 1);
     let presets: Vec<_> = accuracy::configs().into_iter().filter(|c| c.knob == "preset").collect();
     let rows = accuracy::sweep(&gpu, &scenes, &presets, w, h, |_, _| {}).unwrap();
