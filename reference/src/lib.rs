@@ -155,6 +155,10 @@ pub struct SurfelScene {
     /// close gaps between samples, so on a curved surface a ray leaving one disc at a grazing angle
     /// would otherwise hit its overlapping neighbour (measured on the bunny: 10% darker direct light).
     offset_m: f32,
+    /// The runtime's rock (runtime/src/rock.rs): tiles and rock bits only. A ray that would leave
+    /// the scene through a gap between scanned discs but crosses rock on the way is absorbed, as
+    /// rock there would absorb it; the runtime's cones stop there too. None for bare disc sets.
+    rock: Option<SceneData>,
 }
 
 /// A mean with its standard error.
@@ -228,7 +232,14 @@ impl SurfelScene {
                 )
             })
             .collect();
-        Self::new(discs, scene.lights.clone(), leaf)
+        let mut out = Self::new(discs, scene.lights.clone(), leaf);
+        out.rock = Some(SceneData {
+            leaf_size_m: scene.leaf_size_m,
+            tiles: scene.tiles.clone(),
+            rock_words: scene.rock_words.clone(),
+            ..SceneData::default()
+        });
+        out
     }
 
     /// Any discs and lights; `feature_m` sets the first query segment and the surface offset.
@@ -241,7 +252,16 @@ impl SurfelScene {
         }
         let extent_m = if discs.is_empty() { 1.0 } else { (hi - lo).length().max(1e-3) };
         let feature = feature_m.max(extent_m * 1e-5);
-        Self { discs, bvh, lights, step_m: 4.0 * feature, extent_m, epsilon_m: 1e-3 * feature, offset_m: 0.25 * feature }
+        Self {
+            discs,
+            bvh,
+            lights,
+            step_m: 4.0 * feature,
+            extent_m,
+            epsilon_m: 1e-3 * feature,
+            offset_m: 0.25 * feature,
+            rock: None,
+        }
     }
 
     pub fn discs(&self) -> &[Disc] {
@@ -326,6 +346,29 @@ impl SurfelScene {
         albedo / PI * e
     }
 
+    /// Whether the ray from `o` along unit `d` crosses a rock cell before it leaves the rock grid
+    /// (the tiles plus their margins), probed once per rock cell length.
+    fn through_rock(&self, o: Vec3, d: Vec3) -> bool {
+        let Some(rock) = &self.rock else { return false };
+        let leaf = rock.leaf_size_m;
+        let margin = (grotto_runtime::rock::ROCK_REACH_CELLS << grotto_runtime::rock::ROCK_LEVEL) as f32;
+        let (lo, hi) = rock.bounds_leaf();
+        let (lo, hi) = (lo - Vec3::splat(margin), hi + Vec3::splat(margin));
+        let step = (1u32 << grotto_runtime::rock::ROCK_LEVEL) as f32;
+        let mut p = o / leaf;
+        let max_steps = ((hi - lo).length() / step) as usize + 2;
+        for _ in 0..max_steps {
+            p += d * step;
+            if p.cmplt(lo).any() || p.cmpgt(hi).any() {
+                return false;
+            }
+            if grotto_runtime::rock::in_rock(rock, p.floor().as_ivec3()) {
+                return true;
+            }
+        }
+        false
+    }
+
     /// Radiance arriving at `o` from direction `-d` (one path sample).
     pub fn trace(&self, o: Vec3, d: Vec3, settings: &PathSettings, rng: &mut SmallRng) -> Vec3 {
         let mut radiance = Vec3::ZERO;
@@ -333,7 +376,9 @@ impl SurfelScene {
         let (mut o, mut d) = (o, d);
         for bounce in 0..settings.max_bounces {
             let Some((t, i)) = self.intersect(o, d, f32::INFINITY) else {
-                radiance += throughput * settings.sky(d);
+                if !self.through_rock(o, d) {
+                    radiance += throughput * settings.sky(d);
+                }
                 break;
             };
             let disc = &self.discs[i];

@@ -14,17 +14,14 @@ fn env(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) n
         return;
     }
     let leaf = leaves[i];
-    let n = leaf_normal(leaf.normal_mean.xyz);
-    let frame = basis(n);
-    let origin = leaf.center_m.xyz + n * params.leaf_size_m;
     let cos_half = 1.0 / sqrt(1.0 + params.cone_tan_half * params.cone_tan_half);
     var open = 0.0;
     var all = 0.0;
     for (var c = 0u; c < params.cone_count; c++) {
         let cone = params.cones[c];
-        let dir = normalize(frame * cone.xyz);
+        let dir = leaf_cone_dir(leaf, cone.xyz);
         let sky = dot(sh_cone_radiance(dir, cos_half), vec3<f32>(0.2126, 0.7152, 0.0722));
-        let s = trace_cone(origin, dir, params.cone_tan_half);
+        let s = trace_cone(leaf_cone_origin(leaf), dir, params.cone_tan_half);
         open += cone.w * (1.0 - s.a) * sky;
         all += cone.w * sky;
     }

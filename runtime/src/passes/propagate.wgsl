@@ -1,8 +1,9 @@
 // One bounce of propagation: every leaf gathers incoming radiance with cones over the hemisphere of
 // its mean normal (cosine-distributed directions, weights summing to 1, so the result is
 // irradiance / pi), then out = emission + direct + env + albedo * gather (env: the env pass's
-// reflected environment light; a cone's escaped share adds only the constant background here). Reads only the mip pyramid,
-// so leaves update independently; records the largest relative change for the effect plan.
+// reflected environment light; a cone's escaped share adds only the constant background here).
+// Reads only the mip pyramid, so leaves update independently; records the largest relative change
+// for the effect plan.
 
 @compute @workgroup_size(64)
 fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -11,15 +12,11 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
         return;
     }
     let leaf = leaves[i];
-    let n = leaf_normal(leaf.normal_mean.xyz);
-    let frame = basis(n);
-    // Start one leaf off the surface so the cone does not see its own leaf first.
-    let origin = leaf.center_m.xyz + n * params.leaf_size_m;
     var gathered = vec3<f32>(0.0);
     for (var c = 0u; c < params.cone_count; c++) {
         let cone = params.cones[c];
-        let dir = normalize(frame * cone.xyz);
-        let s = trace_cone(origin, dir, params.cone_tan_half);
+        let dir = leaf_cone_dir(leaf, cone.xyz);
+        let s = trace_cone(leaf_cone_origin(leaf), dir, params.cone_tan_half);
         gathered += cone.w * (s.rgb + (1.0 - s.a) * params.background.rgb);
     }
     var state = leaf_light[i];

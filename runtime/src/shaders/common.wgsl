@@ -427,6 +427,16 @@ fn leaf_normal(mean: vec3<f32>) -> vec3<f32> {
     return mean / r;
 }
 
+// A leaf's cones start one leaf off its surface, so that a cone does not see its own leaf first.
+fn leaf_cone_origin(leaf: Leaf) -> vec3<f32> {
+    return leaf.center_m.xyz + leaf_normal(leaf.normal_mean.xyz) * params.leaf_size_m;
+}
+
+// World direction of a cone given in the leaf's tangent frame (z = mean normal).
+fn leaf_cone_dir(leaf: Leaf, local: vec3<f32>) -> vec3<f32> {
+    return normalize(basis(leaf_normal(leaf.normal_mean.xyz)) * local);
+}
+
 // Cosine term averaged over a leaf's normal distribution: a share |mean| of the normals at the
 // mean direction and the rest spread over its hemisphere, whose mean clamped cosine is (1 + c) / 4.
 fn ndf_cos(mean: vec3<f32>, l: vec3<f32>) -> f32 {
