@@ -1,7 +1,8 @@
 //! The grotto runtime: opens `.grotto` packages, keeps their tiles on the GPU and renders them with
 //! global illumination (wgpu, headless). Per frame it runs only the passes the effect plan asks
-//! for: shadow maps and light injection, anisotropic mipmapping, cone-traced propagation (one
-//! bounce per light update), the surfel G-buffer and deferred shading.
+//! for: shadow maps and light injection, anisotropic mipmapping, environment light through the
+//! openings (SH), cone-traced propagation (one bounce per light update; cones stop in the rock
+//! behind scanned walls), the surfel G-buffer and deferred shading.
 //!
 //! Also: describing and verifying packages ([`inspect`]) and exporting their points ([`export`]).
 

@@ -73,7 +73,7 @@ pub fn carved(
 /// toward the centre) in a cube of `2^depth` leaves, every leaf with emission `e` and albedo
 /// `albedo`. Every cone from the shell ends on the shell, so the exact answer everywhere is
 /// `e / (1 - albedo)`. Like a scanned cave, the shell is thin: coarse levels see through it in
-/// part, which the cone closure rule (common.wgsl, `trace_cone`) has to handle.
+/// part, which the rock behind it (rock.rs) has to stop.
 pub fn furnace_sphere(depth: u32, radius_leaves: f32, albedo: f32, e: f32) -> SceneData {
     open_sphere(depth, radius_leaves, albedo, e, f32::INFINITY)
 }
