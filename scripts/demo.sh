@@ -4,7 +4,7 @@
 # cameras with global illumination to OUT/chamber.png and OUT/entrance.png.
 # Usage: scripts/demo.sh [OUT_DIR]   (default: out/)
 # Rendering runs on the GPU when there is one; otherwise on Mesa's software Vulkan driver (installed
-# here if missing), where the demo takes about two minutes on 2 cores.
+# here if missing), where the demo takes about four minutes on 2 cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-out}
