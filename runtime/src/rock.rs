@@ -1,8 +1,8 @@
 //! Rock behind the scanned surfaces. Scans are shells: the SVO holds the cave's walls and nothing
 //! behind them, so a cone that crosses a wall at a coarse level sees it as partly transparent and
 //! goes on through empty "rock" (VCT's thin-wall leak). Here every cell of 2x2x2 leaves near a
-//! surface that holds no oriented leaf is classified as rock or air from the oriented surface nearest to it (the cell lies
-//! behind it, against its mean normal: rock), the signed-distance test of Hoppe et al. 1992 on the
+//! surface that holds no oriented leaf is classified as rock or air from the oriented surface
+//! nearest to it (the cell lies behind it, against its mean normal: rock), the signed-distance test of Hoppe et al. 1992 on the
 //! leaves' Toksvig mean normals, kept to cells roughly straight behind the surface (see
 //! `BEHIND_SLOPE`) and away from the surface's edges (an opening's rim: beyond it is sky, not
 //! rock); anything else stays air. A cone whose axis enters a rock cell stops there (common.wgsl,
@@ -157,14 +157,15 @@ pub fn classify(scene: &mut SceneData) {
         scene.rock_words.resize(scene.rock_words.len() + (g * g * g).div_ceil(32) as usize, 0);
     }
     for cell in rock {
-        let own = scene.tile_of(cell << ROCK_LEVEL as i32);
-        for (t, tile) in scene.tiles.iter().enumerate() {
-            // A cell inside a tile is stored there; one outside every tile (rock beyond the scene's
-            // bounds, where thin outer walls would otherwise leak) in every margin that holds it.
-            if own.is_some_and(|o| o != t) {
-                continue;
-            }
-            if let Some(bit) = bit_index(tile, cell) {
+        // A cell inside a tile is stored there; one outside every tile (rock beyond the scene's
+        // bounds, where thin outer walls would otherwise leak) in every margin that holds it.
+        let holders: Vec<usize> = match scene.tile_of(cell << ROCK_LEVEL as i32) {
+            Some(t) => vec![t],
+            None => (0..scene.tiles.len()).collect(),
+        };
+        for t in holders {
+            let tile = scene.tiles[t];
+            if let Some(bit) = bit_index(&tile, cell) {
                 scene.rock_words[(tile.rock_offset + bit / 32) as usize] |= 1 << (bit % 32);
             }
         }
