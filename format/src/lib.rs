@@ -21,7 +21,9 @@ mod writer;
 
 pub use error::{Error, Problem, Region, Result};
 pub use reader::{Element, Package, SectionInfo, SvoData, Tile};
-pub use scene::{Camera, Environment, InputFile, Light, LightShape, Material, Provenance, Scene};
+pub use scene::{
+    Camera, Environment, InputFile, Light, LightShape, Material, MaterialRegion, Provenance, Scene,
+};
 pub use spec::{Codec, Scope, SectionKind};
 pub use summary::{KindSummary, SectionSummary, Summary, TileSummary};
 pub use writer::{Compression, PackageWriter, TileInfo};

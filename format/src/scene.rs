@@ -57,13 +57,37 @@ pub struct Material {
     /// 0 = purely diffuse. Wet walls and water are specular.
     #[serde(default)]
     pub specular: f32,
-    /// GGX roughness of the specular lobe.
+    /// GGX roughness of the specular lobe (alpha = roughness^2).
     #[serde(default = "default_roughness")]
     pub roughness: f32,
+    /// Index of refraction of the reflecting film for the Fresnel term (water 1.33).
+    #[serde(default = "default_ior")]
+    pub ior: f32,
+    /// Where the material applies; `None`: nowhere yet (a name other sections may refer to).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub region: Option<MaterialRegion>,
+}
+
+/// The points a material covers: inside a world-space box and, optionally, facing up at least
+/// `min_normal_z` (1 = level floors only: pools; -1 = any direction: wet walls).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MaterialRegion {
+    pub min_m: [f64; 3],
+    pub max_m: [f64; 3],
+    #[serde(default = "any_direction")]
+    pub min_normal_z: f32,
 }
 
 fn default_roughness() -> f32 {
     0.5
+}
+
+fn default_ior() -> f32 {
+    1.33
+}
+
+fn any_direction() -> f32 {
+    -1.0
 }
 
 /// A named viewpoint.
@@ -144,7 +168,13 @@ impl Scene {
             bad(&name, &[c.fov_y_deg])?;
         }
         for m in &self.materials {
-            bad(&format!("material '{}'", m.name), &widen(&[m.specular, m.roughness]))?;
+            let name = format!("material '{}'", m.name);
+            bad(&name, &widen(&[m.specular, m.roughness, m.ior]))?;
+            if let Some(r) = &m.region {
+                bad(&name, &r.min_m)?;
+                bad(&name, &r.max_m)?;
+                bad(&name, &widen(&[r.min_normal_z]))?;
+            }
         }
         if let Some(e) = &self.environment {
             bad("environment intensity", &[f64::from(e.intensity)])?;

@@ -77,6 +77,29 @@ pub struct MaterialSpec {
     pub specular: f32,
     #[serde(default = "half")]
     pub roughness: f32,
+    /// Index of refraction of the wet film (Fresnel term).
+    #[serde(default = "water_ior")]
+    pub ior: f32,
+    /// Where it applies: `region = { min = [x, y, z], max = [x, y, z], min_normal_z = 0.9 }`
+    /// (world metres; `min_normal_z` 1 = level floors, default -1 = any direction).
+    pub region: Option<RegionSpec>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegionSpec {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+    #[serde(default = "minus_one")]
+    pub min_normal_z: f32,
+}
+
+fn water_ior() -> f32 {
+    1.33
+}
+
+fn minus_one() -> f32 {
+    -1.0
 }
 
 fn half() -> f32 {
@@ -293,7 +316,17 @@ impl Manifest {
             materials: self
                 .materials
                 .iter()
-                .map(|m| Material { name: m.name.clone(), specular: m.specular, roughness: m.roughness })
+                .map(|m| Material {
+                    name: m.name.clone(),
+                    specular: m.specular,
+                    roughness: m.roughness,
+                    ior: m.ior,
+                    region: m.region.as_ref().map(|r| grotto_format::MaterialRegion {
+                        min_m: r.min,
+                        max_m: r.max,
+                        min_normal_z: r.min_normal_z,
+                    }),
+                })
                 .collect(),
             cameras: self
                 .cameras

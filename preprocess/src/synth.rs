@@ -613,6 +613,9 @@ pub struct SmallCave {
     pub sky: Option<std::path::PathBuf>,
     /// Window the sky's SH.
     pub sh_window: bool,
+    /// Wet walls and a pool: a glossy wet-wall material over the first chamber and a smooth
+    /// water material on the level floors along the passage's middle third.
+    pub wet: bool,
 }
 
 impl Default for SmallCave {
@@ -625,6 +628,7 @@ impl Default for SmallCave {
             max_tile_extent_m: 16.0,
             sky: None,
             sh_window: true,
+            wet: false,
         }
     }
 }
@@ -639,6 +643,40 @@ pub fn small_cave_package(dir: &std::path::Path, cave: &SmallCave) -> crate::Res
     let mut manifest = crate::manifest::Manifest::load(&manifest_path)?;
     if let Some(map) = &cave.sky {
         manifest.environment = Some(crate::manifest::EnvironmentSpec { map: map.clone(), intensity: 1.0 });
+    }
+    if cave.wet {
+        let synth = SynthCave::new(&params);
+        let o = params.offset_m;
+        let world = |p: [f64; 3], d: f64| {
+            (
+                [p[0] + o[0] - d, p[1] + o[1] - d, p[2] + o[2] - d],
+                [p[0] + o[0] + d, p[1] + o[1] + d, p[2] + o[2] + d],
+            )
+        };
+        if let Some(c) = synth.chambers.first() {
+            let (min, max) = world(*c, 6.0);
+            manifest.materials.push(crate::manifest::MaterialSpec {
+                name: "wet-wall".into(),
+                specular: 0.6,
+                roughness: 0.3,
+                ior: 1.33,
+                region: Some(crate::manifest::RegionSpec { min, max, min_normal_z: -1.0 }),
+            });
+        }
+        let n = synth.path.len();
+        if n >= 3 {
+            let (lo, _) = world(synth.path[n / 3], 0.0);
+            let (hi, _) = world(synth.path[2 * n / 3], 0.0);
+            let min = [lo[0].min(hi[0]) - 4.0, lo[1].min(hi[1]) - 4.0, lo[2].min(hi[2]) - 6.0];
+            let max = [lo[0].max(hi[0]) + 4.0, lo[1].max(hi[1]) + 4.0, lo[2].max(hi[2]) + 6.0];
+            manifest.materials.push(crate::manifest::MaterialSpec {
+                name: "pool".into(),
+                specular: 1.0,
+                roughness: 0.08,
+                ior: 1.33,
+                region: Some(crate::manifest::RegionSpec { min, max, min_normal_z: 0.9 }),
+            });
+        }
     }
     let out = dir.join("cave.grotto");
     let bp = BuildParams {

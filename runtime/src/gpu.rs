@@ -18,7 +18,7 @@ use wgpu::util::DeviceExt;
 use crate::error::{Error, Result};
 
 /// Storage buffers one compute stage binds at most (common.wgsl group 0 plus a pass's group 1).
-pub const STORAGE_BUFFERS_NEEDED: u32 = 11;
+pub const STORAGE_BUFFERS_NEEDED: u32 = 12;
 
 /// How to choose the adapter.
 #[derive(Clone, Debug, Default)]

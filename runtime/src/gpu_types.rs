@@ -72,6 +72,10 @@ pub struct LeafLightGpu {
     /// visibility V in 0..=1 (w): the radiance-weighted share of the cones that leave the scene.
     /// Written by the env pass; zero without an environment map.
     pub env: [f32; 4],
+    /// Irradiance / pi from the lights beyond the shadow-map budget (their per-leaf share,
+    /// shadowed by SVO cones or not at all), without albedo: shade adds `albedo * far`
+    /// interpolated over leaves instead of evaluating those lights per pixel. Written by inject.
+    pub far: [f32; 4],
 }
 
 /// A point or spot light in frame metres.
@@ -80,12 +84,25 @@ pub struct LeafLightGpu {
 pub struct LightGpu {
     /// xyz position, w = kind (0 point, 1 spot).
     pub position_kind: [f32; 4],
-    /// Radiant intensity W / sr per channel, w = first shadow layer (-1: unshadowed).
+    /// Radiant intensity W / sr per channel, w = first shadow layer (-1: no shadow map).
     pub intensity_layer: [f32; 4],
     /// Spot axis, w = cos(outer angle).
     pub direction_cos_outer: [f32; 4],
-    /// x = cos(inner angle), yzw unused.
+    /// x = cos(inner angle); y = range in metres (beyond it the light's irradiance is under the
+    /// cutoff and it is culled); z = how a light without a shadow map is shadowed
+    /// (`light_shadow::*`); w = the irradiance cutoff, W/m^2 (inject skips a light whose
+    /// unshadowed irradiance at a leaf is under it).
     pub params: [f32; 4],
+}
+
+/// `LightGpu::params.z`: how a light is shadowed. Keep in sync with common.wgsl.
+pub mod light_shadow {
+    /// A shadow map in the atlas, evaluated per pixel in shade.
+    pub const MAP: f32 = 0.0;
+    /// Beyond the budget: at leaf resolution, visibility from a cone traced through the SVO.
+    pub const CONE: f32 = 1.0;
+    /// Beyond the budget: at leaf resolution, unshadowed.
+    pub const NONE: f32 = 2.0;
 }
 
 /// Per-dispatch settings shared by the compute passes.
@@ -112,11 +129,12 @@ pub struct Params {
     pub exposure: f32,
     pub shadow_bias_m: f32,
 
-    /// Shadow atlas: faces per row (each `shadow_size` texels square); yzw unused.
+    /// Shadow atlas: faces per row (each `shadow_size` texels square).
     pub shadow_cols: u32,
-    pub pad0: u32,
-    pub pad1: u32,
-    pub pad2: u32,
+    /// Light grid cells per axis (`light_grid` binding: per-cell lists of the lights in range).
+    pub light_grid_dims: [u32; 3],
+    /// Light grid minimum corner in frame metres (xyz) and cell edge in metres (w).
+    pub light_grid_min_m: [f32; 4],
 
     /// Scene bounds in leaf units (xyz), w unused.
     pub scene_min_leaf: [f32; 4],
@@ -134,6 +152,15 @@ pub struct Params {
     /// Environment radiance as 9 real SH coefficients (rgb, w unused), order L00, L1-1, L10, L11,
     /// L2-2, L2-1, L20, L21, L22, already scaled by the scene's environment intensity.
     pub env_sh: [[f32; 4]; 9],
+    /// Material slots (0 = diffuse, unused): x specular weight Ks, y GGX alpha, z index of
+    /// refraction, w GGX roughness.
+    pub materials: [[f32; 4]; 8],
+    /// Prefiltered environment levels in the env atlas: x first row, y width, z height,
+    /// w roughness.
+    pub env_levels: [[f32; 4]; 8],
+    /// x: levels in the env atlas (0: glossy reflection falls back to the SH), y: atlas width;
+    /// zw unused.
+    pub env_chain: [u32; 4],
 }
 
 /// `Params::flags` bits. Keep in sync with common.wgsl.
@@ -150,6 +177,11 @@ pub mod flags {
     pub const TRICUBIC: u32 = 16;
     /// An environment map lights the scene through its SH coefficients (`Params::env_sh`).
     pub const ENV: u32 = 32;
+    /// Some lights are beyond the shadow-map budget: shade adds their per-leaf light (`far`).
+    pub const FAR_LIGHTS: u32 = 64;
+    /// Some surfels have a specular material: shade adds Fresnel-weighted reflection (a specular
+    /// cone through the SVO, the environment where it escapes, GGX highlights of the lamps).
+    pub const SPECULAR: u32 = 128;
 }
 
 /// Mip dispatch range: nodes `first .. first + count` of the height-ordered node list.
@@ -178,7 +210,8 @@ pub struct SplatUniform {
     pub pad: [[f32; 4]; 9],
 }
 
-/// One surfel as an instance vertex: frame position and radius, unit normal and spread, sRGB colour.
+/// One surfel as an instance vertex: frame position and radius, unit normal and spread, sRGB colour
+/// with the material slot in alpha (0 diffuse, k: `SceneData::materials[k - 1]`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct SurfelGpu {
@@ -191,9 +224,9 @@ const _: () = {
     assert!(size_of::<TileGpu>() == 48);
     assert!(size_of::<NodeGpu>() == 8);
     assert!(size_of::<LeafGpu>() == 64);
-    assert!(size_of::<LeafLightGpu>() == 64);
+    assert!(size_of::<LeafLightGpu>() == 80);
     assert!(size_of::<LightGpu>() == 64);
-    assert!(size_of::<Params>() == 80 + 48 + 64 + 16 * MAX_CONES + 16 * 9);
+    assert!(size_of::<Params>() == 80 + 16 + 48 + 64 + 16 * MAX_CONES + 16 * 9 + 16 * 8 * 2 + 16);
     assert!(size_of::<MipRange>() == 16);
     assert!(size_of::<SplatUniform>() == 256);
     assert!(size_of::<SurfelGpu>() == 36);

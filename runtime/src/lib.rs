@@ -14,6 +14,7 @@ pub mod gpu;
 pub mod gpu_types;
 pub mod image_out;
 pub mod inspect;
+pub mod lights;
 pub mod passes;
 pub mod plan;
 pub mod render_job;

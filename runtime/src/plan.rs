@@ -7,7 +7,9 @@
 //! and with one, the env pass once (the sky visibility does not change with the light); no light at
 //! all or a zero bounce budget, no propagation (the mip runs only for a pass that reads it); once the largest relative change of a bounce falls under the
 //! tolerance (or the budget is spent) propagation stops until something changes; the G-buffer is
-//! re-splatted only when the camera or image size changed.
+//! re-splatted only when the camera or image size changed; lights beyond the shadow-map budget
+//! render no shadow maps (lit per leaf); shade traces specular cones only where a specular material
+//! covers surfels.
 
 use serde::Serialize;
 
@@ -81,6 +83,16 @@ pub struct PlanInputs {
     pub point_lights: usize,
     pub spot_lights: usize,
     pub shadows_enabled: bool,
+    /// Lights with shadow maps (the brightest within the budget), and the budget.
+    pub shadowed: usize,
+    pub shadow_budget: u32,
+    /// How the lights beyond the budget are shadowed, in words.
+    pub fallback: &'static str,
+    /// Lights in range per light-grid cell: mean and largest.
+    pub lights_in_range: (f32, u32),
+    /// Specular materials with surfels, and their surfels (0: shade reflects nothing).
+    pub specular_materials: usize,
+    pub specular_surfels: usize,
     pub emissive_leaves: bool,
     /// The scene has an environment map (SH coefficients) and it is enabled.
     pub environment: bool,
@@ -110,10 +122,29 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
         Step { pass: Pass::Shadow, run: false, reason: "no point or spot lights".into() }
     } else if !i.shadows_enabled {
         Step { pass: Pass::Shadow, run: false, reason: "shadows disabled".into() }
+    } else if i.shadowed == 0 {
+        Step {
+            pass: Pass::Shadow,
+            run: false,
+            reason: format!(
+                "shadow-map budget {}: all {analytic} lights lit per leaf with {}",
+                i.shadow_budget, i.fallback
+            ),
+        }
     } else if i.direct_valid {
         Step { pass: Pass::Shadow, run: false, reason: "lights unchanged: shadow maps still valid".into() }
     } else {
-        Step { pass: Pass::Shadow, run: true, reason: format!("{lights_text} cast shadows; lights changed") }
+        let rest = analytic - i.shadowed;
+        let beyond =
+            if rest > 0 { format!("; {rest} more lit per leaf with {}", i.fallback) } else { String::new() };
+        Step {
+            pass: Pass::Shadow,
+            run: true,
+            reason: format!(
+                "{} of {lights_text} get shadow maps (brightest first, budget {}){beyond}; lights changed",
+                i.shadowed, i.shadow_budget
+            ),
+        }
     };
     steps.push(shadow);
     steps.push(if analytic == 0 {
@@ -129,7 +160,14 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
             reason: "lights unchanged: injected direct light still valid".into(),
         }
     } else {
-        Step { pass: Pass::Inject, run: true, reason: format!("{lights_text}; lights changed") }
+        Step {
+            pass: Pass::Inject,
+            run: true,
+            reason: format!(
+                "{lights_text}, {:.1} in range per grid cell on average (at most {}); lights changed",
+                i.lights_in_range.0, i.lights_in_range.1
+            ),
+        }
     });
     let env = if !i.environment {
         Step { pass: Pass::Env, run: false, reason: "no environment map".into() }
@@ -182,7 +220,15 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
         Step { pass: Pass::Gbuffer, run: true, reason: "camera or size changed".into() }
     });
     steps.push(if i.frame {
-        Step { pass: Pass::Shade, run: true, reason: "image requested".into() }
+        let reason = if i.specular_materials > 0 {
+            format!(
+                "image requested; specular cones for {} specular materials ({} surfels)",
+                i.specular_materials, i.specular_surfels
+            )
+        } else {
+            "image requested; no specular materials: diffuse only, no specular cones".into()
+        };
+        Step { pass: Pass::Shade, run: true, reason }
     } else {
         Step { pass: Pass::Shade, run: false, reason: "light update only, no image requested".into() }
     });
@@ -198,6 +244,12 @@ mod tests {
             point_lights: 1,
             spot_lights: 0,
             shadows_enabled: true,
+            shadowed: 1,
+            shadow_budget: 16,
+            fallback: "SVO cone shadows",
+            lights_in_range: (1.0, 1),
+            specular_materials: 0,
+            specular_surfels: 0,
             emissive_leaves: false,
             environment: false,
             ambient: false,
@@ -240,6 +292,28 @@ mod tests {
         // Direct-only with a sky: the env pass still needs the pyramid, propagation does not run.
         let p = plan(&PlanInputs { bounce_budget: 0, ..sky });
         assert!(p.runs(Pass::Env) && p.runs(Pass::Mip) && !p.runs(Pass::Propagate));
+    }
+
+    #[test]
+    fn lights_beyond_the_budget_skip_the_shadow_pass() {
+        let many = PlanInputs { point_lights: 256, shadowed: 16, lights_in_range: (23.5, 40), ..base() };
+        let p = plan(&many);
+        assert!(p.runs(Pass::Shadow) && p.runs(Pass::Inject));
+        assert!(p.explain().contains("240 more lit per leaf"), "{}", p.explain());
+        assert!(p.explain().contains("23.5 in range"), "{}", p.explain());
+        let p = plan(&PlanInputs { shadowed: 0, shadow_budget: 0, ..many });
+        assert!(!p.runs(Pass::Shadow) && p.runs(Pass::Inject), "{}", p.explain());
+    }
+
+    #[test]
+    fn specular_cones_only_with_specular_materials() {
+        assert!(plan(&base()).explain().contains("no specular cones"));
+        let p = plan(&PlanInputs { specular_materials: 2, specular_surfels: 900, ..base() });
+        assert!(
+            p.explain().contains("specular cones for 2 specular materials (900 surfels)"),
+            "{}",
+            p.explain()
+        );
     }
 
     #[test]

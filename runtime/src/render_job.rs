@@ -43,6 +43,23 @@ pub struct RenderOptions {
     /// `None`: automatic exposure (mean log luminance to middle grey).
     pub exposure: Option<f32>,
     pub gpu: GpuOptions,
+    /// Replace the package's lights by a lamp string of this many 8 W lamps
+    /// ([`SceneData::lamp_string`]): how cost and error grow with the number of lights.
+    pub lamp_string: Option<u32>,
+}
+
+/// Watts of one lamp of `--lamps` (the synthetic cave's lamp string uses the same).
+pub const STRING_LAMP_W: f32 = 8.0;
+/// Height of a `--lamps` lamp above its floor, metres.
+pub const STRING_LAMP_LIFT_M: f32 = 0.6;
+
+/// The scene a job renders: the package's, with its lights replaced by `--lamps`.
+pub fn job_scene(opts: &RenderOptions) -> Result<SceneData> {
+    let mut scene = load_scene(&opts.package)?;
+    if let Some(n) = opts.lamp_string {
+        scene.lights = scene.lamp_string(n as usize, STRING_LAMP_W, STRING_LAMP_LIFT_M);
+    }
+    Ok(scene)
 }
 
 /// What a render did, for `--json` and the summary line.
@@ -77,7 +94,8 @@ pub enum Progress {
     Frame { done: u32, total: u32 },
 }
 
-fn resolve_camera(scene: &SceneData, choice: &CameraChoice) -> Result<Camera> {
+/// The camera a choice names in `scene`.
+pub fn resolve_camera(scene: &SceneData, choice: &CameraChoice) -> Result<Camera> {
     match choice {
         CameraChoice::Named(name) => {
             scene.cameras.iter().find(|c| &c.name == name).map(Camera::from_scene).ok_or_else(|| {
@@ -170,7 +188,7 @@ pub fn load_scene(package: &Path) -> Result<SceneData> {
 /// Runs a render job.
 pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<RenderSummary> {
     image_out::kind_of(&opts.out)?;
-    let scene = load_scene(&opts.package)?;
+    let scene = job_scene(opts)?;
     let cameras: Vec<Camera> = if opts.path.is_empty() {
         vec![resolve_camera(&scene, &opts.camera)?]
     } else {
@@ -251,6 +269,10 @@ pub struct PassBench {
     pub surfels: usize,
     pub max_depth: u32,
     pub lights: usize,
+    /// Lights with shadow maps (the rest are lit per leaf by the shadow fallback).
+    pub shadowed_lights: usize,
+    /// Lights in range per light-grid cell: mean and largest.
+    pub lights_in_range: (f32, u32),
     /// Median milliseconds per pass over the repetitions (shadow and inject run once per light
     /// change, mip and propagate once per bounce, gbuffer and shade once per frame).
     pub median_ms: std::collections::BTreeMap<String, f64>,
@@ -266,12 +288,16 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Times every pass `reps` times on the package's first camera (or a default view).
 pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
     use crate::plan::Pass;
-    let scene = load_scene(&opts.package)?;
+    let scene = job_scene(opts)?;
     let cam = resolve_camera(&scene, &opts.camera)?;
     let gpu = Gpu::new(&opts.gpu)?;
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
-    settings.bounces = u32::MAX;
+    // Every repetition runs a bounce, unless the caller asked for none (`--bounces 0`: light
+    // benchmarks that do not need propagation timed again).
+    if settings.bounces > 0 {
+        settings.bounces = u32::MAX;
+    }
     settings.convergence_tolerance = 0.0;
     let mut r = Renderer::new(&gpu, &scene, settings)?;
     let mut samples: std::collections::BTreeMap<Pass, Vec<f64>> = Default::default();
@@ -300,6 +326,8 @@ pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
         surfels: scene.surfels.len(),
         max_depth: scene.tiles.iter().map(|t| t.depth).max().unwrap_or(0),
         lights: scene.lights.len(),
+        shadowed_lights: r.shadowed_lights(),
+        lights_in_range: r.lights_in_range(),
         median_ms,
         repetitions: reps,
         settings: r.settings().clone(),

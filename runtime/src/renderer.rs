@@ -16,7 +16,7 @@ use serde::Serialize;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
-use crate::gpu_types::{LeafLightGpu, LightGpu, MAX_CONES, Params, SplatUniform, flags};
+use crate::gpu_types::{LeafLightGpu, LightGpu, MAX_CONES, Params, SplatUniform, flags, light_shadow};
 use crate::passes::{self, gbuffer, shade, shadow};
 use crate::plan::{self, EffectPlan, Pass, PlanInputs};
 use crate::scene_data::SceneData;
@@ -66,6 +66,39 @@ pub struct Settings {
     pub radiance_f16: bool,
     /// Light the scene with its environment map's SH coefficients (when it has one).
     pub environment: bool,
+    /// Reflection on specular materials (wet walls, water) where the scene assigns them.
+    pub specular: bool,
+    /// Shadow-map budget: this many of the brightest point and spot lights get shadow maps and
+    /// are shaded per pixel; the others follow `shadow_fallback` (lights.rs).
+    pub shadowed_lights: u32,
+    /// How lights beyond the shadow-map budget are shadowed.
+    pub shadow_fallback: ShadowFallback,
+    /// Irradiance, W/m^2, under which a light's contribution is dropped: it bounds each light's
+    /// range for culling (0: every light reaches everywhere).
+    pub light_cutoff_w_m2: f32,
+}
+
+/// What lights beyond the shadow-map budget do (lights.rs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ShadowFallback {
+    /// Lit at leaf resolution, visibility from a cone traced through the SVO toward the light.
+    Cone,
+    /// Lit at leaf resolution, unshadowed (light passes through walls).
+    None,
+}
+
+impl ShadowFallback {
+    pub fn name(self) -> &'static str {
+        match self {
+            ShadowFallback::Cone => "cone",
+            ShadowFallback::None => "none",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        [ShadowFallback::Cone, ShadowFallback::None].into_iter().find(|f| f.name() == s)
+    }
 }
 
 impl Default for Settings {
@@ -88,6 +121,10 @@ impl Default for Settings {
             splat_scale: 2.0,
             radiance_f16: false,
             environment: true,
+            specular: true,
+            shadowed_lights: 16,
+            shadow_fallback: ShadowFallback::Cone,
+            light_cutoff_w_m2: 2e-4,
         }
     }
 }
@@ -167,12 +204,30 @@ impl Settings {
         if !(16..=8192).contains(&self.shadow_map_size) {
             return Err(Error::Setting { name: "shadow_map_size", problem: "must be in 16..=8192".into() });
         }
+        if !(self.light_cutoff_w_m2.is_finite() && self.light_cutoff_w_m2 >= 0.0) {
+            return Err(Error::Setting {
+                name: "light_cutoff_w_m2",
+                problem: "must be finite and not negative".into(),
+            });
+        }
+        if self.shadowed_lights > MAX_SHADOWED_LIGHTS {
+            return Err(Error::Setting {
+                name: "shadowed_lights",
+                problem: format!(
+                    "{} is over {MAX_SHADOWED_LIGHTS} (the atlas would pass 8192^2)",
+                    self.shadowed_lights
+                ),
+            });
+        }
         if !(self.exposure.is_finite() && self.exposure > 0.0) {
             return Err(Error::Setting { name: "exposure", problem: "must be finite and positive".into() });
         }
         Ok(())
     }
 }
+
+/// Most lights with shadow maps: 6 faces each for point lights in one 2D atlas.
+pub const MAX_SHADOWED_LIGHTS: u32 = 256;
 
 /// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
 /// to the hemisphere), equal weights summing to 1, and the half-angle tangent that makes the cones
@@ -237,6 +292,15 @@ pub struct Renderer {
     base_params: Params,
     point_lights: usize,
     spot_lights: usize,
+    /// Lights with shadow maps; the others are lit per leaf (lights.rs).
+    shadowed: usize,
+    /// Lights per light-grid cell: mean and largest.
+    lights_in_range: (f32, u32),
+    /// Specular materials with surfels, and those surfels (0 when `Settings::specular` is off).
+    specular_materials: usize,
+    specular_surfels: usize,
+    /// The prefiltered environment levels (shade.wgsl `env_atlas`).
+    env_atlas: wgpu::TextureView,
     emissive: bool,
     /// An environment map lights the scene (it has SH coefficients and the setting allows it).
     environment: bool,
@@ -303,12 +367,35 @@ impl Renderer {
         let mut shadow_eyes: Vec<(Vec3, f32)> = Vec::new();
         let near = (0.05 * leaf).max(1e-4);
         let far = scene_diag_m * 2.0 + 1.0;
-        for l in &scene.lights {
-            let first = if settings.shadows { shadow_layers.len() as f32 } else { -1.0 };
+        // Shadow maps for the brightest lights within the budget (lights.rs); the rest are lit at
+        // leaf resolution by inject with the fallback's shadows.
+        let mut mapped = vec![false; scene.lights.len()];
+        if settings.shadows {
+            for &k in
+                crate::lights::brightest_first(&scene.lights).iter().take(settings.shadowed_lights as usize)
+            {
+                mapped[k] = true;
+            }
+        }
+        let fallback = match settings.shadow_fallback {
+            ShadowFallback::Cone => light_shadow::CONE,
+            ShadowFallback::None => light_shadow::NONE,
+        };
+        // Lights with shadow maps first: every light-grid cell then lists them before the rest,
+        // and shade, which evaluates only those per pixel, stops at the first one without.
+        let order: Vec<usize> = (0..scene.lights.len())
+            .filter(|&k| mapped[k])
+            .chain((0..scene.lights.len()).filter(|&k| !mapped[k]))
+            .collect();
+        for (l, &has_map) in order.iter().map(|&k| (&scene.lights[k], &mapped[k])) {
+            let first = if has_map { shadow_layers.len() as f32 } else { -1.0 };
+            // Without shadows at all every light is shaded per pixel, unshadowed.
+            let how = if has_map || !settings.shadows { light_shadow::MAP } else { fallback };
+            let range = crate::lights::range_m(l.intensity_w_sr, settings.light_cutoff_w_m2);
             let p = l.position_m;
             match l.spot {
                 None => {
-                    if settings.shadows {
+                    if has_map {
                         for (fwd, up) in [
                             (Vec3::X, Vec3::Y),
                             (Vec3::NEG_X, Vec3::Y),
@@ -326,13 +413,13 @@ impl Renderer {
                         position_kind: p.extend(0.0).to_array(),
                         intensity_layer: l.intensity_w_sr.extend(first).to_array(),
                         direction_cos_outer: [0.0, 0.0, -1.0, -1.0],
-                        params: [-1.0, 0.0, 0.0, 0.0],
+                        params: [-1.0, range.min(f32::MAX), how, settings.light_cutoff_w_m2],
                     });
                 }
                 Some(s) => {
                     let outer = s.outer_angle_rad.clamp(1e-3, 1.48);
                     let inner = s.inner_angle_rad.clamp(0.0, outer);
-                    if settings.shadows {
+                    if has_map {
                         let up = if s.direction.cross(Vec3::Z).length() < 1e-3 { Vec3::Y } else { Vec3::Z };
                         let proj = Mat4::perspective_rh(2.0 * outer, 1.0, near, far);
                         shadow_layers.push(proj * Mat4::look_at_rh(p, p + s.direction, up));
@@ -342,11 +429,21 @@ impl Renderer {
                         position_kind: p.extend(1.0).to_array(),
                         intensity_layer: l.intensity_w_sr.extend(first).to_array(),
                         direction_cos_outer: s.direction.extend(outer.cos()).to_array(),
-                        params: [inner.cos(), 0.0, 0.0, 0.0],
+                        params: [inner.cos(), range.min(f32::MAX), how, settings.light_cutoff_w_m2],
                     });
                 }
             }
         }
+        let shadowed = mapped.iter().filter(|&&m| m).count();
+        // The light grid over the scene, one leaf of slack on every side.
+        let light_grid = crate::lights::LightGrid::build(
+            (lo - 1.0) * leaf,
+            (hi + 1.0) * leaf,
+            &lights_gpu
+                .iter()
+                .map(|l| (Vec3::from_slice(&l.position_kind[..3]), l.params[1]))
+                .collect::<Vec<_>>(),
+        );
         let point_lights = scene.lights.iter().filter(|l| l.spot.is_none()).count();
         let spot_lights = scene.lights.len() - point_lights;
 
@@ -365,6 +462,26 @@ impl Renderer {
         let mut cone_arr = [[0.0f32; 4]; MAX_CONES];
         cone_arr[..cones.len()].copy_from_slice(&cones);
         let environment_on = scene.environment_sh.is_some() && settings.environment;
+        // Specular material slots (slot 0 = diffuse) and the environment's prefiltered levels.
+        let mut material_slots = [[0.0f32; 4]; 8];
+        let (mut specular_materials, mut specular_surfels) = (0, 0);
+        for (k, m) in scene.materials.iter().enumerate().take(7) {
+            let alpha = m.roughness * m.roughness;
+            material_slots[k + 1] = [m.specular, alpha, m.ior, m.roughness];
+            if settings.specular && m.surfels > 0 {
+                specular_materials += 1;
+                specular_surfels += m.surfels;
+            }
+        }
+        let mut env_levels = [[0.0f32; 4]; 8];
+        let chain = scene.env_chain.as_ref().filter(|_| environment_on);
+        let env_level_count = chain.map_or(0, |c| c.levels.len().min(8) as u32);
+        let env_atlas_size = chain.map_or((1, 1), |c| (c.width, c.height));
+        if let Some(c) = chain {
+            for (k, l) in c.levels.iter().take(8).enumerate() {
+                env_levels[k] = [l.0 as f32, l.1 as f32, l.2 as f32, l.3];
+            }
+        }
         let base_params = Params {
             leaf_size_m: leaf,
             tile_count: scene.tiles.len() as u32,
@@ -383,9 +500,8 @@ impl Renderer {
             exposure: settings.exposure,
             shadow_bias_m: 1.5 * leaf,
             shadow_cols,
-            pad0: 0,
-            pad1: 0,
-            pad2: 0,
+            light_grid_dims: light_grid.dims.to_array(),
+            light_grid_min_m: light_grid.min_m.extend(light_grid.cell_m).to_array(),
             scene_min_leaf: lo.extend(0.0).to_array(),
             scene_max_leaf: hi.extend(0.0).to_array(),
             background: Vec3::from_array(settings.background).extend(0.0).to_array(),
@@ -398,6 +514,9 @@ impl Renderer {
                 (Some(sh), true) => sh.map(|c| [c[0], c[1], c[2], 0.0]),
                 _ => [[0.0; 4]; 9],
             },
+            materials: material_slots,
+            env_levels,
+            env_chain: [env_level_count, env_atlas_size.0, 0, 0],
         };
 
         let params = gpu.buffer_init(
@@ -454,6 +573,33 @@ impl Renderer {
             })
             .create_view(&Default::default());
         let shadow_view = shadow_distance.create_view(&Default::default());
+        let env_atlas_tex = gpu.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("env atlas"),
+            size: wgpu::Extent3d {
+                width: env_atlas_size.0,
+                height: env_atlas_size.1,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba32Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        let placeholder = [[0.0f32; 4]];
+        let atlas_texels: &[[f32; 4]] = chain.map_or(&placeholder[..], |c| &c.rgba);
+        gpu.queue.write_texture(
+            env_atlas_tex.as_image_copy(),
+            bytemuck::cast_slice(atlas_texels),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(env_atlas_size.0 * 16),
+                rows_per_image: Some(env_atlas_size.1),
+            },
+            wgpu::Extent3d { width: env_atlas_size.0, height: env_atlas_size.1, depth_or_array_layers: 1 },
+        );
+        let env_atlas = env_atlas_tex.create_view(&Default::default());
 
         let scene_layout = passes::scene_layout(gpu);
         let f16 = settings.radiance_f16;
@@ -470,6 +616,8 @@ impl Renderer {
         });
         let rock = gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock_words), STORAGE);
         entries.push(wgpu::BindGroupEntry { binding: 10, resource: rock.as_entire_binding() });
+        let light_grid_buf = gpu.buffer_init("light grid", bytemuck::cast_slice(&light_grid.words), STORAGE);
+        entries.push(wgpu::BindGroupEntry { binding: 11, resource: light_grid_buf.as_entire_binding() });
         let scene_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("scene"),
             layout: &scene_layout,
@@ -489,11 +637,13 @@ impl Renderer {
             &stats,
             &surfels,
             &rock,
+            &light_grid_buf,
         ]
         .iter()
         .map(|b| b.size())
         .sum::<u64>()
-            + atlas_bytes;
+            + atlas_bytes
+            + u64::from(env_atlas_size.0) * u64::from(env_atlas_size.1) * 16;
         let splat_layout = shadow::splat_layout(gpu);
         let splat_uniforms = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("splat uniforms"),
@@ -568,6 +718,11 @@ impl Renderer {
             base_params,
             point_lights,
             spot_lights,
+            shadowed,
+            lights_in_range: light_grid.occupancy(),
+            specular_materials,
+            specular_surfels,
+            env_atlas,
             emissive: scene.has_emission(),
             environment: environment_on,
             env_valid: false,
@@ -611,6 +766,16 @@ impl Renderer {
         self.static_bytes + view
     }
 
+    /// Lights with shadow maps; the others are lit per leaf (lights.rs).
+    pub fn shadowed_lights(&self) -> usize {
+        self.shadowed
+    }
+
+    /// Lights in range per light-grid cell: mean and largest.
+    pub fn lights_in_range(&self) -> (f32, u32) {
+        self.lights_in_range
+    }
+
     pub fn settings(&self) -> &Settings {
         &self.settings
     }
@@ -639,6 +804,15 @@ impl Renderer {
             point_lights: self.point_lights,
             spot_lights: self.spot_lights,
             shadows_enabled: self.settings.shadows,
+            shadowed: self.shadowed,
+            shadow_budget: self.settings.shadowed_lights,
+            fallback: match self.settings.shadow_fallback {
+                ShadowFallback::Cone => "SVO cone shadows",
+                ShadowFallback::None => "no shadows",
+            },
+            lights_in_range: self.lights_in_range,
+            specular_materials: self.specular_materials,
+            specular_surfels: self.specular_surfels,
             emissive_leaves: self.emissive,
             environment: self.environment,
             ambient: self.settings.background.iter().any(|&b| b > 0.0),
@@ -723,6 +897,9 @@ impl Renderer {
         if s.direct && !self.lights_gpu.is_empty() {
             f |= flags::DIRECT;
         }
+        if s.direct && s.shadows && self.shadowed < self.lights_gpu.len() {
+            f |= flags::FAR_LIGHTS;
+        }
         if s.shadows && !self.shadow_layers.is_empty() {
             f |= flags::SHADOWS;
         }
@@ -733,6 +910,9 @@ impl Renderer {
         }
         if self.environment {
             f |= flags::ENV;
+        }
+        if self.specular_surfels > 0 {
+            f |= flags::SPECULAR;
         }
         p.flags = f;
         if let Some((c, w, h)) = frame {
@@ -780,7 +960,7 @@ impl Renderer {
             let reuse = self.view.as_ref().is_some_and(|v| v.targets.width == w && v.targets.height == h);
             if !reuse {
                 let targets = gbuffer::Targets::new(&self.gpu, w, h);
-                let outputs = self.shade.outputs(&self.gpu, &targets);
+                let outputs = self.shade.outputs(&self.gpu, &targets, &self.env_atlas);
                 self.view = Some(View { camera: *camera, targets, outputs });
             } else if let Some(v) = self.view.as_mut() {
                 v.camera = *camera;

@@ -74,6 +74,101 @@ pub struct SceneData {
     pub environment_sh: Option<[[f32; 3]; 9]>,
     /// Rock bits of every tile (rock.rs; `TileGpu::rock_offset` points into it).
     pub rock_words: Vec<u32>,
+    /// Specular materials with a region, in slot order: surfel colour alpha `k` (1..=7) means
+    /// `materials[k - 1]`, 0 diffuse. The surfels in a material's region are assigned at load.
+    pub materials: Vec<SceneMaterial>,
+    /// The environment's GGX-prefiltered mip chain, decoded from BC6H; None without one.
+    pub env_chain: Option<EnvChain>,
+}
+
+/// Most specular materials a scene may assign (slots 1..=7 of the surfel colour's alpha).
+pub const MAX_MATERIALS: usize = 7;
+
+/// A specular material as shade uses it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneMaterial {
+    pub name: String,
+    /// Weight of the specular layer, 0..=1 (Liu et al.'s Ks); the diffuse layer keeps 1 - Ks F.
+    pub specular: f32,
+    /// GGX roughness (alpha = roughness^2).
+    pub roughness: f32,
+    pub ior: f32,
+    /// Surfels assigned to it.
+    pub surfels: usize,
+}
+
+/// Prefiltered lat-long levels stacked top to bottom in one RGBA f32 image (`width` = the first
+/// level's width); `levels[k]` = (first row, width, height, roughness).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnvChain {
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Vec<[f32; 4]>,
+    pub levels: Vec<(u32, u32, u32, f32)>,
+}
+
+/// Most levels of an environment chain shade reads.
+pub const MAX_ENV_LEVELS: usize = 8;
+
+/// Decodes environment `index`'s prefiltered BC6H chain (`env-mip-levels` + `env-mip-bc6h`) on
+/// the CPU (bcdec_rs: not every adapter samples BC6H, and the chain is small), scaled by
+/// `intensity`. None when the package has no chain for it.
+fn read_env_chain(
+    pkg: &Package,
+    index: u32,
+    intensity: f32,
+) -> std::result::Result<Option<EnvChain>, String> {
+    use grotto_format::spec::{Bc6hBlock, EnvMipLevel};
+    let (Some(levels_s), Some(blocks_s)) = (
+        pkg.find(SectionKind::EnvMipLevels, Scope::Global, index),
+        pkg.find(SectionKind::EnvMipBc6h, Scope::Global, index),
+    ) else {
+        return Ok(None);
+    };
+    let levels = pkg.read::<EnvMipLevel>(&levels_s).map_err(|e| e.to_string())?;
+    let blocks = pkg.read::<Bc6hBlock>(&blocks_s).map_err(|e| e.to_string())?;
+    let Some(first) = levels.first() else { return Ok(None) };
+    let width = first.width;
+    if width == 0 || width > 8192 || levels.len() > MAX_ENV_LEVELS {
+        return Err(format!("environment chain: {} levels, base width {width}", levels.len()));
+    }
+    let mut rows = 0u32;
+    let mut table = Vec::new();
+    for l in levels.iter() {
+        let (bw, bh) = (l.width.div_ceil(4), l.height.div_ceil(4));
+        if l.width == 0 || l.width > width || l.height == 0 || l.height > 4096 || bw * bh != l.block_count {
+            return Err(format!(
+                "environment chain level {}x{} with {} blocks",
+                l.width, l.height, l.block_count
+            ));
+        }
+        if u64::from(l.first_block) + u64::from(l.block_count) > blocks.len() as u64 {
+            return Err("environment chain blocks run past the env-mip-bc6h section".into());
+        }
+        table.push((rows, l.width, l.height, l.roughness));
+        rows += l.height;
+    }
+    let mut rgba = vec![[0.0f32; 4]; (width * rows) as usize];
+    for (l, &(row0, w, h, _)) in levels.iter().zip(&table) {
+        let bw = w.div_ceil(4);
+        for b in 0..l.block_count {
+            let mut px = [0f32; 48];
+            bcdec_rs::bc6h_float(&blocks[(l.first_block + b) as usize].0, &mut px, 12, false);
+            let (bx, by) = ((b % bw) * 4, (b / bw) * 4);
+            for y in 0..4 {
+                for x in 0..4 {
+                    let (u, v) = (bx + x, by + y);
+                    if u < w && v < h {
+                        let k = ((y * 4 + x) * 3) as usize;
+                        let c = [px[k], px[k + 1], px[k + 2]]
+                            .map(|c| if c.is_finite() { c.max(0.0) * intensity } else { 0.0 });
+                        rgba[((row0 + v) * width + u) as usize] = [c[0], c[1], c[2], 1.0];
+                    }
+                }
+            }
+        }
+    }
+    Ok(Some(EnvChain { width, height: rows, rgba, levels: table }))
 }
 
 /// sRGB byte to linear (the IEC 61966-2-1 curve), as the GPU decodes colours.
@@ -120,6 +215,92 @@ impl SceneData {
     /// Deepest level every tile has: cones sample no coarser than this.
     pub fn max_lod(&self) -> u32 {
         self.tiles.iter().map(|t| t.depth).min().unwrap_or(0)
+    }
+
+    /// A lamp string of `n` point lights of `power_w` watts each (warm white), as show caves hang
+    /// them: spread evenly over the cave's floors by farthest-point sampling of the upward-facing
+    /// leaves (starting from the one nearest the scene's first light, or the first such leaf), each
+    /// lamp `lift_m` above its floor leaf where that spot and the way up to it are open (no leaf
+    /// within one cell, no rock). Deterministic. Fewer than `n` where the floors have fewer open
+    /// spots. Used to measure how cost and error grow with the number of lights.
+    pub fn lamp_string(&self, n: usize, power_w: f32, lift_m: f32) -> Vec<SceneLight> {
+        let leaf = self.leaf_size_m;
+        let occupied: std::collections::HashSet<IVec3> = self
+            .leaves
+            .iter()
+            .map(|l| (Vec3::from_slice(&l.center_m[..3]) / leaf).floor().as_ivec3())
+            .collect();
+        let open = |p: Vec3| {
+            let c = (p / leaf).floor().as_ivec3();
+            let near_leaf = (-1..=1)
+                .any(|z| (-1..=1).any(|y| (-1..=1).any(|x| occupied.contains(&(c + IVec3::new(x, y, z))))));
+            !near_leaf && !crate::rock::in_rock(self, c)
+        };
+        let steps = (lift_m / leaf).ceil().max(1.0) as i32;
+        let candidates: Vec<Vec3> = self
+            .leaves
+            .iter()
+            .filter_map(|l| {
+                let m = Vec3::from_slice(&l.normal_mean[..3]);
+                let r = m.length();
+                if r < 0.5 || m.z / r < 0.8 {
+                    return None;
+                }
+                let base = Vec3::from_slice(&l.center_m[..3]);
+                let lamp = base + Vec3::Z * lift_m;
+                // The way up from two leaves above the floor to the lamp must be open too.
+                let clear = (2..=steps).all(|k| {
+                    let p = base + Vec3::Z * (lift_m * k as f32 / steps as f32);
+                    !occupied.contains(&(p / leaf).floor().as_ivec3())
+                });
+                (clear && open(lamp)).then_some(lamp)
+            })
+            .collect();
+        if candidates.is_empty() || n == 0 {
+            return Vec::new();
+        }
+        let start = self
+            .lights
+            .first()
+            .map(|l| {
+                (0..candidates.len())
+                    .min_by(|&a, &b| {
+                        candidates[a]
+                            .distance_squared(l.position_m)
+                            .total_cmp(&candidates[b].distance_squared(l.position_m))
+                    })
+                    .unwrap_or(0)
+            })
+            .unwrap_or(0);
+        let mut dist2 = vec![f32::INFINITY; candidates.len()];
+        let mut chosen = Vec::with_capacity(n.min(candidates.len()));
+        let mut next = start;
+        while chosen.len() < n.min(candidates.len()) {
+            chosen.push(next);
+            let p = candidates[next];
+            let mut best = (0usize, -1.0f32);
+            for (i, (c, d)) in candidates.iter().zip(dist2.iter_mut()).enumerate() {
+                *d = d.min(c.distance_squared(p));
+                if *d > best.1 {
+                    best = (i, *d);
+                }
+            }
+            if best.1 <= 0.0 {
+                break;
+            }
+            next = best.0;
+        }
+        let intensity = Vec3::new(1.0, 0.78, 0.55) * (power_w / (4.0 * std::f32::consts::PI));
+        chosen
+            .into_iter()
+            .enumerate()
+            .map(|(i, k)| SceneLight {
+                name: format!("string-{i}"),
+                position_m: candidates[k],
+                intensity_w_sr: intensity,
+                spot: None,
+            })
+            .collect()
     }
 
     /// True when any leaf emits.
@@ -238,7 +419,7 @@ impl SceneData {
                     out.surfels.push(SurfelGpu {
                         position_radius: p.extend(s.radius_m).to_array(),
                         normal_spread: [s.normal[0], s.normal[1], s.normal[2], s.spread],
-                        color: [c[0], c[1], c[2], 255],
+                        color: [c[0], c[1], c[2], 0],
                     });
                 }
             }
@@ -275,6 +456,40 @@ impl SceneData {
                 )));
             }
             out.environment_sh = Some(first.coeffs.map(|c| c.map(|v| v * env.intensity)));
+        }
+        if let Some(env) = &scene.environment {
+            out.env_chain = read_env_chain(pkg, env.index, env.intensity).map_err(bad)?;
+        }
+        let mut slot = 0u8;
+        for m in &scene.materials {
+            let Some(region) = &m.region else { continue };
+            if m.specular.is_nan() || m.specular <= 0.0 {
+                continue;
+            }
+            if usize::from(slot) >= MAX_MATERIALS {
+                return Err(bad(format!(
+                    "material '{}': at most {MAX_MATERIALS} specular materials with regions are supported",
+                    m.name
+                )));
+            }
+            slot += 1;
+            let lo = DVec3::from_array(region.min_m) - frame;
+            let hi = DVec3::from_array(region.max_m) - frame;
+            let mut n = 0;
+            for s in &mut out.surfels {
+                let p = Vec3::from_slice(&s.position_radius[..3]).as_dvec3();
+                if p.cmpge(lo).all() && p.cmple(hi).all() && s.normal_spread[2] >= region.min_normal_z {
+                    s.color[3] = slot;
+                    n += 1;
+                }
+            }
+            out.materials.push(SceneMaterial {
+                name: m.name.clone(),
+                specular: m.specular.clamp(0.0, 1.0),
+                roughness: m.roughness.clamp(0.02, 1.0),
+                ior: m.ior.clamp(1.0, 3.0),
+                surfels: n,
+            });
         }
         for c in &scene.cameras {
             out.cameras.push(SceneCamera {

@@ -52,7 +52,7 @@ pub fn carved(
                         surfels.push(SurfelGpu {
                             position_radius: center.extend(0.75 * leaf_size_m).to_array(),
                             normal_spread: d.as_vec3().extend(0.0).to_array(),
-                            color: [rgb[0], rgb[1], rgb[2], 255],
+                            color: [rgb[0], rgb[1], rgb[2], 0],
                         });
                     }
                 }
@@ -111,7 +111,7 @@ pub fn open_sphere(depth: u32, radius_leaves: f32, albedo: f32, e: f32, cap_cos:
                     surfels.push(SurfelGpu {
                         position_radius: (at * leaf_size_m).extend(0.75 * leaf_size_m).to_array(),
                         normal_spread: inward.extend(0.0).to_array(),
-                        color: [rgb, rgb, rgb, 255],
+                        color: [rgb, rgb, rgb, 0],
                     });
                 }
             }

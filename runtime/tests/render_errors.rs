@@ -40,6 +40,7 @@ fn opts(package: PathBuf, camera: CameraChoice, out: PathBuf) -> RenderOptions {
         settings: Settings::default(),
         exposure: None,
         gpu: Default::default(),
+        lamp_string: None,
     }
 }
 

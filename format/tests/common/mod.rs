@@ -88,7 +88,17 @@ pub fn sample_scene() -> Scene {
             color: [1.0, 0.85, 0.7],
             power_w: 40.0,
         }],
-        materials: vec![Material { name: "wet".into(), specular: 0.4, roughness: 0.2 }],
+        materials: vec![Material {
+            name: "wet".into(),
+            specular: 0.4,
+            roughness: 0.2,
+            ior: 1.33,
+            region: Some(MaterialRegion {
+                min_m: [0.0, 0.0, -5.0],
+                max_m: [10.0, 10.0, 5.0],
+                min_normal_z: 0.5,
+            }),
+        }],
         cameras: vec![Camera {
             name: "entrance".into(),
             eye_m: [512_341.0, 5_123_449.0, 341.0],

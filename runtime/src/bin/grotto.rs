@@ -111,6 +111,20 @@ struct RenderArgs {
     /// Render without shadow maps.
     #[arg(long)]
     no_shadows: bool,
+    /// Shadow-map budget: the N brightest point and spot lights get shadow maps and per-pixel
+    /// light; the others are lit per leaf with --shadow-fallback (default 16).
+    #[arg(long)]
+    shadowed_lights: Option<u32>,
+    /// Lights beyond the shadow-map budget: "cone" (SVO shadow cones) or "none" (unshadowed).
+    #[arg(long, default_value = "cone")]
+    shadow_fallback: String,
+    /// Irradiance (W/m^2) under which a light is culled: bounds each light's range (0: no culling).
+    #[arg(long)]
+    light_cutoff: Option<f32>,
+    /// Replace the package's lights by a lamp string of N 8 W lamps spread over the cave's floors
+    /// (to measure how cost grows with the number of lights).
+    #[arg(long)]
+    lamps: Option<u32>,
     /// Store the radiance pyramid as f16 (half its memory; values above 65504 clamp).
     #[arg(long)]
     radiance_f16: bool,
@@ -156,7 +170,7 @@ fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
 
 fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderOptions> {
     use grotto_runtime::render_job::{CameraChoice, RenderOptions};
-    use grotto_runtime::renderer::{IndirectFilter, Quality, Settings};
+    use grotto_runtime::renderer::{IndirectFilter, Quality, Settings, ShadowFallback};
     let quality = Quality::parse(&a.quality)
         .ok_or_else(|| anyhow::anyhow!("--quality {:?}: use fast, balanced or high", a.quality))?;
     let mut settings = Settings::preset(quality);
@@ -176,6 +190,10 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
     settings.max_distance_m = a.max_distance;
     settings.convergence_tolerance = a.tolerance;
     settings.shadows = !a.no_shadows;
+    settings.shadowed_lights = a.shadowed_lights.unwrap_or(settings.shadowed_lights);
+    settings.shadow_fallback = ShadowFallback::parse(&a.shadow_fallback)
+        .ok_or_else(|| anyhow::anyhow!("--shadow-fallback {:?}: use cone or none", a.shadow_fallback))?;
+    settings.light_cutoff_w_m2 = a.light_cutoff.unwrap_or(settings.light_cutoff_w_m2);
     settings.radiance_f16 = a.radiance_f16;
     settings.splat_scale = a.splat_scale;
     let camera = match (a.camera.clone(), a.eye, a.look_at) {
@@ -196,6 +214,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
         settings,
         exposure: a.exposure,
         gpu: grotto_runtime::gpu::GpuOptions { prefer_software: a.software, ..Default::default() },
+        lamp_string: a.lamps,
     })
 }
 

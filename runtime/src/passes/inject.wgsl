@@ -1,6 +1,8 @@
-// Light injection: direct light from point and spot lights at every leaf (NDF-weighted diffuse,
-// shadowed by the surfel shadow maps), then the leaf's outgoing radiance
-// out = emission + direct + env + albedo * gather. Area lights are already emissive leaves.
+// Light injection: direct light from point and spot lights at every leaf (NDF-weighted diffuse),
+// only the lights the light grid lists in range; lights with shadow maps are shadowed by them,
+// lights beyond the budget by an SVO shadow cone (or not at all), and their share is kept apart in
+// `far` for shade. Then the leaf's outgoing radiance out = emission + direct + env +
+// albedo * gather. Area lights are already emissive leaves.
 
 @compute @workgroup_size(64)
 fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -12,10 +14,16 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let albedo = leaf.albedo_opacity.rgb;
     let p = leaf.center_m.xyz;
     var irradiance = vec3<f32>(0.0);
-    for (var k = 0u; k < params.light_count; k++) {
-        let light = lights[k];
+    var far = vec3<f32>(0.0);
+    let cell = light_cell(p);
+    let last = light_grid[cell + 1u];
+    for (var j = light_grid[cell]; j < last; j++) {
+        let light = lights[light_grid[j]];
         let to_light = light.position_kind.xyz - p;
         let dist = max(length(to_light), 1e-4);
+        if dist > light.params.y {
+            continue;
+        }
         let l = to_light / dist;
         let cos_term = ndf_cos(leaf.normal_mean.xyz, l);
         if cos_term <= 0.0 {
@@ -25,12 +33,31 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
         if falloff <= 0.0 {
             continue;
         }
-        let vis = shadow_visibility(light, p, dist, params.shadow_bias_m);
-        irradiance += light.intensity_layer.rgb * (cos_term * falloff * vis / (dist * dist));
+        let e_lit = light.intensity_layer.rgb * (cos_term * falloff / (dist * dist));
+        if max(e_lit.r, max(e_lit.g, e_lit.b)) < light.params.w {
+            // Under the cutoff once the cosine and the spot are counted: culled like out of range.
+            continue;
+        }
+        let kind = light_shadow_kind(light);
+        var vis = 1.0;
+        if kind == LIGHT_MAP {
+            vis = shadow_visibility(light, p, dist, params.shadow_bias_m);
+        } else if kind == LIGHT_CONE {
+            let o = leaf_cone_origin(leaf);
+            let to = light.position_kind.xyz - o;
+            let d = length(to);
+            vis = select(1.0, cone_visibility(o, to / d, d), d > 1e-4);
+        }
+        let e = e_lit * vis;
+        irradiance += e;
+        if kind != LIGHT_MAP {
+            far += e;
+        }
     }
     let direct = albedo / PI * irradiance;
     var state = leaf_light[i];
     state.direct = vec4<f32>(direct, 0.0);
+    state.far = vec4<f32>(far / PI, 0.0);
     state.out = vec4<f32>(leaf.emission.rgb + direct + state.env.rgb + albedo * state.gather.rgb, 0.0);
     leaf_light[i] = state;
 }

@@ -31,6 +31,7 @@ pub fn scene_layout(gpu: &Gpu) -> wgpu::BindGroupLayout {
     }
     entries.push(texture_entry(9, wgpu::TextureViewDimension::D2));
     entries.push(storage_entry(10, false));
+    entries.push(storage_entry(11, false));
     gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("scene"),
         entries: &entries,

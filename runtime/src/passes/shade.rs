@@ -29,6 +29,7 @@ impl Shade {
                 super::texture_entry(2, d2),
                 super::storage_entry(3, false),
                 super::storage_entry(4, false),
+                super::texture_entry(5, d2),
             ],
         });
         let pipeline = super::compute_pipeline(
@@ -42,7 +43,8 @@ impl Shade {
         Self { pipeline, layout }
     }
 
-    pub fn outputs(&self, gpu: &Gpu, targets: &Targets) -> Outputs {
+    /// `env_atlas`: the prefiltered environment levels (a 1x1 placeholder without).
+    pub fn outputs(&self, gpu: &Gpu, targets: &Targets, env_atlas: &wgpu::TextureView) -> Outputs {
         let pixels = u64::from(targets.width) * u64::from(targets.height);
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let hdr = gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -68,6 +70,7 @@ impl Shade {
                 wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&views[2]) },
                 wgpu::BindGroupEntry { binding: 3, resource: hdr.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 4, resource: ldr.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(env_atlas) },
             ],
         });
         Outputs { hdr, ldr, bind_group }

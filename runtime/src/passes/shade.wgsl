@@ -7,10 +7,66 @@
 @group(1) @binding(2) var gb_albedo: texture_2d<f32>;
 @group(1) @binding(3) var<storage, read_write> out_hdr: array<vec4<f32>>;
 @group(1) @binding(4) var<storage, read_write> out_ldr: array<u32>;
+// The environment's GGX-prefiltered lat-long levels stacked top to bottom (Params::env_levels);
+// a 1x1 placeholder without a chain.
+@group(1) @binding(5) var env_atlas: texture_2d<f32>;
 
-// Leaf gather, emission and sky visibility (x of the third) at `p_m`, interpolated over the leaves
-// around it with weights renormalised over the leaves that exist (empty cells carry no light).
-fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 3> {
+// Level k of the env atlas along unit `d`, bilinear (lat-long as preprocess/src/env.rs: theta
+// from +z, phi = atan2(y, x), wrapping in phi).
+fn env_level(k: u32, d: vec3<f32>) -> vec3<f32> {
+    let lv = params.env_levels[k];
+    let row0 = i32(lv.x);
+    let w = i32(lv.y);
+    let h = i32(lv.z);
+    let theta = acos(clamp(d.z, -1.0, 1.0));
+    var phi = atan2(d.y, d.x);
+    if phi < 0.0 {
+        phi += 2.0 * PI;
+    }
+    let x = phi / (2.0 * PI) * f32(w) - 0.5;
+    let y = clamp(theta / PI * f32(h) - 0.5, 0.0, f32(h - 1));
+    let x0 = floor(x);
+    let y0 = floor(y);
+    let fx = x - x0;
+    let fy = y - y0;
+    let xa = ((i32(x0) % w) + w) % w;
+    let xb = (xa + 1) % w;
+    let ya = min(i32(y0), h - 1);
+    let yb = min(ya + 1, h - 1);
+    let a = textureLoad(env_atlas, vec2<i32>(xa, row0 + ya), 0).rgb;
+    let b = textureLoad(env_atlas, vec2<i32>(xb, row0 + ya), 0).rgb;
+    let c = textureLoad(env_atlas, vec2<i32>(xa, row0 + yb), 0).rgb;
+    let e = textureLoad(env_atlas, vec2<i32>(xb, row0 + yb), 0).rgb;
+    return mix(mix(a, b, fx), mix(c, e, fx), fy);
+}
+
+// Glossy environment radiance along unit `r` for GGX `roughness`: the two prefiltered levels
+// around it (levels ascend in roughness), blended; without a chain, the SH radiance averaged over
+// a cone of half-angle tangent `tan_half`.
+fn env_glossy(r: vec3<f32>, roughness: f32, tan_half: f32) -> vec3<f32> {
+    let n = params.env_chain.x;
+    if n == 0u {
+        return sh_cone_radiance(r, 1.0 / sqrt(1.0 + tan_half * tan_half));
+    }
+    var k = 0u;
+    for (var i = 1u; i < n; i++) {
+        if params.env_levels[i].w <= roughness {
+            k = i;
+        }
+    }
+    if k + 1u >= n {
+        return env_level(k, r);
+    }
+    let r0 = params.env_levels[k].w;
+    let r1 = params.env_levels[k + 1u].w;
+    let t = clamp((roughness - r0) / max(r1 - r0, 1e-6), 0.0, 1.0);
+    return mix(env_level(k, r), env_level(k + 1u, r), t);
+}
+
+// Leaf gather, emission, sky visibility (x of the third) and the light of the lights beyond the
+// shadow-map budget (`far`) at `p_m`, interpolated over the leaves around it with weights
+// renormalised over the leaves that exist (empty cells carry no light).
+fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 4> {
     let u = p_m / params.leaf_size_m - vec3<f32>(0.5);
     let base = floor(u);
     let f = u - base;
@@ -18,16 +74,28 @@ fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 3> {
     var gather = vec3<f32>(0.0);
     var emission = vec3<f32>(0.0);
     var sky = 0.0;
+    var far = vec3<f32>(0.0);
     var wsum = 0.0;
     let cubic = (params.flags & FLAG_TRICUBIC) != 0u;
-    let lo = select(0, -1, cubic);
-    let hi = select(1, 2, cubic);
+    var lo = select(0, -1, cubic);
+    var hi = select(1, 2, cubic);
+    // A surfel at the rim of its leaf can have none of the 8 nearest leaf cells occupied: then
+    // the 4x4x4 cells around it with a tent twice as wide (measured: black speckles in the
+    // per-leaf lamp light otherwise).
+    for (var attempt = 0; attempt < 2; attempt++) {
+    let wide = attempt == 1;
+    if wide {
+        lo = -1;
+        hi = 2;
+    }
     for (var z = lo; z <= hi; z++) {
         for (var y = lo; y <= hi; y++) {
             for (var x = lo; x <= hi; x++) {
                 let o = vec3<f32>(f32(x), f32(y), f32(z));
                 var w3: vec3<f32>;
-                if cubic {
+                if wide {
+                    w3 = max(vec3<f32>(1.0) - 0.5 * abs(o - f), vec3<f32>(0.0));
+                } else if cubic {
                     w3 = vec3<f32>(bspline(o.x - f.x), bspline(o.y - f.y), bspline(o.z - f.z));
                 } else {
                     w3 = max(vec3<f32>(1.0) - abs(o - f), vec3<f32>(0.0));
@@ -41,13 +109,18 @@ fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 3> {
                     gather += w * leaf_light[leaf].gather.rgb;
                     emission += w * leaves[leaf].emission.rgb;
                     sky += w * leaf_light[leaf].env.w;
+                    far += w * leaf_light[leaf].far.rgb;
                     wsum += w;
                 }
             }
         }
     }
+    if wsum > 1e-6 {
+        break;
+    }
+    }
     let inv = select(0.0, 1.0 / wsum, wsum > 1e-6);
-    return array<vec3<f32>, 3>(gather * inv, emission * inv, vec3<f32>(sky * inv, 0.0, 0.0));
+    return array<vec3<f32>, 4>(gather * inv, emission * inv, vec3<f32>(sky * inv, 0.0, 0.0), far * inv);
 }
 
 // Cubic B-spline kernel (support 2): smooth, non-negative, sums to 1 over the 4 taps.
@@ -126,14 +199,34 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         coverage = 1.0;
         let p = params.camera_eye_m.xyz + ray * d;
         let n = unpack_normal(textureLoad(gb_normal, src, 0));
-        let albedo = textureLoad(gb_albedo, src, 0).rgb;
+        let albedo_slot = textureLoad(gb_albedo, src, 0);
+        let albedo = albedo_slot.rgb;
+        // Material slot from the albedo's alpha: 0 diffuse, 1..=7 specular (Params::materials).
+        let slot = min(u32(round(albedo_slot.a * 255.0)), 7u);
+        let specular = (params.flags & FLAG_SPECULAR) != 0u && slot > 0u;
+        let mat = params.materials[slot];
+        let v = -ray;
+        let nv = max(dot(n, v), 1e-3);
+        var highlight = vec3<f32>(0.0);
         var color = vec3<f32>(0.0);
         if (params.flags & FLAG_DIRECT) != 0u {
+            // Per pixel: the lights with shadow maps (and, shadows off, every light) in range;
+            // the lights beyond the budget come from the leaves (`far`, below).
             var irradiance = vec3<f32>(0.0);
-            for (var k = 0u; k < params.light_count; k++) {
-                let light = lights[k];
+            let cell = light_cell(p);
+            let last = light_grid[cell + 1u];
+            for (var j = light_grid[cell]; j < last; j++) {
+                let light = lights[light_grid[j]];
+                if light_shadow_kind(light) != LIGHT_MAP {
+                    // Lists hold the lights with shadow maps first (renderer.rs): the rest are
+                    // per leaf.
+                    break;
+                }
                 let to_light = light.position_kind.xyz - p;
                 let dist = max(length(to_light), 1e-4);
+                if dist > light.params.y {
+                    continue;
+                }
                 let l = to_light / dist;
                 let c = dot(n, l);
                 if c <= 0.0 {
@@ -146,11 +239,19 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // Normal offset: the shadow maps hold the same discs, so look up a little in front.
                 let q = p + n * (0.25 * params.leaf_size_m);
                 let vis = shadow_visibility(light, q, distance(light.position_kind.xyz, q), params.shadow_bias_m * 0.5);
-                irradiance += light.intensity_layer.rgb * (c * falloff * vis / (dist * dist));
+                let e = light.intensity_layer.rgb * (c * falloff * vis / (dist * dist));
+                irradiance += e;
+                if specular {
+                    // The lamp's highlight on a wet surface: F D V (GGX, Smith), F at the half
+                    // vector; lamps beyond the shadow-map budget make none (they are per leaf).
+                    let h = normalize(l + v);
+                    let f_h = fresnel_dielectric(dot(v, h), mat.z);
+                    highlight += e * (f_h * ggx_d(dot(n, h), mat.y) * ggx_visibility(c, nv, mat.y));
+                }
             }
             color += albedo / PI * irradiance;
         }
-        if (params.flags & (FLAG_INDIRECT | FLAG_EMISSION | FLAG_ENV)) != 0u {
+        if (params.flags & (FLAG_INDIRECT | FLAG_EMISSION | FLAG_ENV | FLAG_FAR_LIGHTS)) != 0u {
             // A quarter leaf behind the surface: inside the leaf the surfel belongs to, so the
             // trilinear weights land on leaves, not on the empty cells in front (measured: looking
             // up in front lost the gather wherever a surfel sat on a cell face).
@@ -161,11 +262,30 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             if (params.flags & FLAG_EMISSION) != 0u {
                 color += l[1];
             }
+            if (params.flags & FLAG_FAR_LIGHTS) != 0u {
+                color += albedo * l[3];
+            }
             if (params.flags & FLAG_ENV) != 0u {
                 // Environment light at the surfel's own normal (Ramamoorthi-Hanrahan), times the
                 // sky visibility the env pass found for the leaves around it.
                 color += albedo * sh_irradiance_ndf_over_pi(n) * l[2].x;
             }
+        }
+        if specular {
+            // Wet walls and water: the diffuse layer under a Fresnel-weighted mirror-like layer of
+            // weight Ks (Liu et al. 2006: Kd diffuse + Ks F specular). What the surface reflects
+            // is a cone along the reflection vector through the SVO (the cave paper's specular
+            // cone), its width from the roughness; where the cone escapes, the environment
+            // prefiltered for that roughness, and the constant background.
+            let r = reflect(ray, n);
+            let f = fresnel_dielectric(nv, mat.z);
+            let tan_half = clamp(1.3 * mat.y, 0.02, 1.0);
+            let cone = trace_cone(p + n * params.leaf_size_m, r, tan_half);
+            var reflected = cone.rgb + (1.0 - cone.a) * params.background.rgb;
+            if (params.flags & FLAG_ENV) != 0u {
+                reflected += (1.0 - cone.a) * env_glossy(r, mat.w, tan_half);
+            }
+            color = color * (1.0 - mat.x * f) + mat.x * (f * reflected + highlight);
         }
         hdr = color;
     }

@@ -61,7 +61,8 @@ fn vs(
     out.disc = c;
     out.world = world;
     out.normal_spread = vec4<f32>(n, normal_spread.w);
-    out.color = vec4<f32>(srgb_to_linear(color.rgb), 1.0);
+    // Alpha carries the material slot (0 diffuse, k / 255 for SceneData::materials[k - 1]).
+    out.color = vec4<f32>(srgb_to_linear(color.rgb), color.a);
     return out;
 }
 

@@ -2,7 +2,6 @@
 // quadrilinear sampling and cone tracing. Prepended to each pass's WGSL by `shaders::compose`.
 // Keep the structs in sync with runtime/src/gpu_types.rs.
 
-const PI: f32 = 3.14159265358979;
 const EMPTY: u32 = 0xffffffffu;
 
 const FLAG_INDIRECT: u32 = 1u;
@@ -11,6 +10,13 @@ const FLAG_SHADOWS: u32 = 4u;
 const FLAG_EMISSION: u32 = 8u;
 const FLAG_TRICUBIC: u32 = 16u;
 const FLAG_ENV: u32 = 32u;
+const FLAG_FAR_LIGHTS: u32 = 64u;
+const FLAG_SPECULAR: u32 = 128u;
+
+// Light::params.z, how a light is shadowed (gpu_types.rs light_shadow).
+const LIGHT_MAP: u32 = 0u;
+const LIGHT_CONE: u32 = 1u;
+const LIGHT_NONE: u32 = 2u;
 
 struct Tile {
     origin_leaf: vec3<i32>,
@@ -44,12 +50,16 @@ struct LeafLight {
     out: vec4<f32>,
     // rgb: albedo * E_sh(n) / pi * V; w: sky visibility V (env pass).
     env: vec4<f32>,
+    // Irradiance / pi from the lights beyond the shadow-map budget, without albedo (inject).
+    far: vec4<f32>,
 }
 
 struct Light {
     position_kind: vec4<f32>,
     intensity_layer: vec4<f32>,
     direction_cos_outer: vec4<f32>,
+    // x: cos(inner angle); y: range in metres; z: LIGHT_MAP, LIGHT_CONE or LIGHT_NONE; w: the
+    // irradiance cutoff, W/m^2.
     params: vec4<f32>,
 }
 
@@ -71,9 +81,11 @@ struct Params {
     exposure: f32,
     shadow_bias_m: f32,
     shadow_cols: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
+    light_grid_x: u32,
+    light_grid_y: u32,
+    light_grid_z: u32,
+    // xyz: light grid minimum corner, frame metres; w: cell edge, metres.
+    light_grid_min_m: vec4<f32>,
     scene_min_leaf: vec4<f32>,
     scene_max_leaf: vec4<f32>,
     background: vec4<f32>,
@@ -84,6 +96,12 @@ struct Params {
     cones: array<vec4<f32>, 16>,
     // Environment radiance, 9 real SH coefficients (rgb), L00, L1-1, L10, L11, L2-2 .. L22.
     env_sh: array<vec4<f32>, 9>,
+    // Material slots: x Ks, y GGX alpha, z ior, w roughness (slot 0 = diffuse).
+    materials: array<vec4<f32>, 8>,
+    // Env atlas levels: x first row, y width, z height, w roughness.
+    env_levels: array<vec4<f32>, 8>,
+    // x: env atlas levels (0: none), y: atlas width.
+    env_chain: vec4<u32>,
 }
 
 struct Stats {
@@ -118,6 +136,9 @@ const F16_MAX: f32 = 65504.0;
 // Rock behind the scanned surfaces: one bit per cell of 2x2x2 leaves over each tile and a margin
 // of ROCK_MARGIN cells around it (runtime/src/rock.rs).
 @group(0) @binding(10) var<storage, read_write> rock: array<u32>;
+// Per-cell lists of the lights in range (runtime/src/lights.rs): cells + 1 offsets (absolute word
+// indices), then the light indices.
+@group(0) @binding(11) var<storage, read_write> light_grid: array<u32>;
 const ROCK_LEVEL: u32 = 1u;
 const ROCK_MARGIN: i32 = 4;
 
@@ -485,6 +506,51 @@ fn shadow_visibility(light: Light, p: vec3<f32>, dist: f32, bias_m: f32) -> f32 
         }
     }
     return lit / 9.0;
+}
+
+// Index of the light-grid cell holding `p_m` (clamped into the grid); its lights are
+// light_grid[light_grid[c] .. light_grid[c + 1]].
+fn light_cell(p_m: vec3<f32>) -> u32 {
+    let dims = vec3<i32>(i32(params.light_grid_x), i32(params.light_grid_y), i32(params.light_grid_z));
+    let f = floor((p_m - params.light_grid_min_m.xyz) / params.light_grid_min_m.w);
+    let c = clamp(vec3<i32>(f), vec3<i32>(0), dims - vec3<i32>(1));
+    return u32(c.x + dims.x * (c.y + dims.y * c.z));
+}
+
+fn light_shadow_kind(light: Light) -> u32 {
+    return u32(light.params.z + 0.5);
+}
+
+// Shadow cone toward a light (Crassin et al. 2011): the share of a narrow cone from `origin_m`
+// along unit `l` that reaches distance `dist_m` through the voxels' filtered opacity; 0 where the
+// axis enters rock. The cone is one leaf wide at least and widens with SHADOW_CONE_TAN_HALF, so
+// that a thin wall seen at a coarse level still blocks it while a small gap lets light by.
+const SHADOW_CONE_TAN_HALF: f32 = 0.1;
+
+fn cone_visibility(origin_m: vec3<f32>, l: vec3<f32>, dist_m: f32) -> f32 {
+    let leaf = params.leaf_size_m;
+    var a = 0.0;
+    var t = leaf;
+    var t_prev = 0.0;
+    let t_end = dist_m - leaf;
+    for (var i = 0u; i < params.max_steps; i++) {
+        if t >= t_end {
+            break;
+        }
+        if rock_on_segment(origin_m, l, t_prev, t) >= 0.0 {
+            return 0.0;
+        }
+        let diameter = max(leaf, 2.0 * t * SHADOW_CONE_TAN_HALF);
+        let s = sample_lod((origin_m + l * t) / leaf, log2(diameter / leaf), l);
+        let sa = 1.0 - pow(max(1.0 - min(s.a, 1.0), 0.0), params.step_scale);
+        a += (1.0 - a) * sa;
+        if a >= 0.995 {
+            return 0.0;
+        }
+        t_prev = t;
+        t += diameter * params.step_scale;
+    }
+    return 1.0 - a;
 }
 
 // Radiant intensity of a light toward `p` times its spot falloff, and the unit direction to it.

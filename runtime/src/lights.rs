@@ -1,0 +1,193 @@
+//! Many lights (show caves hang hundreds of lamps): which lights get shadow maps, how far each one
+//! reaches, and the light grid that lets inject and shade visit only the lights in range.
+//!
+//! - Budget: the `shadowed_lights` brightest lights (largest radiant intensity) get shadow maps
+//!   and are evaluated per pixel; the rest are evaluated once per leaf by inject, shadowed by a
+//!   cone traced through the SVO toward the light (Crassin et al. 2011's soft shadow cone) or not
+//!   at all, and shade interpolates their light over leaves like the gathered light. Their cost
+//!   per frame is then independent of how many there are.
+//! - Range: a point light's irradiance falls as I / d^2, so past `sqrt(I / cutoff)` it adds less
+//!   than `cutoff` W/m^2 anywhere; it is dropped there (a hard cut, so inside the range the light
+//!   is exact).
+//! - Grid: a uniform grid over the scene (at most 32 cells per axis, coarser if the lists would
+//!   pass 4M entries) holds, per cell, the lights whose range sphere touches it. Built on the CPU
+//!   when the lights change; cost then grows with the lights in range, not all lights.
+
+use glam::{UVec3, Vec3};
+
+use crate::scene_data::SceneLight;
+
+/// Most cells per grid axis.
+pub const GRID_MAX_DIM: u32 = 32;
+/// Most light indices over all cells before the grid is made coarser.
+pub const GRID_MAX_ENTRIES: usize = 1 << 22;
+
+/// Distance past which a light of radiant intensity `intensity_w_sr` gives less than
+/// `cutoff_w_m2` of irradiance; infinite for a zero cutoff.
+pub fn range_m(intensity_w_sr: Vec3, cutoff_w_m2: f32) -> f32 {
+    if cutoff_w_m2 > 0.0 {
+        (intensity_w_sr.max_element().max(0.0) / cutoff_w_m2).sqrt()
+    } else {
+        f32::INFINITY
+    }
+}
+
+/// Light indices, brightest first (largest channel of the radiant intensity; ties keep the
+/// package order, so the choice is deterministic).
+pub fn brightest_first(lights: &[SceneLight]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..lights.len()).collect();
+    order.sort_by(|&a, &b| {
+        let (ia, ib) = (lights[a].intensity_w_sr.max_element(), lights[b].intensity_w_sr.max_element());
+        ib.total_cmp(&ia).then(a.cmp(&b))
+    });
+    order
+}
+
+/// Per-cell light lists over a uniform grid. `words` is what the GPU binds: `cells + 1` offsets
+/// (absolute word indices, cell c's lights are `words[words[c]..words[c + 1]]`), then the lists.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LightGrid {
+    pub min_m: Vec3,
+    pub cell_m: f32,
+    pub dims: UVec3,
+    pub words: Vec<u32>,
+}
+
+impl LightGrid {
+    /// The grid over the box `lo_m..hi_m` for lights at `position_m` reaching `range_m`.
+    pub fn build(lo_m: Vec3, hi_m: Vec3, lights: &[(Vec3, f32)]) -> Self {
+        let extent = (hi_m - lo_m).max(Vec3::splat(1e-3));
+        let mut max_dim = GRID_MAX_DIM;
+        loop {
+            let cell_m = extent.max_element() / max_dim as f32;
+            let dims = (extent / cell_m).ceil().as_uvec3().clamp(UVec3::ONE, UVec3::splat(max_dim));
+            let cells = (dims.x * dims.y * dims.z) as usize;
+            let mut lists: Vec<Vec<u32>> = vec![Vec::new(); cells];
+            let mut entries = 0usize;
+            let mut over = false;
+            'lights: for (k, &(p, r)) in lights.iter().enumerate() {
+                // Cell range of the sphere's bounding box, then the exact sphere-box test.
+                let (a, b) = if r.is_finite() {
+                    let a = ((p - r - lo_m) / cell_m).floor();
+                    let b = ((p + r - lo_m) / cell_m).floor();
+                    (a, b)
+                } else {
+                    (Vec3::ZERO, (dims - 1).as_vec3())
+                };
+                let top = (dims - 1).as_vec3();
+                if (b.cmplt(Vec3::ZERO)).any() || (a.cmpgt(top)).any() {
+                    continue;
+                }
+                let (a, b) = (a.clamp(Vec3::ZERO, top).as_uvec3(), b.clamp(Vec3::ZERO, top).as_uvec3());
+                for z in a.z..=b.z {
+                    for y in a.y..=b.y {
+                        for x in a.x..=b.x {
+                            let c_lo = lo_m + UVec3::new(x, y, z).as_vec3() * cell_m;
+                            let nearest = p.clamp(c_lo, c_lo + cell_m);
+                            if r.is_finite() && nearest.distance_squared(p) > r * r {
+                                continue;
+                            }
+                            lists[(x + dims.x * (y + dims.y * z)) as usize].push(k as u32);
+                            entries += 1;
+                            if entries > GRID_MAX_ENTRIES && max_dim > 1 {
+                                over = true;
+                                break 'lights;
+                            }
+                        }
+                    }
+                }
+            }
+            if over {
+                max_dim /= 2;
+                continue;
+            }
+            let mut words = Vec::with_capacity(cells + 1 + entries);
+            let mut at = (cells + 1) as u32;
+            for l in &lists {
+                words.push(at);
+                at += l.len() as u32;
+            }
+            words.push(at);
+            for l in &lists {
+                words.extend_from_slice(l);
+            }
+            return Self { min_m: lo_m, cell_m, dims, words };
+        }
+    }
+
+    pub fn cells(&self) -> usize {
+        (self.dims.x * self.dims.y * self.dims.z) as usize
+    }
+
+    /// The lights listed for the cell holding `p_m` (clamped into the grid), as the GPU reads it.
+    pub fn lights_at(&self, p_m: Vec3) -> &[u32] {
+        let c = ((p_m - self.min_m) / self.cell_m)
+            .floor()
+            .clamp(Vec3::ZERO, (self.dims - 1).as_vec3())
+            .as_uvec3();
+        let i = (c.x + self.dims.x * (c.y + self.dims.y * c.z)) as usize;
+        &self.words[self.words[i] as usize..self.words[i + 1] as usize]
+    }
+
+    /// Mean and largest number of lights per cell.
+    pub fn occupancy(&self) -> (f32, u32) {
+        let cells = self.cells();
+        let counts = (0..cells).map(|i| self.words[i + 1] - self.words[i]);
+        let max = counts.clone().max().unwrap_or(0);
+        let total: u64 = counts.map(u64::from).sum();
+        (total as f32 / cells.max(1) as f32, max)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lcg(seed: &mut u64) -> f32 {
+        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*seed >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    #[test]
+    fn every_light_in_range_of_a_point_is_in_its_cell() {
+        let mut s = 9u64;
+        let lo = Vec3::new(-3.0, 1.0, -0.5);
+        let hi = Vec3::new(40.0, 12.0, 7.0);
+        let lights: Vec<(Vec3, f32)> = (0..300)
+            .map(|_| {
+                let p = lo + (hi - lo) * Vec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 1.2 - 2.0;
+                (p, 0.5 + 6.0 * lcg(&mut s))
+            })
+            .collect();
+        let grid = LightGrid::build(lo, hi, &lights);
+        assert!(grid.dims.max_element() <= GRID_MAX_DIM && grid.dims.min_element() >= 1);
+        let (mean, max) = grid.occupancy();
+        assert!(mean < 300.0 * 0.5, "culling must drop most lights per cell: mean {mean}, max {max}");
+        for _ in 0..5000 {
+            let p = lo + (hi - lo) * Vec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s));
+            let listed = grid.lights_at(p);
+            for (k, &(q, r)) in lights.iter().enumerate() {
+                if p.distance(q) <= r {
+                    assert!(listed.contains(&(k as u32)), "light {k} reaches {p} but is not listed");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn infinite_ranges_list_every_light_everywhere_and_the_grid_stays_bounded() {
+        let lights: Vec<(Vec3, f32)> =
+            (0..5000).map(|i| (Vec3::splat(i as f32 * 0.01), f32::INFINITY)).collect();
+        let grid = LightGrid::build(Vec3::ZERO, Vec3::splat(50.0), &lights);
+        assert!(grid.words.len() <= GRID_MAX_ENTRIES + grid.cells() + 1 + lights.len());
+        assert_eq!(grid.lights_at(Vec3::splat(49.0)).len(), 5000);
+        assert_eq!(grid.lights_at(Vec3::splat(-10.0)).len(), 5000, "points outside clamp into the grid");
+    }
+
+    #[test]
+    fn range_follows_the_inverse_square_law() {
+        let r = range_m(Vec3::new(4.0, 1.0, 0.0), 1e-2);
+        assert!((4.0 / (r * r) - 1e-2).abs() < 1e-6);
+        assert!(range_m(Vec3::ONE, 0.0).is_infinite());
+    }
+}
