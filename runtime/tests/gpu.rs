@@ -466,3 +466,249 @@ fn a_closed_cave_stays_dark_under_a_sky_and_an_opening_lets_it_in() {
     assert!(v5 > 0.35 * 0.25 && v5 < 1.05 * 0.25, "cap 0.5: {v5}");
     assert!(v8 > 0.2 * 0.1 && v8 < v5, "cap 0.8: {v8}");
 }
+
+/// Runs `kernel` (WGSL using shaders/brdf.wgsl, reading and writing `io` at group 0 binding 0)
+/// once per element of `io` and returns `io` afterwards.
+fn run_brdf_kernel(kernel: &str, io: &[[f32; 4]]) -> Vec<[f32; 4]> {
+    let g = gpu();
+    let src = format!(
+        "{}\n@group(0) @binding(0) var<storage, read_write> io: array<vec4<f32>>;\n{kernel}",
+        grotto_runtime::shaders::BRDF
+    );
+    let module = g.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("brdf probe"),
+        source: wgpu::ShaderSource::Wgsl(src.into()),
+    });
+    let pipeline = g.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("brdf probe"),
+        layout: None,
+        module: &module,
+        entry_point: Some("probe"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let buf = g.buffer_init(
+        "brdf io",
+        bytemuck::cast_slice(io),
+        wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+    );
+    let group = g.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("brdf io"),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[wgpu::BindGroupEntry { binding: 0, resource: buf.as_entire_binding() }],
+    });
+    let mut enc = g.device.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups((io.len() as u32).div_ceil(64), 1, 1);
+    }
+    g.queue.submit([enc.finish()]);
+    let bytes = g.read_buffer(&buf, (io.len() * 16) as u64).unwrap();
+    bytemuck::pod_collect_to_vec(&bytes[..io.len() * 16])
+}
+
+#[test]
+fn fresnel_and_distribution_terms_match_their_closed_forms() {
+    // x: cos of incidence, y: index of refraction, z: n.h, w: GGX alpha. Out: x = F, y = D,
+    // z = the hemisphere integral of D (n.h) for that alpha (must be 1).
+    let kernel = "
+@compute @workgroup_size(64)
+fn probe(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if i >= arrayLength(&io) {
+        return;
+    }
+    let q = io[i];
+    // Integral over mu = n.h of D(mu) mu 2 pi dmu, midpoint rule.
+    let steps = 20000u;
+    var sum = 0.0;
+    for (var k = 0u; k < steps; k++) {
+        let mu = (f32(k) + 0.5) / f32(steps);
+        sum += ggx_d(mu, q.w) * mu;
+    }
+    io[i] = vec4<f32>(fresnel_dielectric(q.x, q.y), ggx_d(q.z, q.w), sum * 2.0 * PI / f32(steps), 0.0);
+}";
+    // Full Fresnel for unpolarised light, in f64 (Cook & Torrance's form).
+    let fresnel = |c: f64, n: f64| {
+        let g = (n * n + c * c - 1.0).sqrt();
+        let a = (g - c) / (g + c);
+        let b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
+        0.5 * a * a * (1.0 + b * b)
+    };
+    let mut io = Vec::new();
+    for &n in &[1.33f32, 1.5, 2.4] {
+        for &c in &[1.0f32, 0.0, 0.5, 0.1, 0.9] {
+            for &alpha in &[0.1f32, 0.3, 0.7, 1.0] {
+                for &nh in &[1.0f32, 0.0, 0.8] {
+                    io.push([c, n, nh, alpha]);
+                }
+            }
+        }
+    }
+    let out = run_brdf_kernel(kernel, &io);
+    let (mut worst_f, mut worst_d, mut worst_int) = (0.0f64, 0.0f64, 0.0f64);
+    for (q, o) in io.iter().zip(&out) {
+        let (c, n, nh, alpha) = (f64::from(q[0]), f64::from(q[1]), f64::from(q[2]), f64::from(q[3]));
+        // Closed forms at normal and grazing incidence; the full formula elsewhere.
+        let f_want = if c == 1.0 {
+            ((n - 1.0) / (n + 1.0)).powi(2)
+        } else if c == 0.0 {
+            1.0
+        } else {
+            fresnel(c, n)
+        };
+        let a2 = alpha * alpha;
+        let d_want = if nh == 1.0 {
+            1.0 / (std::f64::consts::PI * a2)
+        } else if nh == 0.0 {
+            a2 / std::f64::consts::PI
+        } else {
+            let d = nh * nh * (a2 - 1.0) + 1.0;
+            a2 / (std::f64::consts::PI * d * d)
+        };
+        worst_f = worst_f.max((f64::from(o[0]) - f_want).abs() / f_want);
+        worst_d = worst_d.max((f64::from(o[1]) - d_want).abs() / d_want);
+        worst_int = worst_int.max((f64::from(o[2]) - 1.0).abs());
+    }
+    eprintln!("Fresnel {worst_f:.2e}, GGX D {worst_d:.2e} relative; |integral of D cos - 1| {worst_int:.2e}");
+    assert!(worst_f < 1e-5, "Fresnel differs from its closed form by {worst_f}");
+    assert!(worst_d < 1e-5, "D differs from its closed form by {worst_d}");
+    assert!(worst_int < 2e-3, "D is not normalised: {worst_int}");
+}
+
+/// Mean of channel 1 of `field` over the leaves in `set`.
+fn mean_of(light: &[LeafLightGpu], set: &[usize], field: fn(&LeafLightGpu) -> [f32; 4]) -> f32 {
+    set.iter().map(|&i| field(&light[i])[1]).sum::<f32>() / set.len() as f32
+}
+
+#[test]
+fn lights_beyond_the_budget_are_shadowed_by_svo_cones_not_lit_through_rock() {
+    use grotto_runtime::renderer::ShadowFallback;
+    // The dogleg: one lamp in a room, a chamber behind three right-angle corridors in rock.
+    let scene = testscenes::dogleg();
+    let select = |want: &dyn Fn(glam::IVec3) -> bool| -> Vec<usize> {
+        scene
+            .leaves
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| {
+                let c = (Vec3::from_slice(&l.center_m[..3]) / scene.leaf_size_m).floor().as_ivec3();
+                want(c) && l.normal_mean[..3].iter().any(|&v| v != 0.0)
+            })
+            .map(|(i, _)| i)
+            .collect()
+    };
+    let chamber = select(&|c| testscenes::dogleg_chamber(c));
+    let room = select(&|c| c.y < 10 && c.x < 11);
+    let direct = |budget: u32, fallback: ShadowFallback| {
+        let settings =
+            Settings { bounces: 0, shadowed_lights: budget, shadow_fallback: fallback, ..Default::default() };
+        let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+        let plan = r.update_light().unwrap();
+        assert_eq!(plan.runs(grotto_runtime::plan::Pass::Shadow), budget > 0, "{}", plan.explain());
+        let light = r.read_leaf_light().unwrap();
+        (
+            mean_of(&light, &chamber, |l| l.direct),
+            mean_of(&light, &room, |l| l.direct),
+            mean_of(&light, &room, |l| l.far),
+        )
+    };
+    let map = direct(1, ShadowFallback::Cone);
+    let cone = direct(0, ShadowFallback::Cone);
+    let none = direct(0, ShadowFallback::None);
+    eprintln!("chamber / room direct: shadow map {map:?}, SVO cone {cone:?}, unshadowed {none:?}");
+    assert_eq!(map.2, 0.0, "a light with a shadow map leaves nothing to the per-leaf share");
+    assert!(cone.2 > 0.0 && none.2 > 0.0, "lights beyond the budget are in the per-leaf share");
+    assert!(none.0 > 1e-3 * none.1, "unshadowed, the lamp shines through the rock into the chamber");
+    assert!(cone.0 <= 1e-6 * cone.1, "cone shadows keep the chamber dark: {cone:?}");
+    assert!(map.0 <= 1e-6 * map.1);
+    // In the lit room cone shadows and the shadow map agree to within the cone's blur.
+    assert!((cone.1 - map.1).abs() < 0.2 * map.1, "room: cone {} vs map {}", cone.1, map.1);
+}
+
+#[test]
+fn a_scene_with_256_lights_renders_and_culling_drops_only_light_under_the_cutoff() {
+    use grotto_runtime::camera::Camera;
+    use grotto_runtime::renderer::ShadowFallback;
+    use grotto_runtime::scene_data::SceneLight;
+    // The colour box with 256 lamps of random power on a grid inside it.
+    let mut scene = testscenes::colour_box();
+    let (lo, hi) = scene.bounds_leaf();
+    let (lo, hi) = (lo * scene.leaf_size_m, hi * scene.leaf_size_m);
+    let weights = random_light(256, 11);
+    scene.lights = weights
+        .iter()
+        .enumerate()
+        .map(|(i, w)| {
+            let f = Vec3::new((i % 8) as f32 + 0.5, ((i / 8) % 8) as f32 + 0.5, (i / 64) as f32 + 0.5)
+                / Vec3::new(8.0, 8.0, 4.0);
+            SceneLight {
+                name: format!("lamp-{i}"),
+                position_m: lo + (hi - lo) * (0.3 + 0.4 * f),
+                intensity_w_sr: Vec3::splat(0.05 + w.out[1] * 0.5),
+                spot: None,
+            }
+        })
+        .collect();
+    // Every light per leaf and unshadowed, so the injected light is a plain sum to compare.
+    let per_leaf = |cutoff: f32| {
+        let settings = Settings {
+            bounces: 0,
+            shadowed_lights: 0,
+            shadow_fallback: ShadowFallback::None,
+            light_cutoff_w_m2: cutoff,
+            ..Default::default()
+        };
+        let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+        r.update_light().unwrap();
+        (r.read_leaf_light().unwrap(), r.lights_in_range())
+    };
+    let (all, in_range_all) = per_leaf(0.0);
+    assert_eq!(in_range_all, (256.0, 256), "no cutoff: every light everywhere");
+    // CPU sum of the per-leaf irradiance / pi (the NDF-weighted cosine as in common.wgsl).
+    let mut worst = 0.0f32;
+    for (leaf, state) in scene.leaves.iter().zip(&all) {
+        let p = Vec3::from_slice(&leaf.center_m[..3]);
+        let mean = Vec3::from_slice(&leaf.normal_mean[..3]);
+        let r = mean.length().min(1.0);
+        let n = if r < 1e-4 { Vec3::Z } else { mean / mean.length() };
+        let mut e = 0.0f32;
+        for l in &scene.lights {
+            let to = l.position_m - p;
+            let d = to.length().max(1e-4);
+            let c = n.dot(to / d);
+            let cos = r * c.max(0.0) + (1.0 - r) * (1.0 + c).max(0.0) * 0.25;
+            e += l.intensity_w_sr.y * cos / (d * d);
+        }
+        let want = e / std::f32::consts::PI;
+        worst = worst.max((state.far[1] - want).abs() / want.max(1e-6));
+    }
+    eprintln!("256 lights per leaf: worst relative difference from the CPU sum {worst:.2e}");
+    assert!(worst < 1e-3, "{worst}");
+    // A cutoff culls lights but drops at most `cutoff` of irradiance per culled light.
+    // Chosen so that the brightest lamp reaches a third of the box.
+    let cutoff = 0.55 / (0.33 * (hi - lo).max_element()).powi(2);
+    let (culled, in_range) = per_leaf(cutoff);
+    eprintln!("cutoff {cutoff} W/m^2: lights in range per cell (mean, max) {in_range:?}");
+    assert!(in_range.0 < 0.5 * 256.0, "the grid must cull: {in_range:?}");
+    for (a, b) in all.iter().zip(&culled) {
+        let lost = (a.far[1] - b.far[1]) * std::f32::consts::PI;
+        assert!(lost >= -1e-4 && lost <= 256.0 * cutoff, "lost {lost} W/m^2");
+    }
+    // And the whole scene renders with a budget: 16 shadow maps, 240 lights per leaf.
+    let settings = Settings { bounces: 1, shadow_map_size: 128, ..Default::default() };
+    let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+    let c = (lo + hi) * 0.5;
+    let cam = Camera {
+        eye_m: c - Vec3::Y * 0.3 * (hi - lo).y,
+        look_at_m: c + Vec3::Y,
+        up: Vec3::Z,
+        fov_y_deg: 70.0,
+    };
+    let (frame, plan) = r.render(&cam, 64, 48).unwrap();
+    assert!(plan.explain().contains("16 of 256 point, 0 spot lights get shadow maps"), "{}", plan.explain());
+    assert!(frame.hdr.iter().all(|p| p.iter().all(|v| v.is_finite() && *v >= 0.0)));
+    assert!(frame.hdr.iter().filter(|p| p[3] > 0.5 && p[1] > 0.0).count() > 64 * 48 / 2, "the box is lit");
+}

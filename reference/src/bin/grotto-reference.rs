@@ -17,6 +17,29 @@ use grotto_runtime::scene_data::SceneData;
 enum Cli {
     Render(RenderArgs),
     Accuracy(AccuracyArgs),
+    Lights(LightsArgs),
+}
+
+/// The many-lights measurement: the demo cave relit by a lamp string, its path-traced reference,
+/// and the runtime with the shadow-map budget, its fallback and the light cutoff varied; writes
+/// the report (docs/lights-accuracy.md).
+#[derive(clap::Args, Debug)]
+struct LightsArgs {
+    /// The report to write.
+    #[arg(long, default_value = "docs/lights-accuracy.md")]
+    out: PathBuf,
+    /// Lamps in the string.
+    #[arg(long, default_value_t = 64)]
+    lamps: usize,
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "96x72")]
+    size: String,
+    /// Reference paths per pixel.
+    #[arg(long, default_value_t = 256)]
+    spp: u32,
+    /// Prefer the software adapter.
+    #[arg(long)]
+    software: bool,
 }
 
 /// Run the runtime over every quality knob and preset on the built-in scenes, compare each image
@@ -75,7 +98,31 @@ fn main() -> anyhow::Result<()> {
     match Cli::parse() {
         Cli::Render(a) => render(a),
         Cli::Accuracy(a) => accuracy(a),
+        Cli::Lights(a) => lights(a),
     }
+}
+
+fn lights(a: LightsArgs) -> anyhow::Result<()> {
+    use grotto_reference::accuracy;
+    let (w, h) = grotto_runtime::render_job::parse_size(&a.size).map_err(anyhow::Error::msg)?;
+    let gpu = grotto_runtime::gpu::Gpu::new(&grotto_runtime::gpu::GpuOptions {
+        prefer_software: a.software,
+        ..Default::default()
+    })?;
+    let t0 = std::time::Instant::now();
+    let (scene, rows) = accuracy::lights_sweep(&gpu, a.lamps, w, h, a.spp, |what| {
+        eprintln!("[{:6.0} s] {what}", t0.elapsed().as_secs_f64());
+    })
+    .map_err(anyhow::Error::msg)?;
+    let command = format!(
+        "cargo run --release -p grotto-reference -- lights --lamps {} --size {w}x{h} --spp {}",
+        a.lamps, a.spp
+    );
+    let md = accuracy::lights_report(&scene, &rows, &gpu.describe(), w, h, &command);
+    grotto_runtime::export::write_atomically(&a.out, md.as_bytes())?;
+    println!("{md}");
+    eprintln!("wrote {} in {:.0} s", a.out.display(), t0.elapsed().as_secs_f64());
+    Ok(())
 }
 
 fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
