@@ -194,6 +194,18 @@ pub struct MipRange {
     pub pad: u32,
 }
 
+/// One inject dispatch: positions `first .. first + count` of each leaf's light-grid cell list;
+/// `reset` = 1 for the first batch (which starts the leaf's direct light from zero). Keep in sync
+/// with passes/inject.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq, Eq)]
+pub struct InjectBatch {
+    pub first: u32,
+    pub count: u32,
+    pub reset: u32,
+    pub pad: u32,
+}
+
 /// Uniform of one splat render pass (one shadow layer or the camera). 256 bytes so that one buffer
 /// holds all of them at dynamic offsets. Keep in sync with passes/splat.wgsl.
 #[repr(C)]
@@ -228,6 +240,7 @@ const _: () = {
     assert!(size_of::<LightGpu>() == 64);
     assert!(size_of::<Params>() == 80 + 16 + 48 + 64 + 16 * MAX_CONES + 16 * 9 + 16 * 8 * 2 + 16);
     assert!(size_of::<MipRange>() == 16);
+    assert!(size_of::<InjectBatch>() == 16);
     assert!(size_of::<SplatUniform>() == 256);
     assert!(size_of::<SurfelGpu>() == 36);
 };

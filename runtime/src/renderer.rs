@@ -322,7 +322,7 @@ pub struct Renderer {
     shadow_cols: u32,
     shadow_depth: wgpu::TextureView,
     scene_group: wgpu::BindGroup,
-    inject: passes::LeafPass,
+    inject: passes::inject::Inject,
     env: passes::LeafPass,
     mip: passes::mip::Mip,
     propagate: passes::LeafPass,
@@ -701,7 +701,7 @@ impl Renderer {
             (set, buf)
         });
         let r = Self {
-            inject: passes::inject::new(gpu, &scene_layout, f16),
+            inject: passes::inject::Inject::new(gpu, &scene_layout, f16, light_grid.occupancy().1),
             env: passes::env::new(gpu, &scene_layout, f16),
             mip: passes::mip::Mip::new(gpu, &scene_layout, &by_height, &ranges, f16),
             propagate: passes::propagate::new(gpu, &scene_layout, f16),

@@ -712,3 +712,55 @@ fn a_scene_with_256_lights_renders_and_culling_drops_only_light_under_the_cutoff
     assert!(frame.hdr.iter().all(|p| p.iter().all(|v| v.is_finite() && *v >= 0.0)));
     assert!(frame.hdr.iter().filter(|p| p[3] > 0.5 && p[1] > 0.0).count() > 64 * 48 / 2, "the box is lit");
 }
+
+#[test]
+fn many_cone_shadowed_lamps_add_up_like_the_same_lamps_one_at_a_time() {
+    use grotto_runtime::renderer::ShadowFallback;
+    use grotto_runtime::scene_data::SceneLight;
+    // 48 lamps along the dogleg's air (room, corridors, chamber), all beyond the shadow-map budget:
+    // each leaf traces one SVO shadow cone per lamp. Mesa's software drivers end every loop of an
+    // invocation once all of them together pass 65535 iterations, which dropped the last lamps of
+    // a long list before inject ran in batches (passes/inject.rs).
+    let mut scene = testscenes::dogleg();
+    let air: Vec<glam::IVec3> = (0..12)
+        .flat_map(|z| (0..42).flat_map(move |y| (0..24).map(move |x| glam::IVec3::new(x, y, z))))
+        .filter(|&c| {
+            testscenes::dogleg_air(c) && (-1..=1).all(|d| testscenes::dogleg_air(c + glam::IVec3::splat(d)))
+        })
+        .collect();
+    let step = air.len() / 48;
+    scene.lights = (0..48)
+        .map(|k| SceneLight {
+            name: format!("lamp-{k}"),
+            position_m: (air[k * step].as_vec3() + 0.5) * scene.leaf_size_m,
+            intensity_w_sr: Vec3::splat(0.5),
+            spot: None,
+        })
+        .collect();
+    let far = |lights: &[SceneLight]| {
+        let mut s = scene.clone();
+        s.lights = lights.to_vec();
+        let settings = Settings {
+            bounces: 0,
+            shadowed_lights: 0,
+            shadow_fallback: ShadowFallback::Cone,
+            light_cutoff_w_m2: 0.0,
+            ..Default::default()
+        };
+        let mut r = Renderer::new(gpu(), &s, settings).unwrap();
+        r.update_light().unwrap();
+        r.read_leaf_light().unwrap().iter().map(|l| l.far[1]).collect::<Vec<f32>>()
+    };
+    let together = far(&scene.lights);
+    let mut one_by_one = vec![0.0f32; together.len()];
+    for k in 0..scene.lights.len() {
+        for (s, v) in one_by_one.iter_mut().zip(far(&scene.lights[k..k + 1])) {
+            *s += v;
+        }
+    }
+    let worst =
+        together.iter().zip(&one_by_one).map(|(a, b)| (a - b).abs() / b.max(1e-3)).fold(0.0f32, f32::max);
+    eprintln!("48 cone-shadowed lamps together vs one at a time: worst relative difference {worst:.2e}");
+    assert!(one_by_one.iter().any(|&v| v > 0.0));
+    assert!(worst < 1e-4, "lamps together differ from their sum: {worst}");
+}

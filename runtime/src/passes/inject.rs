@@ -1,8 +1,84 @@
-//! Light injection (inject.wgsl): direct light from point and spot lights at every leaf.
+//! Light injection (inject.wgsl): direct light from point and spot lights at every leaf, in
+//! batches of at most [`LIGHTS_PER_BATCH`] lights of each leaf's light-grid cell per dispatch,
+//! accumulated in the leaf state (the first batch resets it).
+//!
+//! Why batches: Mesa's software drivers (llvmpipe, lavapipe) share one budget of 65535 loop
+//! iterations among all loops of a shader invocation (`LP_MAX_TGSI_LOOP_ITERATIONS`) and silently
+//! end every loop past it; an SVO shadow cone toward a lamp can take thousands of iterations, so
+//! one invocation looping over 64 lamps lost the last 15 of them (measured on the demo cave with a
+//! 64-lamp string: one leaf got 0.097 instead of the 0.708 its lamps give one by one). Short
+//! dispatches also keep real GPUs clear of driver watchdogs, as the Lexolights report's multipass
+//! lighting does.
+
+use wgpu::util::DeviceExt;
 
 use crate::gpu::Gpu;
+use crate::gpu_types::InjectBatch;
 
-/// The inject pipeline: one invocation per leaf, scene bindings only.
-pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout, radiance_f16: bool) -> super::LeafPass {
-    super::LeafPass::new(gpu, "inject", crate::shaders::INJECT, scene, radiance_f16)
+/// Lights of a cell handled by one inject dispatch.
+pub const LIGHTS_PER_BATCH: u32 = 4;
+
+#[derive(Debug)]
+pub struct Inject {
+    pipeline: wgpu::ComputePipeline,
+    batches: Vec<wgpu::BindGroup>,
+}
+
+impl Inject {
+    /// `max_lights_per_cell`: the longest light-grid cell list (at least one batch runs, so that
+    /// a scene whose lights reach no leaf still resets the direct light).
+    pub fn new(
+        gpu: &Gpu,
+        scene: &wgpu::BindGroupLayout,
+        radiance_f16: bool,
+        max_lights_per_cell: u32,
+    ) -> Self {
+        let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("inject batch"),
+            entries: &[super::uniform_entry(0, wgpu::ShaderStages::COMPUTE, false)],
+        });
+        let pipeline = super::compute_pipeline(
+            gpu,
+            "inject",
+            crate::shaders::INJECT,
+            "inject",
+            &[scene, &layout],
+            radiance_f16,
+        );
+        let count = max_lights_per_cell.div_ceil(LIGHTS_PER_BATCH).max(1);
+        let batches = (0..count)
+            .map(|b| {
+                let u = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("inject batch"),
+                    contents: bytemuck::bytes_of(&InjectBatch {
+                        first: b * LIGHTS_PER_BATCH,
+                        count: LIGHTS_PER_BATCH,
+                        reset: u32::from(b == 0),
+                        pad: 0,
+                    }),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
+                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("inject batch"),
+                    layout: &layout,
+                    entries: &[wgpu::BindGroupEntry { binding: 0, resource: u.as_entire_binding() }],
+                })
+            })
+            .collect();
+        Self { pipeline, batches }
+    }
+
+    /// Dispatches this many times per light update.
+    pub fn batch_count(&self) -> usize {
+        self.batches.len()
+    }
+
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, scene: &wgpu::BindGroup, leaf_count: u32) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, scene, &[]);
+        for bg in &self.batches {
+            pass.set_bind_group(1, bg, &[]);
+            super::dispatch_linear(pass, leaf_count);
+        }
+    }
 }

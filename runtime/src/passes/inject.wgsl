@@ -1,8 +1,18 @@
-// Light injection: direct light from point and spot lights at every leaf (NDF-weighted diffuse),
+// Light injection, one batch of lights per dispatch (passes/inject.rs says why): direct light from point and spot lights at every leaf (NDF-weighted diffuse),
 // only the lights the light grid lists in range; lights with shadow maps are shadowed by them,
 // lights beyond the budget by an SVO shadow cone (or not at all), and their share is kept apart in
 // `far` for shade. Then the leaf's outgoing radiance out = emission + direct + env +
 // albedo * gather. Area lights are already emissive leaves.
+
+// Keep in sync with gpu_types.rs InjectBatch.
+struct InjectBatch {
+    first: u32,
+    count: u32,
+    reset: u32,
+    pad: u32,
+}
+
+@group(1) @binding(0) var<uniform> batch: InjectBatch;
 
 @compute @workgroup_size(64)
 fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -16,8 +26,9 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     var irradiance = vec3<f32>(0.0);
     var far = vec3<f32>(0.0);
     let cell = light_cell(p);
-    let last = light_grid[cell + 1u];
-    for (var j = light_grid[cell]; j < last; j++) {
+    let start = light_grid[cell] + batch.first;
+    let last = min(light_grid[cell + 1u], start + batch.count);
+    for (var j = start; j < last; j++) {
         let light = lights[light_grid[j]];
         let to_light = light.position_kind.xyz - p;
         let dist = max(length(to_light), 1e-4);
@@ -54,10 +65,14 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
             far += e;
         }
     }
-    let direct = albedo / PI * irradiance;
     var state = leaf_light[i];
+    if batch.reset == 1u {
+        state.direct = vec4<f32>(0.0);
+        state.far = vec4<f32>(0.0);
+    }
+    let direct = state.direct.rgb + albedo / PI * irradiance;
     state.direct = vec4<f32>(direct, 0.0);
-    state.far = vec4<f32>(far / PI, 0.0);
+    state.far = vec4<f32>(state.far.rgb + far / PI, 0.0);
     state.out = vec4<f32>(leaf.emission.rgb + direct + state.env.rgb + albedo * state.gather.rgb, 0.0);
     leaf_light[i] = state;
 }
