@@ -136,3 +136,48 @@ fn presets_trade_time_for_error_on_the_colour_box() {
         "reference noise too high to judge"
     );
 }
+
+/// Mesa's software drivers end every loop of a shader invocation once all of them together pass
+/// 65535 iterations (runtime/src/passes/inject.rs). The propagation pass traces up to 16 cones per
+/// leaf in one invocation: on the demo cave, with every preset, its gather must still match the
+/// CPU reference (which has no such budget), so no cone is cut short.
+#[test]
+fn propagation_gathers_every_cone_on_the_demo_cave_with_every_preset() {
+    use grotto_runtime::cpu_ref::CpuScene;
+    use grotto_runtime::gpu_types::LeafLightGpu;
+    use grotto_runtime::renderer::{Quality, Renderer, Settings};
+    let data =
+        grotto_reference::accuracy::demo_cave(grotto_preprocess::build::ColorCodec::Raw, 0.25, None, true)
+            .unwrap();
+    let gpu = grotto_runtime::gpu::Gpu::new(&grotto_runtime::gpu::GpuOptions {
+        prefer_software: true,
+        ..Default::default()
+    })
+    .unwrap();
+    let light: Vec<LeafLightGpu> = (0..data.leaves.len())
+        .map(|i| LeafLightGpu { out: [1.0 + (i % 7) as f32 * 0.1, 1.0, 0.5, 0.0], ..Default::default() })
+        .collect();
+    let cpu = CpuScene::mip(&data, &light);
+    for q in Quality::ALL {
+        let mut r = Renderer::new(&gpu, &data, Settings::preset(q)).unwrap();
+        r.write_leaf_light(&light).unwrap();
+        r.run_bounce().unwrap();
+        let got = r.read_leaf_light().unwrap();
+        let params = r.params();
+        let mut worst = 0.0f64;
+        let mut checked = 0;
+        for i in (0..data.leaves.len()).step_by(37) {
+            if data.leaves[i].normal_mean[..3].iter().all(|&v| v == 0.0) {
+                continue;
+            }
+            let want = cpu.gather(&params, i);
+            for k in 0..3 {
+                worst = worst.max((f64::from(got[i].gather[k]) - want[k]).abs() / want[k].abs().max(0.05));
+            }
+            checked += 1;
+        }
+        eprintln!("{}: gather vs CPU over {checked} leaves, worst {worst:.2e}", q.name());
+        assert!(checked > 100);
+        assert!(worst < 1e-3, "{}: a cone was cut short: {worst}", q.name());
+    }
+}

@@ -523,8 +523,10 @@ fn light_shadow_kind(light: Light) -> u32 {
 
 // Shadow cone toward a light (Crassin et al. 2011): the share of a narrow cone from `origin_m`
 // along unit `l` that reaches distance `dist_m` through the voxels' filtered opacity; 0 where the
-// axis enters rock. The cone is one leaf wide at least and widens with SHADOW_CONE_TAN_HALF, so
-// that a thin wall seen at a coarse level still blocks it while a small gap lets light by.
+// axis enters rock. Its footprint widens with SHADOW_CONE_TAN_HALF away from both ends (a spindle,
+// at least one leaf wide): a point light is seen along a ray, so the cone must narrow again at the
+// lamp, or lamps hung just above a floor would sit inside a coarse voxel holding that floor and
+// shadow themselves.
 const SHADOW_CONE_TAN_HALF: f32 = 0.1;
 
 fn cone_visibility(origin_m: vec3<f32>, l: vec3<f32>, dist_m: f32) -> f32 {
@@ -540,7 +542,7 @@ fn cone_visibility(origin_m: vec3<f32>, l: vec3<f32>, dist_m: f32) -> f32 {
         if rock_on_segment(origin_m, l, t_prev, t) >= 0.0 {
             return 0.0;
         }
-        let diameter = max(leaf, 2.0 * t * SHADOW_CONE_TAN_HALF);
+        let diameter = max(leaf, 2.0 * min(t, dist_m - t) * SHADOW_CONE_TAN_HALF);
         let s = sample_lod((origin_m + l * t) / leaf, log2(diameter / leaf), l);
         let sa = 1.0 - pow(max(1.0 - min(s.a, 1.0), 0.0), params.step_scale);
         a += (1.0 - a) * sa;
