@@ -162,7 +162,7 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
             height: 120,
             out: out.clone(),
             settings: settings.clone(),
-            exposure: Some(4.0),
+            exposure: Some(1.0),
             gpu: GpuOptions { prefer_software: true, backends: Some(wgpu::Backends::VULKAN) },
             lamp_string: Some(64),
         };
@@ -188,12 +188,21 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
         scene.lights = scene.lamp_string(64, render_job::STRING_LAMP_W, render_job::STRING_LAMP_LIFT_M);
         let cam = render_job::resolve_camera(&scene, &CameraChoice::Named("chamber".into())).unwrap();
         let mut r =
-            Renderer::new(&gpu, &scene, Settings { specular: false, exposure: 4.0, ..settings }).unwrap();
+            Renderer::new(&gpu, &scene, Settings { specular: false, exposure: 1.0, ..settings }).unwrap();
         r.settle(|_, _| {}).unwrap();
         let (frame, plan) = r.render(&cam, 160, 120).unwrap();
         assert!(plan.explain().contains("no specular cones"), "{}", plan.explain());
-        let d = golden::diff(&frame.ldr, &frames[0]);
-        eprintln!("chamber without specular: {d:?}");
-        assert!(!golden::within_tolerance(&d), "specular reflection must change the wet chamber");
+        // Wet walls are a few percent of reflection (Fresnel at water's 1.33) with lamp highlights:
+        // the change is local, so count the pixels it moves by more than 8 levels.
+        let moved =
+            frame.ldr.iter().zip(&frames[0]).filter(|(a, b)| (0..3).any(|k| a[k].abs_diff(b[k]) > 8)).count();
+        eprintln!(
+            "chamber without specular: {:?}, {moved} pixels moved by > 8",
+            golden::diff(&frame.ldr, &frames[0])
+        );
+        assert!(
+            moved * 200 >= frame.ldr.len(),
+            "specular reflection must change the wet chamber: {moved} pixels"
+        );
     }
 }
