@@ -163,19 +163,7 @@ fn propagation_gathers_every_cone_on_the_demo_cave_with_every_preset() {
         r.write_leaf_light(&light).unwrap();
         r.run_bounce().unwrap();
         let got = r.read_leaf_light().unwrap();
-        let params = r.params();
-        let mut worst = 0.0f64;
-        let mut checked = 0;
-        for i in (0..data.leaves.len()).step_by(37) {
-            if data.leaves[i].normal_mean[..3].iter().all(|&v| v == 0.0) {
-                continue;
-            }
-            let want = cpu.gather(&params, i);
-            for k in 0..3 {
-                worst = worst.max((f64::from(got[i].gather[k]) - want[k]).abs() / want[k].abs().max(0.05));
-            }
-            checked += 1;
-        }
+        let (worst, checked) = cpu.worst_gather_error(&r.params(), &got, 37);
         eprintln!("{}: gather vs CPU over {checked} leaves, worst {worst:.2e}", q.name());
         assert!(checked > 100);
         assert!(worst < 1e-3, "{}: a cone was cut short: {worst}", q.name());

@@ -231,4 +231,23 @@ impl<'a> CpuScene<'a> {
         }
         g
     }
+
+    /// Largest error of the GPU's gathered radiance `got` against [`CpuScene::gather`] over every
+    /// `step`-th surface leaf (rock interiors, with no mean normal, gather trivially), relative
+    /// to the CPU value or 0.05 where that is smaller; and how many leaves were checked.
+    pub fn worst_gather_error(&self, p: &Params, got: &[LeafLightGpu], step: usize) -> (f64, usize) {
+        let mut worst = 0.0f64;
+        let mut checked = 0;
+        for i in (0..self.scene.leaves.len()).step_by(step.max(1)) {
+            if self.scene.leaves[i].normal_mean[..3].iter().all(|&v| v == 0.0) {
+                continue;
+            }
+            let want = self.gather(p, i);
+            for k in 0..3 {
+                worst = worst.max((f64::from(got[i].gather[k]) - want[k]).abs() / want[k].abs().max(0.05));
+            }
+            checked += 1;
+        }
+        (worst, checked)
+    }
 }

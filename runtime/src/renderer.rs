@@ -19,7 +19,7 @@ use crate::gpu::Gpu;
 use crate::gpu_types::{LeafLightGpu, LightGpu, MAX_CONES, Params, SplatUniform, flags, light_shadow};
 use crate::passes::{self, gbuffer, shade, shadow};
 use crate::plan::{self, EffectPlan, Pass, PlanInputs};
-use crate::scene_data::SceneData;
+use crate::scene_data::{MAX_ENV_LEVELS, MAX_MATERIALS, SceneData};
 
 /// How indirect light is filtered at a pixel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -98,6 +98,14 @@ impl ShadowFallback {
 
     pub fn parse(s: &str) -> Option<Self> {
         [ShadowFallback::Cone, ShadowFallback::None].into_iter().find(|f| f.name() == s)
+    }
+
+    /// In words, for the effect plan.
+    pub fn describe(self) -> &'static str {
+        match self {
+            ShadowFallback::Cone => "SVO cone shadows",
+            ShadowFallback::None => "no shadows",
+        }
     }
 }
 
@@ -444,6 +452,7 @@ impl Renderer {
                 .map(|l| (Vec3::from_slice(&l.position_kind[..3]), l.params[1]))
                 .collect::<Vec<_>>(),
         );
+        let lights_in_range = light_grid.occupancy();
         let point_lights = scene.lights.iter().filter(|l| l.spot.is_none()).count();
         let spot_lights = scene.lights.len() - point_lights;
 
@@ -463,9 +472,9 @@ impl Renderer {
         cone_arr[..cones.len()].copy_from_slice(&cones);
         let environment_on = scene.environment_sh.is_some() && settings.environment;
         // Specular material slots (slot 0 = diffuse) and the environment's prefiltered levels.
-        let mut material_slots = [[0.0f32; 4]; 8];
+        let mut material_slots = [[0.0f32; 4]; MAX_MATERIALS + 1];
         let (mut specular_materials, mut specular_surfels) = (0, 0);
-        for (k, m) in scene.materials.iter().enumerate().take(7) {
+        for (k, m) in scene.materials.iter().enumerate().take(MAX_MATERIALS) {
             let alpha = m.roughness * m.roughness;
             material_slots[k + 1] = [m.specular, alpha, m.ior, m.roughness];
             if settings.specular && m.surfels > 0 {
@@ -473,12 +482,12 @@ impl Renderer {
                 specular_surfels += m.surfels;
             }
         }
-        let mut env_levels = [[0.0f32; 4]; 8];
+        let mut env_levels = [[0.0f32; 4]; MAX_ENV_LEVELS];
         let chain = scene.env_chain.as_ref().filter(|_| environment_on);
-        let env_level_count = chain.map_or(0, |c| c.levels.len().min(8) as u32);
+        let env_level_count = chain.map_or(0, |c| c.levels.len().min(MAX_ENV_LEVELS) as u32);
         let env_atlas_size = chain.map_or((1, 1), |c| (c.width, c.height));
         if let Some(c) = chain {
-            for (k, l) in c.levels.iter().take(8).enumerate() {
+            for (k, l) in c.levels.iter().take(MAX_ENV_LEVELS).enumerate() {
                 env_levels[k] = [l.0 as f32, l.1 as f32, l.2 as f32, l.3];
             }
         }
@@ -701,7 +710,7 @@ impl Renderer {
             (set, buf)
         });
         let r = Self {
-            inject: passes::inject::Inject::new(gpu, &scene_layout, f16, light_grid.occupancy().1),
+            inject: passes::inject::Inject::new(gpu, &scene_layout, f16, lights_in_range.1),
             env: passes::env::new(gpu, &scene_layout, f16),
             mip: passes::mip::Mip::new(gpu, &scene_layout, &by_height, &ranges, f16),
             propagate: passes::propagate::new(gpu, &scene_layout, f16),
@@ -719,7 +728,7 @@ impl Renderer {
             point_lights,
             spot_lights,
             shadowed,
-            lights_in_range: light_grid.occupancy(),
+            lights_in_range,
             specular_materials,
             specular_surfels,
             env_atlas,
@@ -806,10 +815,7 @@ impl Renderer {
             shadows_enabled: self.settings.shadows,
             shadowed: self.shadowed,
             shadow_budget: self.settings.shadowed_lights,
-            fallback: match self.settings.shadow_fallback {
-                ShadowFallback::Cone => "SVO cone shadows",
-                ShadowFallback::None => "no shadows",
-            },
+            fallback: self.settings.shadow_fallback.describe(),
             lights_in_range: self.lights_in_range,
             specular_materials: self.specular_materials,
             specular_surfels: self.specular_surfels,

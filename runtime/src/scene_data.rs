@@ -456,8 +456,6 @@ impl SceneData {
                 )));
             }
             out.environment_sh = Some(first.coeffs.map(|c| c.map(|v| v * env.intensity)));
-        }
-        if let Some(env) = &scene.environment {
             out.env_chain = read_env_chain(pkg, env.index, env.intensity).map_err(bad)?;
         }
         let mut slot = 0u8;
@@ -475,12 +473,10 @@ impl SceneData {
             slot += 1;
             let lo = DVec3::from_array(region.min_m) - frame;
             let hi = DVec3::from_array(region.max_m) - frame;
-            let mut n = 0;
             for s in &mut out.surfels {
                 let p = Vec3::from_slice(&s.position_radius[..3]).as_dvec3();
                 if p.cmpge(lo).all() && p.cmple(hi).all() && s.normal_spread[2] >= region.min_normal_z {
                     s.color[3] = slot;
-                    n += 1;
                 }
             }
             out.materials.push(SceneMaterial {
@@ -488,8 +484,14 @@ impl SceneData {
                 specular: m.specular.clamp(0.0, 1.0),
                 roughness: m.roughness.clamp(0.02, 1.0),
                 ior: m.ior.clamp(1.0, 3.0),
-                surfels: n,
+                surfels: 0,
             });
+        }
+        // Counted once every region is applied: where regions overlap, the last one listed wins.
+        for s in &out.surfels {
+            if let Some(m) = usize::from(s.color[3]).checked_sub(1).and_then(|k| out.materials.get_mut(k)) {
+                m.surfels += 1;
+            }
         }
         for c in &scene.cameras {
             out.cameras.push(SceneCamera {

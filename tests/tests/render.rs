@@ -10,6 +10,24 @@ use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
 use grotto_runtime::renderer::Settings;
 use grotto_tests::golden;
 
+/// A 160x120 single frame of `camera` to `out` on the software Vulkan adapter, default settings;
+/// callers override what they vary.
+fn view(package: &Path, camera: &str, out: std::path::PathBuf) -> RenderOptions {
+    RenderOptions {
+        package: package.to_path_buf(),
+        camera: CameraChoice::Named(camera.into()),
+        path: Vec::new(),
+        frames: 1,
+        width: 160,
+        height: 120,
+        out,
+        settings: Settings::default(),
+        exposure: None,
+        gpu: GpuOptions { prefer_software: true, backends: Some(wgpu::Backends::VULKAN) },
+        lamp_string: None,
+    }
+}
+
 fn build_small_cave(dir: &Path) -> std::path::PathBuf {
     synth::small_cave_package(dir, &synth::SmallCave::default()).unwrap()
 }
@@ -22,17 +40,10 @@ fn demo_cave_renders_the_same_on_vulkan_and_gl() {
         for camera in ["chamber", "entrance"] {
             let out = dir.path().join(format!("{camera}-{name}.png"));
             let opts = RenderOptions {
-                package: package.clone(),
-                camera: CameraChoice::Named(camera.into()),
-                path: Vec::new(),
-                frames: 1,
-                width: 160,
-                height: 120,
-                out: out.clone(),
                 settings: Settings { bounces: 3, shadow_map_size: 256, ..Settings::default() },
                 exposure: Some(8.0),
                 gpu: GpuOptions { prefer_software: true, backends: Some(backend) },
-                lamp_string: None,
+                ..view(&package, camera, out.clone())
             };
             let summary = render_job::run(&opts, |_| {}).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert!(summary.tiles > 1, "the demo cave must span several tiles");
@@ -52,17 +63,11 @@ fn demo_cave_renders_the_same_on_vulkan_and_gl() {
     // No holes at the demo's resolution, and linear radiance as EXR.
     let exr_path = dir.path().join("chamber.exr");
     let opts = RenderOptions {
-        package: package.clone(),
-        camera: CameraChoice::Named("chamber".into()),
-        path: Vec::new(),
-        frames: 1,
         width: 640,
         height: 480,
-        out: exr_path.clone(),
         settings: Settings { bounces: 1, shadow_map_size: 256, ..Settings::default() },
         exposure: Some(8.0),
-        gpu: GpuOptions { prefer_software: true, backends: Some(wgpu::Backends::VULKAN) },
-        lamp_string: None,
+        ..view(&package, "chamber", exr_path.clone())
     };
     render_job::run(&opts, |_| {}).unwrap();
     let img = exr::prelude::read_first_rgba_layer_from_file(
@@ -92,19 +97,8 @@ fn demo_cave_renders_the_same_on_vulkan_and_gl() {
             ),
         ] {
             let out = dir.path().join("wrong.png");
-            let opts = RenderOptions {
-                package: package.clone(),
-                camera: CameraChoice::Named("chamber".into()),
-                path: Vec::new(),
-                frames: 1,
-                width: 160,
-                height: 120,
-                out: out.clone(),
-                settings,
-                exposure: Some(8.0),
-                gpu: GpuOptions { prefer_software: true, backends: Some(wgpu::Backends::VULKAN) },
-                lamp_string: None,
-            };
+            let opts =
+                RenderOptions { settings, exposure: Some(8.0), ..view(&package, "chamber", out.clone()) };
             render_job::run(&opts, |_| {}).unwrap();
             let (w, h, pixels) = grotto_runtime::image_out::read_png(&out).unwrap();
             let d = golden::diff(&pixels, &golden_pixels("demo-chamber", w, h));
@@ -154,17 +148,10 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
     for camera in ["chamber", "entrance"] {
         let out = dir.path().join(format!("wet-{camera}.png"));
         let opts = RenderOptions {
-            package: package.clone(),
-            camera: CameraChoice::Named(camera.into()),
-            path: Vec::new(),
-            frames: 1,
-            width: 160,
-            height: 120,
-            out: out.clone(),
             settings: settings.clone(),
             exposure: Some(1.0),
-            gpu: GpuOptions { prefer_software: true, backends: Some(wgpu::Backends::VULKAN) },
             lamp_string: Some(64),
+            ..view(&package, camera, out.clone())
         };
         let summary = render_job::run(&opts, |_| {}).unwrap();
         let explain = summary.first_plan.explain() + &summary.last_plan.explain();

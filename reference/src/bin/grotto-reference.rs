@@ -102,18 +102,30 @@ fn main() -> anyhow::Result<()> {
     }
 }
 
-fn lights(a: LightsArgs) -> anyhow::Result<()> {
-    use grotto_reference::accuracy;
-    let (w, h) = grotto_runtime::render_job::parse_size(&a.size).map_err(anyhow::Error::msg)?;
+/// The image size of a sweep and the device its runtime runs on.
+fn size_and_gpu(size: &str, software: bool) -> anyhow::Result<((u32, u32), grotto_runtime::gpu::Gpu)> {
+    let wh = grotto_runtime::render_job::parse_size(size).map_err(anyhow::Error::msg)?;
     let gpu = grotto_runtime::gpu::Gpu::new(&grotto_runtime::gpu::GpuOptions {
-        prefer_software: a.software,
+        prefer_software: software,
         ..Default::default()
     })?;
+    Ok((wh, gpu))
+}
+
+fn lights(a: LightsArgs) -> anyhow::Result<()> {
+    use grotto_reference::accuracy;
+    let ((w, h), gpu) = size_and_gpu(&a.size, a.software)?;
     let t0 = std::time::Instant::now();
+    let bar = indicatif::ProgressBar::new_spinner().with_style(
+        indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+    );
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
     let (scene, rows) = accuracy::lights_sweep(&gpu, a.lamps, w, h, a.spp, |what| {
-        eprintln!("[{:6.0} s] {what}", t0.elapsed().as_secs_f64());
+        bar.set_message(what.to_string());
     })
     .map_err(anyhow::Error::msg)?;
+    bar.finish_and_clear();
     let command = format!(
         "cargo run --release -p grotto-reference -- lights --lamps {} --size {w}x{h} --spp {}",
         a.lamps, a.spp
@@ -127,11 +139,7 @@ fn lights(a: LightsArgs) -> anyhow::Result<()> {
 
 fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
     use grotto_reference::accuracy;
-    let (w, h) = grotto_runtime::render_job::parse_size(&a.size).map_err(anyhow::Error::msg)?;
-    let gpu = grotto_runtime::gpu::Gpu::new(&grotto_runtime::gpu::GpuOptions {
-        prefer_software: a.software,
-        ..Default::default()
-    })?;
+    let ((w, h), gpu) = size_and_gpu(&a.size, a.software)?;
     eprintln!("reference renders ({} spp, {w}x{h})...", a.spp);
     let scenes = accuracy::scenes(w, h, a.spp, a.scene.as_deref());
     anyhow::ensure!(!scenes.is_empty(), "no scene named {:?}", a.scene);

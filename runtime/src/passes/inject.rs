@@ -5,8 +5,8 @@
 //! Why batches: Mesa's software drivers (llvmpipe, lavapipe) share one budget of 65535 loop
 //! iterations among all loops of a shader invocation (`LP_MAX_TGSI_LOOP_ITERATIONS`) and silently
 //! end every loop past it; an SVO shadow cone toward a lamp can take thousands of iterations, so
-//! one invocation looping over 64 lamps lost the last 15 of them (measured on the demo cave with a
-//! 64-lamp string: one leaf got 0.097 instead of the 0.708 its lamps give one by one). Short
+//! one invocation looping over a long lamp list lost its last lamps (runtime/tests/gpu.rs
+//! `many_cone_shadowed_lamps_add_up_...` fails with a single batch). Short
 //! dispatches also keep real GPUs clear of driver watchdogs, as the Lexolights report's multipass
 //! lighting does.
 

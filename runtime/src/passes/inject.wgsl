@@ -25,6 +25,8 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let p = leaf.center_m.xyz;
     var irradiance = vec3<f32>(0.0);
     var far = vec3<f32>(0.0);
+    // Shadow cones start one leaf off the surface, like the gather cones.
+    let o = leaf_cone_origin(leaf);
     let cell = light_cell(p);
     let start = light_grid[cell] + batch.first;
     let last = min(light_grid[cell + 1u], start + batch.count);
@@ -54,7 +56,6 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
         if kind == LIGHT_MAP {
             vis = shadow_visibility(light, p, dist, params.shadow_bias_m);
         } else if kind == LIGHT_CONE {
-            let o = leaf_cone_origin(leaf);
             let to = light.position_kind.xyz - o;
             let d = length(to);
             vis = select(1.0, cone_visibility(o, to / d, d), d > 1e-4);

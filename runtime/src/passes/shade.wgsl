@@ -63,39 +63,27 @@ fn env_glossy(r: vec3<f32>, roughness: f32, tan_half: f32) -> vec3<f32> {
     return mix(env_level(k, r), env_level(k + 1u, r), t);
 }
 
-// Leaf gather, emission, sky visibility (x of the third) and the light of the lights beyond the
-// shadow-map budget (`far`) at `p_m`, interpolated over the leaves around it with weights
-// renormalised over the leaves that exist (empty cells carry no light).
-fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 4> {
-    let u = p_m / params.leaf_size_m - vec3<f32>(0.5);
-    let base = floor(u);
-    let f = u - base;
-    let i0 = vec3<i32>(base);
-    var gather = vec3<f32>(0.0);
-    var emission = vec3<f32>(0.0);
-    var sky = 0.0;
-    var far = vec3<f32>(0.0);
-    var wsum = 0.0;
-    let cubic = (params.flags & FLAG_TRICUBIC) != 0u;
-    var lo = select(0, -1, cubic);
-    var hi = select(1, 2, cubic);
-    // A surfel at the rim of its leaf can have none of the 8 nearest leaf cells occupied: then
-    // the 4x4x4 cells around it with a tent twice as wide (measured: black speckles in the
-    // per-leaf lamp light otherwise).
-    for (var attempt = 0; attempt < 2; attempt++) {
-    let wide = attempt == 1;
-    if wide {
-        lo = -1;
-        hi = 2;
-    }
+// Weighted sums of the leaf light around a point (leaf_light_sum).
+struct LeafSum {
+    gather: vec3<f32>,
+    emission: vec3<f32>,
+    far: vec3<f32>,
+    sky: f32,
+    weight: f32,
+}
+
+// Sums the leaves of the cells i0 + lo ..= i0 + hi (each axis) with separable weights at
+// fractional position `f`: 0 trilinear, 1 tricubic B-spline, 2 a tent twice as wide.
+fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32) -> LeafSum {
+    var sum = LeafSum(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
     for (var z = lo; z <= hi; z++) {
         for (var y = lo; y <= hi; y++) {
             for (var x = lo; x <= hi; x++) {
                 let o = vec3<f32>(f32(x), f32(y), f32(z));
                 var w3: vec3<f32>;
-                if wide {
+                if kernel == 2u {
                     w3 = max(vec3<f32>(1.0) - 0.5 * abs(o - f), vec3<f32>(0.0));
-                } else if cubic {
+                } else if kernel == 1u {
                     w3 = vec3<f32>(bspline(o.x - f.x), bspline(o.y - f.y), bspline(o.z - f.z));
                 } else {
                     w3 = max(vec3<f32>(1.0) - abs(o - f), vec3<f32>(0.0));
@@ -106,21 +94,41 @@ fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 4> {
                 }
                 let leaf = find_leaf(i0 + vec3<i32>(x, y, z));
                 if leaf != EMPTY {
-                    gather += w * leaf_light[leaf].gather.rgb;
-                    emission += w * leaves[leaf].emission.rgb;
-                    sky += w * leaf_light[leaf].env.w;
-                    far += w * leaf_light[leaf].far.rgb;
-                    wsum += w;
+                    sum.gather += w * leaf_light[leaf].gather.rgb;
+                    sum.emission += w * leaves[leaf].emission.rgb;
+                    sum.sky += w * leaf_light[leaf].env.w;
+                    sum.far += w * leaf_light[leaf].far.rgb;
+                    sum.weight += w;
                 }
             }
         }
     }
-    if wsum > 1e-6 {
-        break;
+    return sum;
+}
+
+// Leaf gather, emission, sky visibility (x of the third) and the light of the lights beyond the
+// shadow-map budget (`far`) at `p_m`, interpolated over the leaves around it with weights
+// renormalised over the leaves that exist (empty cells carry no light).
+fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 4> {
+    let u = p_m / params.leaf_size_m - vec3<f32>(0.5);
+    let base = floor(u);
+    let f = u - base;
+    let i0 = vec3<i32>(base);
+    let cubic = (params.flags & FLAG_TRICUBIC) != 0u;
+    var sum = leaf_light_sum(i0, f, select(0, -1, cubic), select(1, 2, cubic), select(0u, 1u, cubic));
+    if sum.weight <= 1e-6 {
+        // A surfel at the rim of its leaf can have none of the 8 nearest leaf cells occupied:
+        // then the 4x4x4 cells around it with a tent twice as wide (measured: black speckles in
+        // the per-leaf lamp light otherwise).
+        sum = leaf_light_sum(i0, f, -1, 2, 2u);
     }
-    }
-    let inv = select(0.0, 1.0 / wsum, wsum > 1e-6);
-    return array<vec3<f32>, 4>(gather * inv, emission * inv, vec3<f32>(sky * inv, 0.0, 0.0), far * inv);
+    let inv = select(0.0, 1.0 / sum.weight, sum.weight > 1e-6);
+    return array<vec3<f32>, 4>(
+        sum.gather * inv,
+        sum.emission * inv,
+        vec3<f32>(sum.sky * inv, 0.0, 0.0),
+        sum.far * inv,
+    );
 }
 
 // Cubic B-spline kernel (support 2): smooth, non-negative, sums to 1 over the 4 taps.

@@ -337,6 +337,17 @@ fn outside_scene(p_leaf: vec3<f32>) -> bool {
     return any(p_leaf < params.scene_min_leaf.xyz) || any(p_leaf > params.scene_max_leaf.xyz);
 }
 
+// A sample's premultiplied radiance and opacity for one march step: the mip values are for
+// crossing one voxel of edge `diameter`, the step is a fraction `step_scale` of it, so opacity
+// (and premultiplied radiance with it) is corrected to that fraction.
+fn per_step(s: vec4<f32>) -> vec4<f32> {
+    if s.a <= 1e-6 {
+        return s;
+    }
+    let a = 1.0 - pow(max(1.0 - min(s.a, 1.0), 0.0), params.step_scale);
+    return vec4<f32>(s.rgb * (a / s.a), a);
+}
+
 // Front-to-back composited cone from `origin_m` along unit `dir`: premultiplied radiance and
 // opacity. A cone that becomes opaque (>= 0.995) is renormalised by its opacity, i.e. what is
 // hidden behind the last surfaces is assumed to look like them; one whose axis enters rock ends
@@ -368,13 +379,7 @@ fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32) -> vec4<f32> {
         }
         let diameter = max(leaf, 2.0 * t * tan_half);
         let lod = log2(diameter / leaf);
-        var s = sample_lod(p_leaf, lod, dir);
-        // The mip values are for crossing one voxel of edge `diameter`; the step is a fraction
-        // `step_scale` of it, so correct opacity (and premultiplied radiance with it).
-        if s.a > 1e-6 {
-            let a = 1.0 - pow(max(1.0 - min(s.a, 1.0), 0.0), params.step_scale);
-            s = vec4<f32>(s.rgb * (a / s.a), a);
-        }
+        let s = per_step(sample_lod(p_leaf, lod, dir));
         acc += (1.0 - acc.a) * s;
         if acc.a >= 0.995 {
             return vec4<f32>(acc.rgb / acc.a, 1.0);
@@ -544,8 +549,7 @@ fn cone_visibility(origin_m: vec3<f32>, l: vec3<f32>, dist_m: f32) -> f32 {
         }
         let diameter = max(leaf, 2.0 * min(t, dist_m - t) * SHADOW_CONE_TAN_HALF);
         let s = sample_lod((origin_m + l * t) / leaf, log2(diameter / leaf), l);
-        let sa = 1.0 - pow(max(1.0 - min(s.a, 1.0), 0.0), params.step_scale);
-        a += (1.0 - a) * sa;
+        a += (1.0 - a) * per_step(s).a;
         if a >= 0.995 {
             return 0.0;
         }
