@@ -56,6 +56,38 @@ pub struct BuildParams {
     pub halo_m: f64,
 }
 
+/// Leaf edge of the cave default, metres; tile extents and halo below are in its leaves (1 m and
+/// 64 m tiles, a 0.25 m halo at 6.25 cm leaves).
+pub const DEFAULT_LEAF_M: f64 = 0.0625;
+pub const MIN_TILE_LEAVES: f64 = 16.0;
+pub const MAX_TILE_LEAVES: f64 = 1024.0;
+pub const HALO_LEAVES: f64 = 4.0;
+/// Points per scan the automatic leaf size samples.
+pub const SPACING_SAMPLE_POINTS: usize = 100_000;
+
+/// The leaf size chosen from the data (`grotto-pack build --leaf-m auto`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct AutoLeaf {
+    pub leaf_m: f64,
+    /// Median nearest-neighbour spacing it was chosen from, and the points sampled.
+    pub spacing_m: Option<f64>,
+    pub sampled_points: usize,
+}
+
+/// The leaf edge for `scans`: the smallest power of two of metres at or above their median point
+/// spacing (about one point per leaf face, as the demo cave's 1.2 points per leaf), and never
+/// finer than [`DEFAULT_LEAF_M`] (finer leaves cost GI time and memory for detail the surfels
+/// already draw). Sparse clouds (airborne strips at metres) get leaves that hold their points
+/// together, instead of one isolated point per 6 cm voxel and one per tile.
+pub fn auto_leaf(scans: &[ResolvedScan]) -> Result<AutoLeaf> {
+    let sample = tiling::sample_spacing_m(scans, SPACING_SAMPLE_POINTS)?;
+    let leaf_m = match sample {
+        Some((s, _)) if s.is_finite() && s > DEFAULT_LEAF_M => 2f64.powi(s.log2().ceil() as i32),
+        _ => DEFAULT_LEAF_M,
+    };
+    Ok(AutoLeaf { leaf_m, spacing_m: sample.map(|s| s.0), sampled_points: sample.map_or(0, |s| s.1) })
+}
+
 impl BuildParams {
     pub fn tiling(&self) -> TilingParams {
         let budget = self.memory_budget_bytes.max(64 << 20);
@@ -102,6 +134,33 @@ pub struct BuildSummary {
     pub seam_limited_points: u64,
     /// Peak resident memory of the process (Linux), bytes.
     pub peak_rss_bytes: Option<u64>,
+    /// What the package's scene holds: lights, cameras, an environment map.
+    pub lights: usize,
+    pub cameras: usize,
+    pub environment: bool,
+}
+
+impl BuildSummary {
+    /// What the package lacks for a first render, and how to add it (the runtime copes: it frames
+    /// the data and carries a headlamp, but says so).
+    pub fn hints(&self) -> Vec<String> {
+        let mut h = Vec::new();
+        if self.lights == 0 && !self.environment {
+            h.push(
+                "no lights and no environment map: `grotto render` will light the view with a headlamp \
+                 at the camera; add [[light]] entries (or [environment]) to a manifest (docs/manifest.md)"
+                    .to_string(),
+            );
+        }
+        if self.cameras == 0 {
+            h.push(
+                "no cameras: `grotto render` will frame a view on the data and print it; add [[camera]] \
+                 entries to a manifest (docs/manifest.md), or render with --eye/--look-at"
+                    .to_string(),
+            );
+        }
+        h
+    }
 }
 
 /// One tile's sections, built off the writer thread.
@@ -203,7 +262,7 @@ fn build_tile(
         .collect();
     let input_normals: Vec<[f32; 3]> =
         points.iter().map(|p| p.normal_snorm.map(|c| f32::from(c) / 32767.0)).collect();
-    let estimated = normals::estimate(
+    let mut estimated = normals::estimate(
         &TilePoints {
             positions: &positions,
             own: &own,
@@ -212,6 +271,14 @@ fn build_tile(
         },
         params.k,
     );
+    // A point with no distinct neighbour (alone in its tile and halo, or among exact duplicates)
+    // has no spacing to take a radius from: it stands for the leaf it falls in, so it is drawn and
+    // voxelised rather than left a zero-area disc nothing sees.
+    for e in &mut estimated {
+        if !(e.radius_m > 0.0 && e.radius_m.is_finite()) {
+            e.radius_m = 0.5 * params.leaf_m as f32;
+        }
+    }
     let own_points: Vec<&tiling::BinPoint> = points.iter().filter(|p| p.flags & FLAG_HALO == 0).collect();
     let q = f64::from(1u32 << 16) / extent;
     let mut order: Vec<(u64, usize)> = own_points
@@ -650,5 +717,8 @@ fn assemble_plan(
         reused_tiles: 0,
         seam_limited_points,
         peak_rss_bytes: crate::bench::peak_rss_bytes(),
+        lights: scene.lights.len(),
+        cameras: scene.cameras.len(),
+        environment: scene.environment.is_some(),
     })
 }

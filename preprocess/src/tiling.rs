@@ -234,6 +234,53 @@ fn write_json_atomic(path: &Path, value: &impl Serialize) -> Result<()> {
     Ok(())
 }
 
+/// The median distance from a point to its nearest distinct neighbour, in metres, over the first
+/// `per_scan` points of each scan (posed into the world), with the number of points it was taken
+/// over; None with fewer than two distinct points. Consecutive points of a scan lie together (a
+/// scan line, a flight strip), so a scan's first points measure its spacing where a random sample
+/// of a large survey would be too sparse to.
+pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Option<(f64, usize)>> {
+    use kiddo::SquaredEuclidean;
+    let mut chunk = PointChunk::new(ingest::DEFAULT_CHUNK.min(per_scan.max(1)));
+    let mut spacings: Vec<f64> = Vec::new();
+    let mut sampled = 0usize;
+    for scan in scans {
+        let mut source = ingest::open(&scan.path, scan.format, scan.index)?;
+        let mut pts: Vec<[f64; 3]> = Vec::new();
+        while pts.len() < per_scan && source.fill_chunk(&mut chunk)? > 0 {
+            pts.extend(
+                chunk
+                    .xyz
+                    .iter()
+                    .map(|p| scan.world_from_scan.apply(*p))
+                    .filter(|p| p.iter().all(|c| c.is_finite()))
+                    .take(per_scan - pts.len()),
+            );
+        }
+        let Some(first) = pts.first().copied() else { continue };
+        // Centred before the cast: survey coordinates in f32 would round to decimetres.
+        let local: Vec<[f32; 3]> = pts.iter().map(|p| [0, 1, 2].map(|a| (p[a] - first[a]) as f32)).collect();
+        let tree: kiddo::immutable::float::kdtree::ImmutableKdTree<f32, u32, 3, 64> =
+            kiddo::immutable::float::kdtree::ImmutableKdTree::new_from_slice(&local);
+        let k = std::num::NonZero::new(8).expect("8 > 0");
+        for q in &local {
+            // The nearest neighbour at a non-zero distance (duplicates say nothing of spacing).
+            if let Some(d2) =
+                tree.nearest_n::<SquaredEuclidean>(q, k).iter().map(|nb| nb.distance).find(|&d2| d2 > 0.0)
+            {
+                spacings.push(f64::from(d2).sqrt());
+            }
+        }
+        sampled += pts.len();
+    }
+    if spacings.is_empty() {
+        return Ok(None);
+    }
+    let mid = spacings.len() / 2;
+    let median = *spacings.select_nth_unstable_by(mid, f64::total_cmp).1;
+    Ok(Some((median, sampled)))
+}
+
 /// Streams every scan through `f(scan_index, chunk_in_world)`, posing points into the world.
 fn stream_world(
     scans: &[ResolvedScan],

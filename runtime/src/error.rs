@@ -18,6 +18,10 @@ pub enum Error {
     NoAdapter { tried: String },
     #[error("{adapter}: {what}; {hint}")]
     Unsupported { adapter: String, what: String, hint: String },
+    /// A buffer or texture the scene needs is over what the adapter allows; `hint` says what to
+    /// change (leaf size, image size, shadow budget...).
+    #[error("{resource} is over the adapter's limit ({adapter}: {limit}); {hint}")]
+    TooLarge { resource: String, limit: String, adapter: String, hint: String },
     #[error("GPU device: {0}")]
     Device(String),
     #[error("GPU error in {pass}: {message}")]

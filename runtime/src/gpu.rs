@@ -20,6 +20,39 @@ use crate::error::{Error, Result};
 /// Storage buffers one compute stage binds at most (common.wgsl group 0 plus a pass's group 1).
 pub const STORAGE_BUFFERS_NEEDED: u32 = 12;
 
+/// What a user can change when the resource named `label` outgrows the adapter.
+fn hint_for(label: &str) -> String {
+    match label {
+        "nodes" | "leaves" | "leaf light" | "faces" | "mip order" => {
+            "the package has too many voxels for one binding: build it with a larger leaf size \
+             (grotto-pack build --leaf-m), render with --radiance-f16 (halves the radiance pyramid), \
+             or use a GPU with larger storage bindings"
+        }
+        "surfels" => {
+            "the package has too many points for one vertex buffer: build it from fewer points (thin \
+             the scans) or use a GPU with larger buffers"
+        }
+        "rock" | "tiles" => "build the package with a larger leaf size (grotto-pack build --leaf-m)",
+        "lights" | "shadow matrices" | "shadow atlas" | "shadow depth" | "splat uniforms" => {
+            "lower --shadowed-lights or --shadow-map"
+        }
+        "light grid" => "raise --light-cutoff (shorter light ranges) or use fewer lights",
+        "env atlas" => "rebuild the package with a smaller environment map",
+        l if l.starts_with("gbuffer") || l.starts_with("shade") => "render a smaller --size",
+        _ => "use a GPU with larger limits",
+    }
+    .to_string()
+}
+
+/// "137.4 MB (131.1 MiB)"-style sizes for error messages.
+pub fn human_bytes(b: u64) -> String {
+    if b < 1 << 20 {
+        format!("{b} bytes")
+    } else {
+        format!("{:.1} MB ({:.1} MiB)", b as f64 / 1e6, b as f64 / f64::from(1u32 << 20))
+    }
+}
+
 /// How to choose the adapter.
 #[derive(Clone, Debug, Default)]
 pub struct GpuOptions {
@@ -142,16 +175,96 @@ impl Gpu {
         Err(Error::Gpu { pass, message })
     }
 
-    pub fn buffer_init(&self, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    /// Checks a buffer of `size` bytes with `usage` against the device's limits before it is
+    /// created: wgpu reports an over-limit buffer only as a validation error, and
+    /// `create_buffer_init` then panics while mapping the invalid buffer. The error names the
+    /// buffer, its size, the limit and what to change.
+    pub fn check_buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> Result<()> {
+        let limits = self.device.limits();
+        let mut checks = vec![("largest buffer", limits.max_buffer_size)];
+        if usage.contains(wgpu::BufferUsages::STORAGE) {
+            checks.push(("largest storage-buffer binding", limits.max_storage_buffer_binding_size));
+        }
+        if usage.contains(wgpu::BufferUsages::UNIFORM) {
+            checks.push(("largest uniform-buffer binding", limits.max_uniform_buffer_binding_size));
+        }
+        for (limit_name, limit) in checks {
+            if size > limit {
+                return Err(self.too_large(label, size, limit, limit_name));
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks a 2D texture's size against the device's largest texture side.
+    pub fn check_texture(&self, label: &str, width: u32, height: u32) -> Result<()> {
+        let limit = self.device.limits().max_texture_dimension_2d;
+        if width.max(height) > limit {
+            return Err(Error::TooLarge {
+                resource: format!("the '{label}' texture ({width}x{height} texels)"),
+                limit: format!("its largest texture side, {limit} texels"),
+                adapter: self.describe(),
+                hint: hint_for(label),
+            });
+        }
+        Ok(())
+    }
+
+    fn too_large(&self, label: &str, size: u64, limit: u64, limit_name: &str) -> Error {
+        Error::TooLarge {
+            resource: format!("the '{label}' buffer ({})", human_bytes(size)),
+            limit: format!("its {limit_name}, {}", human_bytes(limit)),
+            adapter: self.describe(),
+            hint: hint_for(label),
+        }
+    }
+
+    /// A buffer holding `bytes`, checked first ([`Gpu::check_buffer`]).
+    pub fn buffer_init(&self, label: &str, bytes: &[u8], usage: wgpu::BufferUsages) -> Result<wgpu::Buffer> {
         // wgpu refuses zero-sized bindings and shaders expect at least one element: an empty
         // array gets 256 zero bytes, more than any element type.
         let pad = [0u8; 256];
         let contents = if bytes.is_empty() { &pad[..] } else { bytes };
-        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        self.check_buffer(label, contents.len() as u64, usage)?;
+        Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some(label),
             contents,
             usage,
-        })
+        }))
+    }
+
+    /// An uninitialised buffer of `size` bytes (at least 16), checked first.
+    pub fn buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> Result<wgpu::Buffer> {
+        let size = size.max(16);
+        self.check_buffer(label, size, usage)?;
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size,
+            usage,
+            mapped_at_creation: false,
+        }))
+    }
+
+    /// A single-level 2D texture, checked first.
+    pub fn texture_2d(
+        &self,
+        label: &str,
+        width: u32,
+        height: u32,
+        format: wgpu::TextureFormat,
+        usage: wgpu::TextureUsages,
+    ) -> Result<wgpu::Texture> {
+        self.check_texture(label, width, height)?;
+        Ok(self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d { width: width.max(1), height: height.max(1), depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        }))
     }
 
     /// Copies `size` bytes of `buffer` (which needs COPY_SRC) to the CPU, blocking.

@@ -20,9 +20,7 @@ pub struct TileGpu {
     pub leaf_offset: u32,
     pub node_count: u32,
     pub leaf_count: u32,
-    /// First word of this tile's rock bits in the rock buffer (rock.rs), or `rock::NO_ROCK`.
-    pub rock_offset: u32,
-    pub pad: [u32; 3],
+    pub pad: [u32; 4],
 }
 
 /// An SVO node with global indices: `first_child` is the global node index of the first child for

@@ -10,6 +10,7 @@ pub mod camera;
 pub mod cpu_ref;
 pub mod error;
 pub mod export;
+pub mod framing;
 pub mod gpu;
 pub mod gpu_types;
 pub mod image_out;

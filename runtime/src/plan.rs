@@ -80,6 +80,8 @@ impl EffectPlan {
 /// What the plan is decided from.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlanInputs {
+    /// One of the spot lights is a headlamp at the camera, added because the scene has no light.
+    pub headlamp: bool,
     pub point_lights: usize,
     pub spot_lights: usize,
     pub shadows_enabled: bool,
@@ -116,7 +118,14 @@ pub struct PlanInputs {
 /// Decides the passes for one frame or light update.
 pub fn plan(i: &PlanInputs) -> EffectPlan {
     let analytic = i.point_lights + i.spot_lights;
-    let lights_text = format!("{} point, {} spot lights", i.point_lights, i.spot_lights);
+    let lights_text = if i.headlamp {
+        format!(
+            "{} point, {} spot lights (a headlamp at the camera: the scene has no light of its own)",
+            i.point_lights, i.spot_lights
+        )
+    } else {
+        format!("{} point, {} spot lights", i.point_lights, i.spot_lights)
+    };
     let mut steps = Vec::new();
     let shadow = if analytic == 0 {
         Step { pass: Pass::Shadow, run: false, reason: "no point or spot lights".into() }
@@ -241,6 +250,7 @@ mod tests {
 
     fn base() -> PlanInputs {
         PlanInputs {
+            headlamp: false,
             point_lights: 1,
             spot_lights: 0,
             shadows_enabled: true,
@@ -314,6 +324,13 @@ mod tests {
             "{}",
             p.explain()
         );
+    }
+
+    #[test]
+    fn headlamp_is_named_in_the_plan() {
+        let p = plan(&PlanInputs { headlamp: true, point_lights: 0, spot_lights: 1, ..base() });
+        assert!(p.runs(Pass::Inject) && p.explain().contains("headlamp at the camera"), "{}", p.explain());
+        assert!(!plan(&base()).explain().contains("headlamp"));
     }
 
     #[test]

@@ -24,8 +24,30 @@ pub enum CameraChoice {
     Named(String),
     /// World coordinates (f64, like the manifest).
     Explicit { eye_m: [f64; 3], look_at_m: [f64; 3], up: [f64; 3], fov_y_deg: f64 },
-    /// The package's first camera, or a view of the whole scene if it has none.
+    /// The package's first camera, or, if it has none, the best view measured on the data
+    /// (framing.rs).
     Default,
+}
+
+/// Whether to light the view with a headlamp at the camera.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Headlamp {
+    /// Only when the scene has no light of its own (no lights, emission or environment map).
+    Auto,
+    On,
+    Off,
+}
+
+impl Headlamp {
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "auto" => Some(Headlamp::Auto),
+            "on" => Some(Headlamp::On),
+            "off" => Some(Headlamp::Off),
+            _ => None,
+        }
+    }
 }
 
 /// Everything `grotto render` can be asked.
@@ -46,6 +68,8 @@ pub struct RenderOptions {
     /// Replace the package's lights by a lamp string of this many 8 W lamps
     /// ([`SceneData::lamp_string`]): how cost and error grow with the number of lights.
     pub lamp_string: Option<u32>,
+    /// A headlamp at the (first) camera ([`crate::framing::headlamp`]).
+    pub headlamp: Headlamp,
 }
 
 /// Watts of one lamp of `--lamps` (the synthetic cave's lamp string uses the same).
@@ -79,6 +103,12 @@ pub struct RenderSummary {
     pub exposure: f32,
     /// Most pixels any frame left uncovered (background showing through: holes, or openings).
     pub uncovered_pixels: usize,
+    /// Most pixels any frame showed black (a surface, but no light reaching it).
+    pub black_pixels: usize,
+    /// How the camera and light were chosen where the package did not say (framing, headlamp).
+    pub notes: Vec<String>,
+    /// What looks wrong with the image and why: most of it uncovered, or black.
+    pub warnings: Vec<String>,
     pub settle_s: f64,
     pub render_s: f64,
     pub first_plan: EffectPlan,
@@ -94,43 +124,145 @@ pub enum Progress {
     Frame { done: u32, total: u32 },
 }
 
-/// The camera a choice names in `scene`.
-pub fn resolve_camera(scene: &SceneData, choice: &CameraChoice) -> Result<Camera> {
+/// The camera a choice names in `scene`, for an image of `aspect` (width / height), and a note
+/// when it was framed on the data rather than given.
+pub fn resolve_camera(
+    scene: &SceneData,
+    choice: &CameraChoice,
+    aspect: f32,
+    splat_scale: f32,
+) -> Result<(Camera, Option<String>)> {
     match choice {
         CameraChoice::Named(name) => {
-            scene.cameras.iter().find(|c| &c.name == name).map(Camera::from_scene).ok_or_else(|| {
-                let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
-                Error::Camera(format!(
-                    "no camera named {name:?} in {} (it has: {})",
-                    scene.name,
-                    names.join(", ")
-                ))
-            })
+            scene.cameras.iter().find(|c| &c.name == name).map(|c| (Camera::from_scene(c), None)).ok_or_else(
+                || {
+                    let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
+                    Error::Camera(format!(
+                        "no camera named {name:?} in {} (it has: {})",
+                        scene.name,
+                        if names.is_empty() { "none".into() } else { names.join(", ") }
+                    ))
+                },
+            )
         }
         CameraChoice::Explicit { eye_m, look_at_m, up, fov_y_deg } => {
             let frame = DVec3::from_array(scene.frame_origin_m);
-            Ok(Camera {
-                eye_m: (DVec3::from_array(*eye_m) - frame).as_vec3(),
-                look_at_m: (DVec3::from_array(*look_at_m) - frame).as_vec3(),
-                up: DVec3::from_array(*up).as_vec3(),
-                fov_y_deg: *fov_y_deg as f32,
-            })
+            Ok((
+                Camera {
+                    eye_m: (DVec3::from_array(*eye_m) - frame).as_vec3(),
+                    look_at_m: (DVec3::from_array(*look_at_m) - frame).as_vec3(),
+                    up: DVec3::from_array(*up).as_vec3(),
+                    fov_y_deg: *fov_y_deg as f32,
+                },
+                None,
+            ))
         }
         CameraChoice::Default => {
             if let Some(c) = scene.cameras.first() {
-                return Ok(Camera::from_scene(c));
+                return Ok((Camera::from_scene(c), None));
             }
-            let (lo, hi) = scene.bounds_leaf();
-            let (lo, hi) = (lo * scene.leaf_size_m, hi * scene.leaf_size_m);
-            let center = (lo + hi) * 0.5;
-            Ok(Camera {
-                eye_m: center + (hi - lo) * Vec3::new(0.1, -0.9, 0.4),
-                look_at_m: center,
-                up: Vec3::Z,
-                fov_y_deg: 60.0,
-            })
+            let f = crate::framing::frame(scene, aspect, splat_scale).ok_or_else(|| Error::Scene {
+                package: scene.name.clone(),
+                problem: "no surfels to frame a view on".into(),
+            })?;
+            let frame = DVec3::from_array(scene.frame_origin_m);
+            let world = |p: Vec3| (p.as_dvec3() + frame).to_array().map(|v| format!("{v:.3}")).join(",");
+            let note = format!(
+                "camera: the package has none; framed from {} the data (about {:.0}% of the image \
+                 sees a surface, median distance {:.2} m): --eye={} --look-at={} --up={}",
+                f.kind,
+                f.estimate.coverage * 100.0,
+                f.estimate.median_distance_m,
+                world(f.camera.eye_m),
+                world(f.camera.look_at_m),
+                [f.camera.up.x, f.camera.up.y, f.camera.up.z].map(|v| format!("{v}")).join(","),
+            );
+            Ok((f.camera, Some(note)))
         }
     }
+}
+
+/// The scene and cameras a job renders: the package's scene (with `--lamps` applied), the cameras
+/// of the choice or path, and a headlamp at the first camera where the options or a lightless
+/// scene call for one; with notes saying what was chosen.
+pub fn prepare(opts: &RenderOptions) -> Result<(SceneData, Vec<Camera>, Vec<String>)> {
+    let mut scene = job_scene(opts)?;
+    let aspect = opts.width as f32 / opts.height.max(1) as f32;
+    let splat = opts.settings.splat_scale;
+    let mut notes = Vec::new();
+    let cameras: Vec<Camera> = if opts.path.is_empty() {
+        let (c, note) = resolve_camera(&scene, &opts.camera, aspect, splat)?;
+        notes.extend(note);
+        vec![c]
+    } else {
+        let keys = opts
+            .path
+            .iter()
+            .map(|n| resolve_camera(&scene, &CameraChoice::Named(n.clone()), aspect, splat).map(|c| c.0))
+            .collect::<Result<Vec<_>>>()?;
+        camera::path(&keys, opts.frames.max(1))
+    };
+    for c in &cameras {
+        c.validate()?;
+    }
+    let want = match opts.headlamp {
+        Headlamp::On => true,
+        Headlamp::Off => false,
+        Headlamp::Auto => !scene.has_own_light(),
+    };
+    if want {
+        let first = cameras[0];
+        let seen = crate::framing::estimate(&scene, &first, aspect, splat);
+        // Nothing in view: size the lamp for the scene's extent instead.
+        let distance_m = seen.map(|e| e.median_distance_m).filter(|&d| d > 0.0).unwrap_or_else(|| {
+            let (lo, hi) = scene.bounds_leaf();
+            ((hi - lo) * scene.leaf_size_m).length() * 0.5
+        });
+        let lamp = crate::framing::headlamp(&first, aspect, distance_m);
+        notes.push(format!(
+            "light: {}; a headlamp at the camera, {:.3} W/sr (1 W/m^2 at {distance_m:.2} m){}",
+            if scene.has_own_light() {
+                "--headlamp on"
+            } else {
+                "the scene has no lights, emission or environment map (--headlamp off for none)"
+            },
+            lamp.intensity_w_sr.max_element(),
+            if cameras.len() > 1 { ", fixed at the path's first camera" } else { "" }
+        ));
+        scene.lights.push(lamp);
+        scene.headlamp = true;
+    }
+    Ok((scene, cameras, notes))
+}
+
+/// Pixels at most this bright (max of sRGB channels) count as black.
+const BLACK_LDR: u8 = 4;
+
+/// Warnings for a rendered image: most of it shows no surface, or most of what it shows is black.
+pub fn image_warnings(scene: &SceneData, uncovered: usize, black: usize, pixels: usize) -> Vec<String> {
+    let mut w = Vec::new();
+    if uncovered * 2 > pixels {
+        w.push(format!(
+            "{:.0}% of the image shows no surface: the camera looks past the scan or from too far; \
+             leave out --camera/--eye to frame the data, or move the eye",
+            100.0 * uncovered as f64 / pixels as f64
+        ));
+    }
+    let covered = pixels - uncovered;
+    if covered > 0 && black * 2 > covered {
+        let why = if scene.lights.is_empty() && !scene.has_own_light() {
+            "the scene has no lights, emission or environment map (add [[light]] to the manifest, or \
+             render with --headlamp on)"
+        } else {
+            "no light reaches what the camera sees (lights out of range, shadowed, or culled by \
+             --light-cutoff; or a fixed --exposure too low)"
+        };
+        w.push(format!(
+            "{:.0}% of the surfaces in view are black: {why}",
+            100.0 * black as f64 / covered as f64
+        ));
+    }
+    w
 }
 
 /// Parses an image size `WIDTHxHEIGHT` (each 1..=16384), for both command lines.
@@ -188,20 +320,7 @@ pub fn load_scene(package: &Path) -> Result<SceneData> {
 /// Runs a render job.
 pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<RenderSummary> {
     image_out::kind_of(&opts.out)?;
-    let scene = job_scene(opts)?;
-    let cameras: Vec<Camera> = if opts.path.is_empty() {
-        vec![resolve_camera(&scene, &opts.camera)?]
-    } else {
-        let keys = opts
-            .path
-            .iter()
-            .map(|n| resolve_camera(&scene, &CameraChoice::Named(n.clone())))
-            .collect::<Result<Vec<_>>>()?;
-        camera::path(&keys, opts.frames.max(1))
-    };
-    for c in &cameras {
-        c.validate()?;
-    }
+    let (scene, cameras, notes) = prepare(opts)?;
     let gpu = Gpu::new(&opts.gpu)?;
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
@@ -217,6 +336,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let mut last_plan = first_plan.clone();
     let n = cameras.len() as u32;
     let mut uncovered_pixels = 0;
+    let mut black_pixels = 0;
     for (i, cam) in cameras.iter().enumerate() {
         let (mut frame, plan) = r.render(cam, opts.width, opts.height)?;
         last_plan = plan;
@@ -227,6 +347,14 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             frame = r.render(cam, opts.width, opts.height)?.0;
         }
         uncovered_pixels = uncovered_pixels.max(frame.hdr.iter().filter(|p| p[3] < 0.5).count());
+        black_pixels = black_pixels.max(
+            frame
+                .hdr
+                .iter()
+                .zip(&frame.ldr)
+                .filter(|(h, l)| h[3] >= 0.5 && l[0].max(l[1]).max(l[2]) <= BLACK_LDR)
+                .count(),
+        );
         let path = frame_path(&opts.out, i as u32, n);
         image_out::write_frame(&frame, &path)?;
         images.push(path.display().to_string());
@@ -246,6 +374,14 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         last_change: r.stats().last_change,
         exposure,
         uncovered_pixels,
+        black_pixels,
+        warnings: image_warnings(
+            &scene,
+            uncovered_pixels,
+            black_pixels,
+            opts.width as usize * opts.height as usize,
+        ),
+        notes,
         settle_s,
         render_s: t1.elapsed().as_secs_f64(),
         first_plan,
@@ -288,8 +424,8 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Times every pass `reps` times on the package's first camera (or a default view).
 pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
     use crate::plan::Pass;
-    let scene = job_scene(opts)?;
-    let cam = resolve_camera(&scene, &opts.camera)?;
+    let (scene, cameras, _) = prepare(opts)?;
+    let cam = cameras[0];
     let gpu = Gpu::new(&opts.gpu)?;
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);

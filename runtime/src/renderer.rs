@@ -300,6 +300,8 @@ pub struct Renderer {
     base_params: Params,
     point_lights: usize,
     spot_lights: usize,
+    /// The scene's last light is a headlamp added for a lightless scene (the plan says so).
+    headlamp: bool,
     /// Lights with shadow maps; the others are lit per leaf (lights.rs).
     shadowed: usize,
     /// Lights per light-grid cell: mean and largest.
@@ -350,20 +352,8 @@ const STORAGE: wgpu::BufferUsages =
 impl Renderer {
     pub fn new(gpu: &Gpu, scene: &SceneData, settings: Settings) -> Result<Self> {
         settings.validate()?;
-        let limits = gpu.device.limits();
         let face_bytes: u64 = if settings.radiance_f16 { 8 } else { 16 };
         let faces_bytes = scene.nodes.len() as u64 * 6 * face_bytes;
-        if faces_bytes > limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) {
-            return Err(Error::Unsupported {
-                adapter: gpu.describe(),
-                what: format!(
-                    "the radiance pyramid needs a {faces_bytes}-byte storage buffer, the adapter binds at most {}",
-                    limits.max_storage_buffer_binding_size
-                ),
-                hint: "use a larger leaf size (grotto-pack build --leaf-m) or a GPU with larger buffers"
-                    .into(),
-            });
-        }
         let (lo, hi) = scene.bounds_leaf();
         let leaf = scene.leaf_size_m.max(1e-6);
         let scene_diag_m = ((hi - lo) * leaf).length().max(leaf);
@@ -532,70 +522,51 @@ impl Renderer {
             "params",
             bytemuck::bytes_of(&base_params),
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        );
-        let tiles = gpu.buffer_init("tiles", bytemuck::cast_slice(&scene.tiles), STORAGE);
-        let nodes = gpu.buffer_init("nodes", bytemuck::cast_slice(&scene.nodes), STORAGE);
-        let leaves = gpu.buffer_init("leaves", bytemuck::cast_slice(&scene.leaves), STORAGE);
+        )?;
+        let tiles = gpu.buffer_init("tiles", bytemuck::cast_slice(&scene.tiles), STORAGE)?;
+        let nodes = gpu.buffer_init("nodes", bytemuck::cast_slice(&scene.nodes), STORAGE)?;
+        let leaves = gpu.buffer_init("leaves", bytemuck::cast_slice(&scene.leaves), STORAGE)?;
         // Initial light state: out = emission (no direct, no gather yet).
         let initial: Vec<LeafLightGpu> =
             scene.leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect();
-        let leaf_light = gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial), STORAGE);
-        let faces = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("faces"),
-            size: faces_bytes.max(16),
-            usage: STORAGE,
-            mapped_at_creation: false,
-        });
-        let lights_buf = gpu.buffer_init("lights", bytemuck::cast_slice(&lights_gpu), STORAGE);
+        let leaf_light = gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial), STORAGE)?;
+        let faces = gpu.buffer("faces", faces_bytes, STORAGE)?;
+        let lights_buf = gpu.buffer_init("lights", bytemuck::cast_slice(&lights_gpu), STORAGE)?;
         let mats: Vec<[[f32; 4]; 4]> = shadow_layers.iter().map(|m| m.to_cols_array_2d()).collect();
-        let shadow_mats = gpu.buffer_init("shadow matrices", bytemuck::cast_slice(&mats), STORAGE);
-        let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE);
+        let shadow_mats = gpu.buffer_init("shadow matrices", bytemuck::cast_slice(&mats), STORAGE)?;
+        let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE)?;
         let surfels =
-            gpu.buffer_init("surfels", bytemuck::cast_slice(&scene.surfels), wgpu::BufferUsages::VERTEX);
+            gpu.buffer_init("surfels", bytemuck::cast_slice(&scene.surfels), wgpu::BufferUsages::VERTEX)?;
 
         let atlas_size = wgpu::Extent3d {
             width: face_size * shadow_cols,
             height: face_size * shadow_rows,
             depth_or_array_layers: 1,
         };
-        let shadow_distance = gpu.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("shadow atlas"),
-            size: atlas_size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: shadow::DISTANCE_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        });
+        let shadow_distance = gpu.texture_2d(
+            "shadow atlas",
+            atlas_size.width,
+            atlas_size.height,
+            shadow::DISTANCE_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        )?;
         let shadow_depth = gpu
-            .device
-            .create_texture(&wgpu::TextureDescriptor {
-                label: Some("shadow depth"),
-                size: atlas_size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: shadow::DEPTH_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-                view_formats: &[],
-            })
+            .texture_2d(
+                "shadow depth",
+                atlas_size.width,
+                atlas_size.height,
+                shadow::DEPTH_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT,
+            )?
             .create_view(&Default::default());
         let shadow_view = shadow_distance.create_view(&Default::default());
-        let env_atlas_tex = gpu.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("env atlas"),
-            size: wgpu::Extent3d {
-                width: env_atlas_size.0,
-                height: env_atlas_size.1,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba32Float,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
+        let env_atlas_tex = gpu.texture_2d(
+            "env atlas",
+            env_atlas_size.0,
+            env_atlas_size.1,
+            wgpu::TextureFormat::Rgba32Float,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        )?;
         let placeholder = [[0.0f32; 4]];
         let atlas_texels: &[[f32; 4]] = chain.map_or(&placeholder[..], |c| &c.rgba);
         gpu.queue.write_texture(
@@ -623,9 +594,10 @@ impl Renderer {
             binding: 9,
             resource: wgpu::BindingResource::TextureView(&shadow_view),
         });
-        let rock = gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock_words), STORAGE);
+        let rock = gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock_words), STORAGE)?;
         entries.push(wgpu::BindGroupEntry { binding: 10, resource: rock.as_entire_binding() });
-        let light_grid_buf = gpu.buffer_init("light grid", bytemuck::cast_slice(&light_grid.words), STORAGE);
+        let light_grid_buf =
+            gpu.buffer_init("light grid", bytemuck::cast_slice(&light_grid.words), STORAGE)?;
         entries.push(wgpu::BindGroupEntry { binding: 11, resource: light_grid_buf.as_entire_binding() });
         let scene_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("scene"),
@@ -654,12 +626,11 @@ impl Renderer {
             + atlas_bytes
             + u64::from(env_atlas_size.0) * u64::from(env_atlas_size.1) * 16;
         let splat_layout = shadow::splat_layout(gpu);
-        let splat_uniforms = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("splat uniforms"),
-            size: (shadow_layers.len() as u64 + 1) * size_of::<SplatUniform>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let splat_uniforms = gpu.buffer(
+            "splat uniforms",
+            (shadow_layers.len() as u64 + 1) * size_of::<SplatUniform>() as u64,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        )?;
         // One bind group per uniform slot, each bound at its slot's static offset.
         let splat_groups: Vec<wgpu::BindGroup> = (0..=shadow_layers.len() as u64)
             .map(|slot| {
@@ -710,9 +681,9 @@ impl Renderer {
             (set, buf)
         });
         let r = Self {
-            inject: passes::inject::Inject::new(gpu, &scene_layout, f16, lights_in_range.1),
+            inject: passes::inject::Inject::new(gpu, &scene_layout, f16, lights_in_range.1)?,
             env: passes::env::new(gpu, &scene_layout, f16),
-            mip: passes::mip::Mip::new(gpu, &scene_layout, &by_height, &ranges, f16),
+            mip: passes::mip::Mip::new(gpu, &scene_layout, &by_height, &ranges, f16)?,
             propagate: passes::propagate::new(gpu, &scene_layout, f16),
             shadow: shadow::Shadow::new(gpu, &splat_layout),
             gbuffer: gbuffer::Gbuffer::new(gpu, &splat_layout),
@@ -727,6 +698,7 @@ impl Renderer {
             base_params,
             point_lights,
             spot_lights,
+            headlamp: scene.headlamp,
             shadowed,
             lights_in_range,
             specular_materials,
@@ -810,6 +782,7 @@ impl Renderer {
             _ => false,
         };
         PlanInputs {
+            headlamp: self.headlamp,
             point_lights: self.point_lights,
             spot_lights: self.spot_lights,
             shadows_enabled: self.settings.shadows,
@@ -965,8 +938,8 @@ impl Renderer {
             self.gpu.queue.write_buffer(&self.splat_uniforms, slot, bytemuck::bytes_of(&u));
             let reuse = self.view.as_ref().is_some_and(|v| v.targets.width == w && v.targets.height == h);
             if !reuse {
-                let targets = gbuffer::Targets::new(&self.gpu, w, h);
-                let outputs = self.shade.outputs(&self.gpu, &targets, &self.env_atlas);
+                let targets = gbuffer::Targets::new(&self.gpu, w, h)?;
+                let outputs = self.shade.outputs(&self.gpu, &targets, &self.env_atlas)?;
                 self.view = Some(View { camera: *camera, targets, outputs });
             } else if let Some(v) = self.view.as_mut() {
                 v.camera = *camera;

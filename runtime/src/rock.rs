@@ -18,8 +18,16 @@
 //!
 //! Written by hand: a multi-source flood over a sparse cell set with per-cell seeds is a few
 //! lines over a hash map; a kd-tree query per cell would touch every cell of every tile.
+//!
+//! Storage: the rock cells of the whole scene go into one hash table of 4x4x4-cell bricks
+//! ([`RockTable`]), looked up by global cell coordinates, so its size follows the rock (a shell
+//! `ROCK_REACH_CELLS` thick behind the surfaces), never the volume of a tile, and a cell beyond
+//! every tile's cube (rock behind the outer walls) is stored once. Lookup cost does not depend on
+//! the number of tiles.
 
-use std::collections::HashMap;
+// foldhash: the flood makes millions of lookups of small integer keys, where std's SipHash
+// (DoS-resistant, slow) cost more than the flood itself.
+use foldhash::{HashMap, HashSet};
 
 use glam::{IVec3, Vec3};
 
@@ -34,8 +42,6 @@ pub const ROCK_REACH_CELLS: i32 = 4;
 /// normal (depth >= this * lateral offset): beside an opening, the wall around it is the nearest
 /// surface, and its plane extended across the opening must not turn the opening into rock.
 pub const BEHIND_SLOPE: f32 = 0.5;
-/// `TileGpu::rock_offset` of a tile without rock bits.
-pub const NO_ROCK: u32 = u32::MAX;
 
 #[derive(Clone, Copy)]
 struct Seed {
@@ -71,14 +77,13 @@ fn is_edge(cell: IVec3, normal: Vec3, seeds: &HashMap<IVec3, Seed>) -> bool {
     })
 }
 
-/// Classifies rock and stores it as one bit per cell for each tile of `scene` (tile-local x fastest,
-/// then y, then z), setting each tile's `rock_offset` into `scene.rock_words`.
+/// Classifies rock and stores the rock cells of `scene` as a [`RockTable`] in `scene.rock_words`.
 pub fn classify(scene: &mut SceneData) {
     let leaf_m = scene.leaf_size_m;
     // Seeds: the mean position and Toksvig mean normal of the oriented leaves in each cell. Cells
     // whose leaves have no clear orientation (solid interiors, clutter) are flooded like empty
     // ones: solid matter behind a wall is rock as much as empty space is.
-    let mut sums: HashMap<IVec3, (Vec3, Vec3, f32)> = HashMap::new();
+    let mut sums: HashMap<IVec3, (Vec3, Vec3, f32)> = HashMap::default();
     for l in &scene.leaves {
         let c_leaf = Vec3::from_slice(&l.center_m[..3]) / leaf_m;
         let cell = c_leaf.floor().as_ivec3() >> ROCK_LEVEL as i32;
@@ -90,7 +95,7 @@ pub fn classify(scene: &mut SceneData) {
             e.2 += 1.0;
         }
     }
-    let mut seed_of: HashMap<IVec3, Seed> = HashMap::new();
+    let mut seed_of: HashMap<IVec3, Seed> = HashMap::default();
     let mut frontier = Vec::new();
     let mut cells: Vec<_> = sums.into_iter().collect();
     // Deterministic order (hash map iteration order is not).
@@ -107,20 +112,41 @@ pub fn classify(scene: &mut SceneData) {
             seed.edge = true;
         }
     }
+    // Only a seed that is no edge makes rock, within `ROCK_REACH_CELLS` of itself, and which seed
+    // claims a cell there depends only on cells within `ROCK_REACH_CELLS` of that cell: the flood
+    // is kept to blocks of 8 cells around those seeds' blocks (8 >= twice the reach, so this is
+    // exact). Sparse clouds (airborne scans at fine leaves) are almost all edges; flooding their
+    // isolated seeds made (2 r + 1)^3 cells each for nothing.
+    const BLOCK_SHIFT: i32 = 3;
+    const _: () = assert!(1 << BLOCK_SHIFT >= 2 * ROCK_REACH_CELLS);
+    let core: HashSet<IVec3> =
+        seed_of.iter().filter(|(_, s)| !s.edge).map(|(c, _)| *c >> BLOCK_SHIFT).collect();
+    let mut region: HashSet<IVec3> = HashSet::default();
+    for b in &core {
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    region.insert(*b + IVec3::new(dx, dy, dz));
+                }
+            }
+        }
+    }
+    let in_region = |c: IVec3| region.contains(&(c >> BLOCK_SHIFT));
+    frontier.retain(|&c| in_region(c));
     let cell_leaves = (1 << ROCK_LEVEL) as f32;
     let centre = |c: IVec3| (c.as_vec3() + Vec3::splat(0.5)) * cell_leaves;
     let mut rock: Vec<IVec3> = Vec::new();
     for _ in 0..ROCK_REACH_CELLS {
         // One layer: every unvisited neighbour of the frontier takes, of the seeds its frontier
         // neighbours carry, the one nearest to its centre (nearest-site propagation).
-        let mut offered: HashMap<IVec3, (f32, Seed)> = HashMap::new();
+        let mut offered: HashMap<IVec3, (f32, Seed)> = HashMap::default();
         for &cell in &frontier {
             let seed = seed_of[&cell];
             for dz in -1..=1 {
                 for dy in -1..=1 {
                     for dx in -1..=1 {
                         let next = cell + IVec3::new(dx, dy, dz);
-                        if seed_of.contains_key(&next) {
+                        if seed_of.contains_key(&next) || !in_region(next) {
                             continue;
                         }
                         let d = centre(next).distance_squared(seed.center_leaf);
@@ -146,61 +172,176 @@ pub fn classify(scene: &mut SceneData) {
         }
         frontier = next_frontier;
     }
-    scene.rock_words.clear();
-    for t in &mut scene.tiles {
-        if t.depth < ROCK_LEVEL {
-            t.rock_offset = NO_ROCK;
-            continue;
+    scene.rock_words = RockTable::build(&rock).words;
+}
+
+/// Rock cells per brick side, as a shift: a brick is 4x4x4 cells, its 64 bits two words.
+pub const BRICK_SHIFT: u32 = 2;
+/// Words before the first entry: capacity - 1 (capacity a power of two), the longest probe
+/// sequence any stored brick needs, the number of bricks, 0.
+pub const HEADER_WORDS: usize = 4;
+/// Words per entry: brick x, y, z (global brick units, i32 bits), then the 64 rock bits (cell
+/// `x + 4 (y + 4 z)` within the brick, low word first).
+pub const ENTRY_WORDS: usize = 5;
+/// Brick x of an empty slot; no brick reaches it (leaf coordinates stay within +-2^28).
+pub const EMPTY_KEY: i32 = i32::MIN;
+
+/// The hash of a brick coordinate, identical in common.wgsl (`rock_hash`): each axis times a large
+/// odd constant (Teschner et al. 2003), xor-ed, then murmur3's finaliser so neighbouring bricks
+/// spread over the table.
+pub fn brick_hash(b: IVec3) -> u32 {
+    let mut h = (b.x as u32).wrapping_mul(0x8da6_b343)
+        ^ (b.y as u32).wrapping_mul(0xd816_3841)
+        ^ (b.z as u32).wrapping_mul(0xcb1a_b31f);
+    h ^= h >> 16;
+    h = h.wrapping_mul(0x85eb_ca6b);
+    h ^= h >> 13;
+    h = h.wrapping_mul(0xc2b2_ae35);
+    h ^ (h >> 16)
+}
+
+/// Rock as the GPU reads it: an open-addressing hash table (linear probing, load at most 1/2) of
+/// the bricks that hold rock. Its size follows the rock cells, which lie within
+/// `ROCK_REACH_CELLS` of the scanned surfaces: it grows with the surface, not with the volume of
+/// the tiles (a dense grid per tile did, and outgrew what adapters bind on sparse scans).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct RockTable {
+    pub words: Vec<u32>,
+}
+
+impl RockTable {
+    /// The table of `cells` (global rock-cell units; repeats are fine).
+    pub fn build(cells: &[IVec3]) -> Self {
+        let mut bricks: HashMap<IVec3, u64> = HashMap::default();
+        for &c in cells {
+            let b = c >> BRICK_SHIFT as i32;
+            let l = c - (b << BRICK_SHIFT as i32);
+            *bricks.entry(b).or_insert(0) |= 1u64 << (l.x + 4 * (l.y + 4 * l.z));
         }
-        t.rock_offset = scene.rock_words.len() as u32;
-        let g = u64::from(grid_side(t.depth));
-        scene.rock_words.resize(scene.rock_words.len() + (g * g * g).div_ceil(32) as usize, 0);
+        let mut list: Vec<(IVec3, u64)> = bricks.into_iter().collect();
+        // Deterministic order (hash map iteration order is not), so the table is reproducible.
+        list.sort_by_key(|(b, _)| (b.z, b.y, b.x));
+        let capacity = (2 * list.len()).next_power_of_two().max(1);
+        let mask = capacity - 1;
+        let mut words = vec![0u32; HEADER_WORDS + capacity * ENTRY_WORDS];
+        for e in 0..capacity {
+            words[HEADER_WORDS + e * ENTRY_WORDS] = EMPTY_KEY as u32;
+        }
+        let mut longest = 0u32;
+        for &(b, bits) in &list {
+            let mut slot = brick_hash(b) as usize & mask;
+            let mut probe = 0u32;
+            while words[HEADER_WORDS + slot * ENTRY_WORDS] != EMPTY_KEY as u32 {
+                slot = (slot + 1) & mask;
+                probe += 1;
+            }
+            longest = longest.max(probe);
+            let e = HEADER_WORDS + slot * ENTRY_WORDS;
+            words[e..e + ENTRY_WORDS].copy_from_slice(&[
+                b.x as u32,
+                b.y as u32,
+                b.z as u32,
+                bits as u32,
+                (bits >> 32) as u32,
+            ]);
+        }
+        words[..HEADER_WORDS].copy_from_slice(&[mask as u32, longest, list.len() as u32, 0]);
+        Self { words }
     }
-    for cell in rock {
-        // A cell inside a tile is stored there; one outside every tile (rock beyond the scene's
-        // bounds, where thin outer walls would otherwise leak) in every margin that holds it.
-        let holders: Vec<usize> = match scene.tile_of(cell << ROCK_LEVEL as i32) {
-            Some(t) => vec![t],
-            None => (0..scene.tiles.len()).collect(),
-        };
-        for t in holders {
-            let tile = scene.tiles[t];
-            if let Some(bit) = bit_index(&tile, cell) {
-                scene.rock_words[(tile.rock_offset + bit / 32) as usize] |= 1 << (bit % 32);
+
+    /// Whether rock cell `cell` (global cell units) is rock: `in_rock` in common.wgsl.
+    pub fn contains(words: &[u32], cell: IVec3) -> bool {
+        let (Some(&mask), Some(&longest)) = (words.first(), words.get(1)) else { return false };
+        let b = cell >> BRICK_SHIFT as i32;
+        let mut slot = brick_hash(b) & mask;
+        for _ in 0..=longest {
+            let e = HEADER_WORDS + slot as usize * ENTRY_WORDS;
+            let Some(entry) = words.get(e..e + ENTRY_WORDS) else { return false };
+            if entry[0] == EMPTY_KEY as u32 {
+                return false;
+            }
+            if IVec3::new(entry[0] as i32, entry[1] as i32, entry[2] as i32) == b {
+                let l = cell - (b << BRICK_SHIFT as i32);
+                let bit = (l.x + 4 * (l.y + 4 * l.z)) as usize;
+                return entry[3 + bit / 32] >> (bit % 32) & 1 == 1;
+            }
+            slot = (slot + 1) & mask;
+        }
+        false
+    }
+
+    /// Bricks stored (the third header word).
+    pub fn bricks(words: &[u32]) -> u32 {
+        words.get(2).copied().unwrap_or(0)
+    }
+}
+
+/// Bytes the rock took as the dense per-tile bit grids it replaced (one bit per cell over each
+/// tile and a margin of `ROCK_REACH_CELLS` cells): kept to report the saving (`grotto inspect
+/// --gpu-memory`), not used to render.
+pub fn dense_grid_bytes(scene: &SceneData) -> u64 {
+    scene
+        .tiles
+        .iter()
+        .filter(|t| t.depth >= ROCK_LEVEL)
+        .map(|t| {
+            let g = u64::from((1u32 << (t.depth - ROCK_LEVEL)) + 2 * ROCK_REACH_CELLS as u32);
+            (g * g * g).div_ceil(32) * 4
+        })
+        .sum()
+}
+
+/// Whether leaf cell `v_leaf` (global leaf units) lies in a rock cell; as `in_rock` in common.wgsl.
+pub fn in_rock(scene: &SceneData, v_leaf: IVec3) -> bool {
+    RockTable::contains(&scene.rock_words, v_leaf >> ROCK_LEVEL as i32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_answers_exactly_the_cells_it_was_built_from() {
+        // A shell of cells around a sphere crossing brick borders and negative coordinates, and
+        // a few isolated far cells: every stored cell is found, every other cell near them not.
+        let mut cells = Vec::new();
+        for z in -12..12 {
+            for y in -12..12 {
+                for x in -12..12 {
+                    let r2 = x * x + y * y + z * z;
+                    if (64..=100).contains(&r2) {
+                        cells.push(IVec3::new(x, y, z));
+                    }
+                }
             }
         }
+        cells.push(IVec3::new(1 << 26, -(1 << 26), 7));
+        cells.push(IVec3::new(-(1 << 26), 3, 1 << 26));
+        let words = RockTable::build(&cells).words;
+        let set: std::collections::HashSet<IVec3> = cells.iter().copied().collect();
+        for z in -14..14 {
+            for y in -14..14 {
+                for x in -14..14 {
+                    let c = IVec3::new(x, y, z);
+                    assert_eq!(RockTable::contains(&words, c), set.contains(&c), "cell {c}");
+                }
+            }
+        }
+        for &c in &cells[cells.len() - 2..] {
+            assert!(RockTable::contains(&words, c));
+            assert!(!RockTable::contains(&words, c + IVec3::X));
+        }
+        // Load at most 1/2, so the table is at most twice the bricks, whatever the volume spanned.
+        let bricks = RockTable::bricks(&words) as usize;
+        let capacity = (words.len() - HEADER_WORDS) / ENTRY_WORDS;
+        assert!(capacity <= 4 * bricks.max(1) && capacity >= 2 * bricks, "{capacity} for {bricks}");
     }
-}
 
-/// Cells per side of a tile's rock grid: the tile's cells plus `ROCK_REACH_CELLS` on each side.
-fn grid_side(depth: u32) -> u32 {
-    (1u32 << (depth - ROCK_LEVEL)) + 2 * ROCK_REACH_CELLS as u32
-}
-
-/// Bit of rock cell `cell` (global cell units) in `tile`'s grid, if the grid holds it.
-fn bit_index(tile: &crate::gpu_types::TileGpu, cell: IVec3) -> Option<u32> {
-    if tile.rock_offset == NO_ROCK {
-        return None;
-    }
-    let g = grid_side(tile.depth) as i32;
-    let c =
-        cell - (IVec3::from_array(tile.origin_leaf) >> ROCK_LEVEL as i32) + IVec3::splat(ROCK_REACH_CELLS);
-    if c.cmplt(IVec3::ZERO).any() || c.cmpge(IVec3::splat(g)).any() {
-        return None;
-    }
-    Some((c.x + g * (c.y + g * c.z)) as u32)
-}
-
-/// Whether leaf cell `v_leaf` (global leaf units) lies in a rock cell; as `in_rock` in common.wgsl:
-/// the tile holding it decides, or outside every tile the first tile whose margin holds it.
-pub fn in_rock(scene: &SceneData, v_leaf: IVec3) -> bool {
-    let cell = v_leaf >> ROCK_LEVEL as i32;
-    let test = |tile: &crate::gpu_types::TileGpu| {
-        bit_index(tile, cell)
-            .map(|bit| scene.rock_words[(tile.rock_offset + bit / 32) as usize] >> (bit % 32) & 1 == 1)
-    };
-    match scene.tile_of(v_leaf) {
-        Some(t) => test(&scene.tiles[t]).unwrap_or(false),
-        None => scene.tiles.iter().find_map(test).unwrap_or(false),
+    #[test]
+    fn empty_table_holds_nothing() {
+        let words = RockTable::build(&[]).words;
+        assert_eq!(words.len(), HEADER_WORDS + ENTRY_WORDS);
+        assert!(!RockTable::contains(&words, IVec3::ZERO));
+        assert!(!RockTable::contains(&words, IVec3::splat(i32::MIN)));
     }
 }

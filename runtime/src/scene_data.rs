@@ -72,13 +72,16 @@ pub struct SceneData {
     /// Environment radiance as 9 real SH coefficients (RGB, world axes, which the frame shares),
     /// scaled by the scene's environment intensity; None without an environment map.
     pub environment_sh: Option<[[f32; 3]; 9]>,
-    /// Rock bits of every tile (rock.rs; `TileGpu::rock_offset` points into it).
+    /// Rock behind the surfaces: the words of a [`crate::rock::RockTable`] (rock.rs).
     pub rock_words: Vec<u32>,
     /// Specular materials with a region, in slot order: surfel colour alpha `k` (1..=7) means
     /// `materials[k - 1]`, 0 diffuse. The surfels in a material's region are assigned at load.
     pub materials: Vec<SceneMaterial>,
     /// The environment's GGX-prefiltered mip chain, decoded from BC6H; None without one.
     pub env_chain: Option<EnvChain>,
+    /// The last light is a headlamp the render job added because the scene had no light
+    /// (framing.rs); the plan says so.
+    pub headlamp: bool,
 }
 
 /// Most specular materials a scene may assign (slots 1..=7 of the surfel colour's alpha).
@@ -303,6 +306,12 @@ impl SceneData {
             .collect()
     }
 
+    /// Whether anything lights the scene by itself: point or spot lights, emissive leaves, or an
+    /// environment map.
+    pub fn has_own_light(&self) -> bool {
+        !self.lights.is_empty() || self.environment_sh.is_some() || self.has_emission()
+    }
+
     /// True when any leaf emits.
     pub fn has_emission(&self) -> bool {
         self.leaves.iter().any(|l| l.emission[..3].iter().any(|&e| e > 0.0))
@@ -407,8 +416,7 @@ impl SceneData {
                 leaf_offset,
                 node_count: svo.nodes.len() as u32,
                 leaf_count,
-                rock_offset: crate::rock::NO_ROCK,
-                pad: [0; 3],
+                pad: [0; 4],
             });
             // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
             if let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? {
@@ -541,8 +549,7 @@ impl SceneData {
                 leaf_offset,
                 node_count: nodes.len() as u32,
                 leaf_count: list.len() as u32,
-                rock_offset: crate::rock::NO_ROCK,
-                pad: [0; 3],
+                pad: [0; 4],
             });
         }
         crate::rock::classify(&mut out);

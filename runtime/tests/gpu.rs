@@ -473,11 +473,13 @@ fn run_brdf_kernel(kernel: &str, io: &[[f32; 4]]) -> Vec<[f32; 4]> {
         compilation_options: Default::default(),
         cache: None,
     });
-    let buf = g.buffer_init(
-        "brdf io",
-        bytemuck::cast_slice(io),
-        wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-    );
+    let buf = g
+        .buffer_init(
+            "brdf io",
+            bytemuck::cast_slice(io),
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        )
+        .expect("a few bytes fit any adapter");
     let group = g.device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("brdf io"),
         layout: &pipeline.get_bind_group_layout(0),

@@ -41,6 +41,7 @@ fn opts(package: PathBuf, camera: CameraChoice, out: PathBuf) -> RenderOptions {
         exposure: None,
         gpu: Default::default(),
         lamp_string: None,
+        headlamp: render_job::Headlamp::Auto,
     }
 }
 

@@ -25,6 +25,7 @@ fn view(package: &Path, camera: &str, out: std::path::PathBuf) -> RenderOptions 
         exposure: None,
         gpu: GpuOptions { prefer_software: true, backends: Some(wgpu::Backends::VULKAN) },
         lamp_string: None,
+        headlamp: render_job::Headlamp::Auto,
     }
 }
 
@@ -173,7 +174,9 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
         .unwrap();
         let mut scene = scene;
         scene.lights = scene.lamp_string(64, render_job::STRING_LAMP_W, render_job::STRING_LAMP_LIFT_M);
-        let cam = render_job::resolve_camera(&scene, &CameraChoice::Named("chamber".into())).unwrap();
+        let cam = render_job::resolve_camera(&scene, &CameraChoice::Named("chamber".into()), 4.0 / 3.0, 2.0)
+            .unwrap()
+            .0;
         let mut r =
             Renderer::new(&gpu, &scene, Settings { specular: false, exposure: 1.0, ..settings }).unwrap();
         r.settle(|_, _| {}).unwrap();

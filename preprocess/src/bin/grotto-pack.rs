@@ -147,24 +147,25 @@ struct BuildOpts {
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
-    /// Leaf voxel edge, metres (a power of two, at most --min-tile-m); sets each tile's SVO depth.
-    #[arg(long, default_value_t = 0.0625)]
-    leaf_m: f64,
+    /// Leaf voxel edge, metres (a power of two, at most --min-tile-m), or "auto": the smallest
+    /// power of two at or above the median point spacing of the scans, at least 0.0625.
+    #[arg(long, default_value = "auto")]
+    leaf_m: String,
     /// Surfel colour storage: bc1 (0.5 byte per point) or raw (4 bytes).
     #[arg(long, default_value = "bc1", value_parser = ["bc1", "raw"])]
     colors: String,
     /// Neighbours for normal estimation.
     #[arg(long, default_value_t = 16)]
     k: usize,
-    /// Smallest tile edge, metres (power of two).
-    #[arg(long, default_value_t = 1.0)]
-    min_tile_m: f64,
-    /// Largest tile edge, metres (power of two).
-    #[arg(long, default_value_t = 64.0)]
-    max_tile_m: f64,
-    /// Halo shared with neighbour tiles, metres.
-    #[arg(long, default_value_t = 0.25)]
-    halo_m: f64,
+    /// Smallest tile edge, metres (power of two; default 16 leaves: 1 m at 6.25 cm leaves).
+    #[arg(long)]
+    min_tile_m: Option<f64>,
+    /// Largest tile edge, metres (power of two; default 1024 leaves: 64 m at 6.25 cm leaves).
+    #[arg(long)]
+    max_tile_m: Option<f64>,
+    /// Halo shared with neighbour tiles, metres (default 4 leaves: 0.25 m at 6.25 cm leaves).
+    #[arg(long)]
+    halo_m: Option<f64>,
     /// Keep the environment's SH unwindowed even where a bright source makes irradiance ring negative.
     #[arg(long)]
     no_sh_window: bool,
@@ -271,17 +272,37 @@ fn setup(
         }
         (None, None) => bail!("--work-dir is required for the plan and build-tile steps"),
     };
+    let leaf_m = match opts.leaf_m.as_str() {
+        "auto" => {
+            let auto = build::auto_leaf(&manifest.resolve()?)?;
+            if !opts.json {
+                match auto.spacing_m {
+                    Some(s) => println!(
+                        "leaf {} m (auto: median point spacing {s:.4} m over {} points; --leaf-m to choose)",
+                        auto.leaf_m, auto.sampled_points
+                    ),
+                    None => {
+                        println!("leaf {} m (auto: too few points to measure their spacing)", auto.leaf_m)
+                    }
+                }
+            }
+            auto.leaf_m
+        }
+        v => v
+            .parse::<f64>()
+            .map_err(|e| anyhow::anyhow!("--leaf-m {v:?}: a number of metres or auto ({e})"))?,
+    };
     let params = BuildParams {
         work_dir,
         memory_budget_bytes: parse_bytes(&opts.memory_budget)?,
         threads: opts.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from)),
-        leaf_m: opts.leaf_m,
+        leaf_m,
         colors: if opts.colors == "raw" { ColorCodec::Raw } else { ColorCodec::Bc1 },
         sh_window: !opts.no_sh_window,
         k: opts.k,
-        min_tile_extent_m: opts.min_tile_m,
-        max_tile_extent_m: opts.max_tile_m,
-        halo_m: opts.halo_m,
+        min_tile_extent_m: opts.min_tile_m.unwrap_or(build::MIN_TILE_LEAVES * leaf_m),
+        max_tile_extent_m: opts.max_tile_m.unwrap_or(build::MAX_TILE_LEAVES * leaf_m),
+        halo_m: opts.halo_m.unwrap_or(build::HALO_LEAVES * leaf_m),
     };
     Ok((manifest, manifest_path, params))
 }
@@ -320,6 +341,9 @@ fn print_build(summary: &BuildSummary, json: bool) -> anyhow::Result<()> {
                     format!(" (resumed: tiling {}, {n} tiles kept)", if r { "reused" } else { "redone" }),
             }
         );
+        for hint in summary.hints() {
+            println!("note: {hint}");
+        }
     }
     Ok(())
 }

@@ -2,7 +2,8 @@
 //!
 //! Colours: LAS stores 16-bit RGB, but many writers put 8-bit values in those fields. The first
 //! [`COLOR_PROBE`] points decide: if no channel exceeds 255 the file is taken as 8-bit. Files
-//! without colour get their intensity as grey (scaled the same way), or a neutral grey.
+//! without colour get their intensity as grey (its 99th percentile over the probe as white), or a
+//! neutral grey.
 
 use std::fs::File;
 use std::io::BufReader;
@@ -28,7 +29,8 @@ pub(super) struct LasSource {
     cursor: usize,
     /// Divide raw colour by this to get 0..=255.
     color_div: f32,
-    /// Same for intensity as grey; `None` when the file has no intensity (all zero).
+    /// Divisor of intensity to an 8-bit grey (its 99th percentile maps to 255); `None` when the
+    /// file has no intensity (all zero).
     grey_div: Option<f32>,
 }
 
@@ -310,9 +312,18 @@ fn probe_scales(
     let mut reader = open_reader(path, format)?;
     let data = reader.read_points(claimed.min(COLOR_PROBE)).map_err(|e| read_error(path, format, e))?;
     let max_color = data.rgb().map_or(0, |rgb| rgb.map(|(r, g, b)| r.max(g).max(b)).max().unwrap_or(0));
-    let max_intensity = data.intensity().max().unwrap_or(0);
     let div = |max: u16| if max <= 255 { 1.0 } else { 257.0 };
-    Ok((if has_color { div(max_color) } else { 1.0 }, (max_intensity > 0).then(|| div(max_intensity))))
+    // Intensity is not calibrated: sensors write 8, 12 or 16 bits, or a range of their own (a
+    // 16-bit scale made most of an airborne file with values up to 600 black). Its 99th
+    // percentile over the probe is white.
+    let mut intensity: Vec<u16> = data.intensity().filter(|&i| i > 0).collect();
+    let white = if intensity.is_empty() {
+        0
+    } else {
+        let k = (intensity.len() - 1) * 99 / 100;
+        *intensity.select_nth_unstable(k).1
+    };
+    Ok((if has_color { div(max_color) } else { 1.0 }, (white > 0).then(|| f32::from(white) / 255.0)))
 }
 
 impl PointSource for LasSource {

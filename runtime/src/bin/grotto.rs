@@ -56,18 +56,23 @@ enum Command {
 #[derive(clap::Args, Debug)]
 struct RenderArgs {
     package: PathBuf,
-    /// A camera named in the package (default: its first camera).
+    /// A camera named in the package (default: its first camera; without one, a view framed on
+    /// the data, printed so it can be reused with --eye/--look-at).
     #[arg(long, conflicts_with_all = ["eye", "path"])]
     camera: Option<String>,
-    /// Eye position, world metres "x,y,z" (with --look-at).
-    #[arg(long, value_parser = parse_vec3, requires = "look_at")]
+    /// Eye position, world metres "x,y,z" (with --look-at); negative numbers as written.
+    #[arg(long, value_parser = parse_vec3, requires = "look_at", allow_hyphen_values = true)]
     eye: Option<[f64; 3]>,
     /// Point looked at, world metres "x,y,z".
-    #[arg(long, value_parser = parse_vec3, requires = "eye")]
+    #[arg(long, value_parser = parse_vec3, requires = "eye", allow_hyphen_values = true)]
     look_at: Option<[f64; 3]>,
     /// Up direction "x,y,z".
-    #[arg(long, value_parser = parse_vec3, default_value = "0,0,1")]
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,1", allow_hyphen_values = true)]
     up: [f64; 3],
+    /// Headlamp at the camera: "auto" (only when the scene has no lights, emission or
+    /// environment map), "on" or "off".
+    #[arg(long, default_value = "auto")]
+    headlamp: String,
     /// Vertical field of view, degrees (with --eye).
     #[arg(long, default_value_t = 60.0)]
     fov: f64,
@@ -169,7 +174,7 @@ fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
 }
 
 fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderOptions> {
-    use grotto_runtime::render_job::{CameraChoice, RenderOptions};
+    use grotto_runtime::render_job::{CameraChoice, Headlamp, RenderOptions};
     use grotto_runtime::renderer::{IndirectFilter, Quality, Settings, ShadowFallback};
     let quality = Quality::parse(&a.quality)
         .ok_or_else(|| anyhow::anyhow!("--quality {:?}: use fast, balanced or high", a.quality))?;
@@ -215,6 +220,8 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
         exposure: a.exposure,
         gpu: grotto_runtime::gpu::GpuOptions { prefer_software: a.software, ..Default::default() },
         lamp_string: a.lamps,
+        headlamp: Headlamp::parse(&a.headlamp)
+            .ok_or_else(|| anyhow::anyhow!("--headlamp {:?}: use auto, on or off", a.headlamp))?,
     })
 }
 
@@ -280,9 +287,15 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
     })?;
     bounce_bar.finish_and_clear();
     frame_bar.finish_and_clear();
+    for w in &summary.warnings {
+        eprintln!("warning: {w}");
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
         return Ok(ExitCode::SUCCESS);
+    }
+    for n in &summary.notes {
+        println!("{n}");
     }
     if a.explain {
         println!("effect plan, first update:\n{}", summary.first_plan.explain());

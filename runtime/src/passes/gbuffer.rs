@@ -2,6 +2,7 @@
 //! normal and albedo targets. Discs are grown to a minimum pixel radius so the demo's sampling
 //! leaves no holes.
 
+use crate::error::Result;
 use crate::gpu::Gpu;
 
 /// Packed f32 distance and octahedral normal (splat.wgsl): 8-bit unorm targets render everywhere.
@@ -21,27 +22,24 @@ pub struct Targets {
 }
 
 impl Targets {
-    pub fn new(gpu: &Gpu, width: u32, height: u32) -> Self {
+    pub fn new(gpu: &Gpu, width: u32, height: u32) -> Result<Self> {
         let make = |label, format| {
-            gpu.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
+            gpu.texture_2d(
+                label,
+                width,
+                height,
                 format,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            })
+                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            )
         };
-        Self {
+        Ok(Self {
             width,
             height,
-            distance: make("gbuffer distance", DISTANCE_FORMAT),
-            normal: make("gbuffer normal", NORMAL_FORMAT),
-            albedo: make("gbuffer albedo", ALBEDO_FORMAT),
-            depth: make("gbuffer depth", super::shadow::DEPTH_FORMAT),
-        }
+            distance: make("gbuffer distance", DISTANCE_FORMAT)?,
+            normal: make("gbuffer normal", NORMAL_FORMAT)?,
+            albedo: make("gbuffer albedo", ALBEDO_FORMAT)?,
+            depth: make("gbuffer depth", super::shadow::DEPTH_FORMAT)?,
+        })
     }
 }
 

@@ -10,8 +10,7 @@
 //! dispatches also keep real GPUs clear of driver watchdogs, as the Lexolights report's multipass
 //! lighting does.
 
-use wgpu::util::DeviceExt;
-
+use crate::error::Result;
 use crate::gpu::Gpu;
 use crate::gpu_types::InjectBatch;
 
@@ -32,7 +31,7 @@ impl Inject {
         scene: &wgpu::BindGroupLayout,
         radiance_f16: bool,
         max_lights_per_cell: u32,
-    ) -> Self {
+    ) -> Result<Self> {
         let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("inject batch"),
             entries: &[super::uniform_entry(0, wgpu::ShaderStages::COMPUTE, false)],
@@ -48,24 +47,24 @@ impl Inject {
         let count = max_lights_per_cell.div_ceil(LIGHTS_PER_BATCH).max(1);
         let batches = (0..count)
             .map(|b| {
-                let u = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("inject batch"),
-                    contents: bytemuck::bytes_of(&InjectBatch {
+                let u = gpu.buffer_init(
+                    "inject batch",
+                    bytemuck::bytes_of(&InjectBatch {
                         first: b * LIGHTS_PER_BATCH,
                         count: LIGHTS_PER_BATCH,
                         reset: u32::from(b == 0),
                         pad: 0,
                     }),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                });
-                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    wgpu::BufferUsages::UNIFORM,
+                )?;
+                Ok(gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("inject batch"),
                     layout: &layout,
                     entries: &[wgpu::BindGroupEntry { binding: 0, resource: u.as_entire_binding() }],
-                })
+                }))
             })
-            .collect();
-        Self { pipeline, batches }
+            .collect::<Result<_>>()?;
+        Ok(Self { pipeline, batches })
     }
 
     /// Dispatches this many times per light update.

@@ -1,8 +1,7 @@
 //! Anisotropic mipmapping (mip.wgsl): one dispatch per node height, leaves first, so every level
 //! reads finished children (wgpu orders dispatches that write and read the same buffer).
 
-use wgpu::util::DeviceExt;
-
+use crate::error::Result;
 use crate::gpu::Gpu;
 use crate::gpu_types::MipRange;
 
@@ -19,7 +18,7 @@ impl Mip {
         by_height: &[u32],
         ranges: &[MipRange],
         radiance_f16: bool,
-    ) -> Self {
+    ) -> Result<Self> {
         let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("mip"),
             entries: &[
@@ -30,15 +29,11 @@ impl Mip {
         let pipeline =
             super::compute_pipeline(gpu, "mip", crate::shaders::MIP, "mip", &[scene, &layout], radiance_f16);
         let order =
-            gpu.buffer_init("mip order", bytemuck::cast_slice(by_height), wgpu::BufferUsages::STORAGE);
+            gpu.buffer_init("mip order", bytemuck::cast_slice(by_height), wgpu::BufferUsages::STORAGE)?;
         let levels = ranges
             .iter()
             .map(|r| {
-                let u = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("mip range"),
-                    contents: bytemuck::bytes_of(r),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                });
+                let u = gpu.buffer_init("mip range", bytemuck::bytes_of(r), wgpu::BufferUsages::UNIFORM)?;
                 let bg = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("mip level"),
                     layout: &layout,
@@ -47,10 +42,10 @@ impl Mip {
                         wgpu::BindGroupEntry { binding: 1, resource: order.as_entire_binding() },
                     ],
                 });
-                (bg, r.count)
+                Ok((bg, r.count))
             })
-            .collect();
-        Self { pipeline, levels }
+            .collect::<Result<_>>()?;
+        Ok(Self { pipeline, levels })
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, scene: &wgpu::BindGroup) {

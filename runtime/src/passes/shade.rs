@@ -2,6 +2,7 @@
 //! tonemapped sRGB8 into storage buffers the renderer reads back.
 
 use super::gbuffer::Targets;
+use crate::error::Result;
 use crate::gpu::Gpu;
 
 #[derive(Debug)]
@@ -44,21 +45,11 @@ impl Shade {
     }
 
     /// `env_atlas`: the prefiltered environment levels (a 1x1 placeholder without).
-    pub fn outputs(&self, gpu: &Gpu, targets: &Targets, env_atlas: &wgpu::TextureView) -> Outputs {
+    pub fn outputs(&self, gpu: &Gpu, targets: &Targets, env_atlas: &wgpu::TextureView) -> Result<Outputs> {
         let pixels = u64::from(targets.width) * u64::from(targets.height);
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
-        let hdr = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("shade hdr"),
-            size: pixels * 16,
-            usage,
-            mapped_at_creation: false,
-        });
-        let ldr = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("shade ldr"),
-            size: pixels * 4,
-            usage,
-            mapped_at_creation: false,
-        });
+        let hdr = gpu.buffer("shade hdr", pixels * 16, usage)?;
+        let ldr = gpu.buffer("shade ldr", pixels * 4, usage)?;
         let views =
             [&targets.distance, &targets.normal, &targets.albedo].map(|t| t.create_view(&Default::default()));
         let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -73,7 +64,7 @@ impl Shade {
                 wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(env_atlas) },
             ],
         });
-        Outputs { hdr, ldr, bind_group }
+        Ok(Outputs { hdr, ldr, bind_group })
     }
 
     pub fn record(

@@ -25,8 +25,7 @@ struct Tile {
     leaf_offset: u32,
     node_count: u32,
     leaf_count: u32,
-    // First word of the tile's rock bits (rock.rs), EMPTY for none.
-    rock_offset: u32,
+    pad3: u32,
     pad0: u32,
     pad1: u32,
     pad2: u32,
@@ -133,44 +132,45 @@ const F16_MAX: f32 = 65504.0;
 // cube face of a point light or per spot light, `shadow_cols` faces per row. A 2D atlas rather
 // than an array texture: wgpu's GL backend neither renders nor copies into array layers.
 @group(0) @binding(9) var shadow_dist: texture_2d<f32>;
-// Rock behind the scanned surfaces: one bit per cell of 2x2x2 leaves over each tile and a margin
-// of ROCK_MARGIN cells around it (runtime/src/rock.rs).
+// Rock behind the scanned surfaces (runtime/src/rock.rs, `RockTable`): a hash table of bricks of
+// 4x4x4 rock cells (cells of 2x2x2 leaves). Header: capacity - 1, longest probe, bricks, 0; then
+// ROCK_ENTRY_WORDS words an entry: brick x, y, z, 64 rock bits. Constants come from rock.rs
+// (shaders::constants).
 @group(0) @binding(10) var<storage, read_write> rock: array<u32>;
 // Per-cell lists of the lights in range (runtime/src/lights.rs): cells + 1 offsets (absolute word
 // indices), then the light indices.
 @group(0) @binding(11) var<storage, read_write> light_grid: array<u32>;
-const ROCK_LEVEL: u32 = 1u;
-const ROCK_MARGIN: i32 = 4;
 
-// Rock bit of `cell` (global cell units) in tile `t`'s grid: 1 rock, 0 not, -1 outside the grid.
-fn rock_bit(t: u32, cell: vec3<i32>) -> i32 {
-    let tile = tiles[t];
-    if tile.rock_offset == EMPTY {
-        return -1;
-    }
-    let g = (1 << (tile.depth - ROCK_LEVEL)) + 2 * ROCK_MARGIN;
-    let c = cell - (tile.origin_leaf >> vec3<u32>(ROCK_LEVEL)) + vec3<i32>(ROCK_MARGIN);
-    if any(c < vec3<i32>(0)) || any(c >= vec3<i32>(g)) {
-        return -1;
-    }
-    let bit = u32(c.x + g * (c.y + g * c.z));
-    return i32((rock[tile.rock_offset + bit / 32u] >> (bit % 32u)) & 1u);
+// rock.rs `brick_hash`.
+fn rock_hash(b: vec3<i32>) -> u32 {
+    var h = (u32(b.x) * 0x8da6b343u) ^ (u32(b.y) * 0xd8163841u) ^ (u32(b.z) * 0xcb1ab31fu);
+    h ^= h >> 16u;
+    h *= 0x85ebca6bu;
+    h ^= h >> 13u;
+    h *= 0xc2b2ae35u;
+    return h ^ (h >> 16u);
 }
 
-// Whether the leaf cell holding `p_leaf` lies in rock (rock.rs, `in_rock`): the tile holding it
-// decides; outside every tile, the first tile whose margin holds it.
+// Whether the leaf cell holding `p_leaf` lies in rock (rock.rs, `in_rock`). The probe loop is
+// bounded by the longest probe sequence the table was built with.
 fn in_rock(p_leaf: vec3<f32>) -> bool {
-    let v = vec3<i32>(floor(p_leaf));
-    let cell = v >> vec3<u32>(ROCK_LEVEL);
-    let t = find_tile(v);
-    if t != EMPTY {
-        return rock_bit(t, cell) == 1;
-    }
-    for (var k = 0u; k < params.tile_count; k++) {
-        let b = rock_bit(k, cell);
-        if b >= 0 {
-            return b == 1;
+    let cell = vec3<i32>(floor(p_leaf)) >> vec3<u32>(ROCK_LEVEL);
+    let b = cell >> vec3<u32>(ROCK_BRICK_SHIFT);
+    let mask = rock[0];
+    let longest = rock[1];
+    var slot = rock_hash(b) & mask;
+    for (var i = 0u; i <= longest; i++) {
+        let e = ROCK_HEADER_WORDS + slot * ROCK_ENTRY_WORDS;
+        let k = vec3<i32>(bitcast<i32>(rock[e]), bitcast<i32>(rock[e + 1u]), bitcast<i32>(rock[e + 2u]));
+        if k.x == ROCK_EMPTY_KEY {
+            return false;
         }
+        if all(k == b) {
+            let l = cell - (b << vec3<u32>(ROCK_BRICK_SHIFT));
+            let bit = u32(l.x + 4 * (l.y + 4 * l.z));
+            return ((rock[e + 3u + bit / 32u] >> (bit % 32u)) & 1u) == 1u;
+        }
+        slot = (slot + 1u) & mask;
     }
     return false;
 }
