@@ -89,6 +89,23 @@ pub fn auto_leaf(scans: &[ResolvedScan]) -> Result<AutoLeaf> {
 }
 
 impl BuildParams {
+    /// `grotto-pack build`'s defaults for leaves of `leaf_m`: a 2 GiB memory budget, every core,
+    /// BC1 colours, 16 neighbours, tiles of 16 to 1024 leaves and a halo of 4 leaves.
+    pub fn with_leaf(work_dir: PathBuf, leaf_m: f64) -> Self {
+        BuildParams {
+            work_dir,
+            memory_budget_bytes: 2 << 30,
+            threads: std::thread::available_parallelism().map_or(1, usize::from),
+            leaf_m,
+            colors: ColorCodec::Bc1,
+            sh_window: true,
+            k: 16,
+            min_tile_extent_m: MIN_TILE_LEAVES * leaf_m,
+            max_tile_extent_m: MAX_TILE_LEAVES * leaf_m,
+            halo_m: HALO_LEAVES * leaf_m,
+        }
+    }
+
     pub fn tiling(&self) -> TilingParams {
         let budget = self.memory_budget_bytes.max(64 << 20);
         TilingParams {
@@ -134,6 +151,8 @@ pub struct BuildSummary {
     pub seam_limited_points: u64,
     /// Peak resident memory of the process (Linux), bytes.
     pub peak_rss_bytes: Option<u64>,
+    /// Leaf voxel edge the package was built with, metres.
+    pub leaf_m: f64,
     /// What the package's scene holds: lights, cameras, an environment map.
     pub lights: usize,
     pub cameras: usize,
@@ -717,6 +736,7 @@ fn assemble_plan(
         reused_tiles: 0,
         seam_limited_points,
         peak_rss_bytes: crate::bench::peak_rss_bytes(),
+        leaf_m: params.leaf_m,
         lights: scene.lights.len(),
         cameras: scene.cameras.len(),
         environment: scene.environment.is_some(),

@@ -244,7 +244,7 @@ impl Occupancy {
             let cx = (v.dot(right) / (z * tan_y * aspect) * 0.5 + 0.5) * w as f32;
             let cy = (0.5 - v.dot(up) / (z * tan_y) * 0.5) * h as f32;
             let facing = if *n == Vec3::ZERO { 1.0 } else { (n.dot(v) / dist).abs() };
-            let radius_px = (r * px_per_unit / z * facing.max(0.2).sqrt()).max(0.5);
+            let radius_px = (r * px_per_unit / z * facing.max(0.02).sqrt()).max(0.5);
             let (x0, x1) = ((cx - radius_px).floor().max(0.0), (cx + radius_px).ceil().min(w as f32));
             let (y0, y1) = ((cy - radius_px).floor().max(0.0), (cy + radius_px).ceil().min(h as f32));
             if !(x0 < x1 && y0 < y1) {
@@ -602,7 +602,7 @@ mod tests {
         }
         let f = frame(&scene_of(&pts, 0.07), 4.0 / 3.0, 2.0).expect("surfels");
         assert_eq!(f.kind, "inside");
-        assert!(f.estimate.coverage > 0.99, "{:?}", f.estimate);
+        assert!(f.estimate.coverage > 0.95, "{:?}", f.estimate);
         let inside = f.camera.eye_m.cmpgt(o).all() && f.camera.eye_m.cmplt(o + size).all();
         assert!(inside, "eye {} outside the room", f.camera.eye_m);
     }

@@ -60,6 +60,9 @@ pub struct GpuOptions {
     pub prefer_software: bool,
     /// Restrict to these backends; `None` reads `WGPU_BACKEND` or allows all.
     pub backends: Option<wgpu::Backends>,
+    /// Ask the device for at most this storage-buffer binding size (bytes), to see what a smaller
+    /// adapter does with a package (WebGPU's default is 128 MiB).
+    pub max_storage_binding_bytes: Option<u64>,
 }
 
 /// A device and queue ready for grotto's passes.
@@ -110,7 +113,10 @@ impl Gpu {
             adapters.into_iter().next().ok_or_else(|| Error::NoAdapter { tried: format!("{backends:?}") })?;
         let info = adapter.get_info();
         let name = format!("{} ({:?})", info.name, info.backend);
-        let limits = adapter.limits();
+        let mut limits = adapter.limits();
+        if let Some(b) = opts.max_storage_binding_bytes {
+            limits.max_storage_buffer_binding_size = limits.max_storage_buffer_binding_size.min(b);
+        }
         if limits.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS_NEEDED {
             return Err(Error::Unsupported {
                 adapter: name,

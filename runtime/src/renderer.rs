@@ -938,6 +938,9 @@ impl Renderer {
             self.gpu.queue.write_buffer(&self.splat_uniforms, slot, bytemuck::bytes_of(&u));
             let reuse = self.view.as_ref().is_some_and(|v| v.targets.width == w && v.targets.height == h);
             if !reuse {
+                // The largest per-view buffer first, before any target is allocated.
+                let pixels = u64::from(w) * u64::from(h);
+                self.gpu.check_buffer("shade hdr", pixels * 16, wgpu::BufferUsages::STORAGE)?;
                 let targets = gbuffer::Targets::new(&self.gpu, w, h)?;
                 let outputs = self.shade.outputs(&self.gpu, &targets, &self.env_atlas)?;
                 self.view = Some(View { camera: *camera, targets, outputs });

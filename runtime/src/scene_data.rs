@@ -84,6 +84,37 @@ pub struct SceneData {
     pub headlamp: bool,
 }
 
+/// GPU bytes of the scene-sized buffers ([`SceneData::buffer_bytes`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct SceneBytes {
+    pub tiles: u64,
+    pub nodes: u64,
+    pub leaves: u64,
+    pub leaf_light: u64,
+    /// The anisotropic radiance pyramid (six values per node).
+    pub faces: u64,
+    pub mip_order: u64,
+    pub surfels: u64,
+    /// The rock hash table (rock.rs).
+    pub rock: u64,
+    /// What the rock took as dense per-tile bit grids before (not allocated; for comparison).
+    pub rock_dense_grid: u64,
+}
+
+impl SceneBytes {
+    /// Everything allocated (the dense grid is not).
+    pub fn total(&self) -> u64 {
+        self.tiles
+            + self.nodes
+            + self.leaves
+            + self.leaf_light
+            + self.faces
+            + self.mip_order
+            + self.surfels
+            + self.rock
+    }
+}
+
 /// Most specular materials a scene may assign (slots 1..=7 of the surfel colour's alpha).
 pub const MAX_MATERIALS: usize = 7;
 
@@ -310,6 +341,26 @@ impl SceneData {
     /// environment map.
     pub fn has_own_light(&self) -> bool {
         !self.lights.is_empty() || self.environment_sh.is_some() || self.has_emission()
+    }
+
+    /// Bytes of every GPU buffer whose size follows the scene's content (tiles, nodes, leaves,
+    /// surfels, rock), as the renderer creates them (`radiance_f16`: the pyramid's precision).
+    /// Lights, shadow atlas and image buffers follow the settings and are not counted.
+    pub fn buffer_bytes(&self, radiance_f16: bool) -> SceneBytes {
+        use crate::gpu_types::LeafLightGpu;
+        let len = |n: usize, each: usize| (n * each) as u64;
+        let (nodes, leaves) = (self.nodes.len(), self.leaves.len());
+        SceneBytes {
+            tiles: len(self.tiles.len(), size_of::<TileGpu>()),
+            nodes: len(nodes, size_of::<NodeGpu>()),
+            leaves: len(leaves, size_of::<LeafGpu>()),
+            leaf_light: len(leaves, size_of::<LeafLightGpu>()),
+            faces: len(nodes, 6 * if radiance_f16 { 8 } else { 16 }),
+            mip_order: len(nodes, 4),
+            surfels: len(self.surfels.len(), size_of::<SurfelGpu>()),
+            rock: len(self.rock_words.len(), 4),
+            rock_dense_grid: crate::rock::dense_grid_bytes(self),
+        }
     }
 
     /// True when any leaf emits.

@@ -105,3 +105,26 @@ fn survey_coordinates_become_small_frame_coordinates() {
         scene.surfels.len()
     );
 }
+
+#[test]
+fn resources_over_the_adapters_limits_are_typed_errors_not_panics() {
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = fixture(dir.path());
+    let out = dir.path().join("x.png");
+    // An adapter that binds at most 64 KiB per storage buffer (the fixture's leaf light alone is
+    // several times that): the first buffer over it stops the render with what to change.
+    let mut small = opts(pkg.clone(), CameraChoice::Default, out.clone());
+    small.gpu.max_storage_binding_bytes = Some(64 << 10);
+    let e = render_job::run(&small, |_| {}).unwrap_err();
+    let text = e.to_string();
+    assert!(matches!(e, Error::TooLarge { .. }), "{e}");
+    assert!(text.contains("storage-buffer binding, 65536 bytes"), "{text}");
+    assert!(text.contains("--leaf-m"), "the hint names the leaf size: {text}");
+    assert!(!out.exists(), "nothing written on failure");
+    // An image larger than the largest buffer: refused before any allocation.
+    let mut huge = opts(pkg, CameraChoice::Default, out.clone());
+    (huge.width, huge.height) = (16384, 16384);
+    huge.gpu.max_storage_binding_bytes = Some(1 << 30);
+    let e = render_job::run(&huge, |_| {}).unwrap_err();
+    assert!(matches!(e, Error::TooLarge { .. }) && e.to_string().contains("--size"), "{e}");
+}

@@ -23,7 +23,11 @@ fn view(package: &Path, camera: &str, out: std::path::PathBuf) -> RenderOptions 
         out,
         settings: Settings::default(),
         exposure: None,
-        gpu: GpuOptions { prefer_software: true, backends: Some(wgpu::Backends::VULKAN) },
+        gpu: GpuOptions {
+            prefer_software: true,
+            backends: Some(wgpu::Backends::VULKAN),
+            ..Default::default()
+        },
         lamp_string: None,
         headlamp: render_job::Headlamp::Auto,
     }
@@ -43,7 +47,7 @@ fn demo_cave_renders_the_same_on_vulkan_and_gl() {
             let opts = RenderOptions {
                 settings: Settings { bounces: 3, shadow_map_size: 256, ..Settings::default() },
                 exposure: Some(8.0),
-                gpu: GpuOptions { prefer_software: true, backends: Some(backend) },
+                gpu: GpuOptions { prefer_software: true, backends: Some(backend), ..Default::default() },
                 ..view(&package, camera, out.clone())
             };
             let summary = render_job::run(&opts, |_| {}).unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -170,6 +174,7 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
         let gpu = grotto_runtime::gpu::Gpu::new(&GpuOptions {
             prefer_software: true,
             backends: Some(wgpu::Backends::VULKAN),
+            ..Default::default()
         })
         .unwrap();
         let mut scene = scene;

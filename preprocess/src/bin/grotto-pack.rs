@@ -108,7 +108,8 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// The main job on the built-in demo scene: synthesise a cave into DIR/demo-scans and build DIR/demo.grotto.
+    /// The main job on the built-in demo scene: synthesise a cave into DIR/demo-scans and build DIR/demo.grotto
+    /// (with 6.25 cm leaves unless --leaf-m gives a number).
     Demo {
         /// Output directory.
         #[arg(long, default_value = "out")]
@@ -292,17 +293,17 @@ fn setup(
             .parse::<f64>()
             .map_err(|e| anyhow::anyhow!("--leaf-m {v:?}: a number of metres or auto ({e})"))?,
     };
+    let defaults = BuildParams::with_leaf(work_dir, leaf_m);
     let params = BuildParams {
-        work_dir,
         memory_budget_bytes: parse_bytes(&opts.memory_budget)?,
-        threads: opts.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from)),
-        leaf_m,
+        threads: opts.threads.unwrap_or(defaults.threads),
         colors: if opts.colors == "raw" { ColorCodec::Raw } else { ColorCodec::Bc1 },
         sh_window: !opts.no_sh_window,
         k: opts.k,
-        min_tile_extent_m: opts.min_tile_m.unwrap_or(build::MIN_TILE_LEAVES * leaf_m),
-        max_tile_extent_m: opts.max_tile_m.unwrap_or(build::MAX_TILE_LEAVES * leaf_m),
-        halo_m: opts.halo_m.unwrap_or(build::HALO_LEAVES * leaf_m),
+        min_tile_extent_m: opts.min_tile_m.unwrap_or(defaults.min_tile_extent_m),
+        max_tile_extent_m: opts.max_tile_m.unwrap_or(defaults.max_tile_extent_m),
+        halo_m: opts.halo_m.unwrap_or(defaults.halo_m),
+        ..defaults
     };
     Ok((manifest, manifest_path, params))
 }
@@ -524,7 +525,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 }
             }
         }
-        Command::Demo { out, synth, opts } => {
+        Command::Demo { out, synth, mut opts } => {
+            // The demo keeps the 6.25 cm leaves its figures (README, docs) were measured with:
+            // its simulated scans are spaced about 9 cm, so `auto` would choose 12.5 cm.
+            if opts.leaf_m == "auto" {
+                opts.leaf_m = build::DEFAULT_LEAF_M.to_string();
+            }
             let scans = out.join("demo-scans");
             let s = run_synth(&scans, &synth, opts.json)?;
             if !opts.json {

@@ -22,6 +22,10 @@ enum Command {
         /// List every section.
         #[arg(long)]
         sections: bool,
+        /// Load the scene as the renderer does and report the GPU bytes of every buffer whose
+        /// size follows the content (nodes, leaves, surfels, rock...), no GPU needed.
+        #[arg(long)]
+        gpu_memory: bool,
         /// Machine-readable output.
         #[arg(long)]
         json: bool,
@@ -339,7 +343,52 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
-        Command::Inspect { package, sections, json } => {
+        Command::Inspect { package, gpu_memory: true, json, .. } => {
+            let t0 = std::time::Instant::now();
+            let scene = grotto_runtime::render_job::load_scene(&package)?;
+            let bytes = scene.buffer_bytes(false);
+            let load_s = t0.elapsed().as_secs_f64();
+            if json {
+                let report = serde_json::json!({
+                    "package": package.display().to_string(),
+                    "tiles": scene.tiles.len(), "nodes": scene.nodes.len(),
+                    "leaves": scene.leaves.len(), "surfels": scene.surfels.len(),
+                    "rock_bricks": grotto_runtime::rock::RockTable::bricks(&scene.rock_words),
+                    "bytes": bytes, "total_bytes": bytes.total(), "load_s": load_s,
+                });
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                let mib = |b: u64| b as f64 / f64::from(1u32 << 20);
+                println!(
+                    "{}: {} tiles, {} nodes, {} leaves, {} surfels (scene loaded in {load_s:.1} s)",
+                    package.display(),
+                    scene.tiles.len(),
+                    scene.nodes.len(),
+                    scene.leaves.len(),
+                    scene.surfels.len()
+                );
+                for (name, b) in [
+                    ("tiles", bytes.tiles),
+                    ("nodes", bytes.nodes),
+                    ("leaves", bytes.leaves),
+                    ("leaf light", bytes.leaf_light),
+                    ("radiance pyramid", bytes.faces),
+                    ("mip order", bytes.mip_order),
+                    ("surfels", bytes.surfels),
+                    ("rock", bytes.rock),
+                ] {
+                    println!("  {name:18} {:10.2} MiB", mib(b));
+                }
+                println!("  {:18} {:10.2} MiB", "total", mib(bytes.total()));
+                println!(
+                    "  rock: {} bricks; as dense per-tile grids it took {:.2} MiB",
+                    grotto_runtime::rock::RockTable::bricks(&scene.rock_words),
+                    mib(bytes.rock_dense_grid)
+                );
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Inspect { package, sections, json, .. } => {
             let pkg = Package::open(&package)?;
             let report = inspect::inspect(&pkg);
             if json {
