@@ -108,3 +108,42 @@ fn export_writes_points_other_tools_read() {
             != Some(0)
     );
 }
+
+#[test]
+fn negative_vectors_parse_as_written_and_gpu_memory_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = grotto_preprocess::synth::small_cave_package(
+        dir.path(),
+        &grotto_preprocess::synth::SmallCave { points: 5_000, segments: 2, ..Default::default() },
+    )
+    .unwrap();
+    let p = path.to_str().unwrap();
+    let out_png = dir.path().join("neg.png");
+    let out = grotto(&[
+        "render",
+        p,
+        "--eye",
+        "-0.6,-2.6,-1.0",
+        "--look-at",
+        "-0.5,0.5,-0.2",
+        "--up",
+        "0,0,1",
+        "--size",
+        "16x12",
+        "--bounces",
+        "0",
+        "--software",
+        "-o",
+        out_png.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out_png.is_file());
+
+    let out = grotto(&["inspect", p, "--gpu-memory", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let leaves = json["leaves"].as_u64().unwrap();
+    assert!(leaves > 0);
+    assert_eq!(json["bytes"]["leaves"].as_u64().unwrap(), leaves * 64);
+    assert!(json["total_bytes"].as_u64().unwrap() > json["bytes"]["surfels"].as_u64().unwrap());
+}
