@@ -72,6 +72,28 @@ pub struct RenderOptions {
     pub headlamp: Headlamp,
 }
 
+impl RenderOptions {
+    /// `grotto render PACKAGE -o OUT` with every other option at its command-line default: the
+    /// package's first camera or a framed view, 800x600, the balanced preset, automatic exposure
+    /// and headlamp, the best adapter.
+    pub fn defaults(package: PathBuf, out: PathBuf) -> Self {
+        RenderOptions {
+            package,
+            camera: CameraChoice::Default,
+            path: Vec::new(),
+            frames: 30,
+            width: 800,
+            height: 600,
+            out,
+            settings: Settings::preset(crate::renderer::Quality::Balanced),
+            exposure: None,
+            gpu: GpuOptions::default(),
+            lamp_string: None,
+            headlamp: Headlamp::Auto,
+        }
+    }
+}
+
 /// Watts of one lamp of `--lamps` (the synthetic cave's lamp string uses the same).
 pub const STRING_LAMP_W: f32 = 8.0;
 /// Height of a `--lamps` lamp above its floor, metres.

@@ -30,18 +30,12 @@ fn fixture(dir: &std::path::Path) -> PathBuf {
 
 fn opts(package: PathBuf, camera: CameraChoice, out: PathBuf) -> RenderOptions {
     RenderOptions {
-        package,
         camera,
-        path: Vec::new(),
         frames: 1,
         width: 32,
         height: 24,
-        out,
         settings: Settings::default(),
-        exposure: None,
-        gpu: Default::default(),
-        lamp_string: None,
-        headlamp: render_job::Headlamp::Auto,
+        ..RenderOptions::defaults(package, out)
     }
 }
 

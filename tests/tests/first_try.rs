@@ -11,8 +11,7 @@ use std::time::Instant;
 use grotto_preprocess::build::{self, BuildParams};
 use grotto_preprocess::manifest::Manifest;
 use grotto_runtime::gpu::GpuOptions;
-use grotto_runtime::render_job::{self, CameraChoice, Headlamp, RenderOptions};
-use grotto_runtime::renderer::{Quality, Settings};
+use grotto_runtime::render_job::{self, RenderOptions};
 use grotto_tests::shared_data_dir;
 
 /// Files no reader accepts, and why (the build must fail with an error naming the file).
@@ -79,22 +78,12 @@ fn build_default(file: &Path, out: &Path) -> grotto_preprocess::Result<(build::B
 /// `grotto render PACKAGE -o OUT`: every option at its command-line default.
 fn render_default(package: &Path, out: &Path) -> grotto_runtime::Result<render_job::RenderSummary> {
     let opts = RenderOptions {
-        package: package.to_path_buf(),
-        camera: CameraChoice::Default,
-        path: Vec::new(),
-        frames: 30,
-        width: 800,
-        height: 600,
-        out: out.to_path_buf(),
-        settings: Settings::preset(Quality::Balanced),
-        exposure: None,
         gpu: GpuOptions {
             prefer_software: true,
             backends: Some(wgpu::Backends::VULKAN),
             ..Default::default()
         },
-        lamp_string: None,
-        headlamp: Headlamp::Auto,
+        ..RenderOptions::defaults(package.to_path_buf(), out.to_path_buf())
     };
     render_job::run(&opts, |_| {})
 }

@@ -14,22 +14,16 @@ use grotto_tests::golden;
 /// callers override what they vary.
 fn view(package: &Path, camera: &str, out: std::path::PathBuf) -> RenderOptions {
     RenderOptions {
-        package: package.to_path_buf(),
         camera: CameraChoice::Named(camera.into()),
-        path: Vec::new(),
-        frames: 1,
         width: 160,
         height: 120,
-        out,
         settings: Settings::default(),
-        exposure: None,
         gpu: GpuOptions {
             prefer_software: true,
             backends: Some(wgpu::Backends::VULKAN),
             ..Default::default()
         },
-        lamp_string: None,
-        headlamp: render_job::Headlamp::Auto,
+        ..RenderOptions::defaults(package.to_path_buf(), out)
     }
 }
 
