@@ -205,6 +205,7 @@ pub fn normals(
                             own: &t.own,
                             scanner_tile_m: &t.scanners,
                             input_normals: &t.inputs,
+                            isolated_radius_m: 0.5 * 0.0625,
                         },
                         k,
                     )

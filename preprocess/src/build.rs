@@ -281,23 +281,16 @@ fn build_tile(
         .collect();
     let input_normals: Vec<[f32; 3]> =
         points.iter().map(|p| p.normal_snorm.map(|c| f32::from(c) / 32767.0)).collect();
-    let mut estimated = normals::estimate(
+    let estimated = normals::estimate(
         &TilePoints {
             positions: &positions,
             own: &own,
             scanner_tile_m: &scanner_tile_m,
             input_normals: &input_normals,
+            isolated_radius_m: 0.5 * params.leaf_m as f32,
         },
         params.k,
     );
-    // A point with no distinct neighbour (alone in its tile and halo, or among exact duplicates)
-    // has no spacing to take a radius from: it stands for the leaf it falls in, so it is drawn and
-    // voxelised rather than left a zero-area disc nothing sees.
-    for e in &mut estimated {
-        if !(e.radius_m > 0.0 && e.radius_m.is_finite()) {
-            e.radius_m = 0.5 * params.leaf_m as f32;
-        }
-    }
     let own_points: Vec<&tiling::BinPoint> = points.iter().filter(|p| p.flags & FLAG_HALO == 0).collect();
     let q = f64::from(1u32 << 16) / extent;
     let mut order: Vec<(u64, usize)> = own_points

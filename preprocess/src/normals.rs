@@ -8,8 +8,9 @@
 //! within 60 degrees of the PCA plane's normal) is kept instead.
 //!
 //! Degenerate neighbourhoods have defined results, never NaN: fewer than 3 distinct points or
-//! all duplicates -> the unit vector toward the scanner; collinear points -> the direction
-//! perpendicular to the line closest to the scanner direction.
+//! all duplicates -> the unit vector toward the scanner, and `TilePoints::isolated_radius_m` as
+//! radius; collinear points -> the direction perpendicular to the line closest to the scanner
+//! direction.
 //!
 //! Spread is `1 - |mean of the neighbours' unit normals|` (Toksvig); the radius covers the area
 //! per point: `1.25 * d_k / sqrt(k)` where `d_k` is the distance to the k-th neighbour (1.25 closes
@@ -129,13 +130,18 @@ pub fn normal_from_neighbourhood(neighbours: &[[f64; 3]], view: [f64; 3]) -> [f6
 }
 
 /// Inputs of one tile: all points (own and halo), which are own, scanner positions in the tile's
-/// frame per point, and optional input normals (zero vector = none).
+/// frame per point, optional input normals (zero vector = none), and the radius of a point with
+/// no distinct neighbour.
 #[derive(Debug)]
 pub struct TilePoints<'a> {
     pub positions: &'a [[f32; 3]],
     pub own: &'a [bool],
     pub scanner_tile_m: &'a [[f64; 3]],
     pub input_normals: &'a [[f32; 3]],
+    /// A point alone in its tile and halo, or among exact duplicates, has no spacing to take a
+    /// radius from: it gets this one (the builder gives half a leaf: it stands for the leaf it
+    /// falls in, drawn and voxelised rather than a zero-area disc nothing sees).
+    pub isolated_radius_m: f32,
 }
 
 /// Normals for the own points of a tile, in order. `k` neighbours (the point itself included).
@@ -227,7 +233,7 @@ pub fn estimate(tile: &TilePoints<'_>, k: usize) -> Vec<PointNormal> {
             PointNormal {
                 normal: normals[i].map(|c| c as f32),
                 spread: (1.0 - mean_len).clamp(0.0, 1.0) as f32,
-                radius_m: radii[i] as f32,
+                radius_m: if radii[i] > 0.0 { radii[i] as f32 } else { tile.isolated_radius_m },
             }
         })
         .collect()
@@ -310,6 +316,25 @@ mod tests {
     }
 
     #[test]
+    fn points_without_a_distinct_neighbour_get_the_isolated_radius() {
+        // One point alone, then a tile of exact duplicates: no spacing to measure.
+        for positions in [vec![[1.0f32, 2.0, 3.0]], vec![[1.0f32, 2.0, 3.0]; 8]] {
+            let n = positions.len();
+            let out = estimate(
+                &TilePoints {
+                    positions: &positions,
+                    own: &vec![true; n],
+                    scanner_tile_m: &vec![[0.0, 0.0, 10.0]; n],
+                    input_normals: &vec![[0.0; 3]; n],
+                    isolated_radius_m: 0.03125,
+                },
+                16,
+            );
+            assert!(out.iter().all(|p| p.radius_m == 0.03125), "{out:?}");
+        }
+    }
+
+    #[test]
     fn degenerate_neighbourhoods_have_defined_normals() {
         let view = [0.0, 0.6, 0.8];
         // Fewer than 3 points, and exact duplicates: toward the scanner.
@@ -342,6 +367,7 @@ mod tests {
                 own: &own,
                 scanner_tile_m: &scanners,
                 input_normals: &inputs,
+                isolated_radius_m: 0.5,
             },
             16,
         );

@@ -237,7 +237,7 @@ impl SurfelScene {
         out.rock = Some(SceneData {
             leaf_size_m: scene.leaf_size_m,
             tiles: scene.tiles.clone(),
-            rock_words: scene.rock_words.clone(),
+            rock: scene.rock.clone(),
             ..SceneData::default()
         });
         out

@@ -1,13 +1,13 @@
 //! A view and a light for scenes that bring none. A package built from a bare scan file has no
 //! cameras and no lights; a fixed default view of its bounding box may see nothing (a scan from
 //! inside a cave seen from outside its box, a bunny 15 cm across behind a survey origin), and an
-//! unlit scene renders black. Here the data is framed by measurement: the surfels go into a coarse
-//! occupancy grid, candidate views are scored by casting a grid of rays through their image
-//! (the share of rays that hit a surface):
+//! unlit scene renders black. Here the data is framed by measurement: candidate views are scored
+//! by splatting a sample of the surfels into a small depth buffer of their image (the share of
+//! pixels a surface covers, the median visible distance, how squarely the surfaces face the eye):
 //!
-//! - from inside: empty cells enclosed by surfaces that face them (the largest open spaces of a
-//!   cave, found with a distance transform and an enclosure test), looking along the directions
-//!   around them;
+//! - from inside: empty cells of a coarse occupancy grid enclosed by surfaces that face them (the
+//!   largest open spaces of a cave, found with a distance transform and an enclosure test),
+//!   looking along the directions around them;
 //! - from outside: the data fitted to the image from above, from the sides, and face-on along the
 //!   principal axes of the points (a single disc, a wall or a terrain seen square).
 //!
@@ -39,24 +39,35 @@ pub const HEADLAMP_IRRADIANCE_W_M2: f32 = 1.0;
 /// Colour of the headlamp (a neutral white LED).
 pub const HEADLAMP_COLOR: [f32; 3] = [1.0, 0.95, 0.9];
 
-/// Surfels in a coarse grid: which cells hold a surface, and the sum of the surfel normals there.
+/// A sample of the scene's surfels (at most `FIT_POINTS`, inside their robust bounds): what view
+/// estimates and fits need.
 #[derive(Clone, Debug)]
-pub struct Occupancy {
+pub struct SurfelSample {
+    /// Bounds of the surfels (1st to 99th percentile per axis when there are many) widened by
+    /// `splat_radius_m`, frame metres.
+    min_m: Vec3,
+    max_m: Vec3,
+    /// Frame-space surfel centres.
+    points: Vec<Vec3>,
+    /// Their unit normals (zero: none) and splat radii, widened by the square root of the
+    /// sampling stride so the sample covers what all surfels cover.
+    normals: Vec<Vec3>,
+    radii: Vec<f32>,
+    /// Splat radius of a typical surfel, metres.
+    splat_radius_m: f32,
+    /// Sum of the sample's normals.
+    mean_normal: Vec3,
+}
+
+/// Surfels in a coarse grid over the sample's bounds: which cells hold a surface, and the sum of
+/// the surfel normals there (for the search of inside views).
+#[derive(Clone, Debug)]
+struct Occupancy {
     min_m: Vec3,
     cell_m: f32,
     dims: IVec3,
     normals: Vec<Vec3>,
     occupied: Vec<bool>,
-    /// Frame-space points (surfel centres inside the grid, at most `FIT_POINTS`) for fitting views.
-    points: Vec<Vec3>,
-    /// Their unit normals (zero: none) and splat radii, widened by the square root of the
-    /// sampling stride so the sample covers what all surfels cover.
-    point_normals: Vec<Vec3>,
-    point_radii: Vec<f32>,
-    /// Splat radius of a typical surfel, metres.
-    splat_radius_m: f32,
-    /// Sum of the fitting points' surfel normals.
-    mean_normal: Vec3,
 }
 
 /// Of the 14 rays from a candidate eye, how many must meet a surface facing it.
@@ -66,10 +77,10 @@ const MARK_BUDGET: f64 = 5e7;
 /// Surfel centres kept for fitting outside views.
 const FIT_POINTS: usize = 20_000;
 
-/// What a view sees, estimated on the occupancy grid.
+/// What a view sees, estimated by splatting the surfel sample.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewEstimate {
-    /// Share of the image's rays that hit a surface, 0..=1.
+    /// Share of the image's pixels a surface covers, 0..=1.
     pub coverage: f32,
     /// Median distance of those hits, metres (0 when nothing is hit).
     pub median_distance_m: f32,
@@ -93,9 +104,9 @@ fn percentile(v: &mut [f32], q: f32) -> f32 {
     *v.select_nth_unstable_by(k, f32::total_cmp).1
 }
 
-impl Occupancy {
-    /// The grid over the scene's surfels (their 1st to 99th percentile per axis when there are
-    /// many, so a few stray returns do not shrink the rest to a dot), or None without surfels.
+impl SurfelSample {
+    /// The sample of `scene`'s surfels (robust bounds: a few stray returns do not shrink the rest
+    /// to a dot), or None without surfels.
     pub fn from_scene(scene: &SceneData, splat_scale: f32) -> Option<Self> {
         let centres: Vec<Vec3> = scene
             .surfels
@@ -122,103 +133,34 @@ impl Occupancy {
             .collect();
         let radius = if radii.is_empty() { 0.0 } else { percentile(&mut radii, 0.5) };
         let splat_radius_m = (radius * splat_scale).max((hi - lo).max_element() * 1e-3).max(1e-4);
-        let (lo, hi) = (lo - Vec3::splat(splat_radius_m), hi + Vec3::splat(splat_radius_m));
-        let cell_m = (hi - lo).max_element() / GRID_CELLS as f32;
-        let dims = ((hi - lo) / cell_m).ceil().as_ivec3().clamp(IVec3::ONE, IVec3::splat(GRID_CELLS));
-        let n = (dims.x * dims.y * dims.z) as usize;
-        let mut grid = Self {
-            min_m: lo,
-            cell_m,
-            dims,
-            normals: vec![Vec3::ZERO; n],
-            occupied: vec![false; n],
+        let mut sample = Self {
+            min_m: lo - Vec3::splat(splat_radius_m),
+            max_m: hi + Vec3::splat(splat_radius_m),
             points: Vec::new(),
-            point_normals: Vec::new(),
-            point_radii: Vec::new(),
+            normals: Vec::new(),
+            radii: Vec::new(),
             splat_radius_m,
             mean_normal: Vec3::ZERO,
         };
-        // A surfel covers the cells its splat disc passes through (within half a cell diagonal of
-        // its plane and of its rim). How far out a disc may reach is bounded so the marking costs
-        // at most about `MARK_BUDGET` cell tests: a few surfels may each span the grid (a
-        // one-point scan framed to fill the image), millions stay within a few cells.
-        let budget_reach = ((MARK_BUDGET / scene.surfels.len() as f64).cbrt() * 0.5).floor() as i32;
-        let reach = ((splat_radius_m / cell_m).ceil() as i32).min(budget_reach.clamp(1, GRID_CELLS));
-        let half_diagonal = 0.87 * cell_m;
         let stride = scene.surfels.len().div_ceil(FIT_POINTS).max(1);
-        for (i, s) in scene.surfels.iter().enumerate() {
+        for s in scene.surfels.iter().step_by(stride) {
             let p = Vec3::from_slice(&s.position_radius[..3]);
-            let Some(c) = grid.cell_of(p) else { continue };
-            let n = Vec3::from_slice(&s.normal_spread[..3]);
-            let n = n.try_normalize().unwrap_or(Vec3::ZERO);
-            if i % stride == 0 {
-                grid.points.push(p);
-                grid.point_normals.push(n);
-                let r = s.position_radius[3];
-                let r = if r.is_finite() && r > 0.0 { r * splat_scale } else { splat_radius_m };
-                grid.point_radii.push(r * (stride as f32).sqrt());
-                grid.mean_normal += n;
+            if !sample.holds(p) {
+                continue;
             }
-            for dz in -reach..=reach {
-                for dy in -reach..=reach {
-                    for dx in -reach..=reach {
-                        let q = c + IVec3::new(dx, dy, dz);
-                        let offset = grid.centre(q) - p;
-                        let height = offset.dot(n);
-                        if height.abs() > half_diagonal
-                            || (offset - n * height).length() > splat_radius_m + half_diagonal
-                        {
-                            continue;
-                        }
-                        if let Some(k) = grid.index(q) {
-                            grid.occupied[k] = true;
-                            grid.normals[k] += n;
-                        }
-                    }
-                }
-            }
+            let n = Vec3::from_slice(&s.normal_spread[..3]).try_normalize().unwrap_or(Vec3::ZERO);
+            let r = s.position_radius[3];
+            let r = if r.is_finite() && r > 0.0 { r * splat_scale } else { splat_radius_m };
+            sample.points.push(p);
+            sample.normals.push(n);
+            sample.radii.push(r * (stride as f32).sqrt());
+            sample.mean_normal += n;
         }
-        Some(grid)
+        Some(sample)
     }
 
-    fn index(&self, c: IVec3) -> Option<usize> {
-        (c.cmpge(IVec3::ZERO).all() && c.cmplt(self.dims).all())
-            .then(|| (c.x + self.dims.x * (c.y + self.dims.y * c.z)) as usize)
-    }
-
-    fn cell_of(&self, p: Vec3) -> Option<IVec3> {
-        let c = ((p - self.min_m) / self.cell_m).floor();
-        c.is_finite().then(|| c.as_ivec3()).filter(|c| self.index(*c).is_some())
-    }
-
-    fn centre(&self, c: IVec3) -> Vec3 {
-        self.min_m + (c.as_vec3() + Vec3::splat(0.5)) * self.cell_m
-    }
-
-    /// The first surface along the ray (`dir` unit): distance in metres and whether the surfels
-    /// there face the ray's origin.
-    pub fn cast(&self, origin: Vec3, dir: Vec3) -> Option<(f32, bool)> {
-        // Clip to the grid's box (slab test), then march half a cell at a time.
-        let hi = self.min_m + self.dims.as_vec3() * self.cell_m;
-        let inv = dir.recip();
-        let t_a = (self.min_m - origin) * inv;
-        let t_b = (hi - origin) * inv;
-        let t0 = t_a.min(t_b).max_element().max(0.0);
-        let t1 = t_a.max(t_b).min_element();
-        if t0 > t1 || t0.is_nan() || t1.is_nan() {
-            return None;
-        }
-        let step = 0.5 * self.cell_m;
-        let mut t = t0 + 0.5 * step;
-        while t <= t1 {
-            if let Some(k) = self.cell_of(origin + dir * t).and_then(|c| self.index(c))
-                && self.occupied[k]
-            {
-                return Some((t, self.normals[k].dot(dir) < 0.0));
-            }
-            t += step;
-        }
-        None
+    fn holds(&self, p: Vec3) -> bool {
+        p.cmpge(self.min_m).all() && p.cmplt(self.max_m).all()
     }
 
     /// Splats the sampled surfels into a small depth buffer of `camera`'s image, as the G-buffer
@@ -234,7 +176,7 @@ impl Occupancy {
         let px_per_unit = h as f32 * 0.5 / tan_y;
         let mut depth = vec![(f32::INFINITY, 0.0f32); w * h];
         let near = 1e-3 * self.splat_radius_m;
-        for ((p, n), r) in self.points.iter().zip(&self.point_normals).zip(&self.point_radii) {
+        for ((p, n), r) in self.points.iter().zip(&self.normals).zip(&self.radii) {
             let v = *p - camera.eye_m;
             let z = v.dot(forward);
             if z <= near {
@@ -267,6 +209,143 @@ impl Occupancy {
         let coverage = seen.len() as f32 / (w * h) as f32;
         let median_distance_m = if seen.is_empty() { 0.0 } else { percentile(&mut seen, 0.5) };
         ViewEstimate { coverage, median_distance_m, lit }
+    }
+
+    /// The camera looking along `dir` (unit) that fits the points to the image: centred on their
+    /// extent across the view, as close as the nearest ones allow.
+    fn fit(&self, dir: Vec3, aspect: f32) -> Camera {
+        let up_hint = if dir.z.abs() > 0.95 { Vec3::Y } else { Vec3::Z };
+        let right = dir.cross(up_hint).normalize();
+        let up = right.cross(dir);
+        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+        for p in &self.points {
+            let q = Vec3::new(p.dot(right), p.dot(up), p.dot(dir));
+            lo = lo.min(q);
+            hi = hi.max(q);
+        }
+        let r = self.splat_radius_m;
+        let (lo, hi) = (lo - Vec3::new(r, r, 0.0), hi + Vec3::new(r, r, 0.0));
+        let tan_y = (FRAMED_FOV_Y_DEG.to_radians() * 0.5).tan();
+        let half = (hi - lo) * 0.5;
+        let distance = (half.x / (tan_y * aspect)).max(half.y / tan_y).max(1e-4);
+        let centre = (lo + hi) * 0.5;
+        let target = right * centre.x + up * centre.y + dir * lo.z;
+        Camera { eye_m: target - dir * distance, look_at_m: target, up: up_hint, fov_y_deg: FRAMED_FOV_Y_DEG }
+    }
+
+    /// Principal axes of the fitting points (eigenvectors of their covariance, any order).
+    fn principal_axes(&self) -> Vec<Vec3> {
+        let n = self.points.len() as f32;
+        if n < 3.0 {
+            return Vec::new();
+        }
+        let mean = self.points.iter().copied().sum::<Vec3>() / n;
+        let mut cov = glam::Mat3::ZERO;
+        for p in &self.points {
+            let d = *p - mean;
+            cov += glam::Mat3::from_cols(d * d.x, d * d.y, d * d.z);
+        }
+        // Power iteration with deflation: three symmetric eigenvectors are all this needs.
+        let mut axes = Vec::new();
+        let mut m = cov * (1.0 / n);
+        for _ in 0..3 {
+            let mut v = Vec3::new(0.6, 0.5, 0.62).normalize();
+            for _ in 0..64 {
+                let w = m * v;
+                if w.length() < 1e-20 {
+                    break;
+                }
+                v = w.normalize();
+            }
+            let lambda = v.dot(m * v);
+            axes.push(v);
+            m -= glam::Mat3::from_cols(v * v.x, v * v.y, v * v.z) * lambda;
+        }
+        axes
+    }
+}
+
+impl Occupancy {
+    /// The grid over `sample`'s bounds, every surfel of `scene` in it marked.
+    fn new(scene: &SceneData, sample: &SurfelSample) -> Self {
+        let (lo, hi) = (sample.min_m, sample.max_m);
+        let splat_radius_m = sample.splat_radius_m;
+        let cell_m = (hi - lo).max_element() / GRID_CELLS as f32;
+        let dims = ((hi - lo) / cell_m).ceil().as_ivec3().clamp(IVec3::ONE, IVec3::splat(GRID_CELLS));
+        let n = (dims.x * dims.y * dims.z) as usize;
+        let mut grid =
+            Self { min_m: lo, cell_m, dims, normals: vec![Vec3::ZERO; n], occupied: vec![false; n] };
+        // A surfel covers the cells its splat disc passes through (within half a cell diagonal of
+        // its plane and of its rim). How far out a disc may reach is bounded so the marking costs
+        // at most about `MARK_BUDGET` cell tests: a few surfels may each span the grid (a
+        // one-point scan framed to fill the image), millions stay within a few cells.
+        let budget_reach = ((MARK_BUDGET / scene.surfels.len() as f64).cbrt() * 0.5).floor() as i32;
+        let reach = ((splat_radius_m / cell_m).ceil() as i32).min(budget_reach.clamp(1, GRID_CELLS));
+        let half_diagonal = 0.87 * cell_m;
+        for s in &scene.surfels {
+            let p = Vec3::from_slice(&s.position_radius[..3]);
+            let Some(c) = grid.cell_of(p) else { continue };
+            let n = Vec3::from_slice(&s.normal_spread[..3]).try_normalize().unwrap_or(Vec3::ZERO);
+            for dz in -reach..=reach {
+                for dy in -reach..=reach {
+                    for dx in -reach..=reach {
+                        let q = c + IVec3::new(dx, dy, dz);
+                        let offset = grid.centre(q) - p;
+                        let height = offset.dot(n);
+                        if height.abs() > half_diagonal
+                            || (offset - n * height).length() > splat_radius_m + half_diagonal
+                        {
+                            continue;
+                        }
+                        if let Some(k) = grid.index(q) {
+                            grid.occupied[k] = true;
+                            grid.normals[k] += n;
+                        }
+                    }
+                }
+            }
+        }
+        grid
+    }
+
+    fn index(&self, c: IVec3) -> Option<usize> {
+        (c.cmpge(IVec3::ZERO).all() && c.cmplt(self.dims).all())
+            .then(|| (c.x + self.dims.x * (c.y + self.dims.y * c.z)) as usize)
+    }
+
+    fn cell_of(&self, p: Vec3) -> Option<IVec3> {
+        let c = ((p - self.min_m) / self.cell_m).floor();
+        c.is_finite().then(|| c.as_ivec3()).filter(|c| self.index(*c).is_some())
+    }
+
+    fn centre(&self, c: IVec3) -> Vec3 {
+        self.min_m + (c.as_vec3() + Vec3::splat(0.5)) * self.cell_m
+    }
+
+    /// The first surface along the ray (`dir` unit): distance in metres and whether the surfels
+    /// there face the ray's origin.
+    fn cast(&self, origin: Vec3, dir: Vec3) -> Option<(f32, bool)> {
+        // Clip to the grid's box (slab test), then march half a cell at a time.
+        let hi = self.min_m + self.dims.as_vec3() * self.cell_m;
+        let inv = dir.recip();
+        let t_a = (self.min_m - origin) * inv;
+        let t_b = (hi - origin) * inv;
+        let t0 = t_a.min(t_b).max_element().max(0.0);
+        let t1 = t_a.max(t_b).min_element();
+        if t0 > t1 || t0.is_nan() || t1.is_nan() {
+            return None;
+        }
+        let step = 0.5 * self.cell_m;
+        let mut t = t0 + 0.5 * step;
+        while t <= t1 {
+            if let Some(k) = self.cell_of(origin + dir * t).and_then(|c| self.index(c))
+                && self.occupied[k]
+            {
+                return Some((t, self.normals[k].dot(dir) < 0.0));
+            }
+            t += step;
+        }
+        None
     }
 
     /// Eyes inside open spaces: sampled empty cells enclosed by surfaces facing them (at least
@@ -372,59 +451,6 @@ impl Occupancy {
         }
         dist
     }
-
-    /// The camera looking along `dir` (unit) that fits the points to the image: centred on their
-    /// extent across the view, as close as the nearest ones allow.
-    fn fit(&self, dir: Vec3, aspect: f32) -> Camera {
-        let up_hint = if dir.z.abs() > 0.95 { Vec3::Y } else { Vec3::Z };
-        let right = dir.cross(up_hint).normalize();
-        let up = right.cross(dir);
-        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-        for p in &self.points {
-            let q = Vec3::new(p.dot(right), p.dot(up), p.dot(dir));
-            lo = lo.min(q);
-            hi = hi.max(q);
-        }
-        let r = self.splat_radius_m;
-        let (lo, hi) = (lo - Vec3::new(r, r, 0.0), hi + Vec3::new(r, r, 0.0));
-        let tan_y = (FRAMED_FOV_Y_DEG.to_radians() * 0.5).tan();
-        let half = (hi - lo) * 0.5;
-        let distance = (half.x / (tan_y * aspect)).max(half.y / tan_y).max(1e-4);
-        let centre = (lo + hi) * 0.5;
-        let target = right * centre.x + up * centre.y + dir * lo.z;
-        Camera { eye_m: target - dir * distance, look_at_m: target, up: up_hint, fov_y_deg: FRAMED_FOV_Y_DEG }
-    }
-
-    /// Principal axes of the fitting points (eigenvectors of their covariance, any order).
-    fn principal_axes(&self) -> Vec<Vec3> {
-        let n = self.points.len() as f32;
-        if n < 3.0 {
-            return Vec::new();
-        }
-        let mean = self.points.iter().copied().sum::<Vec3>() / n;
-        let mut cov = glam::Mat3::ZERO;
-        for p in &self.points {
-            let d = *p - mean;
-            cov += glam::Mat3::from_cols(d * d.x, d * d.y, d * d.z);
-        }
-        // Power iteration with deflation: three symmetric eigenvectors are all this needs.
-        let mut axes = Vec::new();
-        let mut m = cov * (1.0 / n);
-        for _ in 0..3 {
-            let mut v = Vec3::new(0.6, 0.5, 0.62).normalize();
-            for _ in 0..64 {
-                let w = m * v;
-                if w.length() < 1e-20 {
-                    break;
-                }
-                v = w.normalize();
-            }
-            let lambda = v.dot(m * v);
-            axes.push(v);
-            m -= glam::Mat3::from_cols(v * v.x, v * v.y, v * v.z) * lambda;
-        }
-        axes
-    }
 }
 
 /// Forward, right and up unit vectors of a camera.
@@ -437,10 +463,10 @@ fn basis(camera: &Camera) -> (Vec3, Vec3, Vec3) {
 /// The best view of `scene` for an image of `aspect` (width / height), or None when it has no
 /// surfels.
 pub fn frame(scene: &SceneData, aspect: f32, splat_scale: f32) -> Option<Framing> {
-    let grid = Occupancy::from_scene(scene, splat_scale)?;
+    let sample = SurfelSample::from_scene(scene, splat_scale)?;
     let mut candidates: Vec<(Camera, &'static str)> = Vec::new();
-    let centroid = grid.points.iter().copied().sum::<Vec3>() / grid.points.len().max(1) as f32;
-    for eye in grid.inside_eyes(12) {
+    let centroid = sample.points.iter().copied().sum::<Vec3>() / sample.points.len().max(1) as f32;
+    for eye in Occupancy::new(scene, &sample).inside_eyes(12) {
         let mut dirs: Vec<Vec3> = Vec::new();
         for k in 0..8 {
             let a = k as f32 * std::f32::consts::FRAC_PI_4;
@@ -467,11 +493,11 @@ pub fn frame(scene: &SceneData, aspect: f32, splat_scale: f32) -> Option<Framing
             outside.push(Vec3::new(a.cos() * elevation.cos(), a.sin() * elevation.cos(), elevation.sin()));
         }
     }
-    for axis in grid.principal_axes() {
+    for axis in sample.principal_axes() {
         outside.push(axis);
         outside.push(-axis);
     }
-    if let Some(n) = grid.mean_normal.try_normalize() {
+    if let Some(n) = sample.mean_normal.try_normalize() {
         outside.push(-n);
     }
     let first_outside = candidates.len();
@@ -480,7 +506,7 @@ pub fn frame(scene: &SceneData, aspect: f32, splat_scale: f32) -> Option<Framing
         if d.z > 0.3 {
             continue;
         }
-        let fit = grid.fit(d, aspect);
+        let fit = sample.fit(d, aspect);
         for zoom in ZOOMS {
             let mut c = fit;
             c.eye_m = fit.look_at_m - (fit.look_at_m - fit.eye_m) * zoom;
@@ -491,14 +517,14 @@ pub fn frame(scene: &SceneData, aspect: f32, splat_scale: f32) -> Option<Framing
         .into_iter()
         .enumerate()
         .filter(|(_, (c, _))| c.validate().is_ok())
-        .map(|(i, (camera, kind))| (i, Framing { estimate: grid.estimate(&camera, aspect), camera, kind }))
+        .map(|(i, (camera, kind))| (i, Framing { estimate: sample.estimate(&camera, aspect), camera, kind }))
         .collect();
     choose(scored, first_outside)
 }
 
 /// Outside views are tried at these fractions of the distance that fits all the data.
 const ZOOMS: [f32; 6] = [1.0, 0.8, 0.65, 0.5, 0.35, 0.25];
-/// "Most of the image": the share of rays a chosen view should see a surface with.
+/// "Most of the image": the share of pixels a chosen view should see a surface in.
 pub const MOST: f32 = 0.6;
 
 /// The choice among scored candidates (index, view; outside views from `first_outside` on, in
@@ -538,7 +564,7 @@ fn choose(scored: Vec<(usize, Framing)>, first_outside: usize) -> Option<Framing
 
 /// What a view of `scene` sees (for a camera the user chose), or None without surfels.
 pub fn estimate(scene: &SceneData, camera: &Camera, aspect: f32, splat_scale: f32) -> Option<ViewEstimate> {
-    Occupancy::from_scene(scene, splat_scale).map(|g| g.estimate(camera, aspect))
+    SurfelSample::from_scene(scene, splat_scale).map(|s| s.estimate(camera, aspect))
 }
 
 /// A headlamp for `camera`: a spot at the eye along the view whose cone covers the image, bright

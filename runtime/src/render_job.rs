@@ -11,6 +11,7 @@ use serde::Serialize;
 
 use crate::camera::{self, Camera};
 use crate::error::{Error, Result};
+use crate::framing::Framing;
 use crate::gpu::{Gpu, GpuOptions};
 use crate::image_out;
 use crate::plan::EffectPlan;
@@ -146,14 +147,14 @@ pub enum Progress {
     Frame { done: u32, total: u32 },
 }
 
-/// The camera a choice names in `scene`, for an image of `aspect` (width / height), and a note
-/// when it was framed on the data rather than given.
+/// The camera a choice names in `scene`, for an image of `aspect` (width / height), and the
+/// framing when it was framed on the data rather than given.
 pub fn resolve_camera(
     scene: &SceneData,
     choice: &CameraChoice,
     aspect: f32,
     splat_scale: f32,
-) -> Result<(Camera, Option<String>)> {
+) -> Result<(Camera, Option<Framing>)> {
     match choice {
         CameraChoice::Named(name) => {
             scene.cameras.iter().find(|c| &c.name == name).map(|c| (Camera::from_scene(c), None)).ok_or_else(
@@ -187,21 +188,25 @@ pub fn resolve_camera(
                 package: scene.name.clone(),
                 problem: "no surfels to frame a view on".into(),
             })?;
-            let frame = DVec3::from_array(scene.frame_origin_m);
-            let world = |p: Vec3| (p.as_dvec3() + frame).to_array().map(|v| format!("{v:.3}")).join(",");
-            let note = format!(
-                "camera: the package has none; framed from {} the data (about {:.0}% of the image \
-                 sees a surface, median distance {:.2} m): --eye={} --look-at={} --up={}",
-                f.kind,
-                f.estimate.coverage * 100.0,
-                f.estimate.median_distance_m,
-                world(f.camera.eye_m),
-                world(f.camera.look_at_m),
-                [f.camera.up.x, f.camera.up.y, f.camera.up.z].map(|v| format!("{v}")).join(","),
-            );
-            Ok((f.camera, Some(note)))
+            Ok((f.camera, Some(f)))
         }
     }
+}
+
+/// What `framing` chose, in world coordinates a user can pass back as options.
+fn framing_note(scene: &SceneData, f: &Framing) -> String {
+    let frame = DVec3::from_array(scene.frame_origin_m);
+    let world = |p: Vec3| (p.as_dvec3() + frame).to_array().map(|v| format!("{v:.3}")).join(",");
+    format!(
+        "camera: the package has none; framed from {} the data (about {:.0}% of the image \
+         sees a surface, median distance {:.2} m): --eye={} --look-at={} --up={}",
+        f.kind,
+        f.estimate.coverage * 100.0,
+        f.estimate.median_distance_m,
+        world(f.camera.eye_m),
+        world(f.camera.look_at_m),
+        [f.camera.up.x, f.camera.up.y, f.camera.up.z].map(|v| format!("{v}")).join(","),
+    )
 }
 
 /// The scene and cameras a job renders: the package's scene (with `--lamps` applied), the cameras
@@ -212,9 +217,11 @@ pub fn prepare(opts: &RenderOptions) -> Result<(SceneData, Vec<Camera>, Vec<Stri
     let aspect = opts.width as f32 / opts.height.max(1) as f32;
     let splat = opts.settings.splat_scale;
     let mut notes = Vec::new();
+    let mut framed = None;
     let cameras: Vec<Camera> = if opts.path.is_empty() {
-        let (c, note) = resolve_camera(&scene, &opts.camera, aspect, splat)?;
-        notes.extend(note);
+        let (c, f) = resolve_camera(&scene, &opts.camera, aspect, splat)?;
+        notes.extend(f.as_ref().map(|f| framing_note(&scene, f)));
+        framed = f;
         vec![c]
     } else {
         let keys = opts
@@ -234,7 +241,11 @@ pub fn prepare(opts: &RenderOptions) -> Result<(SceneData, Vec<Camera>, Vec<Stri
     };
     if want {
         let first = cameras[0];
-        let seen = crate::framing::estimate(&scene, &first, aspect, splat);
+        // A framed view was estimated already; a given one is estimated here.
+        let seen = match &framed {
+            Some(f) => Some(f.estimate),
+            None => crate::framing::estimate(&scene, &first, aspect, splat),
+        };
         // Nothing in view: size the lamp for the scene's extent instead.
         let distance_m = seen.map(|e| e.median_distance_m).filter(|&d| d > 0.0).unwrap_or_else(|| {
             let (lo, hi) = scene.bounds_leaf();
@@ -274,7 +285,7 @@ pub fn image_warnings(scene: &SceneData, uncovered: usize, black: usize, pixels:
     }
     let covered = pixels - uncovered;
     if covered > 0 && black * 2 > covered {
-        let why = if scene.lights.is_empty() && !scene.has_own_light() {
+        let why = if !scene.has_own_light() {
             "the scene has no lights, emission or environment map (add [[light]] to the manifest, or \
              render with --headlamp on)"
         } else {

@@ -352,8 +352,7 @@ const STORAGE: wgpu::BufferUsages =
 impl Renderer {
     pub fn new(gpu: &Gpu, scene: &SceneData, settings: Settings) -> Result<Self> {
         settings.validate()?;
-        let face_bytes: u64 = if settings.radiance_f16 { 8 } else { 16 };
-        let faces_bytes = scene.nodes.len() as u64 * 6 * face_bytes;
+        let faces_bytes = scene.buffer_bytes(settings.radiance_f16).faces;
         let (lo, hi) = scene.bounds_leaf();
         let leaf = scene.leaf_size_m.max(1e-6);
         let scene_diag_m = ((hi - lo) * leaf).length().max(leaf);
@@ -594,7 +593,7 @@ impl Renderer {
             binding: 9,
             resource: wgpu::BindingResource::TextureView(&shadow_view),
         });
-        let rock = gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock_words), STORAGE)?;
+        let rock = gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock.words), STORAGE)?;
         entries.push(wgpu::BindGroupEntry { binding: 10, resource: rock.as_entire_binding() });
         let light_grid_buf =
             gpu.buffer_init("light grid", bytemuck::cast_slice(&light_grid.words), STORAGE)?;

@@ -77,7 +77,7 @@ fn is_edge(cell: IVec3, normal: Vec3, seeds: &HashMap<IVec3, Seed>) -> bool {
     })
 }
 
-/// Classifies rock and stores the rock cells of `scene` as a [`RockTable`] in `scene.rock_words`.
+/// Classifies rock and stores the rock cells of `scene` as a [`RockTable`] in `scene.rock`.
 pub fn classify(scene: &mut SceneData) {
     let leaf_m = scene.leaf_size_m;
     // Seeds: the mean position and Toksvig mean normal of the oriented leaves in each cell. Cells
@@ -172,7 +172,7 @@ pub fn classify(scene: &mut SceneData) {
         }
         frontier = next_frontier;
     }
-    scene.rock_words = RockTable::build(&rock).words;
+    scene.rock = RockTable::build(&rock);
 }
 
 /// Rock cells per brick side, as a shift: a brick is 4x4x4 cells, its 64 bits two words.
@@ -250,7 +250,8 @@ impl RockTable {
     }
 
     /// Whether rock cell `cell` (global cell units) is rock: `in_rock` in common.wgsl.
-    pub fn contains(words: &[u32], cell: IVec3) -> bool {
+    pub fn contains(&self, cell: IVec3) -> bool {
+        let words = &self.words;
         let (Some(&mask), Some(&longest)) = (words.first(), words.get(1)) else { return false };
         let b = cell >> BRICK_SHIFT as i32;
         let mut slot = brick_hash(b) & mask;
@@ -271,8 +272,8 @@ impl RockTable {
     }
 
     /// Bricks stored (the third header word).
-    pub fn bricks(words: &[u32]) -> u32 {
-        words.get(2).copied().unwrap_or(0)
+    pub fn bricks(&self) -> u32 {
+        self.words.get(2).copied().unwrap_or(0)
     }
 }
 
@@ -293,7 +294,7 @@ pub fn dense_grid_bytes(scene: &SceneData) -> u64 {
 
 /// Whether leaf cell `v_leaf` (global leaf units) lies in a rock cell; as `in_rock` in common.wgsl.
 pub fn in_rock(scene: &SceneData, v_leaf: IVec3) -> bool {
-    RockTable::contains(&scene.rock_words, v_leaf >> ROCK_LEVEL as i32)
+    scene.rock.contains(v_leaf >> ROCK_LEVEL as i32)
 }
 
 #[cfg(test)]
@@ -317,31 +318,31 @@ mod tests {
         }
         cells.push(IVec3::new(1 << 26, -(1 << 26), 7));
         cells.push(IVec3::new(-(1 << 26), 3, 1 << 26));
-        let words = RockTable::build(&cells).words;
+        let table = RockTable::build(&cells);
         let set: std::collections::HashSet<IVec3> = cells.iter().copied().collect();
         for z in -14..14 {
             for y in -14..14 {
                 for x in -14..14 {
                     let c = IVec3::new(x, y, z);
-                    assert_eq!(RockTable::contains(&words, c), set.contains(&c), "cell {c}");
+                    assert_eq!(table.contains(c), set.contains(&c), "cell {c}");
                 }
             }
         }
         for &c in &cells[cells.len() - 2..] {
-            assert!(RockTable::contains(&words, c));
-            assert!(!RockTable::contains(&words, c + IVec3::X));
+            assert!(table.contains(c));
+            assert!(!table.contains(c + IVec3::X));
         }
         // Load at most 1/2, so the table is at most twice the bricks, whatever the volume spanned.
-        let bricks = RockTable::bricks(&words) as usize;
-        let capacity = (words.len() - HEADER_WORDS) / ENTRY_WORDS;
+        let bricks = table.bricks() as usize;
+        let capacity = (table.words.len() - HEADER_WORDS) / ENTRY_WORDS;
         assert!(capacity <= 4 * bricks.max(1) && capacity >= 2 * bricks, "{capacity} for {bricks}");
     }
 
     #[test]
     fn empty_table_holds_nothing() {
-        let words = RockTable::build(&[]).words;
-        assert_eq!(words.len(), HEADER_WORDS + ENTRY_WORDS);
-        assert!(!RockTable::contains(&words, IVec3::ZERO));
-        assert!(!RockTable::contains(&words, IVec3::splat(i32::MIN)));
+        let table = RockTable::build(&[]);
+        assert_eq!(table.words.len(), HEADER_WORDS + ENTRY_WORDS);
+        assert!(!table.contains(IVec3::ZERO));
+        assert!(!table.contains(IVec3::splat(i32::MIN)));
     }
 }

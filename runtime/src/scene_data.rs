@@ -72,8 +72,8 @@ pub struct SceneData {
     /// Environment radiance as 9 real SH coefficients (RGB, world axes, which the frame shares),
     /// scaled by the scene's environment intensity; None without an environment map.
     pub environment_sh: Option<[[f32; 3]; 9]>,
-    /// Rock behind the surfaces: the words of a [`crate::rock::RockTable`] (rock.rs).
-    pub rock_words: Vec<u32>,
+    /// Rock behind the surfaces (rock.rs).
+    pub rock: crate::rock::RockTable,
     /// Specular materials with a region, in slot order: surfel colour alpha `k` (1..=7) means
     /// `materials[k - 1]`, 0 diffuse. The surfels in a material's region are assigned at load.
     pub materials: Vec<SceneMaterial>,
@@ -358,7 +358,7 @@ impl SceneData {
             faces: len(nodes, 6 * if radiance_f16 { 8 } else { 16 }),
             mip_order: len(nodes, 4),
             surfels: len(self.surfels.len(), size_of::<SurfelGpu>()),
-            rock: len(self.rock_words.len(), 4),
+            rock: len(self.rock.words.len(), 4),
             rock_dense_grid: crate::rock::dense_grid_bytes(self),
         }
     }

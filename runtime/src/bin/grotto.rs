@@ -353,7 +353,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     "package": package.display().to_string(),
                     "tiles": scene.tiles.len(), "nodes": scene.nodes.len(),
                     "leaves": scene.leaves.len(), "surfels": scene.surfels.len(),
-                    "rock_bricks": grotto_runtime::rock::RockTable::bricks(&scene.rock_words),
+                    "rock_bricks": scene.rock.bricks(),
                     "bytes": bytes, "total_bytes": bytes.total(), "load_s": load_s,
                 });
                 println!("{}", serde_json::to_string_pretty(&report)?);
@@ -382,7 +382,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 println!("  {:18} {:10.2} MiB", "total", mib(bytes.total()));
                 println!(
                     "  rock: {} bricks; as dense per-tile grids it took {:.2} MiB",
-                    grotto_runtime::rock::RockTable::bricks(&scene.rock_words),
+                    scene.rock.bricks(),
                     mib(bytes.rock_dense_grid)
                 );
             }
