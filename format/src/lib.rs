@@ -10,6 +10,7 @@
 //! This is a leaf crate: no GPU, threading or CLI dependencies. Its only `unsafe` is the memory map
 //! in `source.rs`.
 
+mod env_chain;
 mod error;
 mod reader;
 mod scene;
@@ -19,6 +20,7 @@ mod summary;
 pub mod svo;
 mod writer;
 
+pub use env_chain::EnvChain;
 pub use error::{Error, Problem, Region, Result};
 pub use reader::{Element, Package, SectionInfo, SvoData, Tile};
 pub use scene::{

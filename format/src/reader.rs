@@ -190,7 +190,7 @@ impl Package {
         self.raw_tiles().iter().enumerate().map(|(i, raw)| Tile { package: self, index: i as u32, raw })
     }
 
-    fn invalid(&self, problem: Problem) -> Error {
+    pub(crate) fn invalid(&self, problem: Problem) -> Error {
         Error::Invalid { path: self.path.clone(), problem }
     }
 
@@ -318,7 +318,8 @@ impl Package {
 
     /// Checks every section's checksum and content. Returns all problems found (empty = valid).
     pub fn verify(&self) -> Vec<Problem> {
-        self.sections()
+        let mut problems: Vec<Problem> = self
+            .sections()
             .filter_map(|s| match self.read_bytes(&s) {
                 Ok(_) => None,
                 Err(Error::Invalid { problem, .. }) => Some(problem),
@@ -328,7 +329,14 @@ impl Package {
                     reason: other.to_string(),
                 }),
             })
-            .collect()
+            .collect();
+        // Rules across sections, reported once.
+        for p in self.env_chain_problems() {
+            if !problems.contains(&p) {
+                problems.push(p);
+            }
+        }
+        problems
     }
 }
 
@@ -734,23 +742,7 @@ fn check_content(kind: SectionKind, data: &[u8], depth: u32) -> Result<(), Strin
             }
             Ok(())
         }
-        SectionKind::EnvMipLevels => {
-            let mut next = 0u64;
-            for (i, l) in cast::<EnvMipLevel>(data).iter().enumerate() {
-                let blocks = u64::from(l.width.div_ceil(4)) * u64::from(l.height.div_ceil(4));
-                if l.width == 0 || l.height == 0 || blocks != u64::from(l.block_count) {
-                    return Err(format!(
-                        "level {i} is {}x{} with {} blocks",
-                        l.width, l.height, l.block_count
-                    ));
-                }
-                if u64::from(l.first_block) != next || !l.roughness.is_finite() {
-                    return Err(format!("level {i} starts at block {}, expected {next}", l.first_block));
-                }
-                next += blocks;
-            }
-            Ok(())
-        }
+        SectionKind::EnvMipLevels => crate::env_chain::check_levels(&cast::<EnvMipLevel>(data)),
         SectionKind::Scene => {
             let scene: Scene = serde_json::from_slice(data).map_err(|e| e.to_string())?;
             scene.check_finite()

@@ -24,6 +24,15 @@ pub const MAX_SVO_DEPTH: u32 = 21;
 /// claimed uncompressed length beyond `stored * MAX_ZSTD_RATIO + 64 KiB` is a lie we refuse before
 /// allocating for it.
 pub const MAX_ZSTD_RATIO: u64 = 32_768;
+/// Most levels of a prefiltered environment chain.
+pub const MAX_ENV_MIP_LEVELS: usize = 8;
+/// Largest environment chain level, texels: a lat-long map is twice as wide as it is high.
+pub const MAX_ENV_MIP_WIDTH: u32 = 8192;
+pub const MAX_ENV_MIP_HEIGHT: u32 = 4096;
+/// A reader stacks a chain's levels in one atlas as wide as level 0; the atlas may hold at most
+/// this many times the texels the levels have (1.5 for a chain that halves each level), so
+/// decoding a chain costs a bounded multiple of its stored blocks.
+pub const MAX_ENV_ATLAS_RATIO: u64 = 2;
 
 /// File header, at offset 0. `header_size` bytes long (72 in version 1.0; a later minor may grow it).
 #[repr(C)]

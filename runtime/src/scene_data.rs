@@ -142,52 +142,22 @@ pub struct EnvChain {
 }
 
 /// Most levels of an environment chain shade reads.
-pub const MAX_ENV_LEVELS: usize = 8;
+pub const MAX_ENV_LEVELS: usize = grotto_format::spec::MAX_ENV_MIP_LEVELS;
 
-/// Decodes environment `index`'s prefiltered BC6H chain (`env-mip-levels` + `env-mip-bc6h`) on
-/// the CPU (bcdec_rs: not every adapter samples BC6H, and the chain is small), scaled by
-/// `intensity`. None when the package has no chain for it.
-fn read_env_chain(
-    pkg: &Package,
-    index: u32,
-    intensity: f32,
-) -> std::result::Result<Option<EnvChain>, String> {
-    use grotto_format::spec::{Bc6hBlock, EnvMipLevel};
-    let (Some(levels_s), Some(blocks_s)) = (
-        pkg.find(SectionKind::EnvMipLevels, Scope::Global, index),
-        pkg.find(SectionKind::EnvMipBc6h, Scope::Global, index),
-    ) else {
-        return Ok(None);
-    };
-    let levels = pkg.read::<EnvMipLevel>(&levels_s).map_err(|e| e.to_string())?;
-    let blocks = pkg.read::<Bc6hBlock>(&blocks_s).map_err(|e| e.to_string())?;
-    let Some(first) = levels.first() else { return Ok(None) };
-    let width = first.width;
-    if width == 0 || width > 8192 || levels.len() > MAX_ENV_LEVELS {
-        return Err(format!("environment chain: {} levels, base width {width}", levels.len()));
-    }
-    let mut rows = 0u32;
-    let mut table = Vec::new();
-    for l in levels.iter() {
-        let (bw, bh) = (l.width.div_ceil(4), l.height.div_ceil(4));
-        if l.width == 0 || l.width > width || l.height == 0 || l.height > 4096 || bw * bh != l.block_count {
-            return Err(format!(
-                "environment chain level {}x{} with {} blocks",
-                l.width, l.height, l.block_count
-            ));
-        }
-        if u64::from(l.first_block) + u64::from(l.block_count) > blocks.len() as u64 {
-            return Err("environment chain blocks run past the env-mip-bc6h section".into());
-        }
-        table.push((rows, l.width, l.height, l.roughness));
-        rows += l.height;
-    }
-    let mut rgba = vec![[0.0f32; 4]; (width * rows) as usize];
-    for (l, &(row0, w, h, _)) in levels.iter().zip(&table) {
+/// Decodes environment `index`'s prefiltered BC6H chain (checked by `Package::env_chain`, whose
+/// rules bound the atlas by the blocks it holds) on the CPU (bcdec_rs: not every adapter samples
+/// BC6H, and the chain is small), scaled by `intensity`. None when the package has no chain.
+fn read_env_chain(pkg: &Package, index: u32, intensity: f32) -> Result<Option<EnvChain>> {
+    let Some(chain) = pkg.env_chain(index)? else { return Ok(None) };
+    let (width, height) = (chain.atlas_width(), chain.atlas_height());
+    let table: Vec<(u32, u32, u32, f32)> =
+        chain.levels.iter().zip(chain.level_rows()).map(|(l, row)| (row, l.width, l.height, l.roughness)).collect();
+    let mut rgba = vec![[0.0f32; 4]; width as usize * height as usize];
+    for (l, &(row0, w, h, _)) in chain.levels.iter().zip(&table) {
         let bw = w.div_ceil(4);
         for b in 0..l.block_count {
             let mut px = [0f32; 48];
-            bcdec_rs::bc6h_float(&blocks[(l.first_block + b) as usize].0, &mut px, 12, false);
+            bcdec_rs::bc6h_float(&chain.blocks[(l.first_block + b) as usize].0, &mut px, 12, false);
             let (bx, by) = ((b % bw) * 4, (b / bw) * 4);
             for y in 0..4 {
                 for x in 0..4 {
@@ -202,7 +172,7 @@ fn read_env_chain(
             }
         }
     }
-    Ok(Some(EnvChain { width, height: rows, rgba, levels: table }))
+    Ok(Some(EnvChain { width, height, rgba, levels: table }))
 }
 
 /// sRGB byte to linear (the IEC 61966-2-1 curve), as the GPU decodes colours.
@@ -515,7 +485,7 @@ impl SceneData {
                 )));
             }
             out.environment_sh = Some(first.coeffs.map(|c| c.map(|v| v * env.intensity)));
-            out.env_chain = read_env_chain(pkg, env.index, env.intensity).map_err(bad)?;
+            out.env_chain = read_env_chain(pkg, env.index, env.intensity)?;
         }
         let mut slot = 0u8;
         for m in &scene.materials {

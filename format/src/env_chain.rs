@@ -1,0 +1,165 @@
+//! The prefiltered environment chain (`env-mip-levels` + `env-mip-bc6h`): the rules its level
+//! table must follow (docs/format.md, "EnvMipLevel") and a checked view of both sections.
+//!
+//! The rules bound what a reader allocates to decode the chain: at most
+//! [`MAX_ENV_MIP_LEVELS`] levels no larger than [`MAX_ENV_MIP_WIDTH`] x [`MAX_ENV_MIP_HEIGHT`],
+//! never growing from one level to the next, stacked in an atlas at most [`MAX_ENV_ATLAS_RATIO`]
+//! times the texels they hold. A table claiming an 8192-wide base and seven 4x4096 levels (147
+//! KiB of blocks, a 3.8 GB atlas) is refused here, so `verify` reports it and no tool sizes
+//! anything from it.
+
+use std::borrow::Cow;
+
+use crate::error::{Problem, Result};
+use crate::reader::Package;
+use crate::spec::{
+    Bc6hBlock, EnvMipLevel, MAX_ENV_ATLAS_RATIO, MAX_ENV_MIP_HEIGHT, MAX_ENV_MIP_LEVELS, MAX_ENV_MIP_WIDTH,
+    Scope, SectionKind,
+};
+
+/// A checked environment chain: levels that follow the rules and blocks that are exactly theirs.
+#[derive(Clone, Debug)]
+pub struct EnvChain<'a> {
+    pub levels: Cow<'a, [EnvMipLevel]>,
+    pub blocks: Cow<'a, [Bc6hBlock]>,
+}
+
+impl EnvChain<'_> {
+    /// Width of the atlas the levels stack into (level 0's width).
+    pub fn atlas_width(&self) -> u32 {
+        self.levels.first().map_or(0, |l| l.width)
+    }
+
+    /// Height of that atlas: the levels' heights added.
+    pub fn atlas_height(&self) -> u32 {
+        // At most 8 levels of at most 4096 rows: cannot overflow.
+        self.levels.iter().map(|l| l.height).sum()
+    }
+
+    /// Each level's first row in the atlas.
+    pub fn level_rows(&self) -> impl Iterator<Item = u32> + '_ {
+        self.levels.iter().scan(0u32, |row, l| {
+            let first = *row;
+            *row += l.height;
+            Some(first)
+        })
+    }
+}
+
+/// The level table's own rules (checked when the section is first read).
+pub(crate) fn check_levels(levels: &[EnvMipLevel]) -> Result<(), String> {
+    if levels.len() > MAX_ENV_MIP_LEVELS {
+        return Err(format!("{} levels, at most {MAX_ENV_MIP_LEVELS}", levels.len()));
+    }
+    let mut next_block = 0u64;
+    let mut level_texels = 0u64;
+    let mut prev: Option<&EnvMipLevel> = None;
+    for (i, l) in levels.iter().enumerate() {
+        let blocks = u64::from(l.width.div_ceil(4)) * u64::from(l.height.div_ceil(4));
+        if l.width == 0 || l.height == 0 || blocks != u64::from(l.block_count) {
+            return Err(format!("level {i} is {}x{} with {} blocks", l.width, l.height, l.block_count));
+        }
+        if l.width > MAX_ENV_MIP_WIDTH || l.height > MAX_ENV_MIP_HEIGHT {
+            return Err(format!(
+                "level {i} is {}x{}, larger than {MAX_ENV_MIP_WIDTH}x{MAX_ENV_MIP_HEIGHT}",
+                l.width, l.height
+            ));
+        }
+        if u64::from(l.first_block) != next_block {
+            return Err(format!("level {i} starts at block {}, expected {next_block}", l.first_block));
+        }
+        if !(l.roughness.is_finite() && (0.0..=1.0).contains(&l.roughness)) {
+            return Err(format!("level {i} has roughness {}, outside 0..=1", l.roughness));
+        }
+        if let Some(p) = prev {
+            if l.width > p.width || l.height > p.height {
+                return Err(format!(
+                    "level {i} ({}x{}) is larger than level {} ({}x{})",
+                    l.width,
+                    l.height,
+                    i - 1,
+                    p.width,
+                    p.height
+                ));
+            }
+            if l.roughness < p.roughness {
+                return Err(format!("level {i}'s roughness {} is below level {}'s", l.roughness, i - 1));
+            }
+        }
+        next_block += blocks;
+        level_texels += u64::from(l.width) * u64::from(l.height);
+        prev = Some(l);
+    }
+    let width = levels.first().map_or(0, |l| u64::from(l.width));
+    let atlas = width * levels.iter().map(|l| u64::from(l.height)).sum::<u64>();
+    if atlas > MAX_ENV_ATLAS_RATIO * level_texels {
+        return Err(format!(
+            "the levels stack into a {atlas}-texel atlas for {level_texels} texels (at most {MAX_ENV_ATLAS_RATIO}x)"
+        ));
+    }
+    Ok(())
+}
+
+impl Package {
+    /// Environment `index`'s prefiltered chain, checked: the level table follows the rules above
+    /// and the blocks section holds exactly the blocks the levels cover. `Ok(None)` when the
+    /// package has neither section (or an empty table); an error when it has only one of them.
+    pub fn env_chain(&self, index: u32) -> Result<Option<EnvChain<'_>>> {
+        let levels_s = self.find(SectionKind::EnvMipLevels, Scope::Global, index);
+        let blocks_s = self.find(SectionKind::EnvMipBc6h, Scope::Global, index);
+        let (levels_s, blocks_s) = match (levels_s, blocks_s) {
+            (None, None) => return Ok(None),
+            (Some(l), Some(b)) => (l, b),
+            (Some(_), None) => {
+                return Err(self.invalid(Problem::Missing {
+                    kind: SectionKind::EnvMipBc6h.name().to_owned(),
+                    scope: format!(" for environment {index} (its env-mip-levels section has none)"),
+                }));
+            }
+            (None, Some(_)) => {
+                return Err(self.invalid(Problem::Missing {
+                    kind: SectionKind::EnvMipLevels.name().to_owned(),
+                    scope: format!(" for environment {index} (its env-mip-bc6h section has none)"),
+                }));
+            }
+        };
+        let levels = self.read::<EnvMipLevel>(&levels_s)?;
+        if levels.is_empty() {
+            return Ok(None);
+        }
+        let blocks = self.read::<Bc6hBlock>(&blocks_s)?;
+        let claimed: u64 = levels.iter().map(|l| u64::from(l.block_count)).sum();
+        if claimed != blocks.len() as u64 {
+            return Err(self.invalid(Problem::BadContent {
+                section: blocks_s.index,
+                kind: SectionKind::EnvMipBc6h.name().to_owned(),
+                reason: format!(
+                    "holds {} blocks, environment {index}'s levels cover {claimed}",
+                    blocks.len()
+                ),
+            }));
+        }
+        Ok(Some(EnvChain { levels, blocks }))
+    }
+
+    /// Problems of every environment chain as a whole (each section alone is checked by `read`).
+    pub(crate) fn env_chain_problems(&self) -> Vec<Problem> {
+        let items: Vec<u32> = self
+            .sections()
+            .filter(|s| {
+                matches!(s.kind, Some(SectionKind::EnvMipLevels | SectionKind::EnvMipBc6h))
+                    && s.scope == Scope::Global
+            })
+            .map(|s| s.item)
+            .collect::<std::collections::BTreeSet<u32>>()
+            .into_iter()
+            .collect();
+        items
+            .into_iter()
+            .filter_map(|item| match self.env_chain(item) {
+                Err(e) => e.problem().cloned(),
+                Ok(_) => None,
+            })
+            .collect()
+    }
+}
