@@ -96,23 +96,40 @@ fn with_environment(src: &Path, out: &Path, chain: &[EnvMipLevel], blocks: &[Bc6
     Package::open(out).unwrap()
 }
 
-fn small_cave(dir: &Path) -> std::path::PathBuf {
-    let cave = grotto_preprocess::synth::SmallCave { points: 20_000, segments: 3, ..Default::default() };
+fn small_cave(dir: &Path, points: u64, segments: usize) -> std::path::PathBuf {
+    let cave = grotto_preprocess::synth::SmallCave { points, segments, ..Default::default() };
     grotto_preprocess::synth::small_cave_package(dir, &cave).unwrap()
 }
 
 #[test]
 fn loading_a_package_allocates_a_bounded_multiple_of_what_it_holds() {
     let dir = tempfile::tempdir().unwrap();
-    let cave = small_cave(dir.path());
+    let cave = small_cave(&dir.path().join("cave"), 20_000, 3);
+    let tiny = small_cave(&dir.path().join("tiny"), 1_500, 1);
     // The chain preprocess writes for a sky (256 wide, 6 levels): the densest part to decode.
     let sky = LatLong { width: 256, height: 128, rgb: vec![[2.0, 1.5, 1.0]; 256 * 128] };
     let (levels, blocks) = env::encode_chain(&env::prefilter(&sky, 256, 6, 16));
+    let (small_levels, small_blocks) = env::encode_chain(&env::prefilter(&sky, 32, 3, 16));
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    for (name, pkg) in [
+    let cases = [
         ("cave", Package::open(&cave).unwrap()),
         ("cave under a sky", with_environment(&cave, &dir.path().join("sky.grotto"), &levels, &blocks)),
-    ] {
+        ("tiny cave", Package::open(&tiny).unwrap()),
+        (
+            "tiny cave under a sky",
+            with_environment(&tiny, &dir.path().join("tiny-sky.grotto"), &small_levels, &small_blocks),
+        ),
+    ];
+    // `GROTTO_FUZZ_SEEDS=DIR` keeps the tiny packages as seeds for the load_scene fuzz target
+    // (docs/fuzzing.md).
+    if let Some(seeds) = std::env::var_os("GROTTO_FUZZ_SEEDS") {
+        std::fs::create_dir_all(&seeds).unwrap();
+        for (name, pkg) in cases.iter().filter(|(name, _)| name.starts_with("tiny")) {
+            std::fs::copy(pkg.path(), Path::new(&seeds).join(format!("{}.grotto", name.replace(' ', "-"))))
+                .unwrap();
+        }
+    }
+    for (name, pkg) in cases {
         let held = held_bytes(&pkg);
         let (scene, peak) = peak_heap(|| SceneData::from_package(&pkg).unwrap());
         let limit = BYTES_PER_HELD_BYTE * held + FIXED_ALLOWANCE;
@@ -129,7 +146,7 @@ fn loading_a_package_allocates_a_bounded_multiple_of_what_it_holds() {
 #[test]
 fn a_chain_claiming_a_huge_atlas_is_refused_before_anything_is_sized_from_it() {
     let dir = tempfile::tempdir().unwrap();
-    let cave = small_cave(dir.path());
+    let cave = small_cave(dir.path(), 20_000, 3);
     // The package: valid section by section, an 8192-wide base and seven levels of
     // 4x4096 (147 KiB of blocks) that a reader stacking them as wide as the base would decode
     // into a 3.8 GB atlas.

@@ -3,12 +3,27 @@
 use std::path::PathBuf;
 
 /// `../shared/data` beside the repository (CI puts `shared/` there), or `$GROTTO_SHARED_DATA`.
+///
+/// Missing data fails the calling test: a test that read nothing must not pass. Only where
+/// `GROTTO_SKIP_SHARED_DATA=1` says so (a checkout without `../shared`) is this `None`, and the
+/// caller skips, saying so.
 pub fn shared_data_dir() -> Option<PathBuf> {
-    if let Some(p) = std::env::var_os("GROTTO_SHARED_DATA") {
-        return Some(PathBuf::from(p));
+    let p = match std::env::var_os("GROTTO_SHARED_DATA") {
+        Some(p) => PathBuf::from(p),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"),
+    };
+    if p.is_dir() {
+        return Some(p);
     }
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data");
-    p.is_dir().then_some(p)
+    if std::env::var_os("GROTTO_SKIP_SHARED_DATA").is_some_and(|v| v == "1") {
+        eprintln!("skipped: {} is missing and GROTTO_SKIP_SHARED_DATA=1", p.display());
+        return None;
+    }
+    panic!(
+        "{} is missing: put the shared test data there, point GROTTO_SHARED_DATA at it, or set \
+         GROTTO_SKIP_SHARED_DATA=1 to skip the tests that read it",
+        p.display()
+    );
 }
 
 /// Golden images: the one tolerance every image comparison uses.
