@@ -10,6 +10,7 @@
 //! This is a leaf crate: no GPU, threading or CLI dependencies. Its only `unsafe` is the memory map
 //! in `source.rs`.
 
+pub mod color;
 mod env_chain;
 mod error;
 mod reader;

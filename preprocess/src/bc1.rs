@@ -23,15 +23,7 @@ pub fn encode(colors: &[[u8; 3]]) -> Vec<Bc1Block> {
         .collect()
 }
 
-/// The first `n` colours of `blocks`.
-pub fn decode(blocks: &[Bc1Block], n: usize) -> Vec<[u8; 3]> {
-    blocks
-        .iter()
-        .flat_map(|b| Format::Bc1.decompress_block(&b.0))
-        .take(n)
-        .map(|px| [px[0], px[1], px[2]])
-        .collect()
-}
+pub use grotto_format::color::decode_bc1 as decode;
 
 /// Peak signal-to-noise ratio (dB, 8-bit RGB) and the largest channel error of `b` against `a`.
 pub fn psnr(a: &[[u8; 3]], b: &[[u8; 3]]) -> (f64, u8) {

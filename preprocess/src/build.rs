@@ -339,7 +339,7 @@ fn build_tile(
                 pos_tile_m: own_points[i].pos_tile_m(quantum),
                 normal: estimated[i].normal,
                 area_m2: (std::f64::consts::PI * r * r) as f32,
-                albedo_linear: c.map(|v| voxels::srgb_to_linear(f32::from(v) / 255.0)),
+                albedo_linear: c.map(|v| grotto_format::color::srgb8_to_linear(v)),
                 emission: [0.0; 3],
             }
         })

@@ -21,7 +21,8 @@ use bvh::bvh::Bvh;
 use glam::{IVec3, Vec3};
 use grotto_runtime::camera::Camera;
 use grotto_runtime::cpu_ref::CpuScene;
-use grotto_runtime::scene_data::{SceneData, SceneLight, srgb_to_linear};
+use grotto_format::color::srgb8_to_linear;
+use grotto_runtime::scene_data::{SceneData, SceneLight};
 use nalgebra::Point3;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -220,9 +221,9 @@ impl SurfelScene {
                     })
                     .unwrap_or(Vec3::ZERO);
                 let albedo = Vec3::new(
-                    srgb_to_linear(s.color[0]),
-                    srgb_to_linear(s.color[1]),
-                    srgb_to_linear(s.color[2]),
+                    srgb8_to_linear(s.color[0]),
+                    srgb8_to_linear(s.color[1]),
+                    srgb8_to_linear(s.color[2]),
                 );
                 Disc::new(
                     c,
@@ -528,6 +529,5 @@ impl SurfelScene {
 pub fn aces_srgb(x: f32) -> u8 {
     let x = x.max(0.0);
     let m = ((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)).clamp(0.0, 1.0);
-    let s = if m <= 0.003_130_8 { m * 12.92 } else { 1.055 * m.powf(1.0 / 2.4) - 0.055 };
-    (s * 255.0 + 0.5) as u8
+    grotto_format::color::linear_to_srgb8(m)
 }

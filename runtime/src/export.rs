@@ -35,13 +35,7 @@ struct Point {
 
 pub(crate) fn tile_colors(tile: &grotto_format::Tile<'_>, n: usize) -> Result<Vec<[u8; 3]>, Error> {
     if let Some(bc1) = tile.read::<Bc1Block>(SectionKind::SurfelColorsBc1)? {
-        let out: Vec<[u8; 3]> = bc1
-            .iter()
-            .flat_map(|b| texpresso::Format::Bc1.decompress_block(&b.0))
-            .take(n)
-            .map(|p| [p[0], p[1], p[2]])
-            .collect();
-        return Ok(out);
+        return Ok(grotto_format::color::decode_bc1(&bc1, n));
     }
     if let Some(raw) = tile.read::<Rgba8>(SectionKind::SurfelColorsRaw)? {
         return Ok(raw.iter().take(n).map(|c| [c.0[0], c.0[1], c.0[2]]).collect());

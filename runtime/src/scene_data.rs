@@ -9,6 +9,7 @@
 use std::collections::BTreeMap;
 
 use glam::{DVec3, IVec3, Vec3};
+use grotto_format::color::srgb8_to_linear;
 use grotto_format::spec::Rgba8;
 use grotto_format::spec::{ShRgb9, Surfel, SvoNode};
 use grotto_format::svo::{morton_decode, morton_encode, nodes_from_leaves};
@@ -175,11 +176,6 @@ fn read_env_chain(pkg: &Package, index: u32, intensity: f32) -> Result<Option<En
     Ok(Some(EnvChain { width, height, rgba, levels: table }))
 }
 
-/// sRGB byte to linear (the IEC 61966-2-1 curve), as the GPU decodes colours.
-pub fn srgb_to_linear(c: u8) -> f32 {
-    let c = f32::from(c) / 255.0;
-    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
-}
 
 impl SceneData {
     /// Appends a tile's nodes with global indices: `first_child` becomes a global node index for
@@ -416,9 +412,9 @@ impl SceneData {
                 let e = emission.map_or([0.0; 3], |e| e[li].radiance);
                 out.leaves.push(LeafGpu {
                     albedo_opacity: [
-                        srgb_to_linear(c[0]),
-                        srgb_to_linear(c[1]),
-                        srgb_to_linear(c[2]),
+                        srgb8_to_linear(c[0]),
+                        srgb8_to_linear(c[1]),
+                        srgb8_to_linear(c[2]),
                         svo.opacity[li],
                     ],
                     normal_mean: [ndf.mean[0], ndf.mean[1], ndf.mean[2], 0.0],

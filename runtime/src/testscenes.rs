@@ -6,17 +6,13 @@
 //! surfel per open face; rock further in has no surfels.
 
 use glam::{IVec3, Vec3};
+use grotto_format::color::linear_to_srgb8;
 
 use crate::gpu_types::SurfelGpu;
 use crate::scene_data::{SceneCamera, SceneData, SceneLight, VoxelLeaf};
 
 const NEIGHBOURS: [IVec3; 6] = [IVec3::X, IVec3::NEG_X, IVec3::Y, IVec3::NEG_Y, IVec3::Z, IVec3::NEG_Z];
 
-fn srgb8(linear: f32) -> u8 {
-    let c = linear.clamp(0.0, 1.0);
-    let s = if c <= 0.003_130_8 { c * 12.92 } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
-    (s * 255.0 + 0.5) as u8
-}
 
 /// Solid rock over `dims` leaves with the cells where `air` is true carved out.
 /// `normal_override` may give a leaf's normal (the furnace uses it for rock).
@@ -48,7 +44,7 @@ pub fn carved(
                     if inside(n) && air(n) {
                         open += d.as_vec3();
                         let center = (c.as_vec3() + Vec3::splat(0.5) + d.as_vec3() * 0.5) * leaf_size_m;
-                        let rgb = albedo.to_array().map(srgb8);
+                        let rgb = albedo.to_array().map(linear_to_srgb8);
                         surfels.push(SurfelGpu {
                             position_radius: center.extend(0.75 * leaf_size_m).to_array(),
                             normal_spread: d.as_vec3().extend(0.0).to_array(),
@@ -107,7 +103,7 @@ pub fn open_sphere(depth: u32, radius_leaves: f32, albedo: f32, e: f32, cap_cos:
                     // At the leaf centre: the surfel lies in its own leaf (the reference takes
                     // emission from the leaf a surfel is in).
                     let at = p;
-                    let rgb = srgb8(albedo);
+                    let rgb = linear_to_srgb8(albedo);
                     surfels.push(SurfelGpu {
                         position_radius: (at * leaf_size_m).extend(0.75 * leaf_size_m).to_array(),
                         normal_spread: inward.extend(0.0).to_array(),
