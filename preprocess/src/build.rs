@@ -88,6 +88,13 @@ pub fn auto_leaf(scans: &[ResolvedScan]) -> Result<AutoLeaf> {
     Ok(AutoLeaf { leaf_m, spacing_m: sample.map(|s| s.0), sampled_points: sample.map_or(0, |s| s.1) })
 }
 
+/// `grotto-pack build`'s defaults at the default leaf size, working in `./grotto-work`.
+impl Default for BuildParams {
+    fn default() -> Self {
+        Self::with_leaf(PathBuf::from("grotto-work"), DEFAULT_LEAF_M)
+    }
+}
+
 impl BuildParams {
     /// `grotto-pack build`'s defaults for leaves of `leaf_m`: a 2 GiB memory budget, every core,
     /// BC1 colours, 16 neighbours, tiles of 16 to 1024 leaves and a halo of 4 leaves.

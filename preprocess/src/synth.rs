@@ -686,10 +686,10 @@ pub fn small_cave_package(dir: &std::path::Path, cave: &SmallCave) -> crate::Res
         leaf_m: cave.leaf_m,
         colors: cave.colors,
         sh_window: cave.sh_window,
-        k: 16,
         min_tile_extent_m: 4.0,
         max_tile_extent_m: cave.max_tile_extent_m,
         halo_m: 0.5,
+        ..BuildParams::default()
     };
     build::build(&manifest, &manifest_path, &out, &bp, &|_| {})?;
     Ok(out)

@@ -221,11 +221,10 @@ pub fn bunny() -> Result<SceneData, String> {
         threads: 2,
         leaf_m: 1.0 / 512.0,
         colors: ColorCodec::Raw,
-        sh_window: true,
-        k: 16,
         min_tile_extent_m: 1.0 / 16.0,
         max_tile_extent_m: 0.25,
         halo_m: 0.004,
+        ..BuildParams::default()
     };
     build::build(&manifest, &conf, &out, &bp, &|_| {}).map_err(|e| e.to_string())?;
     let pkg = grotto_format::Package::open(&out).map_err(|e| e.to_string())?;

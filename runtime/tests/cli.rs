@@ -71,12 +71,10 @@ fn export_writes_points_other_tools_read() {
         memory_budget_bytes: 64 << 20,
         threads: 2,
         leaf_m: 0.125,
-        colors: grotto_preprocess::build::ColorCodec::Bc1,
-        sh_window: true,
-        k: 16,
         min_tile_extent_m: 4.0,
         max_tile_extent_m: 16.0,
         halo_m: 0.25,
+        ..grotto_preprocess::build::BuildParams::default()
     };
     grotto_preprocess::build::build(&manifest, std::path::Path::new(&s.manifest), &pkg_path, &bp, &|_| {})
         .unwrap();

@@ -19,11 +19,10 @@ fn params(work: &Path, min_tile: f64, max_tile: f64) -> BuildParams {
         threads: 2,
         leaf_m: 0.125,
         colors: ColorCodec::Raw,
-        sh_window: true,
-        k: 16,
         min_tile_extent_m: min_tile,
         max_tile_extent_m: max_tile,
         halo_m: 0.5,
+        ..BuildParams::default()
     }
 }
 

@@ -37,11 +37,10 @@ fn synthetic_cave_builds_with_accurate_oriented_normals() {
         threads: 2,
         leaf_m: 0.125,
         colors: ColorCodec::Raw,
-        sh_window: true,
-        k: 16,
         min_tile_extent_m: 2.0,
         max_tile_extent_m: 32.0,
         halo_m: 0.25,
+        ..BuildParams::default()
     };
     let built = build::build(&manifest, &manifest_path, &out, &bp, &|_| {}).unwrap();
     assert_eq!(built.points, summary.points);
@@ -117,12 +116,11 @@ fn an_interrupted_build_resumes_and_gives_the_same_bytes() {
         memory_budget_bytes: 64 << 20,
         threads: 2,
         leaf_m: 0.25,
-        colors: ColorCodec::Bc1,
-        sh_window: true,
         k: 12,
         min_tile_extent_m: 4.0,
         max_tile_extent_m: 16.0,
         halo_m: 0.25,
+        ..BuildParams::default()
     };
     let first = build::build(&manifest, &manifest_path, &dir.path().join("a.grotto"), &bp, &|_| {}).unwrap();
     assert!(!first.resumed_tiling && first.reused_tiles == 0 && first.tiles >= 3);
@@ -165,12 +163,11 @@ fn plan_shards_and_assemble_give_the_same_package_as_build() {
         memory_budget_bytes: 64 << 20,
         threads: 1,
         leaf_m: 0.25,
-        colors: ColorCodec::Bc1,
-        sh_window: true,
         k: 12,
         min_tile_extent_m: 4.0,
         max_tile_extent_m: 8.0,
         halo_m: 0.25,
+        ..BuildParams::default()
     };
     let whole = build::build(&manifest, &manifest_path, &dir.path().join("whole.grotto"), &bp("w1"), &|_| {})
         .unwrap();

@@ -30,6 +30,6 @@ fn env(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) n
     let env_light = albedo * sh_irradiance_ndf_over_pi(leaf.normal_mean.xyz) * v;
     var state = leaf_light[i];
     state.env = vec4<f32>(env_light, v);
-    state.out = vec4<f32>(leaf.emission.rgb + state.direct.rgb + env_light + albedo * state.gather.rgb, 0.0);
+    state.out = leaf_out(leaf, state);
     leaf_light[i] = state;
 }

@@ -32,21 +32,16 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let last = min(light_grid[cell + 1u], start + batch.count);
     for (var j = start; j < last; j++) {
         let light = lights[light_grid[j]];
-        let to_light = light.position_kind.xyz - p;
-        let dist = max(length(to_light), 1e-4);
-        if dist > light.params.y {
+        let seen = light_seen(light, p);
+        if seen.falloff <= 0.0 {
             continue;
         }
-        let l = to_light / dist;
-        let cos_term = ndf_cos(leaf.normal_mean.xyz, l);
+        let dist = seen.dist;
+        let cos_term = ndf_cos(leaf.normal_mean.xyz, seen.l);
         if cos_term <= 0.0 {
             continue;
         }
-        let falloff = spot_factor(light, l);
-        if falloff <= 0.0 {
-            continue;
-        }
-        let e_lit = light.intensity_layer.rgb * (cos_term * falloff / (dist * dist));
+        let e_lit = light.intensity_layer.rgb * (cos_term * seen.falloff / (dist * dist));
         if max(e_lit.r, max(e_lit.g, e_lit.b)) < light.params.w {
             // Under the cutoff once the cosine and the spot are counted: culled like out of range.
             continue;
@@ -74,6 +69,6 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let direct = state.direct.rgb + albedo / PI * irradiance;
     state.direct = vec4<f32>(direct, 0.0);
     state.far = vec4<f32>(state.far.rgb + far / PI, 0.0);
-    state.out = vec4<f32>(leaf.emission.rgb + direct + state.env.rgb + albedo * state.gather.rgb, 0.0);
+    state.out = leaf_out(leaf, state);
     leaf_light[i] = state;
 }

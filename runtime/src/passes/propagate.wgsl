@@ -21,10 +21,9 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     }
     var state = leaf_light[i];
     let before = state.out.rgb;
-    let albedo = leaf.albedo_opacity.rgb;
-    let after = leaf.emission.rgb + state.direct.rgb + state.env.rgb + albedo * gathered;
     state.gather = vec4<f32>(gathered, 0.0);
-    state.out = vec4<f32>(after, 0.0);
+    state.out = leaf_out(leaf, state);
+    let after = state.out.rgb;
     leaf_light[i] = state;
     let scale = max(max(after.r, max(after.g, after.b)), 1e-6);
     let diff = abs(after - before);

@@ -230,18 +230,15 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     // per leaf.
                     break;
                 }
-                let to_light = light.position_kind.xyz - p;
-                let dist = max(length(to_light), 1e-4);
-                if dist > light.params.y {
+                let seen = light_seen(light, p);
+                if seen.falloff <= 0.0 {
                     continue;
                 }
-                let l = to_light / dist;
+                let l = seen.l;
+                let dist = seen.dist;
+                let falloff = seen.falloff;
                 let c = dot(n, l);
                 if c <= 0.0 {
-                    continue;
-                }
-                let falloff = spot_factor(light, l);
-                if falloff <= 0.0 {
                     continue;
                 }
                 // Normal offset: the shadow maps hold the same discs, so look up a little in front.

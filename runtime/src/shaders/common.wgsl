@@ -559,7 +559,31 @@ fn cone_visibility(origin_m: vec3<f32>, l: vec3<f32>, dist_m: f32) -> f32 {
     return 1.0 - a;
 }
 
-// Radiant intensity of a light toward `p` times its spot falloff, and the unit direction to it.
+// A light as seen from `p`: unit direction `l` to it, distance (at least 0.1 mm) and spot falloff
+// in 0..=1, which is 0 beyond the light's range (it bounds culling) or outside its spot.
+struct LightSeen {
+    l: vec3<f32>,
+    dist: f32,
+    falloff: f32,
+}
+
+fn light_seen(light: Light, p: vec3<f32>) -> LightSeen {
+    let to_light = light.position_kind.xyz - p;
+    let dist = max(length(to_light), 1e-4);
+    let l = to_light / dist;
+    if dist > light.params.y {
+        return LightSeen(l, dist, 0.0);
+    }
+    return LightSeen(l, dist, spot_factor(light, l));
+}
+
+// What a leaf sends on: out = emission + direct + env + albedo * gather (every pass that changes
+// one of the terms recomputes it).
+fn leaf_out(leaf: Leaf, s: LeafLight) -> vec4<f32> {
+    return vec4<f32>(leaf.emission.rgb + s.direct.rgb + s.env.rgb + leaf.albedo_opacity.rgb * s.gather.rgb, 0.0);
+}
+
+// Spot falloff of a light toward unit direction `l` from the lit point (1 for point lights).
 fn spot_factor(light: Light, l: vec3<f32>) -> f32 {
     if light.position_kind.w < 0.5 {
         return 1.0;
