@@ -5,13 +5,17 @@
 use grotto_format::spec::{Bc6hBlock, EnvMipLevel};
 use grotto_format::{Compression, Package, PackageWriter, Problem, Scope, SectionKind};
 
+/// A level's width, height and roughness.
+type Dims = (u32, u32, f32);
+
 /// Level (width, height, roughness) list -> consecutive levels.
-fn levels(dims: &[(u32, u32, f32)]) -> Vec<EnvMipLevel> {
+fn levels(dims: &[Dims]) -> Vec<EnvMipLevel> {
     let mut first = 0;
     dims.iter()
         .map(|&(width, height, roughness)| {
             let block_count = width.div_ceil(4) * height.div_ceil(4);
-            let l = EnvMipLevel { width, height, first_block: first, block_count, roughness, reserved: [0; 3] };
+            let l =
+                EnvMipLevel { width, height, first_block: first, block_count, roughness, reserved: [0; 3] };
             first += block_count;
             l
         })
@@ -61,7 +65,7 @@ fn a_chain_that_would_stack_into_a_huge_atlas_is_refused_and_verify_says_why() {
 #[test]
 fn each_rule_of_the_level_table_is_checked() {
     let dir = tempfile::tempdir().unwrap();
-    let cases: Vec<(Vec<(u32, u32, f32)>, &str)> = vec![
+    let cases: Vec<(Vec<Dims>, &str)> = vec![
         (vec![(16, 8, 0.0); 9], "9 levels"),
         (vec![(16384, 8192, 0.0)], "larger than 8192x4096"),
         (vec![(16, 8, 0.5), (8, 4, 0.25)], "roughness 0.25 is below"),

@@ -346,7 +346,7 @@ fn build_tile(
                 pos_tile_m: own_points[i].pos_tile_m(quantum),
                 normal: estimated[i].normal,
                 area_m2: (std::f64::consts::PI * r * r) as f32,
-                albedo_linear: c.map(|v| grotto_format::color::srgb8_to_linear(v)),
+                albedo_linear: c.map(grotto_format::color::srgb8_to_linear),
                 emission: [0.0; 3],
             }
         })

@@ -1,5 +1,5 @@
 //! CPU reference of the mip and cone-gather passes: the same SVO walk, anisotropic compositing,
-//! quadrilinear sampling and cone marching as common.wgsl / mip.wgsl / propagate.wgsl, written
+//! quadrilinear sampling and cone marching as shaders/svo.wgsl, cone.wgsl / mip.wgsl / propagate.wgsl, written
 //! plainly in f64 so the GPU results can be checked against it on small hand-built SVOs.
 
 use glam::{DVec3, IVec3, Vec3};
@@ -7,7 +7,7 @@ use glam::{DVec3, IVec3, Vec3};
 use crate::gpu_types::{LeafLightGpu, Params};
 use crate::scene_data::SceneData;
 
-/// Closure of a cone that left the scene nearly opaque (`close_cone` in common.wgsl).
+/// Closure of a cone that left the scene nearly opaque (`close_cone` in shaders/cone.wgsl).
 pub fn close_cone(acc: [f64; 4]) -> [f64; 4] {
     const CLOSE_LO: f64 = 0.8;
     const CLOSE_HI: f64 = 0.95;
@@ -21,7 +21,7 @@ pub fn close_cone(acc: [f64; 4]) -> [f64; 4] {
     [acc[0] * k, acc[1] * k, acc[2] * k, a]
 }
 
-/// A cone whose axis entered rock (`enter_rock` in common.wgsl): it ends opaque; what is hidden
+/// A cone whose axis entered rock (`enter_rock` in shaders/cone.wgsl): it ends opaque; what is hidden
 /// behind the surfaces it met looks like them (or, having met none, like the rock cell's own
 /// filtered radiance `s`).
 pub fn enter_rock(acc: [f64; 4], s: [f64; 4]) -> [f64; 4] {
@@ -96,7 +96,7 @@ impl<'a> CpuScene<'a> {
         self.scene.tile_of(v_leaf)
     }
 
-    /// Global node index of voxel `v` at `lod`, as `find_node` in common.wgsl.
+    /// Global node index of voxel `v` at `lod`, as `find_node` in shaders/svo.wgsl.
     pub fn find_node(&self, v: IVec3, lod: u32) -> Option<u32> {
         let v_leaf = v << lod as i32;
         let tile = self.scene.tiles[self.find_tile(v_leaf)?];
@@ -163,7 +163,7 @@ impl<'a> CpuScene<'a> {
         [0, 1, 2, 3].map(|k| a[k] + (b[k] - a[k]) * t)
     }
 
-    /// One cone, as `trace_cone` in common.wgsl.
+    /// One cone, as `trace_cone` in shaders/cone.wgsl.
     pub fn trace_cone(&self, p: &Params, origin_m: DVec3, dir: DVec3) -> [f64; 4] {
         let leaf = f64::from(p.leaf_size_m);
         let lo =

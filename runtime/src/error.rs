@@ -26,6 +26,10 @@ pub enum Error {
     Device(String),
     #[error("GPU error in {pass}: {message}")]
     Gpu { pass: &'static str, message: String },
+    /// Something the renderer relies on itself did not hold (a bug in grotto, not in the input or
+    /// the GPU): reported, never a panic.
+    #[error("internal error in {what}: {message} (a bug in grotto; please report it)")]
+    Internal { what: &'static str, message: String },
     #[error("{package}: {problem}")]
     Scene { package: String, problem: String },
     #[error("camera: {0}")]

@@ -17,7 +17,8 @@ use wgpu::util::DeviceExt;
 
 use crate::error::{Error, Result};
 
-/// Storage buffers one compute stage binds at most (common.wgsl group 0 plus a pass's group 1).
+/// Storage buffers one compute stage binds at most: shade's, whose imports declare the most
+/// (runtime/tests/shaders.rs reflects every pass and checks this).
 pub const STORAGE_BUFFERS_NEEDED: u32 = 12;
 
 /// What a user can change when the resource named `label` outgrows the adapter.
@@ -179,6 +180,17 @@ impl Gpu {
         let message = v.join("; ");
         v.clear();
         Err(Error::Gpu { pass, message })
+    }
+
+    /// Runs `f` inside a validation error scope: an error it causes (creating a pipeline,
+    /// finishing a pass's commands) comes back as [`Error::Gpu`] naming `pass`.
+    pub fn scoped<T>(&self, pass: &'static str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let out = f();
+        match pollster::block_on(scope.pop()) {
+            Some(e) => Err(Error::Gpu { pass, message: e.to_string() }),
+            None => out,
+        }
     }
 
     /// Checks a buffer of `size` bytes with `usage` against the device's limits before it is

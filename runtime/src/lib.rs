@@ -22,6 +22,7 @@ pub mod render_job;
 pub mod renderer;
 pub mod rock;
 pub mod scene_data;
+pub mod settings;
 pub mod shaders;
 pub mod testscenes;
 

@@ -13,9 +13,121 @@
 //!   pass 4M entries) holds, per cell, the lights whose range sphere touches it. Built on the CPU
 //!   when the lights change; cost then grows with the lights in range, not all lights.
 
-use glam::{UVec3, Vec3};
+use glam::{Mat4, UVec3, Vec3};
 
-use crate::scene_data::SceneLight;
+use crate::gpu_types::{LightGpu, LightShadow};
+use crate::passes::shadow::Face;
+use crate::scene_data::{SceneData, SceneLight};
+use crate::settings::{Settings, ShadowFallback};
+
+/// The scene's lights as the GPU takes them: lights with shadow maps first (every light-grid cell
+/// then lists them before the rest, and shade, which evaluates only those per pixel, stops at the
+/// first one without), their shadow-atlas faces, and the light grid.
+#[derive(Clone, Debug)]
+pub struct LightSetup {
+    pub lights: Vec<LightGpu>,
+    pub faces: Vec<Face>,
+    /// Lights with shadow maps; the others are lit per leaf by inject.
+    pub shadowed: usize,
+    pub point_lights: usize,
+    pub spot_lights: usize,
+    pub grid: LightGrid,
+}
+
+impl LightSetup {
+    /// `near_m` / `far_m`: the shadow projections' depth range; the grid covers `grid_lo_m ..
+    /// grid_hi_m`.
+    pub fn new(
+        scene: &SceneData,
+        settings: &Settings,
+        near_m: f32,
+        far_m: f32,
+        grid_lo_m: Vec3,
+        grid_hi_m: Vec3,
+    ) -> Self {
+        // Shadow maps for the brightest lights within the budget; the rest are lit at leaf
+        // resolution by inject with the fallback's shadows.
+        let mut mapped = vec![false; scene.lights.len()];
+        if settings.shadows {
+            for &k in brightest_first(&scene.lights).iter().take(settings.shadowed_lights as usize) {
+                mapped[k] = true;
+            }
+        }
+        let fallback = match settings.shadow_fallback {
+            ShadowFallback::Cone => LightShadow::Cone,
+            ShadowFallback::None => LightShadow::None,
+        };
+        let order = (0..scene.lights.len())
+            .filter(|&k| mapped[k])
+            .chain((0..scene.lights.len()).filter(|&k| !mapped[k]));
+        let (mut lights, mut faces) = (Vec::new(), Vec::new());
+        for k in order {
+            let (l, has_map) = (&scene.lights[k], mapped[k]);
+            let first = if has_map { faces.len() as f32 } else { -1.0 };
+            // Without shadows at all every light is shaded per pixel, unshadowed.
+            let how = if has_map || !settings.shadows { LightShadow::Map } else { fallback }.encode();
+            let range = range_m(l.intensity_w_sr, settings.light_cutoff_w_m2);
+            let p = l.position_m;
+            match l.spot {
+                None => {
+                    if has_map {
+                        for (fwd, up) in [
+                            (Vec3::X, Vec3::Y),
+                            (Vec3::NEG_X, Vec3::Y),
+                            (Vec3::Y, Vec3::Z),
+                            (Vec3::NEG_Y, Vec3::Z),
+                            (Vec3::Z, Vec3::Y),
+                            (Vec3::NEG_Z, Vec3::Y),
+                        ] {
+                            let proj = Mat4::perspective_rh(std::f32::consts::FRAC_PI_2, 1.0, near_m, far_m);
+                            let view_proj = proj * Mat4::look_at_rh(p, p + fwd, up);
+                            faces.push(Face { view_proj, eye_m: p, proj_scale: 1.0 });
+                        }
+                    }
+                    lights.push(LightGpu {
+                        position_kind: p.extend(0.0).to_array(),
+                        intensity_layer: l.intensity_w_sr.extend(first).to_array(),
+                        direction_cos_outer: [0.0, 0.0, -1.0, -1.0],
+                        params: [-1.0, range.min(f32::MAX), how, settings.light_cutoff_w_m2],
+                    });
+                }
+                Some(s) => {
+                    let outer = s.outer_angle_rad.clamp(1e-3, 1.48);
+                    let inner = s.inner_angle_rad.clamp(0.0, outer);
+                    if has_map {
+                        let up = if s.direction.cross(Vec3::Z).length() < 1e-3 { Vec3::Y } else { Vec3::Z };
+                        let proj = Mat4::perspective_rh(2.0 * outer, 1.0, near_m, far_m);
+                        let view_proj = proj * Mat4::look_at_rh(p, p + s.direction, up);
+                        faces.push(Face { view_proj, eye_m: p, proj_scale: 1.0 / outer.tan() });
+                    }
+                    lights.push(LightGpu {
+                        position_kind: p.extend(1.0).to_array(),
+                        intensity_layer: l.intensity_w_sr.extend(first).to_array(),
+                        direction_cos_outer: s.direction.extend(outer.cos()).to_array(),
+                        params: [inner.cos(), range.min(f32::MAX), how, settings.light_cutoff_w_m2],
+                    });
+                }
+            }
+        }
+        let grid = LightGrid::build(
+            grid_lo_m,
+            grid_hi_m,
+            &lights
+                .iter()
+                .map(|l| (Vec3::from_slice(&l.position_kind[..3]), l.params[1]))
+                .collect::<Vec<_>>(),
+        );
+        let point_lights = scene.lights.iter().filter(|l| l.spot.is_none()).count();
+        LightSetup {
+            lights,
+            faces,
+            shadowed: mapped.iter().filter(|&&m| m).count(),
+            point_lights,
+            spot_lights: scene.lights.len() - point_lights,
+            grid,
+        }
+    }
+}
 
 /// Most cells per grid axis.
 pub const GRID_MAX_DIM: u32 = 32;

@@ -10,232 +10,19 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use serde::Serialize;
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
-use crate::gpu_types::{LeafLightGpu, LightGpu, MAX_CONES, Params, SplatUniform, flags, light_shadow};
+use crate::gpu_types::{LeafLightGpu, MAX_CONES, Params, SplatUniform, flags};
+use crate::lights::LightSetup;
 use crate::passes::{self, gbuffer, shade, shadow};
 use crate::plan::{self, EffectPlan, Pass, PlanInputs};
-use crate::scene_data::{MAX_ENV_LEVELS, MAX_MATERIALS, SceneData};
+use crate::scene_data::{EnvChain, MAX_ENV_LEVELS, MAX_MATERIALS, SceneData};
 
-/// How indirect light is filtered at a pixel.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum IndirectFilter {
-    Trilinear,
-    Tricubic,
-    Off,
-}
-
-/// The quality knobs of the runtime.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Settings {
-    /// Cones per leaf gather, 1..=16.
-    pub cones: u32,
-    /// Multiplies each cone's half-angle (1 = cones just tile the hemisphere's solid angle).
-    pub cone_aperture_scale: f32,
-    /// Step along a cone as a fraction of its current diameter.
-    pub step_scale: f32,
-    /// Longest cone, metres (`None`: the scene diagonal).
-    pub max_distance_m: Option<f32>,
-    pub max_steps: u32,
-    /// Bounce budget: propagation passes before the plan stops them.
-    pub bounces: u32,
-    /// Propagation stops once a bounce changes no leaf's radiance by more than this (relative).
-    pub convergence_tolerance: f32,
-    pub shadows: bool,
-    pub shadow_map_size: u32,
-    pub indirect: IndirectFilter,
-    /// Direct light at pixels (off: only indirect and emission, for tests).
-    pub direct: bool,
-    pub exposure: f32,
-    /// Radiance where a pixel or a cone sees nothing (the environment before SH lands), linear RGB.
-    pub background: [f32; 3],
-    /// Smallest splat radius in pixels (hole filling).
-    pub min_splat_px: f32,
-    /// Surfel radius multiplier for splatting. The stored radius (1.25 d_k / sqrt(k)) is about
-    /// 0.7 point spacings, which tiles a regular grid but leaves holes in scanner sampling
-    /// (`grotto render out/demo.grotto --camera chamber --size 640x480 --bounces 0 --no-shadows
-    /// --splat-scale S` prints the uncovered pixels: 105 at S = 1.5, 0 at 2.0).
-    pub splat_scale: f32,
-    /// Store the radiance pyramid (six directional values per node) as f16 instead of f32: half
-    /// the memory and bandwidth of the largest buffer; values above 65504 are clamped.
-    pub radiance_f16: bool,
-    /// Light the scene with its environment map's SH coefficients (when it has one).
-    pub environment: bool,
-    /// Reflection on specular materials (wet walls, water) where the scene assigns them.
-    pub specular: bool,
-    /// Shadow-map budget: this many of the brightest point and spot lights get shadow maps and
-    /// are shaded per pixel; the others follow `shadow_fallback` (lights.rs).
-    pub shadowed_lights: u32,
-    /// How lights beyond the shadow-map budget are shadowed.
-    pub shadow_fallback: ShadowFallback,
-    /// Irradiance, W/m^2, under which a light's contribution is dropped: it bounds each light's
-    /// range for culling (0: every light reaches everywhere).
-    pub light_cutoff_w_m2: f32,
-}
-
-/// What lights beyond the shadow-map budget do (lights.rs).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ShadowFallback {
-    /// Lit at leaf resolution, visibility from a cone traced through the SVO toward the light.
-    Cone,
-    /// Lit at leaf resolution, unshadowed (light passes through walls).
-    None,
-}
-
-impl ShadowFallback {
-    pub fn name(self) -> &'static str {
-        match self {
-            ShadowFallback::Cone => "cone",
-            ShadowFallback::None => "none",
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<Self> {
-        [ShadowFallback::Cone, ShadowFallback::None].into_iter().find(|f| f.name() == s)
-    }
-
-    /// In words, for the effect plan.
-    pub fn describe(self) -> &'static str {
-        match self {
-            ShadowFallback::Cone => "SVO cone shadows",
-            ShadowFallback::None => "no shadows",
-        }
-    }
-}
-
-impl Default for Settings {
-    fn default() -> Self {
-        Self {
-            cones: 6,
-            cone_aperture_scale: 1.0,
-            step_scale: 0.5,
-            max_distance_m: None,
-            max_steps: 256,
-            bounces: 8,
-            convergence_tolerance: 1e-3,
-            shadows: true,
-            shadow_map_size: 512,
-            indirect: IndirectFilter::Trilinear,
-            direct: true,
-            exposure: 1.0,
-            background: [0.0; 3],
-            min_splat_px: 0.75,
-            splat_scale: 2.0,
-            radiance_f16: false,
-            environment: true,
-            specular: true,
-            shadowed_lights: 16,
-            shadow_fallback: ShadowFallback::Cone,
-            light_cutoff_w_m2: 2e-4,
-        }
-    }
-}
-
-/// Named trade-offs between error and time (`--quality`); their measured error and time on every
-/// accuracy scene are in docs/accuracy.md, where the sweep checks each costs more time and has
-/// less error than the one below it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Quality {
-    Fast,
-    Balanced,
-    High,
-}
-
-impl Quality {
-    pub const ALL: [Quality; 3] = [Quality::Fast, Quality::Balanced, Quality::High];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Quality::Fast => "fast",
-            Quality::Balanced => "balanced",
-            Quality::High => "high",
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|q| q.name() == s)
-    }
-}
-
-impl Settings {
-    /// The knobs of a quality preset (everything else at its default).
-    pub fn preset(q: Quality) -> Self {
-        let d = Settings::default();
-        match q {
-            Quality::Fast => Settings { cones: 4, step_scale: 1.0, bounces: 2, shadow_map_size: 256, ..d },
-            Quality::Balanced => Settings {
-                cones: 9,
-                cone_aperture_scale: 0.7,
-                step_scale: 0.5,
-                bounces: 4,
-                shadow_map_size: 512,
-                ..d
-            },
-            Quality::High => Settings {
-                cones: 16,
-                cone_aperture_scale: 0.7,
-                step_scale: 0.35,
-                bounces: 8,
-                shadow_map_size: 1024,
-                indirect: IndirectFilter::Tricubic,
-                ..d
-            },
-        }
-    }
-
-    pub fn validate(&self) -> Result<()> {
-        if !(1..=MAX_CONES as u32).contains(&self.cones) {
-            return Err(Error::Setting {
-                name: "cones",
-                problem: format!("{} is outside 1..=16", self.cones),
-            });
-        }
-        if !(self.step_scale > 0.05 && self.step_scale <= 4.0) {
-            return Err(Error::Setting {
-                name: "step_scale",
-                problem: format!("{} is outside 0.05..=4", self.step_scale),
-            });
-        }
-        if !(self.cone_aperture_scale > 0.05 && self.cone_aperture_scale <= 4.0) {
-            return Err(Error::Setting {
-                name: "cone_aperture_scale",
-                problem: "must be in 0.05..=4".into(),
-            });
-        }
-        if !(16..=8192).contains(&self.shadow_map_size) {
-            return Err(Error::Setting { name: "shadow_map_size", problem: "must be in 16..=8192".into() });
-        }
-        if !(self.light_cutoff_w_m2.is_finite() && self.light_cutoff_w_m2 >= 0.0) {
-            return Err(Error::Setting {
-                name: "light_cutoff_w_m2",
-                problem: "must be finite and not negative".into(),
-            });
-        }
-        if self.shadowed_lights > MAX_SHADOWED_LIGHTS {
-            return Err(Error::Setting {
-                name: "shadowed_lights",
-                problem: format!(
-                    "{} is over {MAX_SHADOWED_LIGHTS} (the atlas would pass 8192^2)",
-                    self.shadowed_lights
-                ),
-            });
-        }
-        if !(self.exposure.is_finite() && self.exposure > 0.0) {
-            return Err(Error::Setting { name: "exposure", problem: "must be finite and positive".into() });
-        }
-        Ok(())
-    }
-}
-
-/// Most lights with shadow maps: 6 faces each for point lights in one 2D atlas.
-pub const MAX_SHADOWED_LIGHTS: u32 = 256;
+pub use crate::settings::{IndirectFilter, MAX_SHADOWED_LIGHTS, Quality, Settings, ShadowFallback};
 
 /// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
 /// to the hemisphere), equal weights summing to 1, and the half-angle tangent that makes the cones
@@ -304,19 +91,18 @@ pub struct Renderer {
     headlamp: bool,
     /// Lights with shadow maps; the others are lit per leaf (lights.rs).
     shadowed: usize,
+    /// Shadow-atlas faces (six per point light with a map, one per spot light).
+    shadow_faces: usize,
+    light_count: usize,
     /// Lights per light-grid cell: mean and largest.
     lights_in_range: (f32, u32),
     /// Specular materials with surfels, and those surfels (0 when `Settings::specular` is off).
     specular_materials: usize,
     specular_surfels: usize,
-    /// The prefiltered environment levels (shade.wgsl `env_atlas`).
-    env_atlas: wgpu::TextureView,
     emissive: bool,
     /// An environment map lights the scene (it has SH coefficients and the setting allows it).
     environment: bool,
     env_valid: bool,
-    shadow_layers: Vec<Mat4>,
-    lights_gpu: Vec<LightGpu>,
     params: wgpu::Buffer,
     /// Bytes of every buffer and texture created at upload (the G-buffer is added per view).
     static_bytes: u64,
@@ -324,14 +110,6 @@ pub struct Renderer {
     faces: wgpu::Buffer,
     stats: wgpu::Buffer,
     surfels: wgpu::Buffer,
-    splat_uniforms: wgpu::Buffer,
-    /// Shadow layers' splat uniforms, then the camera's.
-    splat_groups: Vec<wgpu::BindGroup>,
-    shadow_distance: wgpu::Texture,
-    shadow_face_size: u32,
-    shadow_cols: u32,
-    shadow_depth: wgpu::TextureView,
-    scene_group: wgpu::BindGroup,
     inject: passes::inject::Inject,
     env: passes::LeafPass,
     mip: passes::mip::Mip,
@@ -349,344 +127,195 @@ pub struct Renderer {
 const STORAGE: wgpu::BufferUsages =
     wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC).union(wgpu::BufferUsages::COPY_DST);
 
+/// Specular material slots (slot 0 = diffuse: x Ks, y GGX alpha, z ior, w roughness), and the
+/// specular materials and surfels the settings keep.
+fn material_slots(scene: &SceneData, settings: &Settings) -> ([[f32; 4]; MAX_MATERIALS + 1], usize, usize) {
+    let mut slots = [[0.0f32; 4]; MAX_MATERIALS + 1];
+    let (mut materials, mut surfels) = (0, 0);
+    for (k, m) in scene.materials.iter().enumerate().take(MAX_MATERIALS) {
+        slots[k + 1] = [m.specular, m.roughness * m.roughness, m.ior, m.roughness];
+        if settings.specular && m.surfels > 0 {
+            materials += 1;
+            surfels += m.surfels;
+        }
+    }
+    (slots, materials, surfels)
+}
+
+/// The env atlas's level table for shade (`Params::env_levels`, `Params::env_chain`).
+fn env_levels(chain: Option<&EnvChain>) -> ([[f32; 4]; MAX_ENV_LEVELS], [u32; 4]) {
+    let mut levels = [[0.0f32; 4]; MAX_ENV_LEVELS];
+    let Some(c) = chain else { return (levels, [0, 1, 0, 0]) };
+    for (k, l) in c.levels.iter().take(MAX_ENV_LEVELS).enumerate() {
+        levels[k] = [l.0 as f32, l.1 as f32, l.2 as f32, l.3];
+    }
+    (levels, [c.levels.len().min(MAX_ENV_LEVELS) as u32, c.width, 0, 0])
+}
+
+/// The compute parameters that do not change per frame.
+#[allow(clippy::too_many_arguments)]
+fn base_params(
+    scene: &SceneData,
+    settings: &Settings,
+    lights: &LightSetup,
+    shadow: &shadow::Shadow,
+    (lo, hi): (Vec3, Vec3),
+    scene_diag_m: f32,
+    chain: Option<&EnvChain>,
+    materials: [[f32; 4]; MAX_MATERIALS + 1],
+) -> Params {
+    let leaf = scene.leaf_size_m.max(1e-6);
+    let (cones, tan_half) = cone_set(settings.cones, settings.cone_aperture_scale);
+    let mut cone_arr = [[0.0f32; 4]; MAX_CONES];
+    cone_arr[..cones.len()].copy_from_slice(&cones);
+    let (env_levels, env_chain) = env_levels(chain);
+    Params {
+        leaf_size_m: leaf,
+        tile_count: scene.tiles.len() as u32,
+        leaf_count: scene.leaves.len() as u32,
+        light_count: lights.lights.len() as u32,
+        cone_count: settings.cones,
+        cone_tan_half: tan_half,
+        step_scale: settings.step_scale,
+        max_distance_m: settings.max_distance_m.unwrap_or(scene_diag_m),
+        max_steps: settings.max_steps,
+        max_lod: scene.max_lod(),
+        shadow_size: shadow.face_size(),
+        flags: 0,
+        width: 0,
+        height: 0,
+        exposure: settings.exposure,
+        shadow_bias_m: 1.5 * leaf,
+        shadow_cols: shadow.cols(),
+        light_grid_dims: lights.grid.dims.to_array(),
+        light_grid_min_m: lights.grid.min_m.extend(lights.grid.cell_m).to_array(),
+        scene_min_leaf: lo.extend(0.0).to_array(),
+        scene_max_leaf: hi.extend(0.0).to_array(),
+        background: Vec3::from_array(settings.background).extend(0.0).to_array(),
+        camera_eye_m: [0.0; 4],
+        camera_forward: [0.0, 0.0, -1.0, 1.0],
+        camera_right: [1.0, 0.0, 0.0, 1.0],
+        camera_up: [0.0, 1.0, 0.0, 0.0],
+        cones: cone_arr,
+        env_sh: match (&scene.environment_sh, settings.environment) {
+            (Some(sh), true) => sh.map(|c| [c[0], c[1], c[2], 0.0]),
+            _ => [[0.0; 4]; 9],
+        },
+        materials,
+        env_levels,
+        env_chain,
+    }
+}
+
+/// Timestamp queries for every pass, where the adapter has them.
+fn pass_queries(gpu: &Gpu) -> Option<(wgpu::QuerySet, wgpu::Buffer)> {
+    gpu.timestamps.then(|| {
+        let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("pass times"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2 * Pass::ALL.len() as u32,
+        });
+        let buf = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pass times"),
+            size: 16 * Pass::ALL.len() as u64,
+            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        (set, buf)
+    })
+}
+
 impl Renderer {
     pub fn new(gpu: &Gpu, scene: &SceneData, settings: Settings) -> Result<Self> {
         settings.validate()?;
-        let faces_bytes = scene.buffer_bytes(settings.radiance_f16).faces;
+        let f16 = settings.radiance_f16;
         let (lo, hi) = scene.bounds_leaf();
         let leaf = scene.leaf_size_m.max(1e-6);
         let scene_diag_m = ((hi - lo) * leaf).length().max(leaf);
-
-        // Lights and their shadow layers.
-        let mut lights_gpu = Vec::new();
-        let mut shadow_layers = Vec::new();
-        // Light position and projection scale (1 / tan(fov / 2)) of each shadow layer.
-        let mut shadow_eyes: Vec<(Vec3, f32)> = Vec::new();
+        // The light grid over the scene with one leaf of slack on every side.
         let near = (0.05 * leaf).max(1e-4);
-        let far = scene_diag_m * 2.0 + 1.0;
-        // Shadow maps for the brightest lights within the budget (lights.rs); the rest are lit at
-        // leaf resolution by inject with the fallback's shadows.
-        let mut mapped = vec![false; scene.lights.len()];
-        if settings.shadows {
-            for &k in
-                crate::lights::brightest_first(&scene.lights).iter().take(settings.shadowed_lights as usize)
-            {
-                mapped[k] = true;
-            }
-        }
-        let fallback = match settings.shadow_fallback {
-            ShadowFallback::Cone => light_shadow::CONE,
-            ShadowFallback::None => light_shadow::NONE,
-        };
-        // Lights with shadow maps first: every light-grid cell then lists them before the rest,
-        // and shade, which evaluates only those per pixel, stops at the first one without.
-        let order: Vec<usize> = (0..scene.lights.len())
-            .filter(|&k| mapped[k])
-            .chain((0..scene.lights.len()).filter(|&k| !mapped[k]))
-            .collect();
-        for (l, &has_map) in order.iter().map(|&k| (&scene.lights[k], &mapped[k])) {
-            let first = if has_map { shadow_layers.len() as f32 } else { -1.0 };
-            // Without shadows at all every light is shaded per pixel, unshadowed.
-            let how = if has_map || !settings.shadows { light_shadow::MAP } else { fallback };
-            let range = crate::lights::range_m(l.intensity_w_sr, settings.light_cutoff_w_m2);
-            let p = l.position_m;
-            match l.spot {
-                None => {
-                    if has_map {
-                        for (fwd, up) in [
-                            (Vec3::X, Vec3::Y),
-                            (Vec3::NEG_X, Vec3::Y),
-                            (Vec3::Y, Vec3::Z),
-                            (Vec3::NEG_Y, Vec3::Z),
-                            (Vec3::Z, Vec3::Y),
-                            (Vec3::NEG_Z, Vec3::Y),
-                        ] {
-                            let proj = Mat4::perspective_rh(std::f32::consts::FRAC_PI_2, 1.0, near, far);
-                            shadow_layers.push(proj * Mat4::look_at_rh(p, p + fwd, up));
-                            shadow_eyes.push((p, 1.0));
-                        }
-                    }
-                    lights_gpu.push(LightGpu {
-                        position_kind: p.extend(0.0).to_array(),
-                        intensity_layer: l.intensity_w_sr.extend(first).to_array(),
-                        direction_cos_outer: [0.0, 0.0, -1.0, -1.0],
-                        params: [-1.0, range.min(f32::MAX), how, settings.light_cutoff_w_m2],
-                    });
-                }
-                Some(s) => {
-                    let outer = s.outer_angle_rad.clamp(1e-3, 1.48);
-                    let inner = s.inner_angle_rad.clamp(0.0, outer);
-                    if has_map {
-                        let up = if s.direction.cross(Vec3::Z).length() < 1e-3 { Vec3::Y } else { Vec3::Z };
-                        let proj = Mat4::perspective_rh(2.0 * outer, 1.0, near, far);
-                        shadow_layers.push(proj * Mat4::look_at_rh(p, p + s.direction, up));
-                        shadow_eyes.push((p, 1.0 / outer.tan()));
-                    }
-                    lights_gpu.push(LightGpu {
-                        position_kind: p.extend(1.0).to_array(),
-                        intensity_layer: l.intensity_w_sr.extend(first).to_array(),
-                        direction_cos_outer: s.direction.extend(outer.cos()).to_array(),
-                        params: [inner.cos(), range.min(f32::MAX), how, settings.light_cutoff_w_m2],
-                    });
-                }
-            }
-        }
-        let shadowed = mapped.iter().filter(|&&m| m).count();
-        // The light grid over the scene, one leaf of slack on every side.
-        let light_grid = crate::lights::LightGrid::build(
+        let lights = LightSetup::new(
+            scene,
+            &settings,
+            near,
+            scene_diag_m * 2.0 + 1.0,
             (lo - 1.0) * leaf,
             (hi + 1.0) * leaf,
-            &lights_gpu
-                .iter()
-                .map(|l| (Vec3::from_slice(&l.position_kind[..3]), l.params[1]))
-                .collect::<Vec<_>>(),
         );
-        let lights_in_range = light_grid.occupancy();
-        let point_lights = scene.lights.iter().filter(|l| l.spot.is_none()).count();
-        let spot_lights = scene.lights.len() - point_lights;
-
-        // Shadow atlas: faces in a near-square grid; faces shrink if the grid would exceed the
-        // adapter's largest 2D texture.
-        let layers = shadow_layers.len().max(1) as u32;
-        let shadow_cols = (f64::from(layers).sqrt().ceil() as u32).max(1);
-        let shadow_rows = layers.div_ceil(shadow_cols);
-        let max_dim = gpu.device.limits().max_texture_dimension_2d;
-        let face_size = if shadow_layers.is_empty() {
-            1
-        } else {
-            settings.shadow_map_size.min(max_dim / shadow_cols).min(max_dim / shadow_rows).max(1)
-        };
-        let (cones, tan_half) = cone_set(settings.cones, settings.cone_aperture_scale);
-        let mut cone_arr = [[0.0f32; 4]; MAX_CONES];
-        cone_arr[..cones.len()].copy_from_slice(&cones);
         let environment_on = scene.environment_sh.is_some() && settings.environment;
-        // Specular material slots (slot 0 = diffuse) and the environment's prefiltered levels.
-        let mut material_slots = [[0.0f32; 4]; MAX_MATERIALS + 1];
-        let (mut specular_materials, mut specular_surfels) = (0, 0);
-        for (k, m) in scene.materials.iter().enumerate().take(MAX_MATERIALS) {
-            let alpha = m.roughness * m.roughness;
-            material_slots[k + 1] = [m.specular, alpha, m.ior, m.roughness];
-            if settings.specular && m.surfels > 0 {
-                specular_materials += 1;
-                specular_surfels += m.surfels;
-            }
-        }
-        let mut env_levels = [[0.0f32; 4]; MAX_ENV_LEVELS];
         let chain = scene.env_chain.as_ref().filter(|_| environment_on);
-        let env_level_count = chain.map_or(0, |c| c.levels.len().min(MAX_ENV_LEVELS) as u32);
-        let env_atlas_size = chain.map_or((1, 1), |c| (c.width, c.height));
-        if let Some(c) = chain {
-            for (k, l) in c.levels.iter().take(MAX_ENV_LEVELS).enumerate() {
-                env_levels[k] = [l.0 as f32, l.1 as f32, l.2 as f32, l.3];
-            }
-        }
-        let base_params = Params {
-            leaf_size_m: leaf,
-            tile_count: scene.tiles.len() as u32,
-            leaf_count: scene.leaves.len() as u32,
-            light_count: lights_gpu.len() as u32,
-            cone_count: settings.cones,
-            cone_tan_half: tan_half,
-            step_scale: settings.step_scale,
-            max_distance_m: settings.max_distance_m.unwrap_or(scene_diag_m),
-            max_steps: settings.max_steps,
-            max_lod: scene.max_lod(),
-            shadow_size: face_size,
-            flags: 0,
-            width: 0,
-            height: 0,
-            exposure: settings.exposure,
-            shadow_bias_m: 1.5 * leaf,
-            shadow_cols,
-            light_grid_dims: light_grid.dims.to_array(),
-            light_grid_min_m: light_grid.min_m.extend(light_grid.cell_m).to_array(),
-            scene_min_leaf: lo.extend(0.0).to_array(),
-            scene_max_leaf: hi.extend(0.0).to_array(),
-            background: Vec3::from_array(settings.background).extend(0.0).to_array(),
-            camera_eye_m: [0.0; 4],
-            camera_forward: [0.0, 0.0, -1.0, 1.0],
-            camera_right: [1.0, 0.0, 0.0, 1.0],
-            camera_up: [0.0, 1.0, 0.0, 0.0],
-            cones: cone_arr,
-            env_sh: match (&scene.environment_sh, settings.environment) {
-                (Some(sh), true) => sh.map(|c| [c[0], c[1], c[2], 0.0]),
-                _ => [[0.0; 4]; 9],
-            },
-            materials: material_slots,
-            env_levels,
-            env_chain: [env_level_count, env_atlas_size.0, 0, 0],
-        };
+        let (materials, specular_materials, specular_surfels) = material_slots(scene, &settings);
 
+        let splat_layout = passes::splat::layout(gpu);
+        let shadow = gpu.scoped("shadow", || {
+            shadow::Shadow::new(
+                gpu,
+                &splat_layout,
+                &lights.faces,
+                settings.shadow_map_size,
+                settings.min_splat_px,
+                settings.splat_scale,
+            )
+        })?;
+        let base_params =
+            base_params(scene, &settings, &lights, &shadow, (lo, hi), scene_diag_m, chain, materials);
+
+        // The shared bind groups: the static scene (group 0) and the light state (group 1).
         let params = gpu.buffer_init(
             "params",
             bytemuck::bytes_of(&base_params),
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         )?;
-        let tiles = gpu.buffer_init("tiles", bytemuck::cast_slice(&scene.tiles), STORAGE)?;
-        let nodes = gpu.buffer_init("nodes", bytemuck::cast_slice(&scene.nodes), STORAGE)?;
-        let leaves = gpu.buffer_init("leaves", bytemuck::cast_slice(&scene.leaves), STORAGE)?;
         // Initial light state: out = emission (no direct, no gather yet).
         let initial: Vec<LeafLightGpu> =
             scene.leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect();
         let leaf_light = gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial), STORAGE)?;
-        let faces = gpu.buffer("faces", faces_bytes, STORAGE)?;
-        let lights_buf = gpu.buffer_init("lights", bytemuck::cast_slice(&lights_gpu), STORAGE)?;
-        let mats: Vec<[[f32; 4]; 4]> = shadow_layers.iter().map(|m| m.to_cols_array_2d()).collect();
-        let shadow_mats = gpu.buffer_init("shadow matrices", bytemuck::cast_slice(&mats), STORAGE)?;
+        let faces = gpu.buffer("faces", scene.buffer_bytes(f16).faces, STORAGE)?;
         let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE)?;
         let surfels =
             gpu.buffer_init("surfels", bytemuck::cast_slice(&scene.surfels), wgpu::BufferUsages::VERTEX)?;
-
-        let atlas_size = wgpu::Extent3d {
-            width: face_size * shadow_cols,
-            height: face_size * shadow_rows,
-            depth_or_array_layers: 1,
-        };
-        let shadow_distance = gpu.texture_2d(
-            "shadow atlas",
-            atlas_size.width,
-            atlas_size.height,
-            shadow::DISTANCE_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-        )?;
-        let shadow_depth = gpu
-            .texture_2d(
-                "shadow depth",
-                atlas_size.width,
-                atlas_size.height,
-                shadow::DEPTH_FORMAT,
-                wgpu::TextureUsages::RENDER_ATTACHMENT,
-            )?
-            .create_view(&Default::default());
-        let shadow_view = shadow_distance.create_view(&Default::default());
-        let env_atlas_tex = gpu.texture_2d(
-            "env atlas",
-            env_atlas_size.0,
-            env_atlas_size.1,
-            wgpu::TextureFormat::Rgba32Float,
-            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        )?;
-        let placeholder = [[0.0f32; 4]];
-        let atlas_texels: &[[f32; 4]] = chain.map_or(&placeholder[..], |c| &c.rgba);
-        gpu.queue.write_texture(
-            env_atlas_tex.as_image_copy(),
-            bytemuck::cast_slice(atlas_texels),
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(env_atlas_size.0 * 16),
-                rows_per_image: Some(env_atlas_size.1),
-            },
-            wgpu::Extent3d { width: env_atlas_size.0, height: env_atlas_size.1, depth_or_array_layers: 1 },
-        );
-        let env_atlas = env_atlas_tex.create_view(&Default::default());
-
-        let scene_layout = passes::scene_layout(gpu);
-        let f16 = settings.radiance_f16;
-        let buffers =
-            [&params, &tiles, &nodes, &leaves, &leaf_light, &faces, &lights_buf, &shadow_mats, &stats];
-        let mut entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-            .collect();
-        entries.push(wgpu::BindGroupEntry {
-            binding: 9,
-            resource: wgpu::BindingResource::TextureView(&shadow_view),
-        });
-        let rock = gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock.words), STORAGE)?;
-        entries.push(wgpu::BindGroupEntry { binding: 10, resource: rock.as_entire_binding() });
-        let light_grid_buf =
-            gpu.buffer_init("light grid", bytemuck::cast_slice(&light_grid.words), STORAGE)?;
-        entries.push(wgpu::BindGroupEntry { binding: 11, resource: light_grid_buf.as_entire_binding() });
-        let scene_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("scene"),
-            layout: &scene_layout,
-            entries: &entries,
-        });
-
-        let atlas_bytes = u64::from(atlas_size.width) * u64::from(atlas_size.height) * 8;
-        let static_bytes = [
-            &params,
-            &tiles,
-            &nodes,
-            &leaves,
-            &leaf_light,
-            &faces,
-            &lights_buf,
-            &shadow_mats,
-            &stats,
-            &surfels,
-            &rock,
-            &light_grid_buf,
-        ]
-        .iter()
-        .map(|b| b.size())
-        .sum::<u64>()
-            + atlas_bytes
-            + u64::from(env_atlas_size.0) * u64::from(env_atlas_size.1) * 16;
-        let splat_layout = shadow::splat_layout(gpu);
-        let splat_uniforms = gpu.buffer(
-            "splat uniforms",
-            (shadow_layers.len() as u64 + 1) * size_of::<SplatUniform>() as u64,
-            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        )?;
-        // One bind group per uniform slot, each bound at its slot's static offset.
-        let splat_groups: Vec<wgpu::BindGroup> = (0..=shadow_layers.len() as u64)
-            .map(|slot| {
-                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("splat"),
-                    layout: &splat_layout,
-                    entries: &[wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: &splat_uniforms,
-                            offset: slot * size_of::<SplatUniform>() as u64,
-                            size: wgpu::BufferSize::new(size_of::<SplatUniform>() as u64),
-                        }),
-                    }],
-                })
-            })
-            .collect();
-        // Shadow layer uniforms never change for static lights: write them once.
-        let settings_splat = settings.splat_scale;
-        for (i, (m, (eye, scale))) in shadow_layers.iter().zip(&shadow_eyes).enumerate() {
-            let u = SplatUniform {
-                view_proj: m.to_cols_array_2d(),
-                eye_m: eye.extend(1.0).to_array(),
-                viewport: [face_size as f32, face_size as f32, settings.min_splat_px, *scale],
-                splat: [settings_splat, 0.0, 0.0, 0.0],
-                pad: [[0.0; 4]; 9],
-            };
-            gpu.queue.write_buffer(
-                &splat_uniforms,
-                (i * size_of::<SplatUniform>()) as u64,
-                bytemuck::bytes_of(&u),
-            );
+        let shadow_mats: Vec<[[f32; 4]; 4]> =
+            lights.faces.iter().map(|f| f.view_proj.to_cols_array_2d()).collect();
+        let static_buffers = [
+            (0, params.clone()),
+            (1, gpu.buffer_init("tiles", bytemuck::cast_slice(&scene.tiles), STORAGE)?),
+            (2, gpu.buffer_init("nodes", bytemuck::cast_slice(&scene.nodes), STORAGE)?),
+            (3, gpu.buffer_init("leaves", bytemuck::cast_slice(&scene.leaves), STORAGE)?),
+            (4, gpu.buffer_init("lights", bytemuck::cast_slice(&lights.lights), STORAGE)?),
+            (5, gpu.buffer_init("shadow matrices", bytemuck::cast_slice(&shadow_mats), STORAGE)?),
+            (7, gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock.words), STORAGE)?),
+            (8, gpu.buffer_init("light grid", bytemuck::cast_slice(&lights.grid.words), STORAGE)?),
+        ];
+        let mut shared = passes::Shared::default();
+        let mut static_bytes = surfels.size() + shadow.bytes();
+        for (binding, b) in static_buffers {
+            static_bytes += b.size();
+            shared.insert(0, binding, passes::Resource::Buffer(b));
+        }
+        shared.insert(0, 6, passes::Resource::Texture(shadow.atlas().clone()));
+        for (binding, b) in [(0, &leaf_light), (1, &faces), (2, &stats)] {
+            static_bytes += b.size();
+            shared.insert(1, binding, passes::Resource::Buffer(b.clone()));
         }
 
         let (by_height, ranges) = scene.nodes_by_height();
-        let queries = gpu.timestamps.then(|| {
-            let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("pass times"),
-                ty: wgpu::QueryType::Timestamp,
-                count: 2 * Pass::ALL.len() as u32,
-            });
-            let buf = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("pass times"),
-                size: 16 * Pass::ALL.len() as u64,
-                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
-            (set, buf)
-        });
+        let lights_in_range = lights.grid.occupancy();
+        let inject =
+            gpu.scoped("inject", || passes::inject::Inject::new(gpu, &shared, f16, lights_in_range.1))?;
+        let env = gpu.scoped("env", || passes::env::new(gpu, &shared, f16))?;
+        let mip = gpu.scoped("mip", || passes::mip::Mip::new(gpu, &shared, &by_height, &ranges, f16))?;
+        let propagate = gpu.scoped("propagate", || passes::propagate::new(gpu, &shared, f16))?;
+        let gbuffer = gpu.scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout))?;
+        let shade = gpu.scoped("shade", || shade::Shade::new(gpu, &shared, f16, chain))?;
+        static_bytes += shade.env_atlas_bytes();
         let r = Self {
-            inject: passes::inject::Inject::new(gpu, &scene_layout, f16, lights_in_range.1)?,
-            env: passes::env::new(gpu, &scene_layout, f16),
-            mip: passes::mip::Mip::new(gpu, &scene_layout, &by_height, &ranges, f16)?,
-            propagate: passes::propagate::new(gpu, &scene_layout, f16),
-            shadow: shadow::Shadow::new(gpu, &splat_layout),
-            gbuffer: gbuffer::Gbuffer::new(gpu, &splat_layout),
-            shade: shade::Shade::new(gpu, &scene_layout, f16),
+            inject,
+            env,
+            mip,
+            propagate,
+            shadow,
+            gbuffer,
+            shade,
             gpu: gpu.clone(),
             settings,
             leaf_count: scene.leaves.len() as u32,
@@ -695,37 +324,29 @@ impl Renderer {
             leaf_size_m: leaf,
             scene_diag_m,
             base_params,
-            point_lights,
-            spot_lights,
+            point_lights: lights.point_lights,
+            spot_lights: lights.spot_lights,
             headlamp: scene.headlamp,
-            shadowed,
+            shadowed: lights.shadowed,
+            shadow_faces: lights.faces.len(),
+            light_count: lights.lights.len(),
             lights_in_range,
             specular_materials,
             specular_surfels,
-            env_atlas,
             emissive: scene.has_emission(),
             environment: environment_on,
             env_valid: false,
-            shadow_layers,
-            lights_gpu,
             params,
             static_bytes,
             leaf_light,
             faces,
             stats,
             surfels,
-            splat_uniforms,
-            splat_groups,
-            shadow_distance,
-            shadow_face_size: face_size,
-            shadow_cols,
-            shadow_depth,
-            scene_group,
             view: None,
             direct_valid: false,
             forced: Vec::new(),
             stats_now: PassStats::default(),
-            queries,
+            queries: pass_queries(gpu),
         };
         gpu.check("upload")?;
         Ok(r)
@@ -859,7 +480,7 @@ impl Renderer {
         }
         let p = self.plan(Some((camera, width, height)));
         self.execute(&p, Some((camera, width, height)))?;
-        let view = self.view.as_ref().ok_or(Error::Gpu { pass: "shade", message: "no view".into() })?;
+        let view = self.view("shade")?;
         let pixels = u64::from(width) * u64::from(height);
         let hdr_bytes = self.gpu.read_buffer(&view.outputs.hdr, pixels * 16)?;
         let ldr_bytes = self.gpu.read_buffer(&view.outputs.ldr, pixels * 4)?;
@@ -872,13 +493,13 @@ impl Renderer {
         let mut p = self.base_params;
         let s = &self.settings;
         let mut f = flags::EMISSION;
-        if s.direct && !self.lights_gpu.is_empty() {
+        if s.direct && self.light_count > 0 {
             f |= flags::DIRECT;
         }
-        if s.direct && s.shadows && self.shadowed < self.lights_gpu.len() {
+        if s.direct && s.shadows && self.shadowed < self.light_count {
             f |= flags::FAR_LIGHTS;
         }
-        if s.shadows && !self.shadow_layers.is_empty() {
+        if s.shadows && self.shadow_faces > 0 {
             f |= flags::SHADOWS;
         }
         match s.indirect {
@@ -912,135 +533,109 @@ impl Renderer {
         self.queries.as_ref().map(|(set, _)| (set, 2 * i))
     }
 
+    /// Writes the camera's splat uniform and (re)makes the view's targets when the size changed.
+    fn prepare_view(&mut self, camera: &Camera, w: u32, h: u32) -> Result<()> {
+        let near = (0.02 * self.leaf_size_m).max(1e-4);
+        let far = (camera.eye_m.length() + self.scene_diag_m) * 2.0 + 1.0;
+        let m = camera.view_proj(w, h, near, far);
+        let u = SplatUniform {
+            view_proj: m.to_cols_array_2d(),
+            eye_m: camera.eye_m.extend(1.0).to_array(),
+            viewport: [
+                w as f32,
+                h as f32,
+                self.settings.min_splat_px,
+                1.0 / (camera.fov_y_deg.to_radians() * 0.5).tan(),
+            ],
+            splat: [self.settings.splat_scale, 0.0, 0.0, 0.0],
+            pad: [[0.0; 4]; 9],
+        };
+        self.gbuffer.set_camera(&self.gpu, &u);
+        let reuse = self.view.as_ref().is_some_and(|v| v.targets.width == w && v.targets.height == h);
+        if !reuse {
+            // The largest per-view buffer first, before any target is allocated.
+            let pixels = u64::from(w) * u64::from(h);
+            self.gpu.check_buffer("shade hdr", pixels * 16, wgpu::BufferUsages::STORAGE)?;
+            let targets = gbuffer::Targets::new(&self.gpu, w, h)?;
+            let outputs = self.shade.outputs(&self.gpu, &targets)?;
+            self.view = Some(View { camera: *camera, targets, outputs });
+        } else if let Some(v) = self.view.as_mut() {
+            v.camera = *camera;
+        }
+        Ok(())
+    }
+
+    fn view(&self, pass: &'static str) -> Result<&View> {
+        self.view.as_ref().ok_or(Error::Internal { what: pass, message: "no view was prepared".into() })
+    }
+
+    /// Records one pass into a command buffer of its own.
+    fn record(&self, pass: Pass) -> Result<wgpu::CommandBuffer> {
+        let mut enc = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(pass.name()) });
+        let ts = self.timestamp_pair(pass);
+        let render_ts = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
+            query_set: set,
+            beginning_of_pass_write_index: Some(i),
+            end_of_pass_write_index: Some(i + 1),
+        });
+        match pass {
+            Pass::Shadow => self.shadow.record(&mut enc, &self.surfels, self.surfel_count, render_ts),
+            Pass::Gbuffer => {
+                let v = self.view("gbuffer")?;
+                self.gbuffer.record(&mut enc, &v.targets, &self.surfels, self.surfel_count, render_ts);
+            }
+            compute => {
+                if compute == Pass::Propagate {
+                    enc.clear_buffer(&self.stats, 0, None);
+                }
+                let tw = ts.map(|(set, i)| wgpu::ComputePassTimestampWrites {
+                    query_set: set,
+                    beginning_of_pass_write_index: Some(i),
+                    end_of_pass_write_index: Some(i + 1),
+                });
+                let mut cp = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some(compute.name()),
+                    timestamp_writes: tw,
+                });
+                match compute {
+                    Pass::Inject => self.inject.record(&mut cp, self.leaf_count),
+                    Pass::Env => self.env.record(&mut cp, self.leaf_count),
+                    Pass::Mip => self.mip.record(&mut cp),
+                    Pass::Propagate => self.propagate.record(&mut cp, self.leaf_count),
+                    Pass::Shade => {
+                        let v = self.view("shade")?;
+                        self.shade.record(&mut cp, &v.outputs, v.targets.width, v.targets.height);
+                    }
+                    Pass::Shadow | Pass::Gbuffer => {}
+                }
+            }
+        }
+        Ok(enc.finish())
+    }
+
     fn execute(&mut self, plan: &EffectPlan, frame: Option<(&Camera, u32, u32)>) -> Result<()> {
         let params = self.frame_params(frame);
         self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         if let Some((camera, w, h)) = frame
             && plan.runs(Pass::Gbuffer)
         {
-            let near = (0.02 * self.leaf_size_m).max(1e-4);
-            let far = (camera.eye_m.length() + self.scene_diag_m) * 2.0 + 1.0;
-            let m = camera.view_proj(w, h, near, far);
-            let u = SplatUniform {
-                view_proj: m.to_cols_array_2d(),
-                eye_m: camera.eye_m.extend(1.0).to_array(),
-                viewport: [
-                    w as f32,
-                    h as f32,
-                    self.settings.min_splat_px,
-                    1.0 / (camera.fov_y_deg.to_radians() * 0.5).tan(),
-                ],
-                splat: [self.settings.splat_scale, 0.0, 0.0, 0.0],
-                pad: [[0.0; 4]; 9],
-            };
-            let slot = self.shadow_layers.len() as u64 * size_of::<SplatUniform>() as u64;
-            self.gpu.queue.write_buffer(&self.splat_uniforms, slot, bytemuck::bytes_of(&u));
-            let reuse = self.view.as_ref().is_some_and(|v| v.targets.width == w && v.targets.height == h);
-            if !reuse {
-                // The largest per-view buffer first, before any target is allocated.
-                let pixels = u64::from(w) * u64::from(h);
-                self.gpu.check_buffer("shade hdr", pixels * 16, wgpu::BufferUsages::STORAGE)?;
-                let targets = gbuffer::Targets::new(&self.gpu, w, h)?;
-                let outputs = self.shade.outputs(&self.gpu, &targets, &self.env_atlas)?;
-                self.view = Some(View { camera: *camera, targets, outputs });
-            } else if let Some(v) = self.view.as_mut() {
-                v.camera = *camera;
-            }
+            self.prepare_view(camera, w, h)?;
         }
-        let mut enc =
-            self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
         let mut ran: Vec<Pass> = Vec::new();
-        if plan.runs(Pass::Propagate) {
-            enc.clear_buffer(&self.stats, 0, None);
-        }
+        // One command buffer per pass, each finished inside its own error scope, so a validation
+        // error names the pass that caused it; all are submitted together (or, without timestamp
+        // queries, each on its own to time it on the CPU).
+        let mut buffers: Vec<wgpu::CommandBuffer> = Vec::new();
         for step in plan.steps.iter().filter(|s| s.run) {
             let recorded = Instant::now();
-            let ts = self.timestamp_pair(step.pass);
-            match step.pass {
-                Pass::Shadow => {
-                    let tw = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
-                        query_set: set,
-                        beginning_of_pass_write_index: Some(i),
-                        end_of_pass_write_index: Some(i + 1),
-                    });
-                    let layers = self.shadow_layers.len();
-                    self.shadow.record(
-                        &mut enc,
-                        &self.shadow_distance,
-                        &self.shadow_depth,
-                        self.shadow_face_size,
-                        self.shadow_cols,
-                        &self.splat_groups[..layers],
-                        &self.surfels,
-                        self.surfel_count,
-                        tw,
-                    );
-                }
-                Pass::Gbuffer => {
-                    let v = self
-                        .view
-                        .as_ref()
-                        .ok_or(Error::Gpu { pass: "gbuffer", message: "no view".into() })?;
-                    let tw = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
-                        query_set: set,
-                        beginning_of_pass_write_index: Some(i),
-                        end_of_pass_write_index: Some(i + 1),
-                    });
-                    self.gbuffer.record(
-                        &mut enc,
-                        &v.targets,
-                        &self.splat_groups[self.shadow_layers.len()],
-                        &self.surfels,
-                        self.surfel_count,
-                        tw,
-                    );
-                }
-                compute => {
-                    let tw = ts.map(|(set, i)| wgpu::ComputePassTimestampWrites {
-                        query_set: set,
-                        beginning_of_pass_write_index: Some(i),
-                        end_of_pass_write_index: Some(i + 1),
-                    });
-                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                        label: Some(compute.name()),
-                        timestamp_writes: tw,
-                    });
-                    match compute {
-                        Pass::Inject => self.inject.record(&mut pass, &self.scene_group, self.leaf_count),
-                        Pass::Env => self.env.record(&mut pass, &self.scene_group, self.leaf_count),
-                        Pass::Mip => self.mip.record(&mut pass, &self.scene_group),
-                        Pass::Propagate => {
-                            self.propagate.record(&mut pass, &self.scene_group, self.leaf_count)
-                        }
-                        Pass::Shade => {
-                            let v = self
-                                .view
-                                .as_ref()
-                                .ok_or(Error::Gpu { pass: "shade", message: "no view".into() })?;
-                            self.shade.record(
-                                &mut pass,
-                                &self.scene_group,
-                                &v.outputs,
-                                v.targets.width,
-                                v.targets.height,
-                            );
-                        }
-                        Pass::Shadow | Pass::Gbuffer => {}
-                    }
-                }
-            }
+            buffers.push(self.gpu.scoped(step.pass.name(), || self.record(step.pass))?);
             *self.stats_now.dispatches.entry(step.pass).or_default() += 1;
             ran.push(step.pass);
             if self.queries.is_none() {
-                // No timestamp queries: time each pass on the CPU, recording to completion of its
-                // own blocking submit.
-                let done = std::mem::replace(
-                    &mut enc,
-                    self.gpu
-                        .device
-                        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") }),
-                );
-                self.gpu.queue.submit([done.finish()]);
+                self.gpu.queue.submit(buffers.drain(..));
                 self.gpu.wait()?;
                 let ms = recorded.elapsed().as_secs_f64() * 1e3;
                 self.stats_now.last_ms.insert(step.pass, ms);
@@ -1049,9 +644,14 @@ impl Renderer {
         if let Some((set, buf)) = &self.queries
             && !ran.is_empty()
         {
+            let mut enc = self
+                .gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pass times") });
             enc.resolve_query_set(set, 0..2 * Pass::ALL.len() as u32, buf, 0);
+            buffers.push(enc.finish());
         }
-        self.gpu.queue.submit([enc.finish()]);
+        self.gpu.queue.submit(buffers);
         self.gpu.wait()?;
         self.gpu.check("frame")?;
         if let Some((_, buf)) = &self.queries {

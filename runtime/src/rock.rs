@@ -5,7 +5,7 @@
 //! nearest to it (the cell lies behind it, against its mean normal: rock), the signed-distance test of Hoppe et al. 1992 on the
 //! leaves' Toksvig mean normals, kept to cells roughly straight behind the surface (see
 //! `BEHIND_SLOPE`) and away from the surface's edges (an opening's rim: beyond it is sky, not
-//! rock); anything else stays air. A cone whose axis enters a rock cell stops there (common.wgsl,
+//! rock); anything else stays air. A cone whose axis enters a rock cell stops there (shaders/rock.wgsl,
 //! `trace_cone`): what is hidden behind the walls it met is taken to look like them, so closed caves
 //! keep their energy, and a cone that leaves the scene through an opening keeps its transparency
 //! for the environment — no opacity threshold has to tell a leak from an opening.
@@ -36,7 +36,7 @@ use crate::scene_data::SceneData;
 /// Rock cells are 2^ROCK_LEVEL leaves on a side.
 pub const ROCK_LEVEL: u32 = 1;
 /// How far (in cells, Chebyshev) from a surface cell the classification reaches; also the margin
-/// of cells kept around each tile (`ROCK_MARGIN` in common.wgsl).
+/// of cells kept around each tile (`ROCK_MARGIN` in shaders/rock.wgsl).
 pub const ROCK_REACH_CELLS: i32 = 4;
 /// A cell is rock only if it lies behind its seed's surface within about 63 degrees of the inward
 /// normal (depth >= this * lateral offset): beside an opening, the wall around it is the nearest
@@ -186,7 +186,7 @@ pub const ENTRY_WORDS: usize = 5;
 /// Brick x of an empty slot; no brick reaches it (leaf coordinates stay within +-2^28).
 pub const EMPTY_KEY: i32 = i32::MIN;
 
-/// The hash of a brick coordinate, identical in common.wgsl (`rock_hash`): each axis times a large
+/// The hash of a brick coordinate, identical in shaders/rock.wgsl (`rock_hash`): each axis times a large
 /// odd constant (Teschner et al. 2003), xor-ed, then murmur3's finaliser so neighbouring bricks
 /// spread over the table.
 pub fn brick_hash(b: IVec3) -> u32 {
@@ -249,7 +249,7 @@ impl RockTable {
         Self { words }
     }
 
-    /// Whether rock cell `cell` (global cell units) is rock: `in_rock` in common.wgsl.
+    /// Whether rock cell `cell` (global cell units) is rock: `in_rock` in shaders/rock.wgsl.
     pub fn contains(&self, cell: IVec3) -> bool {
         let words = &self.words;
         let (Some(&mask), Some(&longest)) = (words.first(), words.get(1)) else { return false };
@@ -292,7 +292,7 @@ pub fn dense_grid_bytes(scene: &SceneData) -> u64 {
         .sum()
 }
 
-/// Whether leaf cell `v_leaf` (global leaf units) lies in a rock cell; as `in_rock` in common.wgsl.
+/// Whether leaf cell `v_leaf` (global leaf units) lies in a rock cell; as `in_rock` in shaders/rock.wgsl.
 pub fn in_rock(scene: &SceneData, v_leaf: IVec3) -> bool {
     scene.rock.contains(v_leaf >> ROCK_LEVEL as i32)
 }

@@ -151,8 +151,12 @@ pub const MAX_ENV_LEVELS: usize = grotto_format::spec::MAX_ENV_MIP_LEVELS;
 fn read_env_chain(pkg: &Package, index: u32, intensity: f32) -> Result<Option<EnvChain>> {
     let Some(chain) = pkg.env_chain(index)? else { return Ok(None) };
     let (width, height) = (chain.atlas_width(), chain.atlas_height());
-    let table: Vec<(u32, u32, u32, f32)> =
-        chain.levels.iter().zip(chain.level_rows()).map(|(l, row)| (row, l.width, l.height, l.roughness)).collect();
+    let table: Vec<(u32, u32, u32, f32)> = chain
+        .levels
+        .iter()
+        .zip(chain.level_rows())
+        .map(|(l, row)| (row, l.width, l.height, l.roughness))
+        .collect();
     let mut rgba = vec![[0.0f32; 4]; width as usize * height as usize];
     for (l, &(row0, w, h, _)) in chain.levels.iter().zip(&table) {
         let bw = w.div_ceil(4);
@@ -176,7 +180,6 @@ fn read_env_chain(pkg: &Package, index: u32, intensity: f32) -> Result<Option<En
     Ok(Some(EnvChain { width, height, rgba, levels: table }))
 }
 
-
 impl SceneData {
     /// Appends a tile's nodes with global indices: `first_child` becomes a global node index for
     /// inner nodes and a global leaf index for leaves (the package stores tile-local ones).
@@ -191,7 +194,7 @@ impl SceneData {
     }
 
     /// The tile whose cube holds leaf cell `v_leaf` (global leaf units), as `find_tile` in
-    /// common.wgsl.
+    /// shaders/svo.wgsl.
     pub fn tile_of(&self, v_leaf: IVec3) -> Option<usize> {
         self.tiles.iter().position(|t| {
             let rel = v_leaf - IVec3::from_array(t.origin_leaf);

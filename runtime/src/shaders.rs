@@ -1,8 +1,31 @@
-//! WGSL sources. Each compute pass is `shaders/brdf.wgsl` and `shaders/common.wgsl` followed by its
-//! own file, after the constants generated from Rust (`constants`); the splat render passes stand alone. `ALL` lists every composed module so one naga test validates them.
+//! WGSL sources and the small import mechanism that composes them.
+//!
+//! Shared WGSL lives in `shaders/`, one file per subsystem (scene, light state, SVO, rock, cone
+//! tracing, lights, SH, colour, packing, ...); each pass's WGSL lives beside its module in
+//! `passes/`. A file names what it needs with `#import name` lines (names of `shaders/` files);
+//! [`compose`] puts each needed file in once, dependencies first, after the constants generated
+//! from Rust ([`constants`]). A pass therefore declares only the bindings of the subsystems it
+//! imports, and its bind group layouts are reflected from that (passes/mod.rs).
 
-pub const BRDF: &str = include_str!("shaders/brdf.wgsl");
-pub const COMMON: &str = include_str!("shaders/common.wgsl");
+use crate::error::{Error, Result};
+
+/// The shared library: (import name, source).
+pub const LIBRARY: &[(&str, &str)] = &[
+    ("brdf", include_str!("shaders/brdf.wgsl")),
+    ("color", include_str!("shaders/color.wgsl")),
+    ("cone", include_str!("shaders/cone.wgsl")),
+    ("dispatch", include_str!("shaders/dispatch.wgsl")),
+    ("geometry", include_str!("shaders/geometry.wgsl")),
+    ("light_state", include_str!("shaders/light_state.wgsl")),
+    ("lights", include_str!("shaders/lights.wgsl")),
+    ("ndf", include_str!("shaders/ndf.wgsl")),
+    ("packing", include_str!("shaders/packing.wgsl")),
+    ("rock", include_str!("shaders/rock.wgsl")),
+    ("scene", include_str!("shaders/scene.wgsl")),
+    ("sh", include_str!("shaders/sh.wgsl")),
+    ("svo", include_str!("shaders/svo.wgsl")),
+];
+
 pub const ENV: &str = include_str!("passes/env.wgsl");
 pub const INJECT: &str = include_str!("passes/inject.wgsl");
 pub const MIP: &str = include_str!("passes/mip.wgsl");
@@ -12,32 +35,89 @@ pub const SHADE: &str = include_str!("passes/shade.wgsl");
 
 /// Constants shared with the Rust side, generated from it so the two cannot drift.
 pub fn constants() -> String {
+    use crate::gpu_types::{LightShadow, flags};
     use crate::rock;
-    format!(
-        "const ROCK_LEVEL: u32 = {}u;\nconst ROCK_BRICK_SHIFT: u32 = {}u;\nconst ROCK_HEADER_WORDS: u32 = {}u;\n\
-         const ROCK_ENTRY_WORDS: u32 = {}u;\nconst ROCK_EMPTY_KEY: i32 = {};\n",
+    let mut out = format!(
+        "const EMPTY: u32 = 0xffffffffu;\nconst ROCK_LEVEL: u32 = {}u;\nconst ROCK_BRICK_SHIFT: u32 = {}u;\n\
+         const ROCK_HEADER_WORDS: u32 = {}u;\nconst ROCK_ENTRY_WORDS: u32 = {}u;\nconst ROCK_EMPTY_KEY: i32 = {};\n",
         rock::ROCK_LEVEL,
         rock::BRICK_SHIFT,
         rock::HEADER_WORDS,
         rock::ENTRY_WORDS,
         // WGSL has no literal for i32::MIN (its negation overflows): write it as an expression.
         format_args!("({} - 1)", rock::EMPTY_KEY + 1),
-    )
+    );
+    for (name, bit) in flags::ALL {
+        out += &format!("const {name}: u32 = {bit}u;\n");
+    }
+    for kind in LightShadow::ALL {
+        out += &format!("const {}: u32 = {}u;\n", kind.wgsl_name(), kind as u32);
+    }
+    out
 }
 
-/// The generated constants and common declarations followed by a pass's own WGSL.
-pub fn compose(pass: &str) -> String {
-    format!("{}\n{BRDF}\n{COMMON}\n{pass}", constants())
+/// The names a source imports (its `#import name` lines), in order.
+fn imports(src: &str) -> impl Iterator<Item = &str> {
+    src.lines().filter_map(|l| l.trim().strip_prefix("#import ")).map(str::trim)
 }
+
+/// The generated constants, then every library file `src` needs (dependencies first, each once),
+/// then `src` itself; `#import` lines become comments.
+pub fn compose(src: &str) -> Result<String> {
+    fn visit(name: &str, order: &mut Vec<&'static str>, stack: &mut Vec<String>) -> Result<()> {
+        let Some(&(known, text)) = LIBRARY.iter().find(|(n, _)| *n == name) else {
+            return Err(Error::Internal {
+                what: "WGSL import",
+                message: format!("no shader named '{name}'"),
+            });
+        };
+        if order.contains(&known) {
+            return Ok(());
+        }
+        if stack.iter().any(|s| s == name) {
+            return Err(Error::Internal {
+                what: "WGSL import",
+                message: format!("import cycle: {} -> {name}", stack.join(" -> ")),
+            });
+        }
+        stack.push(name.to_owned());
+        for dep in imports(text) {
+            visit(dep, order, stack)?;
+        }
+        stack.pop();
+        order.push(known);
+        Ok(())
+    }
+    let mut order = Vec::new();
+    for dep in imports(src) {
+        visit(dep, &mut order, &mut Vec::new())?;
+    }
+    let strip = |text: &str| -> String {
+        text.lines()
+            .map(|l| if l.trim().starts_with("#import ") { format!("// {}", l.trim()) } else { l.to_owned() })
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    let mut out = constants();
+    for name in order {
+        let text = LIBRARY.iter().find(|(n, _)| *n == name).map_or("", |(_, t)| t);
+        out += &format!("\n// ---- shaders/{name}.wgsl\n{}\n", strip(text));
+    }
+    out += &format!("\n// ---- pass\n{}\n", strip(src));
+    Ok(out)
+}
+
+/// (name, source) of every shader module the runtime creates, before composing.
+pub const PASSES: [(&str, &str); 6] = [
+    ("env", ENV),
+    ("inject", INJECT),
+    ("mip", MIP),
+    ("propagate", PROPAGATE),
+    ("shade", SHADE),
+    ("splat", SPLAT),
+];
 
 /// (name, complete module source) of every shader module the runtime creates.
-pub fn all() -> Vec<(&'static str, String)> {
-    vec![
-        ("env", compose(ENV)),
-        ("inject", compose(INJECT)),
-        ("mip", compose(MIP)),
-        ("propagate", compose(PROPAGATE)),
-        ("shade", compose(SHADE)),
-        ("splat", SPLAT.to_string()),
-    ]
+pub fn all() -> Result<Vec<(&'static str, String)>> {
+    PASSES.iter().map(|(name, src)| Ok((*name, compose(src)?))).collect()
 }

@@ -13,7 +13,6 @@ use crate::scene_data::{SceneCamera, SceneData, SceneLight, VoxelLeaf};
 
 const NEIGHBOURS: [IVec3; 6] = [IVec3::X, IVec3::NEG_X, IVec3::Y, IVec3::NEG_Y, IVec3::Z, IVec3::NEG_Z];
 
-
 /// Solid rock over `dims` leaves with the cells where `air` is true carved out.
 /// `normal_override` may give a leaf's normal (the furnace uses it for rock).
 #[allow(clippy::too_many_arguments)]

@@ -457,10 +457,10 @@ fn a_closed_cave_stays_dark_under_a_sky_and_an_opening_lets_it_in() {
 /// once per element of `io` and returns `io` afterwards.
 fn run_brdf_kernel(kernel: &str, io: &[[f32; 4]]) -> Vec<[f32; 4]> {
     let g = gpu();
-    let src = format!(
-        "{}\n@group(0) @binding(0) var<storage, read_write> io: array<vec4<f32>>;\n{kernel}",
-        grotto_runtime::shaders::BRDF
-    );
+    let src = grotto_runtime::shaders::compose(&format!(
+        "#import brdf\n@group(0) @binding(0) var<storage, read_write> io: array<vec4<f32>>;\n{kernel}"
+    ))
+    .unwrap();
     let module = g.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("brdf probe"),
         source: wgpu::ShaderSource::Wgsl(src.into()),

@@ -4,7 +4,7 @@ use grotto_runtime::shaders;
 
 #[test]
 fn every_wgsl_module_validates() {
-    let all = shaders::all();
+    let all = shaders::all().unwrap();
     let pass_files = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/src/passes"))
         .unwrap()
         .filter(|e| e.as_ref().is_ok_and(|e| e.path().extension().is_some_and(|x| x == "wgsl")))
@@ -27,7 +27,7 @@ fn every_wgsl_module_validates() {
 #[test]
 fn a_broken_shader_is_caught() {
     // The check above must be able to fail: a type error in a composed module is reported.
-    let src = shaders::compose("fn f() -> u32 { return params.leaf_size_m; }");
+    let src = shaders::compose("#import scene\nfn f() -> u32 { return params.leaf_size_m; }").unwrap();
     let parsed = naga::front::wgsl::parse_str(&src);
     let invalid = match parsed {
         Err(_) => true,
@@ -39,4 +39,29 @@ fn a_broken_shader_is_caught() {
         .is_err(),
     };
     assert!(invalid);
+}
+
+#[test]
+fn unknown_imports_and_cycles_are_internal_errors() {
+    let e = shaders::compose("#import nowhere\n").unwrap_err();
+    assert!(matches!(e, grotto_runtime::Error::Internal { .. }), "{e}");
+}
+
+#[test]
+fn the_storage_buffer_requirement_is_what_the_passes_declare() {
+    // gpu.rs refuses adapters with fewer storage buffers per stage than the hungriest pass binds.
+    let mut most = 0;
+    for (name, src) in shaders::all().unwrap() {
+        let groups = grotto_runtime::passes::reflect_layouts(&src, wgpu::ShaderStages::COMPUTE).unwrap();
+        let storage = groups
+            .values()
+            .flatten()
+            .filter(|e| {
+                matches!(e.ty, wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Storage { .. }, .. })
+            })
+            .count() as u32;
+        eprintln!("{name}: {storage} storage buffers");
+        most = most.max(storage);
+    }
+    assert_eq!(most, grotto_runtime::gpu::STORAGE_BUFFERS_NEEDED);
 }

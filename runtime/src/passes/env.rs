@@ -1,8 +1,9 @@
 //! Environment (env.wgsl): sky visibility and SH irradiance at every leaf, once per environment.
 
+use crate::error::Result;
 use crate::gpu::Gpu;
 
-/// The env pipeline: one invocation per leaf, scene bindings only.
-pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout, radiance_f16: bool) -> super::LeafPass {
-    super::LeafPass::new(gpu, "env", crate::shaders::ENV, scene, radiance_f16)
+/// The env pipeline: one invocation per leaf, shared groups only.
+pub fn new(gpu: &Gpu, shared: &super::Shared, radiance_f16: bool) -> Result<super::LeafPass> {
+    super::LeafPass::new(gpu, "env", crate::shaders::ENV, shared, radiance_f16)
 }

@@ -6,6 +6,9 @@
 // Ramamoorthi-Hanrahan irradiance of the 9 coefficients (for the leaf's normal distribution, see
 // sh_irradiance_ndf_over_pi): unoccluded leaves get exactly that, a leaf whose cones all end on
 // rock gets nothing. Runs once per environment (geometry is static).
+#import cone
+#import sh
+#import dispatch
 
 @compute @workgroup_size(64)
 fn env(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {

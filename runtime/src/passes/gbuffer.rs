@@ -2,8 +2,10 @@
 //! normal and albedo targets. Discs are grown to a minimum pixel radius so the demo's sampling
 //! leaves no holes.
 
+use super::splat;
 use crate::error::Result;
 use crate::gpu::Gpu;
+use crate::gpu_types::SplatUniform;
 
 /// Packed f32 distance and octahedral normal (splat.wgsl): 8-bit unorm targets render everywhere.
 pub const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -38,30 +40,38 @@ impl Targets {
             distance: make("gbuffer distance", DISTANCE_FORMAT)?,
             normal: make("gbuffer normal", NORMAL_FORMAT)?,
             albedo: make("gbuffer albedo", ALBEDO_FORMAT)?,
-            depth: make("gbuffer depth", super::shadow::DEPTH_FORMAT)?,
+            depth: make("gbuffer depth", splat::DEPTH_FORMAT)?,
         })
     }
 }
 
+/// The G-buffer pass and the camera's splat uniform.
 #[derive(Debug)]
 pub struct Gbuffer {
     pipeline: wgpu::RenderPipeline,
+    camera: splat::Uniforms,
 }
 
 impl Gbuffer {
-    pub fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout) -> Self {
+    pub fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout) -> Result<Self> {
         let t =
             |format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL });
         let targets = [t(DISTANCE_FORMAT), t(NORMAL_FORMAT), t(ALBEDO_FORMAT)];
-        Self { pipeline: super::shadow::splat_pipeline(gpu, "gbuffer", layout, "fs_gbuffer", &targets) }
+        Ok(Self {
+            pipeline: splat::pipeline(gpu, "gbuffer", layout, "fs_gbuffer", &targets)?,
+            camera: splat::Uniforms::new(gpu, "camera splat", layout, 1)?,
+        })
     }
 
-    #[allow(clippy::too_many_arguments)]
+    /// The camera the next recording draws from.
+    pub fn set_camera(&self, gpu: &Gpu, u: &SplatUniform) {
+        self.camera.write(gpu, 0, u);
+    }
+
     pub fn record(
         &self,
         enc: &mut wgpu::CommandEncoder,
         targets: &Targets,
-        uniforms: &wgpu::BindGroup,
         surfels: &wgpu::Buffer,
         surfel_count: u32,
         timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
@@ -83,13 +93,13 @@ impl Gbuffer {
         let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("gbuffer"),
             color_attachments: &[attach(&views[0]), attach(&views[1]), attach(&views[2])],
-            depth_stencil_attachment: Some(super::shadow::depth_cleared(&depth)),
+            depth_stencil_attachment: Some(splat::depth_cleared(&depth)),
             timestamp_writes: timestamps,
             occlusion_query_set: None,
             multiview_mask: None,
         });
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, uniforms, &[]);
+        pass.set_bind_group(0, &self.camera.groups[0], &[]);
         pass.set_vertex_buffer(0, surfels.slice(..));
         pass.draw(0..6, 0..surfel_count);
     }

@@ -19,7 +19,7 @@ pub const LIGHTS_PER_BATCH: u32 = 4;
 
 #[derive(Debug)]
 pub struct Inject {
-    pipeline: wgpu::ComputePipeline,
+    pipeline: super::ComputePipeline,
     batches: Vec<wgpu::BindGroup>,
 }
 
@@ -28,22 +28,13 @@ impl Inject {
     /// a scene whose lights reach no leaf still resets the direct light).
     pub fn new(
         gpu: &Gpu,
-        scene: &wgpu::BindGroupLayout,
+        shared: &super::Shared,
         radiance_f16: bool,
         max_lights_per_cell: u32,
     ) -> Result<Self> {
-        let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("inject batch"),
-            entries: &[super::uniform_entry(0, wgpu::ShaderStages::COMPUTE, false)],
-        });
-        let pipeline = super::compute_pipeline(
-            gpu,
-            "inject",
-            crate::shaders::INJECT,
-            "inject",
-            &[scene, &layout],
-            radiance_f16,
-        );
+        let pipeline =
+            super::compute_pipeline(gpu, "inject", crate::shaders::INJECT, "inject", shared, radiance_f16)?;
+        let layout = super::own_layout(&pipeline, "inject")?;
         let count = max_lights_per_cell.div_ceil(LIGHTS_PER_BATCH).max(1);
         let batches = (0..count)
             .map(|b| {
@@ -59,7 +50,7 @@ impl Inject {
                 )?;
                 Ok(gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("inject batch"),
-                    layout: &layout,
+                    layout,
                     entries: &[wgpu::BindGroupEntry { binding: 0, resource: u.as_entire_binding() }],
                 }))
             })
@@ -72,11 +63,10 @@ impl Inject {
         self.batches.len()
     }
 
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, scene: &wgpu::BindGroup, leaf_count: u32) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, scene, &[]);
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, leaf_count: u32) {
+        self.pipeline.bind(pass);
         for bg in &self.batches {
-            pass.set_bind_group(1, bg, &[]);
+            pass.set_bind_group(super::OWN_GROUP, bg, &[]);
             super::dispatch_linear(pass, leaf_count);
         }
     }

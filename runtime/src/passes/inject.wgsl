@@ -3,8 +3,12 @@
 // lights beyond the budget by an SVO shadow cone (or not at all), and their share is kept apart in
 // `far` for shade. Then the leaf's outgoing radiance out = emission + direct + env +
 // albedo * gather. Area lights are already emissive leaves.
+#import lights
+#import cone
+#import dispatch
+#import brdf
 
-// Keep in sync with gpu_types.rs InjectBatch.
+// Mirrors gpu_types.rs InjectBatch (runtime/tests/layout.rs).
 struct InjectBatch {
     first: u32,
     count: u32,
@@ -12,7 +16,7 @@ struct InjectBatch {
     pad: u32,
 }
 
-@group(1) @binding(0) var<uniform> batch: InjectBatch;
+@group(2) @binding(0) var<uniform> batch: InjectBatch;
 
 @compute @workgroup_size(64)
 fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {

@@ -7,27 +7,20 @@ use crate::gpu_types::MipRange;
 
 #[derive(Debug)]
 pub struct Mip {
-    pipeline: wgpu::ComputePipeline,
+    pipeline: super::ComputePipeline,
     levels: Vec<(wgpu::BindGroup, u32)>,
 }
 
 impl Mip {
     pub fn new(
         gpu: &Gpu,
-        scene: &wgpu::BindGroupLayout,
+        shared: &super::Shared,
         by_height: &[u32],
         ranges: &[MipRange],
         radiance_f16: bool,
     ) -> Result<Self> {
-        let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("mip"),
-            entries: &[
-                super::uniform_entry(0, wgpu::ShaderStages::COMPUTE, false),
-                super::storage_entry(1, true),
-            ],
-        });
-        let pipeline =
-            super::compute_pipeline(gpu, "mip", crate::shaders::MIP, "mip", &[scene, &layout], radiance_f16);
+        let pipeline = super::compute_pipeline(gpu, "mip", crate::shaders::MIP, "mip", shared, radiance_f16)?;
+        let layout = super::own_layout(&pipeline, "mip")?;
         let order =
             gpu.buffer_init("mip order", bytemuck::cast_slice(by_height), wgpu::BufferUsages::STORAGE)?;
         let levels = ranges
@@ -36,7 +29,7 @@ impl Mip {
                 let u = gpu.buffer_init("mip range", bytemuck::bytes_of(r), wgpu::BufferUsages::UNIFORM)?;
                 let bg = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("mip level"),
-                    layout: &layout,
+                    layout,
                     entries: &[
                         wgpu::BindGroupEntry { binding: 0, resource: u.as_entire_binding() },
                         wgpu::BindGroupEntry { binding: 1, resource: order.as_entire_binding() },
@@ -48,11 +41,10 @@ impl Mip {
         Ok(Self { pipeline, levels })
     }
 
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, scene: &wgpu::BindGroup) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, scene, &[]);
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+        self.pipeline.bind(pass);
         for (bg, count) in &self.levels {
-            pass.set_bind_group(1, bg, &[]);
+            pass.set_bind_group(super::OWN_GROUP, bg, &[]);
             super::dispatch_linear(pass, *count);
         }
     }

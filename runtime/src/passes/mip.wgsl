@@ -1,6 +1,8 @@
 // Anisotropic mipmapping, one dispatch per node height (0 = leaves), deepest first. Leaves get six
 // equal values (opacity * radiance, opacity); an inner node composites its children front to back
 // along each travel direction (premultiplied alpha) and averages the four columns.
+#import svo
+#import dispatch
 
 struct MipRange {
     first: u32,
@@ -9,9 +11,9 @@ struct MipRange {
     pad: u32,
 }
 
-@group(1) @binding(0) var<uniform> range: MipRange;
+@group(2) @binding(0) var<uniform> range: MipRange;
 // Global node indices ordered by height.
-@group(1) @binding(1) var<storage, read> by_height: array<u32>;
+@group(2) @binding(1) var<storage, read> by_height: array<u32>;
 
 // Value of child octant `o` of `node` for face `f`, zero where the child is absent.
 fn child_face(node: Node, o: u32, f: u32) -> vec4<f32> {

@@ -1,8 +1,12 @@
-//! One module per pass, its WGSL beside it. Each builds its pipeline once and records itself into
-//! an encoder; the renderer decides (through the effect plan) which ones run.
+//! One module per pass, its WGSL beside it. Each builds its pipeline once, owns its resources and
+//! bind groups, and records itself into an encoder; the renderer decides (through the effect plan)
+//! which ones run.
 //!
-//! Compute passes share bind group 0 (the scene, declared in shaders/common.wgsl); a pass's own
-//! resources are group 1.
+//! Compute passes share two bind groups, declared by the WGSL subsystems they import: group 0 the
+//! static scene (read-only: parameters, tiles, nodes, leaves, lights, shadow matrices and atlas,
+//! rock, light grid) and group 1 the light state (read-write: leaf light, radiance pyramid,
+//! statistics). A pass's own resources are group 2. Layouts are reflected from each composed
+//! module (naga), so a pass binds only what its imports declare.
 
 pub mod env;
 pub mod gbuffer;
@@ -11,97 +15,168 @@ pub mod mip;
 pub mod propagate;
 pub mod shade;
 pub mod shadow;
+pub mod splat;
 
+use std::collections::BTreeMap;
+
+use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 
-/// Bind group 0 layout: keep in sync with the bindings in shaders/common.wgsl.
-pub fn scene_layout(gpu: &Gpu) -> wgpu::BindGroupLayout {
-    let mut entries = vec![wgpu::BindGroupLayoutEntry {
-        binding: 0,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }];
-    for b in 1..=8 {
-        entries.push(storage_entry(b, false));
-    }
-    entries.push(texture_entry(9, wgpu::TextureViewDimension::D2));
-    entries.push(storage_entry(10, false));
-    entries.push(storage_entry(11, false));
-    gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("scene"),
-        entries: &entries,
-    })
+/// A resource of a shared bind group.
+#[derive(Clone, Debug)]
+pub enum Resource {
+    Buffer(wgpu::Buffer),
+    Texture(wgpu::TextureView),
 }
 
-pub fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
+impl Resource {
+    fn binding(&self) -> wgpu::BindingResource<'_> {
+        match self {
+            Resource::Buffer(b) => b.as_entire_binding(),
+            Resource::Texture(v) => wgpu::BindingResource::TextureView(v),
+        }
     }
 }
 
-pub fn uniform_entry(
-    binding: u32,
-    visibility: wgpu::ShaderStages,
-    dynamic: bool,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: dynamic,
-            min_binding_size: None,
-        },
-        count: None,
+/// The resources of the shared bind groups, by group then binding (the numbers in the WGSL).
+#[derive(Clone, Debug, Default)]
+pub struct Shared {
+    pub groups: BTreeMap<u32, BTreeMap<u32, Resource>>,
+}
+
+impl Shared {
+    pub fn insert(&mut self, group: u32, binding: u32, resource: Resource) {
+        self.groups.entry(group).or_default().insert(binding, resource);
     }
 }
 
-pub fn texture_entry(binding: u32, dim: wgpu::TextureViewDimension) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: dim,
-            multisampled: false,
-        },
-        count: None,
+/// Group of a pass's own resources.
+pub const OWN_GROUP: u32 = 2;
+
+/// The bind group layout entries a composed WGSL module declares, by group (naga reflection of
+/// its resource variables): uniforms, storage buffers (read-only unless written) and
+/// non-filterable float 2D textures, visible to `stages`.
+pub fn reflect_layouts(
+    src: &str,
+    stages: wgpu::ShaderStages,
+) -> Result<BTreeMap<u32, Vec<wgpu::BindGroupLayoutEntry>>> {
+    let internal = |message: String| Error::Internal { what: "WGSL reflection", message };
+    let module = naga::front::wgsl::parse_str(src).map_err(|e| internal(e.emit_to_string(src)))?;
+    let mut groups: BTreeMap<u32, Vec<wgpu::BindGroupLayoutEntry>> = BTreeMap::new();
+    for (_, var) in module.global_variables.iter() {
+        let Some(rb) = &var.binding else { continue };
+        let ty = match var.space {
+            naga::AddressSpace::Uniform => wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            naga::AddressSpace::Storage { access } => wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage {
+                    read_only: !access.contains(naga::StorageAccess::STORE),
+                },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            naga::AddressSpace::Handle => match module.types[var.ty].inner {
+                naga::TypeInner::Image {
+                    dim: naga::ImageDimension::D2,
+                    arrayed: false,
+                    class: naga::ImageClass::Sampled { kind: naga::ScalarKind::Float, multi: false },
+                } => wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                ref other => return Err(internal(format!("binding {rb:?} has unsupported type {other:?}"))),
+            },
+            other => return Err(internal(format!("binding {rb:?} in address space {other:?}"))),
+        };
+        groups.entry(rb.group).or_default().push(wgpu::BindGroupLayoutEntry {
+            binding: rb.binding,
+            visibility: stages,
+            ty,
+            count: None,
+        });
+    }
+    for entries in groups.values_mut() {
+        entries.sort_by_key(|e| e.binding);
+    }
+    Ok(groups)
+}
+
+/// A compute pipeline with its reflected layouts and its shared bind groups made.
+#[derive(Debug)]
+pub struct ComputePipeline {
+    pub pipeline: wgpu::ComputePipeline,
+    /// Layout of the pass's own group ([`OWN_GROUP`]), when its WGSL declares one.
+    pub own_layout: Option<wgpu::BindGroupLayout>,
+    shared: Vec<(u32, wgpu::BindGroup)>,
+}
+
+impl ComputePipeline {
+    /// Sets the pipeline and the shared bind groups.
+    pub fn bind(&self, pass: &mut wgpu::ComputePass<'_>) {
+        pass.set_pipeline(&self.pipeline);
+        for (group, bg) in &self.shared {
+            pass.set_bind_group(*group, bg, &[]);
+        }
     }
 }
 
-/// A compute pipeline from common.wgsl + `pass_src`, entry point `entry`; `radiance_f16` sets the
-/// pipeline constant of the same name (the radiance pyramid's storage precision).
+/// Pipeline `label` from `pass_src` (composed with its imports), entry point `entry`;
+/// `radiance_f16` sets the pipeline constant of that name (the radiance pyramid's precision).
+/// Groups other than [`OWN_GROUP`] are bound from `shared`.
 pub fn compute_pipeline(
     gpu: &Gpu,
-    label: &str,
+    label: &'static str,
     pass_src: &str,
     entry: &str,
-    layouts: &[&wgpu::BindGroupLayout],
+    shared: &Shared,
     radiance_f16: bool,
-) -> wgpu::ComputePipeline {
+) -> Result<ComputePipeline> {
+    let src = crate::shaders::compose(pass_src)?;
+    let reflected = reflect_layouts(&src, wgpu::ShaderStages::COMPUTE)?;
+    let top = reflected.keys().max().copied().unwrap_or(0);
+    let layouts: Vec<wgpu::BindGroupLayout> = (0..=top)
+        .map(|g| {
+            gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries: reflected.get(&g).map_or(&[][..], Vec::as_slice),
+            })
+        })
+        .collect();
+    let mut bound = Vec::new();
+    for (&g, entries) in reflected.iter().filter(|(g, _)| **g != OWN_GROUP) {
+        let resources = shared.groups.get(&g);
+        let bind: Vec<wgpu::BindGroupEntry<'_>> = entries
+            .iter()
+            .map(|e| {
+                let r = resources.and_then(|r| r.get(&e.binding)).ok_or_else(|| Error::Internal {
+                    what: label,
+                    message: format!("no resource for group {g} binding {}", e.binding),
+                })?;
+                Ok(wgpu::BindGroupEntry { binding: e.binding, resource: r.binding() })
+            })
+            .collect::<Result<_>>()?;
+        let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &layouts[g as usize],
+            entries: &bind,
+        });
+        bound.push((g, group));
+    }
     let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(label),
-        source: wgpu::ShaderSource::Wgsl(crate::shaders::compose(pass_src).into()),
+        source: wgpu::ShaderSource::Wgsl(src.into()),
     });
-    let layouts: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().map(|l| Some(*l)).collect();
+    let refs: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().map(Some).collect();
     let layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(label),
-        bind_group_layouts: &layouts,
+        bind_group_layouts: &refs,
         immediate_size: 0,
     });
-    gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+    let pipeline = gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some(label),
         layout: Some(&layout),
         module: &module,
@@ -111,36 +186,44 @@ pub fn compute_pipeline(
             ..Default::default()
         },
         cache: None,
-    })
+    });
+    let own_layout = reflected.contains_key(&OWN_GROUP).then(|| layouts[OWN_GROUP as usize].clone());
+    Ok(ComputePipeline { pipeline, own_layout, shared: bound })
 }
 
-/// A compute pass with one invocation per leaf that binds only the scene (inject, env,
+/// A compute pass with one invocation per leaf that binds only the shared groups (env,
 /// propagate); its WGSL entry point has the pass's name.
 #[derive(Debug)]
 pub struct LeafPass {
-    pipeline: wgpu::ComputePipeline,
+    pipeline: ComputePipeline,
 }
 
 impl LeafPass {
     pub fn new(
         gpu: &Gpu,
-        name: &str,
+        name: &'static str,
         pass_src: &str,
-        scene: &wgpu::BindGroupLayout,
+        shared: &Shared,
         radiance_f16: bool,
-    ) -> Self {
-        Self { pipeline: compute_pipeline(gpu, name, pass_src, name, &[scene], radiance_f16) }
+    ) -> Result<Self> {
+        Ok(Self { pipeline: compute_pipeline(gpu, name, pass_src, name, shared, radiance_f16)? })
     }
 
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, scene: &wgpu::BindGroup, leaf_count: u32) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, scene, &[]);
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, leaf_count: u32) {
+        self.pipeline.bind(pass);
         dispatch_linear(pass, leaf_count);
     }
 }
 
+/// The own group's layout of `p`, which its WGSL must declare.
+pub fn own_layout<'a>(p: &'a ComputePipeline, label: &'static str) -> Result<&'a wgpu::BindGroupLayout> {
+    p.own_layout
+        .as_ref()
+        .ok_or(Error::Internal { what: label, message: format!("the WGSL declares no group {OWN_GROUP}") })
+}
+
 /// Dispatches 64-wide groups covering `n` items as a 2D grid (at most 65535 groups per
-/// dimension); shaders recover the item with `linear_index` (common.wgsl).
+/// dimension); shaders recover the item with `linear_index` (shaders/dispatch.wgsl).
 pub fn dispatch_linear(pass: &mut wgpu::ComputePass<'_>, n: u32) {
     let groups = n.div_ceil(64).max(1);
     let x = groups.min(65535);

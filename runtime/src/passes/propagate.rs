@@ -1,8 +1,9 @@
 //! Propagation (propagate.wgsl): one bounce of cone-traced gathering at every leaf.
 
+use crate::error::Result;
 use crate::gpu::Gpu;
 
-/// The propagate pipeline: one invocation per leaf, scene bindings only.
-pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout, radiance_f16: bool) -> super::LeafPass {
-    super::LeafPass::new(gpu, "propagate", crate::shaders::PROPAGATE, scene, radiance_f16)
+/// The propagate pipeline: one invocation per leaf, shared groups only.
+pub fn new(gpu: &Gpu, shared: &super::Shared, radiance_f16: bool) -> Result<super::LeafPass> {
+    super::LeafPass::new(gpu, "propagate", crate::shaders::PROPAGATE, shared, radiance_f16)
 }

@@ -4,6 +4,8 @@
 // reflected environment light; a cone's escaped share adds only the constant background here).
 // Reads only the mip pyramid, so leaves update independently; records the largest relative change
 // for the effect plan.
+#import cone
+#import dispatch
 
 @compute @workgroup_size(64)
 fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {

@@ -1,14 +1,17 @@
 //! Deferred shading (shade.wgsl): one thread per pixel over the G-buffer, writing linear HDR and
-//! tonemapped sRGB8 into storage buffers the renderer reads back.
+//! tonemapped sRGB8 into storage buffers the renderer reads back. Owns the environment atlas it
+//! reads for glossy reflections (the prefiltered levels stacked top to bottom).
 
 use super::gbuffer::Targets;
 use crate::error::Result;
 use crate::gpu::Gpu;
+use crate::scene_data::EnvChain;
 
 #[derive(Debug)]
 pub struct Shade {
-    pipeline: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    pipeline: super::ComputePipeline,
+    env_atlas: wgpu::TextureView,
+    env_atlas_bytes: u64,
 }
 
 /// Shade's outputs and bind group for one G-buffer.
@@ -20,64 +23,75 @@ pub struct Outputs {
 }
 
 impl Shade {
-    pub fn new(gpu: &Gpu, scene: &wgpu::BindGroupLayout, radiance_f16: bool) -> Self {
-        let d2 = wgpu::TextureViewDimension::D2;
-        let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("shade"),
-            entries: &[
-                super::texture_entry(0, d2),
-                super::texture_entry(1, d2),
-                super::texture_entry(2, d2),
-                super::storage_entry(3, false),
-                super::storage_entry(4, false),
-                super::texture_entry(5, d2),
-            ],
-        });
-        let pipeline = super::compute_pipeline(
-            gpu,
-            "shade",
-            crate::shaders::SHADE,
-            "shade",
-            &[scene, &layout],
-            radiance_f16,
+    /// `env_chain`: the prefiltered environment levels, when the scene is lit by one (a 1x1
+    /// placeholder atlas without).
+    pub fn new(
+        gpu: &Gpu,
+        shared: &super::Shared,
+        radiance_f16: bool,
+        env_chain: Option<&EnvChain>,
+    ) -> Result<Self> {
+        let pipeline =
+            super::compute_pipeline(gpu, "shade", crate::shaders::SHADE, "shade", shared, radiance_f16)?;
+        let (width, height) = env_chain.map_or((1, 1), |c| (c.width, c.height));
+        let tex = gpu.texture_2d(
+            "env atlas",
+            width,
+            height,
+            wgpu::TextureFormat::Rgba32Float,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        )?;
+        let placeholder = [[0.0f32; 4]];
+        let texels: &[[f32; 4]] = env_chain.map_or(&placeholder[..], |c| &c.rgba);
+        gpu.queue.write_texture(
+            tex.as_image_copy(),
+            bytemuck::cast_slice(texels),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(width * 16),
+                rows_per_image: Some(height),
+            },
+            wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
         );
-        Self { pipeline, layout }
+        Ok(Self {
+            pipeline,
+            env_atlas: tex.create_view(&Default::default()),
+            env_atlas_bytes: u64::from(width) * u64::from(height) * 16,
+        })
     }
 
-    /// `env_atlas`: the prefiltered environment levels (a 1x1 placeholder without).
-    pub fn outputs(&self, gpu: &Gpu, targets: &Targets, env_atlas: &wgpu::TextureView) -> Result<Outputs> {
+    /// GPU bytes of the environment atlas.
+    pub fn env_atlas_bytes(&self) -> u64 {
+        self.env_atlas_bytes
+    }
+
+    pub fn outputs(&self, gpu: &Gpu, targets: &Targets) -> Result<Outputs> {
+        let layout = super::own_layout(&self.pipeline, "shade")?;
         let pixels = u64::from(targets.width) * u64::from(targets.height);
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let hdr = gpu.buffer("shade hdr", pixels * 16, usage)?;
         let ldr = gpu.buffer("shade ldr", pixels * 4, usage)?;
         let views =
             [&targets.distance, &targets.normal, &targets.albedo].map(|t| t.create_view(&Default::default()));
+        let view = |v| wgpu::BindingResource::TextureView(v);
         let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("shade"),
-            layout: &self.layout,
+            layout,
             entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&views[0]) },
-                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&views[1]) },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&views[2]) },
+                wgpu::BindGroupEntry { binding: 0, resource: view(&views[0]) },
+                wgpu::BindGroupEntry { binding: 1, resource: view(&views[1]) },
+                wgpu::BindGroupEntry { binding: 2, resource: view(&views[2]) },
                 wgpu::BindGroupEntry { binding: 3, resource: hdr.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 4, resource: ldr.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(env_atlas) },
+                wgpu::BindGroupEntry { binding: 5, resource: view(&self.env_atlas) },
             ],
         });
         Ok(Outputs { hdr, ldr, bind_group })
     }
 
-    pub fn record(
-        &self,
-        pass: &mut wgpu::ComputePass<'_>,
-        scene: &wgpu::BindGroup,
-        out: &Outputs,
-        w: u32,
-        h: u32,
-    ) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, scene, &[]);
-        pass.set_bind_group(1, &out.bind_group, &[]);
+    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, out: &Outputs, w: u32, h: u32) {
+        self.pipeline.bind(pass);
+        pass.set_bind_group(super::OWN_GROUP, &out.bind_group, &[]);
         pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
     }
 }

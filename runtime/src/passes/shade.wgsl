@@ -1,15 +1,21 @@
 // Deferred shading of the surfel G-buffer: emission + direct (analytic point and spot lights with
 // shadow maps) + indirect (albedo * gathered leaf radiance, trilinear or tricubic over leaves),
 // then exposure, ACES tonemap and sRGB. Writes linear HDR (for EXR) and packed sRGB8 (for PNG).
+#import lights
+#import cone
+#import sh
+#import brdf
+#import color
+#import packing
 
-@group(1) @binding(0) var gb_distance: texture_2d<f32>;
-@group(1) @binding(1) var gb_normal: texture_2d<f32>;
-@group(1) @binding(2) var gb_albedo: texture_2d<f32>;
-@group(1) @binding(3) var<storage, read_write> out_hdr: array<vec4<f32>>;
-@group(1) @binding(4) var<storage, read_write> out_ldr: array<u32>;
+@group(2) @binding(0) var gb_distance: texture_2d<f32>;
+@group(2) @binding(1) var gb_normal: texture_2d<f32>;
+@group(2) @binding(2) var gb_albedo: texture_2d<f32>;
+@group(2) @binding(3) var<storage, read_write> out_hdr: array<vec4<f32>>;
+@group(2) @binding(4) var<storage, read_write> out_ldr: array<u32>;
 // The environment's GGX-prefiltered lat-long levels stacked top to bottom (Params::env_levels);
 // a 1x1 placeholder without a chain.
-@group(1) @binding(5) var env_atlas: texture_2d<f32>;
+@group(2) @binding(5) var env_atlas: texture_2d<f32>;
 
 // Level k of the env atlas along unit `d`, bilinear (lat-long as preprocess/src/env.rs: theta
 // from +z, phi = atan2(y, x), wrapping in phi).

@@ -1,11 +1,17 @@
-//! Shadow maps rendered from surfels (splat.wgsl, `fs_shadow`): one layer of distance-to-light per
-//! cube face of a point light or per spot light, with a depth buffer for the nearest disc. Inject
-//! and shade read the layers with a 3x3 percentage-closer filter (common.wgsl).
+//! Shadow maps rendered from surfels (splat.wgsl, `fs_shadow`): one square face of distance to the
+//! light per cube face of a point light or per spot light, in one 2D atlas (wgpu's GL backend
+//! neither renders nor copies into array layers), with a depth buffer for the nearest disc. Owns
+//! the atlas and the faces' splat uniforms; inject and shade read the atlas with a 3x3
+//! percentage-closer filter (shaders/lights.wgsl).
 
+use glam::{Mat4, Vec3};
+
+use super::splat;
+use crate::error::Result;
 use crate::gpu::Gpu;
-use crate::gpu_types::SurfelGpu;
+use crate::gpu_types::SplatUniform;
 
-/// Distance to the light as a packed f32 (splat.wgsl `pack_f32`): float targets do not render on GL.
+/// Distance to the light as a packed f32 (packing.wgsl `pack_f32`): float targets do not render on GL.
 pub const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
 /// Clear colour whose packed bytes read back as `f32` `v`.
@@ -14,116 +20,116 @@ pub fn packed_clear(v: f32) -> wgpu::Color {
     let c = |i: usize| f64::from(b[i]) / 255.0;
     wgpu::Color { r: c(0), g: c(1), b: c(2), a: c(3) }
 }
-pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
-/// The depth attachment both splat passes use: cleared to the far plane, not kept after the pass.
-pub fn depth_cleared(view: &wgpu::TextureView) -> wgpu::RenderPassDepthStencilAttachment<'_> {
-    wgpu::RenderPassDepthStencilAttachment {
-        view,
-        depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
-        stencil_ops: None,
-    }
-}
-
-/// The uniform layout and instance layout both splat passes use.
-pub fn splat_layout(gpu: &Gpu) -> wgpu::BindGroupLayout {
-    gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("splat"),
-        entries: &[super::uniform_entry(0, wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT, false)],
-    })
-}
-
-const SURFEL_ATTRIBUTES: [wgpu::VertexAttribute; 3] = wgpu::vertex_attr_array![
-    0 => Float32x4,
-    1 => Float32x4,
-    2 => Unorm8x4,
-];
-
-/// A render pipeline drawing every surfel as an oriented disc into `targets`.
-pub fn splat_pipeline(
-    gpu: &Gpu,
-    label: &str,
-    layout: &wgpu::BindGroupLayout,
-    fragment_entry: &str,
-    targets: &[Option<wgpu::ColorTargetState>],
-) -> wgpu::RenderPipeline {
-    let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("splat"),
-        source: wgpu::ShaderSource::Wgsl(crate::shaders::SPLAT.into()),
-    });
-    let pl = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &[Some(layout)],
-        immediate_size: 0,
-    });
-    gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
-        layout: Some(&pl),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs"),
-            compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: size_of::<SurfelGpu>() as u64,
-                step_mode: wgpu::VertexStepMode::Instance,
-                attributes: &SURFEL_ATTRIBUTES,
-            })],
-        },
-        primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some(fragment_entry),
-            compilation_options: Default::default(),
-            targets,
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+/// One face of the atlas: light-space view-projection, the light's position, and the projection
+/// scale (1 / tan(fov / 2)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Face {
+    pub view_proj: Mat4,
+    pub eye_m: Vec3,
+    pub proj_scale: f32,
 }
 
 #[derive(Debug)]
 pub struct Shadow {
     pipeline: wgpu::RenderPipeline,
+    faces: usize,
+    face_size: u32,
+    cols: u32,
+    atlas: wgpu::TextureView,
+    depth: wgpu::TextureView,
+    uniforms: splat::Uniforms,
+    atlas_bytes: u64,
 }
 
 impl Shadow {
-    pub fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout) -> Self {
+    /// The atlas for `faces` at `face_size` texels each, in a near-square grid; faces shrink if
+    /// the grid would pass the adapter's largest 2D texture. The faces' uniforms are written once
+    /// (lights are static).
+    pub fn new(
+        gpu: &Gpu,
+        layout: &wgpu::BindGroupLayout,
+        faces: &[Face],
+        face_size: u32,
+        min_splat_px: f32,
+        splat_scale: f32,
+    ) -> Result<Self> {
         let targets = [Some(wgpu::ColorTargetState {
             format: DISTANCE_FORMAT,
             blend: None,
             write_mask: wgpu::ColorWrites::ALL,
         })];
-        Self { pipeline: splat_pipeline(gpu, "shadow", layout, "fs_shadow", &targets) }
+        let pipeline = splat::pipeline(gpu, "shadow", layout, "fs_shadow", &targets)?;
+        let layers = faces.len().max(1) as u32;
+        let cols = (f64::from(layers).sqrt().ceil() as u32).max(1);
+        let rows = layers.div_ceil(cols);
+        let max_dim = gpu.device.limits().max_texture_dimension_2d;
+        let face_size =
+            if faces.is_empty() { 1 } else { face_size.min(max_dim / cols).min(max_dim / rows).max(1) };
+        let (width, height) = (face_size * cols, face_size * rows);
+        let atlas = gpu
+            .texture_2d(
+                "shadow atlas",
+                width,
+                height,
+                DISTANCE_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            )?
+            .create_view(&Default::default());
+        let depth = gpu
+            .texture_2d(
+                "shadow depth",
+                width,
+                height,
+                splat::DEPTH_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT,
+            )?
+            .create_view(&Default::default());
+        let uniforms = splat::Uniforms::new(gpu, "shadow splat", layout, faces.len())?;
+        for (i, f) in faces.iter().enumerate() {
+            let u = SplatUniform {
+                view_proj: f.view_proj.to_cols_array_2d(),
+                eye_m: f.eye_m.extend(1.0).to_array(),
+                viewport: [face_size as f32, face_size as f32, min_splat_px, f.proj_scale],
+                splat: [splat_scale, 0.0, 0.0, 0.0],
+                pad: [[0.0; 4]; 9],
+            };
+            uniforms.write(gpu, i, &u);
+        }
+        let atlas_bytes = u64::from(width) * u64::from(height) * 8;
+        Ok(Self { pipeline, faces: faces.len(), face_size, cols, atlas, depth, uniforms, atlas_bytes })
     }
 
-    /// Renders every face into its square of the atlas in one pass (one viewport per face);
-    /// `uniforms[i]` binds face i's splat uniform.
-    #[allow(clippy::too_many_arguments)]
+    /// The distance atlas, as inject and shade bind it.
+    pub fn atlas(&self) -> &wgpu::TextureView {
+        &self.atlas
+    }
+
+    pub fn face_size(&self) -> u32 {
+        self.face_size
+    }
+
+    pub fn cols(&self) -> u32 {
+        self.cols
+    }
+
+    /// GPU bytes of the atlas and its depth buffer (4 bytes a texel each).
+    pub fn bytes(&self) -> u64 {
+        self.atlas_bytes
+    }
+
+    /// Renders every face into its square of the atlas in one pass (one viewport per face).
     pub fn record(
         &self,
         enc: &mut wgpu::CommandEncoder,
-        atlas: &wgpu::Texture,
-        depth: &wgpu::TextureView,
-        face_size: u32,
-        cols: u32,
-        uniforms: &[wgpu::BindGroup],
         surfels: &wgpu::Buffer,
         surfel_count: u32,
         timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
     ) {
-        let view = atlas.create_view(&Default::default());
         let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("shadow"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &view,
+                view: &self.atlas,
                 depth_slice: None,
                 resolve_target: None,
                 ops: wgpu::Operations {
@@ -131,16 +137,16 @@ impl Shadow {
                     store: wgpu::StoreOp::Store,
                 },
             })],
-            depth_stencil_attachment: Some(depth_cleared(depth)),
+            depth_stencil_attachment: Some(splat::depth_cleared(&self.depth)),
             timestamp_writes: timestamps,
             occlusion_query_set: None,
             multiview_mask: None,
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_vertex_buffer(0, surfels.slice(..));
-        let s = face_size as f32;
-        for (i, group) in uniforms.iter().enumerate() {
-            let (x, y) = ((i as u32 % cols) as f32 * s, (i as u32 / cols) as f32 * s);
+        let s = self.face_size as f32;
+        for (i, group) in self.uniforms.groups.iter().take(self.faces).enumerate() {
+            let (x, y) = ((i as u32 % self.cols) as f32 * s, (i as u32 / self.cols) as f32 * s);
             pass.set_viewport(x, y, s, s, 0.0, 1.0);
             pass.set_bind_group(0, group, &[]);
             pass.draw(0..6, 0..surfel_count);

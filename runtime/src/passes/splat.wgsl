@@ -1,7 +1,10 @@
 // Surfel splatting, shared by the shadow and gbuffer passes: each surfel is an oriented disc (a
 // quad in its tangent plane, fragments outside the unit circle discarded), so depth is the disc's
 // true depth. A disc smaller than `viewport.z` pixels is grown to it so sparse samples leave no
-// holes. Keep `Splat` in sync with SplatUniform in runtime/src/gpu_types.rs.
+// holes. `Splat` mirrors SplatUniform in runtime/src/gpu_types.rs (runtime/tests/layout.rs).
+#import geometry
+#import packing
+#import color
 
 struct Splat {
     view_proj: mat4x4<f32>,
@@ -23,11 +26,6 @@ struct VsOut {
     @location(3) color: vec4<f32>,
 }
 
-fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
-    let lo = c / 12.92;
-    let hi = pow((c + vec3<f32>(0.055)) / 1.055, vec3<f32>(2.4));
-    return select(hi, lo, c <= vec3<f32>(0.04045));
-}
 
 @vertex
 fn vs(
@@ -42,11 +40,9 @@ fn vs(
     );
     let c = corners[vi];
     let n = normalize(normal_spread.xyz);
-    let s = select(-1.0, 1.0, n.z >= 0.0);
-    let a = -1.0 / (s + n.z);
-    let b = n.x * n.y * a;
-    let t1 = vec3<f32>(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
-    let t2 = vec3<f32>(b, s + n.y * n.y * a, -n.y);
+    let frame = basis(n);
+    let t1 = frame[0];
+    let t2 = frame[1];
     let center_clip = splat.view_proj * vec4<f32>(position_radius.xyz, 1.0);
     var r = position_radius.w * splat.splat.x;
     if center_clip.w > 0.0 {
@@ -66,21 +62,6 @@ fn vs(
     return out;
 }
 
-// f32 and unit vectors travel through Rgba8Unorm targets bit-exactly: float colour targets are not
-// renderable on every backend (GL), 8-bit unorm ones are. Unpacked in common.wgsl.
-fn pack_f32(v: f32) -> vec4<f32> {
-    return unpack4x8unorm(bitcast<u32>(v));
-}
-
-// Octahedral encoding of a unit vector in two 16-bit halves.
-fn pack_normal(n: vec3<f32>) -> vec4<f32> {
-    let l1 = abs(n.x) + abs(n.y) + abs(n.z);
-    var p = n.xy / l1;
-    if n.z < 0.0 {
-        p = (vec2<f32>(1.0) - abs(p.yx)) * select(vec2<f32>(-1.0), vec2<f32>(1.0), p >= vec2<f32>(0.0));
-    }
-    return unpack4x8unorm(pack2x16unorm(p * 0.5 + vec2<f32>(0.5)));
-}
 
 @fragment
 fn fs_shadow(in: VsOut) -> @location(0) vec4<f32> {

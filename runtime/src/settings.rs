@@ -1,0 +1,223 @@
+//! The runtime's quality knobs ([`Settings`]), their named presets ([`Quality`]) and their
+//! validation.
+
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::gpu_types::MAX_CONES;
+
+/// How indirect light is filtered at a pixel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum IndirectFilter {
+    Trilinear,
+    Tricubic,
+    Off,
+}
+
+/// The quality knobs of the runtime.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Settings {
+    /// Cones per leaf gather, 1..=16.
+    pub cones: u32,
+    /// Multiplies each cone's half-angle (1 = cones just tile the hemisphere's solid angle).
+    pub cone_aperture_scale: f32,
+    /// Step along a cone as a fraction of its current diameter.
+    pub step_scale: f32,
+    /// Longest cone, metres (`None`: the scene diagonal).
+    pub max_distance_m: Option<f32>,
+    pub max_steps: u32,
+    /// Bounce budget: propagation passes before the plan stops them.
+    pub bounces: u32,
+    /// Propagation stops once a bounce changes no leaf's radiance by more than this (relative).
+    pub convergence_tolerance: f32,
+    pub shadows: bool,
+    pub shadow_map_size: u32,
+    pub indirect: IndirectFilter,
+    /// Direct light at pixels (off: only indirect and emission, for tests).
+    pub direct: bool,
+    pub exposure: f32,
+    /// Radiance where a pixel or a cone sees nothing (the environment before SH lands), linear RGB.
+    pub background: [f32; 3],
+    /// Smallest splat radius in pixels (hole filling).
+    pub min_splat_px: f32,
+    /// Surfel radius multiplier for splatting. The stored radius (1.25 d_k / sqrt(k)) is about
+    /// 0.7 point spacings, which tiles a regular grid but leaves holes in scanner sampling
+    /// (`grotto render out/demo.grotto --camera chamber --size 640x480 --bounces 0 --no-shadows
+    /// --splat-scale S` prints the uncovered pixels: 105 at S = 1.5, 0 at 2.0).
+    pub splat_scale: f32,
+    /// Store the radiance pyramid (six directional values per node) as f16 instead of f32: half
+    /// the memory and bandwidth of the largest buffer; values above 65504 are clamped.
+    pub radiance_f16: bool,
+    /// Light the scene with its environment map's SH coefficients (when it has one).
+    pub environment: bool,
+    /// Reflection on specular materials (wet walls, water) where the scene assigns them.
+    pub specular: bool,
+    /// Shadow-map budget: this many of the brightest point and spot lights get shadow maps and
+    /// are shaded per pixel; the others follow `shadow_fallback` (lights.rs).
+    pub shadowed_lights: u32,
+    /// How lights beyond the shadow-map budget are shadowed.
+    pub shadow_fallback: ShadowFallback,
+    /// Irradiance, W/m^2, under which a light's contribution is dropped: it bounds each light's
+    /// range for culling (0: every light reaches everywhere).
+    pub light_cutoff_w_m2: f32,
+}
+
+/// What lights beyond the shadow-map budget do (lights.rs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ShadowFallback {
+    /// Lit at leaf resolution, visibility from a cone traced through the SVO toward the light.
+    Cone,
+    /// Lit at leaf resolution, unshadowed (light passes through walls).
+    None,
+}
+
+impl ShadowFallback {
+    pub fn name(self) -> &'static str {
+        match self {
+            ShadowFallback::Cone => "cone",
+            ShadowFallback::None => "none",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        [ShadowFallback::Cone, ShadowFallback::None].into_iter().find(|f| f.name() == s)
+    }
+
+    /// In words, for the effect plan.
+    pub fn describe(self) -> &'static str {
+        match self {
+            ShadowFallback::Cone => "SVO cone shadows",
+            ShadowFallback::None => "no shadows",
+        }
+    }
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            cones: 6,
+            cone_aperture_scale: 1.0,
+            step_scale: 0.5,
+            max_distance_m: None,
+            max_steps: 256,
+            bounces: 8,
+            convergence_tolerance: 1e-3,
+            shadows: true,
+            shadow_map_size: 512,
+            indirect: IndirectFilter::Trilinear,
+            direct: true,
+            exposure: 1.0,
+            background: [0.0; 3],
+            min_splat_px: 0.75,
+            splat_scale: 2.0,
+            radiance_f16: false,
+            environment: true,
+            specular: true,
+            shadowed_lights: 16,
+            shadow_fallback: ShadowFallback::Cone,
+            light_cutoff_w_m2: 2e-4,
+        }
+    }
+}
+
+/// Named trade-offs between error and time (`--quality`); their measured error and time on every
+/// accuracy scene are in docs/accuracy.md, where the sweep checks each costs more time and has
+/// less error than the one below it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Quality {
+    Fast,
+    Balanced,
+    High,
+}
+
+impl Quality {
+    pub const ALL: [Quality; 3] = [Quality::Fast, Quality::Balanced, Quality::High];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::Fast => "fast",
+            Quality::Balanced => "balanced",
+            Quality::High => "high",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|q| q.name() == s)
+    }
+}
+
+impl Settings {
+    /// The knobs of a quality preset (everything else at its default).
+    pub fn preset(q: Quality) -> Self {
+        let d = Settings::default();
+        match q {
+            Quality::Fast => Settings { cones: 4, step_scale: 1.0, bounces: 2, shadow_map_size: 256, ..d },
+            Quality::Balanced => Settings {
+                cones: 9,
+                cone_aperture_scale: 0.7,
+                step_scale: 0.5,
+                bounces: 4,
+                shadow_map_size: 512,
+                ..d
+            },
+            Quality::High => Settings {
+                cones: 16,
+                cone_aperture_scale: 0.7,
+                step_scale: 0.35,
+                bounces: 8,
+                shadow_map_size: 1024,
+                indirect: IndirectFilter::Tricubic,
+                ..d
+            },
+        }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        if !(1..=MAX_CONES as u32).contains(&self.cones) {
+            return Err(Error::Setting {
+                name: "cones",
+                problem: format!("{} is outside 1..=16", self.cones),
+            });
+        }
+        if !(self.step_scale > 0.05 && self.step_scale <= 4.0) {
+            return Err(Error::Setting {
+                name: "step_scale",
+                problem: format!("{} is outside 0.05..=4", self.step_scale),
+            });
+        }
+        if !(self.cone_aperture_scale > 0.05 && self.cone_aperture_scale <= 4.0) {
+            return Err(Error::Setting {
+                name: "cone_aperture_scale",
+                problem: "must be in 0.05..=4".into(),
+            });
+        }
+        if !(16..=8192).contains(&self.shadow_map_size) {
+            return Err(Error::Setting { name: "shadow_map_size", problem: "must be in 16..=8192".into() });
+        }
+        if !(self.light_cutoff_w_m2.is_finite() && self.light_cutoff_w_m2 >= 0.0) {
+            return Err(Error::Setting {
+                name: "light_cutoff_w_m2",
+                problem: "must be finite and not negative".into(),
+            });
+        }
+        if self.shadowed_lights > MAX_SHADOWED_LIGHTS {
+            return Err(Error::Setting {
+                name: "shadowed_lights",
+                problem: format!(
+                    "{} is over {MAX_SHADOWED_LIGHTS} (the atlas would pass 8192^2)",
+                    self.shadowed_lights
+                ),
+            });
+        }
+        if !(self.exposure.is_finite() && self.exposure > 0.0) {
+            return Err(Error::Setting { name: "exposure", problem: "must be finite and positive".into() });
+        }
+        Ok(())
+    }
+}
+
+/// Most lights with shadow maps: 6 faces each for point lights in one 2D atlas.
+pub const MAX_SHADOWED_LIGHTS: u32 = 256;

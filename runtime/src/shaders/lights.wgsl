@@ -1,0 +1,108 @@
+// Point and spot lights: the light list, the light grid of the lights in range, and the shadow
+// maps' atlas (runtime/src/lights.rs, passes/shadow.rs).
+#import scene
+#import packing
+
+struct Light {
+    position_kind: vec4<f32>,
+    intensity_layer: vec4<f32>,
+    direction_cos_outer: vec4<f32>,
+    // x: cos(inner angle); y: range in metres; z: LIGHT_MAP, LIGHT_CONE or LIGHT_NONE; w: the
+    // irradiance cutoff, W/m^2.
+    params: vec4<f32>,
+}
+
+@group(0) @binding(4) var<storage, read> lights: array<Light>;
+@group(0) @binding(5) var<storage, read> shadow_view_proj: array<mat4x4<f32>>;
+// Shadow atlas: distance from the light to the nearest surfel (packed f32), one square face per
+// cube face of a point light or per spot light, `shadow_cols` faces per row. A 2D atlas rather
+// than an array texture: wgpu's GL backend neither renders nor copies into array layers.
+@group(0) @binding(6) var shadow_dist: texture_2d<f32>;
+// Per-cell lists of the lights in range (runtime/src/lights.rs): cells + 1 offsets (absolute word
+// indices), then the light indices.
+@group(0) @binding(8) var<storage, read> light_grid: array<u32>;
+
+// Fraction of a light's shadow map that sees past `p` (3x3 percentage-closer filter).
+fn shadow_visibility(light: Light, p: vec3<f32>, dist: f32, bias_m: f32) -> f32 {
+    let first = light.intensity_layer.w;
+    if first < 0.0 || (params.flags & FLAG_SHADOWS) == 0u {
+        return 1.0;
+    }
+    let d = p - light.position_kind.xyz;
+    var face = 0u;
+    if light.position_kind.w < 0.5 {
+        let a = abs(d);
+        if a.x >= a.y && a.x >= a.z {
+            face = select(1u, 0u, d.x >= 0.0);
+        } else if a.y >= a.z {
+            face = select(3u, 2u, d.y >= 0.0);
+        } else {
+            face = select(5u, 4u, d.z >= 0.0);
+        }
+    }
+    let layer = u32(first) + face;
+    let clip = shadow_view_proj[layer] * vec4<f32>(p, 1.0);
+    if clip.w <= 0.0 {
+        return 1.0;
+    }
+    let ndc = clip.xy / clip.w;
+    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
+        return 1.0;
+    }
+    let size = i32(params.shadow_size);
+    let tile = vec2<i32>(i32(layer % params.shadow_cols), i32(layer / params.shadow_cols)) * size;
+    let texel = clamp(vec2<i32>(uv * f32(size)), vec2<i32>(0), vec2<i32>(size - 1));
+    var lit = 0.0;
+    for (var dy = -1; dy <= 1; dy++) {
+        for (var dx = -1; dx <= 1; dx++) {
+            let q = clamp(texel + vec2<i32>(dx, dy), vec2<i32>(0), vec2<i32>(size - 1));
+            let stored = unpack_f32(textureLoad(shadow_dist, tile + q, 0));
+            lit += select(0.0, 1.0, dist - bias_m <= stored);
+        }
+    }
+    return lit / 9.0;
+}
+
+// Index of the light-grid cell holding `p_m` (clamped into the grid); its lights are
+// light_grid[light_grid[c] .. light_grid[c + 1]].
+fn light_cell(p_m: vec3<f32>) -> u32 {
+    let dims = vec3<i32>(i32(params.light_grid_x), i32(params.light_grid_y), i32(params.light_grid_z));
+    let f = floor((p_m - params.light_grid_min_m.xyz) / params.light_grid_min_m.w);
+    let c = clamp(vec3<i32>(f), vec3<i32>(0), dims - vec3<i32>(1));
+    return u32(c.x + dims.x * (c.y + dims.y * c.z));
+}
+
+fn light_shadow_kind(light: Light) -> u32 {
+    return u32(light.params.z + 0.5);
+}
+
+// A light as seen from `p`: unit direction `l` to it, distance (at least 0.1 mm) and spot falloff
+// in 0..=1, which is 0 beyond the light's range (it bounds culling) or outside its spot.
+struct LightSeen {
+    l: vec3<f32>,
+    dist: f32,
+    falloff: f32,
+}
+
+fn light_seen(light: Light, p: vec3<f32>) -> LightSeen {
+    let to_light = light.position_kind.xyz - p;
+    let dist = max(length(to_light), 1e-4);
+    let l = to_light / dist;
+    if dist > light.params.y {
+        return LightSeen(l, dist, 0.0);
+    }
+    return LightSeen(l, dist, spot_factor(light, l));
+}
+
+
+// Spot falloff of a light toward unit direction `l` from the lit point (1 for point lights).
+fn spot_factor(light: Light, l: vec3<f32>) -> f32 {
+    if light.position_kind.w < 0.5 {
+        return 1.0;
+    }
+    let c = dot(-l, light.direction_cos_outer.xyz);
+    let outer = light.direction_cos_outer.w;
+    let inner = light.params.x;
+    return smoothstep(outer, max(inner, outer + 1e-4), c);
+}

@@ -1,0 +1,31 @@
+// A leaf's normal distribution (Toksvig): its mean normal vector, whose length says how much the
+// normals agree, and the frames and cosines built from it.
+#import scene
+#import geometry
+
+// Unit mean normal of a leaf, or +z where its normals cancel (no preferred side).
+fn leaf_normal(mean: vec3<f32>) -> vec3<f32> {
+    let r = length(mean);
+    if r < 1e-4 {
+        return vec3<f32>(0.0, 0.0, 1.0);
+    }
+    return mean / r;
+}
+
+// Cosine term averaged over a leaf's normal distribution: a share |mean| of the normals at the
+// mean direction and the rest spread over its hemisphere, whose mean clamped cosine is (1 + c) / 4.
+fn ndf_cos(mean: vec3<f32>, l: vec3<f32>) -> f32 {
+    let r = min(length(mean), 1.0);
+    let c = dot(leaf_normal(mean), l);
+    return r * max(c, 0.0) + (1.0 - r) * max(1.0 + c, 0.0) * 0.25;
+}
+
+// A leaf's cones start one leaf off its surface, so that a cone does not see its own leaf first.
+fn leaf_cone_origin(leaf: Leaf) -> vec3<f32> {
+    return leaf.center_m.xyz + leaf_normal(leaf.normal_mean.xyz) * params.leaf_size_m;
+}
+
+// World direction of a cone given in the leaf's tangent frame (z = mean normal).
+fn leaf_cone_dir(leaf: Leaf, local: vec3<f32>) -> vec3<f32> {
+    return normalize(basis(leaf_normal(leaf.normal_mean.xyz)) * local);
+}

@@ -1,0 +1,56 @@
+// Rock behind the scanned surfaces (runtime/src/rock.rs): where cones stop.
+#import scene
+
+// Rock behind the scanned surfaces (runtime/src/rock.rs, `RockTable`): a hash table of bricks of
+// 4x4x4 rock cells (cells of 2x2x2 leaves). Header: capacity - 1, longest probe, bricks, 0; then
+// ROCK_ENTRY_WORDS words an entry: brick x, y, z, 64 rock bits. Constants come from rock.rs
+// (shaders::constants).
+@group(0) @binding(7) var<storage, read> rock: array<u32>;
+
+// rock.rs `brick_hash`.
+fn rock_hash(b: vec3<i32>) -> u32 {
+    var h = (u32(b.x) * 0x8da6b343u) ^ (u32(b.y) * 0xd8163841u) ^ (u32(b.z) * 0xcb1ab31fu);
+    h ^= h >> 16u;
+    h *= 0x85ebca6bu;
+    h ^= h >> 13u;
+    h *= 0xc2b2ae35u;
+    return h ^ (h >> 16u);
+}
+
+// Whether the leaf cell holding `p_leaf` lies in rock (rock.rs, `in_rock`). The probe loop is
+// bounded by the longest probe sequence the table was built with.
+fn in_rock(p_leaf: vec3<f32>) -> bool {
+    let cell = vec3<i32>(floor(p_leaf)) >> vec3<u32>(ROCK_LEVEL);
+    let b = cell >> vec3<u32>(ROCK_BRICK_SHIFT);
+    let mask = rock[0];
+    let longest = rock[1];
+    var slot = rock_hash(b) & mask;
+    for (var i = 0u; i <= longest; i++) {
+        let e = ROCK_HEADER_WORDS + slot * ROCK_ENTRY_WORDS;
+        let k = vec3<i32>(bitcast<i32>(rock[e]), bitcast<i32>(rock[e + 1u]), bitcast<i32>(rock[e + 2u]));
+        if k.x == ROCK_EMPTY_KEY {
+            return false;
+        }
+        if all(k == b) {
+            let l = cell - (b << vec3<u32>(ROCK_BRICK_SHIFT));
+            let bit = u32(l.x + 4 * (l.y + 4 * l.z));
+            return ((rock[e + 3u + bit / 32u] >> (bit % 32u)) & 1u) == 1u;
+        }
+        slot = (slot + 1u) & mask;
+    }
+    return false;
+}
+
+// The first distance in (t0, t1] (metres along the cone axis) at which the axis lies in rock,
+// probed once per rock cell length (at most 64 probes), or -1.
+fn rock_on_segment(origin_m: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32) -> f32 {
+    let cell_m = params.leaf_size_m * f32(1u << ROCK_LEVEL);
+    let n = min(u32(ceil((t1 - t0) / cell_m)), 64u);
+    for (var k = 1u; k <= n; k++) {
+        let t = t0 + (t1 - t0) * f32(k) / f32(n);
+        if in_rock((origin_m + dir * t) / params.leaf_size_m) {
+            return t;
+        }
+    }
+    return -1.0;
+}

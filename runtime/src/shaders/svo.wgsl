@@ -1,0 +1,161 @@
+// The sparse voxel octree of every resident tile: finding a node, and anisotropic quadrilinear
+// sampling of the radiance pyramid (light_state.wgsl).
+#import scene
+#import light_state
+
+struct Tile {
+    origin_leaf: vec3<i32>,
+    depth: u32,
+    node_offset: u32,
+    leaf_offset: u32,
+    node_count: u32,
+    leaf_count: u32,
+    pad: vec4<u32>,
+}
+
+struct Node {
+    first_child: u32,
+    mask_level: u32,
+}
+
+@group(0) @binding(1) var<storage, read> tiles: array<Tile>;
+@group(0) @binding(2) var<storage, read> nodes: array<Node>;
+
+// The tile whose cube holds the leaf cell `v_leaf` (global leaf units), or EMPTY. A linear scan:
+// resident tile counts are small today; streaming will replace it with a tile grid.
+fn find_tile(v_leaf: vec3<i32>) -> u32 {
+    for (var t = 0u; t < params.tile_count; t++) {
+        let tile = tiles[t];
+        let rel = v_leaf - tile.origin_leaf;
+        let size = 1 << tile.depth;
+        if all(rel >= vec3<i32>(0)) && all(rel < vec3<i32>(size)) {
+            return t;
+        }
+    }
+    return EMPTY;
+}
+
+// The node covering voxel `v` of the global grid at `lod` (0 = leaves, voxel edge leaf * 2^lod),
+// or EMPTY where that space is empty or outside every tile.
+fn find_node(v: vec3<i32>, lod: u32) -> u32 {
+    let v_leaf = v << vec3<u32>(lod);
+    let t = find_tile(v_leaf);
+    if t == EMPTY {
+        return EMPTY;
+    }
+    let tile = tiles[t];
+    if lod > tile.depth {
+        return EMPTY;
+    }
+    let local = vec3<u32>(v_leaf - tile.origin_leaf) >> vec3<u32>(lod);
+    return descend(tile.node_offset, local, tile.depth - lod);
+}
+
+// Global leaf index of the leaf cell `v` (global leaf units), or EMPTY.
+fn find_leaf(v: vec3<i32>) -> u32 {
+    let n = find_node(v, 0u);
+    if n == EMPTY {
+        return EMPTY;
+    }
+    return nodes[n].first_child;
+}
+
+// The node's value seen by a ray travelling along unit `dir`: its three facing directional
+// values weighted by the squared direction components (the weights sum to 1).
+fn directional(n: u32, dir: vec3<f32>) -> vec4<f32> {
+    let w = dir * dir;
+    let base = n * 6u;
+    let fx = load_face(base + select(1u, 0u, dir.x >= 0.0));
+    let fy = load_face(base + select(3u, 2u, dir.y >= 0.0));
+    let fz = load_face(base + select(5u, 4u, dir.z >= 0.0));
+    return fx * w.x + fy * w.y + fz * w.z;
+}
+
+// Descends `levels` levels from node `n` along the low bits of `local` (bit levels-1 first).
+fn descend(start: u32, local: vec3<u32>, levels: u32) -> u32 {
+    var n = start;
+    for (var level = 0u; level < levels; level++) {
+        let b = levels - 1u - level;
+        let o = ((local.x >> b) & 1u) | (((local.y >> b) & 1u) << 1u) | (((local.z >> b) & 1u) << 2u);
+        let node = nodes[n];
+        let mask = node.mask_level & 0xffu;
+        if ((mask >> o) & 1u) == 0u {
+            return EMPTY;
+        }
+        n = node.first_child + countOneBits(mask & ((1u << o) - 1u));
+    }
+    return n;
+}
+
+// Trilinear sample of level `lod` at `p_leaf` (leaf units from the frame origin): voxel centres
+// sit at (i + 0.5) * 2^lod. Empty space contributes zero radiance and zero opacity.
+// The eight corners share their ancestors down to where their coordinates' bits differ, so when
+// they lie in one tile the walk from the root is done once for all of them (same nodes as eight
+// find_node calls, which cpu_ref.rs does).
+fn sample_level(p_leaf: vec3<f32>, lod: u32, dir: vec3<f32>) -> vec4<f32> {
+    let scale = f32(1u << lod);
+    let u = p_leaf / scale - vec3<f32>(0.5);
+    let base = floor(u);
+    let f = u - base;
+    let i0 = vec3<i32>(base);
+    let t = find_tile(i0 << vec3<u32>(lod));
+    let t1 = find_tile((i0 + vec3<i32>(1)) << vec3<u32>(lod));
+    var acc = vec4<f32>(0.0);
+    if t != EMPTY && t == t1 && lod <= tiles[t].depth {
+        let tile = tiles[t];
+        let levels = tile.depth - lod;
+        let lo = vec3<u32>((i0 << vec3<u32>(lod)) - tile.origin_leaf) >> vec3<u32>(lod);
+        let hi = lo + vec3<u32>(1u);
+        let diff = (lo ^ hi).x | (lo ^ hi).y | (lo ^ hi).z;
+        let low_bits = min(32u - countLeadingZeros(diff), levels);
+        let ancestor = descend(tile.node_offset, lo >> vec3<u32>(low_bits), levels - low_bits);
+        if ancestor == EMPTY {
+            return acc;
+        }
+        let mask = (1u << low_bits) - 1u;
+        for (var c = 0u; c < 8u; c++) {
+            let o = vec3<u32>(c & 1u, (c >> 1u) & 1u, (c >> 2u) & 1u);
+            let w3 = mix(vec3<f32>(1.0) - f, f, vec3<f32>(o));
+            let w = w3.x * w3.y * w3.z;
+            if w <= 0.0 {
+                continue;
+            }
+            let n = descend(ancestor, (lo + o) & vec3<u32>(mask), low_bits);
+            if n != EMPTY {
+                acc += w * directional(n, dir);
+            }
+        }
+        return acc;
+    }
+    for (var c = 0u; c < 8u; c++) {
+        let o = vec3<u32>(c & 1u, (c >> 1u) & 1u, (c >> 2u) & 1u);
+        let corner = vec3<f32>(o);
+        let w3 = mix(vec3<f32>(1.0) - f, f, corner);
+        let w = w3.x * w3.y * w3.z;
+        if w <= 0.0 {
+            continue;
+        }
+        let n = find_node(i0 + vec3<i32>(o), lod);
+        if n != EMPTY {
+            acc += w * directional(n, dir);
+        }
+    }
+    return acc;
+}
+
+// Quadrilinear sample: trilinear in the two levels around the fractional `lod`, blended.
+fn sample_lod(p_leaf: vec3<f32>, lod: f32, dir: vec3<f32>) -> vec4<f32> {
+    let l = clamp(lod, 0.0, f32(params.max_lod));
+    let l0 = u32(floor(l));
+    let t = l - f32(l0);
+    let a = sample_level(p_leaf, l0, dir);
+    if t <= 0.0 || l0 >= params.max_lod {
+        return a;
+    }
+    let b = sample_level(p_leaf, l0 + 1u, dir);
+    return mix(a, b, t);
+}
+
+fn outside_scene(p_leaf: vec3<f32>) -> bool {
+    return any(p_leaf < params.scene_min_leaf.xyz) || any(p_leaf > params.scene_max_leaf.xyz);
+}
