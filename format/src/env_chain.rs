@@ -1,5 +1,6 @@
 //! The prefiltered environment chain (`env-mip-levels` + `env-mip-bc6h`): the rules its level
-//! table must follow (docs/format.md, "EnvMipLevel") and a checked view of both sections.
+//! table must follow (docs/format.md, "EnvMipLevel") and the checked view of both sections that
+//! `Package::env_chain` (reader.rs) hands out.
 //!
 //! The rules bound what a reader allocates to decode the chain: at most
 //! [`MAX_ENV_MIP_LEVELS`] levels no larger than [`MAX_ENV_MIP_WIDTH`] x [`MAX_ENV_MIP_HEIGHT`],
@@ -10,11 +11,8 @@
 
 use std::borrow::Cow;
 
-use crate::error::{Problem, Result};
-use crate::reader::Package;
 use crate::spec::{
     Bc6hBlock, EnvMipLevel, MAX_ENV_ATLAS_RATIO, MAX_ENV_MIP_HEIGHT, MAX_ENV_MIP_LEVELS, MAX_ENV_MIP_WIDTH,
-    Scope, SectionKind,
 };
 
 /// A checked environment chain: levels that follow the rules and blocks that are exactly theirs.
@@ -98,68 +96,4 @@ pub(crate) fn check_levels(levels: &[EnvMipLevel]) -> Result<(), String> {
         ));
     }
     Ok(())
-}
-
-impl Package {
-    /// Environment `index`'s prefiltered chain, checked: the level table follows the rules above
-    /// and the blocks section holds exactly the blocks the levels cover. `Ok(None)` when the
-    /// package has neither section (or an empty table); an error when it has only one of them.
-    pub fn env_chain(&self, index: u32) -> Result<Option<EnvChain<'_>>> {
-        let levels_s = self.find(SectionKind::EnvMipLevels, Scope::Global, index);
-        let blocks_s = self.find(SectionKind::EnvMipBc6h, Scope::Global, index);
-        let (levels_s, blocks_s) = match (levels_s, blocks_s) {
-            (None, None) => return Ok(None),
-            (Some(l), Some(b)) => (l, b),
-            (Some(_), None) => {
-                return Err(self.invalid(Problem::Missing {
-                    kind: SectionKind::EnvMipBc6h.name().to_owned(),
-                    scope: format!(" for environment {index} (its env-mip-levels section has none)"),
-                }));
-            }
-            (None, Some(_)) => {
-                return Err(self.invalid(Problem::Missing {
-                    kind: SectionKind::EnvMipLevels.name().to_owned(),
-                    scope: format!(" for environment {index} (its env-mip-bc6h section has none)"),
-                }));
-            }
-        };
-        let levels = self.read::<EnvMipLevel>(&levels_s)?;
-        if levels.is_empty() {
-            return Ok(None);
-        }
-        let blocks = self.read::<Bc6hBlock>(&blocks_s)?;
-        let claimed: u64 = levels.iter().map(|l| u64::from(l.block_count)).sum();
-        if claimed != blocks.len() as u64 {
-            return Err(self.invalid(Problem::BadContent {
-                section: blocks_s.index,
-                kind: SectionKind::EnvMipBc6h.name().to_owned(),
-                reason: format!(
-                    "holds {} blocks, environment {index}'s levels cover {claimed}",
-                    blocks.len()
-                ),
-            }));
-        }
-        Ok(Some(EnvChain { levels, blocks }))
-    }
-
-    /// Problems of every environment chain as a whole (each section alone is checked by `read`).
-    pub(crate) fn env_chain_problems(&self) -> Vec<Problem> {
-        let items: Vec<u32> = self
-            .sections()
-            .filter(|s| {
-                matches!(s.kind, Some(SectionKind::EnvMipLevels | SectionKind::EnvMipBc6h))
-                    && s.scope == Scope::Global
-            })
-            .map(|s| s.item)
-            .collect::<std::collections::BTreeSet<u32>>()
-            .into_iter()
-            .collect();
-        items
-            .into_iter()
-            .filter_map(|item| match self.env_chain(item) {
-                Err(e) => e.problem().cloned(),
-                Ok(_) => None,
-            })
-            .collect()
-    }
 }

@@ -7,13 +7,13 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use glam::Vec3;
+use grotto_fixtures::testscenes;
 use grotto_preprocess::build::ColorCodec;
 use grotto_runtime::camera::Camera;
 use grotto_runtime::gpu::Gpu;
 use grotto_runtime::plan::Pass;
 use grotto_runtime::renderer::{IndirectFilter, Quality, Renderer, Settings};
 use grotto_runtime::scene_data::SceneData;
-use grotto_runtime::testscenes;
 use serde::Serialize;
 
 use crate::{Estimate, PathSettings, SurfelScene};
@@ -187,14 +187,14 @@ pub fn demo_cave(
     sh_window: bool,
 ) -> Result<SceneData, String> {
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
-    let cave = grotto_preprocess::synth::SmallCave {
+    let cave = grotto_fixtures::SmallCave {
         colors,
         leaf_m,
         sky: sky.map(std::path::Path::to_path_buf),
         sh_window,
         ..Default::default()
     };
-    let out = grotto_preprocess::synth::small_cave_package(dir.path(), &cave).map_err(|e| e.to_string())?;
+    let out = grotto_fixtures::small_cave_package(dir.path(), &cave).map_err(|e| e.to_string())?;
     let pkg = grotto_format::Package::open(&out).map_err(|e| e.to_string())?;
     let mut scene = SceneData::from_package(&pkg).map_err(|e| e.to_string())?;
     // The entrance camera first: it looks down a passage the lamps light mostly indirectly.

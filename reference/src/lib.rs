@@ -364,7 +364,7 @@ impl SurfelScene {
             if p.cmplt(lo).any() || p.cmpgt(hi).any() {
                 return false;
             }
-            if grotto_runtime::rock::in_rock(rock, p.floor().as_ivec3()) {
+            if grotto_runtime::rock::in_rock(&rock.rock, p.floor().as_ivec3()) {
                 return true;
             }
         }

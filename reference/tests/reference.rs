@@ -2,10 +2,10 @@
 //! two seeds agreeing within their stated noise.
 
 use glam::Vec3;
+use grotto_fixtures::testscenes;
 use grotto_reference::{Disc, PathSettings, SurfelScene};
 use grotto_runtime::camera::Camera;
 use grotto_runtime::scene_data::SceneLight;
-use grotto_runtime::testscenes;
 use rayon::prelude::*;
 
 /// A closed sphere of `n` discs (Fibonacci lattice, normals inward), each twice the radius that

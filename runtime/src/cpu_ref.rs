@@ -183,7 +183,7 @@ impl<'a> CpuScene<'a> {
             for k in 1..=n {
                 let tk = t_prev + (t - t_prev) * f64::from(k) / f64::from(n);
                 let qk = (origin_m + dir * tk) / leaf;
-                if crate::rock::in_rock(self.scene, qk.floor().as_ivec3()) {
+                if crate::rock::in_rock(&self.scene.rock, qk.floor().as_ivec3()) {
                     let d = leaf.max(2.0 * tk * tan_half);
                     let lod = ((d / leaf).log2() + 1.0).max(f64::from(crate::rock::ROCK_LEVEL + 1));
                     return enter_rock(acc, self.sample_lod(qk, lod, p.max_lod, dir));

@@ -24,6 +24,5 @@ pub mod rock;
 pub mod scene_data;
 pub mod settings;
 pub mod shaders;
-pub mod testscenes;
 
 pub use error::{Error, Result};

@@ -80,6 +80,7 @@ pub struct Renderer {
     gpu: Gpu,
     settings: Settings,
     leaf_count: u32,
+    #[cfg(feature = "test-hooks")]
     node_count: u32,
     surfel_count: u32,
     leaf_size_m: f32,
@@ -106,7 +107,10 @@ pub struct Renderer {
     params: wgpu::Buffer,
     /// Bytes of every buffer and texture created at upload (the G-buffer is added per view).
     static_bytes: u64,
+    /// The light state, for the test hooks (the bind groups keep it alive otherwise).
+    #[cfg(feature = "test-hooks")]
     leaf_light: wgpu::Buffer,
+    #[cfg(feature = "test-hooks")]
     faces: wgpu::Buffer,
     stats: wgpu::Buffer,
     surfels: wgpu::Buffer,
@@ -319,6 +323,7 @@ impl Renderer {
             gpu: gpu.clone(),
             settings,
             leaf_count: scene.leaves.len() as u32,
+            #[cfg(feature = "test-hooks")]
             node_count: scene.nodes.len() as u32,
             surfel_count: scene.surfels.len() as u32,
             leaf_size_m: leaf,
@@ -338,7 +343,9 @@ impl Renderer {
             env_valid: false,
             params,
             static_bytes,
+            #[cfg(feature = "test-hooks")]
             leaf_light,
+            #[cfg(feature = "test-hooks")]
             faces,
             stats,
             surfels,
@@ -682,6 +689,7 @@ impl Renderer {
     }
 
     /// Each leaf's light state (direct, gather, out), for tests and the reference comparison.
+    #[cfg(feature = "test-hooks")]
     pub fn read_leaf_light(&self) -> Result<Vec<LeafLightGpu>> {
         let size = size_of::<LeafLightGpu>();
         let bytes = self.gpu.read_buffer(&self.leaf_light, u64::from(self.leaf_count) * size as u64)?;
@@ -689,6 +697,7 @@ impl Renderer {
     }
 
     /// Overwrites each leaf's light state (tests: a known radiance field before a mip or gather).
+    #[cfg(feature = "test-hooks")]
     pub fn write_leaf_light(&mut self, state: &[LeafLightGpu]) -> Result<()> {
         if state.len() != self.leaf_count as usize {
             return Err(Error::Setting {
@@ -702,6 +711,7 @@ impl Renderer {
     }
 
     /// The six anisotropic values of every node (after a mip pass).
+    #[cfg(feature = "test-hooks")]
     pub fn read_faces(&self) -> Result<Vec<[f32; 4]>> {
         let n = self.node_count as usize * 6;
         if self.settings.radiance_f16 {
@@ -714,6 +724,7 @@ impl Renderer {
     }
 
     /// Runs only the mip pass (tests).
+    #[cfg(feature = "test-hooks")]
     pub fn run_mip(&mut self) -> Result<()> {
         let p =
             EffectPlan { steps: vec![plan::Step { pass: Pass::Mip, run: true, reason: "requested".into() }] };
@@ -721,6 +732,7 @@ impl Renderer {
     }
 
     /// Runs only mip + propagate, i.e. one bounce regardless of the plan (tests).
+    #[cfg(feature = "test-hooks")]
     pub fn run_bounce(&mut self) -> Result<()> {
         let p = EffectPlan {
             steps: vec![

@@ -31,7 +31,7 @@ use foldhash::{HashMap, HashSet};
 
 use glam::{IVec3, Vec3};
 
-use crate::scene_data::SceneData;
+use crate::gpu_types::{LeafGpu, TileGpu};
 
 /// Rock cells are 2^ROCK_LEVEL leaves on a side.
 pub const ROCK_LEVEL: u32 = 1;
@@ -77,14 +77,13 @@ fn is_edge(cell: IVec3, normal: Vec3, seeds: &HashMap<IVec3, Seed>) -> bool {
     })
 }
 
-/// Classifies rock and stores the rock cells of `scene` as a [`RockTable`] in `scene.rock`.
-pub fn classify(scene: &mut SceneData) {
-    let leaf_m = scene.leaf_size_m;
+/// Classifies rock around `leaves` (frame metres, leaves of `leaf_m`) into a [`RockTable`].
+pub fn classify(leaf_m: f32, leaves: &[LeafGpu]) -> RockTable {
     // Seeds: the mean position and Toksvig mean normal of the oriented leaves in each cell. Cells
     // whose leaves have no clear orientation (solid interiors, clutter) are flooded like empty
     // ones: solid matter behind a wall is rock as much as empty space is.
     let mut sums: HashMap<IVec3, (Vec3, Vec3, f32)> = HashMap::default();
-    for l in &scene.leaves {
+    for l in leaves {
         let c_leaf = Vec3::from_slice(&l.center_m[..3]) / leaf_m;
         let cell = c_leaf.floor().as_ivec3() >> ROCK_LEVEL as i32;
         let mean = Vec3::from_slice(&l.normal_mean[..3]);
@@ -172,7 +171,7 @@ pub fn classify(scene: &mut SceneData) {
         }
         frontier = next_frontier;
     }
-    scene.rock = RockTable::build(&rock);
+    RockTable::build(&rock)
 }
 
 /// Rock cells per brick side, as a shift: a brick is 4x4x4 cells, its 64 bits two words.
@@ -280,9 +279,8 @@ impl RockTable {
 /// Bytes the rock took as the dense per-tile bit grids it replaced (one bit per cell over each
 /// tile and a margin of `ROCK_REACH_CELLS` cells): kept to report the saving (`grotto inspect
 /// --gpu-memory`), not used to render.
-pub fn dense_grid_bytes(scene: &SceneData) -> u64 {
-    scene
-        .tiles
+pub fn dense_grid_bytes(tiles: &[TileGpu]) -> u64 {
+    tiles
         .iter()
         .filter(|t| t.depth >= ROCK_LEVEL)
         .map(|t| {
@@ -292,9 +290,10 @@ pub fn dense_grid_bytes(scene: &SceneData) -> u64 {
         .sum()
 }
 
-/// Whether leaf cell `v_leaf` (global leaf units) lies in a rock cell; as `in_rock` in shaders/rock.wgsl.
-pub fn in_rock(scene: &SceneData, v_leaf: IVec3) -> bool {
-    scene.rock.contains(v_leaf >> ROCK_LEVEL as i32)
+/// Whether leaf cell `v_leaf` (global leaf units) lies in a rock cell of `rock`; as `in_rock` in
+/// shaders/rock.wgsl.
+pub fn in_rock(rock: &RockTable, v_leaf: IVec3) -> bool {
+    rock.contains(v_leaf >> ROCK_LEVEL as i32)
 }
 
 #[cfg(test)]

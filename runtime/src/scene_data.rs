@@ -237,7 +237,7 @@ impl SceneData {
             let c = (p / leaf).floor().as_ivec3();
             let near_leaf = (-1..=1)
                 .any(|z| (-1..=1).any(|y| (-1..=1).any(|x| occupied.contains(&(c + IVec3::new(x, y, z))))));
-            !near_leaf && !crate::rock::in_rock(self, c)
+            !near_leaf && !crate::rock::in_rock(&self.rock, c)
         };
         let steps = (lift_m / leaf).ceil().max(1.0) as i32;
         let candidates: Vec<Vec3> = self
@@ -328,7 +328,7 @@ impl SceneData {
             mip_order: len(nodes, 4),
             surfels: len(self.surfels.len(), size_of::<SurfelGpu>()),
             rock: len(self.rock.words.len(), 4),
-            rock_dense_grid: crate::rock::dense_grid_bytes(self),
+            rock_dense_grid: crate::rock::dense_grid_bytes(&self.tiles),
         }
     }
 
@@ -530,7 +530,7 @@ impl SceneData {
                 fov_y_deg: c.fov_y_deg as f32,
             });
         }
-        crate::rock::classify(&mut out);
+        out.rock = crate::rock::classify(out.leaf_size_m, &out.leaves);
         Ok(out)
     }
 
@@ -572,7 +572,7 @@ impl SceneData {
                 pad: [0; 4],
             });
         }
-        crate::rock::classify(&mut out);
+        out.rock = crate::rock::classify(out.leaf_size_m, &out.leaves);
         out
     }
 }

@@ -97,8 +97,8 @@ fn with_environment(src: &Path, out: &Path, chain: &[EnvMipLevel], blocks: &[Bc6
 }
 
 fn small_cave(dir: &Path, points: u64, segments: usize) -> std::path::PathBuf {
-    let cave = grotto_preprocess::synth::SmallCave { points, segments, ..Default::default() };
-    grotto_preprocess::synth::small_cave_package(dir, &cave).unwrap()
+    let cave = grotto_fixtures::SmallCave { points, segments, ..Default::default() };
+    grotto_fixtures::small_cave_package(dir, &cave).unwrap()
 }
 
 #[test]

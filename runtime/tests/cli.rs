@@ -110,9 +110,9 @@ fn export_writes_points_other_tools_read() {
 #[test]
 fn negative_vectors_parse_as_written_and_gpu_memory_is_reported() {
     let dir = tempfile::tempdir().unwrap();
-    let path = grotto_preprocess::synth::small_cave_package(
+    let path = grotto_fixtures::small_cave_package(
         dir.path(),
-        &grotto_preprocess::synth::SmallCave { points: 5_000, segments: 2, ..Default::default() },
+        &grotto_fixtures::SmallCave { points: 5_000, segments: 2, ..Default::default() },
     )
     .unwrap();
     let p = path.to_str().unwrap();

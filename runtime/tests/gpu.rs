@@ -4,11 +4,11 @@
 use std::sync::OnceLock;
 
 use glam::Vec3;
+use grotto_fixtures::testscenes;
 use grotto_runtime::cpu_ref::CpuScene;
 use grotto_runtime::gpu::{Gpu, GpuOptions};
 use grotto_runtime::gpu_types::LeafLightGpu;
 use grotto_runtime::renderer::{Renderer, Settings};
-use grotto_runtime::testscenes;
 
 fn gpu() -> &'static Gpu {
     static GPU: OnceLock<Gpu> = OnceLock::new();

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use glam::Vec3;
 use grotto_format::Package;
 use grotto_preprocess::build::ColorCodec;
-use grotto_preprocess::synth;
 use grotto_runtime::Error;
 use grotto_runtime::cpu_ref::CpuScene;
 use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
@@ -15,9 +14,9 @@ use grotto_runtime::scene_data::SceneData;
 
 /// A small synthetic cave at UTM-sized coordinates, several tiles.
 fn fixture(dir: &std::path::Path) -> PathBuf {
-    synth::small_cave_package(
+    grotto_fixtures::small_cave_package(
         dir,
-        &synth::SmallCave {
+        &grotto_fixtures::SmallCave {
             points: 20_000,
             segments: 4,
             colors: ColorCodec::Raw,

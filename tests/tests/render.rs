@@ -4,7 +4,6 @@
 
 use std::path::Path;
 
-use grotto_preprocess::synth;
 use grotto_runtime::gpu::GpuOptions;
 use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
 use grotto_runtime::renderer::Settings;
@@ -28,7 +27,7 @@ fn view(package: &Path, camera: &str, out: std::path::PathBuf) -> RenderOptions 
 }
 
 fn build_small_cave(dir: &Path) -> std::path::PathBuf {
-    synth::small_cave_package(dir, &synth::SmallCave::default()).unwrap()
+    grotto_fixtures::small_cave_package(dir, &grotto_fixtures::SmallCave::default()).unwrap()
 }
 
 #[test]
@@ -122,12 +121,12 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
     use grotto_runtime::renderer::{Renderer, ShadowFallback};
     let Some(data) = grotto_tests::shared_data_dir() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let cave = synth::SmallCave {
+    let cave = grotto_fixtures::SmallCave {
         sky: Some(data.join("envmaps/probulator_ennis.hdr")),
         wet: true,
-        ..synth::SmallCave::default()
+        ..grotto_fixtures::SmallCave::default()
     };
-    let package = synth::small_cave_package(dir.path(), &cave).unwrap();
+    let package = grotto_fixtures::small_cave_package(dir.path(), &cave).unwrap();
     let pkg = grotto_format::Package::open(&package).unwrap();
     let scene = grotto_runtime::scene_data::SceneData::from_package(&pkg).unwrap();
     assert_eq!(scene.materials.len(), 2, "wet walls and a pool");
