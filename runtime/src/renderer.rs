@@ -211,6 +211,71 @@ fn base_params(
     }
 }
 
+/// The buffers every pass shares, uploaded once: the static scene (bind group 0), the light state
+/// (group 1), and the surfels the splat passes draw.
+struct Upload {
+    params: wgpu::Buffer,
+    #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
+    leaf_light: wgpu::Buffer,
+    #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
+    faces: wgpu::Buffer,
+    stats: wgpu::Buffer,
+    surfels: wgpu::Buffer,
+    shared: passes::Shared,
+    /// GPU bytes of all of them and of the shadow atlas.
+    bytes: u64,
+}
+
+impl Upload {
+    fn new(
+        gpu: &Gpu,
+        scene: &SceneData,
+        lights: &LightSetup,
+        shadow: &shadow::Shadow,
+        base_params: &Params,
+        f16: bool,
+    ) -> Result<Self> {
+        let params = gpu.buffer_init(
+            "params",
+            bytemuck::bytes_of(base_params),
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        )?;
+        // Initial light state: out = emission (no direct, no gather yet).
+        let initial: Vec<LeafLightGpu> =
+            scene.leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect();
+        let leaf_light = gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial), STORAGE)?;
+        let faces = gpu.buffer("faces", scene.buffer_bytes(f16).faces, STORAGE)?;
+        let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE)?;
+        let surfels =
+            gpu.buffer_init("surfels", bytemuck::cast_slice(&scene.surfels), wgpu::BufferUsages::VERTEX)?;
+        let shadow_mats: Vec<[[f32; 4]; 4]> =
+            lights.faces.iter().map(|f| f.view_proj.to_cols_array_2d()).collect();
+        let static_buffers = [
+            (0, params.clone()),
+            (1, gpu.buffer_init("tiles", bytemuck::cast_slice(&scene.tiles), STORAGE)?),
+            (2, gpu.buffer_init("nodes", bytemuck::cast_slice(&scene.nodes), STORAGE)?),
+            (3, gpu.buffer_init("leaves", bytemuck::cast_slice(&scene.leaves), STORAGE)?),
+            (4, gpu.buffer_init("lights", bytemuck::cast_slice(&lights.lights), STORAGE)?),
+            (5, gpu.buffer_init("shadow matrices", bytemuck::cast_slice(&shadow_mats), STORAGE)?),
+            (7, gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock.words), STORAGE)?),
+            (8, gpu.buffer_init("light grid", bytemuck::cast_slice(&lights.grid.words), STORAGE)?),
+        ];
+        let mut shared = passes::Shared::default();
+        let mut bytes = surfels.size() + shadow.bytes();
+        for (binding, b) in static_buffers {
+            bytes += b.size();
+            shared.insert(0, binding, passes::Resource::Buffer(b));
+        }
+        shared.insert(0, 6, passes::Resource::Texture(shadow.atlas().clone()));
+        for (binding, b) in [(0, &leaf_light), (1, &faces), (2, &stats)] {
+            bytes += b.size();
+            shared.insert(1, binding, passes::Resource::Buffer(b.clone()));
+        }
+
+        Ok(Upload { params, leaf_light, faces, stats, surfels, shared, bytes })
+    }
+}
+
 /// Timestamp queries for every pass, where the adapter has them.
 fn pass_queries(gpu: &Gpu) -> Option<(wgpu::QuerySet, wgpu::Buffer)> {
     gpu.timestamps.then(|| {
@@ -264,53 +329,19 @@ impl Renderer {
         let base_params =
             base_params(scene, &settings, &lights, &shadow, (lo, hi), scene_diag_m, chain, materials);
 
-        // The shared bind groups: the static scene (group 0) and the light state (group 1).
-        let params = gpu.buffer_init(
-            "params",
-            bytemuck::bytes_of(&base_params),
-            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        )?;
-        // Initial light state: out = emission (no direct, no gather yet).
-        let initial: Vec<LeafLightGpu> =
-            scene.leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect();
-        let leaf_light = gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial), STORAGE)?;
-        let faces = gpu.buffer("faces", scene.buffer_bytes(f16).faces, STORAGE)?;
-        let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE)?;
-        let surfels =
-            gpu.buffer_init("surfels", bytemuck::cast_slice(&scene.surfels), wgpu::BufferUsages::VERTEX)?;
-        let shadow_mats: Vec<[[f32; 4]; 4]> =
-            lights.faces.iter().map(|f| f.view_proj.to_cols_array_2d()).collect();
-        let static_buffers = [
-            (0, params.clone()),
-            (1, gpu.buffer_init("tiles", bytemuck::cast_slice(&scene.tiles), STORAGE)?),
-            (2, gpu.buffer_init("nodes", bytemuck::cast_slice(&scene.nodes), STORAGE)?),
-            (3, gpu.buffer_init("leaves", bytemuck::cast_slice(&scene.leaves), STORAGE)?),
-            (4, gpu.buffer_init("lights", bytemuck::cast_slice(&lights.lights), STORAGE)?),
-            (5, gpu.buffer_init("shadow matrices", bytemuck::cast_slice(&shadow_mats), STORAGE)?),
-            (7, gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock.words), STORAGE)?),
-            (8, gpu.buffer_init("light grid", bytemuck::cast_slice(&lights.grid.words), STORAGE)?),
-        ];
-        let mut shared = passes::Shared::default();
-        let mut static_bytes = surfels.size() + shadow.bytes();
-        for (binding, b) in static_buffers {
-            static_bytes += b.size();
-            shared.insert(0, binding, passes::Resource::Buffer(b));
-        }
-        shared.insert(0, 6, passes::Resource::Texture(shadow.atlas().clone()));
-        for (binding, b) in [(0, &leaf_light), (1, &faces), (2, &stats)] {
-            static_bytes += b.size();
-            shared.insert(1, binding, passes::Resource::Buffer(b.clone()));
-        }
+        let up = Upload::new(gpu, scene, &lights, &shadow, &base_params, f16)?;
+        let shared = &up.shared;
+        let mut static_bytes = up.bytes;
 
         let (by_height, ranges) = scene.nodes_by_height();
         let lights_in_range = lights.grid.occupancy();
         let inject =
-            gpu.scoped("inject", || passes::inject::Inject::new(gpu, &shared, f16, lights_in_range.1))?;
-        let env = gpu.scoped("env", || passes::env::new(gpu, &shared, f16))?;
-        let mip = gpu.scoped("mip", || passes::mip::Mip::new(gpu, &shared, &by_height, &ranges, f16))?;
-        let propagate = gpu.scoped("propagate", || passes::propagate::new(gpu, &shared, f16))?;
+            gpu.scoped("inject", || passes::inject::Inject::new(gpu, shared, f16, lights_in_range.1))?;
+        let env = gpu.scoped("env", || passes::env::new(gpu, shared, f16))?;
+        let mip = gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, &by_height, &ranges, f16))?;
+        let propagate = gpu.scoped("propagate", || passes::propagate::new(gpu, shared, f16))?;
         let gbuffer = gpu.scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout))?;
-        let shade = gpu.scoped("shade", || shade::Shade::new(gpu, &shared, f16, chain))?;
+        let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
         static_bytes += shade.env_atlas_bytes();
         let r = Self {
             inject,
@@ -341,14 +372,14 @@ impl Renderer {
             emissive: scene.has_emission(),
             environment: environment_on,
             env_valid: false,
-            params,
+            params: up.params,
             static_bytes,
             #[cfg(feature = "test-hooks")]
-            leaf_light,
+            leaf_light: up.leaf_light,
             #[cfg(feature = "test-hooks")]
-            faces,
-            stats,
-            surfels,
+            faces: up.faces,
+            stats: up.stats,
+            surfels: up.surfels,
             view: None,
             direct_valid: false,
             forced: Vec::new(),

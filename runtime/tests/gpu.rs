@@ -752,3 +752,24 @@ fn many_cone_shadowed_lamps_add_up_like_the_same_lamps_one_at_a_time() {
     assert!(one_by_one.iter().any(|&v| v > 0.0));
     assert!(worst < 1e-4, "lamps together differ from their sum: {worst}");
 }
+
+#[test]
+fn a_validation_error_names_the_pass_whose_scope_caught_it() {
+    let g = gpu();
+    // MAP_READ goes only with COPY_DST: wgpu reports this buffer as a validation error, which the
+    // scope turns into an error naming the pass.
+    let err = g
+        .scoped("probe", || {
+            Ok(g.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("invalid"),
+                size: 16,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            }))
+        })
+        .unwrap_err();
+    assert!(matches!(err, grotto_runtime::Error::Gpu { pass: "probe", .. }), "{err}");
+    // Nothing leaks to the device-wide check, and a clean scope passes.
+    g.check("after").unwrap();
+    assert!(g.scoped("clean", || Ok(())).is_ok());
+}
