@@ -520,8 +520,9 @@ pub fn report(
          frame at {width}x{height}). Error over the pixels the runtime covers: relative RMSE of linear radiance \
          (the reference's own noise on the same scale is listed so it can be seen to be far below the errors \
          it judges), bias = sum(runtime) / sum(reference) - 1, and mean FLIP (NVIDIA's perceptual metric, \
-         `nv-flip`, 67 pixels per degree) of both images tonemapped at the reference's auto-exposure. Time: GPU \
-         milliseconds (timestamp queries) to converge the light (shadow maps, injection, every bounce until \
+         `nv-flip`, 67 pixels per degree) of both images tonemapped at the reference's auto-exposure. Time: \
+         milliseconds of the passes (timestamp queries on a hardware adapter, CPU wall time per pass on a \
+         software one: docs/runtime.md, \"Per-pass GPU times\") to converge the light (shadow maps, injection, every bounce until \
          converged or the budget is spent) and to draw one frame. Memory: GPU buffers and textures the \
          renderer holds. Knobs vary one at a time around the balanced preset; package knobs (SVO depth, \
          colour codec) rebuild the scene's package and run the balanced preset on it, against the same \
