@@ -237,6 +237,17 @@ pub struct InjectBatch {
     pub pad: u32,
 }
 
+/// One propagate dispatch: cones `first .. first + count` of the cone set (passes/propagate.rs).
+/// Mirrored in passes/propagate.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq, Eq)]
+pub struct ConeBatch {
+    pub first: u32,
+    pub count: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+}
+
 /// Uniform of one splat render pass (one shadow layer or the camera). 256 bytes so that one buffer
 /// holds all of them at static offsets. Mirrored by `Splat` in passes/splat.wgsl.
 #[repr(C)]
@@ -272,6 +283,7 @@ const _: () = {
     assert!(size_of::<Params>() == 80 + 16 + 48 + 64 + 16 * MAX_CONES + 16 * 9 + 16 * 8 * 2 + 16);
     assert!(size_of::<MipRange>() == 16);
     assert!(size_of::<InjectBatch>() == 16);
+    assert!(size_of::<ConeBatch>() == 16);
     assert!(size_of::<SplatUniform>() == 256);
     assert!(size_of::<SurfelGpu>() == 36);
 };

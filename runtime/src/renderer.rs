@@ -117,7 +117,7 @@ pub struct Renderer {
     inject: passes::inject::Inject,
     env: passes::LeafPass,
     mip: passes::mip::Mip,
-    propagate: passes::LeafPass,
+    propagate: passes::propagate::Propagate,
     shadow: shadow::Shadow,
     gbuffer: gbuffer::Gbuffer,
     shade: shade::Shade,
@@ -339,7 +339,8 @@ impl Renderer {
             gpu.scoped("inject", || passes::inject::Inject::new(gpu, shared, f16, lights_in_range.1))?;
         let env = gpu.scoped("env", || passes::env::new(gpu, shared, f16))?;
         let mip = gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, &by_height, &ranges, f16))?;
-        let propagate = gpu.scoped("propagate", || passes::propagate::new(gpu, shared, f16))?;
+        let propagate =
+            gpu.scoped("propagate", || passes::propagate::Propagate::new(gpu, shared, f16, settings.cones))?;
         let gbuffer = gpu.scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout))?;
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
         static_bytes += shade.env_atlas_bytes();

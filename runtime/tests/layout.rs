@@ -126,6 +126,7 @@ fn shared() -> Vec<(&'static str, RustLayout)> {
         ),
         ("MipRange", rust_layout!(MipRange { first, count, height, pad })),
         ("InjectBatch", rust_layout!(InjectBatch { first, count, reset, pad })),
+        ("ConeBatch", rust_layout!(ConeBatch { first, count, pad0, pad1 })),
         ("Splat", rust_layout!(SplatUniform { view_proj, eye_m, viewport, splat, pad })),
     ]
 }

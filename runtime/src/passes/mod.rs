@@ -191,8 +191,8 @@ pub fn compute_pipeline(
     Ok(ComputePipeline { pipeline, own_layout, shared: bound })
 }
 
-/// A compute pass with one invocation per leaf that binds only the shared groups (env,
-/// propagate); its WGSL entry point has the pass's name.
+/// A compute pass with one invocation per leaf that binds only the shared groups (env); its WGSL
+/// entry point has the pass's name.
 #[derive(Debug)]
 pub struct LeafPass {
     pipeline: ComputePipeline,

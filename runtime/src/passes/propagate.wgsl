@@ -4,8 +4,22 @@
 // reflected environment light; a cone's escaped share adds only the constant background here).
 // Reads only the mip pyramid, so leaves update independently; records the largest relative change
 // for the effect plan.
+//
+// Cones are traced in batches, one dispatch each (passes/propagate.rs says why); the running sum
+// lives in the leaf's `gather`, added to cone by cone in the same order as one loop would (the
+// result is the same to the bit), and the last batch finishes the leaf.
 #import cone
 #import dispatch
+
+// Mirrors gpu_types.rs ConeBatch (runtime/tests/layout.rs).
+struct ConeBatch {
+    first: u32,
+    count: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+@group(2) @binding(0) var<uniform> batch: ConeBatch;
 
 @compute @workgroup_size(64)
 fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -14,14 +28,20 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
         return;
     }
     let leaf = leaves[i];
-    var gathered = vec3<f32>(0.0);
-    for (var c = 0u; c < params.cone_count; c++) {
+    var state = leaf_light[i];
+    var gathered = select(state.gather.rgb, vec3<f32>(0.0), batch.first == 0u);
+    let end = min(batch.first + batch.count, params.cone_count);
+    for (var c = batch.first; c < end; c++) {
         let cone = params.cones[c];
         let dir = leaf_cone_dir(leaf, cone.xyz);
         let s = trace_cone(leaf_cone_origin(leaf), dir, params.cone_tan_half);
         gathered += cone.w * (s.rgb + (1.0 - s.a) * params.background.rgb);
     }
-    var state = leaf_light[i];
+    if end < params.cone_count {
+        state.gather = vec4<f32>(gathered, 0.0);
+        leaf_light[i] = state;
+        return;
+    }
     let before = state.out.rgb;
     state.gather = vec4<f32>(gathered, 0.0);
     state.out = leaf_out(leaf, state);
