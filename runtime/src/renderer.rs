@@ -115,9 +115,9 @@ pub struct Renderer {
     stats: wgpu::Buffer,
     surfels: wgpu::Buffer,
     inject: passes::inject::Inject,
-    env: passes::LeafPass,
+    env: passes::ConeBatched,
     mip: passes::mip::Mip,
-    propagate: passes::propagate::Propagate,
+    propagate: passes::ConeBatched,
     shadow: shadow::Shadow,
     gbuffer: gbuffer::Gbuffer,
     shade: shade::Shade,
@@ -337,10 +337,10 @@ impl Renderer {
         let lights_in_range = lights.grid.occupancy();
         let inject =
             gpu.scoped("inject", || passes::inject::Inject::new(gpu, shared, f16, lights_in_range.1))?;
-        let env = gpu.scoped("env", || passes::env::new(gpu, shared, f16))?;
+        let env = gpu.scoped("env", || passes::env::new(gpu, shared, f16, settings.cones))?;
         let mip = gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, &by_height, &ranges, f16))?;
         let propagate =
-            gpu.scoped("propagate", || passes::propagate::Propagate::new(gpu, shared, f16, settings.cones))?;
+            gpu.scoped("propagate", || passes::propagate::new(gpu, shared, f16, settings.cones))?;
         let gbuffer = gpu.scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout))?;
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
         static_bytes += shade.env_atlas_bytes();

@@ -14,6 +14,7 @@ pub const LIBRARY: &[(&str, &str)] = &[
     ("brdf", include_str!("shaders/brdf.wgsl")),
     ("color", include_str!("shaders/color.wgsl")),
     ("cone", include_str!("shaders/cone.wgsl")),
+    ("cone_batch", include_str!("shaders/cone_batch.wgsl")),
     ("dispatch", include_str!("shaders/dispatch.wgsl")),
     ("geometry", include_str!("shaders/geometry.wgsl")),
     ("light_state", include_str!("shaders/light_state.wgsl")),

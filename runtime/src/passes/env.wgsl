@@ -6,7 +6,12 @@
 // Ramamoorthi-Hanrahan irradiance of the 9 coefficients (for the leaf's normal distribution, see
 // sh_irradiance_ndf_over_pi): unoccluded leaves get exactly that, a leaf whose cones all end on
 // rock gets nothing. Runs once per environment (geometry is static).
+//
+// Cones are traced in batches, one dispatch each (passes/mod.rs `ConeBatched`); the running sums
+// of the numerator and denominator live in the leaf's `env` (x, y) until the last batch, added to
+// in the same order as one loop would.
 #import cone
+#import cone_batch
 #import sh
 #import dispatch
 
@@ -18,9 +23,11 @@ fn env(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) n
     }
     let leaf = leaves[i];
     let cos_half = 1.0 / sqrt(1.0 + params.cone_tan_half * params.cone_tan_half);
-    var open = 0.0;
-    var all = 0.0;
-    for (var c = 0u; c < params.cone_count; c++) {
+    var state = leaf_light[i];
+    var open = select(state.env.x, 0.0, batch.first == 0u);
+    var all = select(state.env.y, 0.0, batch.first == 0u);
+    let end = batch_end();
+    for (var c = batch.first; c < end; c++) {
         let cone = params.cones[c];
         let dir = leaf_cone_dir(leaf, cone.xyz);
         let sky = dot(sh_cone_radiance(dir, cos_half), vec3<f32>(0.2126, 0.7152, 0.0722));
@@ -28,10 +35,14 @@ fn env(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) n
         open += cone.w * (1.0 - s.a) * sky;
         all += cone.w * sky;
     }
+    if end < params.cone_count {
+        state.env = vec4<f32>(open, all, 0.0, state.env.w);
+        leaf_light[i] = state;
+        return;
+    }
     let v = select(0.0, clamp(open / all, 0.0, 1.0), all > 1e-12);
     let albedo = leaf.albedo_opacity.rgb;
     let env_light = albedo * sh_irradiance_ndf_over_pi(leaf.normal_mean.xyz) * v;
-    var state = leaf_light[i];
     state.env = vec4<f32>(env_light, v);
     state.out = leaf_out(leaf, state);
     leaf_light[i] = state;

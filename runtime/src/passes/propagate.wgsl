@@ -5,21 +5,13 @@
 // Reads only the mip pyramid, so leaves update independently; records the largest relative change
 // for the effect plan.
 //
-// Cones are traced in batches, one dispatch each (passes/propagate.rs says why); the running sum
+// Cones are traced in batches, one dispatch each (passes/mod.rs `ConeBatched` says why); the running sum
 // lives in the leaf's `gather`, added to cone by cone in the same order as one loop would (the
 // result is the same to the bit), and the last batch finishes the leaf.
 #import cone
+#import cone_batch
 #import dispatch
 
-// Mirrors gpu_types.rs ConeBatch (runtime/tests/layout.rs).
-struct ConeBatch {
-    first: u32,
-    count: u32,
-    pad0: u32,
-    pad1: u32,
-}
-
-@group(2) @binding(0) var<uniform> batch: ConeBatch;
 
 @compute @workgroup_size(64)
 fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -30,7 +22,7 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     let leaf = leaves[i];
     var state = leaf_light[i];
     var gathered = select(state.gather.rgb, vec3<f32>(0.0), batch.first == 0u);
-    let end = min(batch.first + batch.count, params.cone_count);
+    let end = batch_end();
     for (var c = batch.first; c < end; c++) {
         let cone = params.cones[c];
         let dir = leaf_cone_dir(leaf, cone.xyz);
