@@ -36,25 +36,17 @@ impl Inject {
             super::compute_pipeline(gpu, "inject", crate::shaders::INJECT, "inject", shared, radiance_f16)?;
         let layout = super::own_layout(&pipeline, "inject")?;
         let count = max_lights_per_cell.div_ceil(LIGHTS_PER_BATCH).max(1);
-        let batches = (0..count)
-            .map(|b| {
-                let u = gpu.buffer_init(
-                    "inject batch",
-                    bytemuck::bytes_of(&InjectBatch {
-                        first: b * LIGHTS_PER_BATCH,
-                        count: LIGHTS_PER_BATCH,
-                        reset: u32::from(b == 0),
-                        pad: 0,
-                    }),
-                    wgpu::BufferUsages::UNIFORM,
-                )?;
-                Ok(gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("inject batch"),
-                    layout,
-                    entries: &[wgpu::BindGroupEntry { binding: 0, resource: u.as_entire_binding() }],
-                }))
-            })
-            .collect::<Result<_>>()?;
+        let batches = super::uniform_groups(
+            gpu,
+            "inject batch",
+            layout,
+            (0..count).map(|b| InjectBatch {
+                first: b * LIGHTS_PER_BATCH,
+                count: LIGHTS_PER_BATCH,
+                reset: u32::from(b == 0),
+                pad: 0,
+            }),
+        )?;
         Ok(Self { pipeline, batches })
     }
 

@@ -222,23 +222,17 @@ impl ConeBatched {
     ) -> Result<Self> {
         let pipeline = compute_pipeline(gpu, name, pass_src, name, shared, radiance_f16)?;
         let layout = own_layout(&pipeline, name)?;
-        let batches = (0..cones.div_ceil(CONES_PER_BATCH).max(1))
-            .map(|b| {
-                let batch = crate::gpu_types::ConeBatch {
-                    first: b * CONES_PER_BATCH,
-                    count: CONES_PER_BATCH,
-                    pad0: 0,
-                    pad1: 0,
-                };
-                let u =
-                    gpu.buffer_init("cone batch", bytemuck::bytes_of(&batch), wgpu::BufferUsages::UNIFORM)?;
-                Ok(gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("cone batch"),
-                    layout,
-                    entries: &[wgpu::BindGroupEntry { binding: 0, resource: u.as_entire_binding() }],
-                }))
-            })
-            .collect::<Result<_>>()?;
+        let batches = uniform_groups(
+            gpu,
+            "cone batch",
+            layout,
+            (0..cones.div_ceil(CONES_PER_BATCH).max(1)).map(|b| crate::gpu_types::ConeBatch {
+                first: b * CONES_PER_BATCH,
+                count: CONES_PER_BATCH,
+                pad0: 0,
+                pad1: 0,
+            }),
+        )?;
         Ok(Self { pipeline, batches })
     }
 
@@ -249,6 +243,27 @@ impl ConeBatched {
             dispatch_linear(pass, leaf_count);
         }
     }
+}
+
+/// One bind group per value, each holding it as a uniform at binding 0 of `layout`: the batches
+/// of a pass dispatched several times (inject's lights, the cone passes' cones).
+pub fn uniform_groups<T: bytemuck::Pod>(
+    gpu: &Gpu,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    values: impl IntoIterator<Item = T>,
+) -> Result<Vec<wgpu::BindGroup>> {
+    values
+        .into_iter()
+        .map(|v| {
+            let u = gpu.buffer_init(label, bytemuck::bytes_of(&v), wgpu::BufferUsages::UNIFORM)?;
+            Ok(gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(label),
+                layout,
+                entries: &[wgpu::BindGroupEntry { binding: 0, resource: u.as_entire_binding() }],
+            }))
+        })
+        .collect()
 }
 
 /// The own group's layout of `p`, which its WGSL must declare.
