@@ -44,6 +44,20 @@ impl EnvChain<'_> {
     }
 }
 
+/// The level table for consecutive levels of these (width, height, roughness): each level's
+/// block count and first block as the rules require (what a writer stores).
+pub fn level_table(dims: impl IntoIterator<Item = (u32, u32, f32)>) -> Vec<EnvMipLevel> {
+    let mut first_block = 0;
+    dims.into_iter()
+        .map(|(width, height, roughness)| {
+            let block_count = width.div_ceil(4) * height.div_ceil(4);
+            let level = EnvMipLevel { width, height, first_block, block_count, roughness, reserved: [0; 3] };
+            first_block += block_count;
+            level
+        })
+        .collect()
+}
+
 /// The level table's own rules (checked when the section is first read).
 pub(crate) fn check_levels(levels: &[EnvMipLevel]) -> Result<(), String> {
     if levels.len() > MAX_ENV_MIP_LEVELS {

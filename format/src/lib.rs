@@ -21,7 +21,7 @@ mod summary;
 pub mod svo;
 mod writer;
 
-pub use env_chain::EnvChain;
+pub use env_chain::{EnvChain, level_table};
 pub use error::{Error, Problem, Region, Result};
 pub use reader::{Element, Package, SectionInfo, SvoData, Tile};
 pub use scene::{

@@ -816,47 +816,47 @@ impl Package {
     /// and the blocks section holds exactly the blocks the levels cover. `Ok(None)` when the
     /// package has neither section (or an empty table); an error when it has only one of them.
     pub fn env_chain(&self, index: u32) -> Result<Option<EnvChain<'_>>> {
+        let Some((levels, blocks_s)) = self.env_chain_table(index)? else { return Ok(None) };
+        let blocks = self.read::<Bc6hBlock>(&blocks_s)?;
+        Ok(Some(EnvChain { levels, blocks }))
+    }
+
+    /// The level table of environment `index` and its blocks section, checked against each other
+    /// by the section's length alone (the blocks are not decoded).
+    fn env_chain_table(&self, index: u32) -> Result<Option<(Cow<'_, [EnvMipLevel]>, SectionInfo)>> {
         let levels_s = self.find(SectionKind::EnvMipLevels, Scope::Global, index);
         let blocks_s = self.find(SectionKind::EnvMipBc6h, Scope::Global, index);
+        let missing = |kind: SectionKind, other: SectionKind| {
+            self.invalid(Problem::Missing {
+                kind: kind.name().to_owned(),
+                scope: format!(" for environment {index} (its {} section has none)", other.name()),
+            })
+        };
         let (levels_s, blocks_s) = match (levels_s, blocks_s) {
             (None, None) => return Ok(None),
             (Some(l), Some(b)) => (l, b),
-            (Some(_), None) => {
-                return Err(self.invalid(Problem::Missing {
-                    kind: SectionKind::EnvMipBc6h.name().to_owned(),
-                    scope: format!(" for environment {index} (its env-mip-levels section has none)"),
-                }));
-            }
-            (None, Some(_)) => {
-                return Err(self.invalid(Problem::Missing {
-                    kind: SectionKind::EnvMipLevels.name().to_owned(),
-                    scope: format!(" for environment {index} (its env-mip-bc6h section has none)"),
-                }));
-            }
+            (Some(_), None) => return Err(missing(SectionKind::EnvMipBc6h, SectionKind::EnvMipLevels)),
+            (None, Some(_)) => return Err(missing(SectionKind::EnvMipLevels, SectionKind::EnvMipBc6h)),
         };
         let levels = self.read::<EnvMipLevel>(&levels_s)?;
         if levels.is_empty() {
             return Ok(None);
         }
-        let blocks = self.read::<Bc6hBlock>(&blocks_s)?;
         let claimed: u64 = levels.iter().map(|l| u64::from(l.block_count)).sum();
-        if claimed != blocks.len() as u64 {
+        let held = blocks_s.raw_len / size_of::<Bc6hBlock>() as u64;
+        if claimed != held {
             return Err(self.invalid(Problem::BadContent {
                 section: blocks_s.index,
                 kind: SectionKind::EnvMipBc6h.name().to_owned(),
-                reason: format!(
-                    "holds {} blocks, environment {index}'s levels cover {claimed}",
-                    blocks.len()
-                ),
+                reason: format!("holds {held} blocks, environment {index}'s levels cover {claimed}"),
             }));
         }
-        Ok(Some(EnvChain { levels, blocks }))
+        Ok(Some((levels, blocks_s)))
     }
 
     /// Problems of every environment chain as a whole (each section alone is checked by `read`).
     pub(crate) fn env_chain_problems(&self) -> Vec<Problem> {
-        let items: Vec<u32> = self
-            .sections()
+        self.sections()
             .filter(|s| {
                 matches!(s.kind, Some(SectionKind::EnvMipLevels | SectionKind::EnvMipBc6h))
                     && s.scope == Scope::Global
@@ -864,13 +864,7 @@ impl Package {
             .map(|s| s.item)
             .collect::<std::collections::BTreeSet<u32>>()
             .into_iter()
-            .collect();
-        items
-            .into_iter()
-            .filter_map(|item| match self.env_chain(item) {
-                Err(e) => e.problem().cloned(),
-                Ok(_) => None,
-            })
+            .filter_map(|item| self.env_chain_table(item).err().and_then(|e| e.problem().cloned()))
             .collect()
     }
 }

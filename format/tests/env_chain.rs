@@ -10,16 +10,7 @@ type Dims = (u32, u32, f32);
 
 /// Level (width, height, roughness) list -> consecutive levels.
 fn levels(dims: &[Dims]) -> Vec<EnvMipLevel> {
-    let mut first = 0;
-    dims.iter()
-        .map(|&(width, height, roughness)| {
-            let block_count = width.div_ceil(4) * height.div_ceil(4);
-            let l =
-                EnvMipLevel { width, height, first_block: first, block_count, roughness, reserved: [0; 3] };
-            first += block_count;
-            l
-        })
-        .collect()
+    grotto_format::level_table(dims.iter().copied())
 }
 
 /// A package holding environment 0's levels and `blocks` blocks (None: as many as the levels cover).

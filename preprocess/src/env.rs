@@ -406,20 +406,11 @@ pub fn encode_bc6h(map: &LatLong) -> Vec<Bc6hBlock> {
 
 /// The level table and block array for a chain.
 pub fn encode_chain(levels: &[GlossLevel]) -> (Vec<EnvMipLevel>, Vec<Bc6hBlock>) {
-    let mut table = Vec::new();
-    let mut blocks = Vec::new();
-    for l in levels {
-        let b = encode_bc6h(&l.map);
-        table.push(EnvMipLevel {
-            width: l.map.width as u32,
-            height: l.map.height as u32,
-            first_block: blocks.len() as u32,
-            block_count: b.len() as u32,
-            roughness: l.roughness,
-            reserved: [0; 3],
-        });
-        blocks.extend(b);
-    }
+    let table = grotto_format::level_table(
+        levels.iter().map(|l| (l.map.width as u32, l.map.height as u32, l.roughness)),
+    );
+    let blocks: Vec<Bc6hBlock> = levels.iter().flat_map(|l| encode_bc6h(&l.map)).collect();
+    debug_assert_eq!(blocks.len() as u32, table.iter().map(|l| l.block_count).sum::<u32>());
     (table, blocks)
 }
 

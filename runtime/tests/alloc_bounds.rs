@@ -150,21 +150,14 @@ fn a_chain_claiming_a_huge_atlas_is_refused_before_anything_is_sized_from_it() {
     // The package: valid section by section, an 8192-wide base and seven levels of
     // 4x4096 (147 KiB of blocks) that a reader stacking them as wide as the base would decode
     // into a 3.8 GB atlas.
-    let mut levels = Vec::new();
-    let mut first_block = 0;
-    for (k, (width, height)) in [(8192u32, 4u32)].into_iter().chain([(4, 4096); 7]).enumerate() {
-        let block_count = width.div_ceil(4) * height.div_ceil(4);
-        levels.push(EnvMipLevel {
-            width,
-            height,
-            first_block,
-            block_count,
-            roughness: k as f32 / 7.0,
-            reserved: [0; 3],
-        });
-        first_block += block_count;
-    }
-    let blocks = vec![Bc6hBlock([0; 16]); first_block as usize];
+    let levels = grotto_format::level_table(
+        [(8192u32, 4u32)]
+            .into_iter()
+            .chain([(4, 4096); 7])
+            .enumerate()
+            .map(|(k, (w, h))| (w, h, k as f32 / 7.0)),
+    );
+    let blocks = vec![Bc6hBlock([0; 16]); levels.iter().map(|l| l.block_count as usize).sum()];
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let pkg = with_environment(&cave, &dir.path().join("hostile.grotto"), &levels, &blocks);
     let held = held_bytes(&pkg);
