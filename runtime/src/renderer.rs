@@ -222,7 +222,7 @@ struct Upload {
     stats: wgpu::Buffer,
     surfels: wgpu::Buffer,
     shared: passes::Shared,
-    /// GPU bytes of all of them and of the shadow atlas.
+    /// GPU bytes of all of them.
     bytes: u64,
 }
 
@@ -231,7 +231,7 @@ impl Upload {
         gpu: &Gpu,
         scene: &SceneData,
         lights: &LightSetup,
-        shadow: &shadow::Shadow,
+        shadow_atlas: &wgpu::TextureView,
         base_params: &Params,
         f16: bool,
     ) -> Result<Self> {
@@ -261,12 +261,12 @@ impl Upload {
             (8, gpu.buffer_init("light grid", bytemuck::cast_slice(&lights.grid.words), STORAGE)?),
         ];
         let mut shared = passes::Shared::default();
-        let mut bytes = surfels.size() + shadow.bytes();
+        let mut bytes = surfels.size();
         for (binding, b) in static_buffers {
             bytes += b.size();
             shared.insert(0, binding, passes::Resource::Buffer(b));
         }
-        shared.insert(0, 6, passes::Resource::Texture(shadow.atlas().clone()));
+        shared.insert(0, 6, passes::Resource::Texture(shadow_atlas.clone()));
         for (binding, b) in [(0, &leaf_light), (1, &faces), (2, &stats)] {
             bytes += b.size();
             shared.insert(1, binding, passes::Resource::Buffer(b.clone()));
@@ -329,9 +329,8 @@ impl Renderer {
         let base_params =
             base_params(scene, &settings, &lights, &shadow, (lo, hi), scene_diag_m, chain, materials);
 
-        let up = Upload::new(gpu, scene, &lights, &shadow, &base_params, f16)?;
+        let up = Upload::new(gpu, scene, &lights, shadow.atlas(), &base_params, f16)?;
         let shared = &up.shared;
-        let mut static_bytes = up.bytes;
 
         let (by_height, ranges) = scene.nodes_by_height();
         let lights_in_range = lights.grid.occupancy();
@@ -343,7 +342,7 @@ impl Renderer {
             gpu.scoped("propagate", || passes::propagate::new(gpu, shared, f16, settings.cones))?;
         let gbuffer = gpu.scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout))?;
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
-        static_bytes += shade.env_atlas_bytes();
+        let static_bytes = up.bytes + shadow.bytes() + shade.env_atlas_bytes();
         let r = Self {
             inject,
             env,
@@ -693,9 +692,9 @@ impl Renderer {
         }
         // The frame runs inside one validation error scope; when it catches an error, each pass
         // is recorded again alone in a scope of its own (and not submitted) to name the culprit.
-        // Per-pass command buffers would name it directly, but on lavapipe they made frames slower
-        // (1.5 s against 0.1 s for the bunny at 64x48) and garbled the pass timestamps
-        // (propagate read 0 ms), so the fast path stays one encoder.
+        // A command buffer per pass would name it directly, but costs lavapipe time on every frame
+        // (tried: frames of the bunny at 64x48 went from 0.1 s to 1.5 s), so the fast path stays
+        // one encoder and only a failing frame pays for the search.
         let scope = self.gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut ran: Vec<Pass> = Vec::new();
         let outcome = self.record_frame(plan, &mut ran);
