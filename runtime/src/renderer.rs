@@ -94,7 +94,6 @@ pub struct Renderer {
     shadowed: usize,
     /// Shadow-atlas faces (six per point light with a map, one per spot light).
     shadow_faces: usize,
-    light_count: usize,
     /// Lights per light-grid cell: mean and largest.
     lights_in_range: (f32, u32),
     /// Specular materials with surfels, and those surfels (0 when `Settings::specular` is off).
@@ -365,7 +364,6 @@ impl Renderer {
             headlamp: scene.headlamp,
             shadowed: lights.shadowed,
             shadow_faces: lights.faces.len(),
-            light_count: lights.lights.len(),
             lights_in_range,
             specular_materials,
             specular_surfels,
@@ -531,10 +529,10 @@ impl Renderer {
         let mut p = self.base_params;
         let s = &self.settings;
         let mut f = flags::EMISSION;
-        if s.direct && self.light_count > 0 {
+        if s.direct && p.light_count > 0 {
             f |= flags::DIRECT;
         }
-        if s.direct && s.shadows && self.shadowed < self.light_count {
+        if s.direct && s.shadows && self.shadowed < p.light_count as usize {
             f |= flags::FAR_LIGHTS;
         }
         if s.shadows && self.shadow_faces > 0 {

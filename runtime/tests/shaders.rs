@@ -42,7 +42,7 @@ fn a_broken_shader_is_caught() {
 }
 
 #[test]
-fn unknown_imports_and_cycles_are_internal_errors() {
+fn unknown_imports_are_internal_errors() {
     let e = shaders::compose("#import nowhere\n").unwrap_err();
     assert!(matches!(e, grotto_runtime::Error::Internal { .. }), "{e}");
 }

@@ -50,11 +50,6 @@ impl Inject {
         Ok(Self { pipeline, batches })
     }
 
-    /// Dispatches this many times per light update.
-    pub fn batch_count(&self) -> usize {
-        self.batches.len()
-    }
-
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, leaf_count: u32) {
         self.pipeline.bind(pass);
         for bg in &self.batches {
