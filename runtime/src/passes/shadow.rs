@@ -33,7 +33,6 @@ pub struct Face {
 #[derive(Debug)]
 pub struct Shadow {
     pipeline: wgpu::RenderPipeline,
-    faces: usize,
     face_size: u32,
     cols: u32,
     atlas: wgpu::TextureView,
@@ -97,7 +96,7 @@ impl Shadow {
             uniforms.write(gpu, i, &u);
         }
         let atlas_bytes = u64::from(width) * u64::from(height) * 8;
-        Ok(Self { pipeline, faces: faces.len(), face_size, cols, atlas, depth, uniforms, atlas_bytes })
+        Ok(Self { pipeline, face_size, cols, atlas, depth, uniforms, atlas_bytes })
     }
 
     /// The distance atlas, as inject and shade bind it.
@@ -145,7 +144,8 @@ impl Shadow {
         pass.set_pipeline(&self.pipeline);
         pass.set_vertex_buffer(0, surfels.slice(..));
         let s = self.face_size as f32;
-        for (i, group) in self.uniforms.groups.iter().take(self.faces).enumerate() {
+        // One uniform group per face.
+        for (i, group) in self.uniforms.groups.iter().enumerate() {
             let (x, y) = ((i as u32 % self.cols) as f32 * s, (i as u32 / self.cols) as f32 * s);
             pass.set_viewport(x, y, s, s, 0.0, 1.0);
             pass.set_bind_group(0, group, &[]);
