@@ -19,7 +19,7 @@ use crate::error::{Error, Result};
 
 /// Storage buffers one compute stage binds at most: shade's, whose imports declare the most
 /// (runtime/tests/shaders.rs reflects every pass and checks this).
-pub const STORAGE_BUFFERS_NEEDED: u32 = 12;
+pub const STORAGE_BUFFERS_NEEDED: u32 = 13;
 
 /// What a user can change when the resource named `label` outgrows the adapter.
 fn hint_for(label: &str) -> String {
@@ -33,7 +33,9 @@ fn hint_for(label: &str) -> String {
             "the package has too many points for one vertex buffer: build it from fewer points (thin \
              the scans) or use a GPU with larger buffers"
         }
-        "rock" | "tiles" => "build the package with a larger leaf size (grotto-pack build --leaf-m)",
+        "rock" | "tiles" | "tile index" => {
+            "build the package with a larger leaf size (grotto-pack build --leaf-m)"
+        }
         "lights" | "shadow matrices" | "shadow atlas" | "shadow depth" | "splat uniforms" => {
             "lower --shadowed-lights or --shadow-map"
         }

@@ -24,5 +24,6 @@ pub mod rock;
 pub mod scene_data;
 pub mod settings;
 pub mod shaders;
+pub mod tile_index;
 
 pub use error::{Error, Result};

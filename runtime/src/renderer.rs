@@ -245,6 +245,7 @@ impl Upload {
         let leaf_light = gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial), STORAGE)?;
         let faces = gpu.buffer("faces", scene.buffer_bytes(f16).faces, STORAGE)?;
         let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE)?;
+        let tile_index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
         let surfels =
             gpu.buffer_init("surfels", bytemuck::cast_slice(&scene.surfels), wgpu::BufferUsages::VERTEX)?;
         let shadow_mats: Vec<[[f32; 4]; 4]> =
@@ -258,6 +259,7 @@ impl Upload {
             (5, gpu.buffer_init("shadow matrices", bytemuck::cast_slice(&shadow_mats), STORAGE)?),
             (7, gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock.words), STORAGE)?),
             (8, gpu.buffer_init("light grid", bytemuck::cast_slice(&lights.grid.words), STORAGE)?),
+            (9, gpu.buffer_init("tile index", bytemuck::cast_slice(&tile_index.words), STORAGE)?),
         ];
         let mut shared = passes::Shared::default();
         let mut bytes = surfels.size();

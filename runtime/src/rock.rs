@@ -185,7 +185,7 @@ pub const ENTRY_WORDS: usize = 5;
 /// Brick x of an empty slot; no brick reaches it (leaf coordinates stay within +-2^28).
 pub const EMPTY_KEY: i32 = i32::MIN;
 
-/// The hash of a brick coordinate, identical in shaders/rock.wgsl (`rock_hash`): each axis times a large
+/// The hash of a brick coordinate, identical in shaders/hash.wgsl (`cell_hash`): each axis times a large
 /// odd constant (Teschner et al. 2003), xor-ed, then murmur3's finaliser so neighbouring bricks
 /// spread over the table.
 pub fn brick_hash(b: IVec3) -> u32 {

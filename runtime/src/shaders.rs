@@ -17,6 +17,7 @@ pub const LIBRARY: &[(&str, &str)] = &[
     ("cone_batch", include_str!("shaders/cone_batch.wgsl")),
     ("dispatch", include_str!("shaders/dispatch.wgsl")),
     ("geometry", include_str!("shaders/geometry.wgsl")),
+    ("hash", include_str!("shaders/hash.wgsl")),
     ("light_state", include_str!("shaders/light_state.wgsl")),
     ("lights", include_str!("shaders/lights.wgsl")),
     ("ndf", include_str!("shaders/ndf.wgsl")),
@@ -37,7 +38,7 @@ pub const SHADE: &str = include_str!("passes/shade.wgsl");
 /// Constants shared with the Rust side, generated from it so the two cannot drift.
 pub fn constants() -> String {
     use crate::gpu_types::{LightShadow, flags};
-    use crate::rock;
+    use crate::{rock, tile_index};
     let mut out = format!(
         "const EMPTY: u32 = 0xffffffffu;\nconst ROCK_LEVEL: u32 = {}u;\nconst ROCK_BRICK_SHIFT: u32 = {}u;\n\
          const ROCK_HEADER_WORDS: u32 = {}u;\nconst ROCK_ENTRY_WORDS: u32 = {}u;\nconst ROCK_EMPTY_KEY: i32 = {};\n",
@@ -47,6 +48,12 @@ pub fn constants() -> String {
         rock::ENTRY_WORDS,
         // WGSL has no literal for i32::MIN (its negation overflows): write it as an expression.
         format_args!("({} - 1)", rock::EMPTY_KEY + 1),
+    );
+    out += &format!(
+        "const TILE_HEADER_WORDS: u32 = {}u;\nconst TILE_ENTRY_WORDS: u32 = {}u;\nconst TILE_EMPTY_KEY: i32 = ({} - 1);\n",
+        tile_index::HEADER_WORDS,
+        tile_index::ENTRY_WORDS,
+        tile_index::EMPTY_KEY + 1,
     );
     for (name, bit) in flags::ALL {
         out += &format!("const {name}: u32 = {bit}u;\n");

@@ -1,21 +1,12 @@
 // Rock behind the scanned surfaces (runtime/src/rock.rs): where cones stop.
 #import scene
+#import hash
 
 // Rock behind the scanned surfaces (runtime/src/rock.rs, `RockTable`): a hash table of bricks of
 // 4x4x4 rock cells (cells of 2x2x2 leaves). Header: capacity - 1, longest probe, bricks, 0; then
 // ROCK_ENTRY_WORDS words an entry: brick x, y, z, 64 rock bits. Constants come from rock.rs
 // (shaders::constants).
 @group(0) @binding(7) var<storage, read> rock: array<u32>;
-
-// rock.rs `brick_hash`.
-fn rock_hash(b: vec3<i32>) -> u32 {
-    var h = (u32(b.x) * 0x8da6b343u) ^ (u32(b.y) * 0xd8163841u) ^ (u32(b.z) * 0xcb1ab31fu);
-    h ^= h >> 16u;
-    h *= 0x85ebca6bu;
-    h ^= h >> 13u;
-    h *= 0xc2b2ae35u;
-    return h ^ (h >> 16u);
-}
 
 // Whether the leaf cell holding `p_leaf` lies in rock (rock.rs, `in_rock`). The probe loop is
 // bounded by the longest probe sequence the table was built with.
@@ -24,7 +15,7 @@ fn in_rock(p_leaf: vec3<f32>) -> bool {
     let b = cell >> vec3<u32>(ROCK_BRICK_SHIFT);
     let mask = rock[0];
     let longest = rock[1];
-    var slot = rock_hash(b) & mask;
+    var slot = cell_hash(b) & mask;
     for (var i = 0u; i <= longest; i++) {
         let e = ROCK_HEADER_WORDS + slot * ROCK_ENTRY_WORDS;
         let k = vec3<i32>(bitcast<i32>(rock[e]), bitcast<i32>(rock[e + 1u]), bitcast<i32>(rock[e + 2u]));

@@ -2,6 +2,7 @@
 // sampling of the radiance pyramid (light_state.wgsl).
 #import scene
 #import light_state
+#import hash
 
 struct Tile {
     origin_leaf: vec3<i32>,
@@ -21,15 +22,40 @@ struct Node {
 @group(0) @binding(1) var<storage, read> tiles: array<Tile>;
 @group(0) @binding(2) var<storage, read> nodes: array<Node>;
 
-// The tile whose cube holds the leaf cell `v_leaf` (global leaf units), or EMPTY. A linear scan:
-// resident tile counts are small today; streaming will replace it with a tile grid.
+// The tile index (runtime/src/tile_index.rs, `TileIndex`): a hash table of (cell at a tile depth,
+// depth) -> tile. Header: capacity - 1, longest probe, mask of the depths entries are keyed at,
+// entries, anchor x, y, z (leaf units), 0; then TILE_ENTRY_WORDS words an entry: cell x, y, z,
+// depth, tile.
+@group(0) @binding(9) var<storage, read> tile_index: array<u32>;
+
+// tile_index.rs `tile_hash`: the cell hash with the depth mixed in.
+fn tile_hash(c: vec3<i32>, depth: u32) -> u32 {
+    return cell_hash(c) ^ (depth * 0x9e3779b9u);
+}
+
+// The tile whose cube holds the leaf cell `v_leaf` (global leaf units), or EMPTY: one hash probe
+// per distinct tile depth, whatever the number of tiles (tile_index.rs, `TileIndex::find`).
 fn find_tile(v_leaf: vec3<i32>) -> u32 {
-    for (var t = 0u; t < params.tile_count; t++) {
-        let tile = tiles[t];
-        let rel = v_leaf - tile.origin_leaf;
-        let size = 1 << tile.depth;
-        if all(rel >= vec3<i32>(0)) && all(rel < vec3<i32>(size)) {
-            return t;
+    let mask = tile_index[0];
+    let longest = tile_index[1];
+    var depths = tile_index[2];
+    let anchor = vec3<i32>(bitcast<i32>(tile_index[4]), bitcast<i32>(tile_index[5]), bitcast<i32>(tile_index[6]));
+    let rel = v_leaf - anchor;
+    while depths != 0u {
+        let d = firstTrailingBit(depths);
+        depths &= depths - 1u;
+        let c = rel >> vec3<u32>(d);
+        var slot = tile_hash(c, d) & mask;
+        for (var i = 0u; i <= longest; i++) {
+            let e = TILE_HEADER_WORDS + slot * TILE_ENTRY_WORDS;
+            let k = vec3<i32>(bitcast<i32>(tile_index[e]), bitcast<i32>(tile_index[e + 1u]), bitcast<i32>(tile_index[e + 2u]));
+            if k.x == TILE_EMPTY_KEY {
+                break;
+            }
+            if all(k == c) && tile_index[e + 3u] == d {
+                return tile_index[e + 4u];
+            }
+            slot = (slot + 1u) & mask;
         }
     }
     return EMPTY;
