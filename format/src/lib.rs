@@ -28,5 +28,5 @@ pub use scene::{
     Camera, Environment, InputFile, Light, LightShape, Material, MaterialRegion, Provenance, Scene,
 };
 pub use spec::{Codec, Scope, SectionKind};
-pub use summary::{KindSummary, SectionSummary, Summary, TileSummary};
+pub use summary::{KindSummary, SectionSummary, Summary, TileSummary, parse_bytes};
 pub use writer::{Compression, PackageWriter, TileInfo};

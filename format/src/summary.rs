@@ -135,3 +135,34 @@ impl Package {
         }
     }
 }
+
+/// A size as people write it on a command line ("2G", "512M", "64k", "1.5G", "4096"; binary
+/// multiples), for the budgets both binaries take (`--memory-budget`, `--gpu-memory`).
+pub fn parse_bytes(s: &str) -> Result<u64, String> {
+    let s = s.trim();
+    let (num, mult) = match s.chars().last() {
+        Some('k' | 'K') => (&s[..s.len() - 1], 1u64 << 10),
+        Some('m' | 'M') => (&s[..s.len() - 1], 1 << 20),
+        Some('g' | 'G') => (&s[..s.len() - 1], 1 << 30),
+        Some('t' | 'T') => (&s[..s.len() - 1], 1 << 40),
+        _ => (s, 1),
+    };
+    let v: f64 = num.parse().map_err(|_| format!("'{s}' is not a size like 2G or 512M"))?;
+    if !(v > 0.0 && v * (mult as f64) < 2f64.powi(63)) {
+        return Err(format!("'{s}' must be a positive size"));
+    }
+    Ok((v * mult as f64) as u64)
+}
+
+#[cfg(test)]
+mod size_tests {
+    #[test]
+    fn sizes_parse_as_written() {
+        assert_eq!(super::parse_bytes("512M"), Ok(512 << 20));
+        assert_eq!(super::parse_bytes("1.5g"), Ok(3 << 29));
+        assert_eq!(super::parse_bytes("4096"), Ok(4096));
+        assert!(super::parse_bytes("-1G").is_err());
+        assert!(super::parse_bytes("lots").is_err());
+        assert!(super::parse_bytes("NaNG").is_err());
+    }
+}

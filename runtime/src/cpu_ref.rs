@@ -103,8 +103,9 @@ impl<'a> CpuScene<'a> {
         if lod > tile.depth {
             return None;
         }
-        let levels = tile.depth - lod;
-        let local = (v_leaf - IVec3::from_array(tile.origin_leaf)) >> lod as i32;
+        let l = lod.max(tile.leaf_lod);
+        let levels = tile.depth - l;
+        let local = (v_leaf - IVec3::from_array(tile.origin_leaf)) >> l as i32;
         let mut n = tile.node_offset;
         for level in 0..levels {
             let b = levels - 1 - level;
@@ -221,7 +222,8 @@ impl<'a> CpuScene<'a> {
         let b = n.x * n.y * a;
         let t1 = DVec3::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
         let t2 = DVec3::new(b, s + n.y * n.y * a, -n.y);
-        let origin = Vec3::from_slice(&leaf.center_m[..3]).as_dvec3() + n * f64::from(p.leaf_size_m);
+        let origin = Vec3::from_slice(&leaf.center_m[..3]).as_dvec3()
+            + n * f64::from(p.leaf_size_m.max(leaf.center_m[3]));
         let bg = DVec3::new(p.background[0].into(), p.background[1].into(), p.background[2].into());
         let mut g = DVec3::ZERO;
         for c in &p.cones[..p.cone_count as usize] {

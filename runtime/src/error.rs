@@ -32,6 +32,9 @@ pub enum Error {
     Internal { what: &'static str, message: String },
     #[error("{package}: {problem}")]
     Scene { package: String, problem: String },
+    /// The GPU memory or point budget cannot hold what residency must keep (residency.rs).
+    #[error("{what}; {hint}")]
+    Budget { what: String, hint: String },
     #[error("camera: {0}")]
     Camera(String),
     #[error("setting {name}: {problem}")]

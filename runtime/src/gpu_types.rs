@@ -20,7 +20,11 @@ pub struct TileGpu {
     pub leaf_offset: u32,
     pub node_count: u32,
     pub leaf_count: u32,
-    pub pad: [u32; 4],
+    /// Level (counted up from the package's leaves) of the tile's leaves here: 0 for the tile as
+    /// built, k for its coarse level (scene_data.rs `coarse_tile`), whose leaves are the nodes
+    /// 2^k package leaves wide and whose SVO ends there.
+    pub leaf_lod: u32,
+    pub pad: [u32; 3],
 }
 
 /// An SVO node with global indices: `first_child` is the global node index of the first child for
@@ -50,7 +54,8 @@ pub struct LeafGpu {
     pub albedo_opacity: [f32; 4],
     /// Toksvig mean normal (length = 1 - spread); w unused.
     pub normal_mean: [f32; 4],
-    /// Leaf centre in frame metres; w unused.
+    /// Leaf centre in frame metres; w: the leaf's edge in metres where it is a coarse leaf (wider
+    /// than the package's leaves), else 0.
     pub center_m: [f32; 4],
     /// Emitted radiance, W / (sr m^2); w unused.
     pub emission: [f32; 4],

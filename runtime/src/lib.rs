@@ -7,6 +7,7 @@
 //! Also: describing and verifying packages ([`inspect`]) and exporting their points ([`export`]).
 
 pub mod camera;
+pub mod coarse;
 pub mod cpu_ref;
 pub mod error;
 pub mod export;
@@ -20,6 +21,7 @@ pub mod passes;
 pub mod plan;
 pub mod render_job;
 pub mod renderer;
+pub mod residency;
 pub mod rock;
 pub mod scene_data;
 pub mod settings;

@@ -16,7 +16,8 @@ use crate::gpu::{Gpu, GpuOptions};
 use crate::image_out;
 use crate::plan::EffectPlan;
 use crate::renderer::{PassStats, Renderer, Settings};
-use crate::scene_data::SceneData;
+use crate::residency::{self, Budget, Residency};
+use crate::scene_data::{SceneData, TileMode};
 
 /// Where the camera comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -71,6 +72,10 @@ pub struct RenderOptions {
     pub lamp_string: Option<u32>,
     /// A headlamp at the (first) camera ([`crate::framing::headlamp`]).
     pub headlamp: Headlamp,
+    /// GPU bytes for tiles (`--gpu-memory`); `None`: [`default_gpu_memory`].
+    pub gpu_memory: Option<u64>,
+    /// Most surfels drawn (`--point-budget`); `None`: no limit.
+    pub point_budget: Option<u64>,
 }
 
 impl RenderOptions {
@@ -91,6 +96,8 @@ impl RenderOptions {
             gpu: GpuOptions::default(),
             lamp_string: None,
             headlamp: Headlamp::Auto,
+            gpu_memory: None,
+            point_budget: None,
         }
     }
 }
@@ -100,13 +107,73 @@ pub const STRING_LAMP_W: f32 = 8.0;
 /// Height of a `--lamps` lamp above its floor, metres.
 pub const STRING_LAMP_LIFT_M: f32 = 0.6;
 
-/// The scene a job renders: the package's, with its lights replaced by `--lamps`.
-pub fn job_scene(opts: &RenderOptions) -> Result<SceneData> {
-    let mut scene = load_scene(&opts.package)?;
+/// The tile budget when `--gpu-memory` is not given. wgpu reports no adapter memory, so this is
+/// what the adapter's limits can address: twice its largest storage binding (each pool is one
+/// binding; the largest, leaf light or the radiance pyramid, is under half of a tile's bytes),
+/// at most 2 GiB.
+pub fn default_gpu_memory(gpu: &Gpu) -> u64 {
+    (2 * gpu.device.limits().max_storage_buffer_binding_size).min(2 << 30)
+}
+
+/// `--lamps`: the lights replaced by a lamp string.
+fn apply_lamps(opts: &RenderOptions, scene: &mut SceneData) {
     if let Some(n) = opts.lamp_string {
         scene.lights = scene.lamp_string(n as usize, STRING_LAMP_W, STRING_LAMP_LIFT_M);
     }
+}
+
+/// A scene with no voxels is an error (nothing to render).
+fn non_empty(scene: SceneData) -> Result<SceneData> {
+    if scene.leaves.is_empty() {
+        return Err(Error::Scene {
+            package: scene.name.clone(),
+            problem: "no voxels to render (empty package)".into(),
+        });
+    }
     Ok(scene)
+}
+
+/// The scene a job renders and the cameras it renders from, under the job's budgets: the whole
+/// package where it fits (`residency` None), else the tiles [`residency::choose`] keeps in full
+/// for the first camera and every other tile at its coarse level. Cameras are resolved (and a
+/// view framed) on the coarse scene then, so a package over budget is never loaded whole.
+fn resident_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Residency>)> {
+    let pkg = Package::open(&opts.package)?;
+    let f16 = opts.settings.radiance_f16;
+    let budget = Budget {
+        gpu_bytes: opts.gpu_memory.unwrap_or_else(|| default_gpu_memory(gpu)),
+        points: opts.point_budget.unwrap_or(u64::MAX),
+    };
+    let tiles = residency::footprints(&pkg, f16)?;
+    let full_bytes: u64 = tiles.iter().map(|t| t.full.bytes).sum();
+    let full_surfels: u64 = tiles.iter().map(|t| t.full.surfels).sum();
+    if full_bytes <= budget.gpu_bytes && full_surfels <= budget.points {
+        let mut scene = non_empty(SceneData::from_package(&pkg)?)?;
+        apply_lamps(opts, &mut scene);
+        return Ok((scene, None));
+    }
+    let mut coarse = non_empty(SceneData::from_package_with(&pkg, |_| TileMode::Coarse)?)?;
+    apply_lamps(opts, &mut coarse);
+    let aspect = opts.width as f32 / opts.height.max(1) as f32;
+    let choice = match opts.path.first() {
+        Some(first) => CameraChoice::Named(first.clone()),
+        None => opts.camera.clone(),
+    };
+    let (cam, _) = resolve_camera(&coarse, &choice, aspect, opts.settings.splat_scale)?;
+    let largest_tile_m = tiles.iter().map(|t| (t.max_m - t.min_m).max_element()).fold(0.0, f32::max);
+    let view = residency::View {
+        eye_m: cam.eye_m,
+        forward: cam.look_at_m - cam.eye_m,
+        up: cam.up,
+        fov_y_rad: cam.fov_y_deg.to_radians(),
+        aspect,
+        lights_m: coarse.lights.iter().map(|l| l.position_m).collect(),
+        light_reach_m: opts.settings.max_distance_m.unwrap_or(largest_tile_m),
+    };
+    let chosen = residency::choose(&tiles, &view, budget)?;
+    let mut scene = SceneData::from_package_with(&pkg, |i| chosen.mode_of(i))?;
+    apply_lamps(opts, &mut scene);
+    Ok((scene, Some(chosen)))
 }
 
 /// What a render did, for `--json` and the summary line.
@@ -128,6 +195,10 @@ pub struct RenderSummary {
     pub uncovered_pixels: usize,
     /// Most pixels any frame showed black (a surface, but no light reaching it).
     pub black_pixels: usize,
+    /// Tiles held in full and coarse under the budgets; None where the whole package fit.
+    pub residency: Option<residency::ResidencySummary>,
+    /// GPU bytes of the tile data the renderer holds (nodes, leaves, light, pyramid, surfels).
+    pub tile_bytes: u64,
     /// How the camera and light were chosen where the package did not say (framing, headlamp).
     pub notes: Vec<String>,
     /// What looks wrong with the image and why: most of it uncovered, or black.
@@ -212,8 +283,8 @@ fn framing_note(scene: &SceneData, f: &Framing) -> String {
 /// The scene and cameras a job renders: the package's scene (with `--lamps` applied), the cameras
 /// of the choice or path, and a headlamp at the first camera where the options or a lightless
 /// scene call for one; with notes saying what was chosen.
-pub fn prepare(opts: &RenderOptions) -> Result<(SceneData, Vec<Camera>, Vec<String>)> {
-    let mut scene = job_scene(opts)?;
+pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
+    let (mut scene, residency) = resident_scene(opts, gpu)?;
     let aspect = opts.width as f32 / opts.height.max(1) as f32;
     let splat = opts.settings.splat_scale;
     let mut notes = Vec::new();
@@ -265,7 +336,37 @@ pub fn prepare(opts: &RenderOptions) -> Result<(SceneData, Vec<Camera>, Vec<Stri
         scene.lights.push(lamp);
         scene.headlamp = true;
     }
-    Ok((scene, cameras, notes))
+    if let Some(r) = &residency {
+        notes.push(format!(
+            "residency: {} of {} tiles in full, the rest at their coarse level; {} of tile data \
+             (budget {}), {} surfels drawn{}",
+            r.full_tiles,
+            r.decisions.len(),
+            crate::gpu::human_bytes(r.resident_bytes),
+            crate::gpu::human_bytes(r.budget.gpu_bytes),
+            r.surfels,
+            if r.visible_coarse > 0 {
+                format!(
+                    "; {} tiles in view left coarse (raise --gpu-memory or --point-budget)",
+                    r.visible_coarse
+                )
+            } else {
+                String::new()
+            }
+        ));
+    }
+    Ok(Prepared { scene, cameras, notes, residency })
+}
+
+/// What [`prepare`] gives a job.
+#[derive(Debug)]
+pub struct Prepared {
+    pub scene: SceneData,
+    pub cameras: Vec<Camera>,
+    /// What was chosen on the user's behalf (framing, headlamp, residency).
+    pub notes: Vec<String>,
+    /// `None` where the whole package fits the budgets.
+    pub residency: Option<Residency>,
 }
 
 /// Pixels at most this bright (max of sRGB channels, 0..=255) count as black: no light at all,
@@ -341,22 +442,14 @@ pub fn auto_exposure(hdr: &[[f32; 4]]) -> f32 {
 
 /// Opens a package and reads its scene; an empty package is an error (nothing to render).
 pub fn load_scene(package: &Path) -> Result<SceneData> {
-    let pkg = Package::open(package)?;
-    let scene = SceneData::from_package(&pkg)?;
-    if scene.leaves.is_empty() {
-        return Err(Error::Scene {
-            package: scene.name.clone(),
-            problem: "no voxels to render (empty package)".into(),
-        });
-    }
-    Ok(scene)
+    non_empty(SceneData::from_package(&Package::open(package)?)?)
 }
 
 /// Runs a render job.
 pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<RenderSummary> {
     image_out::kind_of(&opts.out)?;
-    let (scene, cameras, notes) = prepare(opts)?;
     let gpu = Gpu::new(&opts.gpu)?;
+    let Prepared { scene, cameras, notes, residency } = prepare(opts, &gpu)?;
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
     let mut r = Renderer::new(&gpu, &scene, settings.clone())?;
@@ -410,6 +503,8 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         exposure,
         uncovered_pixels,
         black_pixels,
+        residency: residency.as_ref().map(Residency::summary),
+        tile_bytes: scene.tile_bytes(settings.radiance_f16),
         warnings: image_warnings(
             &scene,
             uncovered_pixels,
@@ -449,6 +544,9 @@ pub struct PassBench {
     pub median_ms: std::collections::BTreeMap<String, f64>,
     pub repetitions: u32,
     pub settings: Settings,
+    /// As in [`RenderSummary`].
+    pub residency: Option<residency::ResidencySummary>,
+    pub tile_bytes: u64,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -459,9 +557,9 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Times every pass `reps` times on the package's first camera (or a default view).
 pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
     use crate::plan::Pass;
-    let (scene, cameras, _) = prepare(opts)?;
-    let cam = cameras[0];
     let gpu = Gpu::new(&opts.gpu)?;
+    let Prepared { scene, cameras, residency, .. } = prepare(opts, &gpu)?;
+    let cam = cameras[0];
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
     // Every repetition runs a bounce, unless the caller asked for none (`--bounces 0`: light
@@ -501,6 +599,8 @@ pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
         lights_in_range: r.lights_in_range(),
         median_ms,
         repetitions: reps,
+        tile_bytes: scene.tile_bytes(r.settings().radiance_f16),
         settings: r.settings().clone(),
+        residency: residency.as_ref().map(Residency::summary),
     })
 }

@@ -15,6 +15,7 @@ use grotto_format::spec::{ShRgb9, Surfel, SvoNode};
 use grotto_format::svo::{morton_decode, morton_encode, nodes_from_leaves};
 use grotto_format::{LightShape, Package, Scope, SectionKind};
 
+use crate::coarse::{COARSE_LEVELS, coarse_tile};
 use crate::error::{Error, Result};
 use crate::gpu_types::{LeafGpu, MipRange, NodeGpu, SurfelGpu, TileGpu};
 
@@ -116,6 +117,18 @@ impl SceneBytes {
     }
 }
 
+/// How [`SceneData::from_package_with`] loads a tile.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TileMode {
+    /// Every leaf and surfel, as built.
+    Full,
+    /// Its coarse level (coarse.rs): leaves `COARSE_LEVELS` levels up, one splat each.
+    Coarse,
+    /// Not at all.
+    Skip,
+}
+
 /// Most specular materials a scene may assign (slots 1..=7 of the surfel colour's alpha).
 pub const MAX_MATERIALS: usize = 7;
 
@@ -180,16 +193,32 @@ fn read_env_chain(pkg: &Package, index: u32, intensity: f32) -> Result<Option<En
     Ok(Some(EnvChain { width, height, rgba, levels: table }))
 }
 
+/// The frame every loaded scene of `pkg` shares: the corner of its first tile with an SVO (f64
+/// world metres) and that tile's leaf edge; None when no tile has one.
+pub fn frame_of(pkg: &Package) -> Result<Option<([f64; 3], f64)>> {
+    for tile in pkg.tiles() {
+        if tile.read::<SvoNode>(SectionKind::SvoNodes)?.is_some_and(|n| !n.is_empty()) {
+            return Ok(Some((tile.origin_m(), tile.leaf_size_m())));
+        }
+    }
+    Ok(None)
+}
+
 impl SceneData {
-    /// Appends a tile's nodes with global indices: `first_child` becomes a global node index for
-    /// inner nodes and a global leaf index for leaves (the package stores tile-local ones).
-    fn push_nodes(&mut self, nodes: &[SvoNode], depth: u32, node_offset: u32, leaf_offset: u32) {
-        for n in nodes {
-            let base = if u32::from(n.level) == depth { leaf_offset } else { node_offset };
-            self.nodes.push(NodeGpu {
-                first_child: base + n.first_child,
-                mask_level: u32::from(n.child_mask) | u32::from(n.level) << 8,
-            });
+    /// Appends a tile's nodes down to `leaf_level` with global indices: `first_child` becomes a
+    /// global node index for inner nodes and a global leaf index for the nodes at `leaf_level`
+    /// (the k-th node of that level is the tile's k-th leaf). `nodes` is in the spec's
+    /// breadth-first order, so the nodes down to a level are a prefix of it.
+    fn push_nodes(&mut self, nodes: &[SvoNode], leaf_level: u32, node_offset: u32, leaf_offset: u32) {
+        let mut leaf = leaf_offset;
+        for n in nodes.iter().take_while(|n| u32::from(n.level) <= leaf_level) {
+            let (first_child, mask) = if u32::from(n.level) == leaf_level {
+                leaf += 1;
+                (leaf - 1, 0)
+            } else {
+                (node_offset + n.first_child, n.child_mask)
+            };
+            self.nodes.push(NodeGpu { first_child, mask_level: u32::from(mask) | u32::from(n.level) << 8 });
         }
     }
 
@@ -332,6 +361,13 @@ impl SceneData {
         }
     }
 
+    /// GPU bytes of the tile data ([`crate::residency::tile_bytes`] summed over the tiles): what
+    /// `--gpu-memory` bounds.
+    pub fn tile_bytes(&self, radiance_f16: bool) -> u64 {
+        let b = self.buffer_bytes(radiance_f16);
+        b.total() - b.rock
+    }
+
     /// True when any leaf emits.
     pub fn has_emission(&self) -> bool {
         self.leaves.iter().any(|l| l.emission[..3].iter().any(|&e| e > 0.0))
@@ -343,7 +379,8 @@ impl SceneData {
         for t in &self.tiles {
             for i in 0..t.node_count {
                 let n = t.node_offset + i;
-                let h = (t.depth - self.nodes[n as usize].level()) as usize;
+                // Height above the tile's own leaves (a coarse tile's are 2^leaf_lod wide).
+                let h = (t.depth - t.leaf_lod - self.nodes[n as usize].level()) as usize;
                 if buckets.len() <= h {
                     buckets.resize(h + 1, Vec::new());
                 }
@@ -366,30 +403,44 @@ impl SceneData {
 
     /// Reads every tile of `pkg` (checked SVO view, surfels, colours) and its scene.
     pub fn from_package(pkg: &Package) -> Result<Self> {
+        Self::from_package_with(pkg, |_| TileMode::Full)
+    }
+
+    /// Reads `pkg` with each tile as `mode_of(tile index)` says: as built, at its coarse level
+    /// ([`coarse_tile`]), or not at all. The rock is classified from every loaded tile's full
+    /// leaves, so a coarse tile keeps the rock behind its walls.
+    pub fn from_package_with(pkg: &Package, mode_of: impl Fn(usize) -> TileMode) -> Result<Self> {
         let name = pkg.path().display().to_string();
         let bad = |problem: String| Error::Scene { package: name.clone(), problem };
         let scene = pkg.scene()?;
         let mut out = SceneData { name: name.clone(), ..Default::default() };
-        let mut leaf_size: Option<f64> = None;
+        // The frame does not depend on which tiles are loaded: cameras and lights keep their
+        // place whatever residency chose.
+        let leaf_size = frame_of(pkg)?.map(|(origin, leaf)| {
+            out.frame_origin_m = origin;
+            out.leaf_size_m = leaf as f32;
+            leaf
+        });
+        // Full leaves of the coarse tiles, for the rock.
+        let mut hidden_leaves: Vec<LeafGpu> = Vec::new();
         for tile in pkg.tiles() {
+            let mode = mode_of(tile.index() as usize);
+            if mode == TileMode::Skip {
+                continue;
+            }
             let Some(svo) = tile.svo()? else { continue };
             if svo.nodes.is_empty() {
                 continue;
             }
             let origin = tile.origin_m();
             let ls = tile.leaf_size_m();
-            match leaf_size {
-                None => {
-                    leaf_size = Some(ls);
-                    out.frame_origin_m = origin;
-                    out.leaf_size_m = ls as f32;
-                }
-                Some(l) if (l - ls).abs() > l * 1e-9 => {
-                    return Err(bad(format!("tile {} has leaf size {ls} m, tile 0 has {l} m", tile.index())));
-                }
-                _ => {}
-            }
             let ls0 = leaf_size.unwrap_or(ls);
+            if (ls0 - ls).abs() > ls0 * 1e-9 {
+                return Err(bad(format!(
+                    "tile {} has leaf size {ls} m, the first tile has {ls0} m",
+                    tile.index()
+                )));
+            }
             let mut origin_leaf = [0i32; 3];
             for a in 0..3 {
                 let v = (origin[a] - out.frame_origin_m[a]) / ls0;
@@ -400,10 +451,9 @@ impl SceneData {
                 origin_leaf[a] = r as i32;
             }
             let depth = tile.depth();
-            let node_offset = out.nodes.len() as u32;
-            let leaf_offset = out.leaves.len() as u32;
-            out.push_nodes(svo.nodes.as_ref(), depth, node_offset, leaf_offset);
             let emission = svo.emission.as_deref();
+            let mut leaves = Vec::with_capacity(svo.leaf_count());
+            let mut codes = Vec::with_capacity(svo.leaf_count());
             for (li, n) in svo.nodes.iter().filter(|n| u32::from(n.level) == depth).enumerate() {
                 let cell = morton_decode(n.morton);
                 let center = (IVec3::from_array(origin_leaf)
@@ -413,7 +463,8 @@ impl SceneData {
                 let Rgba8(c) = svo.albedo[li];
                 let ndf = svo.ndf[li];
                 let e = emission.map_or([0.0; 3], |e| e[li].radiance);
-                out.leaves.push(LeafGpu {
+                codes.push(n.morton);
+                leaves.push(LeafGpu {
                     albedo_opacity: [
                         srgb8_to_linear(c[0]),
                         srgb8_to_linear(c[1]),
@@ -425,32 +476,44 @@ impl SceneData {
                     emission: [e[0], e[1], e[2], 0.0],
                 });
             }
-            let leaf_count = out.leaves.len() as u32 - leaf_offset;
-            if leaf_count != svo.leaf_count() as u32 {
+            if leaves.len() != svo.leaf_count() {
                 return Err(bad(format!("tile {}: leaf nodes and leaf arrays disagree", tile.index())));
+            }
+            let node_offset = out.nodes.len() as u32;
+            let leaf_offset = out.leaves.len() as u32;
+            let leaf_lod = if mode == TileMode::Coarse { COARSE_LEVELS.min(depth) } else { 0 };
+            out.push_nodes(svo.nodes.as_ref(), depth - leaf_lod, node_offset, leaf_offset);
+            if leaf_lod > 0 {
+                let coarse = coarse_tile(&leaves, &codes, leaf_lod, out.leaf_size_m);
+                out.leaves.extend(coarse.leaves);
+                out.surfels.extend(coarse.splats);
+                hidden_leaves.extend(leaves);
+            } else {
+                out.leaves.extend(leaves);
+                // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
+                if let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? {
+                    let colors = crate::export::tile_colors(&tile, surfels.len())?;
+                    let shift = DVec3::from_array(origin) - DVec3::from_array(out.frame_origin_m);
+                    for (s, c) in surfels.iter().zip(colors) {
+                        let p = (DVec3::from_array(s.position_tile_m.map(f64::from)) + shift).as_vec3();
+                        out.surfels.push(SurfelGpu {
+                            position_radius: p.extend(s.radius_m).to_array(),
+                            normal_spread: [s.normal[0], s.normal[1], s.normal[2], s.spread],
+                            color: [c[0], c[1], c[2], 0],
+                        });
+                    }
+                }
             }
             out.tiles.push(TileGpu {
                 origin_leaf,
                 depth,
                 node_offset,
                 leaf_offset,
-                node_count: svo.nodes.len() as u32,
-                leaf_count,
-                pad: [0; 4],
+                node_count: out.nodes.len() as u32 - node_offset,
+                leaf_count: out.leaves.len() as u32 - leaf_offset,
+                leaf_lod,
+                pad: [0; 3],
             });
-            // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
-            if let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? {
-                let colors = crate::export::tile_colors(&tile, surfels.len())?;
-                let shift = DVec3::from_array(origin) - DVec3::from_array(out.frame_origin_m);
-                for (s, c) in surfels.iter().zip(colors) {
-                    let p = (DVec3::from_array(s.position_tile_m.map(f64::from)) + shift).as_vec3();
-                    out.surfels.push(SurfelGpu {
-                        position_radius: p.extend(s.radius_m).to_array(),
-                        normal_spread: [s.normal[0], s.normal[1], s.normal[2], s.spread],
-                        color: [c[0], c[1], c[2], 0],
-                    });
-                }
-            }
         }
         let frame = DVec3::from_array(out.frame_origin_m);
         let to_frame = |p: [f64; 3]| (DVec3::from_array(p) - frame).as_vec3();
@@ -530,7 +593,15 @@ impl SceneData {
                 fov_y_deg: c.fov_y_deg as f32,
             });
         }
-        out.rock = crate::rock::classify(out.leaf_size_m, &out.leaves);
+        out.rock = if hidden_leaves.is_empty() {
+            crate::rock::classify(out.leaf_size_m, &out.leaves)
+        } else {
+            for t in out.tiles.iter().filter(|t| t.leaf_lod == 0) {
+                let range = t.leaf_offset as usize..(t.leaf_offset + t.leaf_count) as usize;
+                hidden_leaves.extend_from_slice(&out.leaves[range]);
+            }
+            crate::rock::classify(out.leaf_size_m, &hidden_leaves)
+        };
         Ok(out)
     }
 
@@ -569,7 +640,8 @@ impl SceneData {
                 leaf_offset,
                 node_count: nodes.len() as u32,
                 leaf_count: list.len() as u32,
-                pad: [0; 4],
+                leaf_lod: 0,
+                pad: [0; 3],
             });
         }
         out.rock = crate::rock::classify(out.leaf_size_m, &out.leaves);

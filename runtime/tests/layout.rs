@@ -81,6 +81,7 @@ fn shared() -> Vec<(&'static str, RustLayout)> {
                 leaf_offset,
                 node_count,
                 leaf_count,
+                leaf_lod,
                 pad
             }),
         ),

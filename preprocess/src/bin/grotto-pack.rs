@@ -179,19 +179,7 @@ struct BuildOpts {
 }
 
 fn parse_bytes(s: &str) -> anyhow::Result<u64> {
-    let s = s.trim();
-    let (num, mult) = match s.chars().last() {
-        Some('k' | 'K') => (&s[..s.len() - 1], 1u64 << 10),
-        Some('m' | 'M') => (&s[..s.len() - 1], 1 << 20),
-        Some('g' | 'G') => (&s[..s.len() - 1], 1 << 30),
-        Some('t' | 'T') => (&s[..s.len() - 1], 1 << 40),
-        _ => (s, 1),
-    };
-    let v: f64 = num.parse().with_context(|| format!("memory budget '{s}' is not a size like 2G or 512M"))?;
-    if v.is_nan() || v <= 0.0 {
-        bail!("memory budget '{s}' must be positive");
-    }
-    Ok((v * mult as f64) as u64)
+    grotto_format::parse_bytes(s).map_err(|e| anyhow::anyhow!("memory budget {e}"))
 }
 
 fn parse_formats(names: &[String]) -> anyhow::Result<Vec<ScanFormat>> {

@@ -137,6 +137,14 @@ struct RenderArgs {
     /// Store the radiance pyramid as f16 (half its memory; values above 65504 clamp).
     #[arg(long)]
     radiance_f16: bool,
+    /// GPU memory for tiles, e.g. 512M or 2G (default: what the adapter's binding limits address,
+    /// at most 2G). A package over it keeps the tiles the view needs in full and every other
+    /// tile at its coarse level.
+    #[arg(long, value_parser = grotto_format::parse_bytes)]
+    gpu_memory: Option<u64>,
+    /// Most surfels drawn (default: no limit); tiles beyond it are drawn from their coarse level.
+    #[arg(long)]
+    point_budget: Option<u64>,
     /// Indirect light filter at pixels: trilinear, tricubic or off.
     #[arg(long)]
     indirect: Option<String>,
@@ -226,6 +234,8 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
         lamp_string: a.lamps,
         headlamp: Headlamp::parse(&a.headlamp)
             .ok_or_else(|| anyhow::anyhow!("--headlamp {:?}: use auto, on or off", a.headlamp))?,
+        gpu_memory: a.gpu_memory,
+        point_budget: a.point_budget,
     })
 }
 

@@ -22,7 +22,8 @@ fn ndf_cos(mean: vec3<f32>, l: vec3<f32>) -> f32 {
 
 // A leaf's cones start one leaf off its surface, so that a cone does not see its own leaf first.
 fn leaf_cone_origin(leaf: Leaf) -> vec3<f32> {
-    return leaf.center_m.xyz + leaf_normal(leaf.normal_mean.xyz) * params.leaf_size_m;
+    // center_m.w: the leaf's edge where it is a coarse leaf wider than the package's (else 0).
+    return leaf.center_m.xyz + leaf_normal(leaf.normal_mean.xyz) * max(params.leaf_size_m, leaf.center_m.w);
 }
 
 // World direction of a cone given in the leaf's tangent frame (z = mean normal).

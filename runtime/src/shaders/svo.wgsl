@@ -11,7 +11,9 @@ struct Tile {
     leaf_offset: u32,
     node_count: u32,
     leaf_count: u32,
-    pad: vec4<u32>,
+    // 0, or the level of a coarse tile's leaves (TileGpu::leaf_lod): its SVO ends there.
+    leaf_lod: u32,
+    pad: array<u32, 3>,
 }
 
 struct Node {
@@ -73,8 +75,10 @@ fn find_node(v: vec3<i32>, lod: u32) -> u32 {
     if lod > tile.depth {
         return EMPTY;
     }
-    let local = vec3<u32>(v_leaf - tile.origin_leaf) >> vec3<u32>(lod);
-    return descend(tile.node_offset, local, tile.depth - lod);
+    // A coarse tile ends at its coarse leaves: a finer sample reads the leaf that holds it.
+    let l = max(lod, tile.leaf_lod);
+    let local = vec3<u32>(v_leaf - tile.origin_leaf) >> vec3<u32>(l);
+    return descend(tile.node_offset, local, tile.depth - l);
 }
 
 // Global leaf index of the leaf cell `v` (global leaf units), or EMPTY.
@@ -127,7 +131,7 @@ fn sample_level(p_leaf: vec3<f32>, lod: u32, dir: vec3<f32>) -> vec4<f32> {
     let t = find_tile(i0 << vec3<u32>(lod));
     let t1 = find_tile((i0 + vec3<i32>(1)) << vec3<u32>(lod));
     var acc = vec4<f32>(0.0);
-    if t != EMPTY && t == t1 && lod <= tiles[t].depth {
+    if t != EMPTY && t == t1 && lod <= tiles[t].depth && lod >= tiles[t].leaf_lod {
         let tile = tiles[t];
         let levels = tile.depth - lod;
         let lo = vec3<u32>((i0 << vec3<u32>(lod)) - tile.origin_leaf) >> vec3<u32>(lod);

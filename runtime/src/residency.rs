@@ -1,0 +1,410 @@
+//! Which tiles the renderer holds in full under a GPU memory budget and a point budget, for a
+//! view. Every tile keeps its coarse level (coarse.rs) resident, reserved first: cones that leave
+//! the full tiles still meet walls and light. The rest of the budget goes to full tiles by
+//! priority: tiles in the view frustum, then tiles that light them (within `light_reach_m` of a
+//! visible tile, or holding a light), then the others; nearer first within each class. A tile
+//! that does not fit is passed over for smaller ones behind it (greedy), never split.
+//!
+//! Pure policy over byte counts, no GPU: the renderer's buffers follow the same per-tile formula
+//! ([`tile_bytes`], checked against `SceneData::buffer_bytes` by a test), so the bytes chosen here
+//! are the bytes the renderer holds for tiles.
+
+use glam::{DVec3, Vec3};
+use grotto_format::spec::{Surfel, SvoNode};
+use grotto_format::{Package, SectionKind};
+use serde::Serialize;
+
+use crate::coarse::COARSE_LEVELS;
+use crate::error::{Error, Result};
+use crate::scene_data::TileMode;
+
+/// What one representation of a tile costs on the GPU.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct TileCost {
+    pub nodes: u64,
+    pub leaves: u64,
+    pub surfels: u64,
+    pub bytes: u64,
+}
+
+impl TileCost {
+    pub fn new(nodes: u64, leaves: u64, surfels: u64, radiance_f16: bool) -> Self {
+        Self { nodes, leaves, surfels, bytes: tile_bytes(nodes, leaves, surfels, radiance_f16) }
+    }
+}
+
+/// GPU bytes a tile of `nodes` nodes, `leaves` leaves and `surfels` surfels takes: its tile
+/// record, nodes, radiance pyramid (six faces a node), mip order, leaves, leaf light and surfels,
+/// as the renderer allocates them (`SceneData::buffer_bytes` without the rock).
+pub fn tile_bytes(nodes: u64, leaves: u64, surfels: u64, radiance_f16: bool) -> u64 {
+    use crate::gpu_types::{LeafGpu, LeafLightGpu, NodeGpu, SurfelGpu, TileGpu};
+    let face = if radiance_f16 { 8 } else { 16 };
+    size_of::<TileGpu>() as u64
+        + nodes * (size_of::<NodeGpu>() as u64 + 6 * face + 4)
+        + leaves * (size_of::<LeafGpu>() + size_of::<LeafLightGpu>()) as u64
+        + surfels * size_of::<SurfelGpu>() as u64
+}
+
+/// A tile as the policy sees it: its box in frame metres and what each representation costs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TileFootprint {
+    /// The package's tile index.
+    pub index: usize,
+    pub min_m: Vec3,
+    pub max_m: Vec3,
+    pub full: TileCost,
+    pub coarse: TileCost,
+}
+
+/// The budgets residency keeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Budget {
+    /// Bytes of tile data on the GPU (`--gpu-memory`).
+    pub gpu_bytes: u64,
+    /// Surfels drawn (`--point-budget`).
+    pub points: u64,
+}
+
+/// The view residency serves.
+#[derive(Clone, Debug, PartialEq)]
+pub struct View {
+    pub eye_m: Vec3,
+    pub forward: Vec3,
+    pub up: Vec3,
+    pub fov_y_rad: f32,
+    pub aspect: f32,
+    /// Light positions (frame metres).
+    pub lights_m: Vec<Vec3>,
+    /// How far light travels between tiles that matters (cone reach).
+    pub light_reach_m: f32,
+}
+
+/// Why a tile ranks where it does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Relevance {
+    Other,
+    /// Lights a visible tile (near one, or holds a light).
+    Lights,
+    Visible,
+}
+
+/// One tile's decision.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Decision {
+    pub tile: usize,
+    pub relevance: Relevance,
+    pub distance_m: f32,
+    pub mode: TileMode,
+}
+
+/// What [`choose`] decided.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Residency {
+    /// In priority order.
+    pub decisions: Vec<Decision>,
+    pub budget: Budget,
+    /// Tile bytes held: every coarse level plus the full tiles' extra.
+    pub resident_bytes: u64,
+    /// Of them, the coarse levels' reserve.
+    pub coarse_bytes: u64,
+    /// Surfels drawn.
+    pub surfels: u64,
+    pub full_tiles: usize,
+    pub coarse_tiles: usize,
+    /// Visible tiles left coarse for lack of budget.
+    pub visible_coarse: usize,
+}
+
+/// [`Residency`] without the per-tile decisions, for summaries.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ResidencySummary {
+    pub budget: Budget,
+    pub resident_bytes: u64,
+    pub coarse_bytes: u64,
+    pub surfels: u64,
+    pub full_tiles: usize,
+    pub coarse_tiles: usize,
+    pub visible_coarse: usize,
+}
+
+impl Residency {
+    pub fn summary(&self) -> ResidencySummary {
+        ResidencySummary {
+            budget: self.budget,
+            resident_bytes: self.resident_bytes,
+            coarse_bytes: self.coarse_bytes,
+            surfels: self.surfels,
+            full_tiles: self.full_tiles,
+            coarse_tiles: self.coarse_tiles,
+            visible_coarse: self.visible_coarse,
+        }
+    }
+
+    /// Mode of the package's tile `index` (tiles the policy never saw are skipped).
+    pub fn mode_of(&self, index: usize) -> TileMode {
+        self.decisions.iter().find(|d| d.tile == index).map_or(TileMode::Skip, |d| d.mode)
+    }
+
+    /// Every tile full (nothing was cut).
+    pub fn all_full(&self) -> bool {
+        self.coarse_tiles == 0
+    }
+}
+
+/// Every tile of `pkg` with an SVO, with its box in the scene's frame
+/// ([`crate::scene_data::frame_of`]) and its costs: full from the section lengths, coarse from the node
+/// levels (reading the nodes is the one pass over a tile this takes). A coarse tile's splats are counted as its leaves (an upper bound: empty blocks draw
+/// none), so the bytes chosen are never under what is held.
+pub fn footprints(pkg: &Package, radiance_f16: bool) -> Result<Vec<TileFootprint>> {
+    let mut out = Vec::new();
+    let Some((frame_origin_m, _)) = crate::scene_data::frame_of(pkg)? else { return Ok(out) };
+    for tile in pkg.tiles() {
+        let Some(nodes) = tile.read::<SvoNode>(SectionKind::SvoNodes)? else { continue };
+        if nodes.is_empty() {
+            continue;
+        }
+        let depth = tile.depth();
+        let len = |kind: SectionKind, each: usize| tile.find(kind, 0).map_or(0, |s| s.raw_len / each as u64);
+        let leaves = nodes.iter().filter(|n| u32::from(n.level) == depth).count() as u64;
+        let surfels = len(SectionKind::Surfels, size_of::<Surfel>());
+        let cut = depth - COARSE_LEVELS.min(depth);
+        let coarse_nodes = nodes.iter().filter(|n| u32::from(n.level) <= cut).count() as u64;
+        let coarse_leaves = nodes.iter().filter(|n| u32::from(n.level) == cut).count() as u64;
+        let lo = DVec3::from_array(tile.origin_m()) - DVec3::from_array(frame_origin_m);
+        out.push(TileFootprint {
+            index: tile.index() as usize,
+            min_m: lo.as_vec3(),
+            max_m: (lo + DVec3::splat(tile.extent_m())).as_vec3(),
+            full: TileCost::new(nodes.len() as u64, leaves, surfels, radiance_f16),
+            coarse: if cut == depth {
+                TileCost::new(nodes.len() as u64, leaves, surfels, radiance_f16)
+            } else {
+                TileCost::new(coarse_nodes, coarse_leaves, coarse_leaves, radiance_f16)
+            },
+        });
+    }
+    Ok(out)
+}
+
+fn distance_to_box(p: Vec3, lo: Vec3, hi: Vec3) -> f32 {
+    (lo - p).max(p - hi).max(Vec3::ZERO).length()
+}
+
+fn boxes_within(a: (Vec3, Vec3), b: (Vec3, Vec3), gap: f32) -> bool {
+    ((a.0 - b.1).max(b.0 - a.1)).max(Vec3::ZERO).length() <= gap
+}
+
+/// Whether the box `lo..hi` meets the view's frustum (no far plane): a box is outside when all
+/// its corners are outside one of the four side planes or behind the eye.
+fn in_frustum(view: &View, lo: Vec3, hi: Vec3) -> bool {
+    if distance_to_box(view.eye_m, lo, hi) == 0.0 {
+        return true;
+    }
+    let f = view.forward.normalize_or(Vec3::NEG_Z);
+    let r = f.cross(view.up).normalize_or(Vec3::X);
+    let u = r.cross(f);
+    let th = (0.5 * view.fov_y_rad).tan();
+    let tw = th * view.aspect;
+    // Inward normals of the side planes through the eye, and the near plane at the eye.
+    let planes =
+        [f - r / tw, f + r / tw, f - u / th, f + u / th].map(|n| n.normalize()).into_iter().chain([f]);
+    for n in planes {
+        let corner_max = (0..8)
+            .map(|c| {
+                let p = Vec3::new(
+                    if c & 1 == 0 { lo.x } else { hi.x },
+                    if c & 2 == 0 { lo.y } else { hi.y },
+                    if c & 4 == 0 { lo.z } else { hi.z },
+                );
+                (p - view.eye_m).dot(n)
+            })
+            .fold(f32::MIN, f32::max);
+        if corner_max < 0.0 {
+            return false;
+        }
+    }
+    true
+}
+
+/// Chooses the full tiles for `view` within `budget`. Errors: the coarse levels alone are over
+/// the budget, or a tile's full form is (it could never be loaded); both say what to change.
+pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Residency> {
+    let coarse_bytes: u64 = tiles.iter().map(|t| t.coarse.bytes).sum();
+    let coarse_surfels: u64 = tiles.iter().map(|t| t.coarse.surfels).sum();
+    if coarse_bytes > budget.gpu_bytes {
+        return Err(Error::Budget {
+            what: format!(
+                "the coarse levels of all {} tiles need {} of GPU memory, over the budget of {}",
+                tiles.len(),
+                crate::gpu::human_bytes(coarse_bytes),
+                crate::gpu::human_bytes(budget.gpu_bytes)
+            ),
+            hint: "raise --gpu-memory".into(),
+        });
+    }
+    if let Some(t) = tiles.iter().find(|t| t.full.bytes > budget.gpu_bytes) {
+        return Err(Error::Budget {
+            what: format!(
+                "tile {} needs {} of GPU memory when loaded, over the budget of {}",
+                t.index,
+                crate::gpu::human_bytes(t.full.bytes),
+                crate::gpu::human_bytes(budget.gpu_bytes)
+            ),
+            hint: "raise --gpu-memory, or build the package with smaller tiles (grotto-pack build \
+                   --max-tile-m) or a larger leaf (--leaf-m)"
+                .into(),
+        });
+    }
+    let visible: Vec<bool> = tiles.iter().map(|t| in_frustum(view, t.min_m, t.max_m)).collect();
+    let mut decisions: Vec<Decision> = tiles
+        .iter()
+        .zip(&visible)
+        .map(|(t, &vis)| {
+            let relevance = if vis {
+                Relevance::Visible
+            } else if view.lights_m.iter().any(|&l| distance_to_box(l, t.min_m, t.max_m) == 0.0)
+                || tiles.iter().zip(&visible).any(|(o, &ov)| {
+                    ov && boxes_within((t.min_m, t.max_m), (o.min_m, o.max_m), view.light_reach_m)
+                })
+            {
+                Relevance::Lights
+            } else {
+                Relevance::Other
+            };
+            Decision {
+                tile: t.index,
+                relevance,
+                distance_m: distance_to_box(view.eye_m, t.min_m, t.max_m),
+                mode: TileMode::Coarse,
+            }
+        })
+        .collect();
+    let by_index: std::collections::HashMap<usize, &TileFootprint> =
+        tiles.iter().map(|t| (t.index, t)).collect();
+    decisions.sort_by(|a, b| {
+        b.relevance.cmp(&a.relevance).then(a.distance_m.total_cmp(&b.distance_m)).then(a.tile.cmp(&b.tile))
+    });
+    let (mut bytes, mut surfels) = (coarse_bytes, coarse_surfels);
+    for d in &mut decisions {
+        let t = by_index[&d.tile];
+        let extra_bytes = t.full.bytes.saturating_sub(t.coarse.bytes);
+        let extra_surfels = t.full.surfels.saturating_sub(t.coarse.surfels);
+        if bytes + extra_bytes <= budget.gpu_bytes && surfels + extra_surfels <= budget.points {
+            bytes += extra_bytes;
+            surfels += extra_surfels;
+            d.mode = TileMode::Full;
+        }
+    }
+    let full_tiles = decisions.iter().filter(|d| d.mode == TileMode::Full).count();
+    let visible_coarse =
+        decisions.iter().filter(|d| d.mode == TileMode::Coarse && d.relevance == Relevance::Visible).count();
+    Ok(Residency {
+        coarse_tiles: decisions.len() - full_tiles,
+        decisions,
+        budget,
+        resident_bytes: bytes,
+        coarse_bytes,
+        surfels,
+        full_tiles,
+        visible_coarse,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A row of `n` 4 m tiles along +x, each 1000 B full / 100 B coarse, 50 / 5 surfels.
+    fn row(n: usize) -> Vec<TileFootprint> {
+        (0..n)
+            .map(|i| TileFootprint {
+                index: i,
+                min_m: Vec3::new(4.0 * i as f32, 0.0, 0.0),
+                max_m: Vec3::new(4.0 * i as f32 + 4.0, 4.0, 4.0),
+                full: TileCost { nodes: 0, leaves: 0, surfels: 50, bytes: 1000 },
+                coarse: TileCost { nodes: 0, leaves: 0, surfels: 5, bytes: 100 },
+            })
+            .collect()
+    }
+
+    fn looking(eye: Vec3, forward: Vec3) -> View {
+        View {
+            eye_m: eye,
+            forward,
+            up: Vec3::Z,
+            fov_y_rad: 60f32.to_radians(),
+            aspect: 1.0,
+            lights_m: Vec::new(),
+            light_reach_m: 2.0,
+        }
+    }
+
+    #[test]
+    fn visible_and_near_tiles_come_first_and_the_budget_holds() {
+        let tiles = row(10);
+        // In tile 5 looking along +x: tiles 5..9 visible; 4 lights them (adjacent); the rest not.
+        let view = looking(Vec3::new(22.0, 2.0, 2.0), Vec3::X);
+        let budget = Budget { gpu_bytes: 10 * 100 + 3 * 900, points: u64::MAX };
+        let r = choose(&tiles, &view, budget).unwrap();
+        let order: Vec<usize> = r.decisions.iter().map(|d| d.tile).collect();
+        assert_eq!(order, [5, 6, 7, 8, 9, 4, 3, 2, 1, 0]);
+        assert_eq!(r.decisions[5].relevance, Relevance::Lights);
+        assert_eq!(r.decisions[6].relevance, Relevance::Other);
+        let full: Vec<usize> =
+            r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect();
+        assert_eq!(full, [5, 6, 7], "the nearest visible tiles");
+        assert_eq!(r.resident_bytes, budget.gpu_bytes);
+        assert_eq!(r.visible_coarse, 2);
+        // Never over the budget, whatever it is.
+        for gpu_bytes in (1000..=10_000).step_by(77) {
+            let r = choose(&tiles, &view, Budget { gpu_bytes, points: u64::MAX }).unwrap();
+            assert!(r.resident_bytes <= gpu_bytes);
+            let held: u64 = r
+                .decisions
+                .iter()
+                .map(|d| {
+                    if d.mode == TileMode::Full {
+                        tiles[d.tile].full.bytes
+                    } else {
+                        tiles[d.tile].coarse.bytes
+                    }
+                })
+                .sum();
+            assert_eq!(held, r.resident_bytes);
+        }
+    }
+
+    #[test]
+    fn a_tile_behind_the_camera_that_holds_a_light_outranks_unlit_ones() {
+        let tiles = row(10);
+        let mut view = looking(Vec3::new(22.0, 2.0, 2.0), Vec3::X);
+        view.lights_m.push(Vec3::new(2.0, 2.0, 2.0));
+        let r = choose(&tiles, &view, Budget { gpu_bytes: 100_000, points: u64::MAX }).unwrap();
+        let lights: Vec<usize> =
+            r.decisions.iter().filter(|d| d.relevance == Relevance::Lights).map(|d| d.tile).collect();
+        assert_eq!(lights, [4, 0]);
+        assert!(r.all_full());
+    }
+
+    #[test]
+    fn the_point_budget_bounds_the_surfels_drawn() {
+        let tiles = row(10);
+        let view = looking(Vec3::new(22.0, 2.0, 2.0), Vec3::X);
+        let r = choose(&tiles, &view, Budget { gpu_bytes: u64::MAX, points: 10 * 5 + 2 * 45 }).unwrap();
+        assert_eq!(r.full_tiles, 2);
+        assert_eq!(r.surfels, 140);
+    }
+
+    #[test]
+    fn budgets_too_small_for_the_coarse_levels_or_one_tile_are_clear_errors() {
+        let mut tiles = row(4);
+        let view = looking(Vec3::ZERO, Vec3::X);
+        let err = choose(&tiles, &view, Budget { gpu_bytes: 399, points: u64::MAX }).unwrap_err();
+        assert!(err.to_string().contains("coarse levels of all 4 tiles"), "{err}");
+        tiles[2].full.bytes = 5000;
+        let err = choose(&tiles, &view, Budget { gpu_bytes: 4000, points: u64::MAX }).unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.contains("tile 2") && msg.contains("--max-tile-m"), "{msg}");
+    }
+}
