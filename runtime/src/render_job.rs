@@ -108,11 +108,10 @@ pub const STRING_LAMP_W: f32 = 8.0;
 pub const STRING_LAMP_LIFT_M: f32 = 0.6;
 
 /// The tile budget when `--gpu-memory` is not given. wgpu reports no adapter memory, so this is
-/// what the adapter's limits can address: twice its largest storage binding (each pool is one
-/// binding; the largest, leaf light or the radiance pyramid, is under half of a tile's bytes),
-/// at most 2 GiB.
+/// half the largest buffer the adapter allows, at most 2 GiB. Binding limits are checked per
+/// buffer as before (`Error::TooLarge` says what to change).
 pub fn default_gpu_memory(gpu: &Gpu) -> u64 {
-    (2 * gpu.device.limits().max_storage_buffer_binding_size).min(2 << 30)
+    (gpu.device.limits().max_buffer_size / 2).min(2 << 30)
 }
 
 /// `--lamps`: the lights replaced by a lamp string.
@@ -137,7 +136,7 @@ fn non_empty(scene: SceneData) -> Result<SceneData> {
 /// package where it fits (`residency` None), else the tiles [`residency::choose`] keeps in full
 /// for the first camera and every other tile at its coarse level. Cameras are resolved (and a
 /// view framed) on the coarse scene then, so a package over budget is never loaded whole.
-fn resident_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Residency>)> {
+fn resident_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<(Residency, Streaming)>)> {
     let pkg = Package::open(&opts.package)?;
     let f16 = opts.settings.radiance_f16;
     let budget = Budget {
@@ -161,19 +160,68 @@ fn resident_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<
     };
     let (cam, _) = resolve_camera(&coarse, &choice, aspect, opts.settings.splat_scale)?;
     let largest_tile_m = tiles.iter().map(|t| (t.max_m - t.min_m).max_element()).fold(0.0, f32::max);
-    let view = residency::View {
-        eye_m: cam.eye_m,
-        forward: cam.look_at_m - cam.eye_m,
-        up: cam.up,
-        fov_y_rad: cam.fov_y_deg.to_radians(),
+    let streaming = Streaming {
+        pkg,
+        tiles,
+        budget,
         aspect,
         lights_m: coarse.lights.iter().map(|l| l.position_m).collect(),
         light_reach_m: opts.settings.max_distance_m.unwrap_or(largest_tile_m),
     };
-    let chosen = residency::choose(&tiles, &view, budget)?;
-    let mut scene = SceneData::from_package_with(&pkg, |i| chosen.mode_of(i))?;
+    let chosen = streaming.choose(&cam)?;
+    let mut scene = streaming.load(&chosen)?;
     apply_lamps(opts, &mut scene);
-    Ok((scene, Some(chosen)))
+    Ok((scene, Some((chosen, streaming))))
+}
+
+/// What a job over budget keeps to choose tiles again as its camera moves.
+#[derive(Debug)]
+pub struct Streaming {
+    pkg: Package,
+    tiles: Vec<residency::TileFootprint>,
+    budget: Budget,
+    aspect: f32,
+    lights_m: Vec<Vec3>,
+    light_reach_m: f32,
+}
+
+impl Streaming {
+    /// The residency for a camera.
+    pub fn choose(&self, cam: &Camera) -> Result<Residency> {
+        let view = residency::View {
+            eye_m: cam.eye_m,
+            forward: cam.look_at_m - cam.eye_m,
+            up: cam.up,
+            fov_y_rad: cam.fov_y_deg.to_radians(),
+            aspect: self.aspect,
+            lights_m: self.lights_m.clone(),
+            light_reach_m: self.light_reach_m,
+        };
+        residency::choose(&self.tiles, &view, self.budget)
+    }
+
+    /// The scene of a residency (the package's lights; a job's own lights are the caller's).
+    pub fn load(&self, r: &Residency) -> Result<SceneData> {
+        SceneData::from_package_with(&self.pkg, |i| r.mode_of(i))
+    }
+}
+
+/// One frame of a job, for `--json` and the fly-through tables.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameReport {
+    pub frame: u32,
+    /// GPU bytes of tile data held for this frame.
+    pub tile_bytes: u64,
+    pub full_tiles: usize,
+    pub coarse_tiles: usize,
+    /// Tiles that became full (loaded) and coarse (evicted) for this frame.
+    pub loaded: usize,
+    pub evicted: usize,
+    pub surfels: usize,
+    /// Bounces run for this frame (after a change of tiles the light is settled again).
+    pub bounces: u32,
+    /// Milliseconds of each pass that ran for this frame.
+    pub pass_ms: std::collections::BTreeMap<String, f64>,
 }
 
 /// What a render did, for `--json` and the summary line.
@@ -199,10 +247,14 @@ pub struct RenderSummary {
     pub residency: Option<residency::ResidencySummary>,
     /// GPU bytes of the tile data the renderer holds (nodes, leaves, light, pyramid, surfels).
     pub tile_bytes: u64,
+    /// Per frame: tile bytes, tiles loaded and evicted, surfels drawn, pass times.
+    pub frames: Vec<FrameReport>,
     /// How the camera and light were chosen where the package did not say (framing, headlamp).
     pub notes: Vec<String>,
     /// What looks wrong with the image and why: most of it uncovered, or black.
     pub warnings: Vec<String>,
+    /// Seconds to open the package and load the scene (residency included), before the GPU work.
+    pub load_s: f64,
     pub settle_s: f64,
     pub render_s: f64,
     pub first_plan: EffectPlan,
@@ -284,7 +336,8 @@ fn framing_note(scene: &SceneData, f: &Framing) -> String {
 /// of the choice or path, and a headlamp at the first camera where the options or a lightless
 /// scene call for one; with notes saying what was chosen.
 pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
-    let (mut scene, residency) = resident_scene(opts, gpu)?;
+    let (mut scene, streaming) = resident_scene(opts, gpu)?;
+    let (residency, streaming) = streaming.unzip();
     let aspect = opts.width as f32 / opts.height.max(1) as f32;
     let splat = opts.settings.splat_scale;
     let mut notes = Vec::new();
@@ -355,7 +408,7 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
             }
         ));
     }
-    Ok(Prepared { scene, cameras, notes, residency })
+    Ok(Prepared { scene, cameras, notes, residency, streaming })
 }
 
 /// What [`prepare`] gives a job.
@@ -367,6 +420,8 @@ pub struct Prepared {
     pub notes: Vec<String>,
     /// `None` where the whole package fits the budgets.
     pub residency: Option<Residency>,
+    /// Where it did not: how to choose again for another camera.
+    pub streaming: Option<Streaming>,
 }
 
 /// Pixels at most this bright (max of sRGB channels, 0..=255) count as black: no light at all,
@@ -449,7 +504,9 @@ pub fn load_scene(package: &Path) -> Result<SceneData> {
 pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<RenderSummary> {
     image_out::kind_of(&opts.out)?;
     let gpu = Gpu::new(&opts.gpu)?;
-    let Prepared { scene, cameras, notes, residency } = prepare(opts, &gpu)?;
+    let t_load = Instant::now();
+    let Prepared { mut scene, cameras, notes, mut residency, streaming } = prepare(opts, &gpu)?;
+    let load_s = t_load.elapsed().as_secs_f64();
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
     let mut r = Renderer::new(&gpu, &scene, settings.clone())?;
@@ -465,7 +522,33 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let n = cameras.len() as u32;
     let mut uncovered_pixels = 0;
     let mut black_pixels = 0;
+    let mut frames = Vec::new();
+    let f16 = settings.radiance_f16;
     for (i, cam) in cameras.iter().enumerate() {
+        let (mut loaded, mut evicted, mut bounces) = (0, 0, 0);
+        if i == 0 {
+            bounces = r.stats().bounces_done;
+        } else if let (Some(st), Some(current)) = (&streaming, &residency) {
+            // The tiles this camera needs: where they differ, the scene is loaded again and its
+            // light settled (every tile's upload, not yet a bounded one per frame).
+            let next = st.choose(cam)?;
+            let full = |r: &Residency| -> std::collections::BTreeSet<usize> {
+                r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect()
+            };
+            let (before, after) = (full(current), full(&next));
+            if before != after {
+                loaded = after.difference(&before).count();
+                evicted = before.difference(&after).count();
+                let mut next_scene = st.load(&next)?;
+                next_scene.lights = scene.lights.clone();
+                next_scene.headlamp = scene.headlamp;
+                scene = next_scene;
+                settings.exposure = exposure;
+                r = Renderer::new(&gpu, &scene, settings.clone())?;
+                bounces = r.settle(|done, change| progress(Progress::Bounce { done, budget, change }))?;
+            }
+            residency = Some(next);
+        }
         let (mut frame, plan) = r.render(cam, opts.width, opts.height)?;
         last_plan = plan;
         if opts.exposure.is_none() && i == 0 {
@@ -483,6 +566,17 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
                 .filter(|(h, l)| h[3] >= 0.5 && l[0].max(l[1]).max(l[2]) <= BLACK_LDR)
                 .count(),
         );
+        frames.push(FrameReport {
+            frame: i as u32,
+            tile_bytes: scene.tile_bytes(f16),
+            full_tiles: scene.tiles.iter().filter(|t| t.leaf_lod == 0).count(),
+            coarse_tiles: scene.tiles.iter().filter(|t| t.leaf_lod > 0).count(),
+            loaded,
+            evicted,
+            surfels: scene.surfels.len(),
+            bounces,
+            pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
+        });
         let path = frame_path(&opts.out, i as u32, n);
         image_out::write_frame(&frame, &path)?;
         images.push(path.display().to_string());
@@ -505,6 +599,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         black_pixels,
         residency: residency.as_ref().map(Residency::summary),
         tile_bytes: scene.tile_bytes(settings.radiance_f16),
+        frames,
         warnings: image_warnings(
             &scene,
             uncovered_pixels,
@@ -512,6 +607,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             opts.width as usize * opts.height as usize,
         ),
         notes,
+        load_s,
         settle_s,
         render_s: t1.elapsed().as_secs_f64(),
         first_plan,

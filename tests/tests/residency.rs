@@ -206,3 +206,35 @@ fn a_render_job_keeps_its_budget_and_a_budget_too_small_is_a_clear_error() {
     assert!(err.contains("when loaded") && err.contains("--max-tile-m"), "{err}");
     assert!(!dir.path().join("c.png").exists() && !dir.path().join("d.png").exists());
 }
+
+#[test]
+fn a_fly_through_under_a_tiny_budget_loads_and_evicts_and_never_exceeds_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let package = small_tiles_cave(dir.path());
+    let pkg = Package::open(&package).unwrap();
+    let tiles = residency::footprints(&pkg, false).unwrap();
+    let coarse: u64 = tiles.iter().map(|t| t.coarse.bytes).sum();
+    let full: u64 = tiles.iter().map(|t| t.full.bytes).sum();
+    let gpu_memory = coarse + (full - coarse) / 4;
+    let opts = RenderOptions {
+        path: vec!["entrance".into(), "chamber".into()],
+        frames: 6,
+        width: 64,
+        height: 48,
+        settings: Settings { bounces: 1, shadow_map_size: 128, ..Settings::default() },
+        gpu: gpu_options(),
+        gpu_memory: Some(gpu_memory),
+        ..RenderOptions::defaults(package.clone(), dir.path().join("fly.png"))
+    };
+    let s = render_job::run(&opts, |_| {}).unwrap();
+    assert_eq!(s.frames.len(), 6);
+    for f in &s.frames {
+        eprintln!("{f:?}");
+        assert!(f.tile_bytes <= gpu_memory, "frame {}: {} > {gpu_memory}", f.frame, f.tile_bytes);
+        assert_eq!(f.full_tiles + f.coarse_tiles, tiles.len());
+    }
+    let moved: usize = s.frames.iter().map(|f| f.loaded + f.evicted).sum();
+    assert!(moved > 0, "the path crosses the cave: tiles must come and go");
+    assert!(s.frames.iter().skip(1).any(|f| f.loaded > 0 && f.bounces > 0), "loaded tiles get their light");
+    assert_eq!(s.images.len(), 6);
+}

@@ -137,8 +137,8 @@ struct RenderArgs {
     /// Store the radiance pyramid as f16 (half its memory; values above 65504 clamp).
     #[arg(long)]
     radiance_f16: bool,
-    /// GPU memory for tiles, e.g. 512M or 2G (default: what the adapter's binding limits address,
-    /// at most 2G). A package over it keeps the tiles the view needs in full and every other
+    /// GPU memory for tiles, e.g. 512M or 2G (default: half the adapter's largest buffer, at
+    /// most 2G). A package over it keeps the tiles the view needs in full and every other
     /// tile at its coarse level.
     #[arg(long, value_parser = grotto_format::parse_bytes)]
     gpu_memory: Option<u64>,
@@ -310,6 +310,22 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
     }
     for n in &summary.notes {
         println!("{n}");
+    }
+    if summary.residency.is_some() && summary.frames.len() > 1 {
+        println!("frame  tile MiB  full  coarse  loaded  evicted  surfels  bounces");
+        for f in &summary.frames {
+            println!(
+                "{:5}  {:8.1}  {:4}  {:6}  {:6}  {:7}  {:7}  {:7}",
+                f.frame,
+                f.tile_bytes as f64 / f64::from(1u32 << 20),
+                f.full_tiles,
+                f.coarse_tiles,
+                f.loaded,
+                f.evicted,
+                f.surfels,
+                f.bounces
+            );
+        }
     }
     if a.explain {
         println!("effect plan, first update:\n{}", summary.first_plan.explain());
