@@ -244,7 +244,7 @@ pub struct RenderSummary {
     /// Most pixels any frame showed black (a surface, but no light reaching it).
     pub black_pixels: usize,
     /// Tiles held in full and coarse under the budgets; None where the whole package fit.
-    pub residency: Option<residency::ResidencySummary>,
+    pub residency: Option<residency::ResidencyTotals>,
     /// GPU bytes of the tile data the renderer holds (nodes, leaves, light, pyramid, surfels).
     pub tile_bytes: u64,
     /// Per frame: tile bytes, tiles loaded and evicted, surfels drawn, pass times.
@@ -393,15 +393,15 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
         notes.push(format!(
             "residency: {} of {} tiles in full, the rest at their coarse level; {} of tile data \
              (budget {}), {} surfels drawn{}",
-            r.full_tiles,
+            r.totals.full_tiles,
             r.decisions.len(),
-            crate::gpu::human_bytes(r.resident_bytes),
-            crate::gpu::human_bytes(r.budget.gpu_bytes),
-            r.surfels,
-            if r.visible_coarse > 0 {
+            crate::gpu::human_bytes(r.totals.resident_bytes),
+            crate::gpu::human_bytes(r.totals.budget.gpu_bytes),
+            r.totals.surfels,
+            if r.totals.visible_coarse > 0 {
                 format!(
                     "; {} tiles in view left coarse (raise --gpu-memory or --point-budget)",
-                    r.visible_coarse
+                    r.totals.visible_coarse
                 )
             } else {
                 String::new()
@@ -597,7 +597,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         exposure,
         uncovered_pixels,
         black_pixels,
-        residency: residency.as_ref().map(Residency::summary),
+        residency: residency.as_ref().map(|r| r.totals),
         tile_bytes: scene.tile_bytes(settings.radiance_f16),
         frames,
         warnings: image_warnings(
@@ -641,7 +641,7 @@ pub struct PassBench {
     pub repetitions: u32,
     pub settings: Settings,
     /// As in [`RenderSummary`].
-    pub residency: Option<residency::ResidencySummary>,
+    pub residency: Option<residency::ResidencyTotals>,
     pub tile_bytes: u64,
 }
 
@@ -697,6 +697,6 @@ pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
         repetitions: reps,
         tile_bytes: scene.tile_bytes(r.settings().radiance_f16),
         settings: r.settings().clone(),
-        residency: residency.as_ref().map(Residency::summary),
+        residency: residency.as_ref().map(|r| r.totals),
     })
 }

@@ -103,6 +103,13 @@ pub struct Decision {
 pub struct Residency {
     /// In priority order.
     pub decisions: Vec<Decision>,
+    #[serde(flatten)]
+    pub totals: ResidencyTotals,
+}
+
+/// The totals of a [`Residency`] (what summaries report).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ResidencyTotals {
     pub budget: Budget,
     /// Tile bytes held: every coarse level plus the full tiles' extra.
     pub resident_bytes: u64,
@@ -116,31 +123,7 @@ pub struct Residency {
     pub visible_coarse: usize,
 }
 
-/// [`Residency`] without the per-tile decisions, for summaries.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct ResidencySummary {
-    pub budget: Budget,
-    pub resident_bytes: u64,
-    pub coarse_bytes: u64,
-    pub surfels: u64,
-    pub full_tiles: usize,
-    pub coarse_tiles: usize,
-    pub visible_coarse: usize,
-}
-
 impl Residency {
-    pub fn summary(&self) -> ResidencySummary {
-        ResidencySummary {
-            budget: self.budget,
-            resident_bytes: self.resident_bytes,
-            coarse_bytes: self.coarse_bytes,
-            surfels: self.surfels,
-            full_tiles: self.full_tiles,
-            coarse_tiles: self.coarse_tiles,
-            visible_coarse: self.visible_coarse,
-        }
-    }
-
     /// Mode of the package's tile `index` (tiles the policy never saw are skipped).
     pub fn mode_of(&self, index: usize) -> TileMode {
         self.decisions.iter().find(|d| d.tile == index).map_or(TileMode::Skip, |d| d.mode)
@@ -148,7 +131,7 @@ impl Residency {
 
     /// Every tile full (nothing was cut).
     pub fn all_full(&self) -> bool {
-        self.coarse_tiles == 0
+        self.totals.coarse_tiles == 0
     }
 }
 
@@ -299,16 +282,16 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
     let full_tiles = decisions.iter().filter(|d| d.mode == TileMode::Full).count();
     let visible_coarse =
         decisions.iter().filter(|d| d.mode == TileMode::Coarse && d.relevance == Relevance::Visible).count();
-    Ok(Residency {
-        coarse_tiles: decisions.len() - full_tiles,
-        decisions,
+    let totals = ResidencyTotals {
         budget,
         resident_bytes: bytes,
         coarse_bytes,
         surfels,
         full_tiles,
+        coarse_tiles: decisions.len() - full_tiles,
         visible_coarse,
-    })
+    };
+    Ok(Residency { decisions, totals })
 }
 
 #[cfg(test)]
@@ -354,12 +337,12 @@ mod tests {
         let full: Vec<usize> =
             r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect();
         assert_eq!(full, [5, 6, 7], "the nearest visible tiles");
-        assert_eq!(r.resident_bytes, budget.gpu_bytes);
-        assert_eq!(r.visible_coarse, 2);
+        assert_eq!(r.totals.resident_bytes, budget.gpu_bytes);
+        assert_eq!(r.totals.visible_coarse, 2);
         // Never over the budget, whatever it is.
         for gpu_bytes in (1000..=10_000).step_by(77) {
             let r = choose(&tiles, &view, Budget { gpu_bytes, points: u64::MAX }).unwrap();
-            assert!(r.resident_bytes <= gpu_bytes);
+            assert!(r.totals.resident_bytes <= gpu_bytes);
             let held: u64 = r
                 .decisions
                 .iter()
@@ -371,7 +354,7 @@ mod tests {
                     }
                 })
                 .sum();
-            assert_eq!(held, r.resident_bytes);
+            assert_eq!(held, r.totals.resident_bytes);
         }
     }
 
@@ -392,8 +375,8 @@ mod tests {
         let tiles = row(10);
         let view = looking(Vec3::new(22.0, 2.0, 2.0), Vec3::X);
         let r = choose(&tiles, &view, Budget { gpu_bytes: u64::MAX, points: 10 * 5 + 2 * 45 }).unwrap();
-        assert_eq!(r.full_tiles, 2);
-        assert_eq!(r.surfels, 140);
+        assert_eq!(r.totals.full_tiles, 2);
+        assert_eq!(r.totals.surfels, 140);
     }
 
     #[test]

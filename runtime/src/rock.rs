@@ -199,6 +199,33 @@ pub fn brick_hash(b: IVec3) -> u32 {
     h ^ (h >> 16)
 }
 
+/// Linear probing in a table of `entry_words`-word entries after `header_words` header words,
+/// whose empty slots start with [`EMPTY_KEY`] (the rock table and the tile index,
+/// tile_index.rs): from slot `hash & mask`, the first empty slot and the probes it took, or
+/// `Err(slot)` of an entry that starts with `key` already.
+pub(crate) fn free_slot(
+    words: &[u32],
+    header_words: usize,
+    entry_words: usize,
+    mask: usize,
+    hash: usize,
+    key: &[u32],
+) -> Result<(usize, u32), usize> {
+    let mut slot = hash & mask;
+    let mut probe = 0u32;
+    loop {
+        let e = header_words + slot * entry_words;
+        if words[e] == EMPTY_KEY as u32 {
+            return Ok((slot, probe));
+        }
+        if words[e..e + key.len()] == *key {
+            return Err(slot);
+        }
+        slot = (slot + 1) & mask;
+        probe += 1;
+    }
+}
+
 /// Rock as the GPU reads it: an open-addressing hash table (linear probing, load at most 1/2) of
 /// the bricks that hold rock. Its size follows the rock cells, which lie within
 /// `ROCK_REACH_CELLS` of the scanned surfaces: it grows with the surface, not with the volume of
@@ -228,12 +255,11 @@ impl RockTable {
         }
         let mut longest = 0u32;
         for &(b, bits) in &list {
-            let mut slot = brick_hash(b) as usize & mask;
-            let mut probe = 0u32;
-            while words[HEADER_WORDS + slot * ENTRY_WORDS] != EMPTY_KEY as u32 {
-                slot = (slot + 1) & mask;
-                probe += 1;
-            }
+            let key = [b.x as u32, b.y as u32, b.z as u32];
+            // Bricks are unique (a map's keys): no slot holds this key yet.
+            let (slot, probe) =
+                free_slot(&words, HEADER_WORDS, ENTRY_WORDS, mask, brick_hash(b) as usize, &key)
+                    .unwrap_or_default();
             longest = longest.max(probe);
             let e = HEADER_WORDS + slot * ENTRY_WORDS;
             words[e..e + ENTRY_WORDS].copy_from_slice(&[

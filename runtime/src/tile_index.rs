@@ -19,7 +19,7 @@ use glam::IVec3;
 
 use crate::error::{Error, Result};
 use crate::gpu_types::TileGpu;
-use crate::rock::brick_hash;
+use crate::rock::{brick_hash, free_slot};
 
 /// Words before the first entry: capacity - 1 (capacity a power of two), the longest probe
 /// sequence any entry needs, the mask of depths entries are keyed at, the entry count, the anchor
@@ -92,31 +92,20 @@ impl TileIndex {
         let (mut longest, mut depths) = (0u32, 0u32);
         for &(cell, depth, tile) in &entries {
             depths |= 1 << depth;
-            let mut slot = tile_hash(cell, depth) as usize & mask;
-            let mut probe = 0u32;
-            loop {
-                let e = HEADER_WORDS + slot * ENTRY_WORDS;
-                if words[e] == EMPTY_KEY as u32 {
-                    break;
-                }
-                if words[e..e + 4] == [cell.x as u32, cell.y as u32, cell.z as u32, depth] {
-                    return Err(Error::Scene {
+            let key = [cell.x as u32, cell.y as u32, cell.z as u32, depth];
+            let (slot, probe) =
+                free_slot(&words, HEADER_WORDS, ENTRY_WORDS, mask, tile_hash(cell, depth) as usize, &key)
+                    .map_err(|taken| Error::Scene {
                         package: scene.into(),
-                        problem: format!("tiles {} and {tile} overlap", words[e + 4]),
-                    });
-                }
-                slot = (slot + 1) & mask;
-                probe += 1;
-            }
+                        problem: format!(
+                            "tiles {} and {tile} overlap",
+                            words[HEADER_WORDS + taken * ENTRY_WORDS + 4]
+                        ),
+                    })?;
             longest = longest.max(probe);
             let e = HEADER_WORDS + slot * ENTRY_WORDS;
-            words[e..e + ENTRY_WORDS].copy_from_slice(&[
-                cell.x as u32,
-                cell.y as u32,
-                cell.z as u32,
-                depth,
-                tile,
-            ]);
+            words[e..e + 4].copy_from_slice(&key);
+            words[e + 4] = tile;
         }
         words[..HEADER_WORDS].copy_from_slice(&[
             mask as u32,
