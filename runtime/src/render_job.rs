@@ -243,8 +243,9 @@ pub struct RenderSummary {
     pub uncovered_pixels: usize,
     /// Most pixels any frame showed black (a surface, but no light reaching it).
     pub black_pixels: usize,
-    /// Tiles held in full and coarse under the budgets; None where the whole package fit.
-    pub residency: Option<residency::ResidencyTotals>,
+    /// Tiles held in full and coarse under the budgets (for the last frame: each tile's mode,
+    /// relevance and distance, and the totals); None where the whole package fit.
+    pub residency: Option<Residency>,
     /// GPU bytes of the tile data the renderer holds (nodes, leaves, light, pyramid, surfels).
     pub tile_bytes: u64,
     /// Per frame: tile bytes, tiles loaded and evicted, surfels drawn, pass times.
@@ -597,7 +598,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         exposure,
         uncovered_pixels,
         black_pixels,
-        residency: residency.as_ref().map(|r| r.totals),
+        residency,
         tile_bytes: scene.tile_bytes(settings.radiance_f16),
         frames,
         warnings: image_warnings(

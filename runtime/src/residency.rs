@@ -129,6 +129,29 @@ impl Residency {
         self.decisions.iter().find(|d| d.tile == index).map_or(TileMode::Skip, |d| d.mode)
     }
 
+    /// The decisions as text (`--explain`): the first `rows` tiles by priority, then counts.
+    pub fn explain(&self, rows: usize) -> String {
+        use std::fmt::Write;
+        let t = &self.totals;
+        let mut out = format!(
+            "residency: {} tiles full, {} coarse ({} in view), {} of {} budget, {} surfels\n  \
+             tile  relevance  distance m  mode\n",
+            t.full_tiles,
+            t.coarse_tiles,
+            t.visible_coarse,
+            crate::gpu::human_bytes(t.resident_bytes),
+            crate::gpu::human_bytes(t.budget.gpu_bytes),
+            t.surfels
+        );
+        for d in self.decisions.iter().take(rows) {
+            let _ = writeln!(out, "  {:4}  {:9?}  {:10.1}  {:?}", d.tile, d.relevance, d.distance_m, d.mode);
+        }
+        if self.decisions.len() > rows {
+            let _ = writeln!(out, "  ... {} more (all in --json)", self.decisions.len() - rows);
+        }
+        out
+    }
+
     /// Every tile full (nothing was cut).
     pub fn all_full(&self) -> bool {
         self.totals.coarse_tiles == 0
@@ -339,6 +362,8 @@ mod tests {
         assert_eq!(full, [5, 6, 7], "the nearest visible tiles");
         assert_eq!(r.totals.resident_bytes, budget.gpu_bytes);
         assert_eq!(r.totals.visible_coarse, 2);
+        let text = r.explain(3);
+        assert!(text.contains("3 tiles full, 7 coarse (2 in view)") && text.contains("... 7 more"), "{text}");
         // Never over the budget, whatever it is.
         for gpu_bytes in (1000..=10_000).step_by(77) {
             let r = choose(&tiles, &view, Budget { gpu_bytes, points: u64::MAX }).unwrap();

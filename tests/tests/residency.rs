@@ -191,7 +191,7 @@ fn a_render_job_keeps_its_budget_and_a_budget_too_small_is_a_clear_error() {
     let budget = coarse + (full - coarse) / 3;
     assert!(budget >= largest);
     let s = render_job::run(&opts(budget, "a.png"), |_| {}).unwrap();
-    let r = s.residency.expect("over budget: residency decides");
+    let r = s.residency.expect("over budget: residency decides").totals;
     assert!(r.full_tiles > 0 && r.coarse_tiles > 0, "{r:?}");
     assert!(s.tile_bytes <= r.resident_bytes && r.resident_bytes <= budget, "{} / {r:?}", s.tile_bytes);
     // The whole package fits: no residency, every tile in full.

@@ -328,6 +328,9 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
         }
     }
     if a.explain {
+        if let Some(r) = &summary.residency {
+            println!("{}", r.explain(24));
+        }
         println!("effect plan, first update:\n{}", summary.first_plan.explain());
         println!("effect plan, last frame:\n{}", summary.last_plan.explain());
     }
