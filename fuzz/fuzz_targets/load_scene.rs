@@ -1,11 +1,14 @@
 //! Fuzzes the runtime's loading of a package into its scene (package bytes -> `SceneData`, no
-//! GPU): SVO views, surfel colours, lights, materials, the environment chain and the rock table.
+//! GPU): SVO views, surfel colours, lights, materials, the environment chain and the rock table;
+//! residency's per-tile costs and choice, coarse tiles, and the tile index.
 //! Any bytes may fail; none may panic, hang, or allocate beyond what the input justifies.
 //! Each input is tried as is and with its checksums recomputed (reseal.rs).
 #![no_main]
 
 use grotto_format::Package;
-use grotto_runtime::scene_data::SceneData;
+use grotto_runtime::residency::{self, Budget, View};
+use grotto_runtime::scene_data::{SceneData, TileMode};
+use grotto_runtime::tile_index::TileIndex;
 use libfuzzer_sys::fuzz_target;
 
 #[path = "reseal.rs"]
@@ -25,5 +28,25 @@ fn load(data: &[u8]) {
         // What the renderer sizes its buffers from.
         let _ = scene.buffer_bytes(false);
         let _ = scene.nodes_by_height();
+        let _ = TileIndex::build("fuzz", &scene.tiles);
     }
+    // Residency over a budget of half the package: every other tile coarse or full as chosen.
+    let Ok(tiles) = residency::footprints(&pkg, false) else { return };
+    let full: u64 = tiles.iter().map(|t| t.full.bytes).sum();
+    let view = View {
+        eye_m: glam::Vec3::ZERO,
+        forward: glam::Vec3::X,
+        up: glam::Vec3::Z,
+        fov_y_rad: 1.0,
+        aspect: 1.5,
+        lights_m: Vec::new(),
+        light_reach_m: 4.0,
+    };
+    if let Ok(r) = residency::choose(&tiles, &view, Budget { gpu_bytes: full / 2, points: u64::MAX }) {
+        if let Ok(scene) = SceneData::from_package_with(&pkg, |i| r.mode_of(i)) {
+            let _ = scene.nodes_by_height();
+            let _ = TileIndex::build("fuzz", &scene.tiles);
+        }
+    }
+    let _ = SceneData::from_package_with(&pkg, |i| if i % 2 == 0 { TileMode::Coarse } else { TileMode::Skip });
 }

@@ -63,7 +63,10 @@ impl TileIndex {
             // The largest depth at which the tile's corner lies on the anchor's grid.
             let aligned = (rel.x | rel.y | rel.z | (1 << t.depth)).trailing_zeros().min(t.depth);
             let per_axis = 1i64 << (t.depth - aligned);
-            if entries.len() as i64 + per_axis.pow(3) > MAX_ENTRIES as i64 {
+            // 3 * (depth - aligned) bits of entries: compared as exponents first (no overflow).
+            if 3 * (t.depth - aligned) > MAX_ENTRIES.trailing_zeros()
+                || entries.len() as i64 + per_axis.pow(3) > MAX_ENTRIES as i64
+            {
                 return Err(Error::Scene {
                     package: scene.into(),
                     problem: format!(
