@@ -113,10 +113,10 @@ pub struct Renderer {
     faces: wgpu::Buffer,
     stats: wgpu::Buffer,
     surfels: wgpu::Buffer,
-    inject: passes::inject::Inject,
-    env: passes::ConeBatched,
+    inject: passes::Batched,
+    env: passes::Batched,
     mip: passes::mip::Mip,
-    propagate: passes::ConeBatched,
+    propagate: passes::Batched,
     shadow: shadow::Shadow,
     gbuffer: gbuffer::Gbuffer,
     shade: shade::Shade,
@@ -335,8 +335,7 @@ impl Renderer {
 
         let (by_height, ranges) = scene.nodes_by_height();
         let lights_in_range = lights.grid.occupancy();
-        let inject =
-            gpu.scoped("inject", || passes::inject::Inject::new(gpu, shared, f16, lights_in_range.1))?;
+        let inject = gpu.scoped("inject", || passes::inject::new(gpu, shared, f16, lights_in_range.1))?;
         let env = gpu.scoped("env", || passes::env::new(gpu, shared, f16, settings.cones))?;
         let mip = gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, &by_height, &ranges, f16))?;
         let propagate =

@@ -1,10 +1,10 @@
 //! Environment (env.wgsl): sky visibility and SH irradiance at every leaf, once per environment,
-//! one cone per dispatch (`ConeBatched`).
+//! one cone per dispatch (`cone_batched`).
 
 use crate::error::Result;
 use crate::gpu::Gpu;
 
 /// The env pass over the settings' `cones`.
-pub fn new(gpu: &Gpu, shared: &super::Shared, radiance_f16: bool, cones: u32) -> Result<super::ConeBatched> {
-    super::ConeBatched::new(gpu, "env", crate::shaders::ENV, shared, radiance_f16, cones)
+pub fn new(gpu: &Gpu, shared: &super::Shared, radiance_f16: bool, cones: u32) -> Result<super::Batched> {
+    super::cone_batched(gpu, "env", crate::shaders::ENV, shared, radiance_f16, cones)
 }

@@ -7,7 +7,7 @@
 // sh_irradiance_ndf_over_pi): unoccluded leaves get exactly that, a leaf whose cones all end on
 // rock gets nothing. Runs once per environment (geometry is static).
 //
-// Cones are traced in batches, one dispatch each (passes/mod.rs `ConeBatched`); the running sums
+// Cones are traced in batches, one dispatch each (passes/mod.rs `cone_batched`); the running sums
 // of the numerator and denominator live in the leaf's `env` (x, y) until the last batch, added to
 // in the same order as one loop would.
 #import cone

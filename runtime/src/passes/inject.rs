@@ -17,44 +17,21 @@ use crate::gpu_types::InjectBatch;
 /// Lights of a cell handled by one inject dispatch.
 pub const LIGHTS_PER_BATCH: u32 = 4;
 
-#[derive(Debug)]
-pub struct Inject {
-    pipeline: super::ComputePipeline,
-    batches: Vec<wgpu::BindGroup>,
-}
-
-impl Inject {
-    /// `max_lights_per_cell`: the longest light-grid cell list (at least one batch runs, so that
-    /// a scene whose lights reach no leaf still resets the direct light).
-    pub fn new(
-        gpu: &Gpu,
-        shared: &super::Shared,
-        radiance_f16: bool,
-        max_lights_per_cell: u32,
-    ) -> Result<Self> {
-        let pipeline =
-            super::compute_pipeline(gpu, "inject", crate::shaders::INJECT, "inject", shared, radiance_f16)?;
-        let layout = super::own_layout(&pipeline, "inject")?;
-        let count = max_lights_per_cell.div_ceil(LIGHTS_PER_BATCH).max(1);
-        let batches = super::uniform_groups(
-            gpu,
-            "inject batch",
-            layout,
-            (0..count).map(|b| InjectBatch {
-                first: b * LIGHTS_PER_BATCH,
-                count: LIGHTS_PER_BATCH,
-                reset: u32::from(b == 0),
-                pad: 0,
-            }),
-        )?;
-        Ok(Self { pipeline, batches })
-    }
-
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, leaf_count: u32) {
-        self.pipeline.bind(pass);
-        for bg in &self.batches {
-            pass.set_bind_group(super::OWN_GROUP, bg, &[]);
-            super::dispatch_linear(pass, leaf_count);
-        }
-    }
+/// The inject pass for a light grid whose longest cell list holds `max_lights_per_cell` lights
+/// (at least one batch runs, so that a scene whose lights reach no leaf still resets the direct
+/// light).
+pub fn new(
+    gpu: &Gpu,
+    shared: &super::Shared,
+    radiance_f16: bool,
+    max_lights_per_cell: u32,
+) -> Result<super::Batched> {
+    let count = max_lights_per_cell.div_ceil(LIGHTS_PER_BATCH).max(1);
+    let batches = (0..count).map(|b| InjectBatch {
+        first: b * LIGHTS_PER_BATCH,
+        count: LIGHTS_PER_BATCH,
+        reset: u32::from(b == 0),
+        pad: 0,
+    });
+    super::Batched::new(gpu, "inject", crate::shaders::INJECT, shared, radiance_f16, batches)
 }

@@ -191,48 +191,38 @@ pub fn compute_pipeline(
     Ok(ComputePipeline { pipeline, own_layout, shared: bound })
 }
 
-/// A compute pass with one invocation per leaf that traces the cone set (env, propagate), in
-/// batches of [`CONES_PER_BATCH`] cones per dispatch; its WGSL entry point has the pass's name.
-///
-/// Why batches: Mesa's software drivers (llvmpipe, lavapipe) share one budget of 65535 loop
-/// iterations among all loops of a shader invocation and silently end every loop past it (as in
-/// inject.rs). A cone's march loops over its steps, the rock probes of each step and the octree
-/// descents of each sample, so an invocation tracing all its cones at fine steps ran out: on the
-/// dogleg scene with every leaf sending 1, 16 cones at step 0.1 gathered 0.944 on lavapipe against
-/// 0.999 from the CPU reference (which is step-invariant there); 9 cones, or step >= 0.35, matched
-/// (issue 21). With one cone per dispatch the budget is per cone. Results are the same to the bit:
-/// the running sums are kept in the leaf state and added to in the same order (the WGSL).
+/// A compute pass with one invocation per leaf, dispatched once per batch, each batch's uniform
+/// (binding 0 of the pass's own group) in a bind group made once: inject's lights and the cone
+/// passes' cones (`cone_batched`). Results accumulate in the leaf state between dispatches.
 #[derive(Debug)]
-pub struct ConeBatched {
+pub struct Batched {
     pipeline: ComputePipeline,
     batches: Vec<wgpu::BindGroup>,
 }
 
-/// Cones traced by one dispatch of a [`ConeBatched`] pass.
-pub const CONES_PER_BATCH: u32 = 1;
-
-impl ConeBatched {
-    pub fn new(
+impl Batched {
+    /// The pass `name` (its WGSL entry point has the pass's name) with one batch per value.
+    pub fn new<T: bytemuck::Pod>(
         gpu: &Gpu,
         name: &'static str,
         pass_src: &str,
         shared: &Shared,
         radiance_f16: bool,
-        cones: u32,
+        values: impl IntoIterator<Item = T>,
     ) -> Result<Self> {
         let pipeline = compute_pipeline(gpu, name, pass_src, name, shared, radiance_f16)?;
         let layout = own_layout(&pipeline, name)?;
-        let batches = uniform_groups(
-            gpu,
-            "cone batch",
-            layout,
-            (0..cones.div_ceil(CONES_PER_BATCH).max(1)).map(|b| crate::gpu_types::ConeBatch {
-                first: b * CONES_PER_BATCH,
-                count: CONES_PER_BATCH,
-                pad0: 0,
-                pad1: 0,
-            }),
-        )?;
+        let batches = values
+            .into_iter()
+            .map(|v| {
+                let u = gpu.buffer_init(name, bytemuck::bytes_of(&v), wgpu::BufferUsages::UNIFORM)?;
+                Ok(gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some(name),
+                    layout,
+                    entries: &[wgpu::BindGroupEntry { binding: 0, resource: u.as_entire_binding() }],
+                }))
+            })
+            .collect::<Result<_>>()?;
         Ok(Self { pipeline, batches })
     }
 
@@ -245,25 +235,35 @@ impl ConeBatched {
     }
 }
 
-/// One bind group per value, each holding it as a uniform at binding 0 of `layout`: the batches
-/// of a pass dispatched several times (inject's lights, the cone passes' cones).
-pub fn uniform_groups<T: bytemuck::Pod>(
+/// Cones traced by one dispatch of a cone pass ([`cone_batched`]).
+pub const CONES_PER_BATCH: u32 = 1;
+
+/// A pass that traces the cone set (env, propagate) in batches of [`CONES_PER_BATCH`] cones per
+/// dispatch.
+///
+/// Why batches: Mesa's software drivers (llvmpipe, lavapipe) share one budget of 65535 loop
+/// iterations among all loops of a shader invocation and silently end every loop past it (as in
+/// inject.rs). A cone's march loops over its steps, the rock probes of each step and the octree
+/// descents of each sample, so an invocation tracing all its cones at fine steps ran out: on the
+/// dogleg scene with every leaf sending 1, 16 cones at step 0.1 gathered 0.944 on lavapipe against
+/// 0.999 from the CPU reference (which is step-invariant there); 9 cones, or step >= 0.35, matched
+/// (issue 21). With one cone per dispatch the budget is per cone. Results are the same to the bit:
+/// the running sums are kept in the leaf state and added to in the same order (the WGSL).
+pub fn cone_batched(
     gpu: &Gpu,
-    label: &str,
-    layout: &wgpu::BindGroupLayout,
-    values: impl IntoIterator<Item = T>,
-) -> Result<Vec<wgpu::BindGroup>> {
-    values
-        .into_iter()
-        .map(|v| {
-            let u = gpu.buffer_init(label, bytemuck::bytes_of(&v), wgpu::BufferUsages::UNIFORM)?;
-            Ok(gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some(label),
-                layout,
-                entries: &[wgpu::BindGroupEntry { binding: 0, resource: u.as_entire_binding() }],
-            }))
-        })
-        .collect()
+    name: &'static str,
+    pass_src: &str,
+    shared: &Shared,
+    radiance_f16: bool,
+    cones: u32,
+) -> Result<Batched> {
+    let batches = (0..cones.div_ceil(CONES_PER_BATCH).max(1)).map(|b| crate::gpu_types::ConeBatch {
+        first: b * CONES_PER_BATCH,
+        count: CONES_PER_BATCH,
+        pad0: 0,
+        pad1: 0,
+    });
+    Batched::new(gpu, name, pass_src, shared, radiance_f16, batches)
 }
 
 /// The own group's layout of `p`, which its WGSL must declare.

@@ -1,10 +1,10 @@
 //! Propagation (propagate.wgsl): one bounce of cone-traced gathering at every leaf, one cone per
-//! dispatch (`ConeBatched`).
+//! dispatch (`cone_batched`).
 
 use crate::error::Result;
 use crate::gpu::Gpu;
 
 /// The propagate pass over the settings' `cones`.
-pub fn new(gpu: &Gpu, shared: &super::Shared, radiance_f16: bool, cones: u32) -> Result<super::ConeBatched> {
-    super::ConeBatched::new(gpu, "propagate", crate::shaders::PROPAGATE, shared, radiance_f16, cones)
+pub fn new(gpu: &Gpu, shared: &super::Shared, radiance_f16: bool, cones: u32) -> Result<super::Batched> {
+    super::cone_batched(gpu, "propagate", crate::shaders::PROPAGATE, shared, radiance_f16, cones)
 }

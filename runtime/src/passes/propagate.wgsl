@@ -5,7 +5,7 @@
 // Reads only the mip pyramid, so leaves update independently; records the largest relative change
 // for the effect plan.
 //
-// Cones are traced in batches, one dispatch each (passes/mod.rs `ConeBatched` says why); the running sum
+// Cones are traced in batches, one dispatch each (passes/mod.rs `cone_batched` says why); the running sum
 // lives in the leaf's `gather`, added to cone by cone in the same order as one loop would (the
 // result is the same to the bit), and the last batch finishes the leaf.
 #import cone

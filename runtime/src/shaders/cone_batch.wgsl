@@ -1,5 +1,5 @@
 // The cones one dispatch of a cone-batched pass (env, propagate) traces: `first .. first + count`
-// of the cone set (passes/mod.rs `ConeBatched` says why). The pass's own group.
+// of the cone set (passes/mod.rs `cone_batched` says why). The pass's own group.
 
 // Mirrors gpu_types.rs ConeBatch (runtime/tests/layout.rs).
 struct ConeBatch {
