@@ -43,7 +43,7 @@ fn load(data: &[u8]) {
         light_reach_m: 4.0,
     };
     if let Ok(r) = residency::choose(&tiles, &view, Budget { gpu_bytes: full / 2, points: u64::MAX }) {
-        if let Ok(scene) = SceneData::from_package_with(&pkg, |i| r.mode_of(i)) {
+        if let Ok(scene) = SceneData::from_package_with(&pkg, r.mode_of()) {
             let _ = scene.nodes_by_height();
             let _ = TileIndex::build("fuzz", &scene.tiles);
         }

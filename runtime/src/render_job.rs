@@ -132,18 +132,17 @@ fn non_empty(scene: SceneData) -> Result<SceneData> {
     Ok(scene)
 }
 
-/// The scene a job renders and the cameras it renders from, under the job's budgets: the whole
-/// package where it fits (`residency` None), else the tiles [`residency::choose`] keeps in full
-/// for the first camera and every other tile at its coarse level. Cameras are resolved (and a
-/// view framed) on the coarse scene then, so a package over budget is never loaded whole.
-fn resident_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<(Residency, Streaming)>)> {
+/// The package opened under the job's budgets, with `--lamps` applied: the whole scene where it
+/// fits (no [`Streaming`]); else every tile at its coarse level, the scene cameras are resolved
+/// (and a view framed) on before [`prepare`] chooses the tiles to hold in full, so a package over
+/// budget is never loaded whole.
+fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Streaming>)> {
     let pkg = Package::open(&opts.package)?;
-    let f16 = opts.settings.radiance_f16;
     let budget = Budget {
         gpu_bytes: opts.gpu_memory.unwrap_or_else(|| default_gpu_memory(gpu)),
         points: opts.point_budget.unwrap_or(u64::MAX),
     };
-    let tiles = residency::footprints(&pkg, f16)?;
+    let tiles = residency::footprints(&pkg, opts.settings.radiance_f16)?;
     let full_bytes: u64 = tiles.iter().map(|t| t.full.bytes).sum();
     let full_surfels: u64 = tiles.iter().map(|t| t.full.surfels).sum();
     if full_bytes <= budget.gpu_bytes && full_surfels <= budget.points {
@@ -153,25 +152,17 @@ fn resident_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<
     }
     let mut coarse = non_empty(SceneData::from_package_with(&pkg, |_| TileMode::Coarse)?)?;
     apply_lamps(opts, &mut coarse);
-    let aspect = opts.width as f32 / opts.height.max(1) as f32;
-    let choice = match opts.path.first() {
-        Some(first) => CameraChoice::Named(first.clone()),
-        None => opts.camera.clone(),
-    };
-    let (cam, _) = resolve_camera(&coarse, &choice, aspect, opts.settings.splat_scale)?;
     let largest_tile_m = tiles.iter().map(|t| (t.max_m - t.min_m).max_element()).fold(0.0, f32::max);
     let streaming = Streaming {
         pkg,
         tiles,
         budget,
-        aspect,
+        aspect: opts.width as f32 / opts.height.max(1) as f32,
         lights_m: coarse.lights.iter().map(|l| l.position_m).collect(),
         light_reach_m: opts.settings.max_distance_m.unwrap_or(largest_tile_m),
+        rock: coarse.rock.clone(),
     };
-    let chosen = streaming.choose(&cam)?;
-    let mut scene = streaming.load(&chosen)?;
-    apply_lamps(opts, &mut scene);
-    Ok((scene, Some((chosen, streaming))))
+    Ok((coarse, Some(streaming)))
 }
 
 /// What a job over budget keeps to choose tiles again as its camera moves.
@@ -183,6 +174,8 @@ pub struct Streaming {
     aspect: f32,
     lights_m: Vec<Vec3>,
     light_reach_m: f32,
+    /// Classified once: every load holds every tile, full or coarse (`from_package_with_rock`).
+    rock: crate::rock::RockTable,
 }
 
 impl Streaming {
@@ -200,9 +193,16 @@ impl Streaming {
         residency::choose(&self.tiles, &view, self.budget)
     }
 
-    /// The scene of a residency (the package's lights; a job's own lights are the caller's).
-    pub fn load(&self, r: &Residency) -> Result<SceneData> {
-        SceneData::from_package_with(&self.pkg, |i| r.mode_of(i))
+    /// The scene of a residency with the job's `lights` (`--lamps`, a headlamp: chosen once).
+    pub fn load(
+        &self,
+        r: &Residency,
+        lights: Vec<crate::scene_data::SceneLight>,
+        headlamp: bool,
+    ) -> Result<SceneData> {
+        let mut scene = SceneData::from_package_with_rock(&self.pkg, r.mode_of(), self.rock.clone())?;
+        (scene.lights, scene.headlamp) = (lights, headlamp);
+        Ok(scene)
     }
 }
 
@@ -337,8 +337,7 @@ fn framing_note(scene: &SceneData, f: &Framing) -> String {
 /// of the choice or path, and a headlamp at the first camera where the options or a lightless
 /// scene call for one; with notes saying what was chosen.
 pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
-    let (mut scene, streaming) = resident_scene(opts, gpu)?;
-    let (residency, streaming) = streaming.unzip();
+    let (mut scene, streaming) = open_scene(opts, gpu)?;
     let aspect = opts.width as f32 / opts.height.max(1) as f32;
     let splat = opts.settings.splat_scale;
     let mut notes = Vec::new();
@@ -359,6 +358,15 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
     for c in &cameras {
         c.validate()?;
     }
+    // Over budget: the tiles the first camera needs in full, the others stay coarse.
+    let residency = match &streaming {
+        Some(st) => {
+            let r = st.choose(&cameras[0])?;
+            scene = st.load(&r, std::mem::take(&mut scene.lights), false)?;
+            Some(r)
+        }
+        None => None,
+    };
     let want = match opts.headlamp {
         Headlamp::On => true,
         Headlamp::Off => false,
@@ -540,10 +548,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             if before != after {
                 loaded = after.difference(&before).count();
                 evicted = before.difference(&after).count();
-                let mut next_scene = st.load(&next)?;
-                next_scene.lights = scene.lights.clone();
-                next_scene.headlamp = scene.headlamp;
-                scene = next_scene;
+                scene = st.load(&next, scene.lights.clone(), scene.headlamp)?;
                 settings.exposure = exposure;
                 r = Renderer::new(&gpu, &scene, settings.clone())?;
                 bounces = r.settle(|done, change| progress(Progress::Bounce { done, budget, change }))?;

@@ -124,9 +124,14 @@ pub struct ResidencyTotals {
 }
 
 impl Residency {
-    /// Mode of the package's tile `index` (tiles the policy never saw are skipped).
-    pub fn mode_of(&self, index: usize) -> TileMode {
-        self.decisions.iter().find(|d| d.tile == index).map_or(TileMode::Skip, |d| d.mode)
+    /// Each package tile's mode, as `SceneData::from_package_with` takes it (tiles the policy
+    /// never saw are skipped): a table made once, read in constant time per tile.
+    pub fn mode_of(&self) -> impl Fn(usize) -> TileMode + use<> {
+        let mut modes = vec![TileMode::Skip; self.decisions.iter().map(|d| d.tile + 1).max().unwrap_or(0)];
+        for d in &self.decisions {
+            modes[d.tile] = d.mode;
+        }
+        move |i| modes.get(i).copied().unwrap_or(TileMode::Skip)
     }
 
     /// The decisions as text (`--explain`): the first `rows` tiles by priority, then counts.
@@ -263,6 +268,8 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
         });
     }
     let visible: Vec<bool> = tiles.iter().map(|t| in_frustum(view, t.min_m, t.max_m)).collect();
+    let visible_boxes: Vec<(Vec3, Vec3)> =
+        tiles.iter().zip(&visible).filter(|(_, v)| **v).map(|(t, _)| (t.min_m, t.max_m)).collect();
     let mut decisions: Vec<Decision> = tiles
         .iter()
         .zip(&visible)
@@ -270,9 +277,7 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
             let relevance = if vis {
                 Relevance::Visible
             } else if view.lights_m.iter().any(|&l| distance_to_box(l, t.min_m, t.max_m) == 0.0)
-                || tiles.iter().zip(&visible).any(|(o, &ov)| {
-                    ov && boxes_within((t.min_m, t.max_m), (o.min_m, o.max_m), view.light_reach_m)
-                })
+                || visible_boxes.iter().any(|&o| boxes_within((t.min_m, t.max_m), o, view.light_reach_m))
             {
                 Relevance::Lights
             } else {
@@ -286,22 +291,24 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
             }
         })
         .collect();
-    let by_index: std::collections::HashMap<usize, &TileFootprint> =
-        tiles.iter().map(|t| (t.index, t)).collect();
-    decisions.sort_by(|a, b| {
+    // Positions in `tiles` (and `decisions`) by priority.
+    let mut order: Vec<usize> = (0..tiles.len()).collect();
+    order.sort_by(|&i, &j| {
+        let (a, b) = (&decisions[i], &decisions[j]);
         b.relevance.cmp(&a.relevance).then(a.distance_m.total_cmp(&b.distance_m)).then(a.tile.cmp(&b.tile))
     });
     let (mut bytes, mut surfels) = (coarse_bytes, coarse_surfels);
-    for d in &mut decisions {
-        let t = by_index[&d.tile];
+    for &k in &order {
+        let t = &tiles[k];
         let extra_bytes = t.full.bytes.saturating_sub(t.coarse.bytes);
         let extra_surfels = t.full.surfels.saturating_sub(t.coarse.surfels);
         if bytes + extra_bytes <= budget.gpu_bytes && surfels + extra_surfels <= budget.points {
             bytes += extra_bytes;
             surfels += extra_surfels;
-            d.mode = TileMode::Full;
+            decisions[k].mode = TileMode::Full;
         }
     }
+    let decisions: Vec<Decision> = order.into_iter().map(|k| decisions[k]).collect();
     let full_tiles = decisions.iter().filter(|d| d.mode == TileMode::Full).count();
     let visible_coarse =
         decisions.iter().filter(|d| d.mode == TileMode::Coarse && d.relevance == Relevance::Visible).count();

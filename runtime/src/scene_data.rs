@@ -410,6 +410,25 @@ impl SceneData {
     /// ([`coarse_tile`]), or not at all. The rock is classified from every loaded tile's full
     /// leaves, so a coarse tile keeps the rock behind its walls.
     pub fn from_package_with(pkg: &Package, mode_of: impl Fn(usize) -> TileMode) -> Result<Self> {
+        Self::load(pkg, mode_of, None)
+    }
+
+    /// As [`SceneData::from_package_with`], with the rock already classified for these tiles: it
+    /// depends on which tiles are loaded, not on their modes, so residency classifies it once
+    /// (from a first load) and passes it to every later load.
+    pub fn from_package_with_rock(
+        pkg: &Package,
+        mode_of: impl Fn(usize) -> TileMode,
+        rock: crate::rock::RockTable,
+    ) -> Result<Self> {
+        Self::load(pkg, mode_of, Some(rock))
+    }
+
+    fn load(
+        pkg: &Package,
+        mode_of: impl Fn(usize) -> TileMode,
+        rock: Option<crate::rock::RockTable>,
+    ) -> Result<Self> {
         let name = pkg.path().display().to_string();
         let bad = |problem: String| Error::Scene { package: name.clone(), problem };
         let scene = pkg.scene()?;
@@ -487,7 +506,9 @@ impl SceneData {
                 let coarse = coarse_tile(&leaves, &codes, leaf_lod, out.leaf_size_m);
                 out.leaves.extend(coarse.leaves);
                 out.surfels.extend(coarse.splats);
-                hidden_leaves.extend(leaves);
+                if rock.is_none() {
+                    hidden_leaves.extend(leaves);
+                }
             } else {
                 out.leaves.extend(leaves);
                 // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
@@ -593,7 +614,9 @@ impl SceneData {
                 fov_y_deg: c.fov_y_deg as f32,
             });
         }
-        out.rock = if hidden_leaves.is_empty() {
+        out.rock = if let Some(rock) = rock {
+            rock
+        } else if hidden_leaves.is_empty() {
             crate::rock::classify(out.leaf_size_m, &out.leaves)
         } else {
             for t in out.tiles.iter().filter(|t| t.leaf_lod == 0) {
