@@ -5,6 +5,7 @@
 //! makes this test fail if the coarse level stops doing its job.
 
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use glam::Vec3;
 use grotto_format::Package;
@@ -27,9 +28,37 @@ fn settings() -> Settings {
     Settings { bounces: 3, shadow_map_size: 256, exposure: 8.0, ..Settings::default() }
 }
 
-fn small_tiles_cave(dir: &Path) -> PathBuf {
-    let cave = grotto_fixtures::SmallCave { max_tile_extent_m: 4.0, ..Default::default() };
-    grotto_fixtures::small_cave_package(dir, &cave).unwrap()
+/// The small cave cut into 4 m tiles, built once for the tests of this file.
+fn small_tiles_cave() -> &'static Path {
+    static PACKAGE: OnceLock<PathBuf> = OnceLock::new();
+    PACKAGE.get_or_init(|| {
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("residency-cave");
+        let _ = std::fs::remove_dir_all(&dir);
+        let cave = grotto_fixtures::SmallCave { max_tile_extent_m: 4.0, ..Default::default() };
+        grotto_fixtures::small_cave_package(&dir, &cave).unwrap()
+    })
+}
+
+/// Tile bytes of the package: every tile full, every tile coarse, the largest tile full.
+fn sizes(pkg: &Package) -> (Vec<residency::TileFootprint>, u64, u64, u64) {
+    let tiles = residency::footprints(pkg, false).unwrap();
+    let full = tiles.iter().map(|t| t.full.bytes).sum();
+    let coarse = tiles.iter().map(|t| t.coarse.bytes).sum();
+    let largest = tiles.iter().map(|t| t.full.bytes).max().unwrap();
+    (tiles, full, coarse, largest)
+}
+
+/// A small, cheap render job of the package to `out` under `gpu_memory`.
+fn job(package: &Path, out: PathBuf, gpu_memory: u64) -> RenderOptions {
+    RenderOptions {
+        camera: CameraChoice::Named("chamber".into()),
+        width: 64,
+        height: 48,
+        settings: Settings { bounces: 1, shadow_map_size: 128, ..Settings::default() },
+        gpu: gpu_options(),
+        gpu_memory: Some(gpu_memory),
+        ..RenderOptions::defaults(package.to_path_buf(), out)
+    }
 }
 
 /// The tone-mapped pixels and how many of them show a surface.
@@ -94,9 +123,7 @@ fn split(
 
 #[test]
 fn coarse_neighbours_keep_the_image_and_dropping_them_does_not() {
-    let dir = tempfile::tempdir().unwrap();
-    let package = small_tiles_cave(dir.path());
-    let pkg = Package::open(&package).unwrap();
+    let pkg = Package::open(small_tiles_cave()).unwrap();
     let gpu = Gpu::new(&gpu_options()).unwrap();
     let full = SceneData::from_package(&pkg).unwrap();
     assert!(full.tiles.len() >= 20, "{} tiles: the test needs many", full.tiles.len());
@@ -173,21 +200,9 @@ fn coarse_neighbours_keep_the_image_and_dropping_them_does_not() {
 #[test]
 fn a_render_job_keeps_its_budget_and_a_budget_too_small_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
-    let package = small_tiles_cave(dir.path());
-    let pkg = Package::open(&package).unwrap();
-    let tiles = residency::footprints(&pkg, false).unwrap();
-    let full: u64 = tiles.iter().map(|t| t.full.bytes).sum();
-    let coarse: u64 = tiles.iter().map(|t| t.coarse.bytes).sum();
-    let largest = tiles.iter().map(|t| t.full.bytes).max().unwrap();
-    let opts = |gpu_memory: u64, out: &str| RenderOptions {
-        camera: CameraChoice::Named("chamber".into()),
-        width: 64,
-        height: 48,
-        settings: Settings { bounces: 1, shadow_map_size: 128, ..Settings::default() },
-        gpu: gpu_options(),
-        gpu_memory: Some(gpu_memory),
-        ..RenderOptions::defaults(package.clone(), dir.path().join(out))
-    };
+    let package = small_tiles_cave();
+    let (_, full, coarse, largest) = sizes(&Package::open(package).unwrap());
+    let opts = |gpu_memory: u64, out: &str| job(package, dir.path().join(out), gpu_memory);
     let budget = coarse + (full - coarse) / 3;
     assert!(budget >= largest);
     let s = render_job::run(&opts(budget, "a.png"), |_| {}).unwrap();
@@ -210,21 +225,14 @@ fn a_render_job_keeps_its_budget_and_a_budget_too_small_is_a_clear_error() {
 #[test]
 fn a_fly_through_under_a_tiny_budget_loads_and_evicts_and_never_exceeds_it() {
     let dir = tempfile::tempdir().unwrap();
-    let package = small_tiles_cave(dir.path());
-    let pkg = Package::open(&package).unwrap();
-    let tiles = residency::footprints(&pkg, false).unwrap();
-    let coarse: u64 = tiles.iter().map(|t| t.coarse.bytes).sum();
-    let full: u64 = tiles.iter().map(|t| t.full.bytes).sum();
+    let package = small_tiles_cave();
+    let (tiles, full, coarse, _) = sizes(&Package::open(package).unwrap());
     let gpu_memory = coarse + (full - coarse) / 4;
     let opts = RenderOptions {
+        camera: CameraChoice::Default,
         path: vec!["entrance".into(), "chamber".into()],
         frames: 6,
-        width: 64,
-        height: 48,
-        settings: Settings { bounces: 1, shadow_map_size: 128, ..Settings::default() },
-        gpu: gpu_options(),
-        gpu_memory: Some(gpu_memory),
-        ..RenderOptions::defaults(package.clone(), dir.path().join("fly.png"))
+        ..job(package, dir.path().join("fly.png"), gpu_memory)
     };
     let s = render_job::run(&opts, |_| {}).unwrap();
     assert_eq!(s.frames.len(), 6);
