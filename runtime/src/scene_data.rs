@@ -222,8 +222,8 @@ impl SceneData {
         }
     }
 
-    /// The tile whose cube holds leaf cell `v_leaf` (global leaf units), as `find_tile` in
-    /// shaders/svo.wgsl.
+    /// The tile whose cube holds leaf cell `v_leaf` (global leaf units), by a scan: the CPU
+    /// reference's lookup, which the GPU's tile index (tile_index.rs) is tested against.
     pub fn tile_of(&self, v_leaf: IVec3) -> Option<usize> {
         self.tiles.iter().position(|t| {
             let rel = v_leaf - IVec3::from_array(t.origin_leaf);

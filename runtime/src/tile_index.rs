@@ -170,14 +170,10 @@ mod tests {
         TileGpu { origin_leaf: origin, depth, ..Default::default() }
     }
 
+    /// The scan the index replaces ([`crate::scene_data::SceneData::tile_of`]).
     fn linear(tiles: &[TileGpu], v: IVec3) -> Option<u32> {
-        tiles
-            .iter()
-            .position(|t| {
-                let rel = v - IVec3::from_array(t.origin_leaf);
-                rel.cmpge(IVec3::ZERO).all() && rel.cmplt(IVec3::splat(1 << t.depth)).all()
-            })
-            .map(|i| i as u32)
+        let scene = crate::scene_data::SceneData { tiles: tiles.to_vec(), ..Default::default() };
+        scene.tile_of(v).map(|i| i as u32)
     }
 
     /// An adaptive tiling as the packer makes it: a pyramid anchored at `anchor`, tiles of depths
