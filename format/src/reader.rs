@@ -36,7 +36,7 @@ macro_rules! element {
 element!(
     SvoNode => SvoNode, f32 => F32, Rgba8 => Rgba8, LeafNdf => LeafNdf, LeafEmission => LeafEmission,
     Surfel => Surfel, Bc1Block => Bc1Block, ShRgb9 => ShRgb9, EnvMipLevel => EnvMipLevel,
-    Bc6hBlock => Bc6hBlock,
+    Bc6hBlock => Bc6hBlock, CoarseLeaf => CoarseLeaf, RockBrick => RockBrick,
 );
 
 /// A validated section-table entry.
@@ -257,9 +257,28 @@ impl Package {
         }
         let data = self.decode(s)?;
         if let Some(kind) = s.kind {
-            let depth = match s.scope {
+            let tile_depth = match s.scope {
                 Scope::Tile(t) => self.raw_tiles()[t as usize].depth,
                 Scope::Global => 0,
+            };
+            // A coarse level k is an SVO k levels shallower than the tile's.
+            let depth = match kind {
+                SectionKind::CoarseNodes | SectionKind::CoarseLeaves => {
+                    match tile_depth.checked_sub(s.item) {
+                        Some(d) if s.item > 0 => d,
+                        _ => {
+                            return Err(Problem::BadContent {
+                                section: s.index,
+                                kind: kind.name().to_owned(),
+                                reason: format!(
+                                    "coarse level {} of a tile of depth {tile_depth} (levels are 1..=depth)",
+                                    s.item
+                                ),
+                            });
+                        }
+                    }
+                }
+                _ => tile_depth,
             };
             check_content(kind, &data, depth).map_err(|reason| Problem::BadContent {
                 section: s.index,
@@ -332,7 +351,15 @@ impl Package {
             })
             .collect();
         // Rules across sections, reported once.
-        for p in self.env_chain_problems() {
+        let coarse = self.tiles().flat_map(|t| {
+            let levels: Vec<u32> =
+                t.sections().filter(|s| s.kind == Some(SectionKind::CoarseNodes)).map(|s| s.item).collect();
+            levels.into_iter().filter_map(move |k| match t.coarse(k) {
+                Err(Error::Invalid { problem, .. }) => Some(problem),
+                _ => None,
+            })
+        });
+        for p in self.env_chain_problems().into_iter().chain(coarse.collect::<Vec<_>>()) {
             if !problems.contains(&p) {
                 problems.push(p);
             }
@@ -358,7 +385,46 @@ impl SvoData<'_> {
     }
 }
 
+/// A tile's coarse level k (format 1.1): an SVO of depth D - k and one [`CoarseLeaf`] per leaf.
+#[derive(Clone, Debug)]
+pub struct CoarseData<'a> {
+    pub nodes: Cow<'a, [SvoNode]>,
+    pub leaves: Cow<'a, [CoarseLeaf]>,
+}
+
 impl<'a> Tile<'a> {
+    /// The tile's coarse level `k` (>= 1), checked to fit together; `Ok(None)` when the package
+    /// does not store it (format 1.0 packages, or a level the writer did not make).
+    pub fn coarse(&self, k: u32) -> Result<Option<CoarseData<'a>>> {
+        let (Some(ns), Some(ls)) =
+            (self.find(SectionKind::CoarseNodes, k), self.find(SectionKind::CoarseLeaves, k))
+        else {
+            return Ok(None);
+        };
+        let nodes = self.package.read::<SvoNode>(&ns)?;
+        let leaves = self.package.read::<CoarseLeaf>(&ls)?;
+        // Checked as an SVO of depth D - k on read, so the subtraction holds.
+        let depth = self.raw.depth - k;
+        let count = nodes.iter().filter(|n| u32::from(n.level) == depth).count();
+        if count != leaves.len() {
+            return Err(self.package.invalid(Problem::BadContent {
+                section: ls.index,
+                kind: SectionKind::CoarseLeaves.name().to_owned(),
+                reason: format!(
+                    "tile {} level {k} has {count} leaves but {} entries",
+                    self.index,
+                    leaves.len()
+                ),
+            }));
+        }
+        Ok(Some(CoarseData { nodes, leaves }))
+    }
+
+    /// The rock bricks stored with the tile (format 1.1); `Ok(None)` when the package has none.
+    pub fn rock(&self) -> Result<Option<Cow<'a, [RockBrick]>>> {
+        self.read::<RockBrick>(SectionKind::RockBricks)
+    }
+
     /// The tile's SVO and leaf attributes; `Ok(None)` when the tile has no SVO section.
     pub fn svo(&self) -> Result<Option<SvoData<'a>>> {
         let Some(nodes) = self.read::<SvoNode>(SectionKind::SvoNodes)? else { return Ok(None) };
@@ -694,7 +760,40 @@ fn check_content(kind: SectionKind, data: &[u8], depth: u32) -> Result<(), Strin
             .map_or_else(|_| Cow::Owned(bytemuck::pod_collect_to_vec(data)), Cow::Borrowed)
     }
     match kind {
-        SectionKind::SvoNodes => check_svo(&cast::<SvoNode>(data), depth),
+        SectionKind::SvoNodes | SectionKind::CoarseNodes => check_svo(&cast::<SvoNode>(data), depth),
+        SectionKind::CoarseLeaves => {
+            for (i, l) in cast::<CoarseLeaf>(data).iter().enumerate() {
+                let n = &l.ndf;
+                finite(&l.centroid_tile_m, "coarse leaf centroid", i)?;
+                finite(&[l.opacity, n.mean[0], n.mean[1], n.mean[2], n.weight], "coarse leaf", i)?;
+                finite(&l.emission, "coarse leaf emission", i)?;
+                let len = n.mean.iter().map(|c| c * c).sum::<f32>().sqrt();
+                if !(0.0..=1.0).contains(&l.opacity)
+                    || len > 1.0 + 1e-3
+                    || n.weight < 0.0
+                    || l.emission.iter().any(|&c| c < 0.0)
+                {
+                    return Err(format!(
+                        "coarse leaf {i}: opacity {}, NDF length {len}, weight {}, emission {:?}",
+                        l.opacity, n.weight, l.emission
+                    ));
+                }
+            }
+            Ok(())
+        }
+        SectionKind::RockBricks => {
+            // Within one brick of the tile's cube (rock reaches 4 cells, one brick, past a wall).
+            let side = (1u64 << depth).div_ceil(u64::from(ROCK_BRICK_LEAVES)) as i64;
+            for (i, b) in cast::<RockBrick>(data).iter().enumerate() {
+                if b.brick.iter().any(|&c| !(-1..=side).contains(&i64::from(c))) {
+                    return Err(format!(
+                        "rock brick {i} at {:?} lies outside the tile's {side} bricks and a margin of one",
+                        b.brick
+                    ));
+                }
+            }
+            Ok(())
+        }
         SectionKind::LeafOpacity => {
             for (i, v) in cast::<f32>(data).iter().enumerate() {
                 if !(0.0..=1.0).contains(v) {

@@ -12,7 +12,7 @@ pub const MAGIC: [u8; 8] = *b"\x89GROTTO\n";
 /// Major version this crate writes and reads. A file with a larger major is refused.
 pub const VERSION_MAJOR: u16 = 1;
 /// Minor version this crate writes. Files with a larger minor open; the additions are ignored.
-pub const VERSION_MINOR: u16 = 0;
+pub const VERSION_MINOR: u16 = 1;
 /// Every section starts at a multiple of this, so a raw section can be cast to any element type in
 /// place (the mapping itself is page-aligned).
 pub const SECTION_ALIGN: u64 = 64;
@@ -33,6 +33,12 @@ pub const MAX_ENV_MIP_HEIGHT: u32 = 4096;
 /// this many times the texels the levels have (1.5 for a chain that halves each level), so
 /// decoding a chain costs a bounded multiple of its stored blocks.
 pub const MAX_ENV_ATLAS_RATIO: u64 = 2;
+/// Rock cells ([`SectionKind::RockBricks`]) are `2^ROCK_CELL_SHIFT` leaves on a side.
+pub const ROCK_CELL_SHIFT: u32 = 1;
+/// A rock brick is `2^ROCK_BRICK_SHIFT` rock cells on a side (64 cells, one bit each).
+pub const ROCK_BRICK_SHIFT: u32 = 2;
+/// Leaves on a side of a rock brick.
+pub const ROCK_BRICK_LEAVES: u32 = 1 << (ROCK_CELL_SHIFT + ROCK_BRICK_SHIFT);
 
 /// File header, at offset 0. `header_size` bytes long (72 in version 1.0; a later minor may grow it).
 #[repr(C)]
@@ -163,6 +169,13 @@ pub enum SectionKind {
     Scene = 12,
     /// Global: UTF-8 JSON [`crate::Provenance`].
     Provenance = 13,
+    /// Per tile, `item` = k >= 1 (format 1.1): [`SvoNode`] array of the tile's coarse level k, the
+    /// SVO cut k levels above its leaves (depth D - k), whose nodes at that level are its leaves.
+    CoarseNodes = 14,
+    /// Per tile, `item` = k (format 1.1): [`CoarseLeaf`] per leaf of coarse level k.
+    CoarseLeaves = 15,
+    /// Per tile (format 1.1): [`RockBrick`]s, the rock behind the scanned walls near the tile.
+    RockBricks = 16,
 }
 
 /// The Rust type of one element of a section, used to check casts.
@@ -178,6 +191,8 @@ pub enum ElementType {
     ShRgb9,
     EnvMipLevel,
     Bc6hBlock,
+    CoarseLeaf,
+    RockBrick,
     Utf8Json,
 }
 
@@ -194,13 +209,15 @@ impl ElementType {
             Self::ShRgb9 => size_of::<ShRgb9>(),
             Self::EnvMipLevel => size_of::<EnvMipLevel>(),
             Self::Bc6hBlock => size_of::<Bc6hBlock>(),
+            Self::CoarseLeaf => size_of::<CoarseLeaf>(),
+            Self::RockBrick => size_of::<RockBrick>(),
             Self::Utf8Json => 1,
         }
     }
 }
 
 impl SectionKind {
-    pub const ALL: [SectionKind; 13] = [
+    pub const ALL: [SectionKind; 16] = [
         Self::SvoNodes,
         Self::LeafOpacity,
         Self::LeafAlbedo,
@@ -214,6 +231,9 @@ impl SectionKind {
         Self::EnvMipBc6h,
         Self::Scene,
         Self::Provenance,
+        Self::CoarseNodes,
+        Self::CoarseLeaves,
+        Self::RockBricks,
     ];
 
     pub fn from_u32(v: u32) -> Option<Self> {
@@ -235,12 +255,15 @@ impl SectionKind {
             Self::EnvMipBc6h => "env-mip-bc6h",
             Self::Scene => "scene",
             Self::Provenance => "provenance",
+            Self::CoarseNodes => "coarse-nodes",
+            Self::CoarseLeaves => "coarse-leaves",
+            Self::RockBricks => "rock-bricks",
         }
     }
 
     pub fn element(self) -> ElementType {
         match self {
-            Self::SvoNodes => ElementType::SvoNode,
+            Self::SvoNodes | Self::CoarseNodes => ElementType::SvoNode,
             Self::LeafOpacity => ElementType::F32,
             Self::LeafAlbedo | Self::SurfelColorsRaw => ElementType::Rgba8,
             Self::LeafNdf => ElementType::LeafNdf,
@@ -250,6 +273,8 @@ impl SectionKind {
             Self::EnvSh9 => ElementType::ShRgb9,
             Self::EnvMipLevels => ElementType::EnvMipLevel,
             Self::EnvMipBc6h => ElementType::Bc6hBlock,
+            Self::CoarseLeaves => ElementType::CoarseLeaf,
+            Self::RockBricks => ElementType::RockBrick,
             Self::Scene | Self::Provenance => ElementType::Utf8Json,
         }
     }
@@ -346,6 +371,34 @@ pub struct EnvMipLevel {
     pub reserved: [u32; 3],
 }
 
+/// A leaf of a tile's coarse level: what the package leaves under it look like from outside
+/// (docs/format.md, "Coarse levels").
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable, Default)]
+pub struct CoarseLeaf {
+    /// Coverage-weighted centroid of the leaves under it, metres from the tile origin.
+    pub centroid_tile_m: [f32; 3],
+    /// Coverage seen across the leaf, 0..=1.
+    pub opacity: f32,
+    /// Coverage-weighted mean of the leaves' NDFs; `weight` is the sum of their weights.
+    pub ndf: LeafNdf,
+    /// Coverage-weighted mean emitted radiance, linear RGB, W / (sr m^2).
+    pub emission: [f32; 3],
+    /// Coverage-weighted mean albedo, averaged in linear light, sRGB-encoded; A = 255.
+    pub albedo: Rgba8,
+}
+
+/// 4x4x4 rock cells of 2x2x2 leaves: a brick 8 leaves on a side.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable, Default)]
+pub struct RockBrick {
+    /// Brick position from the tile's minimum corner, in bricks (may be negative).
+    pub brick: [i32; 3],
+    pub reserved: u32,
+    /// Bit `x + 4 (y + 4 z)` set when cell (x, y, z) of the brick is rock; low word first.
+    pub bits: [u32; 2],
+}
+
 // The sizes in docs/format.md; a change here is a format change.
 const _: () = assert!(size_of::<RawHeader>() == 72);
 const _: () = assert!(size_of::<RawSectionEntry>() == 48);
@@ -359,4 +412,6 @@ const _: () = assert!(size_of::<Bc1Block>() == 8);
 const _: () = assert!(size_of::<Bc6hBlock>() == 16);
 const _: () = assert!(size_of::<ShRgb9>() == 108);
 const _: () = assert!(size_of::<EnvMipLevel>() == 32);
+const _: () = assert!(size_of::<CoarseLeaf>() == 48);
+const _: () = assert!(size_of::<RockBrick>() == 24);
 const _: () = assert!(align_of::<RawSectionEntry>() == 8 && align_of::<RawTileEntry>() == 8);

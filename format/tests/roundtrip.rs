@@ -18,7 +18,8 @@ fn check_all_content(pkg: &Package) {
             vec![(Scope::Global, 9)]
         };
         for (scope, seed) in scopes {
-            let s = pkg.find(kind, scope, 0).unwrap_or_else(|| panic!("{kind:?} {scope:?} missing"));
+            let s =
+                pkg.find(kind, scope, item_of(kind)).unwrap_or_else(|| panic!("{kind:?} {scope:?} missing"));
             assert_eq!(&*pkg.read_bytes(&s).unwrap(), content(kind, seed).as_slice(), "{kind:?} {scope:?}");
         }
     }
@@ -248,7 +249,7 @@ fn sections_copy_between_packages_as_stored() {
     let copy = Package::open(w.finish().unwrap()).unwrap();
     assert!(copy.verify().is_empty());
     for s in t.sections().filter(|s| s.kind.is_some()) {
-        let c = copy.find(s.kind.unwrap(), Scope::Tile(0), 0).unwrap();
+        let c = copy.find(s.kind.unwrap(), Scope::Tile(0), s.item).unwrap();
         assert_eq!((c.codec, c.stored_len, c.checksum), (s.codec, s.stored_len, s.checksum));
         assert_eq!(copy.read_bytes(&c).unwrap(), src.read_bytes(&s).unwrap());
     }
@@ -301,4 +302,60 @@ fn svo_view_checks_that_leaf_attributes_fit_the_nodes() {
     assert!(svo.emission.is_none());
     let err = pkg.tile(1).unwrap().svo().unwrap_err();
     assert!(err.to_string().contains("3 leaves but 2 entries"), "{err}");
+}
+
+#[test]
+fn coarse_levels_and_rock_read_back_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = Package::open(sample_package(dir.path(), alternating)).unwrap();
+    for t in 0..2 {
+        let tile = pkg.tile(t).unwrap();
+        let coarse = tile.coarse(1).unwrap().expect("level 1 stored");
+        assert_eq!(bytemuck::cast_slice::<SvoNode, u8>(&coarse.nodes), content(SectionKind::CoarseNodes, t));
+        assert_eq!(coarse.leaves.len(), coarse.nodes.iter().filter(|n| n.level == 2).count());
+        assert!(tile.coarse(2).unwrap().is_none(), "a level the writer did not make");
+        assert_eq!(tile.rock().unwrap().unwrap().len(), 5);
+    }
+}
+
+#[test]
+fn coarse_levels_that_do_not_fit_their_tile_are_refused() {
+    // Level 0 (that is the tile itself), a level deeper than the tile, nodes of the wrong depth
+    // for their level, a leaf count that does not match, and rock far outside the tile.
+    let nodes2 = content(SectionKind::CoarseNodes, 0);
+    let leaves2 = content(SectionKind::CoarseLeaves, 0);
+    let far = bytemuck::bytes_of(&RockBrick { brick: [0, 2, 0], reserved: 0, bits: [1, 0] }).to_vec();
+    let cases: [(&str, Vec<(SectionKind, u32, Vec<u8>)>); 5] = [
+        ("level 0", vec![(SectionKind::CoarseNodes, 0, content(SectionKind::SvoNodes, 0))]),
+        ("deeper than the tile", vec![(SectionKind::CoarseNodes, 4, nodes2.clone())]),
+        ("wrong depth", vec![(SectionKind::CoarseNodes, 2, nodes2.clone())]),
+        (
+            "leaf count",
+            vec![
+                (SectionKind::CoarseNodes, 1, nodes2),
+                (SectionKind::CoarseLeaves, 1, leaves2[48..].to_vec()),
+            ],
+        ),
+        ("rock outside", vec![(SectionKind::RockBricks, 0, far)]),
+    ];
+    for (name, sections) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.grotto");
+        let mut w = PackageWriter::create(&path).unwrap();
+        w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 8.0, grid: [0; 3], depth: 3, point_count: 1 })
+            .unwrap();
+        for (kind, item, bytes) in &sections {
+            w.add_section(*kind, Scope::Tile(0), *item, bytes, Compression::Raw).unwrap();
+        }
+        let pkg = Package::open(w.finish().unwrap()).unwrap();
+        let tile = pkg.tile(0).unwrap();
+        let (kind, item, _) = &sections[0];
+        let err = match kind {
+            SectionKind::RockBricks => tile.rock().map(drop).unwrap_err(),
+            _ if sections.len() == 2 => tile.coarse(*item).map(drop).unwrap_err(),
+            _ => pkg.read_bytes(&tile.find(*kind, *item).unwrap()).map(drop).unwrap_err(),
+        };
+        assert!(matches!(err.problem(), Some(Problem::BadContent { .. })), "{name}: {err}");
+        assert!(!pkg.verify().is_empty(), "{name}: verify finds it too");
+    }
 }

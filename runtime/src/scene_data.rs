@@ -15,7 +15,7 @@ use grotto_format::spec::{ShRgb9, Surfel, SvoNode};
 use grotto_format::svo::{morton_decode, morton_encode, nodes_from_leaves};
 use grotto_format::{LightShape, Package, Scope, SectionKind};
 
-use crate::coarse::{COARSE_LEVELS, coarse_tile};
+use crate::coarse::{COARSE_LEVELS, CoarseLevel, coarse_level, gpu_tile};
 use crate::error::{Error, Result};
 use crate::gpu_types::{LeafGpu, MipRange, NodeGpu, SurfelGpu, TileGpu};
 
@@ -440,18 +440,18 @@ impl SceneData {
             out.leaf_size_m = leaf as f32;
             leaf
         });
-        // Full leaves of the coarse tiles, for the rock.
+        // The rock: as given, else from the package's rock sections where every tile that is
+        // loaded has one and lies on the bricks' grid (format 1.1), else classified from the
+        // full leaves of every loaded tile, coarse ones too (collected below).
+        let brick_leaves = grotto_format::spec::ROCK_BRICK_LEAVES as i32;
+        let mut stored_rock: Option<Vec<(IVec3, u64)>> = if rock.is_some() { None } else { Some(Vec::new()) };
         let mut hidden_leaves: Vec<LeafGpu> = Vec::new();
+        let mut loaded = Vec::new();
         for tile in pkg.tiles() {
             let mode = mode_of(tile.index() as usize);
             if mode == TileMode::Skip {
                 continue;
             }
-            let Some(svo) = tile.svo()? else { continue };
-            if svo.nodes.is_empty() {
-                continue;
-            }
-            let origin = tile.origin_m();
             let ls = tile.leaf_size_m();
             let ls0 = leaf_size.unwrap_or(ls);
             if (ls0 - ls).abs() > ls0 * 1e-9 {
@@ -460,6 +460,7 @@ impl SceneData {
                     tile.index()
                 )));
             }
+            let origin = tile.origin_m();
             let mut origin_leaf = [0i32; 3];
             for a in 0..3 {
                 let v = (origin[a] - out.frame_origin_m[a]) / ls0;
@@ -469,52 +470,101 @@ impl SceneData {
                 }
                 origin_leaf[a] = r as i32;
             }
+            let origin_leaf = IVec3::from_array(origin_leaf);
+            if let Some(bricks) = &mut stored_rock {
+                match tile.rock()? {
+                    Some(list) if origin_leaf % brick_leaves == IVec3::ZERO => {
+                        let origin_brick = origin_leaf / brick_leaves;
+                        bricks.extend(list.iter().map(|b| {
+                            (
+                                origin_brick + IVec3::from_array(b.brick),
+                                u64::from(b.bits[0]) | u64::from(b.bits[1]) << 32,
+                            )
+                        }));
+                    }
+                    // A tile without an SVO has no rock to store.
+                    None if tile.find(SectionKind::SvoNodes, 0).is_none() => {}
+                    _ => stored_rock = None,
+                }
+            }
+            loaded.push((tile, mode, origin_leaf));
+        }
+        let classify_rock = rock.is_none() && stored_rock.is_none();
+        for (tile, mode, origin_leaf) in loaded {
             let depth = tile.depth();
-            let emission = svo.emission.as_deref();
-            let mut leaves = Vec::with_capacity(svo.leaf_count());
-            let mut codes = Vec::with_capacity(svo.leaf_count());
-            for (li, n) in svo.nodes.iter().filter(|n| u32::from(n.level) == depth).enumerate() {
-                let cell = morton_decode(n.morton);
-                let center = (IVec3::from_array(origin_leaf)
-                    + IVec3::new(cell[0] as i32, cell[1] as i32, cell[2] as i32))
-                .as_vec3()
-                    + Vec3::splat(0.5);
-                let Rgba8(c) = svo.albedo[li];
-                let ndf = svo.ndf[li];
-                let e = emission.map_or([0.0; 3], |e| e[li].radiance);
-                codes.push(n.morton);
-                leaves.push(LeafGpu {
-                    albedo_opacity: [
-                        srgb8_to_linear(c[0]),
-                        srgb8_to_linear(c[1]),
-                        srgb8_to_linear(c[2]),
-                        svo.opacity[li],
-                    ],
-                    normal_mean: [ndf.mean[0], ndf.mean[1], ndf.mean[2], 0.0],
-                    center_m: (center * out.leaf_size_m).extend(0.0).to_array(),
-                    emission: [e[0], e[1], e[2], 0.0],
-                });
-            }
-            if leaves.len() != svo.leaf_count() {
-                return Err(bad(format!("tile {}: leaf nodes and leaf arrays disagree", tile.index())));
-            }
+            let leaf_lod = if mode == TileMode::Coarse { COARSE_LEVELS.min(depth) } else { 0 };
+            let stored_coarse = if leaf_lod > 0 { tile.coarse(leaf_lod)? } else { None };
+            // The full SVO: for a full tile, for a coarse tile whose level is not stored, and for
+            // the rock where it is classified here.
+            let svo =
+                if leaf_lod == 0 || stored_coarse.is_none() || classify_rock { tile.svo()? } else { None };
+            let leaves = match &svo {
+                Some(svo) => {
+                    let emission = svo.emission.as_deref();
+                    let mut leaves = Vec::with_capacity(svo.leaf_count());
+                    for (li, n) in svo.nodes.iter().filter(|n| u32::from(n.level) == depth).enumerate() {
+                        let cell = morton_decode(n.morton);
+                        let center = (origin_leaf
+                            + IVec3::new(cell[0] as i32, cell[1] as i32, cell[2] as i32))
+                        .as_vec3()
+                            + Vec3::splat(0.5);
+                        let Rgba8(c) = svo.albedo[li];
+                        let ndf = svo.ndf[li];
+                        let e = emission.map_or([0.0; 3], |e| e[li].radiance);
+                        leaves.push(LeafGpu {
+                            albedo_opacity: [
+                                srgb8_to_linear(c[0]),
+                                srgb8_to_linear(c[1]),
+                                srgb8_to_linear(c[2]),
+                                svo.opacity[li],
+                            ],
+                            normal_mean: [ndf.mean[0], ndf.mean[1], ndf.mean[2], 0.0],
+                            center_m: (center * out.leaf_size_m).extend(0.0).to_array(),
+                            emission: [e[0], e[1], e[2], 0.0],
+                        });
+                    }
+                    if leaves.len() != svo.leaf_count() {
+                        return Err(bad(format!(
+                            "tile {}: leaf nodes and leaf arrays disagree",
+                            tile.index()
+                        )));
+                    }
+                    leaves
+                }
+                None => Vec::new(),
+            };
             let node_offset = out.nodes.len() as u32;
             let leaf_offset = out.leaves.len() as u32;
-            let leaf_lod = if mode == TileMode::Coarse { COARSE_LEVELS.min(depth) } else { 0 };
-            out.push_nodes(svo.nodes.as_ref(), depth - leaf_lod, node_offset, leaf_offset);
             if leaf_lod > 0 {
-                let coarse = coarse_tile(&leaves, &codes, leaf_lod, out.leaf_size_m);
+                let level = match (stored_coarse, &svo) {
+                    (Some(c), _) => {
+                        CoarseLevel { nodes: c.nodes.into_owned(), leaves: c.leaves.into_owned() }
+                    }
+                    (None, Some(svo)) => coarse_level(svo, depth, leaf_lod, tile.leaf_size_m()),
+                    (None, None) => continue,
+                };
+                if level.nodes.is_empty() {
+                    continue;
+                }
+                out.push_nodes(&level.nodes, depth - leaf_lod, node_offset, leaf_offset);
+                let tile_origin_m = origin_leaf.as_vec3() * out.leaf_size_m;
+                let coarse = gpu_tile(&level.leaves, leaf_lod, out.leaf_size_m, tile_origin_m);
                 out.leaves.extend(coarse.leaves);
                 out.surfels.extend(coarse.splats);
-                if rock.is_none() {
+                if classify_rock {
                     hidden_leaves.extend(leaves);
                 }
             } else {
+                let Some(svo) = &svo else { continue };
+                if svo.nodes.is_empty() {
+                    continue;
+                }
+                out.push_nodes(svo.nodes.as_ref(), depth, node_offset, leaf_offset);
                 out.leaves.extend(leaves);
                 // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
                 if let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? {
                     let colors = crate::export::tile_colors(&tile, surfels.len())?;
-                    let shift = DVec3::from_array(origin) - DVec3::from_array(out.frame_origin_m);
+                    let shift = DVec3::from_array(tile.origin_m()) - DVec3::from_array(out.frame_origin_m);
                     for (s, c) in surfels.iter().zip(colors) {
                         let p = (DVec3::from_array(s.position_tile_m.map(f64::from)) + shift).as_vec3();
                         out.surfels.push(SurfelGpu {
@@ -526,7 +576,7 @@ impl SceneData {
                 }
             }
             out.tiles.push(TileGpu {
-                origin_leaf,
+                origin_leaf: origin_leaf.to_array(),
                 depth,
                 node_offset,
                 leaf_offset,
@@ -616,6 +666,8 @@ impl SceneData {
         }
         out.rock = if let Some(rock) = rock {
             rock
+        } else if let Some(bricks) = stored_rock {
+            crate::rock::RockTable::from_bricks(bricks)
         } else if hidden_leaves.is_empty() {
             crate::rock::classify(out.leaf_size_m, &out.leaves)
         } else {

@@ -10,11 +10,50 @@ use grotto_format::svo::{morton_encode, nodes_from_leaves};
 use grotto_format::*;
 use xxhash_rust::xxh3::{Xxh3, xxh3_64};
 
+/// The `item` a kind's sample section has: coarse levels are numbered from 1.
+pub fn item_of(kind: SectionKind) -> u32 {
+    match kind {
+        SectionKind::CoarseNodes | SectionKind::CoarseLeaves => 1,
+        _ => 0,
+    }
+}
+
+/// Leaf Morton codes of the coarse level 1 of the sample tiles (depth 3): depth 2.
+fn coarse_codes(seed: u32) -> Vec<u64> {
+    let n = 40 + seed as usize % 7;
+    let mut leaves: Vec<u64> =
+        (0..n as u32).map(|i| morton_encode(i % 8, (i * 3) % 8, (i * 5 + seed) % 8) >> 3).collect();
+    leaves.sort_unstable();
+    leaves.dedup();
+    leaves
+}
+
 /// Valid content for every known kind (JSON kinds get real documents).
 pub fn content(kind: SectionKind, seed: u32) -> Vec<u8> {
     let n = 40 + seed as usize % 7;
     let f = |i: usize| ((i as u32).wrapping_mul(2_654_435_761).wrapping_add(seed) % 1000) as f32 / 1000.0;
     match kind {
+        SectionKind::CoarseNodes => {
+            bytemuck::cast_slice(&nodes_from_leaves(&coarse_codes(seed), 2).unwrap()).to_vec()
+        }
+        SectionKind::CoarseLeaves => bytemuck::cast_slice(
+            &(0..coarse_codes(seed).len())
+                .map(|i| CoarseLeaf {
+                    centroid_tile_m: [f(i) * 8.0, 1.0, 2.0],
+                    opacity: f(i),
+                    ndf: LeafNdf { mean: [0.0, 0.0, f(i)], weight: 2.0 },
+                    emission: [0.0, f(i), 0.0],
+                    albedo: Rgba8([i as u8, 2, 3, 255]),
+                })
+                .collect::<Vec<_>>(),
+        )
+        .to_vec(),
+        SectionKind::RockBricks => bytemuck::cast_slice(
+            &(0..5)
+                .map(|i| RockBrick { brick: [i % 3 - 1, 0, 1], reserved: 0, bits: [seed + i as u32, 1 << i] })
+                .collect::<Vec<_>>(),
+        )
+        .to_vec(),
         SectionKind::SvoNodes => {
             let mut leaves: Vec<u64> =
                 (0..n as u32).map(|i| morton_encode(i % 8, (i * 3) % 8, (i * 5 + seed) % 8)).collect();
@@ -128,7 +167,8 @@ pub fn sample_package(dir: &Path, codec_for: impl Fn(SectionKind, u32) -> Compre
     for kind in SectionKind::ALL {
         if kind.is_per_tile() {
             for t in 0..2 {
-                w.add_section(kind, Scope::Tile(t), 0, &content(kind, t), codec_for(kind, t)).unwrap();
+                w.add_section(kind, Scope::Tile(t), item_of(kind), &content(kind, t), codec_for(kind, t))
+                    .unwrap();
             }
         } else {
             w.add_section(kind, Scope::Global, 0, &content(kind, 9), codec_for(kind, 9)).unwrap();

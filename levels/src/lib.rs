@@ -1,0 +1,116 @@
+//! Data a package's tiles imply but a renderer should not have to derive at open: each tile's
+//! coarse level (its SVO cut a few levels above the leaves, [`coarse`]) and the rock behind its
+//! scanned walls ([`rock`]). `grotto-pack` stores both in the package (format 1.1), so opening a
+//! large package reads only what it shows; the runtime derives them with the same functions for
+//! packages that lack them (format 1.0, hand-built scenes).
+
+pub mod coarse;
+pub mod rock;
+
+use glam::{IVec3, Vec3};
+use grotto_format::spec::RockBrick;
+use grotto_format::svo::morton_decode;
+use grotto_format::{Result, Tile};
+
+use crate::coarse::{COARSE_LEVELS, CoarseLevel, coarse_level};
+use crate::rock::{CONTEXT_CELLS, ROCK_LEVEL, SurfaceLeaf, in_context, tile_rock};
+
+/// What the packer stores with a tile besides its own data.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TileLevels {
+    /// Coarse level [`COARSE_LEVELS`] (or the tile's depth, if shallower); `None` for a tile
+    /// without an SVO.
+    pub coarse: Option<(u32, CoarseLevel)>,
+    /// The tile's rock; `None` where it cannot be stored per tile (a tile off the shared leaf
+    /// grid or the bricks' grid), so a reader classifies it itself.
+    pub rock: Option<Vec<RockBrick>>,
+}
+
+/// Where tiles sit on one leaf grid: each tile's origin in leaves from the first tile's origin
+/// (`None` off the grid, or with another leaf size) and its side in leaves.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileGrid {
+    pub origin_leaf: Vec<Option<IVec3>>,
+    pub side_leaves: Vec<i64>,
+}
+
+impl TileGrid {
+    pub fn of(tiles: &[Tile<'_>]) -> Self {
+        let first = tiles.first().map(|t| (t.origin_m(), t.leaf_size_m()));
+        let origin_leaf = tiles
+            .iter()
+            .map(|t| {
+                let (o0, ls0) = first?;
+                if (t.leaf_size_m() - ls0).abs() > ls0 * 1e-9 {
+                    return None;
+                }
+                let mut out = [0i32; 3];
+                for a in 0..3 {
+                    let v = (t.origin_m()[a] - o0[a]) / ls0;
+                    let r = v.round();
+                    if (v - r).abs() > 1e-3 || r.abs() > f64::from(1 << 28) {
+                        return None;
+                    }
+                    out[a] = r as i32;
+                }
+                Some(IVec3::from_array(out))
+            })
+            .collect();
+        Self { origin_leaf, side_leaves: tiles.iter().map(|t| 1i64 << t.depth()).collect() }
+    }
+}
+
+/// The surface leaves of `tile` (frame leaf units, origin `origin_leaf`) that `keep` accepts.
+fn surface(tile: &Tile<'_>, origin_leaf: IVec3, keep: impl Fn(Vec3) -> bool) -> Result<Vec<SurfaceLeaf>> {
+    let Some(svo) = tile.svo()? else { return Ok(Vec::new()) };
+    let depth = tile.depth();
+    let origin = origin_leaf.as_vec3() + Vec3::splat(0.5);
+    Ok(svo
+        .nodes
+        .iter()
+        .filter(|n| u32::from(n.level) == depth)
+        .zip(svo.ndf.iter())
+        .map(|(n, ndf)| SurfaceLeaf {
+            center_leaf: origin + glam::UVec3::from_array(morton_decode(n.morton)).as_vec3(),
+            normal_mean: Vec3::from_array(ndf.mean),
+        })
+        .filter(|l| keep(l.center_leaf))
+        .collect())
+}
+
+/// The coarse level and the rock of tile `t` of `tiles` (every tile of one package, so the
+/// rock near a border sees the neighbour's walls).
+pub fn tile_levels(tiles: &[Tile<'_>], grid: &TileGrid, t: usize) -> Result<TileLevels> {
+    let tile = &tiles[t];
+    let Some(svo) = tile.svo()? else { return Ok(TileLevels::default()) };
+    let depth = tile.depth();
+    let k = COARSE_LEVELS.min(depth);
+    let coarse = (k > 0).then(|| (k, coarse_level(&svo, depth, k, tile.leaf_size_m())));
+    let brick = i64::from(grotto_format::spec::ROCK_BRICK_LEAVES);
+    let side = grid.side_leaves[t];
+    let rock = match grid.origin_leaf[t] {
+        Some(o)
+            if o.to_array().iter().all(|&c| i64::from(c) % brick == 0)
+                && side % brick == 0
+                && side < 1 << 28 =>
+        {
+            let side = side as i32;
+            let mut context = surface(tile, o, |_| true)?;
+            let reach = i64::from(CONTEXT_CELLS << ROCK_LEVEL);
+            for (u, other) in tiles.iter().enumerate() {
+                let Some(ou) = grid.origin_leaf[u] else { continue };
+                // Cubes within the context margin of each other on every axis.
+                let near = (0..3).all(|a| {
+                    let (lo, hi) = (i64::from(o[a]) - reach, i64::from(o[a]) + i64::from(side) + reach);
+                    i64::from(ou[a]) < hi && i64::from(ou[a]) + grid.side_leaves[u] > lo
+                });
+                if u != t && near {
+                    context.extend(surface(other, ou, |p| in_context(o, side, p))?);
+                }
+            }
+            Some(tile_rock(o, side, &context))
+        }
+        _ => None,
+    };
+    Ok(TileLevels { coarse, rock })
+}
