@@ -246,3 +246,68 @@ fn a_fly_through_under_a_tiny_budget_loads_and_evicts_and_never_exceeds_it() {
     assert!(s.frames.iter().skip(1).any(|f| f.loaded > 0 && f.bounces > 0), "loaded tiles get their light");
     assert_eq!(s.images.len(), 6);
 }
+
+/// A copy of `package` without the sections format 1.1 added (coarse levels, rock), as a 1.0
+/// packer wrote it: the runtime then derives them itself.
+fn without_levels(package: &Path, out: &Path) -> PathBuf {
+    use grotto_format::{PackageWriter, Scope, SectionKind, TileInfo};
+    let pkg = Package::open(package).unwrap();
+    let mut w = PackageWriter::create(out).unwrap();
+    let added = [SectionKind::CoarseNodes, SectionKind::CoarseLeaves, SectionKind::RockBricks];
+    for t in pkg.tiles() {
+        let i = w
+            .add_tile(TileInfo {
+                origin_m: t.origin_m(),
+                extent_m: t.extent_m(),
+                grid: t.grid(),
+                depth: t.depth(),
+                point_count: t.point_count(),
+            })
+            .unwrap();
+        for s in t.sections().filter(|s| !s.kind.is_some_and(|k| added.contains(&k))) {
+            w.copy_section(&pkg, &s, Scope::Tile(i)).unwrap();
+        }
+    }
+    for s in pkg.sections().filter(|s| s.scope == Scope::Global) {
+        w.copy_section(&pkg, &s, Scope::Global).unwrap();
+    }
+    w.finish().unwrap()
+}
+
+#[test]
+fn stored_coarse_levels_and_rock_are_what_the_runtime_would_derive() {
+    // The packer stores each tile's coarse level and its share of the rock, computed from the
+    // tile and its neighbours' walls; loading them must give exactly the scene the runtime
+    // derives from the full tiles (coarse levels per tile, rock over the whole package), so
+    // opening a package need not read every tile and nothing changes at the seams.
+    let package = small_tiles_cave();
+    let pkg = Package::open(package).unwrap();
+    let mut rock_bricks = 0;
+    for t in pkg.tiles().filter(|t| t.svo().unwrap().is_some_and(|s| !s.nodes.is_empty())) {
+        assert!(t.coarse(3).unwrap().is_some(), "tile {} has its coarse level", t.index());
+        rock_bricks += t.rock().unwrap().expect("and its rock").len();
+    }
+    assert!(rock_bricks > 0);
+    let bare_path =
+        without_levels(package, &Path::new(env!("CARGO_TARGET_TMPDIR")).join("residency-bare.grotto"));
+    let bare = Package::open(&bare_path).unwrap();
+    assert!(bare.tiles().all(|t| t.coarse(3).unwrap().is_none() && t.rock().unwrap().is_none()));
+    for (name, mode) in [
+        ("full", (|_| TileMode::Full) as fn(usize) -> TileMode),
+        ("coarse", |_| TileMode::Coarse),
+        ("mixed", |i| if i % 3 == 0 { TileMode::Full } else { TileMode::Coarse }),
+    ] {
+        let stored = SceneData::from_package_with(&pkg, mode).unwrap();
+        let derived = SceneData::from_package_with(&bare, mode).unwrap();
+        assert!(stored.rock.bricks() > 0, "{name}");
+        // Compared whole, reported short (the tables are thousands of words).
+        let same = |what: &str, a: bool, sizes: (usize, usize)| {
+            assert!(a, "{name}: stored and derived {what} differ ({} vs {} entries)", sizes.0, sizes.1)
+        };
+        same("rock", stored.rock == derived.rock, (stored.rock.words.len(), derived.rock.words.len()));
+        same("tiles", stored.tiles == derived.tiles, (stored.tiles.len(), derived.tiles.len()));
+        same("nodes", stored.nodes == derived.nodes, (stored.nodes.len(), derived.nodes.len()));
+        same("leaves", stored.leaves == derived.leaves, (stored.leaves.len(), derived.leaves.len()));
+        same("surfels", stored.surfels == derived.surfels, (stored.surfels.len(), derived.surfels.len()));
+    }
+}
