@@ -10,7 +10,7 @@
 //! are the bytes the renderer holds for tiles.
 
 use glam::{DVec3, Vec3};
-use grotto_format::spec::{Surfel, SvoNode};
+use grotto_format::spec::{CoarseLeaf, Surfel, SvoNode};
 use grotto_format::{Package, SectionKind};
 use serde::Serialize;
 
@@ -171,25 +171,46 @@ pub fn footprints(pkg: &Package, radiance_f16: bool) -> Result<Vec<TileFootprint
     let mut out = Vec::new();
     let Some((frame_origin_m, _)) = crate::scene_data::frame_of(pkg)? else { return Ok(out) };
     for tile in pkg.tiles() {
-        let Some(nodes) = tile.read::<SvoNode>(SectionKind::SvoNodes)? else { continue };
-        if nodes.is_empty() {
+        let depth = tile.depth();
+        let len = |kind: SectionKind, item: u32, each: usize| {
+            tile.find(kind, item).map(|s| s.raw_len / each as u64)
+        };
+        let k = COARSE_LEVELS.min(depth);
+        // From the section table where the package stores the coarse level (format 1.1), so
+        // sizing every tile reads no tile data; from the node array otherwise.
+        let counts = match (
+            len(SectionKind::SvoNodes, 0, size_of::<SvoNode>()),
+            len(SectionKind::LeafOpacity, 0, size_of::<f32>()),
+            len(SectionKind::CoarseNodes, k, size_of::<SvoNode>()),
+            len(SectionKind::CoarseLeaves, k, size_of::<CoarseLeaf>()),
+        ) {
+            (Some(nodes), Some(leaves), Some(coarse_nodes), Some(coarse_leaves)) if k > 0 => {
+                (nodes, leaves, coarse_nodes, coarse_leaves)
+            }
+            _ => {
+                let Some(nodes) = tile.read::<SvoNode>(SectionKind::SvoNodes)? else { continue };
+                let cut = depth - k;
+                (
+                    nodes.len() as u64,
+                    nodes.iter().filter(|n| u32::from(n.level) == depth).count() as u64,
+                    nodes.iter().filter(|n| u32::from(n.level) <= cut).count() as u64,
+                    nodes.iter().filter(|n| u32::from(n.level) == cut).count() as u64,
+                )
+            }
+        };
+        let (nodes, leaves, coarse_nodes, coarse_leaves) = counts;
+        if nodes == 0 {
             continue;
         }
-        let depth = tile.depth();
-        let len = |kind: SectionKind, each: usize| tile.find(kind, 0).map_or(0, |s| s.raw_len / each as u64);
-        let leaves = nodes.iter().filter(|n| u32::from(n.level) == depth).count() as u64;
-        let surfels = len(SectionKind::Surfels, size_of::<Surfel>());
-        let cut = depth - COARSE_LEVELS.min(depth);
-        let coarse_nodes = nodes.iter().filter(|n| u32::from(n.level) <= cut).count() as u64;
-        let coarse_leaves = nodes.iter().filter(|n| u32::from(n.level) == cut).count() as u64;
+        let surfels = len(SectionKind::Surfels, 0, size_of::<Surfel>()).unwrap_or(0);
         let lo = DVec3::from_array(tile.origin_m()) - DVec3::from_array(frame_origin_m);
         out.push(TileFootprint {
             index: tile.index() as usize,
             min_m: lo.as_vec3(),
             max_m: (lo + DVec3::splat(tile.extent_m())).as_vec3(),
-            full: TileCost::new(nodes.len() as u64, leaves, surfels, radiance_f16),
-            coarse: if cut == depth {
-                TileCost::new(nodes.len() as u64, leaves, surfels, radiance_f16)
+            full: TileCost::new(nodes, leaves, surfels, radiance_f16),
+            coarse: if k == 0 {
+                TileCost::new(nodes, leaves, surfels, radiance_f16)
             } else {
                 TileCost::new(coarse_nodes, coarse_leaves, coarse_leaves, radiance_f16)
             },
