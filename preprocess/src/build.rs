@@ -657,37 +657,46 @@ fn assemble_plan(
         });
     }
     let mut inputs_extra = Vec::new();
-    let packages = (0..total)
-        .map(|t| Package::open(tile_package_path(&params.work_dir, t)))
-        .collect::<std::result::Result<Vec<_>, _>>()?;
-    let tiles = packages
-        .iter()
-        .enumerate()
-        .map(|(t, p)| {
-            p.tile(0).ok_or_else(|| Error::Parameter {
-                name: "tiles",
-                reason: format!("tile package {t} has no tile"),
-            })
-        })
-        .collect::<Result<Vec<_>>>()?;
     // Each tile's coarse level and rock (format 1.1), so a renderer opening the package reads
     // only the tiles it shows in full. The rock near a border needs the neighbours' walls, so
-    // this runs once every tile is built.
-    let grid = grotto_levels::TileGrid::of(&tiles);
-    let done = std::sync::atomic::AtomicU64::new(0);
-    let levels = (0..total)
-        .into_par_iter()
-        .map(|t| {
-            let levels = grotto_levels::tile_levels(&tiles, &grid, t)?;
-            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            progress(Progress { stage: "levels", done: n, total: total as u64 });
-            Ok(levels)
-        })
-        .collect::<Result<Vec<_>>>()?;
+    // this runs once every tile is built, over every tile package at once (it reads their SVOs
+    // only; the maps are dropped before the copy below touches the surfels).
+    let levels = {
+        let packages = (0..total)
+            .map(|t| Package::open(tile_package_path(&params.work_dir, t)))
+            .collect::<std::result::Result<Vec<_>, _>>()?;
+        let tiles = packages
+            .iter()
+            .enumerate()
+            .map(|(t, p)| {
+                p.tile(0).ok_or_else(|| Error::Parameter {
+                    name: "tiles",
+                    reason: format!("tile package {t} has no tile"),
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let grid = grotto_levels::TileGrid::of(&tiles);
+        let done = std::sync::atomic::AtomicU64::new(0);
+        (0..total)
+            .into_par_iter()
+            .map(|t| {
+                let levels = grotto_levels::tile_levels(&tiles, &grid, t)?;
+                let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                progress(Progress { stage: "levels", done: n, total: total as u64 });
+                Ok(levels)
+            })
+            .collect::<Result<Vec<_>>>()?
+    };
     let mut writer = PackageWriter::create(out)?;
-    for (t, (tile, levels)) in tiles.iter().zip(&levels).enumerate() {
-        seam_limited_points +=
-            finished_tile_package(&tile_package_path(&params.work_dir, t), &fingerprint).unwrap_or(0);
+    for (t, levels) in levels.iter().enumerate() {
+        let path = tile_package_path(&params.work_dir, t);
+        seam_limited_points += finished_tile_package(&path, &fingerprint).unwrap_or(0);
+        // One tile package mapped at a time: copying touches every page of its surfels.
+        let tile_pkg = Package::open(&path)?;
+        let tile = tile_pkg.tile(0).ok_or_else(|| Error::Parameter {
+            name: "tiles",
+            reason: format!("tile package {t} has no tile"),
+        })?;
         let index = writer.add_tile(TileInfo {
             origin_m: tile.origin_m(),
             extent_m: tile.extent_m(),
@@ -697,7 +706,7 @@ fn assemble_plan(
         })?;
         let scope = Scope::Tile(index);
         for s in tile.sections() {
-            writer.copy_section(&packages[t], &s, scope)?;
+            writer.copy_section(&tile_pkg, &s, scope)?;
         }
         if let Some((k, coarse)) = &levels.coarse {
             writer.add_elements(SectionKind::CoarseNodes, scope, *k, &coarse.nodes, Compression::Raw)?;

@@ -218,7 +218,7 @@ impl Bars {
             bar.set_position(p.done);
             return;
         }
-        let unit = if p.stage == "tiles" { "tiles" } else { "points" };
+        let unit = if matches!(p.stage, "tiles" | "levels" | "assemble") { "tiles" } else { "points" };
         let bar = self.multi.add(ProgressBar::new(p.total.max(p.done)));
         bar.set_style(
             ProgressStyle::with_template(&format!(
