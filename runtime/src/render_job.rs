@@ -76,6 +76,9 @@ pub struct RenderOptions {
     pub gpu_memory: Option<u64>,
     /// Most surfels drawn (`--point-budget`); `None`: no limit.
     pub point_budget: Option<u64>,
+    /// Along a path, most bounces run before a frame whose tiles changed (`--frame-bounces`);
+    /// the rest runs one bounce per frame, so light converges over frames. `None`: settle.
+    pub frame_bounces: Option<u32>,
 }
 
 impl RenderOptions {
@@ -98,6 +101,7 @@ impl RenderOptions {
             headlamp: Headlamp::Auto,
             gpu_memory: None,
             point_budget: None,
+            frame_bounces: None,
         }
     }
 }
@@ -218,8 +222,12 @@ pub struct FrameReport {
     pub loaded: usize,
     pub evicted: usize,
     pub surfels: usize,
-    /// Bounces run for this frame (after a change of tiles the light is settled again).
+    /// Bounces run for this frame (after a change of tiles the light is settled again, at most
+    /// `--frame-bounces` of them; one per frame until it has converged).
     pub bounces: u32,
+    /// Leaves whose light was carried over from the previous frame's tiles (tiles resident in
+    /// both, in the same form): only the rest starts from darkness.
+    pub carried_leaves: usize,
     /// Milliseconds of each pass that ran for this frame.
     pub pass_ms: std::collections::BTreeMap<String, f64>,
 }
@@ -534,7 +542,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let mut frames = Vec::new();
     let f16 = settings.radiance_f16;
     for (i, cam) in cameras.iter().enumerate() {
-        let (mut loaded, mut evicted, mut bounces) = (0, 0, 0);
+        let (mut loaded, mut evicted, mut bounces, mut carried_leaves) = (0, 0, 0, 0);
         if i == 0 {
             bounces = r.stats().bounces_done;
         } else if let (Some(st), Some(current)) = (&streaming, &residency) {
@@ -548,14 +556,24 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             if before != after {
                 loaded = after.difference(&before).count();
                 evicted = before.difference(&after).count();
+                // Tiles resident before and after keep their light; only the rest needs bounces.
+                let carried = r.light_by_tile(&scene)?;
                 scene = st.load(&next, scene.lights.clone(), scene.headlamp)?;
                 settings.exposure = exposure;
                 r = Renderer::new(&gpu, &scene, settings.clone())?;
-                bounces = r.settle(|done, change| progress(Progress::Bounce { done, budget, change }))?;
+                carried_leaves = r.seed_light(&scene, &carried)?;
+                let report = |done, change| progress(Progress::Bounce { done, budget, change });
+                bounces = match opts.frame_bounces {
+                    Some(n) => r.settle_at_most(n, report)?,
+                    None => r.settle(report)?,
+                };
             }
             residency = Some(next);
         }
+        let before_render = r.stats().bounces_done;
         let (mut frame, plan) = r.render(cam, opts.width, opts.height)?;
+        // A progressive bounce run by the frame itself.
+        bounces += r.stats().bounces_done - before_render;
         last_plan = plan;
         if opts.exposure.is_none() && i == 0 {
             // Auto exposure from the first frame, kept for the sequence so it does not flicker.
@@ -581,6 +599,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             evicted,
             surfels: scene.surfels.len(),
             bounces,
+            carried_leaves,
             pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
         });
         let path = frame_path(&opts.out, i as u32, n);

@@ -106,8 +106,8 @@ pub struct Renderer {
     params: wgpu::Buffer,
     /// Bytes of every buffer and texture created at upload (the G-buffer is added per view).
     static_bytes: u64,
-    /// The light state, for the test hooks (the bind groups keep it alive otherwise).
-    #[cfg(feature = "test-hooks")]
+    /// The light state: carried across reloads (`light_by_tile`, `seed_light`) and read by the
+    /// test hooks.
     leaf_light: wgpu::Buffer,
     #[cfg(feature = "test-hooks")]
     faces: wgpu::Buffer,
@@ -295,6 +295,24 @@ fn pass_queries(gpu: &Gpu) -> Option<(wgpu::QuerySet, wgpu::Buffer)> {
     })
 }
 
+/// Light state per tile, keyed by where the tile is and at which level it is held
+/// ([`Renderer::light_by_tile`], [`Renderer::seed_light`]).
+#[derive(Clone, Debug, Default)]
+pub struct CarriedLight {
+    tiles: std::collections::HashMap<([i32; 3], u32, u32), Vec<LeafLightGpu>>,
+}
+
+impl CarriedLight {
+    fn key(t: &crate::gpu_types::TileGpu) -> ([i32; 3], u32, u32) {
+        (t.origin_leaf, t.depth, t.leaf_lod)
+    }
+
+    /// Leaves held.
+    pub fn leaves(&self) -> usize {
+        self.tiles.values().map(Vec::len).sum()
+    }
+}
+
 impl Renderer {
     pub fn new(gpu: &Gpu, scene: &SceneData, settings: Settings) -> Result<Self> {
         settings.validate()?;
@@ -373,7 +391,6 @@ impl Renderer {
             env_valid: false,
             params: up.params,
             static_bytes,
-            #[cfg(feature = "test-hooks")]
             leaf_light: up.leaf_light,
             #[cfg(feature = "test-hooks")]
             faces: up.faces,
@@ -503,6 +520,79 @@ impl Renderer {
                 return Ok(self.stats_now.bounces_done - start);
             }
         }
+    }
+
+    /// As [`Renderer::settle`], stopping after at most `max_bounces` bounces; what is left runs
+    /// one bounce per rendered frame ([`Renderer::render`]), so the light converges over frames.
+    pub fn settle_at_most(
+        &mut self,
+        max_bounces: u32,
+        mut progress: impl FnMut(u32, Option<f32>),
+    ) -> Result<u32> {
+        let start = self.stats_now.bounces_done;
+        loop {
+            if self.stats_now.bounces_done - start >= max_bounces && self.direct_valid {
+                return Ok(self.stats_now.bounces_done - start);
+            }
+            let p = self.update_light()?;
+            progress(self.stats_now.bounces_done, self.stats_now.last_change);
+            if !p.runs(Pass::Propagate) {
+                return Ok(self.stats_now.bounces_done - start);
+            }
+        }
+    }
+
+    /// Each tile's light state as this renderer holds it for `scene` (the scene it was made
+    /// for), to carry into the renderer of another scene that holds some of the same tiles.
+    pub fn light_by_tile(&self, scene: &SceneData) -> Result<CarriedLight> {
+        let size = size_of::<LeafLightGpu>();
+        if scene.leaves.len() != self.leaf_count as usize {
+            return Err(Error::Internal {
+                what: "light_by_tile",
+                message: "not the scene this renderer was made for".into(),
+            });
+        }
+        let bytes = self.gpu.read_buffer(&self.leaf_light, u64::from(self.leaf_count) * size as u64)?;
+        let state: Vec<LeafLightGpu> =
+            bytemuck::pod_collect_to_vec(&bytes[..self.leaf_count as usize * size]);
+        let mut tiles = std::collections::HashMap::new();
+        for t in &scene.tiles {
+            let range = t.leaf_offset as usize..(t.leaf_offset + t.leaf_count) as usize;
+            if let Some(leaves) = state.get(range) {
+                tiles.insert(CarriedLight::key(t), leaves.to_vec());
+            }
+        }
+        Ok(CarriedLight { tiles })
+    }
+
+    /// Starts every tile of `scene` (this renderer's scene) that `carried` holds in the same form
+    /// (same place, depth and level) from the light it had there, instead of from none: tiles
+    /// that stay resident keep their converged light across a reload, and only what changed
+    /// needs bounces. Direct light, environment light and `out` are recomputed by the passes as
+    /// usual. Returns the leaves seeded.
+    pub fn seed_light(&mut self, scene: &SceneData, carried: &CarriedLight) -> Result<usize> {
+        if scene.leaves.len() != self.leaf_count as usize {
+            return Err(Error::Internal {
+                what: "seed_light",
+                message: "not the scene this renderer was made for".into(),
+            });
+        }
+        let mut state: Vec<LeafLightGpu> =
+            scene.leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect();
+        let mut seeded = 0;
+        for t in &scene.tiles {
+            let range = t.leaf_offset as usize..(t.leaf_offset + t.leaf_count) as usize;
+            if let (Some(from), Some(to)) = (carried.tiles.get(&CarriedLight::key(t)), state.get_mut(range))
+                && from.len() == to.len()
+            {
+                to.copy_from_slice(from);
+                seeded += from.len();
+            }
+        }
+        if seeded > 0 {
+            self.gpu.queue.write_buffer(&self.leaf_light, 0, bytemuck::cast_slice(&state));
+        }
+        Ok(seeded)
     }
 
     /// Renders one frame (running whatever light work the plan asks for first: progressive, at

@@ -145,6 +145,11 @@ struct RenderArgs {
     /// Most surfels drawn (default: no limit); tiles beyond it are drawn from their coarse level.
     #[arg(long)]
     point_budget: Option<u64>,
+    /// Along a path, run at most this many bounces before a frame whose tiles changed (default:
+    /// settle); the rest runs one bounce per frame, so the light converges over frames. Tiles
+    /// resident before and after keep their light either way.
+    #[arg(long)]
+    frame_bounces: Option<u32>,
     /// Indirect light filter at pixels: trilinear, tricubic or off.
     #[arg(long)]
     indirect: Option<String>,
@@ -236,6 +241,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
             .ok_or_else(|| anyhow::anyhow!("--headlamp {:?}: use auto, on or off", a.headlamp))?,
         gpu_memory: a.gpu_memory,
         point_budget: a.point_budget,
+        frame_bounces: a.frame_bounces,
     })
 }
 
@@ -312,10 +318,10 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
         println!("{n}");
     }
     if summary.residency.is_some() && summary.frames.len() > 1 {
-        println!("frame  tile MiB  full  coarse  loaded  evicted  surfels  bounces");
+        println!("frame  tile MiB  full  coarse  loaded  evicted  surfels  bounces  carried leaves");
         for f in &summary.frames {
             println!(
-                "{:5}  {:8.1}  {:4}  {:6}  {:6}  {:7}  {:7}  {:7}",
+                "{:5}  {:8.1}  {:4}  {:6}  {:6}  {:7}  {:7}  {:7}  {:14}",
                 f.frame,
                 f.tile_bytes as f64 / f64::from(1u32 << 20),
                 f.full_tiles,
@@ -323,7 +329,8 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
                 f.loaded,
                 f.evicted,
                 f.surfels,
-                f.bounces
+                f.bounces,
+                f.carried_leaves
             );
         }
     }
