@@ -48,5 +48,9 @@ fn load(data: &[u8]) {
             let _ = TileIndex::build("fuzz", &scene.tiles);
         }
     }
-    let _ = SceneData::from_package_with(&pkg, |i| if i % 2 == 0 { TileMode::Coarse } else { TileMode::Skip });
+    let _ = SceneData::from_package_with(&pkg, |i| match i % 3 {
+        0 => TileMode::Coarse,
+        1 => TileMode::Far,
+        _ => TileMode::Skip,
+    });
 }

@@ -24,6 +24,15 @@ use grotto_format::svo::morton_decode;
 /// level (`item` 3 of the coarse sections).
 pub const COARSE_LEVELS: u32 = 3;
 
+/// Levels the far level is cut above the leaves: leaves 64 package leaves wide (4 m at 6.25 cm
+/// leaves), about 1/4096 of a surface's leaves, so even a cave of 10^10 points keeps every tile
+/// resident in a few hundred MB and draws it from a few million splats. The packer stores it
+/// too (`item` 6).
+pub const FAR_LEVELS: u32 = 6;
+
+/// The levels the packer stores, finest first.
+pub const STORED_LEVELS: [u32; 2] = [COARSE_LEVELS, FAR_LEVELS];
+
 /// A tile at a coarse level: an SVO of depth `D - k` and one leaf per node at that depth.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct CoarseLevel {

@@ -12,15 +12,15 @@ use grotto_format::spec::RockBrick;
 use grotto_format::svo::morton_decode;
 use grotto_format::{Result, Tile};
 
-use crate::coarse::{COARSE_LEVELS, CoarseLevel, coarse_level};
+use crate::coarse::{CoarseLevel, STORED_LEVELS, coarse_level};
 use crate::rock::{CONTEXT_CELLS, ROCK_LEVEL, SurfaceLeaf, in_context, tile_rock};
 
 /// What the packer stores with a tile besides its own data.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TileLevels {
-    /// Coarse level [`COARSE_LEVELS`] (or the tile's depth, if shallower); `None` for a tile
-    /// without an SVO.
-    pub coarse: Option<(u32, CoarseLevel)>,
+    /// The levels of [`STORED_LEVELS`] (each at most the tile's depth; one where they meet),
+    /// finest first; none for a tile without an SVO.
+    pub coarse: Vec<(u32, CoarseLevel)>,
     /// The tile's rock; `None` where it cannot be stored per tile (a tile off the shared leaf
     /// grid or the bricks' grid), so a reader classifies it itself.
     pub rock: Option<Vec<RockBrick>>,
@@ -84,8 +84,9 @@ pub fn tile_levels(tiles: &[Tile<'_>], grid: &TileGrid, t: usize) -> Result<Tile
     let tile = &tiles[t];
     let Some(svo) = tile.svo()? else { return Ok(TileLevels::default()) };
     let depth = tile.depth();
-    let k = COARSE_LEVELS.min(depth);
-    let coarse = (k > 0).then(|| (k, coarse_level(&svo, depth, k, tile.leaf_size_m())));
+    let mut levels: Vec<u32> = STORED_LEVELS.iter().map(|&k| k.min(depth)).filter(|&k| k > 0).collect();
+    levels.dedup();
+    let coarse = levels.into_iter().map(|k| (k, coarse_level(&svo, depth, k, tile.leaf_size_m()))).collect();
     let brick = i64::from(grotto_format::spec::ROCK_BRICK_LEAVES);
     let side = grid.side_leaves[t];
     let rock = match grid.origin_leaf[t] {

@@ -708,7 +708,7 @@ fn assemble_plan(
         for s in tile.sections() {
             writer.copy_section(&tile_pkg, &s, scope)?;
         }
-        if let Some((k, coarse)) = &levels.coarse {
+        for (k, coarse) in &levels.coarse {
             writer.add_elements(SectionKind::CoarseNodes, scope, *k, &coarse.nodes, Compression::Raw)?;
             writer.add_elements(
                 SectionKind::CoarseLeaves,

@@ -8,7 +8,7 @@ use grotto_format::spec::CoarseLeaf;
 
 use crate::gpu_types::{LeafGpu, SurfelGpu};
 
-pub use grotto_levels::coarse::{COARSE_LEVELS, CoarseLevel, coarse_level};
+pub use grotto_levels::coarse::{COARSE_LEVELS, CoarseLevel, FAR_LEVELS, coarse_level};
 
 /// A tile at its coarse level, as the passes read it.
 #[derive(Clone, Debug, Default, PartialEq)]

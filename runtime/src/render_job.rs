@@ -154,7 +154,7 @@ fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Stre
         apply_lamps(opts, &mut scene);
         return Ok((scene, None));
     }
-    let mut coarse = non_empty(SceneData::from_package_with(&pkg, |_| TileMode::Coarse)?)?;
+    let mut coarse = non_empty(SceneData::from_package_with(&pkg, |_| TileMode::Far)?)?;
     apply_lamps(opts, &mut coarse);
     let largest_tile_m = tiles.iter().map(|t| (t.max_m - t.min_m).max_element()).fold(0.0, f32::max);
     let streaming = Streaming {
@@ -218,6 +218,7 @@ pub struct FrameReport {
     pub tile_bytes: u64,
     pub full_tiles: usize,
     pub coarse_tiles: usize,
+    pub far_tiles: usize,
     /// Tiles that became full (loaded) and coarse (evicted) for this frame.
     pub loaded: usize,
     pub evicted: usize,
@@ -408,10 +409,12 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
     }
     if let Some(r) = &residency {
         notes.push(format!(
-            "residency: {} of {} tiles in full, the rest at their coarse level; {} of tile data \
-             (budget {}), {} surfels drawn{}",
+            "residency: {} of {} tiles in full, {} at their coarse level, {} at their far level; {} of \
+             tile data (budget {}), {} surfels drawn{}",
             r.totals.full_tiles,
             r.decisions.len(),
+            r.totals.coarse_tiles,
+            r.totals.far_tiles,
             crate::gpu::human_bytes(r.totals.resident_bytes),
             crate::gpu::human_bytes(r.totals.budget.gpu_bytes),
             r.totals.surfels,
@@ -553,7 +556,12 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
                 r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect()
             };
             let (before, after) = (full(current), full(&next));
-            if before != after {
+            let modes = |r: &Residency| {
+                let mut m: Vec<(usize, TileMode)> = r.decisions.iter().map(|d| (d.tile, d.mode)).collect();
+                m.sort_unstable_by_key(|d| d.0);
+                m
+            };
+            if modes(current) != modes(&next) {
                 loaded = after.difference(&before).count();
                 evicted = before.difference(&after).count();
                 // Tiles resident before and after keep their light; only the rest needs bounces.
@@ -594,7 +602,8 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             frame: i as u32,
             tile_bytes: scene.tile_bytes(f16),
             full_tiles: scene.tiles.iter().filter(|t| t.leaf_lod == 0).count(),
-            coarse_tiles: scene.tiles.iter().filter(|t| t.leaf_lod > 0).count(),
+            coarse_tiles: residency.as_ref().map_or(0, |r| r.totals.coarse_tiles),
+            far_tiles: residency.as_ref().map_or(0, |r| r.totals.far_tiles),
             loaded,
             evicted,
             surfels: scene.surfels.len(),

@@ -1,9 +1,11 @@
 //! Which tiles the renderer holds in full under a GPU memory budget and a point budget, for a
-//! view. Every tile keeps its coarse level (coarse.rs) resident, reserved first: cones that leave
-//! the full tiles still meet walls and light. The rest of the budget goes to full tiles by
-//! priority: tiles in the view frustum, then tiles that light them (within `light_reach_m` of a
-//! visible tile, or holding a light), then the others; nearer first within each class. A tile
-//! that does not fit is passed over for smaller ones behind it (greedy), never split.
+//! view. Every tile keeps at least its far level (coarse.rs, `FAR_LEVELS` above its leaves)
+//! resident, reserved first: cones that leave the full tiles still meet walls and light. The rest
+//! of the budget goes by priority: tiles in the view frustum, then tiles that light them (within
+//! `light_reach_m` of a visible tile, or holding a light), then the others; nearer first within
+//! each class, so detail falls off with distance as the budget runs out. Each tile in turn is held
+//! full if that fits, else at its coarse level (`COARSE_LEVELS`) if that fits, else stays far; a
+//! tile that does not fit is passed over for smaller ones behind it (greedy), never split.
 //!
 //! Pure policy over byte counts, no GPU: the renderer's buffers follow the same per-tile formula
 //! ([`tile_bytes`], checked against `SceneData::buffer_bytes` by a test), so the bytes chosen here
@@ -14,7 +16,6 @@ use grotto_format::spec::{CoarseLeaf, Surfel, SvoNode};
 use grotto_format::{Package, SectionKind};
 use serde::Serialize;
 
-use crate::coarse::COARSE_LEVELS;
 use crate::error::{Error, Result};
 use crate::scene_data::TileMode;
 
@@ -54,6 +55,19 @@ pub struct TileFootprint {
     pub max_m: Vec3,
     pub full: TileCost,
     pub coarse: TileCost,
+    pub far: TileCost,
+}
+
+impl TileFootprint {
+    /// What the tile costs held in `mode`.
+    pub fn cost(&self, mode: TileMode) -> TileCost {
+        match mode {
+            TileMode::Full => self.full,
+            TileMode::Coarse => self.coarse,
+            TileMode::Far => self.far,
+            TileMode::Skip => TileCost::default(),
+        }
+    }
 }
 
 /// The budgets residency keeps.
@@ -111,15 +125,16 @@ pub struct Residency {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ResidencyTotals {
     pub budget: Budget,
-    /// Tile bytes held: every coarse level plus the full tiles' extra.
+    /// Tile bytes held: every far level plus the finer tiles' extra.
     pub resident_bytes: u64,
-    /// Of them, the coarse levels' reserve.
+    /// Of them, the reserve: every tile at its far level.
     pub coarse_bytes: u64,
     /// Surfels drawn.
     pub surfels: u64,
     pub full_tiles: usize,
     pub coarse_tiles: usize,
-    /// Visible tiles left coarse for lack of budget.
+    pub far_tiles: usize,
+    /// Visible tiles left coarse or far for lack of budget.
     pub visible_coarse: usize,
 }
 
@@ -139,10 +154,11 @@ impl Residency {
         use std::fmt::Write;
         let t = &self.totals;
         let mut out = format!(
-            "residency: {} tiles full, {} coarse ({} in view), {} of {} budget, {} surfels\n  \
+            "residency: {} tiles full, {} coarse, {} far ({} in view not full), {} of {} budget, {} surfels\n  \
              tile  relevance  distance m  mode\n",
             t.full_tiles,
             t.coarse_tiles,
+            t.far_tiles,
             t.visible_coarse,
             crate::gpu::human_bytes(t.resident_bytes),
             crate::gpu::human_bytes(t.budget.gpu_bytes),
@@ -159,7 +175,7 @@ impl Residency {
 
     /// Every tile full (nothing was cut).
     pub fn all_full(&self) -> bool {
-        self.totals.coarse_tiles == 0
+        self.totals.coarse_tiles == 0 && self.totals.far_tiles == 0
     }
 }
 
@@ -175,45 +191,57 @@ pub fn footprints(pkg: &Package, radiance_f16: bool) -> Result<Vec<TileFootprint
         let len = |kind: SectionKind, item: u32, each: usize| {
             tile.find(kind, item).map(|s| s.raw_len / each as u64)
         };
-        let k = COARSE_LEVELS.min(depth);
-        // From the section table where the package stores the coarse level (format 1.1), so
-        // sizing every tile reads no tile data; from the node array otherwise.
-        let counts = match (
-            len(SectionKind::SvoNodes, 0, size_of::<SvoNode>()),
-            len(SectionKind::LeafOpacity, 0, size_of::<f32>()),
-            len(SectionKind::CoarseNodes, k, size_of::<SvoNode>()),
-            len(SectionKind::CoarseLeaves, k, size_of::<CoarseLeaf>()),
-        ) {
-            (Some(nodes), Some(leaves), Some(coarse_nodes), Some(coarse_leaves)) if k > 0 => {
-                (nodes, leaves, coarse_nodes, coarse_leaves)
+        // From the section table where the package stores the levels (format 1.1), so sizing
+        // every tile reads no tile data; from the node array otherwise.
+        let mut nodes_read: Option<std::borrow::Cow<'_, [SvoNode]>> = None;
+        let mut nodes_at = |cut: u32, leaf_level: u32| -> Result<Option<(u64, u64)>> {
+            if nodes_read.is_none() {
+                let Some(n) = tile.read::<SvoNode>(SectionKind::SvoNodes)? else { return Ok(None) };
+                nodes_read = Some(n);
             }
-            _ => {
-                let Some(nodes) = tile.read::<SvoNode>(SectionKind::SvoNodes)? else { continue };
-                let cut = depth - k;
-                (
-                    nodes.len() as u64,
-                    nodes.iter().filter(|n| u32::from(n.level) == depth).count() as u64,
-                    nodes.iter().filter(|n| u32::from(n.level) <= cut).count() as u64,
-                    nodes.iter().filter(|n| u32::from(n.level) == cut).count() as u64,
-                )
-            }
+            let nodes = nodes_read.as_deref().unwrap_or_default();
+            Ok(Some((
+                nodes.iter().filter(|n| u32::from(n.level) <= cut).count() as u64,
+                nodes.iter().filter(|n| u32::from(n.level) == leaf_level).count() as u64,
+            )))
         };
-        let (nodes, leaves, coarse_nodes, coarse_leaves) = counts;
+        let full = match (
+            len(SectionKind::SvoNodes, 0, size_of::<SvoNode>()),
+            len(SectionKind::LeafOpacity, 0, 4),
+        ) {
+            (Some(n), Some(l)) => Some((n, l)),
+            _ => nodes_at(depth, depth)?,
+        };
+        let Some((nodes, leaves)) = full else { continue };
         if nodes == 0 {
             continue;
         }
         let surfels = len(SectionKind::Surfels, 0, size_of::<Surfel>()).unwrap_or(0);
+        let full = TileCost::new(nodes, leaves, surfels, radiance_f16);
+        // A coarse tile's splats are counted as its leaves (an upper bound).
+        let mut level = |k: u32| -> Result<TileCost> {
+            if k == 0 {
+                return Ok(full);
+            }
+            let counts = match (
+                len(SectionKind::CoarseNodes, k, size_of::<SvoNode>()),
+                len(SectionKind::CoarseLeaves, k, size_of::<CoarseLeaf>()),
+            ) {
+                (Some(n), Some(l)) => (n, l),
+                _ => nodes_at(depth - k, depth - k)?.unwrap_or_default(),
+            };
+            Ok(TileCost::new(counts.0, counts.1, counts.1, radiance_f16))
+        };
+        let coarse = level(TileMode::Coarse.leaf_lod(depth))?;
+        let far = level(TileMode::Far.leaf_lod(depth))?;
         let lo = DVec3::from_array(tile.origin_m()) - DVec3::from_array(frame_origin_m);
         out.push(TileFootprint {
             index: tile.index() as usize,
             min_m: lo.as_vec3(),
             max_m: (lo + DVec3::splat(tile.extent_m())).as_vec3(),
-            full: TileCost::new(nodes, leaves, surfels, radiance_f16),
-            coarse: if k == 0 {
-                TileCost::new(nodes, leaves, surfels, radiance_f16)
-            } else {
-                TileCost::new(coarse_nodes, coarse_leaves, coarse_leaves, radiance_f16)
-            },
+            full,
+            coarse,
+            far,
         });
     }
     Ok(out)
@@ -262,12 +290,12 @@ fn in_frustum(view: &View, lo: Vec3, hi: Vec3) -> bool {
 /// Chooses the full tiles for `view` within `budget`. Errors: the coarse levels alone are over
 /// the budget, or a tile's full form is (it could never be loaded); both say what to change.
 pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Residency> {
-    let coarse_bytes: u64 = tiles.iter().map(|t| t.coarse.bytes).sum();
-    let coarse_surfels: u64 = tiles.iter().map(|t| t.coarse.surfels).sum();
+    let coarse_bytes: u64 = tiles.iter().map(|t| t.far.bytes).sum();
+    let coarse_surfels: u64 = tiles.iter().map(|t| t.far.surfels).sum();
     if coarse_bytes > budget.gpu_bytes {
         return Err(Error::Budget {
             what: format!(
-                "the coarse levels of all {} tiles need {} of GPU memory, over the budget of {}",
+                "the far levels of all {} tiles need {} of GPU memory, over the budget of {}",
                 tiles.len(),
                 crate::gpu::human_bytes(coarse_bytes),
                 crate::gpu::human_bytes(budget.gpu_bytes)
@@ -308,7 +336,7 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
                 tile: t.index,
                 relevance,
                 distance_m: distance_to_box(view.eye_m, t.min_m, t.max_m),
-                mode: TileMode::Coarse,
+                mode: TileMode::Far,
             }
         })
         .collect();
@@ -321,25 +349,30 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
     let (mut bytes, mut surfels) = (coarse_bytes, coarse_surfels);
     for &k in &order {
         let t = &tiles[k];
-        let extra_bytes = t.full.bytes.saturating_sub(t.coarse.bytes);
-        let extra_surfels = t.full.surfels.saturating_sub(t.coarse.surfels);
-        if bytes + extra_bytes <= budget.gpu_bytes && surfels + extra_surfels <= budget.points {
-            bytes += extra_bytes;
-            surfels += extra_surfels;
-            decisions[k].mode = TileMode::Full;
+        for mode in [TileMode::Full, TileMode::Coarse] {
+            let extra_bytes = t.cost(mode).bytes.saturating_sub(t.far.bytes);
+            let extra_surfels = t.cost(mode).surfels.saturating_sub(t.far.surfels);
+            if bytes + extra_bytes <= budget.gpu_bytes && surfels + extra_surfels <= budget.points {
+                bytes += extra_bytes;
+                surfels += extra_surfels;
+                decisions[k].mode = mode;
+                break;
+            }
         }
     }
     let decisions: Vec<Decision> = order.into_iter().map(|k| decisions[k]).collect();
     let full_tiles = decisions.iter().filter(|d| d.mode == TileMode::Full).count();
+    let count = |m: TileMode| decisions.iter().filter(|d| d.mode == m).count();
     let visible_coarse =
-        decisions.iter().filter(|d| d.mode == TileMode::Coarse && d.relevance == Relevance::Visible).count();
+        decisions.iter().filter(|d| d.mode != TileMode::Full && d.relevance == Relevance::Visible).count();
     let totals = ResidencyTotals {
         budget,
         resident_bytes: bytes,
         coarse_bytes,
         surfels,
         full_tiles,
-        coarse_tiles: decisions.len() - full_tiles,
+        coarse_tiles: count(TileMode::Coarse),
+        far_tiles: count(TileMode::Far),
         visible_coarse,
     };
     Ok(Residency { decisions, totals })
@@ -349,7 +382,8 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
 mod tests {
     use super::*;
 
-    /// A row of `n` 4 m tiles along +x, each 1000 B full / 100 B coarse, 50 / 5 surfels.
+    /// A row of `n` 4 m tiles along +x, each 1000 B full / 100 B coarse and far, 50 / 5 surfels
+    /// (shallow tiles, whose far level is their coarse level).
     fn row(n: usize) -> Vec<TileFootprint> {
         (0..n)
             .map(|i| TileFootprint {
@@ -358,6 +392,7 @@ mod tests {
                 max_m: Vec3::new(4.0 * i as f32 + 4.0, 4.0, 4.0),
                 full: TileCost { nodes: 0, leaves: 0, surfels: 50, bytes: 1000 },
                 coarse: TileCost { nodes: 0, leaves: 0, surfels: 5, bytes: 100 },
+                far: TileCost { nodes: 0, leaves: 0, surfels: 5, bytes: 100 },
             })
             .collect()
     }
@@ -391,24 +426,47 @@ mod tests {
         assert_eq!(r.totals.resident_bytes, budget.gpu_bytes);
         assert_eq!(r.totals.visible_coarse, 2);
         let text = r.explain(3);
-        assert!(text.contains("3 tiles full, 7 coarse (2 in view)") && text.contains("... 7 more"), "{text}");
+        assert!(
+            text.contains("3 tiles full, 7 coarse, 0 far (2 in view not full)")
+                && text.contains("... 7 more"),
+            "{text}"
+        );
         // Never over the budget, whatever it is.
         for gpu_bytes in (1000..=10_000).step_by(77) {
             let r = choose(&tiles, &view, Budget { gpu_bytes, points: u64::MAX }).unwrap();
             assert!(r.totals.resident_bytes <= gpu_bytes);
-            let held: u64 = r
-                .decisions
-                .iter()
-                .map(|d| {
-                    if d.mode == TileMode::Full {
-                        tiles[d.tile].full.bytes
-                    } else {
-                        tiles[d.tile].coarse.bytes
-                    }
-                })
-                .sum();
+            let held: u64 = r.decisions.iter().map(|d| tiles[d.tile].cost(d.mode).bytes).sum();
             assert_eq!(held, r.totals.resident_bytes);
         }
+    }
+
+    #[test]
+    fn detail_falls_off_with_distance_as_the_budget_runs_out() {
+        // Deep tiles: 1000 B full, 100 B coarse, 10 B far. From tile 0 looking along +x, every
+        // tile is visible and priority is distance: the budget makes the nearest full, the next
+        // coarse and leaves the farthest far, and is never exceeded, whatever it is.
+        let mut tiles = row(10);
+        for t in &mut tiles {
+            t.far = TileCost { nodes: 0, leaves: 0, surfels: 1, bytes: 10 };
+        }
+        let view = looking(Vec3::new(-1.0, 2.0, 2.0), Vec3::X);
+        let budget = Budget { gpu_bytes: 10 * 10 + 2 * 990 + 4 * 90, points: u64::MAX };
+        let r = choose(&tiles, &view, budget).unwrap();
+        let modes: Vec<TileMode> = r.decisions.iter().map(|d| d.mode).collect();
+        use TileMode::{Coarse, Far, Full};
+        assert_eq!(modes, [Full, Full, Coarse, Coarse, Coarse, Coarse, Far, Far, Far, Far]);
+        assert_eq!((r.totals.full_tiles, r.totals.coarse_tiles, r.totals.far_tiles), (2, 4, 4));
+        assert_eq!(r.totals.resident_bytes, budget.gpu_bytes);
+        assert!(r.explain(0).contains("2 tiles full, 4 coarse, 4 far (8 in view not full)"));
+        for gpu_bytes in (1000..=10_000).step_by(37) {
+            let r = choose(&tiles, &view, Budget { gpu_bytes, points: u64::MAX }).unwrap();
+            let held: u64 = r.decisions.iter().map(|d| tiles[d.tile].cost(d.mode).bytes).sum();
+            assert!(held == r.totals.resident_bytes && held <= gpu_bytes, "{held} of {gpu_bytes}");
+        }
+        let mut one = tiles[..1].to_vec();
+        one[0].full.bytes = 5;
+        let err = choose(&one, &view, Budget { gpu_bytes: 9, points: u64::MAX }).unwrap_err();
+        assert!(err.to_string().contains("far levels of all 1 tiles"), "{err}");
     }
 
     #[test]
@@ -437,7 +495,7 @@ mod tests {
         let mut tiles = row(4);
         let view = looking(Vec3::ZERO, Vec3::X);
         let err = choose(&tiles, &view, Budget { gpu_bytes: 399, points: u64::MAX }).unwrap_err();
-        assert!(err.to_string().contains("coarse levels of all 4 tiles"), "{err}");
+        assert!(err.to_string().contains("far levels of all 4 tiles"), "{err}");
         tiles[2].full.bytes = 5000;
         let err = choose(&tiles, &view, Budget { gpu_bytes: 4000, points: u64::MAX }).unwrap_err();
         let msg = err.to_string();

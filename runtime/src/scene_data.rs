@@ -15,7 +15,7 @@ use grotto_format::spec::{ShRgb9, Surfel, SvoNode};
 use grotto_format::svo::{morton_decode, morton_encode, nodes_from_leaves};
 use grotto_format::{LightShape, Package, Scope, SectionKind};
 
-use crate::coarse::{COARSE_LEVELS, CoarseLevel, coarse_level, gpu_tile};
+use crate::coarse::{COARSE_LEVELS, CoarseLevel, FAR_LEVELS, coarse_level, gpu_tile};
 use crate::error::{Error, Result};
 use crate::gpu_types::{LeafGpu, MipRange, NodeGpu, SurfelGpu, TileGpu};
 
@@ -125,8 +125,21 @@ pub enum TileMode {
     Full,
     /// Its coarse level (coarse.rs): leaves `COARSE_LEVELS` levels up, one splat each.
     Coarse,
+    /// Its far level: leaves `FAR_LEVELS` levels up (at most the tile's depth), one splat each.
+    Far,
     /// Not at all.
     Skip,
+}
+
+impl TileMode {
+    /// Levels above its leaves a tile of SVO depth `depth` is held at in this mode.
+    pub fn leaf_lod(self, depth: u32) -> u32 {
+        match self {
+            Self::Full | Self::Skip => 0,
+            Self::Coarse => COARSE_LEVELS.min(depth),
+            Self::Far => FAR_LEVELS.min(depth),
+        }
+    }
 }
 
 /// Most specular materials a scene may assign (slots 1..=7 of the surfel colour's alpha).
@@ -492,7 +505,7 @@ impl SceneData {
         let classify_rock = rock.is_none() && stored_rock.is_none();
         for (tile, mode, origin_leaf) in loaded {
             let depth = tile.depth();
-            let leaf_lod = if mode == TileMode::Coarse { COARSE_LEVELS.min(depth) } else { 0 };
+            let leaf_lod = mode.leaf_lod(depth);
             let stored_coarse = if leaf_lod > 0 { tile.coarse(leaf_lod)? } else { None };
             // The full SVO: for a full tile, for a coarse tile whose level is not stored, and for
             // the rock where it is classified here.

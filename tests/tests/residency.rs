@@ -39,11 +39,12 @@ fn small_tiles_cave() -> &'static Path {
     })
 }
 
-/// Tile bytes of the package: every tile full, every tile coarse, the largest tile full.
+/// Tile bytes of the package: every tile full, every tile at its far level (the reserve), the
+/// largest tile full.
 fn sizes(pkg: &Package) -> (Vec<residency::TileFootprint>, u64, u64, u64) {
     let tiles = residency::footprints(pkg, false).unwrap();
     let full = tiles.iter().map(|t| t.full.bytes).sum();
-    let coarse = tiles.iter().map(|t| t.coarse.bytes).sum();
+    let coarse = tiles.iter().map(|t| t.far.bytes).sum();
     let largest = tiles.iter().map(|t| t.full.bytes).max().unwrap();
     (tiles, full, coarse, largest)
 }
@@ -87,6 +88,7 @@ fn view_of(cam: &Camera, scene: &SceneData, reach_m: f32) -> View {
 struct Split {
     full: (Vec<[u8; 4]>, usize),
     coarse: (Vec<[u8; 4]>, usize),
+    far: (Vec<[u8; 4]>, usize),
     dropped: (Vec<[u8; 4]>, usize),
 }
 
@@ -102,6 +104,10 @@ fn split(
         if coarse_ids.contains(&i) { TileMode::Coarse } else { TileMode::Full }
     })
     .unwrap();
+    let far = SceneData::from_package_with(pkg, |i| {
+        if coarse_ids.contains(&i) { TileMode::Far } else { TileMode::Full }
+    })
+    .unwrap();
     let dropped = SceneData::from_package_with(pkg, |i| {
         if coarse_ids.contains(&i) { TileMode::Skip } else { TileMode::Full }
     })
@@ -109,10 +115,16 @@ fn split(
     let out = Split {
         full: render(gpu, full, cam),
         coarse: render(gpu, &coarse, cam),
+        far: render(gpu, &far, cam),
         dropped: render(gpu, &dropped, cam),
     };
     if let Ok(d) = std::env::var("GROTTO_DUMP_DIR") {
-        for (kind, px) in [("full", &out.full.0), ("coarse", &out.coarse.0), ("dropped", &out.dropped.0)] {
+        for (kind, px) in [
+            ("full", &out.full.0),
+            ("coarse", &out.coarse.0),
+            ("far", &out.far.0),
+            ("dropped", &out.dropped.0),
+        ] {
             let bytes: Vec<u8> = px.iter().flatten().copied().collect();
             let path = Path::new(&d).join(format!("{name}-{kind}.png"));
             image::save_buffer(path, &bytes, W, H, image::ColorType::Rgba8).unwrap();
@@ -157,11 +169,16 @@ fn coarse_neighbours_keep_the_image_and_dropping_them_does_not() {
     assert_eq!(coarse_ids, expected);
     let light = split(&gpu, &pkg, &full, &cam, &coarse_ids, "light");
     let with_coarse = golden::diff(&light.full.0, &light.coarse.0);
+    let with_far = golden::diff(&light.full.0, &light.far.0);
     let without = golden::diff(&light.full.0, &light.dropped.0);
     eprintln!(
-        "light: {} of {} tiles coarse; with coarse {with_coarse:?}, dropped {without:?}",
+        "light: {} of {} tiles coarse; with coarse {with_coarse:?}, far {with_far:?}, dropped {without:?}",
         coarse_ids.len(),
         tiles.len()
+    );
+    assert!(
+        with_far.mean_abs < without.mean_abs,
+        "even the far level does better than nothing: {with_far:?}"
     );
     assert!(golden::within_tolerance(&with_coarse), "coarse neighbours change the light: {with_coarse:?}");
     assert!(
@@ -185,12 +202,15 @@ fn coarse_neighbours_keep_the_image_and_dropping_them_does_not() {
         golden::diff(&geometry.full.0, &geometry.dropped.0),
     );
     eprintln!(
-        "geometry: {} of {} tiles coarse; covered {} / {} / {} px; with coarse {with_coarse:?}, dropped {without:?}",
+        "geometry: {} of {} tiles coarse; covered {} / {} / {} / {} px (full, coarse, far, dropped); with coarse \
+         {with_coarse:?}, far {:?}, dropped {without:?}",
         far.len(),
         tiles.len(),
         geometry.full.1,
         geometry.coarse.1,
-        geometry.dropped.1
+        geometry.far.1,
+        geometry.dropped.1,
+        golden::diff(&geometry.full.0, &geometry.far.0)
     );
     assert!(geometry.coarse.1 * 100 >= geometry.full.1 * 99, "coarse splats leave holes");
     assert!(geometry.dropped.1 * 10 < geometry.full.1 * 9, "dropped tiles should leave holes");
@@ -207,16 +227,16 @@ fn a_render_job_keeps_its_budget_and_a_budget_too_small_is_a_clear_error() {
     assert!(budget >= largest);
     let s = render_job::run(&opts(budget, "a.png"), |_| {}).unwrap();
     let r = s.residency.expect("over budget: residency decides").totals;
-    assert!(r.full_tiles > 0 && r.coarse_tiles > 0, "{r:?}");
+    assert!(r.full_tiles > 0 && r.coarse_tiles + r.far_tiles > 0, "{r:?}");
     assert!(s.tile_bytes <= r.resident_bytes && r.resident_bytes <= budget, "{} / {r:?}", s.tile_bytes);
     // The whole package fits: no residency, every tile in full.
     let s = render_job::run(&opts(full, "b.png"), |_| {}).unwrap();
     assert!(s.residency.is_none());
     assert_eq!(s.tile_bytes, full);
-    // Under the coarse levels, or under one tile: an error naming what is missing.
+    // Under the far levels, or under one tile: an error naming what is missing.
     let err = render_job::run(&opts(coarse - 1, "c.png"), |_| {}).unwrap_err().to_string();
-    assert!(err.contains("coarse levels") && err.contains("--gpu-memory"), "{err}");
-    assert!(largest > coarse, "the largest tile is over the coarse levels' reserve");
+    assert!(err.contains("far levels") && err.contains("--gpu-memory"), "{err}");
+    assert!(largest > coarse, "the largest tile is over the far levels' reserve");
     let err = render_job::run(&opts(largest - 1, "d.png"), |_| {}).unwrap_err().to_string();
     assert!(err.contains("when loaded") && err.contains("--max-tile-m"), "{err}");
     assert!(!dir.path().join("c.png").exists() && !dir.path().join("d.png").exists());
@@ -239,7 +259,7 @@ fn a_fly_through_under_a_tiny_budget_loads_and_evicts_and_never_exceeds_it() {
     for f in &s.frames {
         eprintln!("{f:?}");
         assert!(f.tile_bytes <= gpu_memory, "frame {}: {} > {gpu_memory}", f.frame, f.tile_bytes);
-        assert_eq!(f.full_tiles + f.coarse_tiles, tiles.len());
+        assert_eq!(f.full_tiles + f.coarse_tiles + f.far_tiles, tiles.len());
     }
     let moved: usize = s.frames.iter().map(|f| f.loaded + f.evicted).sum();
     assert!(moved > 0, "the path crosses the cave: tiles must come and go");
@@ -295,7 +315,12 @@ fn stored_coarse_levels_and_rock_are_what_the_runtime_would_derive() {
     for (name, mode) in [
         ("full", (|_| TileMode::Full) as fn(usize) -> TileMode),
         ("coarse", |_| TileMode::Coarse),
-        ("mixed", |i| if i % 3 == 0 { TileMode::Full } else { TileMode::Coarse }),
+        ("far", |_| TileMode::Far),
+        ("mixed", |i| match i % 3 {
+            0 => TileMode::Full,
+            1 => TileMode::Coarse,
+            _ => TileMode::Far,
+        }),
     ] {
         let stored = SceneData::from_package_with(&pkg, mode).unwrap();
         let derived = SceneData::from_package_with(&bare, mode).unwrap();

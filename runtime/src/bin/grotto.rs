@@ -318,14 +318,15 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
         println!("{n}");
     }
     if summary.residency.is_some() && summary.frames.len() > 1 {
-        println!("frame  tile MiB  full  coarse  loaded  evicted  surfels  bounces  carried leaves");
+        println!("frame  tile MiB  full  coarse  far  loaded  evicted  surfels  bounces  carried leaves");
         for f in &summary.frames {
             println!(
-                "{:5}  {:8.1}  {:4}  {:6}  {:6}  {:7}  {:7}  {:7}  {:14}",
+                "{:5}  {:8.1}  {:4}  {:6}  {:3}  {:6}  {:7}  {:7}  {:7}  {:14}",
                 f.frame,
                 f.tile_bytes as f64 / f64::from(1u32 << 20),
                 f.full_tiles,
                 f.coarse_tiles,
+                f.far_tiles,
                 f.loaded,
                 f.evicted,
                 f.surfels,
