@@ -325,7 +325,8 @@ fn coarse_levels_that_do_not_fit_their_tile_are_refused() {
     let nodes2 = content(SectionKind::CoarseNodes, 0);
     let leaves2 = content(SectionKind::CoarseLeaves, 0);
     let far = bytemuck::bytes_of(&RockBrick { brick: [0, 2, 0], reserved: 0, bits: [1, 0] }).to_vec();
-    let cases: [(&str, Vec<(SectionKind, u32, Vec<u8>)>); 5] = [
+    type Sections = Vec<(SectionKind, u32, Vec<u8>)>;
+    let cases: [(&str, Sections); 5] = [
         ("level 0", vec![(SectionKind::CoarseNodes, 0, content(SectionKind::SvoNodes, 0))]),
         ("deeper than the tile", vec![(SectionKind::CoarseNodes, 4, nodes2.clone())]),
         ("wrong depth", vec![(SectionKind::CoarseNodes, 2, nodes2.clone())]),
