@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # A fly-through under a GPU memory budget (issue 14): a synthetic cave of POINTS points cut into
-# 4 m tiles, rendered along its entrance -> chamber path with --gpu-memory BUDGET. Prints the
-# per-frame table of docs/benchmarks.md (tile bytes, full and coarse tiles, tiles loaded and
-# evicted, surfels drawn, bounces, pass times) and writes the raw JSON to OUT/flythrough.json.
+# 4 m tiles (TILE_M, default 4), rendered along its entrance -> chamber path with --gpu-memory
+# BUDGET. Prints the per-frame table of docs/benchmarks.md (tile bytes, full, coarse and far
+# tiles, tiles loaded and evicted, surfels drawn, bounces, leaves whose light was carried over,
+# time waiting for the loader, pass times) and writes the raw JSON to OUT/flythrough.json.
 # The same command takes the figures on a machine with a GPU.
 # Usage: scripts/bench-flythrough.sh [OUT_DIR] [POINTS] [BUDGET] [FRAMES]
 #        (default: out/fly, 1000000, 64M, 6)
@@ -17,9 +18,9 @@ export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-$(mktemp -d)}
 cargo build --release --locked -p grotto-preprocess -p grotto-runtime
 [ -f "$out/scans-$points/manifest.toml" ] || target/release/grotto-pack synth --out "$out/scans-$points" \
     --points "$points" --formats las
-pkg="$out/cave-$points.grotto"
+pkg="$out/cave-$points-t${TILE_M:-4}.grotto"
 [ -f "$pkg" ] || target/release/grotto-pack build "$out/scans-$points/manifest.toml" -o "$pkg" \
-    --max-tile-m 4 --clean --json >/dev/null
+    --max-tile-m "${TILE_M:-4}" --clean --json >/dev/null
 target/release/grotto render "$pkg" --path entrance,chamber --frames "$frames" --size 160x120 --bounces 2 \
     --gpu-memory "$budget" --exposure 8 -o "$out/fly.png" --json > "$out/flythrough.json"
 python3 - "$out/flythrough.json" <<'PY'
@@ -29,10 +30,12 @@ res = r.get("residency")
 print(f"device: {r['device']}, {r['tiles']} tiles, budget "
       f"{res['budget']['gpu_bytes'] / 2**20:.0f} MiB" if res else "the whole package fits the budget")
 passes = ["shadow", "inject", "mip", "propagate", "gbuffer", "shade"]
-print("| frame | tile MiB | full | coarse | loaded | evicted | surfels drawn | bounces | " + " | ".join(passes) + " (ms) |")
-print("|" + "---:|" * (8 + len(passes)))
+print("| frame | tile MiB | full | coarse | far | loaded | evicted | surfels drawn | bounces | carried leaves | "
+      "load wait | " + " | ".join(passes) + " (ms) |")
+print("|" + "---:|" * (11 + len(passes)))
 for f in r["frames"]:
-    ms = " | ".join(f"{f['pass_ms'].get(p, 0):.1f}" for p in passes)
+    ms = " | ".join(f"{f['pass_ms'].get(p, 0):.0f}" for p in passes)
     print(f"| {f['frame']} | {f['tile_bytes'] / 2**20:.1f} | {f['full_tiles']} | {f['coarse_tiles']} | "
-          f"{f['loaded']} | {f['evicted']} | {f['surfels']:,} | {f['bounces']} | {ms} |")
+          f"{f['far_tiles']} | {f['loaded']} | {f['evicted']} | {f['surfels']:,} | {f['bounces']} | "
+          f"{f['carried_leaves']:,} | {f['load_wait_ms']:.0f} | {ms} |")
 PY

@@ -229,6 +229,9 @@ pub struct FrameReport {
     /// Leaves whose light was carried over from the previous frame's tiles (tiles resident in
     /// both, in the same form): only the rest starts from darkness.
     pub carried_leaves: usize,
+    /// Milliseconds this frame waited for the loader thread (which chose and read its tiles while
+    /// the previous frame rendered).
+    pub load_wait_ms: f64,
     /// Milliseconds of each pass that ran for this frame.
     pub pass_ms: std::collections::BTreeMap<String, f64>,
 }
@@ -544,78 +547,101 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let mut black_pixels = 0;
     let mut frames = Vec::new();
     let f16 = settings.radiance_f16;
-    for (i, cam) in cameras.iter().enumerate() {
-        let (mut loaded, mut evicted, mut bounces, mut carried_leaves) = (0, 0, 0, 0);
-        if i == 0 {
-            bounces = r.stats().bounces_done;
-        } else if let (Some(st), Some(current)) = (&streaming, &residency) {
-            // The tiles this camera needs: where they differ, the scene is loaded again and its
-            // light settled (every tile's upload, not yet a bounded one per frame).
-            let next = st.choose(cam)?;
-            let full = |r: &Residency| -> std::collections::BTreeSet<usize> {
-                r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect()
-            };
-            let (before, after) = (full(current), full(&next));
-            let modes = |r: &Residency| {
-                let mut m: Vec<(usize, TileMode)> = r.decisions.iter().map(|d| (d.tile, d.mode)).collect();
-                m.sort_unstable_by_key(|d| d.0);
-                m
-            };
-            if modes(current) != modes(&next) {
-                loaded = after.difference(&before).count();
-                evicted = before.difference(&after).count();
-                // Tiles resident before and after keep their light; only the rest needs bounces.
-                let carried = r.light_by_tile(&scene)?;
-                scene = st.load(&next, scene.lights.clone(), scene.headlamp)?;
-                settings.exposure = exposure;
-                r = Renderer::new(&gpu, &scene, settings.clone())?;
-                carried_leaves = r.seed_light(&scene, &carried)?;
-                let report = |done, change| progress(Progress::Bounce { done, budget, change });
-                bounces = match opts.frame_bounces {
-                    Some(n) => r.settle_at_most(n, report)?,
-                    None => r.settle(report)?,
-                };
+    let full = |r: &Residency| -> std::collections::BTreeSet<usize> {
+        r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect()
+    };
+    let modes = |r: &Residency| {
+        let mut m: Vec<(usize, TileMode)> = r.decisions.iter().map(|d| (d.tile, d.mode)).collect();
+        m.sort_unstable_by_key(|d| d.0);
+        m
+    };
+    // The next frame's tiles are chosen and read from the package on a loader thread while
+    // this frame renders, so a frame waits only for what the loader has not finished.
+    std::thread::scope(|scope| -> Result<()> {
+        let mut next_load: Option<std::thread::ScopedJoinHandle<'_, Result<(Residency, Option<SceneData>)>>> =
+            None;
+        for (i, cam) in cameras.iter().enumerate() {
+            let (mut loaded, mut evicted, mut bounces, mut carried_leaves) = (0, 0, 0, 0);
+            let mut load_wait_ms = 0.0;
+            if i == 0 {
+                bounces = r.stats().bounces_done;
+            } else if let (Some(handle), Some(current)) = (next_load.take(), &residency) {
+                let t_wait = Instant::now();
+                let (next, new_scene) = handle.join().map_err(|_| Error::Internal {
+                    what: "tile loader",
+                    message: "the loader thread panicked".into(),
+                })??;
+                load_wait_ms = t_wait.elapsed().as_secs_f64() * 1e3;
+                // Where the tiles differ, the new scene replaces the old one and its light is
+                // settled again (every tile's upload, not yet a bounded one per frame).
+                if let Some(new_scene) = new_scene {
+                    let (before, after) = (full(current), full(&next));
+                    loaded = after.difference(&before).count();
+                    evicted = before.difference(&after).count();
+                    // Tiles resident before and after keep their light; only the rest needs bounces.
+                    let carried = r.light_by_tile(&scene)?;
+                    scene = new_scene;
+                    settings.exposure = exposure;
+                    r = Renderer::new(&gpu, &scene, settings.clone())?;
+                    carried_leaves = r.seed_light(&scene, &carried)?;
+                    let report = |done, change| progress(Progress::Bounce { done, budget, change });
+                    bounces = match opts.frame_bounces {
+                        Some(n) => r.settle_at_most(n, report)?,
+                        None => r.settle(report)?,
+                    };
+                }
+                residency = Some(next);
             }
-            residency = Some(next);
+            if let (Some(st), Some(current), Some(next_cam)) = (&streaming, &residency, cameras.get(i + 1)) {
+                let (now, lights, headlamp) = (modes(current), scene.lights.clone(), scene.headlamp);
+                next_load = Some(scope.spawn(move || {
+                    let next = st.choose(next_cam)?;
+                    let scene =
+                        if modes(&next) == now { None } else { Some(st.load(&next, lights, headlamp)?) };
+                    Ok((next, scene))
+                }));
+            }
+            let before_render = r.stats().bounces_done;
+            let (mut frame, plan) = r.render(cam, opts.width, opts.height)?;
+            // A progressive bounce run by the frame itself.
+            bounces += r.stats().bounces_done - before_render;
+            last_plan = plan;
+            if opts.exposure.is_none() && i == 0 {
+                // Auto exposure from the first frame, kept for the sequence so it does not flicker.
+                exposure = auto_exposure(&frame.hdr);
+                r.set_exposure(exposure);
+                frame = r.render(cam, opts.width, opts.height)?.0;
+            }
+            uncovered_pixels = uncovered_pixels.max(frame.hdr.iter().filter(|p| p[3] < 0.5).count());
+            black_pixels = black_pixels.max(
+                frame
+                    .hdr
+                    .iter()
+                    .zip(&frame.ldr)
+                    .filter(|(h, l)| h[3] >= 0.5 && l[0].max(l[1]).max(l[2]) <= BLACK_LDR)
+                    .count(),
+            );
+            frames.push(FrameReport {
+                frame: i as u32,
+                tile_bytes: scene.tile_bytes(f16),
+                full_tiles: scene.tiles.iter().filter(|t| t.leaf_lod == 0).count(),
+                coarse_tiles: residency.as_ref().map_or(0, |r| r.totals.coarse_tiles),
+                far_tiles: residency.as_ref().map_or(0, |r| r.totals.far_tiles),
+                loaded,
+                evicted,
+                surfels: scene.surfels.len(),
+                bounces,
+                carried_leaves,
+                load_wait_ms,
+                pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
+            });
+            let path = frame_path(&opts.out, i as u32, n);
+            image_out::write_frame(&frame, &path)?;
+            images.push(path.display().to_string());
+            progress(Progress::Frame { done: i as u32 + 1, total: n });
         }
-        let before_render = r.stats().bounces_done;
-        let (mut frame, plan) = r.render(cam, opts.width, opts.height)?;
-        // A progressive bounce run by the frame itself.
-        bounces += r.stats().bounces_done - before_render;
-        last_plan = plan;
-        if opts.exposure.is_none() && i == 0 {
-            // Auto exposure from the first frame, kept for the sequence so it does not flicker.
-            exposure = auto_exposure(&frame.hdr);
-            r.set_exposure(exposure);
-            frame = r.render(cam, opts.width, opts.height)?.0;
-        }
-        uncovered_pixels = uncovered_pixels.max(frame.hdr.iter().filter(|p| p[3] < 0.5).count());
-        black_pixels = black_pixels.max(
-            frame
-                .hdr
-                .iter()
-                .zip(&frame.ldr)
-                .filter(|(h, l)| h[3] >= 0.5 && l[0].max(l[1]).max(l[2]) <= BLACK_LDR)
-                .count(),
-        );
-        frames.push(FrameReport {
-            frame: i as u32,
-            tile_bytes: scene.tile_bytes(f16),
-            full_tiles: scene.tiles.iter().filter(|t| t.leaf_lod == 0).count(),
-            coarse_tiles: residency.as_ref().map_or(0, |r| r.totals.coarse_tiles),
-            far_tiles: residency.as_ref().map_or(0, |r| r.totals.far_tiles),
-            loaded,
-            evicted,
-            surfels: scene.surfels.len(),
-            bounces,
-            carried_leaves,
-            pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
-        });
-        let path = frame_path(&opts.out, i as u32, n);
-        image_out::write_frame(&frame, &path)?;
-        images.push(path.display().to_string());
-        progress(Progress::Frame { done: i as u32 + 1, total: n });
-    }
+        Ok(())
+    })?;
     Ok(RenderSummary {
         package: opts.package.display().to_string(),
         device: gpu.describe(),

@@ -260,6 +260,13 @@ fn a_fly_through_under_a_tiny_budget_loads_and_evicts_and_never_exceeds_it() {
         eprintln!("{f:?}");
         assert!(f.tile_bytes <= gpu_memory, "frame {}: {} > {gpu_memory}", f.frame, f.tile_bytes);
         assert_eq!(f.full_tiles + f.coarse_tiles + f.far_tiles, tiles.len());
+        if f.loaded + f.evicted > 0 {
+            assert!(
+                f.carried_leaves > 0,
+                "frame {}: tiles resident before and after keep their light",
+                f.frame
+            );
+        }
     }
     let moved: usize = s.frames.iter().map(|f| f.loaded + f.evicted).sum();
     assert!(moved > 0, "the path crosses the cave: tiles must come and go");
