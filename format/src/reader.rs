@@ -457,6 +457,17 @@ impl<'a> Tile<'a> {
         self.index
     }
 
+    /// The tile's directory fields as a writer takes them, to copy the tile into another package.
+    pub fn info(&self) -> crate::TileInfo {
+        crate::TileInfo {
+            origin_m: self.origin_m(),
+            extent_m: self.extent_m(),
+            grid: self.grid(),
+            depth: self.depth(),
+            point_count: self.point_count(),
+        }
+    }
+
     /// World position of the minimum corner, metres.
     pub fn origin_m(&self) -> [f64; 3] {
         self.raw.origin_m

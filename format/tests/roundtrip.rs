@@ -231,15 +231,7 @@ fn sections_copy_between_packages_as_stored() {
     let out = dir.path().join("copy.grotto");
     let mut w = PackageWriter::create(&out).unwrap();
     let t = src.tile(1).unwrap();
-    let tile = w
-        .add_tile(TileInfo {
-            origin_m: t.origin_m(),
-            extent_m: t.extent_m(),
-            grid: t.grid(),
-            depth: t.depth(),
-            point_count: t.point_count(),
-        })
-        .unwrap();
+    let tile = w.add_tile(t.info()).unwrap();
     for s in t.sections().filter(|s| s.kind.is_some()) {
         w.copy_section(&src, &s, Scope::Tile(tile)).unwrap();
     }

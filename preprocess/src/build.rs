@@ -697,13 +697,7 @@ fn assemble_plan(
             name: "tiles",
             reason: format!("tile package {t} has no tile"),
         })?;
-        let index = writer.add_tile(TileInfo {
-            origin_m: tile.origin_m(),
-            extent_m: tile.extent_m(),
-            grid: tile.grid(),
-            depth: tile.depth(),
-            point_count: tile.point_count(),
-        })?;
+        let index = writer.add_tile(tile.info())?;
         let scope = Scope::Tile(index);
         for s in tile.sections() {
             writer.copy_section(&tile_pkg, &s, scope)?;

@@ -210,6 +210,10 @@ impl Streaming {
     }
 }
 
+/// What the loader thread hands the next frame: its residency, and its scene where the tiles
+/// changed.
+type NextTiles = (Residency, Option<SceneData>);
+
 /// One frame of a job, for `--json` and the fly-through tables.
 #[derive(Clone, Debug, Serialize)]
 pub struct FrameReport {
@@ -558,8 +562,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     // The next frame's tiles are chosen and read from the package on a loader thread while
     // this frame renders, so a frame waits only for what the loader has not finished.
     std::thread::scope(|scope| -> Result<()> {
-        let mut next_load: Option<std::thread::ScopedJoinHandle<'_, Result<(Residency, Option<SceneData>)>>> =
-            None;
+        let mut next_load: Option<std::thread::ScopedJoinHandle<'_, Result<NextTiles>>> = None;
         for (i, cam) in cameras.iter().enumerate() {
             let (mut loaded, mut evicted, mut bounces, mut carried_leaves) = (0, 0, 0, 0);
             let mut load_wait_ms = 0.0;

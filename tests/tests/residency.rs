@@ -277,20 +277,12 @@ fn a_fly_through_under_a_tiny_budget_loads_and_evicts_and_never_exceeds_it() {
 /// A copy of `package` without the sections format 1.1 added (coarse levels, rock), as a 1.0
 /// packer wrote it: the runtime then derives them itself.
 fn without_levels(package: &Path, out: &Path) -> PathBuf {
-    use grotto_format::{PackageWriter, Scope, SectionKind, TileInfo};
+    use grotto_format::{PackageWriter, Scope, SectionKind};
     let pkg = Package::open(package).unwrap();
     let mut w = PackageWriter::create(out).unwrap();
     let added = [SectionKind::CoarseNodes, SectionKind::CoarseLeaves, SectionKind::RockBricks];
     for t in pkg.tiles() {
-        let i = w
-            .add_tile(TileInfo {
-                origin_m: t.origin_m(),
-                extent_m: t.extent_m(),
-                grid: t.grid(),
-                depth: t.depth(),
-                point_count: t.point_count(),
-            })
-            .unwrap();
+        let i = w.add_tile(t.info()).unwrap();
         for s in t.sections().filter(|s| !s.kind.is_some_and(|k| added.contains(&k))) {
             w.copy_section(&pkg, &s, Scope::Tile(i)).unwrap();
         }
