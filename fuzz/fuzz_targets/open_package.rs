@@ -35,5 +35,9 @@ fn exercise(data: &[u8]) {
         let _ = t.read::<Surfel>(SectionKind::Surfels);
         let _ = t.read::<f32>(SectionKind::LeafOpacity);
         let _ = t.svo();
+        for k in 0..8 {
+            let _ = t.coarse(k);
+        }
+        let _ = t.rock();
     }
 }
