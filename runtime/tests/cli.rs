@@ -18,13 +18,18 @@ fn inspect_and_verify_a_demo_package() {
     let out = grotto(&["inspect", p, "--sections"]);
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
-    assert!(text.contains("grotto package 1.0") && text.contains("surfel-colors-raw"), "{text}");
+    use grotto_format::spec::{VERSION_MAJOR, VERSION_MINOR};
+    let version = format!("{VERSION_MAJOR}.{VERSION_MINOR}");
+    assert!(
+        text.contains(&format!("grotto package {version}")) && text.contains("surfel-colors-raw"),
+        "{text}"
+    );
     assert!(text.contains("cameras [centre]"), "{text}");
 
     let out = grotto(&["inspect", p, "--json"]);
     assert!(out.status.success());
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(json["version"], "1.0");
+    assert_eq!(json["version"], version.as_str());
     assert_eq!(json["tiles"]["points"], 5_000);
     assert_eq!(json["scene"]["lights"][0]["name"], "lantern");
     assert!(json["sections"].as_array().unwrap().len() >= 3);
