@@ -324,3 +324,46 @@ fn every_las_point_format_reads_with_colours_scaled_by_the_writers_depth() {
         }
     }
 }
+
+#[test]
+fn ply_headers_as_people_write_them_read() {
+    // Spaces after the magic word and after property names (PDAL's simple_text.ply writes
+    // "ply \n" and "property float z \n"), comments and obj_info lines anywhere in the header,
+    // CRLF line ends, tabs, and data lines with leading and trailing blanks: all the same three
+    // points.
+    let dir = tempfile::tempdir().unwrap();
+    let variants: [(&str, &[u8]); 4] = [
+        (
+            "trailing-spaces.ply",
+            b"ply \nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z \n\
+              end_header\n-1 0 0\n 0 1 0\n 1 0 2 \n",
+        ),
+        (
+            "comments.ply",
+            b"ply\ncomment written by hand\nformat ascii 1.0\nobj_info scanner: none\nelement vertex 3\n\
+              comment between element and properties\nproperty float x  \nproperty float y\t\nproperty float z\n\
+              comment right before the end\nend_header\n-1 0 0\n0 1 0\n1 0 2\n",
+        ),
+        (
+            "crlf.ply",
+            b"ply\r\nformat ascii 1.0\r\nelement vertex 3\r\nproperty double x\r\nproperty double y\r\n\
+              property double z\r\nend_header\r\n-1 0 0\r\n0 1 0\r\n1 0 2\r\n",
+        ),
+        (
+            "tabs.ply",
+            b"ply\t\nformat ascii 1.0\nelement vertex 3\nproperty\tfloat\tx\nproperty float y\nproperty float z\n\
+              end_header\n-1\t0\t0\n0\t1\t0\n1\t0\t2\n",
+        ),
+    ];
+    for (name, bytes) in variants {
+        let path = scratch(dir.path(), name, bytes);
+        let r = read(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(r.scans.len(), 1, "{name}");
+        let (n, lo, hi) = r.scans[0];
+        assert_eq!((n, lo, hi), (3, [-1.0, 0.0, 0.0], [1.0, 1.0, 2.0]), "{name}");
+    }
+    // Lenient only where writers differ: a header that is not PLY is still refused, by name.
+    let bad = scratch(dir.path(), "plywood.ply", b"plywood\nformat ascii 1.0\nend_header\n");
+    let e = read(&bad).err().expect("not a PLY file");
+    assert!(e.to_string().contains("plywood.ply"), "{e}");
+}

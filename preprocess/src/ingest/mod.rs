@@ -80,7 +80,8 @@ impl ScanFormat {
         match (&magic[..n], ext.as_deref()) {
             (b"LASF", Some("laz")) => Ok(Self::Laz),
             (b"LASF", _) => Ok(Self::Las),
-            (b"ply\n" | b"ply\r", _) => Ok(Self::Ply),
+            // Writers put spaces after the magic word (PDAL's simple_text.ply has "ply \n").
+            (b"ply\n" | b"ply\r" | b"ply " | b"ply\t", _) => Ok(Self::Ply),
             (b"ASTM", _) => Ok(Self::E57),
             _ => Err(Error::Read {
                 path: path.to_path_buf(),
