@@ -54,6 +54,9 @@ pub struct BuildParams {
     pub min_tile_extent_m: f64,
     pub max_tile_extent_m: f64,
     pub halo_m: f64,
+    /// Refuse a scan file that ends inside its last point record instead of reading its complete
+    /// records and warning (`--strict`).
+    pub strict: bool,
 }
 
 /// Leaf edge of the cave default, metres; tile extents and halo below are in its leaves (1 m and
@@ -110,6 +113,7 @@ impl BuildParams {
             min_tile_extent_m: MIN_TILE_LEAVES * leaf_m,
             max_tile_extent_m: MAX_TILE_LEAVES * leaf_m,
             halo_m: HALO_LEAVES * leaf_m,
+            strict: false,
         }
     }
 
@@ -164,6 +168,9 @@ pub struct BuildSummary {
     pub lights: usize,
     pub cameras: usize,
     pub environment: bool,
+    /// Scan files that end inside their last point record, read without it:
+    /// "path: N points dropped" (`--strict` refuses them instead).
+    pub cut_short: Vec<String>,
 }
 
 impl BuildSummary {
@@ -177,6 +184,12 @@ impl BuildSummary {
                  at the camera; add [[light]] entries (or [environment]) to a manifest (docs/manifest.md)"
                     .to_string(),
             );
+        }
+        for c in &self.cut_short {
+            h.push(format!(
+                "{c}: the file ends inside its last point record (a copy cut short?); the complete \
+                 records were read (--strict refuses such files)"
+            ));
         }
         if self.cameras == 0 {
             h.push(
@@ -508,11 +521,37 @@ pub fn plan(
     plan_scans(&manifest.resolve()?, params, progress)
 }
 
+/// The scans whose files end inside their last point record (`SourceInfo::dropped_points`), as
+/// "path: N points dropped"; with `strict`, the first of them is an error instead.
+fn cut_short(scans: &[ResolvedScan], strict: bool) -> Result<Vec<String>> {
+    let mut out = Vec::new();
+    for s in scans {
+        let info = crate::ingest::header(&s.path, s.format, s.index)?;
+        if info.dropped_points > 0 {
+            if strict {
+                return Err(Error::Read {
+                    path: s.path.clone(),
+                    format: s.format.name(),
+                    reason: format!(
+                        "the file ends inside its last point record ({} of the {} points its header \
+                         claims are complete); without --strict the complete records are read",
+                        info.claimed_points,
+                        info.claimed_points + info.dropped_points
+                    ),
+                });
+            }
+            out.push(format!("{}: {} points dropped", s.path.display(), info.dropped_points));
+        }
+    }
+    Ok(out)
+}
+
 fn plan_scans(
     scans: &[ResolvedScan],
     params: &BuildParams,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<(TilePlan, bool)> {
+    cut_short(scans, params.strict)?;
     let tiling_params = params.tiling();
     let earlier = tiling::existing_plan(scans, &params.work_dir, &tiling_params)?;
     let plan = tiling::tile_scans(scans, &params.work_dir, &tiling_params, progress)?;
@@ -779,5 +818,6 @@ fn assemble_plan(
         lights: scene.lights.len(),
         cameras: scene.cameras.len(),
         environment: scene.environment.is_some(),
+        cut_short: cut_short(scans, false)?,
     })
 }

@@ -218,3 +218,65 @@ fn degenerate_inputs_build_valid_packages_without_nan() {
         build_into(&Manifest::from_files(&[empty]), d, "empty.grotto", &params(&d.join("w2"), 1.0, 16.0));
     assert_eq!((summary.tiles, pkg.tile_count()), (0, 0));
 }
+
+#[test]
+fn a_las_file_cut_inside_its_last_record_keeps_its_complete_records() {
+    // A copy that stopped a few bytes short: the complete records are read and the summary says
+    // what was dropped; --strict refuses the file; a file missing whole records (or a header
+    // that lies about its count) is refused either way.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pts: Vec<[f64; 3]> =
+        (0..400).map(|i| [f64::from(i % 20) * 0.05, f64::from(i / 20) * 0.05, 1.0]).collect();
+    let rgb = vec![[90u8, 80, 70]; pts.len()];
+    let whole = d.join("whole.las");
+    write_scan(
+        &whole,
+        ScanFormat::Las,
+        &ScanData { xyz: &pts, rgb: &rgb, intensity: &[], normals: &[], pose: None },
+    )
+    .unwrap();
+    let bytes = std::fs::read(&whole).unwrap();
+    let cut = d.join("cut.las");
+    std::fs::write(&cut, &bytes[..bytes.len() - 5]).unwrap();
+    let built =
+        build_into(&Manifest::from_files(&[cut.clone()]), d, "cut.grotto", &params(&d.join("w1"), 1.0, 16.0))
+            .1;
+    assert_eq!(built.points, 399, "every complete record");
+    assert_eq!(built.cut_short.len(), 1, "{:?}", built.cut_short);
+    assert!(built.cut_short[0].contains("cut.las") && built.cut_short[0].contains("1 points dropped"));
+    assert!(built.hints().iter().any(|h| h.contains("--strict")), "{:?}", built.hints());
+
+    let strict = BuildParams { strict: true, ..params(&d.join("w2"), 1.0, 16.0) };
+    let err = build::build(
+        &Manifest::from_files(&[cut]),
+        Path::new("t.toml"),
+        &d.join("s.grotto"),
+        &strict,
+        &|_| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("cut.las") && err.contains("last point record"), "{err}");
+    assert!(!d.join("s.grotto").exists());
+
+    // Whole records missing (the file stops at a record boundary, or several records short).
+    // Point data offset (u32 at byte 96) and record length (u16 at byte 105) of the LAS header.
+    let offset = u32::from_le_bytes(bytes[96..100].try_into().unwrap()) as usize;
+    let record = usize::from(u16::from_le_bytes(bytes[105..107].try_into().unwrap()));
+    assert_eq!(offset + 400 * record, bytes.len(), "a LAS file without EVLRs");
+    for (name, len) in [("boundary.las", bytes.len() - record), ("short.las", bytes.len() - 3 * record - 5)] {
+        let p = d.join(name);
+        std::fs::write(&p, &bytes[..len]).unwrap();
+        let err = build::build(
+            &Manifest::from_files(&[p]),
+            Path::new("t.toml"),
+            &d.join("x.grotto"),
+            &params(&d.join("w3"), 1.0, 16.0),
+            &|_| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains(name) && err.contains("header claims 400 points"), "{name}: {err}");
+    }
+}

@@ -170,6 +170,10 @@ struct BuildOpts {
     /// Keep the environment's SH unwindowed even where a bright source makes irradiance ring negative.
     #[arg(long)]
     no_sh_window: bool,
+    /// Refuse a LAS file that ends inside its last point record (by default its complete records
+    /// are read and the summary warns).
+    #[arg(long)]
+    strict: bool,
     /// Remove the work directory after a successful build.
     #[arg(long)]
     clean: bool,
@@ -291,6 +295,7 @@ fn setup(
         min_tile_extent_m: opts.min_tile_m.unwrap_or(defaults.min_tile_extent_m),
         max_tile_extent_m: opts.max_tile_m.unwrap_or(defaults.max_tile_extent_m),
         halo_m: opts.halo_m.unwrap_or(defaults.halo_m),
+        strict: opts.strict,
         ..defaults
     };
     Ok((manifest, manifest_path, params))

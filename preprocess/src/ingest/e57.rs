@@ -66,6 +66,7 @@ fn header_unguarded(path: &Path, index: usize) -> Result<(SourceInfo, bool)> {
         claimed_points: pc.records,
         has_color: pc.has_color(),
         has_normals: false,
+        dropped_points: 0,
         file_pose,
     };
     Ok((info, pc.has_intensity()))

@@ -50,15 +50,16 @@ fn claimed_and_color(raw: &las::raw::Header) -> (u64, bool) {
 
 /// What the header says, without decoding points.
 pub(super) fn header_info(path: &Path, format: ScanFormat) -> Result<SourceInfo> {
-    let raw = preflight(path, format)?;
-    let (claimed_points, has_color) = claimed_and_color(&raw);
+    let (raw, dropped_points) = preflight(path, format)?;
+    let (claimed, has_color) = claimed_and_color(&raw);
     Ok(SourceInfo {
         path: path.to_path_buf(),
         format,
         name: path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
-        claimed_points,
+        claimed_points: claimed - dropped_points,
         has_color,
         has_normals: false,
+        dropped_points,
         file_pose: None,
     })
 }
@@ -68,9 +69,10 @@ pub(super) fn header_info(path: &Path, format: ScanFormat) -> Result<SourceInfo>
 /// length (found by fuzzing: 7e18 bytes) would abort the process on allocation, which no error
 /// handling can catch.
 ///
-/// Also refuses an uncompressed file that cannot hold the records its header claims. Returns the
-/// raw header.
-fn preflight(path: &Path, format: ScanFormat) -> Result<las::raw::Header> {
+/// Also refuses an uncompressed file that cannot hold the records its header claims, except one
+/// that ends inside its last record. Returns the raw header and the points dropped (1 for such a
+/// file, else 0).
+fn preflight(path: &Path, format: ScanFormat) -> Result<(las::raw::Header, u64)> {
     use std::io::{Read, Seek, SeekFrom};
     let err = |reason: String| read_error(path, format, reason);
     let mut file = File::open(path).map_err(|e| err(e.to_string()))?;
@@ -86,13 +88,20 @@ fn preflight(path: &Path, format: ScanFormat) -> Result<las::raw::Header> {
     let (claimed, _) = claimed_and_color(&raw);
     let compressed = raw.point_data_record_format & 0xC0 != 0;
     let record = u64::from(raw.point_data_record_length);
+    let mut dropped = 0;
     if !compressed
         && claimed.checked_mul(record).and_then(|b| b.checked_add(offset)).is_none_or(|n| n > file_len)
     {
-        return Err(err(format!(
-            "header claims {claimed} points of {record} bytes, but the {file_len}-byte file holds at most {}",
-            (file_len - offset) / record.max(1)
-        )));
+        let (complete, partial) = ((file_len - offset) / record.max(1), (file_len - offset) % record.max(1));
+        // A file that ends inside its last record (a copy cut short) keeps its complete records;
+        // any other shortfall (a count that lies, records missing whole) is refused.
+        if claimed >= 1 && complete == claimed - 1 && partial > 0 {
+            dropped = 1;
+        } else {
+            return Err(err(format!(
+                "header claims {claimed} points of {record} bytes, but the {file_len}-byte file holds at most {complete}"
+            )));
+        }
     }
     // Record headers: 54 bytes for VLRs (u16 length at 20), 60 for EVLRs (u64 length at 20).
     // Returns where the LASzip VLR's data is, if there is one.
@@ -212,7 +221,7 @@ fn preflight(path: &Path, format: ScanFormat) -> Result<las::raw::Header> {
             }
         }
     }
-    Ok(raw)
+    Ok((raw, dropped))
 }
 
 /// LAS 1.4 layered LAZ chunks start with the first point raw, a u32 point count and one u32 byte
@@ -282,7 +291,8 @@ impl LasSource {
     pub(super) fn open(path: &Path, format: ScanFormat) -> Result<Self> {
         let info = header_info(path, format)?;
         let reader = open_reader(path, format)?;
-        let claimed = reader.header().number_of_points();
+        // Without the record the file cuts short (`SourceInfo::dropped_points`).
+        let claimed = reader.header().number_of_points().saturating_sub(info.dropped_points);
         let point_format = *reader.header().point_format();
         let (color_div, grey_div) =
             guard(path, format, || probe_scales(path, format, point_format.has_color, claimed))?;

@@ -108,8 +108,13 @@ pub struct SourceInfo {
     pub format: ScanFormat,
     /// Scan name (E57 point cloud name, or the file stem).
     pub name: String,
-    /// Points the header claims (already checked against what the file can hold where possible).
+    /// Points the header claims (already checked against what the file can hold where possible),
+    /// less `dropped_points`: the points a reader delivers.
     pub claimed_points: u64,
+    /// Points the header claims that the file cuts short: an uncompressed LAS file that ends
+    /// inside its last point record has that record dropped (the complete ones are read; the
+    /// build warns, and `--strict` refuses the file). Zero for every other file.
+    pub dropped_points: u64,
     pub has_color: bool,
     pub has_normals: bool,
     /// Pose stored in the file (E57), scan frame -> world.

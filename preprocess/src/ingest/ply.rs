@@ -257,6 +257,7 @@ impl PlySource {
                 claimed_points: count,
                 has_color,
                 has_normals,
+                dropped_points: 0,
                 file_pose: None,
             },
             input,
