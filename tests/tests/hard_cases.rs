@@ -239,9 +239,13 @@ fn a_las_file_cut_inside_its_last_record_keeps_its_complete_records() {
     let bytes = std::fs::read(&whole).unwrap();
     let cut = d.join("cut.las");
     std::fs::write(&cut, &bytes[..bytes.len() - 5]).unwrap();
-    let built =
-        build_into(&Manifest::from_files(&[cut.clone()]), d, "cut.grotto", &params(&d.join("w1"), 1.0, 16.0))
-            .1;
+    let built = build_into(
+        &Manifest::from_files(std::slice::from_ref(&cut)),
+        d,
+        "cut.grotto",
+        &params(&d.join("w1"), 1.0, 16.0),
+    )
+    .1;
     assert_eq!(built.points, 399, "every complete record");
     assert_eq!(built.cut_short.len(), 1, "{:?}", built.cut_short);
     assert!(built.cut_short[0].contains("cut.las") && built.cut_short[0].contains("1 points dropped"));
