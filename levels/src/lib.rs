@@ -8,9 +8,9 @@ pub mod coarse;
 pub mod rock;
 
 use glam::{IVec3, Vec3};
-use grotto_format::spec::RockBrick;
+use grotto_format::spec::{LeafNdf, RockBrick, SvoNode};
 use grotto_format::svo::morton_decode;
-use grotto_format::{Result, Tile};
+use grotto_format::{Result, SectionKind, Tile};
 
 use crate::coarse::{CoarseLevel, STORED_LEVELS, coarse_level};
 use crate::rock::{CONTEXT_CELLS, ROCK_LEVEL, SurfaceLeaf, in_context, tile_rock};
@@ -41,35 +41,44 @@ impl TileGrid {
             .iter()
             .map(|t| {
                 let (o0, ls0) = first?;
-                if (t.leaf_size_m() - ls0).abs() > ls0 * 1e-9 {
-                    return None;
-                }
-                let mut out = [0i32; 3];
-                for a in 0..3 {
-                    let v = (t.origin_m()[a] - o0[a]) / ls0;
-                    let r = v.round();
-                    if (v - r).abs() > 1e-3 || r.abs() > f64::from(1 << 28) {
-                        return None;
-                    }
-                    out[a] = r as i32;
-                }
-                Some(IVec3::from_array(out))
+                let same_leaf = (t.leaf_size_m() - ls0).abs() <= ls0 * 1e-9;
+                same_leaf.then(|| origin_leaf(t.origin_m(), o0, ls0)).flatten()
             })
             .collect();
         Self { origin_leaf, side_leaves: tiles.iter().map(|t| 1i64 << t.depth()).collect() }
     }
 }
 
+/// A tile corner `origin_m` in leaves of `leaf_m` from `frame_origin_m` (world metres), where it
+/// lies on that leaf grid (within 1/1000 of a leaf) and within 2^28 leaves of the frame origin.
+pub fn origin_leaf(origin_m: [f64; 3], frame_origin_m: [f64; 3], leaf_m: f64) -> Option<IVec3> {
+    let mut out = [0i32; 3];
+    for a in 0..3 {
+        let v = (origin_m[a] - frame_origin_m[a]) / leaf_m;
+        let r = v.round();
+        if !((v - r).abs() <= 1e-3 && r.abs() <= f64::from(1 << 28)) {
+            return None;
+        }
+        out[a] = r as i32;
+    }
+    Some(IVec3::from_array(out))
+}
+
 /// The surface leaves of `tile` (frame leaf units, origin `origin_leaf`) that `keep` accepts.
+/// Reads only the node array and the NDFs (raw sections in the packer's output, so a tile read
+/// as the context of each of its neighbours is mapped, not decoded, each time).
 fn surface(tile: &Tile<'_>, origin_leaf: IVec3, keep: impl Fn(Vec3) -> bool) -> Result<Vec<SurfaceLeaf>> {
-    let Some(svo) = tile.svo()? else { return Ok(Vec::new()) };
+    let (Some(nodes), Some(ndf)) =
+        (tile.read::<SvoNode>(SectionKind::SvoNodes)?, tile.read::<LeafNdf>(SectionKind::LeafNdf)?)
+    else {
+        return Ok(Vec::new());
+    };
     let depth = tile.depth();
     let origin = origin_leaf.as_vec3() + Vec3::splat(0.5);
-    Ok(svo
-        .nodes
+    Ok(nodes
         .iter()
         .filter(|n| u32::from(n.level) == depth)
-        .zip(svo.ndf.iter())
+        .zip(ndf.iter())
         .map(|(n, ndf)| SurfaceLeaf {
             center_leaf: origin + glam::UVec3::from_array(morton_decode(n.morton)).as_vec3(),
             normal_mean: Vec3::from_array(ndf.mean),

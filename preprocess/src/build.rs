@@ -518,7 +518,8 @@ pub fn plan(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<(TilePlan, bool)> {
     check_params(params)?;
-    plan_scans(&manifest.resolve()?, params, progress)
+    let (plan, reused, _) = plan_scans(&manifest.resolve()?, params, progress)?;
+    Ok((plan, reused))
 }
 
 /// The scans whose files end inside their last point record (`SourceInfo::dropped_points`), as
@@ -546,16 +547,18 @@ fn cut_short(scans: &[ResolvedScan], strict: bool) -> Result<Vec<String>> {
     Ok(out)
 }
 
+/// Tiles the scans (or finds an earlier tiling); returns the plan, whether it was reused, and
+/// the scans cut short ([`cut_short`], refused first under `--strict`).
 fn plan_scans(
     scans: &[ResolvedScan],
     params: &BuildParams,
     progress: &(dyn Fn(Progress) + Sync),
-) -> Result<(TilePlan, bool)> {
-    cut_short(scans, params.strict)?;
+) -> Result<(TilePlan, bool, Vec<String>)> {
+    let cut = cut_short(scans, params.strict)?;
     let tiling_params = params.tiling();
     let earlier = tiling::existing_plan(scans, &params.work_dir, &tiling_params)?;
     let plan = tiling::tile_scans(scans, &params.work_dir, &tiling_params, progress)?;
-    Ok((plan, earlier.is_some()))
+    Ok((plan, earlier.is_some(), cut))
 }
 
 /// The plan an earlier `plan` step left for these inputs and parameters, and the scans.
@@ -644,9 +647,10 @@ pub fn build(
     // Resolved once for all three steps (E57 poses and headers are read here).
     let scans = manifest.resolve()?;
     let scene = manifest.scene(manifest_path)?;
-    let (plan, resumed_tiling) = plan_scans(&scans, params, progress)?;
+    let (plan, resumed_tiling, cut) = plan_scans(&scans, params, progress)?;
     let stage = tile_stage(&plan, &scene, params, Shard::ALL, progress)?;
     let mut summary = assemble_plan(manifest, &plan, &scans, &scene, out, params, progress)?;
+    summary.cut_short = cut;
     summary.resumed_tiling = resumed_tiling;
     summary.reused_tiles = stage.reused;
     summary.seconds = start.elapsed().as_secs_f64();
@@ -665,7 +669,10 @@ pub fn assemble(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<BuildSummary> {
     let (plan, scans) = planned(manifest, params)?;
-    assemble_plan(manifest, &plan, &scans, &manifest.scene(manifest_path)?, out, params, progress)
+    let mut summary =
+        assemble_plan(manifest, &plan, &scans, &manifest.scene(manifest_path)?, out, params, progress)?;
+    summary.cut_short = cut_short(&scans, false)?;
+    Ok(summary)
 }
 
 fn assemble_plan(
@@ -818,6 +825,6 @@ fn assemble_plan(
         lights: scene.lights.len(),
         cameras: scene.cameras.len(),
         environment: scene.environment.is_some(),
-        cut_short: cut_short(scans, false)?,
+        cut_short: Vec::new(),
     })
 }

@@ -137,9 +137,9 @@ fn non_empty(scene: SceneData) -> Result<SceneData> {
 }
 
 /// The package opened under the job's budgets, with `--lamps` applied: the whole scene where it
-/// fits (no [`Streaming`]); else every tile at its coarse level, the scene cameras are resolved
-/// (and a view framed) on before [`prepare`] chooses the tiles to hold in full, so a package over
-/// budget is never loaded whole.
+/// fits (no [`Streaming`]); else every tile at its far level, the scene cameras are resolved (and
+/// a view framed) on before [`prepare`] chooses each tile's level, so a package over budget is
+/// never loaded whole.
 fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Streaming>)> {
     let pkg = Package::open(&opts.package)?;
     let budget = Budget {
@@ -178,7 +178,8 @@ pub struct Streaming {
     aspect: f32,
     lights_m: Vec<Vec3>,
     light_reach_m: f32,
-    /// Classified once: every load holds every tile, full or coarse (`from_package_with_rock`).
+    /// Read (format 1.1) or classified once: every load holds every tile in some form, so every
+    /// load has the same rock (`from_package_with_rock`).
     rock: crate::rock::RockTable,
 }
 
@@ -427,7 +428,7 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
             r.totals.surfels,
             if r.totals.visible_coarse > 0 {
                 format!(
-                    "; {} tiles in view left coarse (raise --gpu-memory or --point-budget)",
+                    "; {} tiles in view not held in full (raise --gpu-memory or --point-budget)",
                     r.totals.visible_coarse
                 )
             } else {
@@ -554,11 +555,6 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let full = |r: &Residency| -> std::collections::BTreeSet<usize> {
         r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect()
     };
-    let modes = |r: &Residency| {
-        let mut m: Vec<(usize, TileMode)> = r.decisions.iter().map(|d| (d.tile, d.mode)).collect();
-        m.sort_unstable_by_key(|d| d.0);
-        m
-    };
     // The next frame's tiles are chosen and read from the package on a loader thread while
     // this frame renders, so a frame waits only for what the loader has not finished.
     std::thread::scope(|scope| -> Result<()> {
@@ -596,11 +592,11 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
                 residency = Some(next);
             }
             if let (Some(st), Some(current), Some(next_cam)) = (&streaming, &residency, cameras.get(i + 1)) {
-                let (now, lights, headlamp) = (modes(current), scene.lights.clone(), scene.headlamp);
+                let (now, lights, headlamp) = (current.modes(), scene.lights.clone(), scene.headlamp);
                 next_load = Some(scope.spawn(move || {
                     let next = st.choose(next_cam)?;
                     let scene =
-                        if modes(&next) == now { None } else { Some(st.load(&next, lights, headlamp)?) };
+                        if next.modes() == now { None } else { Some(st.load(&next, lights, headlamp)?) };
                     Ok((next, scene))
                 }));
             }
@@ -627,7 +623,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             frames.push(FrameReport {
                 frame: i as u32,
                 tile_bytes: scene.tile_bytes(f16),
-                full_tiles: scene.tiles.iter().filter(|t| t.leaf_lod == 0).count(),
+                full_tiles: residency.as_ref().map_or(scene.tiles.len(), |r| r.totals.full_tiles),
                 coarse_tiles: residency.as_ref().map_or(0, |r| r.totals.coarse_tiles),
                 far_tiles: residency.as_ref().map_or(0, |r| r.totals.far_tiles),
                 loaded,

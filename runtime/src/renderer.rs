@@ -239,10 +239,8 @@ impl Upload {
             bytemuck::bytes_of(base_params),
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         )?;
-        // Initial light state: out = emission (no direct, no gather yet).
-        let initial: Vec<LeafLightGpu> =
-            scene.leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect();
-        let leaf_light = gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial), STORAGE)?;
+        let leaf_light =
+            gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial_light(scene)), STORAGE)?;
         let faces = gpu.buffer("faces", scene.buffer_bytes(f16).faces, STORAGE)?;
         let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE)?;
         let tile_index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
@@ -275,6 +273,11 @@ impl Upload {
 
         Ok(Upload { params, leaf_light, faces, stats, surfels, shared, bytes })
     }
+}
+
+/// The light state a scene starts from: out = emission (no direct light, no gather yet).
+fn initial_light(scene: &SceneData) -> Vec<LeafLightGpu> {
+    scene.leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect()
 }
 
 /// Timestamp queries for every pass, where the adapter has them.
@@ -511,15 +514,8 @@ impl Renderer {
 
     /// Runs light updates until the plan stops propagating (converged or budget spent); returns
     /// the number of bounces run.
-    pub fn settle(&mut self, mut progress: impl FnMut(u32, Option<f32>)) -> Result<u32> {
-        let start = self.stats_now.bounces_done;
-        loop {
-            let p = self.update_light()?;
-            progress(self.stats_now.bounces_done, self.stats_now.last_change);
-            if !p.runs(Pass::Propagate) {
-                return Ok(self.stats_now.bounces_done - start);
-            }
-        }
+    pub fn settle(&mut self, progress: impl FnMut(u32, Option<f32>)) -> Result<u32> {
+        self.settle_at_most(u32::MAX, progress)
     }
 
     /// As [`Renderer::settle`], stopping after at most `max_bounces` bounces; what is left runs
@@ -577,8 +573,7 @@ impl Renderer {
                 message: "not the scene this renderer was made for".into(),
             });
         }
-        let mut state: Vec<LeafLightGpu> =
-            scene.leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect();
+        let mut state = initial_light(scene);
         let mut seeded = 0;
         for t in &scene.tiles {
             let range = t.leaf_offset as usize..(t.leaf_offset + t.leaf_count) as usize;

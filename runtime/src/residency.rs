@@ -142,11 +142,18 @@ impl Residency {
     /// Each package tile's mode, as `SceneData::from_package_with` takes it (tiles the policy
     /// never saw are skipped): a table made once, read in constant time per tile.
     pub fn mode_of(&self) -> impl Fn(usize) -> TileMode + use<> {
+        let modes = self.modes();
+        move |i| modes.get(i).copied().unwrap_or(TileMode::Skip)
+    }
+
+    /// Each package tile's mode, indexed by tile (tiles the policy never saw: `Skip`): two
+    /// residencies hold the same tiles in the same form exactly when these are equal.
+    pub fn modes(&self) -> Vec<TileMode> {
         let mut modes = vec![TileMode::Skip; self.decisions.iter().map(|d| d.tile + 1).max().unwrap_or(0)];
         for d in &self.decisions {
             modes[d.tile] = d.mode;
         }
-        move |i| modes.get(i).copied().unwrap_or(TileMode::Skip)
+        modes
     }
 
     /// The decisions as text (`--explain`): the first `rows` tiles by priority, then counts.
@@ -180,9 +187,11 @@ impl Residency {
 }
 
 /// Every tile of `pkg` with an SVO, with its box in the scene's frame
-/// ([`crate::scene_data::frame_of`]) and its costs: full from the section lengths, coarse from the node
-/// levels (reading the nodes is the one pass over a tile this takes). A coarse tile's splats are counted as its leaves (an upper bound: empty blocks draw
-/// none), so the bytes chosen are never under what is held.
+/// ([`crate::scene_data::frame_of`]) and its costs full, coarse and far. The node and leaf counts
+/// of each come from the section table where the package stores them (format 1.1: no tile data
+/// is read); otherwise from one read of the tile's node array. A coarse tile's splats are counted
+/// as its leaves (an upper bound: empty blocks draw none), so the bytes chosen are never under
+/// what is held.
 pub fn footprints(pkg: &Package, radiance_f16: bool) -> Result<Vec<TileFootprint>> {
     let mut out = Vec::new();
     let Some((frame_origin_m, _)) = crate::scene_data::frame_of(pkg)? else { return Ok(out) };
@@ -191,49 +200,44 @@ pub fn footprints(pkg: &Package, radiance_f16: bool) -> Result<Vec<TileFootprint
         let len = |kind: SectionKind, item: u32, each: usize| {
             tile.find(kind, item).map(|s| s.raw_len / each as u64)
         };
-        // From the section table where the package stores the levels (format 1.1), so sizing
-        // every tile reads no tile data; from the node array otherwise.
-        let mut nodes_read: Option<std::borrow::Cow<'_, [SvoNode]>> = None;
-        let mut nodes_at = |cut: u32, leaf_level: u32| -> Result<Option<(u64, u64)>> {
-            if nodes_read.is_none() {
-                let Some(n) = tile.read::<SvoNode>(SectionKind::SvoNodes)? else { return Ok(None) };
-                nodes_read = Some(n);
-            }
-            let nodes = nodes_read.as_deref().unwrap_or_default();
-            Ok(Some((
-                nodes.iter().filter(|n| u32::from(n.level) <= cut).count() as u64,
-                nodes.iter().filter(|n| u32::from(n.level) == leaf_level).count() as u64,
-            )))
+        // Nodes and leaves of the tile `k` levels above its leaves (0: as built), as stored.
+        let stored = |k: u32| -> Option<(u64, u64)> {
+            Some(if k == 0 {
+                (len(SectionKind::SvoNodes, 0, size_of::<SvoNode>())?, len(SectionKind::LeafOpacity, 0, 4)?)
+            } else {
+                (
+                    len(SectionKind::CoarseNodes, k, size_of::<SvoNode>())?,
+                    len(SectionKind::CoarseLeaves, k, size_of::<CoarseLeaf>())?,
+                )
+            })
         };
-        let full = match (
-            len(SectionKind::SvoNodes, 0, size_of::<SvoNode>()),
-            len(SectionKind::LeafOpacity, 0, 4),
-        ) {
-            (Some(n), Some(l)) => Some((n, l)),
-            _ => nodes_at(depth, depth)?,
+        let levels = [0, TileMode::Coarse.leaf_lod(depth), TileMode::Far.leaf_lod(depth)];
+        let nodes = if levels.iter().all(|&k| stored(k).is_some()) {
+            None
+        } else {
+            let Some(nodes) = tile.read::<SvoNode>(SectionKind::SvoNodes)? else { continue };
+            Some(nodes)
         };
-        let Some((nodes, leaves)) = full else { continue };
-        if nodes == 0 {
+        let [(node_count, leaves), coarse, far] = levels.map(|k| {
+            stored(k)
+                .or_else(|| {
+                    let cut = depth - k;
+                    let levels = nodes.as_deref()?.iter().map(|n| u32::from(n.level));
+                    Some((
+                        levels.clone().filter(|&l| l <= cut).count() as u64,
+                        levels.filter(|&l| l == cut).count() as u64,
+                    ))
+                })
+                .unwrap_or_default()
+        });
+        if node_count == 0 {
             continue;
         }
         let surfels = len(SectionKind::Surfels, 0, size_of::<Surfel>()).unwrap_or(0);
-        let full = TileCost::new(nodes, leaves, surfels, radiance_f16);
-        // A coarse tile's splats are counted as its leaves (an upper bound).
-        let mut level = |k: u32| -> Result<TileCost> {
-            if k == 0 {
-                return Ok(full);
-            }
-            let counts = match (
-                len(SectionKind::CoarseNodes, k, size_of::<SvoNode>()),
-                len(SectionKind::CoarseLeaves, k, size_of::<CoarseLeaf>()),
-            ) {
-                (Some(n), Some(l)) => (n, l),
-                _ => nodes_at(depth - k, depth - k)?.unwrap_or_default(),
-            };
-            Ok(TileCost::new(counts.0, counts.1, counts.1, radiance_f16))
-        };
-        let coarse = level(TileMode::Coarse.leaf_lod(depth))?;
-        let far = level(TileMode::Far.leaf_lod(depth))?;
+        let full = TileCost::new(node_count, leaves, surfels, radiance_f16);
+        let level =
+            |k: u32, (n, l): (u64, u64)| if k == 0 { full } else { TileCost::new(n, l, l, radiance_f16) };
+        let (coarse, far) = (level(levels[1], coarse), level(levels[2], far));
         let lo = DVec3::from_array(tile.origin_m()) - DVec3::from_array(frame_origin_m);
         out.push(TileFootprint {
             index: tile.index() as usize,

@@ -13,7 +13,7 @@ use grotto_format::color::srgb8_to_linear;
 use grotto_format::spec::Rgba8;
 use grotto_format::spec::{ShRgb9, Surfel, SvoNode};
 use grotto_format::svo::{morton_decode, morton_encode, nodes_from_leaves};
-use grotto_format::{LightShape, Package, Scope, SectionKind};
+use grotto_format::{LightShape, Package, Scope, SectionKind, SvoData};
 
 use crate::coarse::{COARSE_LEVELS, CoarseLevel, FAR_LEVELS, coarse_level, gpu_tile};
 use crate::error::{Error, Result};
@@ -206,15 +206,43 @@ fn read_env_chain(pkg: &Package, index: u32, intensity: f32) -> Result<Option<En
     Ok(Some(EnvChain { width, height, rgba, levels: table }))
 }
 
+/// A tile's leaves in the frame (`origin_leaf`: the tile's corner in frame leaves of `leaf_m`).
+/// `SvoData` has one attribute per leaf node (checked on read), so indexing cannot fail.
+fn full_leaves(svo: &SvoData<'_>, depth: u32, origin_leaf: IVec3, leaf_m: f32) -> Vec<LeafGpu> {
+    let emission = svo.emission.as_deref();
+    let leaf_nodes = svo.nodes.iter().filter(|n| u32::from(n.level) == depth);
+    leaf_nodes
+        .enumerate()
+        .map(|(li, n)| {
+            let cell = morton_decode(n.morton);
+            let center = (origin_leaf + IVec3::new(cell[0] as i32, cell[1] as i32, cell[2] as i32)).as_vec3()
+                + Vec3::splat(0.5);
+            let Rgba8(c) = svo.albedo[li];
+            let ndf = svo.ndf[li];
+            let e = emission.map_or([0.0; 3], |e| e[li].radiance);
+            LeafGpu {
+                albedo_opacity: [
+                    srgb8_to_linear(c[0]),
+                    srgb8_to_linear(c[1]),
+                    srgb8_to_linear(c[2]),
+                    svo.opacity[li],
+                ],
+                normal_mean: [ndf.mean[0], ndf.mean[1], ndf.mean[2], 0.0],
+                center_m: (center * leaf_m).extend(0.0).to_array(),
+                emission: [e[0], e[1], e[2], 0.0],
+            }
+        })
+        .collect()
+}
+
 /// The frame every loaded scene of `pkg` shares: the corner of its first tile with an SVO (f64
 /// world metres) and that tile's leaf edge; None when no tile has one.
+/// From the section table alone: no tile data is read.
 pub fn frame_of(pkg: &Package) -> Result<Option<([f64; 3], f64)>> {
-    for tile in pkg.tiles() {
-        if tile.read::<SvoNode>(SectionKind::SvoNodes)?.is_some_and(|n| !n.is_empty()) {
-            return Ok(Some((tile.origin_m(), tile.leaf_size_m())));
-        }
-    }
-    Ok(None)
+    Ok(pkg
+        .tiles()
+        .find(|t| t.find(SectionKind::SvoNodes, 0).is_some_and(|s| s.raw_len > 0))
+        .map(|t| (t.origin_m(), t.leaf_size_m())))
 }
 
 impl SceneData {
@@ -419,9 +447,10 @@ impl SceneData {
         Self::from_package_with(pkg, |_| TileMode::Full)
     }
 
-    /// Reads `pkg` with each tile as `mode_of(tile index)` says: as built, at its coarse level
-    /// ([`coarse_tile`]), or not at all. The rock is classified from every loaded tile's full
-    /// leaves, so a coarse tile keeps the rock behind its walls.
+    /// Reads `pkg` with each tile as `mode_of(tile index)` says: as built, at its coarse or far
+    /// level (stored in the package, or derived by [`coarse_level`]), or not at all. The rock is
+    /// the loaded tiles' stored rock, or else classified from every loaded tile's full leaves, so
+    /// a coarse tile keeps the rock behind its walls.
     pub fn from_package_with(pkg: &Package, mode_of: impl Fn(usize) -> TileMode) -> Result<Self> {
         Self::load(pkg, mode_of, None)
     }
@@ -473,17 +502,8 @@ impl SceneData {
                     tile.index()
                 )));
             }
-            let origin = tile.origin_m();
-            let mut origin_leaf = [0i32; 3];
-            for a in 0..3 {
-                let v = (origin[a] - out.frame_origin_m[a]) / ls0;
-                let r = v.round();
-                if (v - r).abs() > 1e-3 || r.abs() > f64::from(1 << 28) {
-                    return Err(bad(format!("tile {} origin is not on the shared leaf grid", tile.index())));
-                }
-                origin_leaf[a] = r as i32;
-            }
-            let origin_leaf = IVec3::from_array(origin_leaf);
+            let origin_leaf = grotto_levels::origin_leaf(tile.origin_m(), out.frame_origin_m, ls0)
+                .ok_or_else(|| bad(format!("tile {} origin is not on the shared leaf grid", tile.index())))?;
             if let Some(bricks) = &mut stored_rock {
                 match tile.rock()? {
                     Some(list) if origin_leaf % brick_leaves == IVec3::ZERO => {
@@ -511,40 +531,12 @@ impl SceneData {
             // the rock where it is classified here.
             let svo =
                 if leaf_lod == 0 || stored_coarse.is_none() || classify_rock { tile.svo()? } else { None };
+            // Its full leaves: for a full tile, and for the rock where it is classified here.
             let leaves = match &svo {
-                Some(svo) => {
-                    let emission = svo.emission.as_deref();
-                    let mut leaves = Vec::with_capacity(svo.leaf_count());
-                    for (li, n) in svo.nodes.iter().filter(|n| u32::from(n.level) == depth).enumerate() {
-                        let cell = morton_decode(n.morton);
-                        let center = (origin_leaf
-                            + IVec3::new(cell[0] as i32, cell[1] as i32, cell[2] as i32))
-                        .as_vec3()
-                            + Vec3::splat(0.5);
-                        let Rgba8(c) = svo.albedo[li];
-                        let ndf = svo.ndf[li];
-                        let e = emission.map_or([0.0; 3], |e| e[li].radiance);
-                        leaves.push(LeafGpu {
-                            albedo_opacity: [
-                                srgb8_to_linear(c[0]),
-                                srgb8_to_linear(c[1]),
-                                srgb8_to_linear(c[2]),
-                                svo.opacity[li],
-                            ],
-                            normal_mean: [ndf.mean[0], ndf.mean[1], ndf.mean[2], 0.0],
-                            center_m: (center * out.leaf_size_m).extend(0.0).to_array(),
-                            emission: [e[0], e[1], e[2], 0.0],
-                        });
-                    }
-                    if leaves.len() != svo.leaf_count() {
-                        return Err(bad(format!(
-                            "tile {}: leaf nodes and leaf arrays disagree",
-                            tile.index()
-                        )));
-                    }
-                    leaves
+                Some(svo) if leaf_lod == 0 || classify_rock => {
+                    full_leaves(svo, depth, origin_leaf, out.leaf_size_m)
                 }
-                None => Vec::new(),
+                _ => Vec::new(),
             };
             let node_offset = out.nodes.len() as u32;
             let leaf_offset = out.leaves.len() as u32;

@@ -44,9 +44,9 @@ fn small_tiles_cave() -> &'static Path {
 fn sizes(pkg: &Package) -> (Vec<residency::TileFootprint>, u64, u64, u64) {
     let tiles = residency::footprints(pkg, false).unwrap();
     let full = tiles.iter().map(|t| t.full.bytes).sum();
-    let coarse = tiles.iter().map(|t| t.far.bytes).sum();
+    let reserve = tiles.iter().map(|t| t.far.bytes).sum();
     let largest = tiles.iter().map(|t| t.full.bytes).max().unwrap();
-    (tiles, full, coarse, largest)
+    (tiles, full, reserve, largest)
 }
 
 /// A small, cheap render job of the package to `out` under `gpu_memory`.
@@ -221,9 +221,9 @@ fn coarse_neighbours_keep_the_image_and_dropping_them_does_not() {
 fn a_render_job_keeps_its_budget_and_a_budget_too_small_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let package = small_tiles_cave();
-    let (_, full, coarse, largest) = sizes(&Package::open(package).unwrap());
+    let (_, full, reserve, largest) = sizes(&Package::open(package).unwrap());
     let opts = |gpu_memory: u64, out: &str| job(package, dir.path().join(out), gpu_memory);
-    let budget = coarse + (full - coarse) / 3;
+    let budget = reserve + (full - reserve) / 3;
     assert!(budget >= largest);
     let s = render_job::run(&opts(budget, "a.png"), |_| {}).unwrap();
     let r = s.residency.expect("over budget: residency decides").totals;
@@ -234,9 +234,9 @@ fn a_render_job_keeps_its_budget_and_a_budget_too_small_is_a_clear_error() {
     assert!(s.residency.is_none());
     assert_eq!(s.tile_bytes, full);
     // Under the far levels, or under one tile: an error naming what is missing.
-    let err = render_job::run(&opts(coarse - 1, "c.png"), |_| {}).unwrap_err().to_string();
+    let err = render_job::run(&opts(reserve - 1, "c.png"), |_| {}).unwrap_err().to_string();
     assert!(err.contains("far levels") && err.contains("--gpu-memory"), "{err}");
-    assert!(largest > coarse, "the largest tile is over the far levels' reserve");
+    assert!(largest > reserve, "the largest tile is over the far levels' reserve");
     let err = render_job::run(&opts(largest - 1, "d.png"), |_| {}).unwrap_err().to_string();
     assert!(err.contains("when loaded") && err.contains("--max-tile-m"), "{err}");
     assert!(!dir.path().join("c.png").exists() && !dir.path().join("d.png").exists());
@@ -246,8 +246,8 @@ fn a_render_job_keeps_its_budget_and_a_budget_too_small_is_a_clear_error() {
 fn a_fly_through_under_a_tiny_budget_loads_and_evicts_and_never_exceeds_it() {
     let dir = tempfile::tempdir().unwrap();
     let package = small_tiles_cave();
-    let (tiles, full, coarse, _) = sizes(&Package::open(package).unwrap());
-    let gpu_memory = coarse + (full - coarse) / 4;
+    let (tiles, full, reserve, _) = sizes(&Package::open(package).unwrap());
+    let gpu_memory = reserve + (full - reserve) / 4;
     let opts = RenderOptions {
         camera: CameraChoice::Default,
         path: vec!["entrance".into(), "chamber".into()],

@@ -139,10 +139,11 @@ struct RenderArgs {
     radiance_f16: bool,
     /// GPU memory for tiles, e.g. 512M or 2G (default: half the adapter's largest buffer, at
     /// most 2G). A package over it keeps the tiles the view needs in full and every other
-    /// tile at its coarse level.
+    /// tile at its coarse or far level, nearer ones finer.
     #[arg(long, value_parser = grotto_format::parse_bytes)]
     gpu_memory: Option<u64>,
-    /// Most surfels drawn (default: no limit); tiles beyond it are drawn from their coarse level.
+    /// Most surfels drawn (default: no limit); tiles beyond it are drawn from their coarse or far
+    /// level.
     #[arg(long)]
     point_budget: Option<u64>,
     /// Along a path, run at most this many bounces before a frame whose tiles changed (default:
