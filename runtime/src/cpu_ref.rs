@@ -8,7 +8,7 @@ use crate::gpu_types::{LeafLightGpu, Params};
 use crate::scene_data::SceneData;
 
 /// Closure of a cone that left the scene nearly opaque (`close_cone` in shaders/cone.wgsl).
-pub fn close_cone(acc: [f64; 4]) -> [f64; 4] {
+pub fn close_cone(acc: [f64; 4], last: [f64; 3]) -> [f64; 4] {
     const CLOSE_LO: f64 = 0.8;
     const CLOSE_HI: f64 = 0.95;
     if acc[3] <= 1e-6 {
@@ -16,25 +16,22 @@ pub fn close_cone(acc: [f64; 4]) -> [f64; 4] {
     }
     let x = ((acc[3] - CLOSE_LO) / (CLOSE_HI - CLOSE_LO)).clamp(0.0, 1.0);
     let s = x * x * (3.0 - 2.0 * x);
-    let a = acc[3] + (1.0 - acc[3]) * s;
-    let k = a / acc[3];
-    [acc[0] * k, acc[1] * k, acc[2] * k, a]
+    let fill = s * (1.0 - acc[3]);
+    [acc[0] + fill * last[0], acc[1] + fill * last[1], acc[2] + fill * last[2], acc[3] + fill]
 }
 
 /// A cone whose axis entered rock (`enter_rock` in shaders/cone.wgsl): it ends opaque; what is hidden
 /// behind the surfaces it met looks like them (or, having met none, like the rock cell's own
 /// filtered radiance `s`).
-pub fn enter_rock(acc: [f64; 4], s: [f64; 4]) -> [f64; 4] {
-    let behind = if acc[3] > 1e-6 {
-        [acc[0] / acc[3], acc[1] / acc[3], acc[2] / acc[3]]
-    } else if s[3] > 1e-6 {
-        [s[0] / s[3], s[1] / s[3], s[2] / s[3]]
-    } else {
-        [0.0; 3]
-    };
+pub fn enter_rock(acc: [f64; 4], s: [f64; 4], last: [f64; 3]) -> [f64; 4] {
+    let behind = if acc[3] <= 1e-6 && s[3] > 1e-6 { [s[0] / s[3], s[1] / s[3], s[2] / s[3]] } else { last };
     let rest = 1.0 - acc[3];
     [acc[0] + rest * behind[0], acc[1] + rest * behind[1], acc[2] + rest * behind[2], 1.0]
 }
+
+/// `PLANE_CLEAR` and `SAMPLE_EDGE` in shaders/cone.wgsl.
+const PLANE_CLEAR: f64 = 2.0 / 3.0;
+const SAMPLE_EDGE: f64 = 0.5;
 
 /// The scene plus a radiance pyramid.
 #[derive(Debug)]
@@ -164,14 +161,16 @@ impl<'a> CpuScene<'a> {
         [0, 1, 2, 3].map(|k| a[k] + (b[k] - a[k]) * t)
     }
 
-    /// One cone, as `trace_cone` in shaders/cone.wgsl.
-    pub fn trace_cone(&self, p: &Params, origin_m: DVec3, dir: DVec3) -> [f64; 4] {
+    /// One cone, as `trace_cone` in shaders/cone.wgsl: from `origin_m` along unit `dir`, the
+    /// origin `rise[0]` metres above its own surface and rising `rise[1]` metres per metre.
+    pub fn trace_cone(&self, p: &Params, origin_m: DVec3, dir: DVec3, rise: [f64; 2]) -> [f64; 4] {
         let leaf = f64::from(p.leaf_size_m);
         let lo =
             DVec3::new(p.scene_min_leaf[0].into(), p.scene_min_leaf[1].into(), p.scene_min_leaf[2].into());
         let hi =
             DVec3::new(p.scene_max_leaf[0].into(), p.scene_max_leaf[1].into(), p.scene_max_leaf[2].into());
         let mut acc = [0.0f64; 4];
+        let mut last = [0.0f64; 3];
         let mut t = leaf;
         let mut t_prev = 0.0;
         let tan_half = f64::from(p.cone_tan_half);
@@ -187,17 +186,21 @@ impl<'a> CpuScene<'a> {
                 if crate::rock::in_rock(&self.scene.rock, qk.floor().as_ivec3()) {
                     let d = leaf.max(2.0 * tk * tan_half);
                     let lod = ((d / leaf).log2() + 1.0).max(f64::from(crate::rock::ROCK_LEVEL + 1));
-                    return enter_rock(acc, self.sample_lod(qk, lod, p.max_lod, dir));
+                    return enter_rock(acc, self.sample_lod(qk, lod, p.max_lod, dir), last);
                 }
             }
             let q = (origin_m + dir * t) / leaf;
             if q.cmplt(lo).any() || q.cmpgt(hi).any() {
                 break;
             }
-            let diameter = leaf.max(2.0 * t * tan_half);
-            let mut s = self.sample_lod(q, (diameter / leaf).log2(), p.max_lod, dir);
+            let clear = PLANE_CLEAR * (rise[0] + t * rise[1] - 0.5 * leaf);
+            let diameter = leaf.max((2.0 * t * tan_half).min(clear));
+            let edge = leaf.max(SAMPLE_EDGE * diameter);
+            let mut s = self.sample_lod(q, (edge / leaf).log2(), p.max_lod, dir);
             if s[3] > 1e-6 {
-                let a = 1.0 - (1.0 - s[3].min(1.0)).max(0.0).powf(f64::from(p.step_scale));
+                last = [s[0] / s[3], s[1] / s[3], s[2] / s[3]];
+                let ratio = diameter * f64::from(p.step_scale) / edge;
+                let a = 1.0 - (1.0 - s[3].min(1.0)).max(0.0).powf(ratio);
                 let k = a / s[3];
                 s = [s[0] * k, s[1] * k, s[2] * k, a];
             }
@@ -208,7 +211,7 @@ impl<'a> CpuScene<'a> {
             t_prev = t;
             t += diameter * f64::from(p.step_scale);
         }
-        close_cone(acc)
+        close_cone(acc, last)
     }
 
     /// The gathered radiance of leaf `i` (irradiance / pi), as propagate.wgsl.
@@ -225,10 +228,11 @@ impl<'a> CpuScene<'a> {
         let origin = Vec3::from_slice(&leaf.center_m[..3]).as_dvec3()
             + n * f64::from(p.leaf_size_m.max(leaf.center_m[3]));
         let bg = DVec3::new(p.background[0].into(), p.background[1].into(), p.background[2].into());
+        let lift = f64::from(p.leaf_size_m.max(leaf.center_m[3]));
         let mut g = DVec3::ZERO;
         for c in &p.cones[..p.cone_count as usize] {
             let d = (t1 * f64::from(c[0]) + t2 * f64::from(c[1]) + n * f64::from(c[2])).normalize();
-            let s = self.trace_cone(p, origin, d);
+            let s = self.trace_cone(p, origin, d, [lift, d.dot(n)]);
             g += f64::from(c[3]) * (DVec3::new(s[0], s[1], s[2]) + (1.0 - s[3]) * bg);
         }
         g

@@ -181,7 +181,7 @@ fn base_params(
         cone_tan_half: tan_half,
         step_scale: settings.step_scale,
         max_distance_m: settings.max_distance_m.unwrap_or(scene_diag_m),
-        max_steps: settings.max_steps,
+        max_steps: settings.march_steps(),
         max_lod: scene.max_lod(),
         shadow_size: shadow.face_size(),
         flags: 0,

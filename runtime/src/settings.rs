@@ -26,6 +26,9 @@ pub struct Settings {
     pub step_scale: f32,
     /// Longest cone, metres (`None`: the scene diagonal).
     pub max_distance_m: Option<f32>,
+    /// Most samples along one cone at step 0.5 or coarser; a finer step allows proportionally
+    /// more (`Settings::march_steps`), so that a finer march reaches as far instead of stopping
+    /// short.
     pub max_steps: u32,
     /// Bounce budget: propagation passes before the plan stops them.
     pub bounces: u32,
@@ -150,6 +153,13 @@ impl Quality {
 }
 
 impl Settings {
+    /// The bound on samples per cone the march runs with: `max_steps`, scaled by 0.5 / step for
+    /// steps finer than 0.5.
+    pub fn march_steps(&self) -> u32 {
+        let scaled = f64::from(self.max_steps) * (0.5 / f64::from(self.step_scale.max(1e-3))).max(1.0);
+        scaled.ceil().clamp(1.0, 1e6) as u32
+    }
+
     /// The knobs of a quality preset (everything else at its default).
     pub fn preset(q: Quality) -> Self {
         let d = Settings::default();

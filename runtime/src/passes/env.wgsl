@@ -31,7 +31,7 @@ fn env(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) n
         let cone = params.cones[c];
         let dir = leaf_cone_dir(leaf, cone.xyz);
         let sky = dot(sh_cone_radiance(dir, cos_half), vec3<f32>(0.2126, 0.7152, 0.0722));
-        let s = trace_cone(leaf_cone_origin(leaf), dir, params.cone_tan_half);
+        let s = trace_cone(leaf_cone_origin(leaf), dir, params.cone_tan_half, leaf_cone_rise(leaf, dir));
         open += cone.w * (1.0 - s.a) * sky;
         all += cone.w * sky;
     }

@@ -26,7 +26,7 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     for (var c = batch.first; c < end; c++) {
         let cone = params.cones[c];
         let dir = leaf_cone_dir(leaf, cone.xyz);
-        let s = trace_cone(leaf_cone_origin(leaf), dir, params.cone_tan_half);
+        let s = trace_cone(leaf_cone_origin(leaf), dir, params.cone_tan_half, leaf_cone_rise(leaf, dir));
         gathered += cone.w * (s.rgb + (1.0 - s.a) * params.background.rgb);
     }
     if end < params.cone_count {

@@ -291,7 +291,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             let r = reflect(ray, n);
             let f = fresnel_dielectric(nv, mat.z);
             let tan_half = clamp(1.3 * mat.y, 0.02, 1.0);
-            let cone = trace_cone(p + n * params.leaf_size_m, r, tan_half);
+            let cone = trace_cone(p + n * params.leaf_size_m, r, tan_half, vec2<f32>(params.leaf_size_m, dot(r, n)));
             var reflected = cone.rgb + (1.0 - cone.a) * params.background.rgb;
             if (params.flags & FLAG_ENV) != 0u {
                 reflected += (1.0 - cone.a) * env_glossy(r, mat.w, tan_half);

@@ -7,21 +7,30 @@
 // crossing one voxel of edge `diameter`, the step is a fraction `step_scale` of it, so opacity
 // (and premultiplied radiance with it) is corrected to that fraction.
 fn per_step(s: vec4<f32>) -> vec4<f32> {
+    return per_step_of(s, params.step_scale);
+}
+
+fn per_step_of(s: vec4<f32>, ratio: f32) -> vec4<f32> {
     if s.a <= 1e-6 {
         return s;
     }
-    let a = 1.0 - pow(max(1.0 - min(s.a, 1.0), 0.0), params.step_scale);
+    let a = 1.0 - pow(max(1.0 - min(s.a, 1.0), 0.0), ratio);
     return vec4<f32>(s.rgb * (a / s.a), a);
 }
+
+const PLANE_CLEAR: f32 = 0.6666667;
+const SAMPLE_EDGE: f32 = 0.5;
 
 // Front-to-back composited cone from `origin_m` along unit `dir`: premultiplied radiance and
 // opacity. A cone that becomes opaque (>= 0.995) is renormalised by its opacity, i.e. what is
 // hidden behind the last surfaces is assumed to look like them; one whose axis enters rock ends
 // there the same way (enter_rock); a cone that leaves the scene keeps its transparency (the
 // environment's share, added by the caller).
-fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32) -> vec4<f32> {
+fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32, rise: vec2<f32>) -> vec4<f32> {
     let leaf = params.leaf_size_m;
     var acc = vec4<f32>(0.0);
+    // The colour of the last matter sampled: what the cone was crossing when it stopped.
+    var last = vec3<f32>(0.0);
     var t = leaf;
     var t_prev = 0.0;
     for (var i = 0u; i < params.max_steps; i++) {
@@ -37,23 +46,28 @@ fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32) -> vec4<f32> {
             // when the step jumped it.
             let q = (origin_m + dir * t_rock) / leaf;
             let d = max(leaf, 2.0 * t_rock * tan_half);
-            return enter_rock(acc, sample_lod(q, max(log2(d / leaf) + 1.0, f32(ROCK_LEVEL + 1u)), dir));
+            return enter_rock(acc, sample_lod(q, max(log2(d / leaf) + 1.0, f32(ROCK_LEVEL + 1u)), dir), last);
         }
         let p_leaf = (origin_m + dir * t) / leaf;
         if outside_scene(p_leaf) {
             break;
         }
-        let diameter = max(leaf, 2.0 * t * tan_half);
-        let lod = log2(diameter / leaf);
-        let s = per_step(sample_lod(p_leaf, lod, dir));
-        acc += (1.0 - acc.a) * s;
+        let clear = PLANE_CLEAR * (rise.x + t * rise.y - 0.5 * leaf);
+        let diameter = max(leaf, min(2.0 * t * tan_half, clear));
+        let edge = max(leaf, SAMPLE_EDGE * diameter);
+        let lod = log2(edge / leaf);
+        let raw = sample_lod(p_leaf, lod, dir);
+        if raw.a > 1e-6 {
+            last = raw.rgb / raw.a;
+        }
+        acc += (1.0 - acc.a) * per_step_of(raw, diameter * params.step_scale / edge);
         if acc.a >= 0.995 {
             return vec4<f32>(acc.rgb / acc.a, 1.0);
         }
         t_prev = t;
         t += diameter * params.step_scale;
     }
-    return close_cone(acc);
+    return close_cone(acc, last);
 }
 
 // A cone that leaves the scene nearly opaque has crossed solid matter whose coarse, blurred
@@ -63,24 +77,21 @@ fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32) -> vec4<f32> {
 const CLOSE_LO: f32 = 0.8;
 const CLOSE_HI: f32 = 0.95;
 
-fn close_cone(acc: vec4<f32>) -> vec4<f32> {
+fn close_cone(acc: vec4<f32>, last: vec3<f32>) -> vec4<f32> {
     if acc.a <= 1e-6 {
         return acc;
     }
     let s = smoothstep(CLOSE_LO, CLOSE_HI, acc.a);
-    let a = mix(acc.a, 1.0, s);
-    return vec4<f32>(acc.rgb * (a / acc.a), a);
+    return vec4<f32>(acc.rgb + s * (1.0 - acc.a) * last, mix(acc.a, 1.0, s));
 }
 
 // A cone whose axis entered rock: scans are shells, so at a coarse level a wall is partly
 // transparent and the cone would go on through the empty rock behind it (a leak). It ends opaque;
 // what is hidden behind the surfaces it met looks like them (or, having met none, like the rock
 // cell's own filtered radiance `s`). Mirrored by cpu_ref::enter_rock.
-fn enter_rock(acc: vec4<f32>, s: vec4<f32>) -> vec4<f32> {
-    var behind = vec3<f32>(0.0);
-    if acc.a > 1e-6 {
-        behind = acc.rgb / acc.a;
-    } else if s.a > 1e-6 {
+fn enter_rock(acc: vec4<f32>, s: vec4<f32>, last: vec3<f32>) -> vec4<f32> {
+    var behind = last;
+    if acc.a <= 1e-6 && s.a > 1e-6 {
         behind = s.rgb / s.a;
     }
     return vec4<f32>(acc.rgb + (1.0 - acc.a) * behind, 1.0);

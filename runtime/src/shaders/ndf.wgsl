@@ -26,6 +26,11 @@ fn leaf_cone_origin(leaf: Leaf) -> vec3<f32> {
     return leaf.center_m.xyz + leaf_normal(leaf.normal_mean.xyz) * max(params.leaf_size_m, leaf.center_m.w);
 }
 
+// Height of a leaf's cone origin above its surface and the rise per metre along `dir`.
+fn leaf_cone_rise(leaf: Leaf, dir: vec3<f32>) -> vec2<f32> {
+    return vec2<f32>(max(params.leaf_size_m, leaf.center_m.w), dot(dir, leaf_normal(leaf.normal_mean.xyz)));
+}
+
 // World direction of a cone given in the leaf's tangent frame (z = mean normal).
 fn leaf_cone_dir(leaf: Leaf, local: vec3<f32>) -> vec3<f32> {
     return normalize(basis(leaf_normal(leaf.normal_mean.xyz)) * local);

@@ -1,0 +1,216 @@
+//! The cone march against answers known in closed form (issue 21): a cone through a slab of known
+//! opacity, a lit wall seen down an open corridor, and the inside of a closed sphere lit by one
+//! lamp, whose one-bounce gather is the same everywhere. Each at steps 0.1 to 1.0 and apertures
+//! 0.35 to 1.0; the CPU reference (`cpu_ref`) carries the known answers and the GPU pass is
+//! checked against it on the same scenes.
+
+use std::f64::consts::PI;
+use std::sync::OnceLock;
+
+use glam::{DVec3, IVec3, Vec3};
+use grotto_fixtures::testscenes;
+use grotto_runtime::cpu_ref::CpuScene;
+use grotto_runtime::gpu::{Gpu, GpuOptions};
+use grotto_runtime::gpu_types::{LeafLightGpu, Params};
+use grotto_runtime::renderer::{Renderer, Settings};
+use grotto_runtime::scene_data::{SceneData, VoxelLeaf};
+
+fn gpu() -> &'static Gpu {
+    static GPU: OnceLock<Gpu> = OnceLock::new();
+    GPU.get_or_init(|| {
+        Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() }).unwrap_or_else(|e| {
+            panic!("GPU tests need an adapter (scripts/test.sh installs Mesa's lavapipe): {e}")
+        })
+    })
+}
+
+const STEPS: [f32; 5] = [1.0, 0.5, 0.35, 0.2, 0.1];
+const LEAF_M: f32 = 0.1;
+
+fn light_where(scene: &SceneData, lit: impl Fn(Vec3) -> f32) -> Vec<LeafLightGpu> {
+    scene
+        .leaves
+        .iter()
+        .map(|l| {
+            let v = lit(Vec3::from_slice(&l.center_m[..3]) / scene.leaf_size_m);
+            LeafLightGpu { out: [v, v, v, 0.0], ..Default::default() }
+        })
+        .collect()
+}
+
+/// The renderer's parameters for `scene` with one cone of half-angle tangent `tan_half` at
+/// relative step `step` (the CPU march reads only these).
+fn params(scene: &SceneData, step: f32, tan_half: f32) -> Params {
+    let settings = Settings { step_scale: step, ..Default::default() };
+    let mut p = Renderer::new(gpu(), scene, settings).unwrap().params();
+    p.cone_tan_half = tan_half;
+    p
+}
+
+/// One cone along +z from `origin_leaf` (leaf units), the origin one leaf above its own surface.
+fn cone_z(cpu: &CpuScene<'_>, p: &Params, origin_leaf: Vec3) -> f64 {
+    let leaf = f64::from(LEAF_M);
+    cpu.trace_cone(p, origin_leaf.as_dvec3() * leaf, DVec3::Z, [leaf, 1.0])[0]
+}
+
+/// A 64-leaf cube: a probe's floor at z = 4, a slab of `thickness` leaves of opacity `alpha` per
+/// leaf from z = 20, and lit rock from z = 50.
+fn slab_scene(alpha: f32, thickness: i32) -> SceneData {
+    let mut cells = Vec::new();
+    let leaf = |cell, opacity, n: Vec3| VoxelLeaf {
+        cell,
+        albedo: Vec3::splat(0.5),
+        opacity,
+        normal_mean: n,
+        emission: Vec3::ZERO,
+    };
+    for y in 0..64 {
+        for x in 0..64 {
+            cells.push(leaf(IVec3::new(x, y, 4), 1.0, Vec3::Z));
+            for z in 20..20 + thickness {
+                cells.push(leaf(IVec3::new(x, y, z), alpha, Vec3::ZERO));
+            }
+            for z in 50..64 {
+                cells.push(leaf(IVec3::new(x, y, z), 1.0, Vec3::NEG_Z));
+            }
+        }
+    }
+    SceneData::from_voxels("slab", LEAF_M, 6, &cells)
+}
+
+#[test]
+fn a_cone_through_a_slab_keeps_its_transmittance_at_every_step() {
+    // Exact: the lit wall behind a non-emitting slab shows through its transmittance (1 - a)^n.
+    for (alpha, thickness) in [(0.1f32, 10), (0.3, 4), (0.05, 20)] {
+        let scene = slab_scene(alpha, thickness);
+        let light = light_where(&scene, |c| if c.z >= 50.0 { 1.0 } else { 0.0 });
+        let cpu = CpuScene::mip(&scene, &light);
+        let want = f64::from(1.0 - alpha).powi(thickness);
+        // The wide cone only through slabs at least 10 leaves thick: a thinner one lies within
+        // one of its samples (edge 3.5 leaves there), whose opacity is then spread over the
+        // whole sample: 0.2955 against 0.2401 at step 0.1 through 4 leaves of 0.3.
+        let cones: &[(f32, f64)] =
+            if thickness >= 10 { &[(0.05, 0.07), (0.2, 0.15)] } else { &[(0.05, 0.07)] };
+        for &(tan_half, tolerance) in cones {
+            let got: Vec<f64> = STEPS
+                .iter()
+                .map(|&step| cone_z(&cpu, &params(&scene, step, tan_half), Vec3::new(32.0, 32.0, 6.5)))
+                .collect();
+            eprintln!(
+                "slab a={alpha} n={thickness} tan {tan_half}: want {want:.4}, steps {STEPS:?}: {got:.4?}"
+            );
+            // Stated tolerances, relative to the answer: steps 0.5 and finer within 7% (narrow
+            // cone) or 15% (a cone 0.4 wide per unit length, whose samples blur the slab's
+            // edges over several leaves), step 1 within 30% (it crosses a 10-leaf slab in one or
+            // two samples).
+            for (g, step) in got.iter().zip(STEPS) {
+                let err = (g - want).abs() / want;
+                let allowed = if step > 0.5 { 0.3 } else { tolerance };
+                assert!(
+                    err < allowed,
+                    "slab a={alpha} n={thickness} tan {tan_half} step {step}: {g} against {want}"
+                );
+            }
+        }
+    }
+}
+
+/// Solid rock around a square corridor along z: 8 leaves wide, open from z = 4 to a lit end
+/// wall at z = 52.
+fn corridor_scene() -> SceneData {
+    let air = |c: IVec3| (28..36).contains(&c.x) && (28..36).contains(&c.y) && (4..52).contains(&c.z);
+    testscenes::carved("corridor", LEAF_M, 6, IVec3::splat(64), &air, &|_| Vec3::splat(0.5), Vec3::ZERO, None)
+}
+
+#[test]
+fn a_lit_wall_down_an_open_corridor_is_seen_whole_by_a_cone_that_fits_through_it() {
+    let scene = corridor_scene();
+    let light = light_where(&scene, |c| if c.z >= 52.0 { 1.0 } else { 0.0 });
+    let cpu = CpuScene::mip(&scene, &light);
+    // From the axis one leaf above the floor, the end wall (47 leaves away, 8 wide) fills every
+    // direction within atan(4 / 47) = 0.085 of the axis: a cone narrower than that sees only the
+    // lit wall, wherever the march samples, as long as the samples' trilinear support (1.5
+    // sample edges, a quarter of the cone's diameter each) stays inside the corridor. (A cone
+    // wider than the opening is not tested: the walls along it are composited as if in series
+    // and close it, docs/runtime.md.)
+    for tan_half in [0.02f32, 0.04] {
+        let got: Vec<f64> = STEPS
+            .iter()
+            .map(|&step| cone_z(&cpu, &params(&scene, step, tan_half), Vec3::new(32.0, 32.0, 5.0)))
+            .collect();
+        eprintln!("corridor tan {tan_half}: want 1, steps {STEPS:?}: {got:.4?}");
+        for (g, step) in got.iter().zip(STEPS) {
+            // Stated tolerance: 2% (trilinear support reaching the corridor's walls).
+            assert!((g - 1.0).abs() < 0.02, "corridor tan {tan_half} step {step}: {g} against 1");
+        }
+    }
+}
+
+/// Inside a closed sphere the form factor between any two points is dA / (4 pi R^2) (both
+/// cosines are chord / 2R), so the one-bounce gather (irradiance / pi) is the same everywhere:
+/// the mean outgoing radiance over the sphere. Under one lamp of intensity I (W/sr) inside,
+/// every watt lands on the wall: mean irradiance 4 pi I / (4 pi R^2), mean radiance that over pi.
+#[test]
+fn one_bounce_inside_a_lit_sphere_is_the_same_everywhere_at_every_aperture() {
+    let (depth, radius_leaves) = (6, 26.0f32);
+    let scene = testscenes::furnace_sphere(depth, radius_leaves, 0.5, 0.0);
+    let center = Vec3::splat((1u32 << depth) as f32 * 0.5);
+    // The lamp 0.6 R above the centre: the wall's radiance varies 16-fold from top to bottom.
+    let lamp = center + Vec3::Z * 0.6 * radius_leaves;
+    let radiance = |c: Vec3| {
+        let n = (center - c).normalize();
+        let d = (lamp - c) * LEAF_M;
+        n.dot(d.normalize()).max(0.0) / d.length_squared() / std::f32::consts::PI
+    };
+    let light = light_where(&scene, radiance);
+    let r_m = f64::from((radius_leaves + 0.5) * LEAF_M);
+    let want = 1.0 / (r_m * r_m * PI);
+    // Inner surface leaves, by height: the bottom third, the middle, the top third.
+    let band = |i: usize| {
+        let c = Vec3::from_slice(&scene.leaves[i].center_m[..3]) / LEAF_M - center;
+        (c.length() < radius_leaves + 1.0).then(|| {
+            if c.z < -c.length() / 3.0 {
+                0
+            } else if c.z > c.length() / 3.0 {
+                2
+            } else {
+                1
+            }
+        })
+    };
+    for aperture in [0.35f32, 0.5, 0.7, 1.0] {
+        for step in [0.5f32, 0.2] {
+            let settings =
+                Settings { cones: 16, cone_aperture_scale: aperture, step_scale: step, ..Default::default() };
+            let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+            r.write_leaf_light(&light).unwrap();
+            r.run_bounce().unwrap();
+            let got = r.read_leaf_light().unwrap();
+            let mut bands = [(0.0f64, 0usize); 3];
+            for (i, l) in got.iter().enumerate() {
+                if let Some(b) = band(i) {
+                    bands[b].0 += f64::from(l.gather[0]);
+                    bands[b].1 += 1;
+                }
+            }
+            let ratio = bands.map(|(s, n)| s / n as f64 / want);
+            eprintln!(
+                "sphere aperture {aperture} step {step}: gather / answer by height (bottom, middle, top) {ratio:.3?}"
+            );
+            // Stated tolerance: every band within 6% of the answer (the march before issue 21:
+            // 27% low at the bottom and 41% high at the top at aperture 1).
+            for (k, v) in ratio.iter().enumerate() {
+                assert!(
+                    (v - 1.0).abs() < 0.06,
+                    "aperture {aperture} step {step}: band {k} at {v:.3} of the answer"
+                );
+            }
+            if step == 0.5 {
+                let (worst, checked) =
+                    CpuScene::mip(&scene, &light).worst_gather_error(&r.params(), &got, 97);
+                eprintln!("  GPU against the CPU reference: worst {worst:.1e} over {checked} leaves");
+                assert!(worst < 1e-3, "aperture {aperture}: the GPU march differs from the CPU's by {worst}");
+            }
+        }
+    }
+}
