@@ -219,8 +219,8 @@ pub fn tile_rock(origin_leaf: IVec3, side_leaves: i32, context: &[SurfaceLeaf]) 
         .collect()
 }
 
-/// Whether the box `lo..hi` (leaf units) comes within [`CONTEXT_CELLS`] of the tile at
-/// `origin_leaf` with `side_leaves` leaves: the neighbours whose leaves [`tile_rock`] needs.
+/// Whether point `p_leaf` (leaf units) lies within [`CONTEXT_CELLS`] of the tile at
+/// `origin_leaf` with `side_leaves` leaves: the neighbours' leaves [`tile_rock`] needs.
 pub fn in_context(origin_leaf: IVec3, side_leaves: i32, p_leaf: Vec3) -> bool {
     let margin = (CONTEXT_CELLS << ROCK_LEVEL) as f32;
     let lo = origin_leaf.as_vec3() - Vec3::splat(margin);

@@ -7,7 +7,8 @@ use glam::{DVec3, IVec3, Vec3};
 use crate::gpu_types::{LeafLightGpu, Params};
 use crate::scene_data::SceneData;
 
-/// Closure of a cone that left the scene nearly opaque (`close_cone` in shaders/cone.wgsl).
+/// Closure of a cone that left the scene nearly opaque (`close_cone` in shaders/cone.wgsl): its
+/// missing share filled with `last`, the colour of the matter it was crossing.
 pub fn close_cone(acc: [f64; 4], last: [f64; 3]) -> [f64; 4] {
     const CLOSE_LO: f64 = 0.8;
     const CLOSE_HI: f64 = 0.95;
@@ -21,8 +22,8 @@ pub fn close_cone(acc: [f64; 4], last: [f64; 3]) -> [f64; 4] {
 }
 
 /// A cone whose axis entered rock (`enter_rock` in shaders/cone.wgsl): it ends opaque; what is hidden
-/// behind the surfaces it met looks like them (or, having met none, like the rock cell's own
-/// filtered radiance `s`).
+/// looks like `last`, the colour of the wall it was crossing (or, having met nothing, like the
+/// rock cell's own filtered radiance `s`).
 pub fn enter_rock(acc: [f64; 4], s: [f64; 4], last: [f64; 3]) -> [f64; 4] {
     let behind = if acc[3] <= 1e-6 && s[3] > 1e-6 { [s[0] / s[3], s[1] / s[3], s[2] / s[3]] } else { last };
     let rest = 1.0 - acc[3];
@@ -225,10 +226,9 @@ impl<'a> CpuScene<'a> {
         let b = n.x * n.y * a;
         let t1 = DVec3::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
         let t2 = DVec3::new(b, s + n.y * n.y * a, -n.y);
-        let origin = Vec3::from_slice(&leaf.center_m[..3]).as_dvec3()
-            + n * f64::from(p.leaf_size_m.max(leaf.center_m[3]));
-        let bg = DVec3::new(p.background[0].into(), p.background[1].into(), p.background[2].into());
         let lift = f64::from(p.leaf_size_m.max(leaf.center_m[3]));
+        let origin = Vec3::from_slice(&leaf.center_m[..3]).as_dvec3() + n * lift;
+        let bg = DVec3::new(p.background[0].into(), p.background[1].into(), p.background[2].into());
         let mut g = DVec3::ZERO;
         for c in &p.cones[..p.cone_count as usize] {
             let d = (t1 * f64::from(c[0]) + t2 * f64::from(c[1]) + n * f64::from(c[2])).normalize();

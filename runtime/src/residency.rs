@@ -294,14 +294,15 @@ fn in_frustum(view: &View, lo: Vec3, hi: Vec3) -> bool {
 /// Chooses the full tiles for `view` within `budget`. Errors: the coarse levels alone are over
 /// the budget, or a tile's full form is (it could never be loaded); both say what to change.
 pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Residency> {
-    let coarse_bytes: u64 = tiles.iter().map(|t| t.far.bytes).sum();
-    let coarse_surfels: u64 = tiles.iter().map(|t| t.far.surfels).sum();
-    if coarse_bytes > budget.gpu_bytes {
+    // The reserve: every tile at its far level.
+    let reserve_bytes: u64 = tiles.iter().map(|t| t.far.bytes).sum();
+    let reserve_surfels: u64 = tiles.iter().map(|t| t.far.surfels).sum();
+    if reserve_bytes > budget.gpu_bytes {
         return Err(Error::Budget {
             what: format!(
                 "the far levels of all {} tiles need {} of GPU memory, over the budget of {}",
                 tiles.len(),
-                crate::gpu::human_bytes(coarse_bytes),
+                crate::gpu::human_bytes(reserve_bytes),
                 crate::gpu::human_bytes(budget.gpu_bytes)
             ),
             hint: "raise --gpu-memory".into(),
@@ -350,7 +351,7 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
         let (a, b) = (&decisions[i], &decisions[j]);
         b.relevance.cmp(&a.relevance).then(a.distance_m.total_cmp(&b.distance_m)).then(a.tile.cmp(&b.tile))
     });
-    let (mut bytes, mut surfels) = (coarse_bytes, coarse_surfels);
+    let (mut bytes, mut surfels) = (reserve_bytes, reserve_surfels);
     for &k in &order {
         let t = &tiles[k];
         for mode in [TileMode::Full, TileMode::Coarse] {
@@ -365,16 +366,15 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
         }
     }
     let decisions: Vec<Decision> = order.into_iter().map(|k| decisions[k]).collect();
-    let full_tiles = decisions.iter().filter(|d| d.mode == TileMode::Full).count();
     let count = |m: TileMode| decisions.iter().filter(|d| d.mode == m).count();
     let visible_coarse =
         decisions.iter().filter(|d| d.mode != TileMode::Full && d.relevance == Relevance::Visible).count();
     let totals = ResidencyTotals {
         budget,
         resident_bytes: bytes,
-        coarse_bytes,
+        coarse_bytes: reserve_bytes,
         surfels,
-        full_tiles,
+        full_tiles: count(TileMode::Full),
         coarse_tiles: count(TileMode::Coarse),
         far_tiles: count(TileMode::Far),
         visible_coarse,

@@ -4,13 +4,9 @@
 #import ndf
 
 // A sample's premultiplied radiance and opacity for one march step: the mip values are for
-// crossing one voxel of edge `diameter`, the step is a fraction `step_scale` of it, so opacity
-// (and premultiplied radiance with it) is corrected to that fraction.
-fn per_step(s: vec4<f32>) -> vec4<f32> {
-    return per_step_of(s, params.step_scale);
-}
-
-fn per_step_of(s: vec4<f32>, ratio: f32) -> vec4<f32> {
+// crossing one voxel, the step is `ratio` voxel edges long, so opacity (and premultiplied
+// radiance with it) is corrected to that length.
+fn per_step(s: vec4<f32>, ratio: f32) -> vec4<f32> {
     if s.a <= 1e-6 {
         return s;
     }
@@ -18,13 +14,21 @@ fn per_step_of(s: vec4<f32>, ratio: f32) -> vec4<f32> {
     return vec4<f32>(s.rgb * (a / s.a), a);
 }
 
-const PLANE_CLEAR: f32 = 0.6666667;
+// A trilinear sample of a voxel of edge e spreads e / 2 (standard deviation per axis), as a disc
+// of radius e does: a cone of diameter d is sampled at e = SAMPLE_EDGE * d (docs/runtime.md,
+// "What a sample covers").
 const SAMPLE_EDGE: f32 = 0.5;
+// Near the surface a cone starts from, its footprint is at most PLANE_CLEAR times its height
+// above that surface (less half a leaf), so that the trilinear support (1.5 e below the sample)
+// never reaches the surface itself: grazing cones would see their own wall.
+const PLANE_CLEAR: f32 = 0.6666667;
 
-// Front-to-back composited cone from `origin_m` along unit `dir`: premultiplied radiance and
+// Front-to-back composited cone from `origin_m` along unit `dir`, its origin `rise.x` metres above
+// its own surface and rising `rise.y` metres per metre along `dir`: premultiplied radiance and
 // opacity. A cone that becomes opaque (>= 0.995) is renormalised by its opacity, i.e. what is
-// hidden behind the last surfaces is assumed to look like them; one whose axis enters rock ends
-// there the same way (enter_rock); a cone that leaves the scene keeps its transparency (the
+// hidden behind the last surfaces is assumed to look like them; one whose axis enters rock, or
+// that leaves the scene nearly opaque, is filled with the colour of the last matter it sampled
+// (enter_rock, close_cone); one that leaves the scene open keeps its transparency (the
 // environment's share, added by the caller).
 fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32, rise: vec2<f32>) -> vec4<f32> {
     let leaf = params.leaf_size_m;
@@ -60,7 +64,7 @@ fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32, rise: vec2<f32
         if raw.a > 1e-6 {
             last = raw.rgb / raw.a;
         }
-        acc += (1.0 - acc.a) * per_step_of(raw, diameter * params.step_scale / edge);
+        acc += (1.0 - acc.a) * per_step(raw, diameter * params.step_scale / edge);
         if acc.a >= 0.995 {
             return vec4<f32>(acc.rgb / acc.a, 1.0);
         }
@@ -72,7 +76,7 @@ fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32, rise: vec2<f32
 
 // A cone that leaves the scene nearly opaque has crossed solid matter whose coarse, blurred
 // opacity never quite saturates (trilinear weights toward the empty space outside): from opacity
-// CLOSE_LO to CLOSE_HI its missing share is filled with what it saw. Far below the thresholds of
+// CLOSE_LO to CLOSE_HI its missing share is filled with `last`, the matter it was crossing. Far below the thresholds of
 // a closure that had to stand in for rock (0.2 to 0.6 before rock.rs): openings keep their sky.
 const CLOSE_LO: f32 = 0.8;
 const CLOSE_HI: f32 = 0.95;
@@ -87,8 +91,8 @@ fn close_cone(acc: vec4<f32>, last: vec3<f32>) -> vec4<f32> {
 
 // A cone whose axis entered rock: scans are shells, so at a coarse level a wall is partly
 // transparent and the cone would go on through the empty rock behind it (a leak). It ends opaque;
-// what is hidden behind the surfaces it met looks like them (or, having met none, like the rock
-// cell's own filtered radiance `s`). Mirrored by cpu_ref::enter_rock.
+// what is hidden looks like `last`, the wall it was crossing (or, having met nothing, like the
+// rock cell's own filtered radiance `s`). Mirrored by cpu_ref::enter_rock.
 fn enter_rock(acc: vec4<f32>, s: vec4<f32>, last: vec3<f32>) -> vec4<f32> {
     var behind = last;
     if acc.a <= 1e-6 && s.a > 1e-6 {
@@ -120,7 +124,7 @@ fn cone_visibility(origin_m: vec3<f32>, l: vec3<f32>, dist_m: f32) -> f32 {
         }
         let diameter = max(leaf, 2.0 * min(t, dist_m - t) * SHADOW_CONE_TAN_HALF);
         let s = sample_lod((origin_m + l * t) / leaf, log2(diameter / leaf), l);
-        a += (1.0 - a) * per_step(s).a;
+        a += (1.0 - a) * per_step(s, params.step_scale).a;
         if a >= 0.995 {
             return 0.0;
         }

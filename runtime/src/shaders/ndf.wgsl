@@ -21,14 +21,19 @@ fn ndf_cos(mean: vec3<f32>, l: vec3<f32>) -> f32 {
 }
 
 // A leaf's cones start one leaf off its surface, so that a cone does not see its own leaf first.
-fn leaf_cone_origin(leaf: Leaf) -> vec3<f32> {
+fn leaf_cone_lift(leaf: Leaf) -> f32 {
     // center_m.w: the leaf's edge where it is a coarse leaf wider than the package's (else 0).
-    return leaf.center_m.xyz + leaf_normal(leaf.normal_mean.xyz) * max(params.leaf_size_m, leaf.center_m.w);
+    return max(params.leaf_size_m, leaf.center_m.w);
 }
 
-// Height of a leaf's cone origin above its surface and the rise per metre along `dir`.
+fn leaf_cone_origin(leaf: Leaf) -> vec3<f32> {
+    return leaf.center_m.xyz + leaf_normal(leaf.normal_mean.xyz) * leaf_cone_lift(leaf);
+}
+
+// Height of a leaf's cone origin above its surface and the rise per metre along `dir`
+// (`trace_cone`'s `rise`).
 fn leaf_cone_rise(leaf: Leaf, dir: vec3<f32>) -> vec2<f32> {
-    return vec2<f32>(max(params.leaf_size_m, leaf.center_m.w), dot(dir, leaf_normal(leaf.normal_mean.xyz)));
+    return vec2<f32>(leaf_cone_lift(leaf), dot(dir, leaf_normal(leaf.normal_mean.xyz)));
 }
 
 // World direction of a cone given in the leaf's tangent frame (z = mean normal).
