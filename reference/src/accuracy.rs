@@ -275,6 +275,20 @@ fn demo_cave_variants() -> Result<(SceneData, Vec<Variant>), String> {
     Ok((base, variants))
 }
 
+/// Knob of the one-bounce step runs (judged against the reference cut after one bounce).
+pub const ONE_BOUNCE_STEP: &str = "step, 1 bounce";
+/// Knob of the one-bounce aperture runs.
+pub const ONE_BOUNCE_APERTURE: &str = "aperture, 1 bounce";
+/// `--step` values of the one-bounce runs, coarse to fine.
+pub const MARCH_STEPS: [f32; 4] = [1.0, 0.5, 0.25, 0.1];
+/// `--aperture` values of the one-bounce runs, wide to narrow.
+pub const MARCH_APERTURES: [f32; 4] = [1.0, 0.7, 0.5, 0.35];
+
+/// Whether a knob's rows are judged against a cut reference rather than full transport.
+fn judged_cut(knob: &str) -> bool {
+    knob == "bounces" || knob == ONE_BOUNCE_STEP || knob == ONE_BOUNCE_APERTURE
+}
+
 /// Each knob alone around the balanced preset, and the three presets.
 pub fn configs() -> Vec<Config> {
     let base = Settings::preset(Quality::Balanced);
@@ -288,11 +302,24 @@ pub fn configs() -> Vec<Config> {
     for cones in [4u32, 6, 16] {
         add("cones", format!("cones {cones}"), Settings { cones, ..base.clone() });
     }
-    for a in [0.5f32, 1.0] {
+    for a in [0.35f32, 0.5, 1.0] {
         add("aperture", format!("aperture {a}"), Settings { cone_aperture_scale: a, ..base.clone() });
     }
-    for s in [0.25f32, 1.0] {
+    for s in [0.1f32, 0.25, 1.0] {
         add("step", format!("step {s}"), Settings { step_scale: s, ..base.clone() });
+    }
+    // The march alone: one bounce against the reference cut after one bounce, so the bounces not
+    // run do not hide what the step and the cone width do (issue 21).
+    let one = Settings { bounces: 1, ..base.clone() };
+    for a in MARCH_APERTURES {
+        add(
+            ONE_BOUNCE_APERTURE,
+            format!("aperture {a}, 1 bounce"),
+            Settings { cone_aperture_scale: a, ..one.clone() },
+        );
+    }
+    for s in MARCH_STEPS {
+        add(ONE_BOUNCE_STEP, format!("step {s}, 1 bounce"), Settings { step_scale: s, ..one.clone() });
     }
     for b in [0u32, 1, 2, 4, 8, 16] {
         add("bounces", format!("bounces {b}"), Settings { bounces: b, ..base.clone() });
@@ -450,7 +477,7 @@ fn run_one(
     let hdr = box_downsample(&big.hdr, width, height, SUPERSAMPLE);
     let (err, noise, bias) = rel_rmse(&hdr, &s.reference);
     let flip = flip_mean(&hdr, &s.reference, width, height);
-    let truncated = (c.knob == "bounces")
+    let truncated = judged_cut(&c.knob)
         .then(|| s.truncated.iter().find(|(k, _)| *k == c.settings.bounces))
         .flatten()
         .map(|(_, img)| {
@@ -494,6 +521,50 @@ pub fn presets_monotone(rows: &[Row]) -> Option<bool> {
     let t = |r: &Row| r.light_ms + r.frame_ms;
     Some(t(f) < t(b) && t(b) < t(h) && f.rel_rmse > b.rel_rmse && b.rel_rmse > h.rel_rmse)
 }
+
+/// How much worse (in relative RMSE or |bias|) a finer row may be than the coarser one before a
+/// knob's rows count as not monotone. Every row is judged against the same reference image, so its noise moves
+/// all rows alike; what is left is the runtime's own rounding, far below this.
+pub const MONOTONE_SLACK: f64 = 0.002;
+
+/// A knob's rows from coarse to fine (config names), the full-transport ones around the balanced
+/// preset and the one-bounce ones.
+pub fn knob_series(knob: &str) -> Vec<String> {
+    match knob {
+        "step" => ["step 1", "balanced", "step 0.25", "step 0.1"].map(String::from).to_vec(),
+        "aperture" => ["aperture 1", "balanced", "aperture 0.5", "aperture 0.35"].map(String::from).to_vec(),
+        ONE_BOUNCE_STEP => MARCH_STEPS.iter().map(|s| format!("step {s}, 1 bounce")).collect(),
+        ONE_BOUNCE_APERTURE => MARCH_APERTURES.iter().map(|a| format!("aperture {a}, 1 bounce")).collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// The error of `knob`'s rows on one scene from coarse to fine (against the cut reference for the
+/// one-bounce knobs), or None where a row is missing. For the step it is the relative RMSE. For the
+/// aperture it is |bias|: with the cone count fixed, a narrower cone covers less of the hemisphere
+/// (9 cones at `--aperture` 0.35 cover 12% of it), so its RMSE grows with the gaps between cones;
+/// what the aperture must not change is the energy (issue 21: "wide cones should blur, not darken").
+pub fn knob_errors(rows: &[Row], knob: &str) -> Option<Vec<f64>> {
+    let aperture = knob == "aperture" || knob == ONE_BOUNCE_APERTURE;
+    knob_series(knob)
+        .iter()
+        .map(|name| {
+            let r = rows.iter().find(|r| &r.config == name)?;
+            let (e, b) = if judged_cut(knob) { r.truncated? } else { (r.rel_rmse, r.bias) };
+            Some(if aperture { b.abs() } else { e })
+        })
+        .collect()
+}
+
+/// Whether each finer row of `knob` is at least as accurate as the coarser one (`knob_errors`),
+/// within `MONOTONE_SLACK`.
+pub fn knob_monotone(rows: &[Row], knob: &str) -> Option<bool> {
+    let e = knob_errors(rows, knob)?;
+    Some(e.windows(2).all(|w| w[1] <= w[0] + MONOTONE_SLACK))
+}
+
+/// The knobs whose rows must get more accurate as they get finer.
+pub const MONOTONE_KNOBS: [&str; 4] = ["step", "aperture", ONE_BOUNCE_STEP, ONE_BOUNCE_APERTURE];
 
 /// File-name form of a scene name.
 pub fn slug(name: &str) -> String {
@@ -560,8 +631,40 @@ pub fn report(
         "\nEach preset slower and more accurate than the one below it on every scene: {}\n",
         if monotone.is_empty() { "yes".to_string() } else { format!("**no** ({})", monotone.join(", ")) }
     );
+    let _ = writeln!(
+        s,
+        "Finer march knobs more accurate: `step` 1 > 0.5 > 0.25 > 0.1 in relative RMSE, `aperture` \
+         1 > 0.7 > 0.5 > 0.35 in |bias| (with the cone count fixed a narrower cone leaves gaps between cones, \
+         which raises the RMSE; the aperture must change blur, not energy), each finer row at most \
+         {MONOTONE_SLACK} above the coarser one; with 4 bounces against full transport, and with 1 bounce \
+         against the reference cut after one bounce:\n"
+    );
+    let _ = writeln!(
+        s,
+        "| knob | {} |",
+        scenes.iter().map(|sc| sc.name.as_str()).collect::<Vec<_>>().join(" | ")
+    );
+    let _ = writeln!(s, "|---|{}", ":-:|".repeat(scenes.len()));
+    for knob in MONOTONE_KNOBS {
+        let cells: Vec<&str> = scenes
+            .iter()
+            .map(|sc| {
+                let mine: Vec<Row> = rows.iter().filter(|r| r.scene == sc.name).cloned().collect();
+                match knob_monotone(&mine, knob) {
+                    Some(true) => "yes",
+                    Some(false) => "**no**",
+                    None => "-",
+                }
+            })
+            .collect();
+        let _ = writeln!(s, "| {knob} | {} |", cells.join(" | "));
+    }
+    let _ = writeln!(s);
     for sc in scenes {
-        let mine: Vec<Row> = rows.iter().filter(|r| r.scene == sc.name).cloned().collect();
+        let all: Vec<Row> = rows.iter().filter(|r| r.scene == sc.name).cloned().collect();
+        // The one-bounce march rows are judged against the cut reference, in their own table.
+        let (march, mine): (Vec<Row>, Vec<Row>) =
+            all.into_iter().partition(|r| r.knob == ONE_BOUNCE_STEP || r.knob == ONE_BOUNCE_APERTURE);
         let front = pareto(&mine);
         let noise = mine.first().map_or(0.0, |r| r.reference_noise);
         let _ = writeln!(s, "## {}\n", sc.name);
@@ -612,7 +715,39 @@ pub fn report(
                 None => "not measured",
             }
         );
-        let cut: Vec<&Row> = mine.iter().filter(|r| r.truncated.is_some()).collect();
+        if !march.is_empty() {
+            let _ = writeln!(
+                s,
+                "The march alone: the balanced preset at one bounce, `--step` and `--aperture` varied, against \
+                 the reference cut after one bounce (so the bounces not run do not hide what the march does).\n"
+            );
+            let _ = writeln!(s, "| config | rel. RMSE (cut reference) | bias (cut reference) | light ms |");
+            let _ = writeln!(s, "|---|---:|---:|---:|");
+            for knob in [ONE_BOUNCE_STEP, ONE_BOUNCE_APERTURE] {
+                for name in knob_series(knob) {
+                    if let Some(r) = march.iter().find(|r| r.config == name) {
+                        let (e, b) = r.truncated.unwrap_or((f64::NAN, f64::NAN));
+                        let _ = writeln!(s, "| {} | {e:.4} | {b:+.3} | {:.1} |", r.config, r.light_ms);
+                    }
+                }
+            }
+            let _ = writeln!(s);
+        }
+        let mono_line =
+            |knob: &str| match knob_monotone(&mine.iter().chain(&march).cloned().collect::<Vec<_>>(), knob) {
+                Some(true) => "yes",
+                Some(false) => "**no**",
+                None => "not measured",
+            };
+        let _ = writeln!(
+            s,
+            "Finer is more accurate: step {}, aperture {}; at one bounce against the cut reference: step {}, aperture {}.\n",
+            mono_line("step"),
+            mono_line("aperture"),
+            mono_line(ONE_BOUNCE_STEP),
+            mono_line(ONE_BOUNCE_APERTURE)
+        );
+        let cut: Vec<&Row> = mine.iter().filter(|r| r.knob == "bounces" && r.truncated.is_some()).collect();
         if !cut.is_empty() {
             let _ = writeln!(
                 s,
@@ -635,7 +770,11 @@ pub fn report(
 /// Pareto front as a line, the presets labelled.
 pub fn plot_svg(scene: &str, rows: &[Row]) -> String {
     use plotters::prelude::*;
-    let mine: Vec<&Row> = rows.iter().filter(|r| r.scene == scene).collect();
+    // Full-transport rows only: the one-bounce march rows answer another question.
+    let mine: Vec<&Row> = rows
+        .iter()
+        .filter(|r| r.scene == scene && r.knob != ONE_BOUNCE_STEP && r.knob != ONE_BOUNCE_APERTURE)
+        .collect();
     let t = |r: &Row| (r.light_ms + r.frame_ms).max(0.1);
     let (t_lo, t_hi) = mine.iter().fold((f64::MAX, f64::MIN), |(a, b), r| (a.min(t(r)), b.max(t(r))));
     let (e_lo, e_hi) =
@@ -795,4 +934,62 @@ pub fn lights_report(
         Settings::default().shadowed_lights
     );
     md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(config: &str, knob: &str, rel_rmse: f64, bias: f64, cut: Option<(f64, f64)>) -> Row {
+        Row {
+            scene: "s".into(),
+            config: config.into(),
+            knob: knob.into(),
+            rel_rmse,
+            reference_noise: 0.01,
+            bias,
+            flip: 0.0,
+            truncated: cut,
+            light_ms: 1.0,
+            frame_ms: 1.0,
+            bounces: 4,
+            gpu_bytes: 0,
+            pass_ms: BTreeMap::new(),
+        }
+    }
+
+    #[test]
+    fn march_knobs_are_judged_coarse_to_fine_on_their_own_measure() {
+        let steps = |errors: [f64; 3]| {
+            vec![
+                row("balanced", "preset", 0.20, -0.1, None),
+                row("step 1", "step", errors[0], -0.1, None),
+                row("step 0.25", "step", errors[1], -0.1, None),
+                row("step 0.1", "step", errors[2], -0.1, None),
+            ]
+        };
+        // step 1 > balanced (0.5) > 0.25 > 0.1, within the slack.
+        assert_eq!(knob_monotone(&steps([0.25, 0.19, 0.1915]), "step"), Some(true));
+        assert_eq!(knob_monotone(&steps([0.25, 0.19, 0.195]), "step"), Some(false));
+        assert_eq!(knob_monotone(&steps([0.18, 0.17, 0.16]), "step"), Some(false));
+        assert_eq!(knob_monotone(&steps([0.25, 0.19, 0.18])[1..], "step"), None, "balanced missing");
+        // The aperture is judged by |bias|: a narrow cone's larger RMSE (gaps) does not count.
+        let ap: Vec<Row> = MARCH_APERTURES
+            .iter()
+            .zip([(0.15, -0.04), (0.14, -0.03), (0.15, -0.02), (0.30, 0.01)])
+            .map(|(a, cut)| {
+                row(&format!("aperture {a}, 1 bounce"), ONE_BOUNCE_APERTURE, 0.5, -0.3, Some(cut))
+            })
+            .collect();
+        assert_eq!(knob_errors(&ap, ONE_BOUNCE_APERTURE), Some(vec![0.04, 0.03, 0.02, 0.01]));
+        assert_eq!(knob_monotone(&ap, ONE_BOUNCE_APERTURE), Some(true));
+        // One-bounce runs are judged against the cut reference, not full transport.
+        let st: Vec<Row> = MARCH_STEPS
+            .iter()
+            .zip([0.2, 0.15, 0.14, 0.13])
+            .map(|(s, e)| row(&format!("step {s}, 1 bounce"), ONE_BOUNCE_STEP, 0.9 - e, -0.3, Some((e, 0.0))))
+            .collect();
+        assert_eq!(knob_monotone(&st, ONE_BOUNCE_STEP), Some(true));
+        assert!(judged_cut(ONE_BOUNCE_STEP) && judged_cut("bounces") && !judged_cut("step"));
+    }
 }

@@ -164,8 +164,7 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
         let path = plots.join(format!("{}.svg", accuracy::slug(&sc.name)));
         grotto_runtime::export::write_atomically(&path, accuracy::plot_svg(&sc.name, &rows).as_bytes())?;
     }
-    std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
-        .with_context(|| format!("writing {}", json.display()))?;
+    grotto_runtime::export::write_atomically(&json, serde_json::to_string_pretty(&rows)?.as_bytes())?;
     println!("wrote {} and {} ({} runs)", a.out.display(), json.display(), rows.len());
     Ok(())
 }
