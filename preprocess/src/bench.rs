@@ -117,6 +117,11 @@ pub struct NormalFigure {
     /// Estimated normals pointing into the rock, percent.
     pub flipped_percent: f64,
     pub threads: usize,
+    /// Oriented without scanner positions (the enclosure votes) rather than toward the scanner.
+    pub bare: bool,
+    /// Building the orientation grid over every point (bare only; 0 otherwise).
+    pub grid_seconds: f64,
+    /// Normals over all tiles, the enclosure votes included when bare.
     pub normals_seconds: f64,
     pub normals_per_second: f64,
     pub svo_seconds: f64,
@@ -126,7 +131,9 @@ pub struct NormalFigure {
 /// Synthesises a cave of `points` with `noise_scale`, tiles it, then times normal estimation and
 /// SVO construction over all tiles (`threads` workers) and scores the normals against the
 /// analytic surface. With `export`, also writes the cloud (cave frame, metres) with its true
-/// normals as binary PLY, for comparison with other tools.
+/// normals as binary PLY, for comparison with other tools. With `bare`, the scans are taken as
+/// one merged cloud without scanner positions: the orientation grid is built (timed) and every
+/// normal is oriented by the enclosure votes.
 pub fn normals(
     dir: &Path,
     points: u64,
@@ -134,11 +141,12 @@ pub fn normals(
     ks: &[usize],
     threads: usize,
     export: Option<&Path>,
+    bare: bool,
 ) -> Result<Vec<NormalFigure>> {
     use rayon::prelude::*;
 
     use crate::manifest::Manifest;
-    use crate::normals::{TilePoints, estimate};
+    use crate::normals::{Orient, TilePoints, estimate};
     use crate::tiling::{FLAG_HALO, TilingParams, read_bin, tile_scans};
     use crate::voxels::{self, Sample};
 
@@ -192,13 +200,25 @@ pub fn normals(
             })
         })
         .collect::<Result<_>>()?;
+    let start = Instant::now();
+    // The build's cell for the bench's 6.25 cm leaves.
+    let grid = if bare {
+        Some(pool.install(|| {
+            crate::orient::CaveGrid::from_plan(&plan, &work, crate::orient::CELL_LEAVES * 0.0625)
+        })?)
+    } else {
+        None
+    };
+    let grid_seconds = if bare { start.elapsed().as_secs_f64() } else { 0.0 };
+    let no_scanner: Vec<Vec<bool>> = tiles.iter().map(|t| vec![true; t.positions.len()]).collect();
     let mut out = Vec::new();
     for &k in ks {
         let start = Instant::now();
         let normals: Vec<Vec<crate::normals::PointNormal>> = pool.install(|| {
             tiles
                 .par_iter()
-                .map(|t| {
+                .zip(&no_scanner)
+                .map(|(t, no_scanner)| {
                     estimate(
                         &TilePoints {
                             positions: &t.positions,
@@ -206,6 +226,11 @@ pub fn normals(
                             scanner_tile_m: &t.scanners,
                             input_normals: &t.inputs,
                             isolated_radius_m: 0.5 * 0.0625,
+                            orient: grid.as_ref().map(|grid| Orient {
+                                grid,
+                                tile_origin_m: t.origin,
+                                no_scanner,
+                            }),
                         },
                         k,
                     )
@@ -275,6 +300,8 @@ pub fn normals(
             p95_deg: errors.get(n * 95 / 100).copied().unwrap_or(0.0),
             flipped_percent: 100.0 * flipped as f64 / n as f64,
             threads,
+            bare,
+            grid_seconds,
             normals_seconds,
             normals_per_second: errors.len() as f64 / normals_seconds,
             svo_seconds,

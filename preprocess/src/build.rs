@@ -27,7 +27,8 @@ use serde::Serialize;
 
 use crate::bc1;
 use crate::manifest::{Manifest, ResolvedScan};
-use crate::normals::{self, TilePoints};
+use crate::normals::{self, Orient, TilePoints};
+use crate::orient::{self, CaveGrid, OrientStats};
 use crate::tiling::{self, FLAG_HALO, Progress, TilePlan, TilingParams};
 use crate::voxels::{self, Sample, TileSvo};
 use crate::{Error, Result};
@@ -57,6 +58,9 @@ pub struct BuildParams {
     /// Refuse a scan file that ends inside its last point record instead of reading its complete
     /// records and warning (`--strict`).
     pub strict: bool,
+    /// Keep normals the files carry where they agree with the local plane (`--normals keep`), or
+    /// estimate every normal (`--normals estimate`).
+    pub keep_input_normals: bool,
 }
 
 /// Leaf edge of the cave default, metres; tile extents and halo below are in its leaves (1 m and
@@ -114,6 +118,7 @@ impl BuildParams {
             max_tile_extent_m: MAX_TILE_LEAVES * leaf_m,
             halo_m: HALO_LEAVES * leaf_m,
             strict: false,
+            keep_input_normals: true,
         }
     }
 
@@ -171,6 +176,16 @@ pub struct BuildSummary {
     /// Scan files that end inside their last point record, read without it:
     /// "path: N points dropped" (`--strict` refuses them instead).
     pub cut_short: Vec<String>,
+    /// Scans with no scanner position (no `origin`, no pose): a merged cloud.
+    pub scans_without_scanner: usize,
+    /// Points whose file carried a normal, and how many of those were kept (`--normals keep`
+    /// keeps those within 60 degrees of the local plane's normal; the rest are estimated).
+    pub input_normals: u64,
+    pub input_normals_kept: u64,
+    pub keep_input_normals: bool,
+    /// What orienting their normals by enclosure did (docs/manifest.md, "Scans without scanner
+    /// positions").
+    pub orientation: Option<OrientStats>,
 }
 
 impl BuildSummary {
@@ -184,6 +199,34 @@ impl BuildSummary {
                  at the camera; add [[light]] entries (or [environment]) to a manifest (docs/manifest.md)"
                     .to_string(),
             );
+        }
+        if self.input_normals > 0 {
+            h.push(format!(
+                "{} points carried normals in their files: {} kept (they agree with the local plane), the \
+                 rest estimated{}",
+                self.input_normals,
+                self.input_normals_kept,
+                if self.keep_input_normals {
+                    " (--normals estimate ignores them all)"
+                } else {
+                    " (--normals estimate)"
+                }
+            ));
+        }
+        if let Some(o) = &self.orientation {
+            h.push(format!(
+                "{} scan(s) have no scanner position (no `origin =`, no pose): the normals of their {} points \
+                 were oriented toward the side their walls enclose ({} turned away from the scan frame's \
+                 origin, {} set by their neighbours against their own votes, {} without evidence turned \
+                 up, mean confidence {:.2}); give `origin =` per scan in a manifest where scanner positions \
+                 are known (docs/manifest.md)",
+                self.scans_without_scanner,
+                o.points,
+                o.flipped,
+                o.corrected,
+                o.undecided,
+                o.mean_confidence()
+            ));
         }
         for c in &self.cut_short {
             h.push(format!(
@@ -207,6 +250,8 @@ struct BuiltTile {
     info: TileInfo,
     /// Own points near the border whose k-neighbourhood may reach past the halo.
     seam_limited: u64,
+    /// What orientation without a scanner did in this tile.
+    orientation: OrientStats,
     surfels: Vec<Surfel>,
     colors: Vec<[u8; 3]>,
     svo: TileSvo,
@@ -284,6 +329,7 @@ fn build_tile(
     t: usize,
     params: &BuildParams,
     scene: &Scene,
+    grid: Option<&CaveGrid>,
 ) -> Result<BuiltTile> {
     let tile = &plan.tiles[t];
     let origin = plan.origin_m(tile);
@@ -299,18 +345,27 @@ fn build_tile(
             std::array::from_fn(|a| s[a] - origin[a])
         })
         .collect();
-    let input_normals: Vec<[f32; 3]> =
-        points.iter().map(|p| p.normal_snorm.map(|c| f32::from(c) / 32767.0)).collect();
-    let estimated = normals::estimate(
+    let input_normals: Vec<[f32; 3]> = if params.keep_input_normals {
+        points.iter().map(|p| p.normal_snorm.map(|c| f32::from(c) / 32767.0)).collect()
+    } else {
+        vec![[0.0; 3]; points.len()]
+    };
+    // Counted before `--normals estimate` drops them, so the summary can say they were there.
+    let given = points.iter().zip(&own).filter(|(p, own)| **own && p.normal_snorm != [0; 3]).count() as u64;
+    let no_scanner: Vec<bool> =
+        points.iter().map(|p| !plan.scanner_known.get(p.scan as usize).copied().unwrap_or(true)).collect();
+    let (estimated, mut orientation) = normals::estimate_with_stats(
         &TilePoints {
             positions: &positions,
             own: &own,
             scanner_tile_m: &scanner_tile_m,
             input_normals: &input_normals,
             isolated_radius_m: 0.5 * params.leaf_m as f32,
+            orient: grid.map(|grid| Orient { grid, tile_origin_m: origin, no_scanner: &no_scanner }),
         },
         params.k,
     );
+    orientation.input_normals = given;
     let own_points: Vec<&tiling::BinPoint> = points.iter().filter(|p| p.flags & FLAG_HALO == 0).collect();
     let q = f64::from(1u32 << 16) / extent;
     let mut order: Vec<(u64, usize)> = own_points
@@ -376,6 +431,7 @@ fn build_tile(
     Ok(BuiltTile {
         info: TileInfo { origin_m: origin, extent_m: extent, grid, depth, point_count: tile.points },
         seam_limited,
+        orientation,
         surfels,
         colors,
         svo,
@@ -390,22 +446,26 @@ pub fn tile_package_path(work_dir: &Path, tile: usize) -> PathBuf {
 fn tile_fingerprint(plan: &TilePlan, params: &BuildParams) -> String {
     // Scene lights matter too (area lights become emissive samples); hashed with the parameters.
     format!(
-        "{}-k{}-leaf{}-{:?}-v{}",
+        "{}-k{}-leaf{}-{:?}-keep{}-v{}",
         plan.fingerprint,
         params.k,
         params.leaf_m,
         params.colors,
+        params.keep_input_normals,
         env!("CARGO_PKG_VERSION")
     )
 }
 
-/// The seam-limited count of a finished tile package with this fingerprint, or `None` when it
-/// must be built (missing, damaged, other parameters).
-fn finished_tile_package(path: &Path, fingerprint: &str) -> Option<u64> {
+/// What a finished tile package with this fingerprint recorded (seam-limited points, orientation
+/// without a scanner), or `None` when it must be built (missing, damaged, other parameters).
+fn finished_tile_package(path: &Path, fingerprint: &str) -> Option<(u64, OrientStats)> {
     let prov = Package::open(path).ok()?.provenance().ok()??;
-    (prov.parameters.get("tile_fingerprint")?.as_str()? == fingerprint)
-        .then(|| prov.parameters.get("seam_limited_points")?.as_u64())
-        .flatten()
+    if prov.parameters.get("tile_fingerprint")?.as_str()? != fingerprint {
+        return None;
+    }
+    let seam = prov.parameters.get("seam_limited_points")?.as_u64()?;
+    let orientation = serde_json::from_value(prov.parameters.get("orientation")?.clone()).ok()?;
+    Some((seam, orientation))
 }
 
 fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: ColorCodec) -> Result<()> {
@@ -444,6 +504,7 @@ fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: 
         parameters: [
             ("tile_fingerprint".to_string(), serde_json::json!(fingerprint)),
             ("seam_limited_points".to_string(), serde_json::json!(tile.seam_limited)),
+            ("orientation".to_string(), serde_json::json!(tile.orientation)),
         ]
         .into(),
     })?;
@@ -558,6 +619,11 @@ fn plan_scans(
     let tiling_params = params.tiling();
     let earlier = tiling::existing_plan(scans, &params.work_dir, &tiling_params)?;
     let plan = tiling::tile_scans(scans, &params.work_dir, &tiling_params, progress)?;
+    if plan.needs_orientation() {
+        progress(Progress { stage: "orientation grid", done: 0, total: 1 });
+        orient::load_or_build(&plan, &params.work_dir, params.leaf_m)?;
+        progress(Progress { stage: "orientation grid", done: 1, total: 1 });
+    }
     Ok((plan, earlier.is_some(), cut))
 }
 
@@ -603,6 +669,12 @@ fn tile_stage(
     std::fs::create_dir_all(&tiles_dir).map_err(|source| Error::Io { path: tiles_dir.clone(), source })?;
     let fingerprint = tile_fingerprint(plan, params);
     let mine: Vec<usize> = (0..plan.tiles.len()).filter(|&t| shard.takes(t)).collect();
+    // Shared read-only by every tile of this job (the plan step normally built it already).
+    let grid = if plan.needs_orientation() && !mine.is_empty() {
+        Some(pool.install(|| orient::load_or_build(plan, &params.work_dir, params.leaf_m))?)
+    } else {
+        None
+    };
     let batch = params.threads.max(1);
     let mut stage = TileStage::default();
     for (b, group) in mine.chunks(batch).enumerate() {
@@ -614,7 +686,7 @@ fn tile_stage(
                     if finished_tile_package(&path, &fingerprint).is_some() {
                         return Ok(true);
                     }
-                    let built = build_tile(plan, &params.work_dir, t, params, scene)?;
+                    let built = build_tile(plan, &params.work_dir, t, params, scene, grid.as_ref())?;
                     write_tile_package(&path, &built, &fingerprint, params.colors)?;
                     Ok(false)
                 })
@@ -689,6 +761,7 @@ fn assemble_plan(
     let fingerprint = tile_fingerprint(plan, params);
     let total = plan.tiles.len();
     let mut seam_limited_points = 0u64;
+    let mut orientation = OrientStats::default();
     let missing: Vec<usize> = (0..total)
         .filter(|&t| finished_tile_package(&tile_package_path(&params.work_dir, t), &fingerprint).is_none())
         .collect();
@@ -736,7 +809,10 @@ fn assemble_plan(
     let mut writer = PackageWriter::create(out)?;
     for (t, levels) in levels.iter().enumerate() {
         let path = tile_package_path(&params.work_dir, t);
-        seam_limited_points += finished_tile_package(&path, &fingerprint).unwrap_or(0);
+        if let Some((seam, orient)) = finished_tile_package(&path, &fingerprint) {
+            seam_limited_points += seam;
+            orientation.add(&orient);
+        }
         // One tile package mapped at a time: copying touches every page of its surfels.
         let tile_pkg = Package::open(&path)?;
         let tile = tile_pkg.tile(0).ok_or_else(|| Error::Parameter {
@@ -820,6 +896,11 @@ fn assemble_plan(
         resumed_tiling: false,
         reused_tiles: 0,
         seam_limited_points,
+        orientation: (orientation.points > 0).then_some(orientation),
+        input_normals: orientation.input_normals,
+        input_normals_kept: orientation.input_kept,
+        keep_input_normals: params.keep_input_normals,
+        scans_without_scanner: plan.scanner_known.iter().filter(|k| !**k).count(),
         peak_rss_bytes: crate::bench::peak_rss_bytes(),
         leaf_m: params.leaf_m,
         lights: scene.lights.len(),

@@ -12,6 +12,7 @@ mod error;
 pub mod ingest;
 pub mod manifest;
 pub mod normals;
+pub mod orient;
 pub mod pose;
 pub mod scanwrite;
 pub mod synth;

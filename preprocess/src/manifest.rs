@@ -41,7 +41,8 @@ pub struct ScanSpec {
     pub rotation: Option<[f64; 4]>,
     /// Row-major 4x4 scan frame -> world matrix (instead of translation + rotation).
     pub matrix: Option<[f64; 16]>,
-    /// Scanner position in the scan frame (default: the frame's origin).
+    /// Scanner position in the scan frame (default: the frame's origin when the scan has a pose;
+    /// with neither, the file is taken as a merged cloud without scanner positions).
     pub origin: Option<[f64; 3]>,
     /// For files with several scans (E57): which one; all when absent.
     pub scan: Option<usize>,
@@ -148,6 +149,11 @@ pub struct ResolvedScan {
     pub scanner_world_m: [f64; 3],
     /// Whether the pose came from the file (E57) rather than the manifest or identity.
     pub pose_from_file: bool,
+    /// Whether `scanner_world_m` is a scanner: the manifest gives an `origin`, or a pose (from the
+    /// manifest, a `.conf`, or the file) places the scan frame, whose origin is then its scanner.
+    /// A bare file with neither is a merged, registered cloud: its frame origin is a survey datum,
+    /// not a scanner, and its normals are oriented by enclosure instead (orient.rs).
+    pub scanner_known: bool,
 }
 
 fn manifest_error(path: &Path, reason: impl std::fmt::Display) -> Error {
@@ -276,6 +282,7 @@ impl Manifest {
                     world_from_scan,
                     scanner_world_m: world_from_scan.apply(origin),
                     pose_from_file: file_pose.is_some(),
+                    scanner_known: spec.origin.is_some() || manifest_pose.is_some() || file_pose.is_some(),
                 });
             }
         }

@@ -21,6 +21,8 @@ use std::num::NonZero;
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
 
+use crate::orient::{CaveGrid, MAX_SCORE, OrientStats};
+
 /// Surfel radii are widened by this over the disc that covers the area per point, so neighbouring
 /// discs overlap without holes.
 pub const RADIUS_COVER_FACTOR: f64 = 1.25;
@@ -142,13 +144,31 @@ pub struct TilePoints<'a> {
     /// radius from: it gets this one (the builder gives half a leaf: it stands for the leaf it
     /// falls in, drawn and voxelised rather than a zero-area disc nothing sees).
     pub isolated_radius_m: f32,
+    /// Orientation for points whose scan has no scanner position (none: every point faces its
+    /// scanner).
+    pub orient: Option<Orient<'a>>,
+}
+
+/// How points without a scanner are oriented: by the enclosure votes of `grid` (see orient.rs).
+#[derive(Clone, Copy, Debug)]
+pub struct Orient<'a> {
+    pub grid: &'a CaveGrid,
+    /// World position of the tile's frame.
+    pub tile_origin_m: [f64; 3],
+    /// Per point: its scan has no scanner position.
+    pub no_scanner: &'a [bool],
 }
 
 /// Normals for the own points of a tile, in order. `k` neighbours (the point itself included).
 pub fn estimate(tile: &TilePoints<'_>, k: usize) -> Vec<PointNormal> {
+    estimate_with_stats(tile, k).0
+}
+
+/// [`estimate`], with what orientation without a scanner did (zero when every point has one).
+pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>, OrientStats) {
     let n = tile.positions.len();
     if n == 0 {
-        return Vec::new();
+        return (Vec::new(), OrientStats::default());
     }
     let k = k.clamp(3, 64).min(n);
     // Query (and build the tree) in Morton order: consecutive queries then walk the same leaves,
@@ -165,7 +185,9 @@ pub fn estimate(tile: &TilePoints<'_>, k: usize) -> Vec<PointNormal> {
     // every point (halo included, so spread at the border averages over both sides), and the
     // neighbour lists, all in sorted order; then scattered to input order.
     let mut sorted_lists: Vec<u32> = vec![0; n * k];
-    let per_point: Vec<([f64; 3], f64)> = sorted_lists
+    // Per point: normal, radius, the enclosure score of that normal (MAX_SCORE where the point
+    // faces its scanner: that orientation is known), and whether its input normal was kept.
+    let per_point: Vec<([f64; 3], f64, i32, bool)> = sorted_lists
         .par_chunks_mut(k * 1024)
         .enumerate()
         .flat_map_iter(|(chunk, lists)| {
@@ -192,19 +214,37 @@ pub fn estimate(tile: &TilePoints<'_>, k: usize) -> Vec<PointNormal> {
                 scratch.clear();
                 scratch.extend(found.iter().map(|nb| pts[nb.item as usize].map(f64::from)));
                 let p = q.map(f64::from);
-                let s = tile.scanner_tile_m[i];
-                let view = normalize([s[0] - p[0], s[1] - p[1], s[2] - p[2]]).unwrap_or([0.0, 0.0, 1.0]);
+                let bare = tile.orient.filter(|o| o.no_scanner[i]);
+                // Without a scanner, the PCA sign is provisional (up); the votes decide below.
+                let view = match bare {
+                    Some(_) => [0.0, 0.0, 1.0],
+                    None => {
+                        let s = tile.scanner_tile_m[i];
+                        normalize([s[0] - p[0], s[1] - p[1], s[2] - p[2]]).unwrap_or([0.0, 0.0, 1.0])
+                    }
+                };
                 let mut normal = normal_from_neighbourhood(&scratch, view);
                 let input = tile.input_normals[i].map(f64::from);
+                let mut kept = false;
                 if let Some(given) = normalize(input)
                     && (dot(input, input) - 1.0).abs() < 0.05
                     && dot(given, normal).abs() > 0.5
                 {
                     normal = if dot(given, view) < 0.0 { given.map(|c| -c) } else { given };
+                    kept = true;
                 }
+                let score = match bare {
+                    Some(o) => o.grid.score(std::array::from_fn(|a| o.tile_origin_m[a] + p[a]), normal),
+                    None => MAX_SCORE,
+                };
                 let d2 = found.iter().map(|nb| nb.distance).fold(0.0f32, f32::max);
                 bound = if d2 > 0.0 { d2 * 2.25 } else { f32::INFINITY };
-                out.push((normal, RADIUS_COVER_FACTOR * f64::from(d2).sqrt() / (k as f64).sqrt()));
+                out.push((
+                    normal,
+                    RADIUS_COVER_FACTOR * f64::from(d2).sqrt() / (k as f64).sqrt(),
+                    score,
+                    kept,
+                ));
             }
             out
         })
@@ -212,31 +252,80 @@ pub fn estimate(tile: &TilePoints<'_>, k: usize) -> Vec<PointNormal> {
     let mut neighbour_lists: Vec<u32> = vec![0; n * k];
     let mut normals = vec![[0.0f64; 3]; n];
     let mut radii = vec![0.0f64; n];
+    let mut scores = vec![0i32; n];
+    let mut kept = vec![false; n];
     for (j, &i) in order.iter().enumerate() {
         let i = i as usize;
         neighbour_lists[i * k..(i + 1) * k].copy_from_slice(&sorted_lists[j * k..(j + 1) * k]);
-        (normals[i], radii[i]) = per_point[j];
+        (normals[i], radii[i], scores[i], kept[i]) = per_point[j];
     }
-    own.iter()
+    let mut stats =
+        OrientStats { input_kept: own.iter().filter(|&&i| kept[i]).count() as u64, ..OrientStats::default() };
+    let out = own
+        .iter()
         .map(|&i| {
             let list = &neighbour_lists[i * k..(i + 1) * k];
+            let ni = match tile.orient.filter(|o| o.no_scanner[i]) {
+                Some(_) => orient_by_neighbourhood(tile, i, list, &normals, &scores, &mut stats),
+                None => normals[i],
+            };
             let mut sum = [0.0f64; 3];
             for &j in list {
                 let nj = normals[j as usize];
                 // Flip neighbours onto this point's side: orientation is not the spread.
-                let sign = if dot(nj, normals[i]) < 0.0 { -1.0 } else { 1.0 };
+                let sign = if dot(nj, ni) < 0.0 { -1.0 } else { 1.0 };
                 for a in 0..3 {
                     sum[a] += sign * nj[a];
                 }
             }
             let mean_len = (dot(sum, sum)).sqrt() / list.len() as f64;
             PointNormal {
-                normal: normals[i].map(|c| c as f32),
+                normal: ni.map(|c| c as f32),
                 spread: (1.0 - mean_len).clamp(0.0, 1.0) as f32,
                 radius_m: if radii[i] > 0.0 { radii[i] as f32 } else { tile.isolated_radius_m },
             }
         })
-        .collect()
+        .collect();
+    (out, stats)
+}
+
+/// The sign of point `i`'s normal (no scanner) from its neighbourhood's enclosure votes: each
+/// neighbour's score, turned onto `i`'s normal by the cosine between them (a neighbour across a
+/// crease says little about this side). Zero evidence turns the normal up (+z: open ground).
+fn orient_by_neighbourhood(
+    tile: &TilePoints<'_>,
+    i: usize,
+    list: &[u32],
+    normals: &[[f64; 3]],
+    scores: &[i32],
+    stats: &mut OrientStats,
+) -> [f64; 3] {
+    let ni = normals[i];
+    let total: f64 = list.iter().map(|&j| f64::from(scores[j as usize]) * dot(normals[j as usize], ni)).sum();
+    let facing = if total > 0.0 {
+        true
+    } else if total < 0.0 {
+        false
+    } else {
+        stats.undecided += 1;
+        ni[2] >= 0.0
+    };
+    let normal = if facing { ni } else { ni.map(|c| -c) };
+    stats.points += 1;
+    if scores[i] != 0 && (scores[i] > 0) != facing {
+        stats.corrected += 1;
+    }
+    if total.abs() < f64::from(MAX_SCORE) {
+        stats.weak += 1;
+    }
+    stats.confidence_sum += total.abs() / (list.len() as f64 * f64::from(MAX_SCORE));
+    // The old rule turned every normal toward the scan frame's origin.
+    let p = tile.positions[i].map(f64::from);
+    let s = tile.scanner_tile_m[i];
+    if dot(normal, [s[0] - p[0], s[1] - p[1], s[2] - p[2]]) < 0.0 {
+        stats.flipped += 1;
+    }
+    normal
 }
 
 /// Indices of `positions` sorted by a 30-bit Morton code over their bounding box.
@@ -327,6 +416,7 @@ mod tests {
                     scanner_tile_m: &vec![[0.0, 0.0, 10.0]; n],
                     input_normals: &vec![[0.0; 3]; n],
                     isolated_radius_m: 0.03125,
+                    orient: None,
                 },
                 16,
             );
@@ -368,6 +458,7 @@ mod tests {
                 scanner_tile_m: &scanners,
                 input_normals: &inputs,
                 isolated_radius_m: 0.5,
+                orient: None,
             },
             16,
         );

@@ -117,10 +117,19 @@ pub struct TilePlan {
     pub halo_points: u64,
     /// Scanner positions (world), by scan index in the bins.
     pub scanners_world_m: Vec<[f64; 3]>,
+    /// Whether each scan's scanner position is known (`ResolvedScan::scanner_known`); normals of
+    /// the others are oriented by enclosure. Empty in plans from before this field: all known.
+    #[serde(default)]
+    pub scanner_known: Vec<bool>,
     pub bins_complete: bool,
 }
 
 impl TilePlan {
+    /// Whether any scan lacks a scanner position (its normals need the orientation grid).
+    pub fn needs_orientation(&self) -> bool {
+        self.scanner_known.iter().any(|k| !k)
+    }
+
     pub fn extent_m(&self, tile: &PlannedTile) -> f64 {
         self.min_extent_m * f64::from(1u32 << tile.level)
     }
@@ -209,13 +218,14 @@ fn fingerprint(scans: &[ResolvedScan], params: &TilingParams) -> Result<String> 
             .map(|d| d.as_nanos());
         h.update(
             format!(
-                "{}|{}|{:?}|{}|{:?}|{:?}\n",
+                "{}|{}|{:?}|{}|{:?}|{:?}|{}\n",
                 s.path.display(),
                 meta.len(),
                 mtime,
                 s.index,
                 s.world_from_scan,
-                s.scanner_world_m
+                s.scanner_world_m,
+                s.scanner_known
             )
             .as_bytes(),
         );
@@ -442,6 +452,7 @@ fn count_and_plan(
         invalid_points: invalid,
         halo_points: 0,
         scanners_world_m: scans.iter().map(|s| s.scanner_world_m).collect(),
+        scanner_known: scans.iter().map(|s| s.scanner_known).collect(),
         bins_complete: false,
     })
 }

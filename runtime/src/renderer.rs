@@ -614,6 +614,8 @@ impl Renderer {
     fn frame_params(&self, frame: Option<(&Camera, u32, u32)>) -> Params {
         let mut p = self.base_params;
         let s = &self.settings;
+        // Auto exposure sets it after the light has settled (`set_exposure`).
+        p.exposure = s.exposure;
         let mut f = flags::EMISSION;
         if s.direct && p.light_count > 0 {
             f |= flags::DIRECT;

@@ -251,13 +251,27 @@ fn skipped_passes_are_not_dispatched_and_change_nothing() {
     let (b, plan) = r.render(&cam, 64, 48).unwrap();
     assert!(!plan.runs(Pass::Gbuffer));
     assert_eq!(a.hdr, b.hdr);
+    // A new exposure (auto exposure sets it after settling) changes the tonemapped frame only.
+    r.set_exposure(0.4);
+    let (brighter, _) = r.render(&cam, 64, 48).unwrap();
+    r.set_exposure(settings.exposure);
+    assert_eq!(brighter.hdr, a.hdr);
+    let mean = |f: &grotto_runtime::renderer::Frame| {
+        f.ldr.iter().map(|p| f64::from(p[0])).sum::<f64>() / f.ldr.len() as f64
+    };
+    assert!(
+        mean(&brighter) > mean(&a) + 10.0,
+        "exposure 0.4 against 0.1: {} vs {}",
+        mean(&brighter),
+        mean(&a)
+    );
     let d = &r.stats().dispatches;
     assert_eq!(d.get(&Pass::Shadow), None);
     assert_eq!(d.get(&Pass::Inject), None);
     assert_eq!(d.get(&Pass::Mip).copied(), Some(u64::from(bounces)));
     assert_eq!(d.get(&Pass::Propagate).copied(), Some(u64::from(bounces)));
     assert_eq!(d.get(&Pass::Gbuffer).copied(), Some(1));
-    assert_eq!(d.get(&Pass::Shade).copied(), Some(2));
+    assert_eq!(d.get(&Pass::Shade).copied(), Some(3));
 
     // Forcing the skipped passes: shadow, inject, gbuffer and one more bounce.
     r.set_forced(&[Pass::Shadow, Pass::Inject, Pass::Gbuffer, Pass::Mip, Pass::Env, Pass::Propagate]);

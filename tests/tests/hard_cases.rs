@@ -179,7 +179,9 @@ fn degenerate_inputs_build_valid_packages_without_nan() {
     pts.push([f64::NAN, 0.0, 0.0]);
     pts.push([0.0, f64::INFINITY, 0.0]);
     let scan = write_ply(&d.join("degenerate.ply"), &pts);
-    let manifest = Manifest::from_files(&[scan]);
+    // The scanner at the scan origin (a bare file would be a merged cloud without one).
+    let mut manifest = Manifest::from_files(&[scan]);
+    manifest.scans[0].origin = Some([0.0; 3]);
     let (pkg, summary) = build_into(&manifest, d, "degenerate.grotto", &params(&d.join("w"), 1.0, 16.0));
     assert_eq!(summary.invalid_points, 2);
     assert_eq!(summary.points, pts.len() as u64 - 2);

@@ -99,6 +99,10 @@ enum Command {
         /// Also write the cloud with its true normals (PLY) for other tools.
         #[arg(long)]
         export: Option<PathBuf>,
+        /// Also time and score orientation without scanner positions (the scans taken as one
+        /// merged cloud): the occupancy grid and the enclosure votes.
+        #[arg(long)]
+        bare: bool,
         #[arg(long)]
         json: bool,
     },
@@ -158,6 +162,10 @@ struct BuildOpts {
     /// Neighbours for normal estimation.
     #[arg(long, default_value_t = 16)]
     k: usize,
+    /// Normals the scan files carry (PLY nx/ny/nz): keep them where they agree with the points'
+    /// local plane (within 60 degrees; oriented like estimated ones), or estimate every normal.
+    #[arg(long, default_value = "keep", value_parser = ["keep", "estimate"])]
+    normals: String,
     /// Smallest tile edge, metres (power of two; default 16 leaves: 1 m at 6.25 cm leaves).
     #[arg(long)]
     min_tile_m: Option<f64>,
@@ -296,6 +304,7 @@ fn setup(
         max_tile_extent_m: opts.max_tile_m.unwrap_or(defaults.max_tile_extent_m),
         halo_m: opts.halo_m.unwrap_or(defaults.halo_m),
         strict: opts.strict,
+        keep_input_normals: opts.normals == "keep",
         ..defaults
     };
     Ok((manifest, manifest_path, params))
@@ -458,7 +467,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 }
             }
         }
-        Command::BenchNormals { dir, points, noise, k, threads, export, json } => {
+        Command::BenchNormals { dir, points, noise, k, threads, export, bare, json } => {
             let threads =
                 threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
             let mut figures = Vec::new();
@@ -470,24 +479,31 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     &k,
                     threads,
                     export.as_deref(),
+                    false,
                 )?);
+                if bare {
+                    figures
+                        .extend(grotto_preprocess::bench::normals(&dir, points, n, &k, threads, None, true)?);
+                }
             }
             if json {
                 println!("{}", serde_json::to_string_pretty(&figures)?);
             } else {
                 println!(
-                    "| noise | k | points | mean error deg | p95 deg | flipped % | threads | normals/s | SVO points/s |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+                    "| noise | orientation | k | points | mean error deg | p95 deg | flipped % | threads | grid s | normals/s | SVO points/s |\n|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
                 );
                 for f in &figures {
                     println!(
-                        "| {} | {} | {} | {:.2} | {:.2} | {:.3} | {} | {:.3e} | {:.3e} |",
+                        "| {} | {} | {} | {} | {:.2} | {:.2} | {:.3} | {} | {:.2} | {:.3e} | {:.3e} |",
                         f.noise_scale,
+                        if f.bare { "enclosure (no scanner)" } else { "toward scanner" },
                         f.k,
                         f.points,
                         f.mean_deg,
                         f.p95_deg,
                         f.flipped_percent,
                         f.threads,
+                        f.grid_seconds,
                         f.normals_per_second,
                         f.svo_points_per_second
                     );

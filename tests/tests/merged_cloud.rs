@@ -1,0 +1,250 @@
+//! A merged, registered cloud with no scanner positions (issue 16): the synthetic cave's scans
+//! merged into one bare PLY at survey coordinates, its entrance opened to the outside, built with
+//! no manifest. Normals must face the open passage, against the cave's analytic surface, and as
+//! well at tile borders as inside tiles.
+
+use std::path::Path;
+
+use grotto_format::spec::Surfel;
+use grotto_format::{Package, SectionKind};
+use grotto_preprocess::build::{self, BuildParams, ColorCodec};
+use grotto_preprocess::ingest::ScanFormat;
+use grotto_preprocess::manifest::Manifest;
+use grotto_preprocess::scanwrite::{ScanData, write_scan};
+use grotto_preprocess::synth::{self, SynthCave, SynthParams};
+use grotto_runtime::gpu::GpuOptions;
+use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
+use grotto_runtime::renderer::Settings;
+use grotto_tests::golden;
+
+/// Each station's scan in world (survey) coordinates with its station, less the points of the
+/// main passage's first end cap: the cave's entrance, open to the outside.
+/// One station's scan: the station and its points (world) with their colours.
+type StationScan = ([f64; 3], Vec<[f64; 3]>, Vec<[u8; 3]>);
+
+fn station_scans(cave: &SynthCave, params: &SynthParams) -> Vec<StationScan> {
+    let rays = params.points.div_ceil(cave.stations.len() as u64);
+    let (a, b) = (cave.path[0], cave.path[1]);
+    let axis: [f64; 3] = std::array::from_fn(|i| b[i] - a[i]);
+    (0..cave.stations.len())
+        .map(|s| {
+            let sc = synth::scan(cave, params, s, rays);
+            let (mut xyz, mut rgb) = (Vec::new(), Vec::new());
+            for (p, c) in sc.xyz.iter().zip(&sc.rgb) {
+                let w = sc.world_from_scan.apply(*p);
+                let d: [f64; 3] = std::array::from_fn(|i| w[i] - params.offset_m[i] - a[i]);
+                let behind = (0..3).map(|i| d[i] * axis[i]).sum::<f64>() < 0.0;
+                if behind && (0..3).map(|i| d[i] * d[i]).sum::<f64>() < 16.0 {
+                    continue;
+                }
+                xyz.push(w);
+                rgb.push(*c);
+            }
+            (sc.station_world_m, xyz, rgb)
+        })
+        .collect()
+}
+
+fn params(work: &Path) -> BuildParams {
+    BuildParams {
+        work_dir: work.to_path_buf(),
+        memory_budget_bytes: 64 << 20,
+        threads: 2,
+        leaf_m: 0.125,
+        colors: ColorCodec::Raw,
+        min_tile_extent_m: 2.0,
+        max_tile_extent_m: 8.0,
+        halo_m: 0.25,
+        ..BuildParams::default()
+    }
+}
+
+/// One 160x120 frame from inside the passage (headlamp at the camera: the packages have no
+/// lights), at `exposure` (None: automatic).
+fn render(
+    package: &Path,
+    out: &Path,
+    eye_m: [f64; 3],
+    look_at_m: [f64; 3],
+    exposure: Option<f32>,
+) -> (f32, Vec<[u8; 4]>) {
+    let opts = RenderOptions {
+        camera: CameraChoice::Explicit { eye_m, look_at_m, up: [0.0, 0.0, 1.0], fov_y_deg: 70.0 },
+        width: 160,
+        height: 120,
+        settings: Settings { bounces: 2, shadow_map_size: 256, ..Settings::default() },
+        exposure,
+        gpu: GpuOptions {
+            prefer_software: true,
+            backends: Some(wgpu::Backends::VULKAN),
+            ..Default::default()
+        },
+        ..RenderOptions::defaults(package.to_path_buf(), out.to_path_buf())
+    };
+    let summary = render_job::run(&opts, |_| {}).unwrap();
+    let (_, _, pixels) = grotto_runtime::image_out::read_png(out).unwrap();
+    (summary.exposure, pixels)
+}
+
+#[test]
+fn a_bare_merged_cloud_gets_normals_that_face_the_passage() {
+    let dir = tempfile::tempdir().unwrap();
+    let synth = SynthParams { points: 120_000, segments: 10, ..SynthParams::default() };
+    let cave = SynthCave::new(&synth);
+    let scans = station_scans(&cave, &synth);
+    let xyz: Vec<[f64; 3]> = scans.iter().flat_map(|s| s.1.iter().copied()).collect();
+    let rgb: Vec<[u8; 3]> = scans.iter().flat_map(|s| s.2.iter().copied()).collect();
+    let ply = dir.path().join("merged.ply");
+    write_scan(
+        &ply,
+        ScanFormat::Ply,
+        &ScanData { xyz: &xyz, rgb: &rgb, intensity: &[], normals: &[], pose: None },
+    )
+    .unwrap();
+    let manifest = Manifest::from_files(std::slice::from_ref(&ply));
+    assert!(manifest.resolve().unwrap().iter().all(|s| !s.scanner_known), "a bare file has no scanner");
+    let out = dir.path().join("merged.grotto");
+    let bp = params(&dir.path().join("work"));
+    let built = build::build(&manifest, &ply, &out, &bp, &|_| {}).unwrap();
+    assert_eq!(built.points, xyz.len() as u64);
+    assert!(built.tiles > 8, "{} tiles", built.tiles);
+    let o = built.orientation.expect("orientation without a scanner ran");
+    assert_eq!(o.points, built.points);
+    assert!(built.hints().iter().any(|h| h.contains("no scanner position")), "{:?}", built.hints());
+
+    let pkg = Package::open(&out).unwrap();
+    let (mut n, mut wrong, mut border, mut border_wrong) = (0u64, 0u64, 0u64, 0u64);
+    for tile in pkg.tiles() {
+        let origin = tile.origin_m();
+        let extent = tile.info().extent_m;
+        for s in tile.read::<Surfel>(SectionKind::Surfels).unwrap().unwrap().iter() {
+            let local: [f64; 3] =
+                std::array::from_fn(|a| origin[a] + f64::from(s.position_tile_m[a]) - synth.offset_m[a]);
+            let truth = cave.normal(local);
+            let faces = (0..3).map(|a| truth[a] * f64::from(s.normal[a])).sum::<f64>() > 0.0;
+            // Within two leaves of a tile face: the neighbourhood and the votes straddle tiles.
+            let near_border =
+                s.position_tile_m.iter().any(|&c| f64::from(c).min(extent - f64::from(c)) < 2.0 * bp.leaf_m);
+            n += 1;
+            wrong += u64::from(!faces);
+            border += u64::from(near_border);
+            border_wrong += u64::from(near_border && !faces);
+        }
+    }
+    let share = 1.0 - wrong as f64 / n as f64;
+    let border_share = 1.0 - border_wrong as f64 / border.max(1) as f64;
+    eprintln!(
+        "bare merged cloud: {n} surfels in {} tiles, {:.2}% face the passage ({:.2}% of {border} within two leaves \
+         of a tile border); summary: {o:?}, mean confidence {:.2}",
+        built.tiles,
+        share * 100.0,
+        border_share * 100.0,
+        o.mean_confidence()
+    );
+    assert!(border > n / 20, "the test must cover borders: {border} of {n}");
+    assert!(share >= 0.99, "{:.2}% face the passage", share * 100.0);
+    assert!(border_share >= 0.99, "{:.2}% at tile borders", border_share * 100.0);
+
+    // The same points as scans with their scanner positions (one file per station, `origin =`),
+    // rendered from inside the passage: the bare build must look the same.
+    let mut manifest_text = String::new();
+    for (i, (station, xyz, rgb)) in scans.iter().enumerate() {
+        let path = dir.path().join(format!("station-{i:02}.ply"));
+        write_scan(&path, ScanFormat::Ply, &ScanData { xyz, rgb, intensity: &[], normals: &[], pose: None })
+            .unwrap();
+        manifest_text += &format!(
+            "[[scan]]\npath = \"{}\"\norigin = [{}, {}, {}]\n",
+            path.display(),
+            station[0],
+            station[1],
+            station[2]
+        );
+    }
+    let manifest_path = dir.path().join("stations.toml");
+    std::fs::write(&manifest_path, manifest_text).unwrap();
+    let stations = Manifest::load(&manifest_path).unwrap();
+    assert!(stations.resolve().unwrap().iter().all(|s| s.scanner_known));
+    let with_scanners = dir.path().join("stations.grotto");
+    let built_s =
+        build::build(&stations, &manifest_path, &with_scanners, &params(&dir.path().join("work-s")), &|_| {})
+            .unwrap();
+    assert!(built_s.orientation.is_none() && built_s.points == built.points);
+    let at = |p: [f64; 3]| -> [f64; 3] { std::array::from_fn(|a| p[a] + synth.offset_m[a]) };
+    for (name, eye, look) in
+        [("passage", cave.path[2], cave.path[4]), ("entrance", cave.path[3], cave.path[0])]
+    {
+        let (exposure, want) =
+            render(&with_scanners, &dir.path().join(format!("{name}-s.png")), at(eye), at(look), None);
+        let (_, got) =
+            render(&out, &dir.path().join(format!("{name}-bare.png")), at(eye), at(look), Some(exposure));
+        for s in ["s", "bare"] {
+            let _ =
+                std::fs::copy(dir.path().join(format!("{name}-{s}.png")), format!("/tmp/mc/{name}-{s}.png"));
+        }
+        let d = golden::diff(&got, &want);
+        eprintln!("{name}: bare against scanner positions {d:?}");
+        assert!(golden::within_tolerance(&d), "{name}: {d:?}");
+    }
+}
+
+#[test]
+fn normals_a_file_carries_are_kept_and_oriented_or_re_estimated_on_request() {
+    let dir = tempfile::tempdir().unwrap();
+    let synth = SynthParams { points: 30_000, segments: 5, ..SynthParams::default() };
+    let cave = SynthCave::new(&synth);
+    let scans = station_scans(&cave, &synth);
+    let xyz: Vec<[f64; 3]> = scans.iter().flat_map(|s| s.1.iter().copied()).collect();
+    let rgb: Vec<[u8; 3]> = scans.iter().flat_map(|s| s.2.iter().copied()).collect();
+    // Registration software writes unoriented normals: the true ones, every third turned around.
+    let given: Vec<[f32; 3]> = xyz
+        .iter()
+        .enumerate()
+        .map(|(i, w)| {
+            let n = cave.normal(std::array::from_fn(|a| w[a] - synth.offset_m[a]));
+            let s = if i % 3 == 0 { -1.0 } else { 1.0 };
+            n.map(|c| (s * c) as f32)
+        })
+        .collect();
+    let ply = dir.path().join("with-normals.ply");
+    write_scan(
+        &ply,
+        ScanFormat::Ply,
+        &ScanData { xyz: &xyz, rgb: &rgb, intensity: &[], normals: &given, pose: None },
+    )
+    .unwrap();
+    let manifest = Manifest::from_files(std::slice::from_ref(&ply));
+    for keep in [true, false] {
+        let bp = BuildParams { keep_input_normals: keep, ..params(&dir.path().join(format!("work-{keep}"))) };
+        let out = dir.path().join(format!("keep-{keep}.grotto"));
+        let built = build::build(&manifest, &ply, &out, &bp, &|_| {}).unwrap();
+        assert_eq!(built.input_normals, built.points, "every point carried one");
+        let pkg = Package::open(&out).unwrap();
+        let (mut n, mut facing, mut exact) = (0u64, 0u64, 0u64);
+        for tile in pkg.tiles() {
+            let origin = tile.origin_m();
+            for s in tile.read::<Surfel>(SectionKind::Surfels).unwrap().unwrap().iter() {
+                let local: [f64; 3] =
+                    std::array::from_fn(|a| origin[a] + f64::from(s.position_tile_m[a]) - synth.offset_m[a]);
+                let d: f64 = (0..3).map(|a| cave.normal(local)[a] * f64::from(s.normal[a])).sum();
+                n += 1;
+                facing += u64::from(d > 0.0);
+                exact += u64::from(d > 0.99999);
+            }
+        }
+        eprintln!(
+            "--normals {}: {} of {} kept; {facing} of {n} face the passage, {exact} equal to the file's (up to sign)",
+            if keep { "keep" } else { "estimate" },
+            built.input_normals_kept,
+            built.input_normals
+        );
+        assert!(facing as f64 >= 0.99 * n as f64, "oriented consistently: {facing} of {n}");
+        if keep {
+            assert!(built.input_normals_kept as f64 >= 0.99 * built.input_normals as f64);
+            assert!(exact as f64 >= 0.95 * n as f64, "the file's normals are kept: {exact} of {n}");
+            assert!(built.hints().iter().any(|h| h.contains("carried normals")));
+        } else {
+            assert_eq!(built.input_normals_kept, 0);
+            assert!(exact * 10 < n, "re-estimated normals differ from the file's: {exact} of {n}");
+        }
+    }
+}
