@@ -162,7 +162,7 @@ struct BuildOpts {
     /// Neighbours for normal estimation.
     #[arg(long, default_value_t = 16)]
     k: usize,
-    /// Normals the scan files carry (PLY nx/ny/nz): keep them where they agree with the points'
+    /// Normals the scan files carry (PLY nx/ny/nz, LAS extra bytes NormalX/nx...): keep them where they agree with the points'
     /// local plane (within 60 degrees; oriented like estimated ones), or estimate every normal.
     #[arg(long, default_value = "keep", value_parser = ["keep", "estimate"])]
     normals: String,

@@ -1,4 +1,6 @@
 //! LAS 1.0-1.4 (point formats 0-10) and LAZ, through the `las` crate (parallel LAZ decoding).
+//! Normals stored in the extra bytes (LAS 1.4 "Extra Bytes" descriptors named NormalX/nx/...) are
+//! read with their data type, scale and offset.
 //!
 //! Colours: LAS stores 16-bit RGB, but many writers put 8-bit values in those fields. The first
 //! [`COLOR_PROBE`] points decide: if no channel exceeds 255 the file is taken as 8-bit. Files
@@ -26,7 +28,10 @@ pub(super) struct LasSource {
     /// Decoded points not yet handed out (LAZ decodes several chunks at once).
     batch_xyz: Vec<[f64; 3]>,
     batch_rgb: Vec<[u8; 3]>,
+    batch_normal: Vec<[f32; 3]>,
     cursor: usize,
+    /// Where a normal sits in each record's extra bytes, when the file stores one there.
+    normal_fields: Option<[ExtraField; 3]>,
     /// Divide raw colour by this to get 0..=255.
     color_div: f32,
     /// Divisor of intensity to an 8-bit grey (its 99th percentile maps to 255); `None` when the
@@ -297,19 +302,131 @@ impl LasSource {
         let (color_div, grey_div) =
             guard(path, format, || probe_scales(path, format, point_format.has_color, claimed))?;
         let data = las::PointDataBuilder::new().for_header(reader.header()).build();
+        let extra_start = point_format.len() as usize - usize::from(point_format.extra_bytes);
+        let normal_fields =
+            normal_fields(reader.header(), extra_start, usize::from(point_format.extra_bytes));
         Ok(Self {
-            info: SourceInfo { claimed_points: claimed, has_color: point_format.has_color, ..info },
+            info: SourceInfo {
+                claimed_points: claimed,
+                has_color: point_format.has_color,
+                has_normals: normal_fields.is_some(),
+                ..info
+            },
             reader,
             data,
             remaining: claimed,
             poisoned: false,
             batch_xyz: Vec::new(),
             batch_rgb: Vec::new(),
+            batch_normal: Vec::new(),
             cursor: 0,
+            normal_fields,
             color_div,
             grey_div,
         })
     }
+}
+
+/// One scalar of the LAS 1.4 "Extra Bytes" records, placed in a point record.
+#[derive(Clone, Copy, Debug)]
+struct ExtraField {
+    /// Byte offset in the whole point record.
+    at: usize,
+    /// LAS extra-bytes data type (1..=10: u8, i8, u16, i16, u32, i32, u64, i64, f32, f64).
+    kind: u8,
+    scale: f64,
+    offset: f64,
+}
+
+impl ExtraField {
+    /// Byte size of a scalar data type.
+    fn size(kind: u8) -> Option<usize> {
+        match kind {
+            1 | 2 => Some(1),
+            3 | 4 => Some(2),
+            5 | 6 | 9 => Some(4),
+            7 | 8 | 10 => Some(8),
+            _ => None,
+        }
+    }
+
+    /// The value in `record` (its bounds were checked against the record length at open).
+    fn read(&self, record: &[u8]) -> f64 {
+        let b = |n: usize| &record[self.at..self.at + n];
+        let raw = match self.kind {
+            1 => f64::from(b(1)[0]),
+            2 => f64::from(b(1)[0] as i8),
+            3 => f64::from(u16::from_le_bytes([b(2)[0], b(2)[1]])),
+            4 => f64::from(i16::from_le_bytes([b(2)[0], b(2)[1]])),
+            5 => f64::from(u32::from_le_bytes(b(4).try_into().unwrap_or_default())),
+            6 => f64::from(i32::from_le_bytes(b(4).try_into().unwrap_or_default())),
+            7 => u64::from_le_bytes(b(8).try_into().unwrap_or_default()) as f64,
+            8 => i64::from_le_bytes(b(8).try_into().unwrap_or_default()) as f64,
+            9 => f64::from(f32::from_le_bytes(b(4).try_into().unwrap_or_default())),
+            _ => f64::from_le_bytes(b(8).try_into().unwrap_or_default()),
+        };
+        raw * self.scale + self.offset
+    }
+}
+
+/// The fields the "Extra Bytes" VLR (LAS 1.4 R15: user "LASF_Spec", record 4, 192-byte
+/// descriptors laid out in order after the standard fields) describes: each descriptor with its
+/// byte offset and size within the extra bytes. None when there is no such VLR or a descriptor's
+/// type has no known size (the ones after it cannot be placed).
+fn extra_layout(header: &las::Header) -> Option<Vec<(&[u8], usize, usize)>> {
+    let vlr = header.all_vlrs().find(|v| v.user_id == "LASF_Spec" && v.record_id == 4)?;
+    let mut at = 0usize;
+    let mut out = Vec::new();
+    for d in vlr.data.chunks_exact(192) {
+        let (kind, options) = (d[2], d[3]);
+        let size = match kind {
+            // Undocumented bytes: the options field holds their count.
+            0 => usize::from(options),
+            1..=10 => ExtraField::size(kind)?,
+            // Deprecated arrays of 2 or 3 scalars.
+            11..=20 => ExtraField::size(kind - 10)? * 2,
+            21..=30 => ExtraField::size(kind - 20)? * 3,
+            _ => return None,
+        };
+        out.push((d, at, size));
+        at += size;
+    }
+    Some(out)
+}
+
+/// The normal's three fields among a file's extra bytes ([`extra_layout`]), named as PDAL and
+/// CloudCompare write them ("NormalX", "nx", "normal_x", any case), scalar types only. None when
+/// the file has none.
+fn normal_fields(header: &las::Header, extra_start: usize, extra_len: usize) -> Option<[ExtraField; 3]> {
+    let mut found: [Option<ExtraField>; 3] = [None; 3];
+    for (d, at, size) in extra_layout(header)? {
+        let (kind, options) = (d[2], d[3]);
+        let name: String = d[4..36]
+            .iter()
+            .take_while(|&&c| c != 0)
+            .filter(|c| c.is_ascii_alphanumeric())
+            .map(|c| c.to_ascii_lowercase() as char)
+            .collect();
+        let axis = match name.as_str() {
+            "normalx" | "nx" => Some(0),
+            "normaly" | "ny" => Some(1),
+            "normalz" | "nz" => Some(2),
+            _ => None,
+        };
+        if let Some(a) = axis
+            && (1..=10).contains(&kind)
+            && at + size <= extra_len
+        {
+            let f64_at = |o: usize| f64::from_le_bytes(d[o..o + 8].try_into().unwrap_or_default());
+            // Options bit 3: scale given; bit 4: offset given.
+            let scale = if options & 8 != 0 { f64_at(112) } else { 1.0 };
+            let offset = if options & 16 != 0 { f64_at(136) } else { 0.0 };
+            if scale.is_finite() && offset.is_finite() {
+                found[a] = Some(ExtraField { at: extra_start + at, kind, scale, offset });
+            }
+        }
+    }
+    Some([found[0]?, found[1]?, found[2]?])
 }
 
 /// Looks at up to COLOR_PROBE points to tell 8-bit from 16-bit colour (and intensity) values.
@@ -353,6 +470,9 @@ impl PointSource for LasSource {
         let end = (self.cursor + chunk.limit()).min(self.batch_xyz.len());
         chunk.xyz.extend_from_slice(&self.batch_xyz[self.cursor..end]);
         chunk.rgb.extend_from_slice(&self.batch_rgb[self.cursor..end]);
+        if !self.batch_normal.is_empty() {
+            chunk.normal.extend_from_slice(&self.batch_normal[self.cursor..end]);
+        }
         self.cursor = end;
         Ok(chunk.len())
     }
@@ -365,6 +485,7 @@ impl LasSource {
     fn decode_batch(&mut self, batch: usize) -> Result<()> {
         self.batch_xyz.clear();
         self.batch_rgb.clear();
+        self.batch_normal.clear();
         self.cursor = 0;
         if self.remaining == 0 {
             return Ok(());
@@ -396,6 +517,13 @@ impl LasSource {
         self.remaining -= n;
         let data = &self.data;
         self.batch_xyz.extend(data.x().zip(data.y()).zip(data.z()).map(|((x, y), z)| [x, y, z]));
+        if let Some(fields) = &self.normal_fields {
+            self.batch_normal.extend(
+                data.raw_bytes()
+                    .chunks_exact(data.record_len())
+                    .map(|rec| fields.each_ref().map(|f| f.read(rec) as f32)),
+            );
+        }
         let to_u8 = |v: u16, div: f32| (f32::from(v) / div).round().min(255.0) as u8;
         match data.rgb() {
             Some(rgb) => {
@@ -407,5 +535,98 @@ impl LasSource {
             },
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One 192-byte extra-bytes descriptor.
+    fn descriptor(name: &str, kind: u8, scale: Option<f64>) -> Vec<u8> {
+        let mut d = vec![0u8; 192];
+        d[2] = kind;
+        d[3] = if scale.is_some() { 8 } else { 0 };
+        d[4..4 + name.len()].copy_from_slice(name.as_bytes());
+        if let Some(s) = scale {
+            d[112..120].copy_from_slice(&s.to_le_bytes());
+        }
+        d
+    }
+
+    #[test]
+    fn normals_in_extra_bytes_are_read_as_pdal_and_cloudcompare_write_them() {
+        let dir = tempfile::tempdir().unwrap();
+        // A user field first (so the normal's offsets must be summed), then nx as a scaled i16,
+        // NormalY and normal_z as f32.
+        let mut data = descriptor("Amplitude", 3, None);
+        data.extend(descriptor("nx", 4, Some(1.0 / 32767.0)));
+        data.extend(descriptor("NormalY", 9, None));
+        data.extend(descriptor("normal_z", 9, None));
+        let mut builder = las::Builder::from((1, 4));
+        builder.point_format = las::point::Format::new(0).unwrap();
+        builder.point_format.extra_bytes = 2 + 2 + 4 + 4;
+        builder.vlrs.push(las::Vlr {
+            user_id: "LASF_Spec".into(),
+            record_id: 4,
+            description: "extra bytes".into(),
+            data,
+        });
+        let path = dir.path().join("normals.las");
+        let want: Vec<[f32; 3]> = (0..50)
+            .map(|i| {
+                let a = i as f32 * 0.1;
+                [a.cos() * 0.6, a.sin() * 0.6, 0.8]
+            })
+            .collect();
+        {
+            let mut w = las::Writer::from_path(&path, builder.into_header().unwrap()).unwrap();
+            for (i, n) in want.iter().enumerate() {
+                let mut extra = 7u16.to_le_bytes().to_vec();
+                extra.extend(((n[0] * 32767.0).round() as i16).to_le_bytes());
+                extra.extend(n[1].to_le_bytes());
+                extra.extend(n[2].to_le_bytes());
+                let p = las::Point { x: i as f64, y: 0.0, z: 1.0, extra_bytes: extra, ..Default::default() };
+                w.write_point(p).unwrap();
+            }
+            w.close().unwrap();
+        }
+        let mut src = crate::ingest::open(&path, ScanFormat::Las, 0).unwrap();
+        assert!(src.info().has_normals);
+        let mut chunk = PointChunk::new(16);
+        let mut got = Vec::new();
+        while src.fill_chunk(&mut chunk).unwrap() > 0 {
+            assert_eq!(chunk.normal.len(), chunk.len());
+            got.extend_from_slice(&chunk.normal);
+        }
+        assert_eq!(got.len(), want.len());
+        for (g, w) in got.iter().zip(&want) {
+            for a in 0..3 {
+                assert!((g[a] - w[a]).abs() < 1e-4, "{g:?} vs {w:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn extra_bytes_layouts_of_real_files_add_up_to_their_records() {
+        // laspy's and lazrs's test files: a deprecated 3-array, undocumented bytes, scalars.
+        let Some(data) = std::env::var_os("GROTTO_SHARED_DATA")
+            .map(std::path::PathBuf::from)
+            .or_else(|| Some(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data")))
+            .filter(|d| d.is_dir())
+        else {
+            assert!(std::env::var_os("GROTTO_SKIP_SHARED_DATA").is_some(), "../shared/data is missing");
+            return;
+        };
+        for name in ["laspy_extrabytes.las", "lazrs_extra-bytes.las", "lazrs_extra-bytes.laz"] {
+            let path = data.join("las").join(name);
+            let reader = Reader::from_path(&path).unwrap();
+            let header = reader.header();
+            let layout = extra_layout(header).unwrap_or_else(|| panic!("{name}: no layout"));
+            let total: usize = layout.iter().map(|(_, _, size)| size).sum();
+            assert_eq!(total, usize::from(header.point_format().extra_bytes), "{name}");
+            let f = header.point_format();
+            assert!(normal_fields(header, f.len() as usize - usize::from(f.extra_bytes), total).is_none());
+        }
     }
 }
