@@ -121,6 +121,8 @@ pub struct NormalFigure {
     pub bare: bool,
     /// Building the orientation grid over every point (bare only; 0 otherwise).
     pub grid_seconds: f64,
+    /// Its occupied cells (12 bytes each on disk; about twice that in memory with the column maps).
+    pub grid_cells: usize,
     /// Normals over all tiles, the enclosure votes included when bare.
     pub normals_seconds: f64,
     pub normals_per_second: f64,
@@ -302,6 +304,7 @@ pub fn normals(
             threads,
             bare,
             grid_seconds,
+            grid_cells: grid.as_ref().map_or(0, |g| g.cells),
             normals_seconds,
             normals_per_second: errors.len() as f64 / normals_seconds,
             svo_seconds,

@@ -490,11 +490,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 println!("{}", serde_json::to_string_pretty(&figures)?);
             } else {
                 println!(
-                    "| noise | orientation | k | points | mean error deg | p95 deg | flipped % | threads | grid s | normals/s | SVO points/s |\n|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+                    "| noise | orientation | k | points | mean error deg | p95 deg | flipped % | threads | grid s | grid cells | normals/s | SVO points/s |\n|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
                 );
                 for f in &figures {
                     println!(
-                        "| {} | {} | {} | {} | {:.2} | {:.2} | {:.3} | {} | {:.2} | {:.3e} | {:.3e} |",
+                        "| {} | {} | {} | {} | {:.2} | {:.2} | {:.3} | {} | {:.2} | {} | {:.3e} | {:.3e} |",
                         f.noise_scale,
                         if f.bare { "enclosure (no scanner)" } else { "toward scanner" },
                         f.k,
@@ -504,6 +504,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         f.flipped_percent,
                         f.threads,
                         f.grid_seconds,
+                        f.grid_cells,
                         f.normals_per_second,
                         f.svo_points_per_second
                     );
