@@ -3,10 +3,10 @@
 //! measured the high preset's bias moving from -7.3% to -5.2% for such a move.
 //!
 //! Today it does not, and this test records by how much (4.0% of the first bounce; direct light
-//! does not move). The move chosen (0.3-0.5 leaf) keeps every wall in the same leaves, so the
-//! voxel room the cones march is the same in both builds: what changes is where the surfels sit
-//! inside their leaves, i.e. how shade interpolates leaf light at a surfel. That lookup is the
-//! place to look next; until it is fixed, the bound below guards against this getting worse.
+//! does not move). The move chosen (0.3-0.5 leaf) keeps every wall's points in the same leaves,
+//! so what changes is where the surfels sit inside their leaves: how far a splat reaches into the
+//! next leaf, and how shade interpolates leaf light at a surfel. Those are the places to look
+//! next; until it is fixed, the bound below guards against this getting worse.
 
 use std::path::Path;
 
@@ -137,6 +137,6 @@ fn moving_the_leaf_grid_under_a_room_changes_its_first_bounce_by_under_six_perce
     );
     // Direct light comes from shadow maps and surfels, which do not depend on the grid.
     assert!(direct_change < 0.005, "direct light moved by {:.2}%", direct_change * 100.0);
-    // Measured 4.03% (issue 21's open item); a bound until the lookup is fixed.
+    // Measured 4.03% (issue 21's open item); a bound until it is fixed.
     assert!(indirect_change < 0.06, "the first bounce moved by {:.2}%", indirect_change * 100.0);
 }
