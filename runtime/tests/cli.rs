@@ -93,13 +93,16 @@ fn export_writes_points_other_tools_read() {
         // Read back with the project's own readers (same parsers as for any scan).
         let format = if ext == "ply" { ScanFormat::Ply } else { ScanFormat::Las };
         let mut src = ingest::open(&target, format, 0).unwrap();
-        assert_eq!(src.info().has_normals, ext == "ply");
+        // PLY normals as properties, LAS ones as extra bytes named NormalX/Y/Z: both read back.
+        assert!(src.info().has_normals, "{ext}");
         let all = ingest::read_all(src.as_mut()).unwrap();
         assert_eq!(all.xyz.len() as u64, s.points);
         assert!(all.xyz.iter().all(|p| p[0] > 511_000.0 && p[1] > 5_122_000.0), "world coordinates");
-        if ext == "ply" {
-            assert!(all.normal.iter().all(|n| (n.iter().map(|c| c * c).sum::<f32>() - 1.0).abs() < 1e-3));
-        }
+        assert_eq!(all.normal.len(), all.xyz.len(), "{ext}");
+        assert!(
+            all.normal.iter().all(|n| (n.iter().map(|c| c * c).sum::<f32>() - 1.0).abs() < 1e-3),
+            "{ext}"
+        );
     }
     // LAS extra bytes carry the normals under their names.
     let reader = las::Reader::from_path(dir.path().join("points.las")).unwrap();
