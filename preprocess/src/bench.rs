@@ -133,9 +133,9 @@ pub struct NormalFigure {
 /// Synthesises a cave of `points` with `noise_scale`, tiles it, then times normal estimation and
 /// SVO construction over all tiles (`threads` workers) and scores the normals against the
 /// analytic surface. With `export`, also writes the cloud (cave frame, metres) with its true
-/// normals as binary PLY, for comparison with other tools. With `bare`, the scans are taken as
-/// one merged cloud without scanner positions: the orientation grid is built (timed) and every
-/// normal is oriented by the enclosure votes.
+/// normals as binary PLY, for comparison with other tools. With `bare`, the same tiles are run
+/// again as one merged cloud without scanner positions: the orientation grid is built (timed) and
+/// every normal is oriented by the enclosure votes.
 pub fn normals(
     dir: &Path,
     points: u64,
@@ -152,6 +152,8 @@ pub fn normals(
     use crate::tiling::{FLAG_HALO, TilingParams, read_bin, tile_scans};
     use crate::voxels::{self, Sample};
 
+    /// The bench's leaf edge (the build default), metres.
+    const LEAF_M: f64 = crate::build::DEFAULT_LEAF_M;
     let params = SynthParams { points, noise_scale, ..SynthParams::default() };
     let scans = dir.join(format!("normals-{points}-{noise_scale}"));
     // Written once per size and noise, then reused.
@@ -202,114 +204,118 @@ pub fn normals(
             })
         })
         .collect::<Result<_>>()?;
-    let start = Instant::now();
-    // The build's cell for the bench's 6.25 cm leaves.
-    let grid = if bare {
-        Some(pool.install(|| {
-            crate::orient::CaveGrid::from_plan(&plan, &work, crate::orient::CELL_LEAVES * 0.0625)
-        })?)
-    } else {
-        None
-    };
-    let grid_seconds = if bare { start.elapsed().as_secs_f64() } else { 0.0 };
-    let no_scanner: Vec<Vec<bool>> = tiles.iter().map(|t| vec![true; t.positions.len()]).collect();
     let mut out = Vec::new();
-    for &k in ks {
+    for by_enclosure in [false, true].into_iter().filter(|&b| !b || bare) {
         let start = Instant::now();
-        let normals: Vec<Vec<crate::normals::PointNormal>> = pool.install(|| {
-            tiles
-                .par_iter()
-                .zip(&no_scanner)
-                .map(|(t, no_scanner)| {
-                    estimate(
-                        &TilePoints {
-                            positions: &t.positions,
-                            own: &t.own,
-                            scanner_tile_m: &t.scanners,
-                            input_normals: &t.inputs,
-                            isolated_radius_m: 0.5 * 0.0625,
-                            orient: grid.as_ref().map(|grid| Orient {
-                                grid,
-                                tile_origin_m: t.origin,
-                                no_scanner,
-                            }),
-                        },
-                        k,
-                    )
-                })
-                .collect()
-        });
-        let normals_seconds = start.elapsed().as_secs_f64();
-        let start = Instant::now();
-        let leaves: usize = pool.install(|| {
-            tiles
-                .par_iter()
-                .zip(&normals)
-                .map(|(t, n)| {
-                    let samples: Vec<Sample> = t
-                        .positions
-                        .iter()
-                        .zip(&t.own)
-                        .filter(|(_, own)| **own)
-                        .zip(n)
-                        .map(|((p, _), n)| Sample {
-                            pos_tile_m: *p,
-                            normal: n.normal,
-                            area_m2: n.radius_m * n.radius_m,
-                            albedo_linear: [0.5; 3],
-                            emission: [0.0; 3],
-                        })
-                        .collect();
-                    voxels::build(&samples, t.extent, (t.extent / 0.0625).log2() as u32).leaf_count()
-                })
-                .sum()
-        });
-        let svo_seconds = start.elapsed().as_secs_f64();
-        // Keeps the timed SVO work observable to the optimiser.
-        std::hint::black_box(leaves);
-        let (mut errors, mut flipped) = (Vec::new(), 0usize);
-        let mut export_rows: Vec<([f64; 3], [f64; 3])> = Vec::new();
-        for (t, n) in tiles.iter().zip(&normals) {
-            for (p, est) in t.positions.iter().zip(&t.own).filter(|(_, own)| **own).map(|(p, _)| p).zip(n) {
-                let local: [f64; 3] =
-                    std::array::from_fn(|a| t.origin[a] + f64::from(p[a]) - params.offset_m[a]);
-                let truth = cave.normal(local);
-                let dot: f64 = (0..3).map(|a| truth[a] * f64::from(est.normal[a])).sum();
-                flipped += usize::from(dot < 0.0);
-                errors.push(dot.abs().min(1.0).acos().to_degrees());
-                if export.is_some() && k == ks[0] {
-                    export_rows.push((local, truth));
+        let grid = if by_enclosure {
+            Some(pool.install(|| {
+                crate::orient::CaveGrid::from_plan(&plan, &work, crate::orient::CELL_LEAVES * LEAF_M)
+            })?)
+        } else {
+            None
+        };
+        let grid_seconds = if by_enclosure { start.elapsed().as_secs_f64() } else { 0.0 };
+        let no_scanner: Vec<Vec<bool>> =
+            tiles.iter().map(|t| vec![by_enclosure; t.positions.len()]).collect();
+        for &k in ks {
+            let start = Instant::now();
+            let normals: Vec<Vec<crate::normals::PointNormal>> = pool.install(|| {
+                tiles
+                    .par_iter()
+                    .zip(&no_scanner)
+                    .map(|(t, no_scanner)| {
+                        estimate(
+                            &TilePoints {
+                                positions: &t.positions,
+                                own: &t.own,
+                                scanner_tile_m: &t.scanners,
+                                input_normals: &t.inputs,
+                                isolated_radius_m: 0.5 * LEAF_M as f32,
+                                keep_input_normals: true,
+                                orient: grid.as_ref().map(|grid| Orient {
+                                    grid,
+                                    tile_origin_m: t.origin,
+                                    no_scanner,
+                                }),
+                            },
+                            k,
+                        )
+                    })
+                    .collect()
+            });
+            let normals_seconds = start.elapsed().as_secs_f64();
+            let start = Instant::now();
+            let leaves: usize = pool.install(|| {
+                tiles
+                    .par_iter()
+                    .zip(&normals)
+                    .map(|(t, n)| {
+                        let samples: Vec<Sample> = t
+                            .positions
+                            .iter()
+                            .zip(&t.own)
+                            .filter(|(_, own)| **own)
+                            .zip(n)
+                            .map(|((p, _), n)| Sample {
+                                pos_tile_m: *p,
+                                normal: n.normal,
+                                area_m2: n.radius_m * n.radius_m,
+                                albedo_linear: [0.5; 3],
+                                emission: [0.0; 3],
+                            })
+                            .collect();
+                        voxels::build(&samples, t.extent, (t.extent / LEAF_M).log2() as u32).leaf_count()
+                    })
+                    .sum()
+            });
+            let svo_seconds = start.elapsed().as_secs_f64();
+            // Keeps the timed SVO work observable to the optimiser.
+            std::hint::black_box(leaves);
+            let (mut errors, mut flipped) = (Vec::new(), 0usize);
+            let mut export_rows: Vec<([f64; 3], [f64; 3])> = Vec::new();
+            for (t, n) in tiles.iter().zip(&normals) {
+                for (p, est) in t.positions.iter().zip(&t.own).filter(|(_, own)| **own).map(|(p, _)| p).zip(n)
+                {
+                    let local: [f64; 3] =
+                        std::array::from_fn(|a| t.origin[a] + f64::from(p[a]) - params.offset_m[a]);
+                    let truth = cave.normal(local);
+                    let dot: f64 = (0..3).map(|a| truth[a] * f64::from(est.normal[a])).sum();
+                    flipped += usize::from(dot < 0.0);
+                    errors.push(dot.abs().min(1.0).acos().to_degrees());
+                    if export.is_some() && k == ks[0] && !by_enclosure {
+                        export_rows.push((local, truth));
+                    }
                 }
             }
+            if let (Some(path), false) = (export, export_rows.is_empty()) {
+                let xyz: Vec<[f64; 3]> = export_rows.iter().map(|r| r.0).collect();
+                let nrm: Vec<[f32; 3]> = export_rows.iter().map(|r| r.1.map(|v| v as f32)).collect();
+                let rgb = vec![[128u8; 3]; xyz.len()];
+                write_scan(
+                    path,
+                    ScanFormat::Ply,
+                    &ScanData { xyz: &xyz, rgb: &rgb, intensity: &[], normals: &nrm, pose: None },
+                )?;
+            }
+            errors.sort_by(f64::total_cmp);
+            let n = errors.len().max(1);
+            out.push(NormalFigure {
+                noise_scale,
+                k,
+                points: errors.len() as u64,
+                mean_deg: errors.iter().sum::<f64>() / n as f64,
+                p95_deg: errors.get(n * 95 / 100).copied().unwrap_or(0.0),
+                flipped_percent: 100.0 * flipped as f64 / n as f64,
+                threads,
+                bare: by_enclosure,
+                grid_seconds,
+                grid_cells: grid.as_ref().map_or(0, |g| g.cells),
+                normals_seconds,
+                normals_per_second: errors.len() as f64 / normals_seconds,
+                svo_seconds,
+                svo_points_per_second: errors.len() as f64 / svo_seconds,
+            });
         }
-        if let (Some(path), false) = (export, export_rows.is_empty()) {
-            let xyz: Vec<[f64; 3]> = export_rows.iter().map(|r| r.0).collect();
-            let nrm: Vec<[f32; 3]> = export_rows.iter().map(|r| r.1.map(|v| v as f32)).collect();
-            let rgb = vec![[128u8; 3]; xyz.len()];
-            write_scan(
-                path,
-                ScanFormat::Ply,
-                &ScanData { xyz: &xyz, rgb: &rgb, intensity: &[], normals: &nrm, pose: None },
-            )?;
-        }
-        errors.sort_by(f64::total_cmp);
-        let n = errors.len().max(1);
-        out.push(NormalFigure {
-            noise_scale,
-            k,
-            points: errors.len() as u64,
-            mean_deg: errors.iter().sum::<f64>() / n as f64,
-            p95_deg: errors.get(n * 95 / 100).copied().unwrap_or(0.0),
-            flipped_percent: 100.0 * flipped as f64 / n as f64,
-            threads,
-            bare,
-            grid_seconds,
-            grid_cells: grid.as_ref().map_or(0, |g| g.cells),
-            normals_seconds,
-            normals_per_second: errors.len() as f64 / normals_seconds,
-            svo_seconds,
-            svo_points_per_second: errors.len() as f64 / svo_seconds,
-        });
     }
     Ok(out)
 }

@@ -27,7 +27,7 @@ use serde::Serialize;
 
 use crate::bc1;
 use crate::manifest::{Manifest, ResolvedScan};
-use crate::normals::{self, Orient, TilePoints};
+use crate::normals::{self, NormalStats, Orient, TilePoints};
 use crate::orient::{self, CaveGrid, OrientStats};
 use crate::tiling::{self, FLAG_HALO, Progress, TilePlan, TilingParams};
 use crate::voxels::{self, Sample, TileSvo};
@@ -250,8 +250,8 @@ struct BuiltTile {
     info: TileInfo,
     /// Own points near the border whose k-neighbourhood may reach past the halo.
     seam_limited: u64,
-    /// What orientation without a scanner did in this tile.
-    orientation: OrientStats,
+    /// File normals kept and orientation without a scanner in this tile.
+    normals: NormalStats,
     surfels: Vec<Surfel>,
     colors: Vec<[u8; 3]>,
     svo: TileSvo,
@@ -345,27 +345,22 @@ fn build_tile(
             std::array::from_fn(|a| s[a] - origin[a])
         })
         .collect();
-    let input_normals: Vec<[f32; 3]> = if params.keep_input_normals {
-        points.iter().map(|p| p.normal_snorm.map(|c| f32::from(c) / 32767.0)).collect()
-    } else {
-        vec![[0.0; 3]; points.len()]
-    };
-    // Counted before `--normals estimate` drops them, so the summary can say they were there.
-    let given = points.iter().zip(&own).filter(|(p, own)| **own && p.normal_snorm != [0; 3]).count() as u64;
+    let input_normals: Vec<[f32; 3]> =
+        points.iter().map(|p| p.normal_snorm.map(|c| f32::from(c) / 32767.0)).collect();
     let no_scanner: Vec<bool> =
         points.iter().map(|p| !plan.scanner_known.get(p.scan as usize).copied().unwrap_or(true)).collect();
-    let (estimated, mut orientation) = normals::estimate_with_stats(
+    let (estimated, normal_stats) = normals::estimate_with_stats(
         &TilePoints {
             positions: &positions,
             own: &own,
             scanner_tile_m: &scanner_tile_m,
             input_normals: &input_normals,
             isolated_radius_m: 0.5 * params.leaf_m as f32,
+            keep_input_normals: params.keep_input_normals,
             orient: grid.map(|grid| Orient { grid, tile_origin_m: origin, no_scanner: &no_scanner }),
         },
         params.k,
     );
-    orientation.input_normals = given;
     let own_points: Vec<&tiling::BinPoint> = points.iter().filter(|p| p.flags & FLAG_HALO == 0).collect();
     let q = f64::from(1u32 << 16) / extent;
     let mut order: Vec<(u64, usize)> = own_points
@@ -431,7 +426,7 @@ fn build_tile(
     Ok(BuiltTile {
         info: TileInfo { origin_m: origin, extent_m: extent, grid, depth, point_count: tile.points },
         seam_limited,
-        orientation,
+        normals: normal_stats,
         surfels,
         colors,
         svo,
@@ -456,16 +451,16 @@ fn tile_fingerprint(plan: &TilePlan, params: &BuildParams) -> String {
     )
 }
 
-/// What a finished tile package with this fingerprint recorded (seam-limited points, orientation
-/// without a scanner), or `None` when it must be built (missing, damaged, other parameters).
-fn finished_tile_package(path: &Path, fingerprint: &str) -> Option<(u64, OrientStats)> {
+/// What a finished tile package with this fingerprint recorded (seam-limited points, file normals
+/// and orientation), or `None` when it must be built (missing, damaged, other parameters).
+fn finished_tile_package(path: &Path, fingerprint: &str) -> Option<(u64, NormalStats)> {
     let prov = Package::open(path).ok()?.provenance().ok()??;
     if prov.parameters.get("tile_fingerprint")?.as_str()? != fingerprint {
         return None;
     }
     let seam = prov.parameters.get("seam_limited_points")?.as_u64()?;
-    let orientation = serde_json::from_value(prov.parameters.get("orientation")?.clone()).ok()?;
-    Some((seam, orientation))
+    let normals = serde_json::from_value(prov.parameters.get("normals")?.clone()).ok()?;
+    Some((seam, normals))
 }
 
 fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: ColorCodec) -> Result<()> {
@@ -504,7 +499,7 @@ fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: 
         parameters: [
             ("tile_fingerprint".to_string(), serde_json::json!(fingerprint)),
             ("seam_limited_points".to_string(), serde_json::json!(tile.seam_limited)),
-            ("orientation".to_string(), serde_json::json!(tile.orientation)),
+            ("normals".to_string(), serde_json::json!(tile.normals)),
         ]
         .into(),
     })?;
@@ -579,8 +574,8 @@ pub fn plan(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<(TilePlan, bool)> {
     check_params(params)?;
-    let (plan, reused, _) = plan_scans(&manifest.resolve()?, params, progress)?;
-    Ok((plan, reused))
+    let step = plan_scans(&manifest.resolve()?, params, progress)?;
+    Ok((step.plan, step.reused))
 }
 
 /// The scans whose files end inside their last point record (`SourceInfo::dropped_points`), as
@@ -608,23 +603,38 @@ fn cut_short(scans: &[ResolvedScan], strict: bool) -> Result<Vec<String>> {
     Ok(out)
 }
 
-/// Tiles the scans (or finds an earlier tiling); returns the plan, whether it was reused, and
-/// the scans cut short ([`cut_short`], refused first under `--strict`).
+/// What the plan step produced.
+struct PlanStep {
+    plan: TilePlan,
+    /// Whether the tiling was an earlier run's.
+    reused: bool,
+    /// The scans cut short ([`cut_short`]).
+    cut: Vec<String>,
+    /// The orientation grid, where a scan has no scanner position (also saved in the work
+    /// directory for build-tile jobs).
+    grid: Option<CaveGrid>,
+}
+
+/// Tiles the scans (or finds an earlier tiling) and builds the orientation grid where it is
+/// needed; scans cut short are refused first under `--strict`.
 fn plan_scans(
     scans: &[ResolvedScan],
     params: &BuildParams,
     progress: &(dyn Fn(Progress) + Sync),
-) -> Result<(TilePlan, bool, Vec<String>)> {
+) -> Result<PlanStep> {
     let cut = cut_short(scans, params.strict)?;
     let tiling_params = params.tiling();
     let earlier = tiling::existing_plan(scans, &params.work_dir, &tiling_params)?;
     let plan = tiling::tile_scans(scans, &params.work_dir, &tiling_params, progress)?;
-    if plan.needs_orientation() {
+    let grid = if plan.needs_orientation() {
         progress(Progress { stage: "orientation grid", done: 0, total: 1 });
-        orient::load_or_build(&plan, &params.work_dir, params.leaf_m)?;
+        let grid = orient::load_or_build(&plan, &params.work_dir, params.leaf_m)?;
         progress(Progress { stage: "orientation grid", done: 1, total: 1 });
-    }
-    Ok((plan, earlier.is_some(), cut))
+        Some(grid)
+    } else {
+        None
+    };
+    Ok(PlanStep { plan, reused: earlier.is_some(), cut, grid })
 }
 
 /// The plan an earlier `plan` step left for these inputs and parameters, and the scans.
@@ -651,14 +661,22 @@ pub fn build_tiles(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<TileStage> {
     let (plan, _) = planned(manifest, params)?;
-    tile_stage(&plan, &manifest.scene(manifest_path)?, params, shard, progress)
+    // The plan step saved the grid; this job reads it once for all its tiles.
+    let grid = if plan.needs_orientation() && (0..plan.tiles.len()).any(|t| shard.takes(t)) {
+        Some(orient::load_or_build(&plan, &params.work_dir, params.leaf_m)?)
+    } else {
+        None
+    };
+    tile_stage(&plan, &manifest.scene(manifest_path)?, params, shard, grid.as_ref(), progress)
 }
 
+/// Builds the shard's tiles; `grid` orients the normals of scans without a scanner position.
 fn tile_stage(
     plan: &TilePlan,
     scene: &Scene,
     params: &BuildParams,
     shard: Shard,
+    grid: Option<&CaveGrid>,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<TileStage> {
     let pool = rayon::ThreadPoolBuilder::new()
@@ -669,12 +687,6 @@ fn tile_stage(
     std::fs::create_dir_all(&tiles_dir).map_err(|source| Error::Io { path: tiles_dir.clone(), source })?;
     let fingerprint = tile_fingerprint(plan, params);
     let mine: Vec<usize> = (0..plan.tiles.len()).filter(|&t| shard.takes(t)).collect();
-    // Shared read-only by every tile of this job (the plan step normally built it already).
-    let grid = if plan.needs_orientation() && !mine.is_empty() {
-        Some(pool.install(|| orient::load_or_build(plan, &params.work_dir, params.leaf_m))?)
-    } else {
-        None
-    };
     let batch = params.threads.max(1);
     let mut stage = TileStage::default();
     for (b, group) in mine.chunks(batch).enumerate() {
@@ -686,7 +698,7 @@ fn tile_stage(
                     if finished_tile_package(&path, &fingerprint).is_some() {
                         return Ok(true);
                     }
-                    let built = build_tile(plan, &params.work_dir, t, params, scene, grid.as_ref())?;
+                    let built = build_tile(plan, &params.work_dir, t, params, scene, grid)?;
                     write_tile_package(&path, &built, &fingerprint, params.colors)?;
                     Ok(false)
                 })
@@ -719,8 +731,9 @@ pub fn build(
     // Resolved once for all three steps (E57 poses and headers are read here).
     let scans = manifest.resolve()?;
     let scene = manifest.scene(manifest_path)?;
-    let (plan, resumed_tiling, cut) = plan_scans(&scans, params, progress)?;
-    let stage = tile_stage(&plan, &scene, params, Shard::ALL, progress)?;
+    let PlanStep { plan, reused: resumed_tiling, cut, grid } = plan_scans(&scans, params, progress)?;
+    let stage = tile_stage(&plan, &scene, params, Shard::ALL, grid.as_ref(), progress)?;
+    drop(grid);
     let mut summary = assemble_plan(manifest, &plan, &scans, &scene, out, params, progress)?;
     summary.cut_short = cut;
     summary.resumed_tiling = resumed_tiling;
@@ -761,7 +774,7 @@ fn assemble_plan(
     let fingerprint = tile_fingerprint(plan, params);
     let total = plan.tiles.len();
     let mut seam_limited_points = 0u64;
-    let mut orientation = OrientStats::default();
+    let mut normals = NormalStats::default();
     let missing: Vec<usize> = (0..total)
         .filter(|&t| finished_tile_package(&tile_package_path(&params.work_dir, t), &fingerprint).is_none())
         .collect();
@@ -809,9 +822,9 @@ fn assemble_plan(
     let mut writer = PackageWriter::create(out)?;
     for (t, levels) in levels.iter().enumerate() {
         let path = tile_package_path(&params.work_dir, t);
-        if let Some((seam, orient)) = finished_tile_package(&path, &fingerprint) {
+        if let Some((seam, tile_normals)) = finished_tile_package(&path, &fingerprint) {
             seam_limited_points += seam;
-            orientation.add(&orient);
+            normals.add(&tile_normals);
         }
         // One tile package mapped at a time: copying touches every page of its surfels.
         let tile_pkg = Package::open(&path)?;
@@ -896,9 +909,9 @@ fn assemble_plan(
         resumed_tiling: false,
         reused_tiles: 0,
         seam_limited_points,
-        orientation: (orientation.points > 0).then_some(orientation),
-        input_normals: orientation.input_normals,
-        input_normals_kept: orientation.input_kept,
+        orientation: (normals.orientation.points > 0).then_some(normals.orientation),
+        input_normals: normals.input_normals,
+        input_normals_kept: normals.input_kept,
         keep_input_normals: params.keep_input_normals,
         scans_without_scanner: plan.scanner_known.iter().filter(|k| !**k).count(),
         peak_rss_bytes: crate::bench::peak_rss_bytes(),

@@ -144,9 +144,30 @@ pub struct TilePoints<'a> {
     /// radius from: it gets this one (the builder gives half a leaf: it stands for the leaf it
     /// falls in, drawn and voxelised rather than a zero-area disc nothing sees).
     pub isolated_radius_m: f32,
+    /// Keep a plausible input normal (`--normals keep`) rather than estimating every normal.
+    pub keep_input_normals: bool,
     /// Orientation for points whose scan has no scanner position (none: every point faces its
     /// scanner).
     pub orient: Option<Orient<'a>>,
+}
+
+/// What estimation did with a tile's own points: normals their files carried, those kept, and
+/// orientation without a scanner.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NormalStats {
+    /// Own points whose file carried a normal (counted under `--normals estimate` too).
+    pub input_normals: u64,
+    /// Of those, kept rather than re-estimated.
+    pub input_kept: u64,
+    pub orientation: OrientStats,
+}
+
+impl NormalStats {
+    pub fn add(&mut self, o: &NormalStats) {
+        self.input_normals += o.input_normals;
+        self.input_kept += o.input_kept;
+        self.orientation.add(&o.orientation);
+    }
 }
 
 /// How points without a scanner are oriented: by the enclosure votes of `grid` (see orient.rs).
@@ -164,11 +185,11 @@ pub fn estimate(tile: &TilePoints<'_>, k: usize) -> Vec<PointNormal> {
     estimate_with_stats(tile, k).0
 }
 
-/// [`estimate`], with what orientation without a scanner did (zero when every point has one).
-pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>, OrientStats) {
+/// [`estimate`], with what it did with file normals and orientation without a scanner.
+pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>, NormalStats) {
     let n = tile.positions.len();
     if n == 0 {
-        return (Vec::new(), OrientStats::default());
+        return (Vec::new(), NormalStats::default());
     }
     let k = k.clamp(3, 64).min(n);
     // Query (and build the tree) in Morton order: consecutive queries then walk the same leaves,
@@ -226,7 +247,8 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
                 let mut normal = normal_from_neighbourhood(&scratch, view);
                 let input = tile.input_normals[i].map(f64::from);
                 let mut kept = false;
-                if let Some(given) = normalize(input)
+                if tile.keep_input_normals
+                    && let Some(given) = normalize(input)
                     && (dot(input, input) - 1.0).abs() < 0.05
                     && dot(given, normal).abs() > 0.5
                 {
@@ -259,14 +281,17 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
         neighbour_lists[i * k..(i + 1) * k].copy_from_slice(&sorted_lists[j * k..(j + 1) * k]);
         (normals[i], radii[i], scores[i], kept[i]) = per_point[j];
     }
-    let mut stats =
-        OrientStats { input_kept: own.iter().filter(|&&i| kept[i]).count() as u64, ..OrientStats::default() };
+    let mut stats = NormalStats {
+        input_normals: own.iter().filter(|&&i| tile.input_normals[i] != [0.0; 3]).count() as u64,
+        input_kept: own.iter().filter(|&&i| kept[i]).count() as u64,
+        orientation: OrientStats::default(),
+    };
     let out = own
         .iter()
         .map(|&i| {
             let list = &neighbour_lists[i * k..(i + 1) * k];
             let ni = match tile.orient.filter(|o| o.no_scanner[i]) {
-                Some(_) => orient_by_neighbourhood(tile, i, list, &normals, &scores, &mut stats),
+                Some(_) => orient_by_neighbourhood(tile, i, list, &normals, &scores, &mut stats.orientation),
                 None => normals[i],
             };
             let mut sum = [0.0f64; 3];
@@ -416,6 +441,7 @@ mod tests {
                     scanner_tile_m: &vec![[0.0, 0.0, 10.0]; n],
                     input_normals: &vec![[0.0; 3]; n],
                     isolated_radius_m: 0.03125,
+                    keep_input_normals: true,
                     orient: None,
                 },
                 16,
@@ -458,6 +484,7 @@ mod tests {
                 scanner_tile_m: &scanners,
                 input_normals: &inputs,
                 isolated_radius_m: 0.5,
+                keep_input_normals: true,
                 orient: None,
             },
             16,

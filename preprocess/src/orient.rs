@@ -93,13 +93,17 @@ impl CaveGrid {
         self.columns[axis].get(&(k[lo], k[hi])).map_or(&[], Vec::as_slice)
     }
 
+    /// Along `axis` through cell `k`: the runs wholly below the cell, or None where the cell is
+    /// itself in a run (a wall cell).
+    fn runs_below(&self, axis: usize, k: [i32; 3]) -> Option<usize> {
+        let runs = self.column(axis, k);
+        let below = runs.partition_point(|r| r[1] < k[axis]);
+        runs.get(below).is_none_or(|r| r[0] > k[axis]).then_some(below)
+    }
+
     /// Whether the cell holding `p_world_m` holds a wall point.
     pub fn occupied(&self, p_world_m: [f64; 3]) -> bool {
-        self.key(p_world_m).is_some_and(|k| {
-            let runs = self.column(2, k);
-            let i = runs.partition_point(|r| r[1] < k[2]);
-            runs.get(i).is_some_and(|r| r[0] <= k[2])
-        })
+        self.key(p_world_m).is_some_and(|k| self.runs_below(2, k).is_none())
     }
 
     /// The inside votes at an empty cell: +1 for each of the six axis rays that crosses the walls
@@ -108,13 +112,8 @@ impl CaveGrid {
         let k = self.key(p_world_m)?;
         let mut votes = 0;
         for axis in 0..3 {
-            let runs = self.column(axis, k);
-            let at = k[axis];
-            let below = runs.partition_point(|r| r[1] < at);
-            if runs.get(below).is_some_and(|r| r[0] <= at) {
-                return None;
-            }
-            let above = runs.len() - below;
+            let below = self.runs_below(axis, k)?;
+            let above = self.column(axis, k).len() - below;
             votes += if below % 2 == 1 { 1 } else { -1 };
             votes += if above % 2 == 1 { 1 } else { -1 };
         }
@@ -262,12 +261,6 @@ pub struct OrientStats {
     pub weak: u64,
     /// Sum over points of |neighbourhood score| / (k * MAX_SCORE), for the mean confidence.
     pub confidence_sum: f64,
-    /// Own points (every scan, not only those without a scanner) whose file carried a normal, and
-    /// how many of those were kept rather than re-estimated.
-    #[serde(default)]
-    pub input_normals: u64,
-    #[serde(default)]
-    pub input_kept: u64,
 }
 
 impl OrientStats {
@@ -278,8 +271,6 @@ impl OrientStats {
         self.undecided += o.undecided;
         self.weak += o.weak;
         self.confidence_sum += o.confidence_sum;
-        self.input_normals += o.input_normals;
-        self.input_kept += o.input_kept;
     }
 
     /// Mean confidence in 0..=1 (1: every neighbour's every ray agreed).

@@ -279,14 +279,24 @@ fn demo_cave_variants() -> Result<(SceneData, Vec<Variant>), String> {
 pub const ONE_BOUNCE_STEP: &str = "step, 1 bounce";
 /// Knob of the one-bounce aperture runs.
 pub const ONE_BOUNCE_APERTURE: &str = "aperture, 1 bounce";
-/// `--step` values of the one-bounce runs, coarse to fine.
+/// `--step` values swept, coarse to fine (the balanced preset's among them).
 pub const MARCH_STEPS: [f32; 4] = [1.0, 0.5, 0.25, 0.1];
-/// `--aperture` values of the one-bounce runs, wide to narrow.
+/// `--aperture` values swept, wide to narrow (the balanced preset's among them).
 pub const MARCH_APERTURES: [f32; 4] = [1.0, 0.7, 0.5, 0.35];
+
+/// Whether a knob is one of the one-bounce march sweeps.
+fn one_bounce_knob(knob: &str) -> bool {
+    knob == ONE_BOUNCE_STEP || knob == ONE_BOUNCE_APERTURE
+}
 
 /// Whether a knob's rows are judged against a cut reference rather than full transport.
 fn judged_cut(knob: &str) -> bool {
-    knob == "bounces" || knob == ONE_BOUNCE_STEP || knob == ONE_BOUNCE_APERTURE
+    knob == "bounces" || one_bounce_knob(knob)
+}
+
+/// Config name of a full-transport step / aperture run ("balanced" at the preset's own value).
+fn swept_name(knob: &str, value: f32, preset_value: f32) -> String {
+    if value == preset_value { "balanced".into() } else { format!("{knob} {value}") }
 }
 
 /// Each knob alone around the balanced preset, and the three presets.
@@ -302,10 +312,10 @@ pub fn configs() -> Vec<Config> {
     for cones in [4u32, 6, 16] {
         add("cones", format!("cones {cones}"), Settings { cones, ..base.clone() });
     }
-    for a in [0.35f32, 0.5, 1.0] {
+    for a in MARCH_APERTURES.into_iter().filter(|&a| a != base.cone_aperture_scale) {
         add("aperture", format!("aperture {a}"), Settings { cone_aperture_scale: a, ..base.clone() });
     }
-    for s in [0.1f32, 0.25, 1.0] {
+    for s in MARCH_STEPS.into_iter().filter(|&s| s != base.step_scale) {
         add("step", format!("step {s}"), Settings { step_scale: s, ..base.clone() });
     }
     // The march alone: one bounce against the reference cut after one bounce, so the bounces not
@@ -530,9 +540,12 @@ pub const MONOTONE_SLACK: f64 = 0.002;
 /// A knob's rows from coarse to fine (config names), the full-transport ones around the balanced
 /// preset and the one-bounce ones.
 pub fn knob_series(knob: &str) -> Vec<String> {
+    let base = Settings::preset(Quality::Balanced);
     match knob {
-        "step" => ["step 1", "balanced", "step 0.25", "step 0.1"].map(String::from).to_vec(),
-        "aperture" => ["aperture 1", "balanced", "aperture 0.5", "aperture 0.35"].map(String::from).to_vec(),
+        "step" => MARCH_STEPS.iter().map(|&s| swept_name(knob, s, base.step_scale)).collect(),
+        "aperture" => {
+            MARCH_APERTURES.iter().map(|&a| swept_name(knob, a, base.cone_aperture_scale)).collect()
+        }
         ONE_BOUNCE_STEP => MARCH_STEPS.iter().map(|s| format!("step {s}, 1 bounce")).collect(),
         ONE_BOUNCE_APERTURE => MARCH_APERTURES.iter().map(|a| format!("aperture {a}, 1 bounce")).collect(),
         _ => Vec::new(),
@@ -565,6 +578,15 @@ pub fn knob_monotone(rows: &[Row], knob: &str) -> Option<bool> {
 
 /// The knobs whose rows must get more accurate as they get finer.
 pub const MONOTONE_KNOBS: [&str; 4] = ["step", "aperture", ONE_BOUNCE_STEP, ONE_BOUNCE_APERTURE];
+
+/// A monotone check in the report: yes, **no**, or `missing` where rows were not measured.
+fn verdict(v: Option<bool>, missing: &'static str) -> &'static str {
+    match v {
+        Some(true) => "yes",
+        Some(false) => "**no**",
+        None => missing,
+    }
+}
 
 /// File-name form of a scene name.
 pub fn slug(name: &str) -> String {
@@ -650,11 +672,7 @@ pub fn report(
             .iter()
             .map(|sc| {
                 let mine: Vec<Row> = rows.iter().filter(|r| r.scene == sc.name).cloned().collect();
-                match knob_monotone(&mine, knob) {
-                    Some(true) => "yes",
-                    Some(false) => "**no**",
-                    None => "-",
-                }
+                verdict(knob_monotone(&mine, knob), "-")
             })
             .collect();
         let _ = writeln!(s, "| {knob} | {} |", cells.join(" | "));
@@ -663,8 +681,7 @@ pub fn report(
     for sc in scenes {
         let all: Vec<Row> = rows.iter().filter(|r| r.scene == sc.name).cloned().collect();
         // The one-bounce march rows are judged against the cut reference, in their own table.
-        let (march, mine): (Vec<Row>, Vec<Row>) =
-            all.into_iter().partition(|r| r.knob == ONE_BOUNCE_STEP || r.knob == ONE_BOUNCE_APERTURE);
+        let (march, mine): (Vec<Row>, Vec<Row>) = all.iter().cloned().partition(|r| one_bounce_knob(&r.knob));
         let front = pareto(&mine);
         let noise = mine.first().map_or(0.0, |r| r.reference_noise);
         let _ = writeln!(s, "## {}\n", sc.name);
@@ -705,15 +722,10 @@ pub fn report(
                 if front[i] { "*" } else { "" }
             );
         }
-        let mono = presets_monotone(&mine);
         let _ = writeln!(
             s,
             "\nPresets monotone (each slower and more accurate than the one below): {}\n",
-            match mono {
-                Some(true) => "yes",
-                Some(false) => "**no**",
-                None => "not measured",
-            }
+            verdict(presets_monotone(&mine), "not measured")
         );
         if !march.is_empty() {
             let _ = writeln!(
@@ -733,12 +745,7 @@ pub fn report(
             }
             let _ = writeln!(s);
         }
-        let mono_line =
-            |knob: &str| match knob_monotone(&mine.iter().chain(&march).cloned().collect::<Vec<_>>(), knob) {
-                Some(true) => "yes",
-                Some(false) => "**no**",
-                None => "not measured",
-            };
+        let mono_line = |knob: &str| verdict(knob_monotone(&all, knob), "not measured");
         let _ = writeln!(
             s,
             "Finer is more accurate: step {}, aperture {}; at one bounce against the cut reference: step {}, aperture {}.\n",
@@ -771,10 +778,7 @@ pub fn report(
 pub fn plot_svg(scene: &str, rows: &[Row]) -> String {
     use plotters::prelude::*;
     // Full-transport rows only: the one-bounce march rows answer another question.
-    let mine: Vec<&Row> = rows
-        .iter()
-        .filter(|r| r.scene == scene && r.knob != ONE_BOUNCE_STEP && r.knob != ONE_BOUNCE_APERTURE)
-        .collect();
+    let mine: Vec<&Row> = rows.iter().filter(|r| r.scene == scene && !one_bounce_knob(&r.knob)).collect();
     let t = |r: &Row| (r.light_ms + r.frame_ms).max(0.1);
     let (t_lo, t_hi) = mine.iter().fold((f64::MAX, f64::MIN), |(a, b), r| (a.min(t(r)), b.max(t(r))));
     let (e_lo, e_hi) =

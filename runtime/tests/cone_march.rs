@@ -166,25 +166,61 @@ fn a_lit_wall_down_an_open_corridor_is_seen_whole_by_a_cone_that_fits_through_it
 /// cosines are chord / 2R), so the one-bounce gather (irradiance / pi) is the same everywhere:
 /// the mean outgoing radiance over the sphere. Under one lamp of intensity I (W/sr) inside,
 /// every watt lands on the wall: mean irradiance 4 pi I / (4 pi R^2), mean radiance that over pi.
+struct LitSphere {
+    scene: SceneData,
+    /// Centre, leaves.
+    center: Vec3,
+    /// The lamp's direct light on every leaf.
+    light: Vec<LeafLightGpu>,
+    /// The one-bounce gather everywhere.
+    want: f64,
+}
+
+const SPHERE_DEPTH: u32 = 6;
+const SPHERE_RADIUS_LEAVES: f32 = 26.0;
+
+impl LitSphere {
+    /// The sphere (albedo 0.5) with its centre `shift_leaves` off the grid, a lamp 0.6 R above
+    /// the centre: the wall's radiance varies 16-fold from top to bottom.
+    fn new(shift_leaves: Vec3) -> Self {
+        let radius_leaves = SPHERE_RADIUS_LEAVES;
+        let scene =
+            testscenes::shifted_sphere(SPHERE_DEPTH, radius_leaves, 0.5, 0.0, f32::INFINITY, shift_leaves);
+        let center = Vec3::splat((1u32 << SPHERE_DEPTH) as f32 * 0.5) + shift_leaves;
+        let lamp = center + Vec3::Z * 0.6 * radius_leaves;
+        let radiance = |c: Vec3| {
+            let n = (center - c).normalize();
+            let d = (lamp - c) * LEAF_M;
+            n.dot(d.normalize()).max(0.0) / d.length_squared() / std::f32::consts::PI
+        };
+        let light = light_where(&scene, radiance);
+        let r_m = f64::from((radius_leaves + 0.5) * LEAF_M);
+        LitSphere { scene, center, light, want: 1.0 / (r_m * r_m * PI) }
+    }
+
+    /// Leaf `i`'s offset from the centre (leaves) where it is on the inner surface.
+    fn inner(&self, i: usize) -> Option<Vec3> {
+        let c = Vec3::from_slice(&self.scene.leaves[i].center_m[..3]) / LEAF_M - self.center;
+        (c.length() < SPHERE_RADIUS_LEAVES + 1.0).then_some(c)
+    }
+
+    /// Every leaf's gather after one bounce with `settings`, and the renderer.
+    fn one_bounce(&self, settings: Settings) -> (Renderer, Vec<LeafLightGpu>) {
+        let mut r = Renderer::new(gpu(), &self.scene, settings).unwrap();
+        r.write_leaf_light(&self.light).unwrap();
+        r.run_bounce().unwrap();
+        let got = r.read_leaf_light().unwrap();
+        (r, got)
+    }
+}
+
 #[test]
 fn one_bounce_inside_a_lit_sphere_is_the_same_everywhere_at_every_aperture() {
-    let (depth, radius_leaves) = (6, 26.0f32);
-    let scene = testscenes::furnace_sphere(depth, radius_leaves, 0.5, 0.0);
-    let center = Vec3::splat((1u32 << depth) as f32 * 0.5);
-    // The lamp 0.6 R above the centre: the wall's radiance varies 16-fold from top to bottom.
-    let lamp = center + Vec3::Z * 0.6 * radius_leaves;
-    let radiance = |c: Vec3| {
-        let n = (center - c).normalize();
-        let d = (lamp - c) * LEAF_M;
-        n.dot(d.normalize()).max(0.0) / d.length_squared() / std::f32::consts::PI
-    };
-    let light = light_where(&scene, radiance);
-    let r_m = f64::from((radius_leaves + 0.5) * LEAF_M);
-    let want = 1.0 / (r_m * r_m * PI);
+    let sphere = LitSphere::new(Vec3::ZERO);
+    let (scene, light, want) = (&sphere.scene, &sphere.light, sphere.want);
     // Inner surface leaves, by height: the bottom third, the middle, the top third.
     let band = |i: usize| {
-        let c = Vec3::from_slice(&scene.leaves[i].center_m[..3]) / LEAF_M - center;
-        (c.length() < radius_leaves + 1.0).then(|| {
+        sphere.inner(i).map(|c| {
             if c.z < -c.length() / 3.0 {
                 0
             } else if c.z > c.length() / 3.0 {
@@ -198,10 +234,7 @@ fn one_bounce_inside_a_lit_sphere_is_the_same_everywhere_at_every_aperture() {
         for step in [0.5f32, 0.2] {
             let settings =
                 Settings { cones: 16, cone_aperture_scale: aperture, step_scale: step, ..Default::default() };
-            let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
-            r.write_leaf_light(&light).unwrap();
-            r.run_bounce().unwrap();
-            let got = r.read_leaf_light().unwrap();
+            let (r, got) = sphere.one_bounce(settings);
             let mut bands = [(0.0f64, 0usize); 3];
             for (i, l) in got.iter().enumerate() {
                 if let Some(b) = band(i) {
@@ -222,8 +255,7 @@ fn one_bounce_inside_a_lit_sphere_is_the_same_everywhere_at_every_aperture() {
                 );
             }
             if step == 0.5 {
-                let (worst, checked) =
-                    CpuScene::mip(&scene, &light).worst_gather_error(&r.params(), &got, 97);
+                let (worst, checked) = CpuScene::mip(scene, light).worst_gather_error(&r.params(), &got, 97);
                 eprintln!("  GPU against the CPU reference: worst {worst:.1e} over {checked} leaves");
                 assert!(worst < 1e-3, "aperture {aperture}: the GPU march differs from the CPU's by {worst}");
             }
@@ -236,37 +268,22 @@ fn one_bounce_inside_a_lit_sphere_is_the_same_everywhere_at_every_aperture() {
 /// the high preset's bias moving from -7.3% to -5.2% when a room moved by a few centimetres.
 #[test]
 fn one_bounce_inside_a_lit_sphere_does_not_depend_on_where_the_grid_falls() {
-    let (depth, radius_leaves) = (6, 26.0f32);
     let mut means = Vec::new();
     for shift in
         [Vec3::ZERO, Vec3::new(0.25, 0.5, 0.125), Vec3::new(0.5, 0.5, 0.5), Vec3::new(0.75, 0.1, 0.4)]
     {
-        let scene = testscenes::shifted_sphere(depth, radius_leaves, 0.5, 0.0, f32::INFINITY, shift);
-        let center = Vec3::splat((1u32 << depth) as f32 * 0.5) + shift;
-        let lamp = center + Vec3::Z * 0.6 * radius_leaves;
-        let radiance = |c: Vec3| {
-            let n = (center - c).normalize();
-            let d = (lamp - c) * LEAF_M;
-            n.dot(d.normalize()).max(0.0) / d.length_squared() / std::f32::consts::PI
-        };
-        let light = light_where(&scene, radiance);
-        let r_m = f64::from((radius_leaves + 0.5) * LEAF_M);
-        let want = 1.0 / (r_m * r_m * PI);
+        let sphere = LitSphere::new(shift);
         // The balanced preset's cones.
         let settings = Settings { cones: 9, cone_aperture_scale: 0.7, step_scale: 0.5, ..Default::default() };
-        let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
-        r.write_leaf_light(&light).unwrap();
-        r.run_bounce().unwrap();
-        let got = r.read_leaf_light().unwrap();
+        let (_, got) = sphere.one_bounce(settings);
         let (mut sum, mut n) = (0.0f64, 0usize);
         for (i, l) in got.iter().enumerate() {
-            let c = Vec3::from_slice(&scene.leaves[i].center_m[..3]) / LEAF_M - center;
-            if c.length() < radius_leaves + 1.0 {
+            if sphere.inner(i).is_some() {
                 sum += f64::from(l.gather[0]);
                 n += 1;
             }
         }
-        let ratio = sum / n as f64 / want;
+        let ratio = sum / n as f64 / sphere.want;
         eprintln!("sphere shifted by {shift:?} leaves: mean gather / answer {ratio:.4} over {n} leaves");
         means.push(ratio);
     }

@@ -1,6 +1,25 @@
-//! Helpers for the end-to-end tests: where the shared third-party test data lives.
+//! Helpers for the end-to-end tests: where the shared third-party test data lives, build
+//! parameters for small packages, and the golden-image tolerance.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+use grotto_preprocess::build::{BuildParams, ColorCodec};
+
+/// Build parameters for a small test package: 2 threads, a 64 MiB budget, 12.5 cm leaves, raw
+/// colours, tiles of `min_tile_m` to `max_tile_m` and a halo of `halo_m`, working in `work_dir`.
+pub fn small_build(work_dir: &Path, min_tile_m: f64, max_tile_m: f64, halo_m: f64) -> BuildParams {
+    BuildParams {
+        work_dir: work_dir.to_path_buf(),
+        memory_budget_bytes: 64 << 20,
+        threads: 2,
+        leaf_m: 0.125,
+        colors: ColorCodec::Raw,
+        min_tile_extent_m: min_tile_m,
+        max_tile_extent_m: max_tile_m,
+        halo_m,
+        ..BuildParams::default()
+    }
+}
 
 /// `../shared/data` beside the repository (CI puts `shared/` there), or `$GROTTO_SHARED_DATA`.
 ///

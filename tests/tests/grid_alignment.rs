@@ -12,7 +12,7 @@ use std::path::Path;
 
 use glam::Vec3;
 use grotto_format::Package;
-use grotto_preprocess::build::{self, BuildParams, ColorCodec};
+use grotto_preprocess::build::{self, BuildParams};
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::scanwrite::{ScanData, write_scan};
@@ -20,8 +20,8 @@ use grotto_runtime::camera::Camera;
 use grotto_runtime::gpu::{Gpu, GpuOptions};
 use grotto_runtime::renderer::{Renderer, Settings};
 use grotto_runtime::scene_data::SceneData;
+use grotto_tests::small_build;
 
-const LEAF_M: f64 = 0.125;
 /// The room: 4 x 3 x 2.5 m.
 const ROOM_M: [f64; 3] = [4.0, 3.0, 2.5];
 
@@ -77,16 +77,10 @@ fn build_room(dir: &Path, name: &str, corner: [f64; 3]) -> std::path::PathBuf {
     .unwrap();
     let manifest = Manifest::load(&manifest_path).unwrap();
     let out = dir.join(format!("{name}.grotto"));
+    // One 8 m tile holds the room.
     let bp = BuildParams {
-        work_dir: dir.join(format!("{name}.work")),
         memory_budget_bytes: 256 << 20,
-        threads: 2,
-        leaf_m: LEAF_M,
-        colors: ColorCodec::Raw,
-        min_tile_extent_m: 8.0,
-        max_tile_extent_m: 8.0,
-        halo_m: 0.5,
-        ..BuildParams::default()
+        ..small_build(&dir.join(format!("{name}.work")), 8.0, 8.0, 0.5)
     };
     build::build(&manifest, &manifest_path, &out, &bp, &|_| {}).unwrap();
     out

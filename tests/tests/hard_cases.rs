@@ -6,25 +6,12 @@ use std::path::{Path, PathBuf};
 
 use grotto_format::spec::Surfel;
 use grotto_format::{Package, SectionKind};
-use grotto_preprocess::build::{self, BuildParams, BuildSummary, ColorCodec};
+use grotto_preprocess::build::{self, BuildParams, BuildSummary};
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::scanwrite::{ScanData, write_scan};
 use grotto_preprocess::synth::{self, SynthParams};
-
-fn params(work: &Path, min_tile: f64, max_tile: f64) -> BuildParams {
-    BuildParams {
-        work_dir: work.to_path_buf(),
-        memory_budget_bytes: 64 << 20,
-        threads: 2,
-        leaf_m: 0.125,
-        colors: ColorCodec::Raw,
-        min_tile_extent_m: min_tile,
-        max_tile_extent_m: max_tile,
-        halo_m: 0.5,
-        ..BuildParams::default()
-    }
-}
+use grotto_tests::small_build;
 
 fn build_into(manifest: &Manifest, dir: &Path, name: &str, p: &BuildParams) -> (Package, BuildSummary) {
     let out = dir.join(name);
@@ -62,11 +49,15 @@ fn tiles_meet_without_seams() {
         &manifest,
         dir.path(),
         "small.grotto",
-        &BuildParams { halo_m: 2.0, ..params(&dir.path().join("w1"), 4.0, 4.0) },
+        &BuildParams { halo_m: 2.0, ..small_build(&dir.path().join("w1"), 4.0, 4.0, 0.5) },
     );
     assert_eq!(small_summary.seam_limited_points, 0);
-    let (big, big_summary) =
-        build_into(&manifest, dir.path(), "big.grotto", &params(&dir.path().join("w2"), 64.0, 64.0));
+    let (big, big_summary) = build_into(
+        &manifest,
+        dir.path(),
+        "big.grotto",
+        &small_build(&dir.path().join("w2"), 64.0, 64.0, 0.5),
+    );
     assert!(
         small_summary.tiles > 8 && big_summary.tiles <= 2,
         "{} vs {}",
@@ -94,7 +85,7 @@ fn tiles_meet_without_seams() {
         &manifest,
         dir.path(),
         "thin.grotto",
-        &BuildParams { halo_m: 0.125, ..params(&dir.path().join("w3"), 4.0, 4.0) },
+        &BuildParams { halo_m: 0.125, ..small_build(&dir.path().join("w3"), 4.0, 4.0, 0.5) },
     );
     assert!(limited.seam_limited_points > 0);
 }
@@ -140,8 +131,10 @@ fn survey_coordinates_give_the_same_normals() {
         t[1] += 5_000_000.0;
         t[2] += 1000.0;
     }
-    let (a, _) = build_into(&at_origin, dir.path(), "a.grotto", &params(&dir.path().join("w1"), 2.0, 16.0));
-    let (b, _) = build_into(&shifted, dir.path(), "b.grotto", &params(&dir.path().join("w2"), 2.0, 16.0));
+    let (a, _) =
+        build_into(&at_origin, dir.path(), "a.grotto", &small_build(&dir.path().join("w1"), 2.0, 16.0, 0.5));
+    let (b, _) =
+        build_into(&shifted, dir.path(), "b.grotto", &small_build(&dir.path().join("w2"), 2.0, 16.0, 0.5));
     // Match surfels by position: the quantisation of a point within f64 rounding (~1e-10 m at
     // 5e6 m) of a quantum boundary can differ by one quantum, which may reorder it.
     let key = |w: [f64; 3], shift: [f64; 3]| -> [i64; 3] {
@@ -182,7 +175,8 @@ fn degenerate_inputs_build_valid_packages_without_nan() {
     // The scanner at the scan origin (a bare file would be a merged cloud without one).
     let mut manifest = Manifest::from_files(&[scan]);
     manifest.scans[0].origin = Some([0.0; 3]);
-    let (pkg, summary) = build_into(&manifest, d, "degenerate.grotto", &params(&d.join("w"), 1.0, 16.0));
+    let (pkg, summary) =
+        build_into(&manifest, d, "degenerate.grotto", &small_build(&d.join("w"), 1.0, 16.0, 0.5));
     assert_eq!(summary.invalid_points, 2);
     assert_eq!(summary.points, pts.len() as u64 - 2);
     let all = surfels(&pkg);
@@ -209,15 +203,23 @@ fn degenerate_inputs_build_valid_packages_without_nan() {
 
     // One point alone.
     let one = write_ply(&d.join("one.ply"), &[[512_000.25, 5_123_000.5, 300.75]]);
-    let (pkg, summary) =
-        build_into(&Manifest::from_files(&[one]), d, "one.grotto", &params(&d.join("w1"), 1.0, 16.0));
+    let (pkg, summary) = build_into(
+        &Manifest::from_files(&[one]),
+        d,
+        "one.grotto",
+        &small_build(&d.join("w1"), 1.0, 16.0, 0.5),
+    );
     assert_eq!((summary.tiles, summary.points), (1, 1));
     assert_eq!(pkg.tile(0).unwrap().svo().unwrap().unwrap().leaf_count(), 1);
 
     // No points at all: a valid package with no tiles.
     let empty = write_ply(&d.join("empty.ply"), &[]);
-    let (pkg, summary) =
-        build_into(&Manifest::from_files(&[empty]), d, "empty.grotto", &params(&d.join("w2"), 1.0, 16.0));
+    let (pkg, summary) = build_into(
+        &Manifest::from_files(&[empty]),
+        d,
+        "empty.grotto",
+        &small_build(&d.join("w2"), 1.0, 16.0, 0.5),
+    );
     assert_eq!((summary.tiles, pkg.tile_count()), (0, 0));
 }
 
@@ -245,7 +247,7 @@ fn a_las_file_cut_inside_its_last_record_keeps_its_complete_records() {
         &Manifest::from_files(std::slice::from_ref(&cut)),
         d,
         "cut.grotto",
-        &params(&d.join("w1"), 1.0, 16.0),
+        &small_build(&d.join("w1"), 1.0, 16.0, 0.5),
     )
     .1;
     assert_eq!(built.points, 399, "every complete record");
@@ -253,7 +255,7 @@ fn a_las_file_cut_inside_its_last_record_keeps_its_complete_records() {
     assert!(built.cut_short[0].contains("cut.las") && built.cut_short[0].contains("1 points dropped"));
     assert!(built.hints().iter().any(|h| h.contains("--strict")), "{:?}", built.hints());
 
-    let strict = BuildParams { strict: true, ..params(&d.join("w2"), 1.0, 16.0) };
+    let strict = BuildParams { strict: true, ..small_build(&d.join("w2"), 1.0, 16.0, 0.5) };
     let err = build::build(
         &Manifest::from_files(&[cut]),
         Path::new("t.toml"),
@@ -278,7 +280,7 @@ fn a_las_file_cut_inside_its_last_record_keeps_its_complete_records() {
             &Manifest::from_files(&[p]),
             Path::new("t.toml"),
             &d.join("x.grotto"),
-            &params(&d.join("w3"), 1.0, 16.0),
+            &small_build(&d.join("w3"), 1.0, 16.0, 0.5),
             &|_| {},
         )
         .unwrap_err()

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use grotto_format::spec::Surfel;
 use grotto_format::{Package, SectionKind};
-use grotto_preprocess::build::{self, BuildParams, ColorCodec};
+use grotto_preprocess::build::{self, BuildParams};
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::scanwrite::{ScanData, write_scan};
@@ -15,7 +15,7 @@ use grotto_preprocess::synth::{self, SynthCave, SynthParams};
 use grotto_runtime::gpu::GpuOptions;
 use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
 use grotto_runtime::renderer::Settings;
-use grotto_tests::golden;
+use grotto_tests::{golden, small_build};
 
 /// Each station's scan in world (survey) coordinates with its station, less the points of the
 /// main passage's first end cap: the cave's entrance, open to the outside.
@@ -45,18 +45,34 @@ fn station_scans(cave: &SynthCave, params: &SynthParams) -> Vec<StationScan> {
         .collect()
 }
 
-fn params(work: &Path) -> BuildParams {
-    BuildParams {
-        work_dir: work.to_path_buf(),
-        memory_budget_bytes: 64 << 20,
-        threads: 2,
-        leaf_m: 0.125,
-        colors: ColorCodec::Raw,
-        min_tile_extent_m: 2.0,
-        max_tile_extent_m: 8.0,
-        halo_m: 0.25,
-        ..BuildParams::default()
+/// Every station's points in one cloud, with their colours.
+fn merged(scans: &[StationScan]) -> (Vec<[f64; 3]>, Vec<[u8; 3]>) {
+    (
+        scans.iter().flat_map(|s| s.1.iter().copied()).collect(),
+        scans.iter().flat_map(|s| s.2.iter().copied()).collect(),
+    )
+}
+
+/// Every surfel of `pkg` with its tile's extent and the cosine between its normal and the cave's
+/// true normal at it (positive: it faces the passage).
+fn against_truth(pkg: &Package, cave: &SynthCave, synth: &SynthParams) -> Vec<(Surfel, f64, f64)> {
+    let mut out = Vec::new();
+    for tile in pkg.tiles() {
+        let origin = tile.origin_m();
+        let extent = tile.info().extent_m;
+        for s in tile.read::<Surfel>(SectionKind::Surfels).unwrap().unwrap().iter() {
+            let local: [f64; 3] =
+                std::array::from_fn(|a| origin[a] + f64::from(s.position_tile_m[a]) - synth.offset_m[a]);
+            let truth = cave.normal(local);
+            out.push((*s, extent, (0..3).map(|a| truth[a] * f64::from(s.normal[a])).sum()));
+        }
     }
+    out
+}
+
+/// Tiles of 2 to 8 m, so that the cave spans many tile borders.
+fn params(work: &Path) -> BuildParams {
+    small_build(work, 2.0, 8.0, 0.25)
 }
 
 /// One 160x120 frame from inside the passage (headlamp at the camera: the packages have no
@@ -92,8 +108,7 @@ fn a_bare_merged_cloud_gets_normals_that_face_the_passage() {
     let synth = SynthParams { points: 120_000, segments: 10, ..SynthParams::default() };
     let cave = SynthCave::new(&synth);
     let scans = station_scans(&cave, &synth);
-    let xyz: Vec<[f64; 3]> = scans.iter().flat_map(|s| s.1.iter().copied()).collect();
-    let rgb: Vec<[u8; 3]> = scans.iter().flat_map(|s| s.2.iter().copied()).collect();
+    let (xyz, rgb) = merged(&scans);
     let ply = dir.path().join("merged.ply");
     write_scan(
         &ply,
@@ -114,22 +129,15 @@ fn a_bare_merged_cloud_gets_normals_that_face_the_passage() {
 
     let pkg = Package::open(&out).unwrap();
     let (mut n, mut wrong, mut border, mut border_wrong) = (0u64, 0u64, 0u64, 0u64);
-    for tile in pkg.tiles() {
-        let origin = tile.origin_m();
-        let extent = tile.info().extent_m;
-        for s in tile.read::<Surfel>(SectionKind::Surfels).unwrap().unwrap().iter() {
-            let local: [f64; 3] =
-                std::array::from_fn(|a| origin[a] + f64::from(s.position_tile_m[a]) - synth.offset_m[a]);
-            let truth = cave.normal(local);
-            let faces = (0..3).map(|a| truth[a] * f64::from(s.normal[a])).sum::<f64>() > 0.0;
-            // Within two leaves of a tile face: the neighbourhood and the votes straddle tiles.
-            let near_border =
-                s.position_tile_m.iter().any(|&c| f64::from(c).min(extent - f64::from(c)) < 2.0 * bp.leaf_m);
-            n += 1;
-            wrong += u64::from(!faces);
-            border += u64::from(near_border);
-            border_wrong += u64::from(near_border && !faces);
-        }
+    for (s, extent, cos) in against_truth(&pkg, &cave, &synth) {
+        let faces = cos > 0.0;
+        // Within two leaves of a tile face: the neighbourhood and the votes straddle tiles.
+        let near_border =
+            s.position_tile_m.iter().any(|&c| f64::from(c).min(extent - f64::from(c)) < 2.0 * bp.leaf_m);
+        n += 1;
+        wrong += u64::from(!faces);
+        border += u64::from(near_border);
+        border_wrong += u64::from(near_border && !faces);
     }
     let share = 1.0 - wrong as f64 / n as f64;
     let border_share = 1.0 - border_wrong as f64 / border.max(1) as f64;
@@ -177,10 +185,6 @@ fn a_bare_merged_cloud_gets_normals_that_face_the_passage() {
             render(&with_scanners, &dir.path().join(format!("{name}-s.png")), at(eye), at(look), None);
         let (_, got) =
             render(&out, &dir.path().join(format!("{name}-bare.png")), at(eye), at(look), Some(exposure));
-        for s in ["s", "bare"] {
-            let _ =
-                std::fs::copy(dir.path().join(format!("{name}-{s}.png")), format!("/tmp/mc/{name}-{s}.png"));
-        }
         let d = golden::diff(&got, &want);
         eprintln!("{name}: bare against scanner positions {d:?}");
         assert!(golden::within_tolerance(&d), "{name}: {d:?}");
@@ -193,8 +197,7 @@ fn normals_a_file_carries_are_kept_and_oriented_or_re_estimated_on_request() {
     let synth = SynthParams { points: 30_000, segments: 5, ..SynthParams::default() };
     let cave = SynthCave::new(&synth);
     let scans = station_scans(&cave, &synth);
-    let xyz: Vec<[f64; 3]> = scans.iter().flat_map(|s| s.1.iter().copied()).collect();
-    let rgb: Vec<[u8; 3]> = scans.iter().flat_map(|s| s.2.iter().copied()).collect();
+    let (xyz, rgb) = merged(&scans);
     // Registration software writes unoriented normals: the true ones, every third turned around.
     let given: Vec<[f32; 3]> = xyz
         .iter()
@@ -220,16 +223,10 @@ fn normals_a_file_carries_are_kept_and_oriented_or_re_estimated_on_request() {
         assert_eq!(built.input_normals, built.points, "every point carried one");
         let pkg = Package::open(&out).unwrap();
         let (mut n, mut facing, mut exact) = (0u64, 0u64, 0u64);
-        for tile in pkg.tiles() {
-            let origin = tile.origin_m();
-            for s in tile.read::<Surfel>(SectionKind::Surfels).unwrap().unwrap().iter() {
-                let local: [f64; 3] =
-                    std::array::from_fn(|a| origin[a] + f64::from(s.position_tile_m[a]) - synth.offset_m[a]);
-                let d: f64 = (0..3).map(|a| cave.normal(local)[a] * f64::from(s.normal[a])).sum();
-                n += 1;
-                facing += u64::from(d > 0.0);
-                exact += u64::from(d > 0.99999);
-            }
+        for (_, _, d) in against_truth(&pkg, &cave, &synth) {
+            n += 1;
+            facing += u64::from(d > 0.0);
+            exact += u64::from(d > 0.99999);
         }
         eprintln!(
             "--normals {}: {} of {} kept; {facing} of {n} face the passage, {exact} equal to the file's (up to sign)",

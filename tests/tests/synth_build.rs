@@ -4,7 +4,7 @@
 
 use grotto_format::spec::Surfel;
 use grotto_format::{Package, SectionKind};
-use grotto_preprocess::build::{self, BuildParams, ColorCodec};
+use grotto_preprocess::build::{self, BuildParams};
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::synth::{self, SynthCave, SynthParams};
@@ -31,17 +31,7 @@ fn synthetic_cave_builds_with_accurate_oriented_normals() {
         assert_eq!(s.pose_from_file, s.format == ScanFormat::E57);
     }
     let out = dir.path().join("cave.grotto");
-    let bp = BuildParams {
-        work_dir: dir.path().join("work"),
-        memory_budget_bytes: 64 << 20,
-        threads: 2,
-        leaf_m: 0.125,
-        colors: ColorCodec::Raw,
-        min_tile_extent_m: 2.0,
-        max_tile_extent_m: 32.0,
-        halo_m: 0.25,
-        ..BuildParams::default()
-    };
+    let bp = grotto_tests::small_build(&dir.path().join("work"), 2.0, 32.0, 0.25);
     let built = build::build(&manifest, &manifest_path, &out, &bp, &|_| {}).unwrap();
     assert_eq!(built.points, summary.points);
     assert!(built.tiles > 1);

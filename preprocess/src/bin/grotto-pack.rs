@@ -479,12 +479,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     &k,
                     threads,
                     export.as_deref(),
-                    false,
+                    bare,
                 )?);
-                if bare {
-                    figures
-                        .extend(grotto_preprocess::bench::normals(&dir, points, n, &k, threads, None, true)?);
-                }
             }
             if json {
                 println!("{}", serde_json::to_string_pretty(&figures)?);

@@ -302,9 +302,7 @@ impl LasSource {
         let (color_div, grey_div) =
             guard(path, format, || probe_scales(path, format, point_format.has_color, claimed))?;
         let data = las::PointDataBuilder::new().for_header(reader.header()).build();
-        let extra_start = point_format.len() as usize - usize::from(point_format.extra_bytes);
-        let normal_fields =
-            normal_fields(reader.header(), extra_start, usize::from(point_format.extra_bytes));
+        let normal_fields = normal_fields(reader.header());
         Ok(Self {
             info: SourceInfo {
                 claimed_points: claimed,
@@ -397,7 +395,11 @@ fn extra_layout(header: &las::Header) -> Option<Vec<(&[u8], usize, usize)>> {
 /// The normal's three fields among a file's extra bytes ([`extra_layout`]), named as PDAL and
 /// CloudCompare write them ("NormalX", "nx", "normal_x", any case), scalar types only. None when
 /// the file has none.
-fn normal_fields(header: &las::Header, extra_start: usize, extra_len: usize) -> Option<[ExtraField; 3]> {
+fn normal_fields(header: &las::Header) -> Option<[ExtraField; 3]> {
+    let format = header.point_format();
+    let extra_len = usize::from(format.extra_bytes);
+    // The extra bytes close each record.
+    let extra_start = usize::from(format.len()) - extra_len;
     let mut found: [Option<ExtraField>; 3] = [None; 3];
     for (d, at, size) in extra_layout(header)? {
         let (kind, options) = (d[2], d[3]);
@@ -625,8 +627,7 @@ mod tests {
             let layout = extra_layout(header).unwrap_or_else(|| panic!("{name}: no layout"));
             let total: usize = layout.iter().map(|(_, _, size)| size).sum();
             assert_eq!(total, usize::from(header.point_format().extra_bytes), "{name}");
-            let f = header.point_format();
-            assert!(normal_fields(header, f.len() as usize - usize::from(f.extra_bytes), total).is_none());
+            assert!(normal_fields(header).is_none());
         }
     }
 }
