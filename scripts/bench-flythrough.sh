@@ -3,7 +3,7 @@
 # 4 m tiles (TILE_M, default 4), rendered along its entrance -> chamber path with --gpu-memory
 # BUDGET. Prints the per-frame table of docs/benchmarks.md (tile bytes, full, coarse and far
 # tiles, tiles loaded and evicted, surfels drawn, bounces, leaves whose light was carried over,
-# time waiting for the loader, pass times) and writes the raw JSON to OUT/flythrough.json.
+# leaves the frame's bounces propagated, time waiting for the loader, pass times) and writes the raw JSON to OUT/flythrough.json.
 # The same command takes the figures on a machine with a GPU.
 # Usage: scripts/bench-flythrough.sh [OUT_DIR] [POINTS] [BUDGET] [FRAMES]
 #        (default: out/fly, 1000000, 64M, 6)
@@ -31,11 +31,11 @@ print(f"device: {r['device']}, {r['tiles']} tiles, budget "
       f"{res['budget']['gpu_bytes'] / 2**20:.0f} MiB" if res else "the whole package fits the budget")
 passes = ["shadow", "inject", "mip", "propagate", "gbuffer", "shade"]
 print("| frame | tile MiB | full | coarse | far | loaded | evicted | surfels drawn | bounces | carried leaves | "
-      "load wait | " + " | ".join(passes) + " (ms) |")
-print("|" + "---:|" * (11 + len(passes)))
+      "propagated leaves | load wait | " + " | ".join(passes) + " (ms) |")
+print("|" + "---:|" * (12 + len(passes)))
 for f in r["frames"]:
     ms = " | ".join(f"{f['pass_ms'].get(p, 0):.0f}" for p in passes)
     print(f"| {f['frame']} | {f['tile_bytes'] / 2**20:.1f} | {f['full_tiles']} | {f['coarse_tiles']} | "
           f"{f['far_tiles']} | {f['loaded']} | {f['evicted']} | {f['surfels']:,} | {f['bounces']} | "
-          f"{f['carried_leaves']:,} | {f['load_wait_ms']:.0f} | {ms} |")
+          f"{f['carried_leaves']:,} | {f['propagated_leaves']:,} | {f['load_wait_ms']:.0f} | {ms} |")
 PY

@@ -6,6 +6,7 @@
 //!
 //! Also: describing and verifying packages ([`inspect`]) and exporting their points ([`export`]).
 
+pub mod activity;
 pub mod camera;
 pub mod coarse;
 pub mod cpu_ref;

@@ -109,6 +109,12 @@ pub struct PlanInputs {
     /// Largest relative change of the last bounce, if one ran since the last change.
     pub last_change: Option<f32>,
     pub convergence_tolerance: f32,
+    /// Tiles the next bounce would update (those whose light may still change: activity.rs), of
+    /// all tiles, and why in words. Converged means the last bounce changed nothing by more than
+    /// the tolerance and no tile is left to update.
+    pub tiles_pending: usize,
+    pub tiles_total: usize,
+    pub tiles_why: String,
     /// A frame (G-buffer + shade) is requested, not only a light update.
     pub frame: bool,
     /// The G-buffer matches the requested camera and size.
@@ -200,10 +206,25 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
         (false, "no light in the scene: nothing to propagate".to_string())
     } else if i.bounces_done >= i.bounce_budget {
         (false, format!("converged by budget: {} of {} bounces done", i.bounces_done, i.bounce_budget))
-    } else if let Some(c) = i.last_change.filter(|&c| c < i.convergence_tolerance) {
+    } else if let Some(c) = i.last_change.filter(|&c| c < i.convergence_tolerance && i.tiles_pending == 0) {
         (
             false,
-            format!("converged: last bounce changed radiance by {c:.2e} < {:.0e}", i.convergence_tolerance),
+            format!(
+                "converged: a bounce over every tile changed radiance by {c:.2e} < {:.0e}",
+                i.convergence_tolerance
+            ),
+        )
+    } else if i.tiles_pending < i.tiles_total {
+        (
+            true,
+            format!(
+                "bounce {} of {} over {} of {} tiles ({})",
+                i.bounces_done + 1,
+                i.bounce_budget,
+                i.tiles_pending,
+                i.tiles_total,
+                i.tiles_why
+            ),
         )
     } else {
         (true, format!("bounce {} of {}", i.bounces_done + 1, i.bounce_budget))
@@ -269,6 +290,9 @@ mod tests {
             bounce_budget: 4,
             last_change: None,
             convergence_tolerance: 1e-3,
+            tiles_pending: 1,
+            tiles_total: 1,
+            tiles_why: "1 no light yet".into(),
             frame: true,
             gbuffer_valid: false,
         }
@@ -283,11 +307,23 @@ mod tests {
 
     #[test]
     fn converged_stops_propagation() {
-        let p = plan(&PlanInputs { direct_valid: true, bounces_done: 2, last_change: Some(1e-5), ..base() });
+        let settled = PlanInputs { direct_valid: true, bounces_done: 2, tiles_pending: 0, ..base() };
+        let p = plan(&PlanInputs { last_change: Some(1e-5), ..settled.clone() });
         assert!(!p.runs(Pass::Mip) && !p.runs(Pass::Propagate) && !p.runs(Pass::Shadow));
         assert!(p.explain().contains("converged"));
-        let p = plan(&PlanInputs { direct_valid: true, bounces_done: 2, last_change: Some(0.1), ..base() });
+        let p = plan(&PlanInputs { last_change: Some(0.1), ..settled.clone() });
         assert!(p.runs(Pass::Propagate));
+        // A small change where the last bounce looked is not convergence while tiles are left
+        // (the check over every tile has not run yet).
+        let partial = PlanInputs {
+            last_change: Some(1e-5),
+            tiles_pending: 3,
+            tiles_total: 10,
+            tiles_why: "3 convergence check".into(),
+            ..settled
+        };
+        let p = plan(&partial);
+        assert!(p.runs(Pass::Propagate) && p.explain().contains("over 3 of 10 tiles"), "{}", p.explain());
     }
 
     #[test]

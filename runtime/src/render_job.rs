@@ -234,6 +234,13 @@ pub struct FrameReport {
     /// Leaves whose light was carried over from the previous frame's tiles (tiles resident in
     /// both, in the same form): only the rest starts from darkness.
     pub carried_leaves: usize,
+    /// Tiles and leaves the frame's propagation bounces updated, summed over its bounces: a bounce
+    /// updates only the tiles whose light may still change (activity.rs), so after a change of
+    /// tiles this follows what changed, not the size of the scene.
+    pub propagated_tiles: usize,
+    pub propagated_leaves: u64,
+    /// Each of the frame's bounces: which tiles it updated and why (`--explain`).
+    pub bounce_work: Vec<crate::activity::BounceWork>,
     /// Milliseconds this frame waited for the loader thread (which chose and read its tiles while
     /// the previous frame rendered).
     pub load_wait_ms: f64,
@@ -620,6 +627,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
                     .filter(|(h, l)| h[3] >= 0.5 && l[0].max(l[1]).max(l[2]) <= BLACK_LDR)
                     .count(),
             );
+            let bounce_work = r.take_bounce_work();
             frames.push(FrameReport {
                 frame: i as u32,
                 tile_bytes: scene.tile_bytes(f16),
@@ -631,6 +639,9 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
                 surfels: scene.surfels.len(),
                 bounces,
                 carried_leaves,
+                propagated_tiles: bounce_work.iter().map(|w| w.tiles).sum(),
+                propagated_leaves: bounce_work.iter().map(|w| w.leaves).sum(),
+                bounce_work,
                 load_wait_ms,
                 pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
             });

@@ -13,6 +13,7 @@ use std::time::Instant;
 use glam::Vec3;
 use serde::Serialize;
 
+use crate::activity::{BounceWork, TileActivity, Why};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
@@ -65,6 +66,9 @@ pub struct PassStats {
     pub last_ms: BTreeMap<Pass, f64>,
     pub bounces_done: u32,
     pub last_change: Option<f32>,
+    /// Leaves updated by all propagation bounces so far (a bounce updates only the tiles whose
+    /// light may still change: activity.rs).
+    pub propagated_leaves: u64,
 }
 
 #[derive(Debug)]
@@ -112,6 +116,14 @@ pub struct Renderer {
     #[cfg(feature = "test-hooks")]
     faces: wgpu::Buffer,
     stats: wgpu::Buffer,
+    /// The active-leaf list propagate reads, and its per-tile changes (shaders/activity.wgsl).
+    active: wgpu::Buffer,
+    tile_change: wgpu::Buffer,
+    activity: TileActivity,
+    /// Leaves in the active list on the GPU; `None` when the list changed since it was written.
+    active_written: Option<u32>,
+    /// Bounces since the last [`Renderer::take_bounce_work`], with what each updated.
+    bounce_work: Vec<BounceWork>,
     surfels: wgpu::Buffer,
     inject: passes::Batched,
     env: passes::Batched,
@@ -219,6 +231,8 @@ struct Upload {
     #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
     faces: wgpu::Buffer,
     stats: wgpu::Buffer,
+    active: wgpu::Buffer,
+    tile_change: wgpu::Buffer,
     surfels: wgpu::Buffer,
     shared: passes::Shared,
     /// GPU bytes of all of them.
@@ -243,6 +257,9 @@ impl Upload {
             gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial_light(scene)), STORAGE)?;
         let faces = gpu.buffer("faces", scene.buffer_bytes(f16).faces, STORAGE)?;
         let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE)?;
+        // A 16-byte count, then (leaf, tile) pairs: at most every leaf.
+        let active = gpu.buffer("active leaves", 16 + 8 * scene.leaves.len().max(1) as u64, STORAGE)?;
+        let tile_change = gpu.buffer("tile change", 4 * scene.tiles.len().max(1) as u64, STORAGE)?;
         let tile_index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
         let surfels =
             gpu.buffer_init("surfels", bytemuck::cast_slice(&scene.surfels), wgpu::BufferUsages::VERTEX)?;
@@ -266,12 +283,12 @@ impl Upload {
             shared.insert(0, binding, passes::Resource::Buffer(b));
         }
         shared.insert(0, 6, passes::Resource::Texture(shadow_atlas.clone()));
-        for (binding, b) in [(0, &leaf_light), (1, &faces), (2, &stats)] {
+        for (binding, b) in [(0, &leaf_light), (1, &faces), (2, &stats), (3, &active), (4, &tile_change)] {
             bytes += b.size();
             shared.insert(1, binding, passes::Resource::Buffer(b.clone()));
         }
 
-        Ok(Upload { params, leaf_light, faces, stats, surfels, shared, bytes })
+        Ok(Upload { params, leaf_light, faces, stats, active, tile_change, surfels, shared, bytes })
     }
 }
 
@@ -398,6 +415,11 @@ impl Renderer {
             #[cfg(feature = "test-hooks")]
             faces: up.faces,
             stats: up.stats,
+            active: up.active,
+            tile_change: up.tile_change,
+            activity: TileActivity::new(&scene.tiles),
+            active_written: None,
+            bounce_work: Vec::new(),
             surfels: up.surfels,
             view: None,
             direct_valid: false,
@@ -451,6 +473,17 @@ impl Renderer {
     pub fn invalidate_lights(&mut self) {
         self.direct_valid = false;
         self.stats_now.last_change = None;
+        self.set_all_active(Why::LightsChanged);
+    }
+
+    fn set_all_active(&mut self, why: Why) {
+        self.activity.all(why);
+        self.active_written = None;
+    }
+
+    /// What each propagation bounce since the last call updated, and why (drained).
+    pub fn take_bounce_work(&mut self) -> Vec<BounceWork> {
+        std::mem::take(&mut self.bounce_work)
     }
 
     fn inputs(&self, frame: Option<(&Camera, u32, u32)>) -> PlanInputs {
@@ -478,6 +511,9 @@ impl Renderer {
             bounce_budget: self.settings.bounces,
             last_change: self.stats_now.last_change,
             convergence_tolerance: self.settings.convergence_tolerance,
+            tiles_pending: self.activity.pending_tiles(),
+            tiles_total: self.activity.tiles(),
+            tiles_why: self.activity.pending_why(),
             frame: frame.is_some(),
             gbuffer_valid,
         }
@@ -575,17 +611,22 @@ impl Renderer {
         }
         let mut state = initial_light(scene);
         let mut seeded = 0;
-        for t in &scene.tiles {
+        let mut kept = vec![false; scene.tiles.len()];
+        for (t, k) in scene.tiles.iter().zip(&mut kept) {
             let range = t.leaf_offset as usize..(t.leaf_offset + t.leaf_count) as usize;
             if let (Some(from), Some(to)) = (carried.tiles.get(&CarriedLight::key(t)), state.get_mut(range))
                 && from.len() == to.len()
             {
                 to.copy_from_slice(from);
                 seeded += from.len();
+                *k = true;
             }
         }
         if seeded > 0 {
             self.gpu.queue.write_buffer(&self.leaf_light, 0, bytemuck::cast_slice(&state));
+            // Only the new tiles and what touches them need bounces (activity.rs).
+            self.activity.seed(&kept);
+            self.active_written = None;
         }
         Ok(seeded)
     }
@@ -725,7 +766,7 @@ impl Renderer {
                     Pass::Inject => self.inject.record(&mut cp, self.leaf_count),
                     Pass::Env => self.env.record(&mut cp, self.leaf_count),
                     Pass::Mip => self.mip.record(&mut cp),
-                    Pass::Propagate => self.propagate.record(&mut cp, self.leaf_count),
+                    Pass::Propagate => self.propagate.record(&mut cp, self.active_written.unwrap_or(0)),
                     Pass::Shade => {
                         let v = self.view("shade")?;
                         self.shade.record(&mut cp, &v.outputs, v.targets.width, v.targets.height);
@@ -743,6 +784,7 @@ impl Renderer {
         let mut enc = self.encoder();
         if plan.runs(Pass::Propagate) {
             enc.clear_buffer(&self.stats, 0, None);
+            enc.clear_buffer(&self.tile_change, 0, None);
         }
         for step in plan.steps.iter().filter(|s| s.run) {
             let recorded = Instant::now();
@@ -771,6 +813,15 @@ impl Renderer {
     fn execute(&mut self, plan: &EffectPlan, frame: Option<(&Camera, u32, u32)>) -> Result<()> {
         let params = self.frame_params(frame);
         self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        if plan.runs(Pass::Propagate) && self.active_written.is_none() {
+            let items = self.activity.items();
+            let count = items.len() as u32;
+            self.gpu.queue.write_buffer(&self.active, 0, bytemuck::cast_slice(&[count, 0, 0, 0]));
+            if !items.is_empty() {
+                self.gpu.queue.write_buffer(&self.active, 16, bytemuck::cast_slice(&items));
+            }
+            self.active_written = Some(count);
+        }
         if let Some((camera, w, h)) = frame
             && plan.runs(Pass::Gbuffer)
         {
@@ -822,6 +873,17 @@ impl Renderer {
             let bits = u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
             self.stats_now.last_change = Some(f32::from_bits(bits));
             self.stats_now.bounces_done += 1;
+            let tiles = self.activity.tiles();
+            let bytes = self.gpu.read_buffer(&self.tile_change, 4 * tiles.max(1) as u64)?;
+            let change: Vec<f32> = bytes
+                .chunks_exact(4)
+                .take(tiles)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect();
+            let work = self.activity.finish(&change, self.settings.convergence_tolerance);
+            self.stats_now.propagated_leaves += work.leaves;
+            self.bounce_work.push(work);
+            self.active_written = None;
         }
         Ok(())
     }
@@ -845,6 +907,7 @@ impl Renderer {
         }
         self.gpu.queue.write_buffer(&self.leaf_light, 0, bytemuck::cast_slice(state));
         self.stats_now.last_change = None;
+        self.set_all_active(Why::Start);
         Ok(())
     }
 

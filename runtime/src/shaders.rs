@@ -11,6 +11,7 @@ use crate::error::{Error, Result};
 
 /// The shared library: (import name, source).
 pub const LIBRARY: &[(&str, &str)] = &[
+    ("activity", include_str!("shaders/activity.wgsl")),
     ("brdf", include_str!("shaders/brdf.wgsl")),
     ("color", include_str!("shaders/color.wgsl")),
     ("cone", include_str!("shaders/cone.wgsl")),

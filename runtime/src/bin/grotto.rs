@@ -319,10 +319,12 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
         println!("{n}");
     }
     if summary.residency.is_some() && summary.frames.len() > 1 {
-        println!("frame  tile MiB  full  coarse  far  loaded  evicted  surfels  bounces  carried leaves");
+        println!(
+            "frame  tile MiB  full  coarse  far  loaded  evicted  surfels  bounces  carried leaves  propagated leaves"
+        );
         for f in &summary.frames {
             println!(
-                "{:5}  {:8.1}  {:4}  {:6}  {:3}  {:6}  {:7}  {:7}  {:7}  {:14}",
+                "{:5}  {:8.1}  {:4}  {:6}  {:3}  {:6}  {:7}  {:7}  {:7}  {:14}  {:17}",
                 f.frame,
                 f.tile_bytes as f64 / f64::from(1u32 << 20),
                 f.full_tiles,
@@ -332,13 +334,20 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
                 f.evicted,
                 f.surfels,
                 f.bounces,
-                f.carried_leaves
+                f.carried_leaves,
+                f.propagated_leaves
             );
         }
     }
     if a.explain {
         if let Some(r) = &summary.residency {
             println!("{}", r.explain(24));
+        }
+        println!("light work by frame (propagation updates only the tiles whose light may still change):");
+        for f in &summary.frames {
+            for (k, w) in f.bounce_work.iter().enumerate() {
+                println!("  frame {} bounce {}: {}", f.frame, k + 1, describe_bounce(w));
+            }
         }
         println!("effect plan, first update:\n{}", summary.first_plan.explain());
         println!("effect plan, last frame:\n{}", summary.last_plan.explain());
@@ -367,6 +376,24 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
         times.join(", ")
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// One bounce of `--explain`'s light work: tiles updated of all, why, which (when few), and what
+/// changed.
+fn describe_bounce(w: &grotto_runtime::activity::BounceWork) -> String {
+    let why: Vec<String> = w.why.iter().map(|(r, n)| format!("{n} {}", r.describe())).collect();
+    let list = w.tile_list.as_ref().map_or(String::new(), |l| {
+        format!(" [tiles {}]", l.iter().map(u32::to_string).collect::<Vec<_>>().join(" "))
+    });
+    format!(
+        "{} of {} tiles, {} leaves ({}){list}; {} still changing, largest change {:.1e}",
+        w.tiles,
+        w.of_tiles,
+        w.leaves,
+        why.join(", "),
+        w.changed,
+        w.max_change
+    )
 }
 
 fn main() -> ExitCode {

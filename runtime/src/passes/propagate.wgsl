@@ -3,11 +3,13 @@
 // irradiance / pi), then out = emission + direct + env + albedo * gather (env: the env pass's
 // reflected environment light; a cone's escaped share adds only the constant background here).
 // Reads only the mip pyramid, so leaves update independently; records the largest relative change
-// for the effect plan.
+// for the effect plan, and per tile for the choice of the next bounce's tiles. Runs over the
+// active-leaf list (shaders/activity.wgsl): the leaves of the tiles whose light may still change.
 //
 // Cones are traced in batches, one dispatch each (passes/mod.rs `cone_batched` says why); the running sum
 // lives in the leaf's `gather`, added to cone by cone in the same order as one loop would (the
 // result is the same to the bit), and the last batch finishes the leaf.
+#import activity
 #import cone
 #import cone_batch
 #import dispatch
@@ -15,10 +17,12 @@
 
 @compute @workgroup_size(64)
 fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let i = linear_index(gid, nwg);
-    if i >= params.leaf_count {
+    let k = linear_index(gid, nwg);
+    if k >= active_leaves.count {
         return;
     }
+    let item = active_leaves.items[k];
+    let i = item.x;
     let leaf = leaves[i];
     var state = leaf_light[i];
     var gathered = select(state.gather.rgb, vec3<f32>(0.0), batch.first == 0u);
@@ -43,4 +47,5 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     let diff = abs(after - before);
     let change = max(diff.r, max(diff.g, diff.b)) / scale;
     atomicMax(&stats.max_change_bits, bitcast<u32>(change));
+    atomicMax(&tile_change[item.y], bitcast<u32>(change));
 }

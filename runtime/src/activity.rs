@@ -1,0 +1,320 @@
+//! Light work only where something changed: which tiles the next propagation bounce updates, and
+//! why.
+//!
+//! A bounce updates the leaves of the *active* tiles only (propagate.wgsl reads the active-leaf
+//! list) and records each tile's largest relative change. A tile stays active while its own light
+//! or a touching tile's light changed by more than the convergence tolerance in the last bounce;
+//! a tile whose light carried over from the previous set of tiles starts inactive unless it
+//! touches a tile that is new. Light reaches further than a touching tile in one bounce (a cone
+//! runs down a corridor), so "nothing active" is not yet convergence: it triggers one bounce over
+//! every tile, and only a bounce over every tile that changes no leaf by more than the tolerance
+//! ends the work. The stopping test is therefore the batch render's, and the fixed point the same.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use crate::gpu_types::TileGpu;
+
+/// Why a bounce updates a tile.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Why {
+    /// The renderer has no light yet (every tile).
+    Start,
+    /// The lights changed (every tile).
+    LightsChanged,
+    /// The tile was not resident in this form before: its light starts from darkness.
+    New,
+    /// The tile touches a new tile.
+    BesideNew,
+    /// The tile's own light changed by more than the tolerance in the last bounce.
+    Changed,
+    /// The tile touches a tile whose light changed by more than the tolerance.
+    BesideChanged,
+    /// No tile changed where the last bounce looked: one bounce over every tile checks the rest.
+    Verify,
+}
+
+impl Why {
+    pub fn describe(self) -> &'static str {
+        match self {
+            Why::Start => "no light yet",
+            Why::LightsChanged => "lights changed",
+            Why::New => "new",
+            Why::BesideNew => "beside a new tile",
+            Why::Changed => "still changing",
+            Why::BesideChanged => "beside a changing tile",
+            Why::Verify => "convergence check over every tile",
+        }
+    }
+}
+
+/// What one propagation bounce updated.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BounceWork {
+    /// Tiles updated, and of them how many for each reason.
+    pub tiles: usize,
+    /// Tiles in the scene.
+    pub of_tiles: usize,
+    pub why: BTreeMap<Why, usize>,
+    pub leaves: u64,
+    /// The bounce covered every tile (its change is the batch render's stopping test).
+    pub every_tile: bool,
+    /// Tiles updated whose largest relative change exceeded the tolerance.
+    pub changed: usize,
+    /// Largest relative change of any updated leaf.
+    pub max_change: f32,
+    /// Scene tile indices updated, when they are few enough to list (`--explain`).
+    pub tile_list: Option<Vec<u32>>,
+}
+
+/// Tiles listed by index in a [`BounceWork`] (more are only counted).
+pub const LISTED_TILES: usize = 24;
+
+/// Per-tile propagation state of one scene (the renderer's tiles, in their order).
+#[derive(Clone, Debug)]
+pub struct TileActivity {
+    /// `leaf_offset`, `leaf_count` of each tile.
+    leaves: Vec<(u32, u32)>,
+    /// Tiles whose boxes touch (share a face, edge or corner) or overlap, by tile.
+    neighbours: Vec<Vec<u32>>,
+    /// Why the next bounce updates each tile (`None`: it does not).
+    next: Vec<Option<Why>>,
+}
+
+impl TileActivity {
+    /// Every tile active (`Why::Start`).
+    pub fn new(tiles: &[TileGpu]) -> Self {
+        let leaves = tiles.iter().map(|t| (t.leaf_offset, t.leaf_count)).collect();
+        Self { leaves, neighbours: touching(tiles), next: vec![Some(Why::Start); tiles.len()] }
+    }
+
+    /// Every tile active for `why`.
+    pub fn all(&mut self, why: Why) {
+        self.next.fill(Some(why));
+    }
+
+    /// After a reload: `carried[t]` says tile `t` kept its light. The others are new, and the
+    /// tiles touching them follow; a tile that kept its light and touches nothing new waits.
+    pub fn seed(&mut self, carried: &[bool]) {
+        self.next.fill(None);
+        for (t, &kept) in carried.iter().enumerate().take(self.next.len()) {
+            if !kept {
+                self.next[t] = Some(Why::New);
+                for &n in &self.neighbours[t] {
+                    let n = n as usize;
+                    if carried.get(n).copied().unwrap_or(false) {
+                        self.next[n] = Some(Why::BesideNew);
+                    }
+                }
+            }
+        }
+        if self.pending_tiles() == 0 {
+            // Nothing is new, yet the scene differs: one bounce over every tile decides.
+            self.all(Why::Verify);
+        }
+    }
+
+    /// Tiles the next bounce updates.
+    pub fn pending_tiles(&self) -> usize {
+        self.next.iter().filter(|w| w.is_some()).count()
+    }
+
+    pub fn tiles(&self) -> usize {
+        self.next.len()
+    }
+
+    /// Counts by reason of the tiles the next bounce updates, in words ("5 new, 9 beside a new
+    /// tile").
+    pub fn pending_why(&self) -> String {
+        let mut by: BTreeMap<Why, usize> = BTreeMap::new();
+        for w in self.next.iter().flatten() {
+            *by.entry(*w).or_default() += 1;
+        }
+        by.iter().map(|(w, n)| format!("{n} {}", w.describe())).collect::<Vec<_>>().join(", ")
+    }
+
+    /// The active-leaf list of the next bounce: (leaf index, tile index) pairs, tile by tile.
+    pub fn items(&self) -> Vec<[u32; 2]> {
+        let mut out = Vec::new();
+        for (t, w) in self.next.iter().enumerate() {
+            if w.is_some() {
+                let (first, n) = self.leaves[t];
+                out.extend((first..first + n).map(|leaf| [leaf, t as u32]));
+            }
+        }
+        out
+    }
+
+    /// Leaves the next bounce updates.
+    pub fn pending_leaves(&self) -> u64 {
+        self.next.iter().zip(&self.leaves).filter(|(w, _)| w.is_some()).map(|(_, l)| u64::from(l.1)).sum()
+    }
+
+    /// Ends a bounce that updated the pending tiles, given each tile's largest relative change
+    /// (`change[t]`, meaningful for the tiles it updated): chooses the next bounce's tiles and
+    /// returns what this one did. A change that is not a number counts as a change.
+    pub fn finish(&mut self, change: &[f32], tolerance: f32) -> BounceWork {
+        let ran: Vec<usize> = (0..self.next.len()).filter(|&t| self.next[t].is_some()).collect();
+        let mut why: BTreeMap<Why, usize> = BTreeMap::new();
+        for &t in &ran {
+            *why.entry(self.next[t].unwrap_or(Why::Start)).or_default() += 1;
+        }
+        let every_tile = ran.len() == self.next.len();
+        let c = |t: usize| change.get(t).copied().unwrap_or(f32::NAN);
+        let changing: Vec<usize> = ran.iter().copied().filter(|&t| !(c(t) < tolerance)).collect();
+        let max_change = ran.iter().map(|&t| c(t)).fold(0.0f32, |m, x| if x.is_nan() { m } else { m.max(x) });
+        let work = BounceWork {
+            tiles: ran.len(),
+            of_tiles: self.next.len(),
+            why,
+            leaves: ran.iter().map(|&t| u64::from(self.leaves[t].1)).sum(),
+            every_tile,
+            changed: changing.len(),
+            max_change,
+            tile_list: (ran.len() <= LISTED_TILES).then(|| ran.iter().map(|&t| t as u32).collect()),
+        };
+        self.next.fill(None);
+        for &t in &changing {
+            for &n in &self.neighbours[t] {
+                self.next[n as usize].get_or_insert(Why::BesideChanged);
+            }
+        }
+        for &t in &changing {
+            self.next[t] = Some(Why::Changed);
+        }
+        if changing.is_empty() && !every_tile {
+            self.all(Why::Verify);
+        }
+        work
+    }
+}
+
+/// For each tile, the other tiles whose boxes (origin .. origin + 2^depth leaves of the package)
+/// touch or overlap it: a sweep over the tiles sorted by their lowest x, so the cost follows the
+/// pairs close in x rather than every pair.
+fn touching(tiles: &[TileGpu]) -> Vec<Vec<u32>> {
+    let boxes: Vec<([i64; 3], [i64; 3])> = tiles
+        .iter()
+        .map(|t| {
+            let lo = t.origin_leaf.map(i64::from);
+            let edge = 1i64 << t.depth.min(40);
+            (lo, lo.map(|v| v + edge))
+        })
+        .collect();
+    let mut order: Vec<usize> = (0..tiles.len()).collect();
+    order.sort_by_key(|&t| boxes[t].0[0]);
+    let mut out = vec![Vec::new(); tiles.len()];
+    for (k, &a) in order.iter().enumerate() {
+        for &b in &order[k + 1..] {
+            if boxes[b].0[0] > boxes[a].1[0] {
+                break;
+            }
+            let meet = (0..3).all(|ax| boxes[a].0[ax] <= boxes[b].1[ax] && boxes[b].0[ax] <= boxes[a].1[ax]);
+            if meet {
+                out[a].push(b as u32);
+                out[b].push(a as u32);
+            }
+        }
+    }
+    for list in &mut out {
+        list.sort_unstable();
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A row of `n` tiles of depth 2 (4 leaves) along x, 10 leaves each.
+    fn row(n: usize) -> Vec<TileGpu> {
+        (0..n)
+            .map(|i| TileGpu {
+                origin_leaf: [4 * i as i32, 0, 0],
+                depth: 2,
+                leaf_offset: 10 * i as u32,
+                leaf_count: 10,
+                ..Default::default()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn touching_tiles_are_neighbours_and_distant_ones_are_not() {
+        let mut tiles = row(4);
+        // A tile diagonal to tile 0 (shares an edge), and one a leaf away from everything.
+        tiles.push(TileGpu { origin_leaf: [-4, 4, 0], depth: 2, ..Default::default() });
+        tiles.push(TileGpu { origin_leaf: [0, 0, 5], depth: 2, ..Default::default() });
+        let n = touching(&tiles);
+        assert_eq!(n[0], vec![1, 4]);
+        assert_eq!(n[1], vec![0, 2]);
+        assert_eq!(n[3], vec![2]);
+        assert!(n[5].is_empty());
+    }
+
+    #[test]
+    fn a_reload_activates_new_tiles_and_their_neighbours_only() {
+        let mut a = TileActivity::new(&row(6));
+        assert_eq!(a.pending_tiles(), 6);
+        a.seed(&[true, true, true, false, true, true]);
+        assert_eq!(
+            a.next,
+            vec![None, None, Some(Why::BesideNew), Some(Why::New), Some(Why::BesideNew), None]
+        );
+        assert_eq!(a.pending_leaves(), 30);
+        let items = a.items();
+        assert_eq!(items.len(), 30);
+        assert_eq!(items[0], [20, 2]);
+        assert_eq!(items[29], [49, 4]);
+        assert_eq!(a.pending_why(), "1 new, 2 beside a new tile");
+    }
+
+    #[test]
+    fn change_spreads_to_neighbours_then_a_check_over_every_tile_ends_it() {
+        let mut a = TileActivity::new(&row(6));
+        a.seed(&[true, true, true, false, true, true]);
+        // Tile 3 still changes, 2 and 4 do not: 3 and its neighbours again.
+        let mut change = [0.0f32; 6];
+        change[3] = 0.1;
+        let w = a.finish(&change, 1e-3);
+        assert_eq!((w.tiles, w.changed, w.leaves, w.every_tile), (3, 1, 30, false));
+        assert_eq!(w.tile_list, Some(vec![2, 3, 4]));
+        assert_eq!(a.next[3], Some(Why::Changed));
+        assert_eq!(a.next[2], Some(Why::BesideChanged));
+        assert_eq!(a.pending_tiles(), 3);
+        // Nothing changes where it looked: every tile is checked once.
+        let w = a.finish(&[0.0; 6], 1e-3);
+        assert_eq!(w.changed, 0);
+        assert_eq!(a.pending_tiles(), 6);
+        assert!(a.next.iter().all(|w| *w == Some(Why::Verify)));
+        // The check finds a far tile changing (light down a corridor): it and its neighbour run.
+        change = [0.0; 6];
+        change[0] = 0.01;
+        let w = a.finish(&change, 1e-3);
+        assert!(w.every_tile);
+        assert_eq!(a.next[..2], [Some(Why::Changed), Some(Why::BesideChanged)]);
+        assert_eq!(a.pending_tiles(), 2);
+        a.finish(&[0.0; 6], 1e-3);
+        // A clean check over every tile: nothing is left to do.
+        let w = a.finish(&[0.0; 6], 1e-3);
+        assert!(w.every_tile && w.changed == 0);
+        assert_eq!(a.pending_tiles(), 0);
+    }
+
+    #[test]
+    fn a_change_that_is_not_a_number_counts_as_a_change() {
+        let mut a = TileActivity::new(&row(3));
+        a.finish(&[0.0, f32::NAN, 0.0], 1e-3);
+        assert_eq!(a.next, vec![Some(Why::BesideChanged), Some(Why::Changed), Some(Why::BesideChanged)]);
+    }
+
+    #[test]
+    fn nothing_new_after_a_reload_still_checks_every_tile() {
+        let mut a = TileActivity::new(&row(3));
+        a.seed(&[true, true, true]);
+        assert_eq!(a.pending_tiles(), 3);
+        assert_eq!(a.next[0], Some(Why::Verify));
+    }
+}
