@@ -813,6 +813,10 @@ impl Renderer {
     fn execute(&mut self, plan: &EffectPlan, frame: Option<(&Camera, u32, u32)>) -> Result<()> {
         let params = self.frame_params(frame);
         self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        if plan.runs(Pass::Propagate) && self.activity.pending_tiles() == 0 {
+            // Forced past convergence: a bounce means every tile.
+            self.set_all_active(Why::Verify);
+        }
         if plan.runs(Pass::Propagate) && self.active_written.is_none() {
             let items = self.activity.items();
             let count = items.len() as u32;
@@ -932,9 +936,10 @@ impl Renderer {
         self.execute(&p, None)
     }
 
-    /// Runs only mip + propagate, i.e. one bounce regardless of the plan (tests).
+    /// Runs only mip + propagate, i.e. one bounce over every tile regardless of the plan (tests).
     #[cfg(feature = "test-hooks")]
     pub fn run_bounce(&mut self) -> Result<()> {
+        self.set_all_active(Why::Verify);
         let p = EffectPlan {
             steps: vec![
                 plan::Step { pass: Pass::Mip, run: true, reason: "requested".into() },

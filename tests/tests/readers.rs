@@ -367,3 +367,35 @@ fn ply_headers_as_people_write_them_read() {
     let e = read(&bad).err().expect("not a PLY file");
     assert!(e.to_string().contains("plywood.ply"), "{e}");
 }
+
+#[test]
+fn e57_surface_normals_extension_reads_as_normals() {
+    // Two writers of the extension: libE57Format's test file (the e57 crate's copy) and
+    // CloudCompare's, whose namespace URI differs (pye57's test data). Each point's normal is a
+    // unit vector distinct from its position, so reading coordinates or a wrong record fails.
+    let Some(data) = shared_data_dir() else { return };
+    for (name, points) in [("e57rs_tiny_pc_with_extension.e57", 1), ("pye57_testWithNormals.e57", 2)] {
+        let path = data.join("e57").join(name);
+        let mut src = ingest::open(&path, ScanFormat::E57, 0).unwrap();
+        assert!(src.info().has_normals, "{name}: the header announces normals");
+        let mut chunk = PointChunk::new(16);
+        let (mut xyz, mut normals) = (Vec::new(), Vec::new());
+        while src.fill_chunk(&mut chunk).unwrap() > 0 {
+            xyz.extend_from_slice(&chunk.xyz);
+            normals.extend_from_slice(&chunk.normal);
+        }
+        eprintln!("{name}: points {xyz:?}, normals {normals:?}");
+        assert_eq!((xyz.len(), normals.len()), (points, points), "{name}");
+        for (p, n) in xyz.iter().zip(&normals) {
+            let len = n.iter().map(|c| c * c).sum::<f32>().sqrt();
+            assert!((len - 1.0).abs() < 1e-3, "{name}: normal {n:?} is not unit length");
+            assert!(
+                p.iter().zip(n).any(|(a, b)| (*a as f32 - b).abs() > 1e-3),
+                "{name}: normal equals position"
+            );
+        }
+    }
+    // A scan without the extension has none.
+    let src = ingest::open(&data.join("e57/e57rs_bunnyInt19.e57"), ScanFormat::E57, 0).unwrap();
+    assert!(!src.info().has_normals);
+}

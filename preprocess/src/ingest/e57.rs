@@ -1,6 +1,7 @@
 //! E57 through the `e57` crate: several scans per file, each with its pose; cartesian or spherical
 //! coordinates (converted by the crate); points flagged invalid are dropped; colour, else
-//! intensity as grey.
+//! intensity as grey; surface normals where the scan carries the normals extension
+//! (`nor:normalX/Y/Z`, as libE57Format and CloudCompare write it).
 //!
 //! The crate's point iterator borrows its reader, so a decoding thread owns both and hands filled
 //! chunks over a bounded channel; empty chunks come back for reuse. That keeps memory at a few
@@ -11,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
-use e57::{CartesianCoordinate, E57Reader};
+use e57::{CartesianCoordinate, E57Reader, PointCloud, RecordName};
 
 use super::{NEUTRAL_GREY, PointChunk, PointSource, ScanFormat, SourceInfo, guard, read_error};
 use crate::Result;
@@ -37,6 +38,16 @@ pub(super) struct E57Source {
 /// What the file says about scan `index` (pose, count, attributes), without decoding points.
 pub(super) fn header_info(path: &Path, index: usize) -> Result<SourceInfo> {
     guard(path, ScanFormat::E57, || header_unguarded(path, index).map(|(info, _)| info))
+}
+
+/// Where the scan's records hold the normals extension's three components, if it has all three.
+/// Matched by local name: the extension's namespace URI differs between writers
+/// (`E57_EXT_surface_normals`, CloudCompare's `E57_NOR_surface_normals`) and its prefix is free.
+fn normal_records(pc: &PointCloud) -> Option<[usize; 3]> {
+    let find = |want: &str| {
+        pc.prototype.iter().position(|r| matches!(&r.name, RecordName::Unknown { name, .. } if name == want))
+    };
+    Some([find("normalX")?, find("normalY")?, find("normalZ")?])
 }
 
 /// The scan's info and whether it has intensity.
@@ -65,7 +76,7 @@ fn header_unguarded(path: &Path, index: usize) -> Result<(SourceInfo, bool)> {
         name: pc.name.clone().unwrap_or_else(|| format!("scan {index}")),
         claimed_points: pc.records,
         has_color: pc.has_color(),
-        has_normals: false,
+        has_normals: normal_records(pc).is_some(),
         dropped_points: 0,
         file_pose,
     };
@@ -108,11 +119,37 @@ fn decode(
         points.apply_pose(false);
         points.spherical_to_cartesian(true);
         points.intensity_to_color(true);
+        // The crate's simple points have no extension fields: the normals come from a second,
+        // raw reading of the same scan, record for record (both yield every record in order).
+        let normal_at = normal_records(&pc);
+        let mut raw_reader = match normal_at {
+            Some(_) => Some(E57Reader::from_file(&path).map_err(|e| e.to_string())?),
+            None => None,
+        };
+        let mut raw = match &mut raw_reader {
+            Some(r) => Some(r.pointcloud_raw(&pc).map_err(|e| e.to_string())?),
+            None => None,
+        };
         let mut chunk = PointChunk::new(super::DEFAULT_CHUNK);
         for p in points {
             let p = p.map_err(|e| e.to_string())?;
+            let normal = match (&mut raw, normal_at) {
+                (Some(raw), Some(at)) => {
+                    let values =
+                        raw.next().ok_or("fewer raw records than points")?.map_err(|e| e.to_string())?;
+                    let component = |k: usize| -> std::result::Result<f32, String> {
+                        let (v, r) =
+                            values.get(at[k]).zip(pc.prototype.get(at[k])).ok_or("short raw record")?;
+                        Ok(v.to_f64(&r.data_type).map_err(|e| e.to_string())? as f32)
+                    };
+                    Some([component(0)?, component(1)?, component(2)?])
+                }
+                _ => None,
+            };
             let CartesianCoordinate::Valid { x, y, z } = p.cartesian else { continue };
             chunk.xyz.push([x, y, z]);
+            // Tiling treats a zero or non-finite normal as missing (estimated instead).
+            chunk.normal.extend(normal);
             chunk.rgb.push(match (p.color, has_color || has_intensity) {
                 (Some(c), true) => {
                     [c.red, c.green, c.blue].map(|v| (v * 255.0).round().clamp(0.0, 255.0) as u8)
