@@ -163,7 +163,8 @@ impl TileActivity {
         }
         let every_tile = ran.len() == self.next.len();
         let c = |t: usize| change.get(t).copied().unwrap_or(f32::NAN);
-        let changing: Vec<usize> = ran.iter().copied().filter(|&t| !(c(t) < tolerance)).collect();
+        let changing: Vec<usize> =
+            ran.iter().copied().filter(|&t| c(t).is_nan() || c(t) >= tolerance).collect();
         let max_change = ran.iter().map(|&t| c(t)).fold(0.0f32, |m, x| if x.is_nan() { m } else { m.max(x) });
         let work = BounceWork {
             tiles: ran.len(),
