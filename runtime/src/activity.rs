@@ -14,7 +14,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use crate::gpu_types::TileGpu;
+use crate::gpu_types::{ActiveTile, TileGpu};
 
 /// Why a bounce updates a tile.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
@@ -128,28 +128,22 @@ impl TileActivity {
     /// Counts by reason of the tiles the next bounce updates, in words ("5 new, 9 beside a new
     /// tile").
     pub fn pending_why(&self) -> String {
-        let mut by: BTreeMap<Why, usize> = BTreeMap::new();
-        for w in self.next.iter().flatten() {
-            *by.entry(*w).or_default() += 1;
-        }
-        by.iter().map(|(w, n)| format!("{n} {}", w.describe())).collect::<Vec<_>>().join(", ")
+        describe_counts(&count_why(self.next.iter().flatten()))
     }
 
-    /// The active-leaf list of the next bounce: (leaf index, tile index) pairs, tile by tile.
-    pub fn items(&self) -> Vec<[u32; 2]> {
+    /// The next bounce's tiles as propagate reads them (shaders/activity.wgsl), tiles without
+    /// leaves left out, and the number of its invocations (their leaves).
+    pub fn active_tiles(&self) -> (Vec<ActiveTile>, u32) {
+        let mut items = 0;
         let mut out = Vec::new();
         for (t, w) in self.next.iter().enumerate() {
-            if w.is_some() {
-                let (first, n) = self.leaves[t];
-                out.extend((first..first + n).map(|leaf| [leaf, t as u32]));
+            let (first_leaf, leaf_count) = self.leaves[t];
+            if w.is_some() && leaf_count > 0 {
+                out.push(ActiveTile { tile: t as u32, first_leaf, leaf_count, first_item: items });
+                items += leaf_count;
             }
         }
-        out
-    }
-
-    /// Leaves the next bounce updates.
-    pub fn pending_leaves(&self) -> u64 {
-        self.next.iter().zip(&self.leaves).filter(|(w, _)| w.is_some()).map(|(_, l)| u64::from(l.1)).sum()
+        (out, items)
     }
 
     /// Ends a bounce that updated the pending tiles, given each tile's largest relative change
@@ -157,10 +151,7 @@ impl TileActivity {
     /// returns what this one did. A change that is not a number counts as a change.
     pub fn finish(&mut self, change: &[f32], tolerance: f32) -> BounceWork {
         let ran: Vec<usize> = (0..self.next.len()).filter(|&t| self.next[t].is_some()).collect();
-        let mut why: BTreeMap<Why, usize> = BTreeMap::new();
-        for &t in &ran {
-            *why.entry(self.next[t].unwrap_or(Why::Start)).or_default() += 1;
-        }
+        let why = count_why(self.next.iter().flatten());
         let every_tile = ran.len() == self.next.len();
         let c = |t: usize| change.get(t).copied().unwrap_or(f32::NAN);
         let changing: Vec<usize> =
@@ -190,6 +181,19 @@ impl TileActivity {
         }
         work
     }
+}
+
+fn count_why<'a>(reasons: impl Iterator<Item = &'a Why>) -> BTreeMap<Why, usize> {
+    let mut by = BTreeMap::new();
+    for w in reasons {
+        *by.entry(*w).or_default() += 1;
+    }
+    by
+}
+
+/// Tiles by reason in words: "12 new, 22 beside a new tile".
+pub fn describe_counts(by: &BTreeMap<Why, usize>) -> String {
+    by.iter().map(|(w, n)| format!("{n} {}", w.describe())).collect::<Vec<_>>().join(", ")
 }
 
 /// For each tile, the other tiles whose boxes (origin .. origin + 2^depth leaves of the package)
@@ -264,11 +268,10 @@ mod tests {
             a.next,
             vec![None, None, Some(Why::BesideNew), Some(Why::New), Some(Why::BesideNew), None]
         );
-        assert_eq!(a.pending_leaves(), 30);
-        let items = a.items();
-        assert_eq!(items.len(), 30);
-        assert_eq!(items[0], [20, 2]);
-        assert_eq!(items[29], [49, 4]);
+        let (tiles, items) = a.active_tiles();
+        assert_eq!(items, 30);
+        let at = |tile, first_leaf, first_item| ActiveTile { tile, first_leaf, leaf_count: 10, first_item };
+        assert_eq!(tiles, vec![at(2, 20, 0), at(3, 30, 10), at(4, 40, 20)]);
         assert_eq!(a.pending_why(), "1 new, 2 beside a new tile");
     }
 

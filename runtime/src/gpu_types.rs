@@ -253,6 +253,17 @@ pub struct ConeBatch {
     pub pad1: u32,
 }
 
+/// One tile of a propagation bounce's active list (activity.rs, shaders/activity.wgsl): its
+/// leaves `first_leaf .. first_leaf + leaf_count` are the bounce's invocations `first_item ..`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq, Eq)]
+pub struct ActiveTile {
+    pub tile: u32,
+    pub first_leaf: u32,
+    pub leaf_count: u32,
+    pub first_item: u32,
+}
+
 /// Uniform of one splat render pass (one shadow layer or the camera). 256 bytes so that one buffer
 /// holds all of them at static offsets. Mirrored by `Splat` in passes/splat.wgsl.
 #[repr(C)]
@@ -289,6 +300,7 @@ const _: () = {
     assert!(size_of::<MipRange>() == 16);
     assert!(size_of::<InjectBatch>() == 16);
     assert!(size_of::<ConeBatch>() == 16);
+    assert!(size_of::<ActiveTile>() == 16);
     assert!(size_of::<SplatUniform>() == 256);
     assert!(size_of::<SurfelGpu>() == 36);
 };

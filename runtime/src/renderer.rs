@@ -17,7 +17,7 @@ use crate::activity::{BounceWork, TileActivity, Why};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
-use crate::gpu_types::{LeafLightGpu, MAX_CONES, Params, SplatUniform, flags};
+use crate::gpu_types::{ActiveTile, LeafLightGpu, MAX_CONES, Params, SplatUniform, flags};
 use crate::lights::LightSetup;
 use crate::passes::{self, gbuffer, shade, shadow};
 use crate::plan::{self, EffectPlan, Pass, PlanInputs};
@@ -116,11 +116,12 @@ pub struct Renderer {
     #[cfg(feature = "test-hooks")]
     faces: wgpu::Buffer,
     stats: wgpu::Buffer,
-    /// The active-leaf list propagate reads, and its per-tile changes (shaders/activity.wgsl).
+    /// The active tiles propagate reads, and their changes (shaders/activity.wgsl).
     active: wgpu::Buffer,
     tile_change: wgpu::Buffer,
     activity: TileActivity,
-    /// Leaves in the active list on the GPU; `None` when the list changed since it was written.
+    /// Invocations (leaves) of the active tiles on the GPU; `None` when the tiles changed since
+    /// they were written.
     active_written: Option<u32>,
     /// Bounces since the last [`Renderer::take_bounce_work`], with what each updated.
     bounce_work: Vec<BounceWork>,
@@ -257,8 +258,12 @@ impl Upload {
             gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial_light(scene)), STORAGE)?;
         let faces = gpu.buffer("faces", scene.buffer_bytes(f16).faces, STORAGE)?;
         let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE)?;
-        // A 16-byte count, then (leaf, tile) pairs: at most every leaf.
-        let active = gpu.buffer("active leaves", 16 + 8 * scene.leaves.len().max(1) as u64, STORAGE)?;
+        // A 16-byte header, then at most every tile.
+        let active = gpu.buffer(
+            "active tiles",
+            16 + (size_of::<ActiveTile>() * scene.tiles.len().max(1)) as u64,
+            STORAGE,
+        )?;
         let tile_change = gpu.buffer("tile change", 4 * scene.tiles.len().max(1) as u64, STORAGE)?;
         let tile_index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
         let surfels =
@@ -813,18 +818,20 @@ impl Renderer {
     fn execute(&mut self, plan: &EffectPlan, frame: Option<(&Camera, u32, u32)>) -> Result<()> {
         let params = self.frame_params(frame);
         self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-        if plan.runs(Pass::Propagate) && self.activity.pending_tiles() == 0 {
-            // Forced past convergence: a bounce means every tile.
-            self.set_all_active(Why::Verify);
-        }
-        if plan.runs(Pass::Propagate) && self.active_written.is_none() {
-            let items = self.activity.items();
-            let count = items.len() as u32;
-            self.gpu.queue.write_buffer(&self.active, 0, bytemuck::cast_slice(&[count, 0, 0, 0]));
-            if !items.is_empty() {
-                self.gpu.queue.write_buffer(&self.active, 16, bytemuck::cast_slice(&items));
+        if plan.runs(Pass::Propagate) {
+            if self.activity.pending_tiles() == 0 {
+                // Forced past convergence: a bounce means every tile.
+                self.set_all_active(Why::Verify);
             }
-            self.active_written = Some(count);
+            if self.active_written.is_none() {
+                let (tiles, items) = self.activity.active_tiles();
+                let header = [tiles.len() as u32, items, 0, 0];
+                self.gpu.queue.write_buffer(&self.active, 0, bytemuck::cast_slice(&header));
+                if !tiles.is_empty() {
+                    self.gpu.queue.write_buffer(&self.active, 16, bytemuck::cast_slice(&tiles));
+                }
+                self.active_written = Some(items);
+            }
         }
         if let Some((camera, w, h)) = frame
             && plan.runs(Pass::Gbuffer)
@@ -879,11 +886,7 @@ impl Renderer {
             self.stats_now.bounces_done += 1;
             let tiles = self.activity.tiles();
             let bytes = self.gpu.read_buffer(&self.tile_change, 4 * tiles.max(1) as u64)?;
-            let change: Vec<f32> = bytes
-                .chunks_exact(4)
-                .take(tiles)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect();
+            let change: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[..4 * tiles]);
             let work = self.activity.finish(&change, self.settings.convergence_tolerance);
             self.stats_now.propagated_leaves += work.leaves;
             self.bounce_work.push(work);

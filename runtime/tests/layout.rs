@@ -128,6 +128,7 @@ fn shared() -> Vec<(&'static str, RustLayout)> {
         ("MipRange", rust_layout!(MipRange { first, count, height, pad })),
         ("InjectBatch", rust_layout!(InjectBatch { first, count, reset, pad })),
         ("ConeBatch", rust_layout!(ConeBatch { first, count, pad0, pad1 })),
+        ("ActiveTile", rust_layout!(ActiveTile { tile, first_leaf, leaf_count, first_item })),
         ("Splat", rust_layout!(SplatUniform { view_proj, eye_m, viewport, splat, pad })),
     ]
 }

@@ -122,14 +122,10 @@ fn decode(
         // The crate's simple points have no extension fields: the normals come from a second,
         // raw reading of the same scan, record for record (both yield every record in order).
         let normal_at = normal_records(&pc);
-        let mut raw_reader = match normal_at {
-            Some(_) => Some(E57Reader::from_file(&path).map_err(|e| e.to_string())?),
-            None => None,
-        };
-        let mut raw = match &mut raw_reader {
-            Some(r) => Some(r.pointcloud_raw(&pc).map_err(|e| e.to_string())?),
-            None => None,
-        };
+        let mut raw_reader =
+            normal_at.map(|_| E57Reader::from_file(&path)).transpose().map_err(|e| e.to_string())?;
+        let mut raw =
+            raw_reader.as_mut().map(|r| r.pointcloud_raw(&pc)).transpose().map_err(|e| e.to_string())?;
         let mut chunk = PointChunk::new(super::DEFAULT_CHUNK);
         for p in points {
             let p = p.map_err(|e| e.to_string())?;

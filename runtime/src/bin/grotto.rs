@@ -381,7 +381,6 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
 /// One bounce of `--explain`'s light work: tiles updated of all, why, which (when few), and what
 /// changed.
 fn describe_bounce(w: &grotto_runtime::activity::BounceWork) -> String {
-    let why: Vec<String> = w.why.iter().map(|(r, n)| format!("{n} {}", r.describe())).collect();
     let list = w.tile_list.as_ref().map_or(String::new(), |l| {
         format!(" [tiles {}]", l.iter().map(u32::to_string).collect::<Vec<_>>().join(" "))
     });
@@ -390,7 +389,7 @@ fn describe_bounce(w: &grotto_runtime::activity::BounceWork) -> String {
         w.tiles,
         w.of_tiles,
         w.leaves,
-        why.join(", "),
+        grotto_runtime::activity::describe_counts(&w.why),
         w.changed,
         w.max_change
     )

@@ -4,7 +4,7 @@
 // reflected environment light; a cone's escaped share adds only the constant background here).
 // Reads only the mip pyramid, so leaves update independently; records the largest relative change
 // for the effect plan, and per tile for the choice of the next bounce's tiles. Runs over the
-// active-leaf list (shaders/activity.wgsl): the leaves of the tiles whose light may still change.
+// active tiles (shaders/activity.wgsl): the leaves of the tiles whose light may still change.
 //
 // Cones are traced in batches, one dispatch each (passes/mod.rs `cone_batched` says why); the running sum
 // lives in the leaf's `gather`, added to cone by cone in the same order as one loop would (the
@@ -18,10 +18,10 @@
 @compute @workgroup_size(64)
 fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let k = linear_index(gid, nwg);
-    if k >= active_leaves.count {
+    if k >= active_tiles.item_count {
         return;
     }
-    let item = active_leaves.items[k];
+    let item = active_leaf(k);
     let i = item.x;
     let leaf = leaves[i];
     var state = leaf_light[i];

@@ -1,17 +1,45 @@
-// Light work only where something changed (runtime/src/activity.rs): the leaves a propagation
-// bounce updates, tile by tile, and the largest relative change each tile's leaves made. With the
-// light state in bind group 1; only propagate imports it.
+// Light work only where something changed (runtime/src/activity.rs): the tiles a propagation
+// bounce updates, and the largest relative change each tile's leaves made. With the light state
+// in bind group 1; only propagate imports it.
 #import light_state
 
-// Mirrors the renderer's active-leaf buffer: a count, then (leaf index, tile index) pairs.
-struct ActiveLeaves {
-    count: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
-    items: array<vec2<u32>>,
+// Mirrors gpu_types.rs ActiveTile (runtime/tests/layout.rs): the tile's leaves are the bounce's
+// invocations first_item .. first_item + leaf_count.
+struct ActiveTile {
+    tile: u32,
+    first_leaf: u32,
+    leaf_count: u32,
+    first_item: u32,
 }
 
-@group(1) @binding(3) var<storage, read> active_leaves: ActiveLeaves;
+// The tiles and the invocations (their leaves) of the bounce, then the tiles in order of
+// first_item: one entry per active tile, not per leaf, so the list the CPU writes each bounce
+// stays small.
+struct ActiveTiles {
+    tile_count: u32,
+    item_count: u32,
+    pad0: u32,
+    pad1: u32,
+    tiles: array<ActiveTile>,
+}
+
+@group(1) @binding(3) var<storage, read> active_tiles: ActiveTiles;
 // Largest relative change per tile in this bounce, as f32 bits (see Stats::max_change_bits).
 @group(1) @binding(4) var<storage, read_write> tile_change: array<atomic<u32>>;
+
+// Leaf index (x) and tile index (y) of invocation `k` (< the list's item total): the last active
+// tile whose first_item is at most k, by binary search (log2 of the active tiles, a few steps).
+fn active_leaf(k: u32) -> vec2<u32> {
+    var lo = 0u;
+    var hi = active_tiles.tile_count;
+    while hi - lo > 1u {
+        let mid = (lo + hi) / 2u;
+        if active_tiles.tiles[mid].first_item <= k {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let t = active_tiles.tiles[lo];
+    return vec2<u32>(t.first_leaf + (k - t.first_item), t.tile);
+}
