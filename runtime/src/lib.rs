@@ -20,6 +20,7 @@ pub mod inspect;
 pub mod lights;
 pub mod passes;
 pub mod plan;
+pub mod pool;
 pub mod render_job;
 pub mod renderer;
 pub mod residency;

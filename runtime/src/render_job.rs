@@ -15,6 +15,7 @@ use crate::framing::Framing;
 use crate::gpu::{Gpu, GpuOptions};
 use crate::image_out;
 use crate::plan::EffectPlan;
+use crate::pool::{POOL_HEADROOM, PoolCaps};
 use crate::renderer::{PassStats, Renderer, Settings};
 use crate::residency::{self, Budget, Residency};
 use crate::scene_data::{SceneData, TileMode};
@@ -79,6 +80,9 @@ pub struct RenderOptions {
     /// Along a path, most bounces run before a frame whose tiles changed (`--frame-bounces`);
     /// the rest runs one bounce per frame, so light converges over frames. `None`: settle.
     pub frame_bounces: Option<u32>,
+    /// Along a path, most tile bytes uploaded before a frame (`--upload-per-frame`,
+    /// [`residency::limit_uploads`]); `None`: no limit.
+    pub upload_per_frame: Option<u64>,
 }
 
 impl RenderOptions {
@@ -102,6 +106,7 @@ impl RenderOptions {
             gpu_memory: None,
             point_budget: None,
             frame_bounces: None,
+            upload_per_frame: None,
         }
     }
 }
@@ -145,6 +150,7 @@ fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Stre
     let budget = Budget {
         gpu_bytes: opts.gpu_memory.unwrap_or_else(|| default_gpu_memory(gpu)),
         points: opts.point_budget.unwrap_or(u64::MAX),
+        pools: None,
     };
     let tiles = residency::footprints(&pkg, opts.settings.radiance_f16)?;
     let full_bytes: u64 = tiles.iter().map(|t| t.full.bytes).sum();
@@ -157,14 +163,17 @@ fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Stre
     let mut coarse = non_empty(SceneData::from_package_with(&pkg, |_| TileMode::Far)?)?;
     apply_lamps(opts, &mut coarse);
     let largest_tile_m = tiles.iter().map(|t| (t.max_m - t.min_m).max_element()).fold(0.0, f32::max);
+    // Residency fills the pools but for their headroom (pool.rs).
+    let fill = Budget { gpu_bytes: (budget.gpu_bytes as f64 * (1.0 - POOL_HEADROOM)) as u64, ..budget };
     let streaming = Streaming {
         pkg,
         tiles,
-        budget,
+        budget: fill,
         aspect: opts.width as f32 / opts.height.max(1) as f32,
         lights_m: coarse.lights.iter().map(|l| l.position_m).collect(),
         light_reach_m: opts.settings.max_distance_m.unwrap_or(largest_tile_m),
         rock: coarse.rock.clone(),
+        pool_bytes: budget.gpu_bytes,
     };
     Ok((coarse, Some(streaming)))
 }
@@ -178,6 +187,9 @@ pub struct Streaming {
     aspect: f32,
     lights_m: Vec<Vec3>,
     light_reach_m: f32,
+    /// `--gpu-memory`: the renderer's tile pools take this much (`budget` keeps their headroom
+    /// free).
+    pool_bytes: u64,
     /// Read (format 1.1) or classified once: every load holds every tile in some form, so every
     /// load has the same rock (`from_package_with_rock`).
     rock: crate::rock::RockTable,
@@ -211,9 +223,9 @@ impl Streaming {
     }
 }
 
-/// What the loader thread hands the next frame: its residency, and its scene where the tiles
-/// changed.
-type NextTiles = (Residency, Option<SceneData>);
+/// What the loader thread hands the next frame: its residency, its scene where the tiles
+/// changed, and the changes deferred by `--upload-per-frame`.
+type NextTiles = (Residency, Option<SceneData>, usize);
 
 /// One frame of a job, for `--json` and the fly-through tables.
 #[derive(Clone, Debug, Serialize)]
@@ -241,6 +253,21 @@ pub struct FrameReport {
     pub propagated_leaves: u64,
     /// Each of the frame's bounces: which tiles it updated and why (`--explain`).
     pub bounce_work: Vec<crate::activity::BounceWork>,
+    /// GPU bytes of the renderer's tile pools (allocated once, from `--gpu-memory`; what the
+    /// budget bounds). `tile_bytes` is the part the frame's tiles use.
+    pub pool_bytes: u64,
+    /// How the frame's change of tiles reached the GPU (pool.rs): tiles written, bytes written,
+    /// whether the pools were repacked; None where the tiles did not change. A change the pools
+    /// could not take in place (a scene whose lights or bounds differ) makes a new renderer and
+    /// reports `made_anew`.
+    pub update: Option<crate::renderer::SceneUpdate>,
+    pub made_anew: bool,
+    /// Changes of tile form left for later frames by `--upload-per-frame`.
+    pub deferred: usize,
+    /// Shadow faces drawn for the frame (0 where the shadow pass did not run): after a change of
+    /// tiles, only the faces that see a changed tile, of `shadow_faces_total`.
+    pub shadow_faces: u64,
+    pub shadow_faces_total: usize,
     /// Milliseconds this frame waited for the loader thread (which chose and read its tiles while
     /// the previous frame rendered).
     pub load_wait_ms: f64,
@@ -425,7 +452,7 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
     if let Some(r) = &residency {
         notes.push(format!(
             "residency: {} of {} tiles in full, {} at their coarse level, {} at their far level; {} of \
-             tile data (budget {}), {} surfels drawn{}",
+             tile data (budget {}: --gpu-memory less the pools' headroom), {} surfels drawn{}",
             r.totals.full_tiles,
             r.decisions.len(),
             r.totals.coarse_tiles,
@@ -544,7 +571,20 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let load_s = t_load.elapsed().as_secs_f64();
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
-    let mut r = Renderer::new(&gpu, &scene, settings.clone())?;
+    let mut streaming = streaming;
+    let mut r = match &mut streaming {
+        // Pools for the whole budget, in the mix of the first view's tiles, so the tiles of later
+        // views replace these in place (pool.rs); residency then keeps within each pool.
+        Some(st) => {
+            let used = PoolCaps { tiles: st.tiles.len() as u64, ..PoolCaps::of(&scene) };
+            let caps = PoolCaps::filling(used, st.pool_bytes, settings.radiance_f16);
+            let r = Renderer::with_pools(&gpu, &scene, settings.clone(), caps)?;
+            st.budget.pools = Some(r.pool_caps().less(POOL_HEADROOM));
+            r
+        }
+        None => Renderer::new(&gpu, &scene, settings.clone())?,
+    };
+    let streaming = streaming;
     let first_plan = r.plan(Some((&cameras[0], opts.width, opts.height)));
     let t0 = Instant::now();
     let budget = settings.bounces;
@@ -569,27 +609,43 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         for (i, cam) in cameras.iter().enumerate() {
             let (mut loaded, mut evicted, mut bounces, mut carried_leaves) = (0, 0, 0, 0);
             let mut load_wait_ms = 0.0;
+            let (mut update, mut made_anew, mut deferred) = (None, false, 0);
+            let shadow_before = r.shadow_faces_drawn();
             if i == 0 {
                 bounces = r.stats().bounces_done;
             } else if let (Some(handle), Some(current)) = (next_load.take(), &residency) {
                 let t_wait = Instant::now();
-                let (next, new_scene) = handle.join().map_err(|_| Error::Internal {
+                let (next, new_scene, waiting) = handle.join().map_err(|_| Error::Internal {
                     what: "tile loader",
                     message: "the loader thread panicked".into(),
                 })??;
                 load_wait_ms = t_wait.elapsed().as_secs_f64() * 1e3;
-                // Where the tiles differ, the new scene replaces the old one and its light is
-                // settled again (every tile's upload, not yet a bounded one per frame).
+                deferred = waiting;
+                // Where the tiles differ, the new scene replaces the old one in the renderer's
+                // pools (only the new tile forms are written; the others keep their place and
+                // light), and its light is settled again from there.
                 if let Some(new_scene) = new_scene {
                     let (before, after) = (full(current), full(&next));
                     loaded = after.difference(&before).count();
                     evicted = before.difference(&after).count();
-                    // Tiles resident before and after keep their light; only the rest needs bounces.
-                    let carried = r.light_by_tile(&scene)?;
-                    scene = new_scene;
-                    settings.exposure = exposure;
-                    r = Renderer::new(&gpu, &scene, settings.clone())?;
-                    carried_leaves = r.seed_light(&scene, &carried)?;
+                    match r.update_scene(&new_scene)? {
+                        Some(u) => {
+                            carried_leaves = u.carried_leaves;
+                            update = Some(u);
+                            scene = new_scene;
+                        }
+                        None => {
+                            // Not in place: a new renderer, tiles resident before and after
+                            // keeping their light through a read-back.
+                            let carried = r.light_by_tile(&scene)?;
+                            let caps = r.pool_caps();
+                            scene = new_scene;
+                            settings.exposure = exposure;
+                            r = Renderer::with_pools(&gpu, &scene, settings.clone(), caps)?;
+                            carried_leaves = r.seed_light(&scene, &carried)?;
+                            made_anew = true;
+                        }
+                    }
                     let report = |done, change| progress(Progress::Bounce { done, budget, change });
                     bounces = match opts.frame_bounces {
                         Some(n) => r.settle_at_most(n, report)?,
@@ -599,12 +655,20 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
                 residency = Some(next);
             }
             if let (Some(st), Some(current), Some(next_cam)) = (&streaming, &residency, cameras.get(i + 1)) {
-                let (now, lights, headlamp) = (current.modes(), scene.lights.clone(), scene.headlamp);
+                let (now, lights, headlamp) = (current.clone(), scene.lights.clone(), scene.headlamp);
+                let limit = opts.upload_per_frame;
                 next_load = Some(scope.spawn(move || {
-                    let next = st.choose(next_cam)?;
-                    let scene =
-                        if next.modes() == now { None } else { Some(st.load(&next, lights, headlamp)?) };
-                    Ok((next, scene))
+                    let mut next = st.choose(next_cam)?;
+                    let mut deferred = 0;
+                    if let Some(max) = limit {
+                        (next, deferred) = residency::limit_uploads(&st.tiles, &now, next, max);
+                    }
+                    let scene = if next.modes() == now.modes() {
+                        None
+                    } else {
+                        Some(st.load(&next, lights, headlamp)?)
+                    };
+                    Ok((next, scene, deferred))
                 }));
             }
             let before_render = r.stats().bounces_done;
@@ -642,6 +706,17 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
                 propagated_tiles: bounce_work.iter().map(|w| w.tiles).sum(),
                 propagated_leaves: bounce_work.iter().map(|w| w.leaves).sum(),
                 bounce_work,
+                pool_bytes: r.pool_bytes(),
+                update,
+                made_anew,
+                deferred,
+                // A renderer made anew counts from zero.
+                shadow_faces: if made_anew {
+                    r.shadow_faces_drawn()
+                } else {
+                    r.shadow_faces_drawn() - shadow_before
+                },
+                shadow_faces_total: r.shadow_face_count(),
                 load_wait_ms,
                 pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
             });

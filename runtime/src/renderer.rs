@@ -7,21 +7,25 @@
 //! `out_(k+1) = emission + direct + albedo * gather(out_k)`, so with albedo < 1 the radiance stays
 //! bounded and converges to the fixed point.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::ops::Range;
 use std::time::Instant;
 
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 use serde::Serialize;
 
 use crate::activity::{BounceWork, TileActivity, Why};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
-use crate::gpu_types::{ActiveTile, LeafLightGpu, MAX_CONES, Params, SplatUniform, flags};
+use crate::gpu_types::{
+    ActiveTile, LeafGpu, LeafLightGpu, MAX_CONES, NodeGpu, Params, SplatUniform, SurfelGpu, TileGpu, flags,
+};
 use crate::lights::LightSetup;
 use crate::passes::{self, gbuffer, shade, shadow};
 use crate::plan::{self, EffectPlan, Pass, PlanInputs};
-use crate::scene_data::{EnvChain, MAX_ENV_LEVELS, MAX_MATERIALS, SceneData};
+use crate::pool::{PoolCaps, Pools, TileKey, key, surfel_owners};
+use crate::scene_data::{EnvChain, MAX_ENV_LEVELS, MAX_MATERIALS, SceneData, SceneLight};
 
 pub use crate::settings::{IndirectFilter, MAX_SHADOWED_LIGHTS, Quality, Settings, ShadowFallback};
 
@@ -126,6 +130,30 @@ pub struct Renderer {
     /// Bounces since the last [`Renderer::take_bounce_work`], with what each updated.
     bounce_work: Vec<BounceWork>,
     surfels: wgpu::Buffer,
+    /// The tile pools (pool.rs): where each resident tile form lives in the buffers.
+    pools: Pools,
+    /// The resident tiles as the GPU holds them (offsets into the pools), and each one's surfels.
+    tiles: Vec<TileGpu>,
+    tile_surfels: Vec<Range<u32>>,
+    /// The surfel ranges in use, merged.
+    surfel_runs: Vec<Range<u32>>,
+    /// Tiles may be culled by their boxes (their surfels lie in them: false for a scene put
+    /// together by hand, whose surfels all count as its first tile's).
+    cull_tiles: bool,
+    tiles_buf: wgpu::Buffer,
+    nodes_buf: wgpu::Buffer,
+    leaves_buf: wgpu::Buffer,
+    tile_index_buf: wgpu::Buffer,
+    /// Shadow faces the next shadow pass draws (every face after a change of lights; after a
+    /// change of tiles, the faces that see one), and how many the last one drew.
+    shadow_dirty: Vec<bool>,
+    shadow_drawn: u64,
+    /// The camera's view-projection of the G-buffer (tiles outside it are not drawn), and whether
+    /// the tiles changed since it was drawn.
+    camera_view_proj: Option<Mat4>,
+    gbuffer_stale: bool,
+    /// What a scene must share with this one to be swapped in place ([`Renderer::update_scene`]).
+    compat: Compat,
     inject: passes::Batched,
     env: passes::Batched,
     mip: passes::mip::Mip,
@@ -227,6 +255,10 @@ fn base_params(
 /// (group 1), and the surfels the splat passes draw.
 struct Upload {
     params: wgpu::Buffer,
+    tiles: wgpu::Buffer,
+    nodes: wgpu::Buffer,
+    leaves: wgpu::Buffer,
+    tile_index: wgpu::Buffer,
     #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
     leaf_light: wgpu::Buffer,
     #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
@@ -241,9 +273,13 @@ struct Upload {
 }
 
 impl Upload {
+    /// The buffers, the tile data in pools of `caps` elements with `scene` at their start (as
+    /// fresh pools place it: pool.rs).
+    #[allow(clippy::too_many_arguments)]
     fn new(
         gpu: &Gpu,
         scene: &SceneData,
+        caps: PoolCaps,
         lights: &LightSetup,
         shadow_atlas: &wgpu::TextureView,
         base_params: &Params,
@@ -254,32 +290,54 @@ impl Upload {
             bytemuck::bytes_of(base_params),
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         )?;
-        let leaf_light =
-            gpu.buffer_init("leaf light", bytemuck::cast_slice(&initial_light(scene)), STORAGE)?;
-        let faces = gpu.buffer("faces", scene.buffer_bytes(f16).faces, STORAGE)?;
+        // A pool: `n` elements of `T`, the first ones written from `data`.
+        fn pool<T: bytemuck::Pod>(
+            gpu: &Gpu,
+            label: &str,
+            n: u64,
+            data: &[T],
+            usage: wgpu::BufferUsages,
+        ) -> Result<wgpu::Buffer> {
+            let b = gpu.buffer(label, n.max(data.len() as u64).max(1) * size_of::<T>() as u64, usage)?;
+            if !data.is_empty() {
+                gpu.queue.write_buffer(&b, 0, bytemuck::cast_slice(data));
+            }
+            Ok(b)
+        }
+        let leaf_light = pool(gpu, "leaf light", caps.leaves, &initial_light(&scene.leaves), STORAGE)?;
+        let face_bytes = if f16 { 8 } else { 16 };
+        let faces = gpu.buffer("faces", caps.nodes.max(1) * 6 * face_bytes, STORAGE)?;
         let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE)?;
         // A 16-byte header, then at most every tile.
-        let active = gpu.buffer(
-            "active tiles",
-            16 + (size_of::<ActiveTile>() * scene.tiles.len().max(1)) as u64,
-            STORAGE,
+        let active =
+            gpu.buffer("active tiles", 16 + size_of::<ActiveTile>() as u64 * caps.tiles.max(1), STORAGE)?;
+        let tile_change = gpu.buffer("tile change", 4 * caps.tiles.max(1), STORAGE)?;
+        let index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
+        // Room for the index of a scene with other tile forms (its size follows how the tiles
+        // align); one that outgrows it makes a new renderer (`update_scene`).
+        let tile_index = pool(gpu, "tile index", 2 * index.words.len() as u64 + 64, &index.words, STORAGE)?;
+        let surfels = pool(
+            gpu,
+            "surfels",
+            caps.surfels,
+            &scene.surfels,
+            wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
         )?;
-        let tile_change = gpu.buffer("tile change", 4 * scene.tiles.len().max(1) as u64, STORAGE)?;
-        let tile_index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
-        let surfels =
-            gpu.buffer_init("surfels", bytemuck::cast_slice(&scene.surfels), wgpu::BufferUsages::VERTEX)?;
+        let tiles = pool(gpu, "tiles", caps.tiles, &scene.tiles, STORAGE)?;
+        let nodes = pool(gpu, "nodes", caps.nodes, &scene.nodes, STORAGE)?;
+        let leaves = pool(gpu, "leaves", caps.leaves, &scene.leaves, STORAGE)?;
         let shadow_mats: Vec<[[f32; 4]; 4]> =
             lights.faces.iter().map(|f| f.view_proj.to_cols_array_2d()).collect();
         let static_buffers = [
             (0, params.clone()),
-            (1, gpu.buffer_init("tiles", bytemuck::cast_slice(&scene.tiles), STORAGE)?),
-            (2, gpu.buffer_init("nodes", bytemuck::cast_slice(&scene.nodes), STORAGE)?),
-            (3, gpu.buffer_init("leaves", bytemuck::cast_slice(&scene.leaves), STORAGE)?),
+            (1, tiles.clone()),
+            (2, nodes.clone()),
+            (3, leaves.clone()),
             (4, gpu.buffer_init("lights", bytemuck::cast_slice(&lights.lights), STORAGE)?),
             (5, gpu.buffer_init("shadow matrices", bytemuck::cast_slice(&shadow_mats), STORAGE)?),
             (7, gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock.words), STORAGE)?),
             (8, gpu.buffer_init("light grid", bytemuck::cast_slice(&lights.grid.words), STORAGE)?),
-            (9, gpu.buffer_init("tile index", bytemuck::cast_slice(&tile_index.words), STORAGE)?),
+            (9, tile_index.clone()),
         ];
         let mut shared = passes::Shared::default();
         let mut bytes = surfels.size();
@@ -293,13 +351,105 @@ impl Upload {
             shared.insert(1, binding, passes::Resource::Buffer(b.clone()));
         }
 
-        Ok(Upload { params, leaf_light, faces, stats, active, tile_change, surfels, shared, bytes })
+        Ok(Upload {
+            params,
+            tiles,
+            nodes,
+            leaves,
+            tile_index,
+            leaf_light,
+            faces,
+            stats,
+            active,
+            tile_change,
+            surfels,
+            shared,
+            bytes,
+        })
     }
 }
 
-/// The light state a scene starts from: out = emission (no direct light, no gather yet).
-fn initial_light(scene: &SceneData) -> Vec<LeafLightGpu> {
-    scene.leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect()
+/// The light state leaves start from: out = emission (no direct light, no gather yet).
+fn initial_light(leaves: &[LeafGpu]) -> Vec<LeafLightGpu> {
+    leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect()
+}
+
+/// What two scenes must share for one to replace the other in a renderer's pools: the same lights,
+/// frame, bounds (so the light grid and shadow faces stay), coarsest level, materials and
+/// environment. Residency keeps all of these (every tile is held in some form).
+#[derive(Clone, Debug, PartialEq)]
+struct Compat {
+    lights: Vec<SceneLight>,
+    headlamp: bool,
+    leaf_size_m: f32,
+    bounds_leaf: (Vec3, Vec3),
+    max_lod: u32,
+    materials: Vec<(String, f32, f32, f32)>,
+    environment_sh: Option<[[f32; 3]; 9]>,
+    env_chain: bool,
+    rock_words: usize,
+}
+
+impl Compat {
+    fn of(scene: &SceneData) -> Self {
+        Self {
+            lights: scene.lights.clone(),
+            headlamp: scene.headlamp,
+            leaf_size_m: scene.leaf_size_m,
+            bounds_leaf: scene.bounds_leaf(),
+            max_lod: scene.max_lod(),
+            materials: scene
+                .materials
+                .iter()
+                .map(|m| (m.name.clone(), m.specular, m.roughness, m.ior))
+                .collect(),
+            environment_sh: scene.environment_sh,
+            env_chain: scene.env_chain.is_some(),
+            rock_words: scene.rock.words.len(),
+        }
+    }
+}
+
+/// A tile's box in frame metres, grown by what its surfels' discs may reach past it.
+fn tile_box(t: &TileGpu, leaf_m: f32) -> (Vec3, Vec3) {
+    let lo = glam::IVec3::from_array(t.origin_leaf).as_vec3() * leaf_m;
+    let edge = (1u64 << t.depth.min(40)) as f32 * leaf_m;
+    let margin = ((1u64 << t.leaf_lod.min(40)) as f32 + 2.0) * leaf_m;
+    (lo - Vec3::splat(margin), lo + Vec3::splat(edge + margin))
+}
+
+/// Merges ranges (sorted here) where they touch.
+fn merge_runs(mut r: Vec<Range<u32>>) -> Vec<Range<u32>> {
+    r.retain(|r| !r.is_empty());
+    r.sort_by_key(|r| r.start);
+    let mut out: Vec<Range<u32>> = Vec::with_capacity(r.len());
+    for x in r {
+        match out.last_mut() {
+            Some(last) if last.end == x.start => last.end = x.end,
+            _ => out.push(x),
+        }
+    }
+    out
+}
+
+/// What [`Renderer::update_scene`] did.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SceneUpdate {
+    /// Tiles written to the pools (forms new to them), and tiles that kept their slot and light.
+    pub uploaded_tiles: usize,
+    pub kept_tiles: usize,
+    /// Tile forms that left the pools.
+    pub freed_tiles: usize,
+    /// The free space was too fragmented for the new forms: every tile was written again, the
+    /// light of those that stayed read back and carried to their new slots.
+    pub repacked: bool,
+    /// Bytes written to the GPU: the new forms' nodes, leaves, light and surfels, the tile table,
+    /// tile index and mip order.
+    pub upload_bytes: u64,
+    /// Leaves that kept their light (in place, or carried through a repack).
+    pub carried_leaves: usize,
+    /// Shadow faces that see a changed tile (drawn again by the next shadow pass).
+    pub shadow_faces: usize,
 }
 
 /// Timestamp queries for every pass, where the adapter has them.
@@ -324,12 +474,12 @@ fn pass_queries(gpu: &Gpu) -> Option<(wgpu::QuerySet, wgpu::Buffer)> {
 /// ([`Renderer::light_by_tile`], [`Renderer::seed_light`]).
 #[derive(Clone, Debug, Default)]
 pub struct CarriedLight {
-    tiles: std::collections::HashMap<([i32; 3], u32, u32), Vec<LeafLightGpu>>,
+    tiles: HashMap<TileKey, Vec<LeafLightGpu>>,
 }
 
 impl CarriedLight {
-    fn key(t: &crate::gpu_types::TileGpu) -> ([i32; 3], u32, u32) {
-        (t.origin_leaf, t.depth, t.leaf_lod)
+    fn key(t: &TileGpu) -> TileKey {
+        key(t)
     }
 
     /// Leaves held.
@@ -340,7 +490,26 @@ impl CarriedLight {
 
 impl Renderer {
     pub fn new(gpu: &Gpu, scene: &SceneData, settings: Settings) -> Result<Self> {
+        Self::with_pools(gpu, scene, settings, PoolCaps::of(scene))
+    }
+
+    /// A renderer whose tile pools hold `caps` elements (at least what `scene` needs), so later
+    /// scenes of other tile forms can replace this one in place ([`Renderer::update_scene`]).
+    pub fn with_pools(gpu: &Gpu, scene: &SceneData, settings: Settings, caps: PoolCaps) -> Result<Self> {
         settings.validate()?;
+        let need = PoolCaps::of(scene);
+        let caps = PoolCaps {
+            tiles: caps.tiles.max(need.tiles),
+            nodes: caps.nodes.max(need.nodes),
+            leaves: caps.leaves.max(need.leaves),
+            surfels: caps.surfels.max(need.surfels),
+        };
+        let mut pools = Pools::new(caps)?;
+        let (owners, cull_tiles) = surfel_owners(scene);
+        let placed = pools.place(scene, &owners)?;
+        if placed.tiles != scene.tiles {
+            return Err(Error::Internal { what: "pools", message: "fresh pools moved a tile".into() });
+        }
         let f16 = settings.radiance_f16;
         let (lo, hi) = scene.bounds_leaf();
         let leaf = scene.leaf_size_m.max(1e-6);
@@ -373,19 +542,21 @@ impl Renderer {
         let base_params =
             base_params(scene, &settings, &lights, &shadow, (lo, hi), scene_diag_m, chain, materials);
 
-        let up = Upload::new(gpu, scene, &lights, shadow.atlas(), &base_params, f16)?;
+        let up = Upload::new(gpu, scene, caps, &lights, shadow.atlas(), &base_params, f16)?;
         let shared = &up.shared;
 
         let (by_height, ranges) = scene.nodes_by_height();
         let lights_in_range = lights.grid.occupancy();
         let inject = gpu.scoped("inject", || passes::inject::new(gpu, shared, f16, lights_in_range.1))?;
         let env = gpu.scoped("env", || passes::env::new(gpu, shared, f16, settings.cones))?;
-        let mip = gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, &by_height, &ranges, f16))?;
+        let mip =
+            gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, caps.nodes, &by_height, &ranges, f16))?;
         let propagate =
             gpu.scoped("propagate", || passes::propagate::new(gpu, shared, f16, settings.cones))?;
         let gbuffer = gpu.scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout))?;
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
         let static_bytes = up.bytes + shadow.bytes() + shade.env_atlas_bytes();
+        let shadow_faces = lights.faces.len();
         let r = Self {
             inject,
             env,
@@ -407,7 +578,7 @@ impl Renderer {
             spot_lights: lights.spot_lights,
             headlamp: scene.headlamp,
             shadowed: lights.shadowed,
-            shadow_faces: lights.faces.len(),
+            shadow_faces,
             lights_in_range,
             specular_materials,
             specular_surfels,
@@ -426,6 +597,20 @@ impl Renderer {
             active_written: None,
             bounce_work: Vec::new(),
             surfels: up.surfels,
+            surfel_runs: pools.surfel_runs(),
+            tile_surfels: placed.slots.iter().map(|s| s.surfels.clone()).collect(),
+            tiles: placed.tiles,
+            pools,
+            cull_tiles,
+            tiles_buf: up.tiles,
+            nodes_buf: up.nodes,
+            leaves_buf: up.leaves,
+            tile_index_buf: up.tile_index,
+            shadow_dirty: vec![true; shadow_faces],
+            shadow_drawn: 0,
+            camera_view_proj: None,
+            gbuffer_stale: false,
+            compat: Compat::of(scene),
             view: None,
             direct_valid: false,
             forced: Vec::new(),
@@ -477,6 +662,7 @@ impl Renderer {
     /// Marks the lights changed: the next update re-renders shadow maps and re-injects.
     pub fn invalidate_lights(&mut self) {
         self.direct_valid = false;
+        self.shadow_dirty.fill(true);
         self.stats_now.last_change = None;
         self.set_all_active(Why::LightsChanged);
     }
@@ -493,7 +679,9 @@ impl Renderer {
 
     fn inputs(&self, frame: Option<(&Camera, u32, u32)>) -> PlanInputs {
         let gbuffer_valid = match (frame, &self.view) {
-            (Some((c, w, h)), Some(v)) => v.camera == *c && v.targets.width == w && v.targets.height == h,
+            (Some((c, w, h)), Some(v)) => {
+                !self.gbuffer_stale && v.camera == *c && v.targets.width == w && v.targets.height == h
+            }
             _ => false,
         };
         PlanInputs {
@@ -580,20 +768,23 @@ impl Renderer {
     }
 
     /// Each tile's light state as this renderer holds it for `scene` (the scene it was made
-    /// for), to carry into the renderer of another scene that holds some of the same tiles.
+    /// for, or last updated to), to carry into the renderer of another scene that holds some of
+    /// the same tiles.
     pub fn light_by_tile(&self, scene: &SceneData) -> Result<CarriedLight> {
         let size = size_of::<LeafLightGpu>();
-        if scene.leaves.len() != self.leaf_count as usize {
+        if scene.tiles.len() != self.tiles.len()
+            || scene.tiles.iter().zip(&self.tiles).any(|(a, b)| key(a) != key(b))
+        {
             return Err(Error::Internal {
                 what: "light_by_tile",
-                message: "not the scene this renderer was made for".into(),
+                message: "not the scene this renderer holds".into(),
             });
         }
         let bytes = self.gpu.read_buffer(&self.leaf_light, u64::from(self.leaf_count) * size as u64)?;
         let state: Vec<LeafLightGpu> =
             bytemuck::pod_collect_to_vec(&bytes[..self.leaf_count as usize * size]);
-        let mut tiles = std::collections::HashMap::new();
-        for t in &scene.tiles {
+        let mut tiles = HashMap::new();
+        for t in &self.tiles {
             let range = t.leaf_offset as usize..(t.leaf_offset + t.leaf_count) as usize;
             if let Some(leaves) = state.get(range) {
                 tiles.insert(CarriedLight::key(t), leaves.to_vec());
@@ -606,34 +797,220 @@ impl Renderer {
     /// (same place, depth and level) from the light it had there, instead of from none: tiles
     /// that stay resident keep their converged light across a reload, and only what changed
     /// needs bounces. Direct light, environment light and `out` are recomputed by the passes as
-    /// usual. Returns the leaves seeded.
+    /// usual. Returns the leaves seeded. ([`Renderer::update_scene`] keeps the light in place
+    /// instead, with no read-back; this is for a renderer made anew.)
     pub fn seed_light(&mut self, scene: &SceneData, carried: &CarriedLight) -> Result<usize> {
-        if scene.leaves.len() != self.leaf_count as usize {
+        if scene.tiles.len() != self.tiles.len()
+            || scene.tiles.iter().zip(&self.tiles).any(|(a, b)| key(a) != key(b))
+        {
             return Err(Error::Internal {
                 what: "seed_light",
-                message: "not the scene this renderer was made for".into(),
+                message: "not the scene this renderer holds".into(),
             });
         }
-        let mut state = initial_light(scene);
         let mut seeded = 0;
-        let mut kept = vec![false; scene.tiles.len()];
-        for (t, k) in scene.tiles.iter().zip(&mut kept) {
-            let range = t.leaf_offset as usize..(t.leaf_offset + t.leaf_count) as usize;
-            if let (Some(from), Some(to)) = (carried.tiles.get(&CarriedLight::key(t)), state.get_mut(range))
-                && from.len() == to.len()
+        let mut kept = vec![false; self.tiles.len()];
+        for (t, k) in self.tiles.iter().zip(&mut kept) {
+            if let Some(from) = carried.tiles.get(&CarriedLight::key(t))
+                && from.len() == t.leaf_count as usize
             {
-                to.copy_from_slice(from);
+                let at = u64::from(t.leaf_offset) * size_of::<LeafLightGpu>() as u64;
+                self.gpu.queue.write_buffer(&self.leaf_light, at, bytemuck::cast_slice(from));
                 seeded += from.len();
                 *k = true;
             }
         }
         if seeded > 0 {
-            self.gpu.queue.write_buffer(&self.leaf_light, 0, bytemuck::cast_slice(&state));
             // Only the new tiles and what touches them need bounces (activity.rs).
             self.activity.seed(&kept);
             self.active_written = None;
         }
         Ok(seeded)
+    }
+
+    /// Replaces the scene with `scene`, another residency of the same package (the same lights,
+    /// frame and bounds: every tile in some form), in place: the tile forms already resident keep
+    /// their slots in the pools and their light; only the new forms are written (pool.rs). Shadow
+    /// faces that see a changed tile are drawn again; the light is then settled from the kept
+    /// light, starting with the new tiles and their neighbours (activity.rs). `None` when the
+    /// scene cannot replace this one in place (other lights or bounds, over the pools, tiles put
+    /// together by hand): make a new renderer then. Nothing is changed in that case.
+    pub fn update_scene(&mut self, scene: &SceneData) -> Result<Option<SceneUpdate>> {
+        let (owners, exact) = surfel_owners(scene);
+        let need = PoolCaps::of(scene);
+        if !exact || !self.cull_tiles || !self.pools.caps().holds(&need) || Compat::of(scene) != self.compat {
+            return Ok(None);
+        }
+        let index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
+        if 4 * index.words.len() as u64 > self.tile_index_buf.size() {
+            return Ok(None);
+        }
+        let old_slots = self.pools.slots().clone();
+        let old_leaf_end = self.pools.leaf_end();
+        let placed = self.pools.place(scene, &owners)?;
+        let write = |buf: &wgpu::Buffer, at: u64, bytes: &[u8]| {
+            if !bytes.is_empty() {
+                self.gpu.queue.write_buffer(buf, at, bytes);
+            }
+            bytes.len() as u64
+        };
+        // The light of the forms that stayed, where a repack moved them: read back before
+        // anything is written.
+        let moved: HashMap<TileKey, Vec<LeafLightGpu>> = if placed.repacked {
+            let size = size_of::<LeafLightGpu>();
+            let raw = self.gpu.read_buffer(&self.leaf_light, u64::from(old_leaf_end) * size as u64)?;
+            let state: Vec<LeafLightGpu> = bytemuck::pod_collect_to_vec(&raw[..old_leaf_end as usize * size]);
+            placed
+                .tiles
+                .iter()
+                .filter_map(|t| {
+                    let s = old_slots.get(&key(t))?;
+                    Some((key(t), state.get(s.leaves.start as usize..s.leaves.end as usize)?.to_vec()))
+                })
+                .collect()
+        } else {
+            HashMap::new()
+        };
+        let mut update =
+            SceneUpdate { repacked: placed.repacked, freed_tiles: placed.freed, ..Default::default() };
+        let mut light_kept = placed.kept.clone();
+        for (i, (t, at)) in scene.tiles.iter().zip(&placed.tiles).enumerate() {
+            if placed.kept[i] {
+                update.kept_tiles += 1;
+                update.carried_leaves += t.leaf_count as usize;
+                continue;
+            }
+            update.uploaded_tiles += 1;
+            let (n0, l0) = (t.node_offset as usize, t.leaf_offset as usize);
+            let leaf_level = t.depth - t.leaf_lod;
+            // Indices inside the tile move with it: to its nodes for inner nodes, to its leaves
+            // for the nodes at its leaf level.
+            let nodes: Vec<NodeGpu> = scene.nodes[n0..n0 + t.node_count as usize]
+                .iter()
+                .map(|n| {
+                    let first_child = if n.level() == leaf_level {
+                        n.first_child.wrapping_sub(t.leaf_offset).wrapping_add(at.leaf_offset)
+                    } else {
+                        n.first_child.wrapping_sub(t.node_offset).wrapping_add(at.node_offset)
+                    };
+                    NodeGpu { first_child, ..*n }
+                })
+                .collect();
+            let leaves = &scene.leaves[l0..l0 + t.leaf_count as usize];
+            let light = match moved.get(&key(t)) {
+                Some(l) if l.len() == leaves.len() => {
+                    light_kept[i] = true;
+                    update.carried_leaves += l.len();
+                    l.clone()
+                }
+                _ => initial_light(leaves),
+            };
+            let surfels = &scene.surfels[owners[i].start as usize..owners[i].end as usize];
+            let slot = &placed.slots[i];
+            update.upload_bytes += write(
+                &self.nodes_buf,
+                u64::from(at.node_offset) * size_of::<NodeGpu>() as u64,
+                bytemuck::cast_slice(&nodes),
+            ) + write(
+                &self.leaves_buf,
+                u64::from(at.leaf_offset) * size_of::<LeafGpu>() as u64,
+                bytemuck::cast_slice(leaves),
+            ) + write(
+                &self.leaf_light,
+                u64::from(at.leaf_offset) * size_of::<LeafLightGpu>() as u64,
+                bytemuck::cast_slice(&light),
+            ) + write(
+                &self.surfels,
+                u64::from(slot.surfels.start) * size_of::<SurfelGpu>() as u64,
+                bytemuck::cast_slice(surfels),
+            );
+        }
+        update.upload_bytes += write(&self.tiles_buf, 0, bytemuck::cast_slice(&placed.tiles))
+            + write(&self.tile_index_buf, 0, bytemuck::cast_slice(&index.words));
+        let (by_height, ranges) = scene.nodes_by_height_at(&placed.tiles);
+        self.mip.set_order(&self.gpu, &by_height, &ranges)?;
+        update.upload_bytes += 4 * by_height.len() as u64;
+
+        // Shadow faces that see a tile form that came or went.
+        let new_keys: HashSet<TileKey> = placed.tiles.iter().map(key).collect();
+        let changed: Vec<(Vec3, Vec3)> = self
+            .tiles
+            .iter()
+            .filter(|t| !new_keys.contains(&key(t)))
+            .chain(placed.tiles.iter().filter(|t| !old_slots.contains_key(&key(t))))
+            .map(|t| tile_box(t, self.leaf_size_m))
+            .collect();
+        for (face, dirty) in self.shadow.faces().iter().zip(&mut self.shadow_dirty) {
+            if changed.iter().any(|(lo, hi)| shadow::face_sees_box(&face.view_proj, *lo, *hi)) {
+                *dirty = true;
+            }
+        }
+        update.shadow_faces = self.shadow_dirty.iter().filter(|d| **d).count();
+
+        self.tile_surfels = placed.slots.iter().map(|s| s.surfels.clone()).collect();
+        self.tiles = placed.tiles;
+        self.surfel_runs = self.pools.surfel_runs();
+        self.leaf_count = self.pools.leaf_end();
+        #[cfg(feature = "test-hooks")]
+        {
+            self.node_count = self.pools.slots().values().map(|s| s.nodes.end).max().unwrap_or(0);
+        }
+        self.surfel_count = scene.surfels.len() as u32;
+        self.base_params.tile_count = self.tiles.len() as u32;
+        self.base_params.leaf_count = self.leaf_count;
+        let (_, specular_materials, specular_surfels) = material_slots(scene, &self.settings);
+        (self.specular_materials, self.specular_surfels) = (specular_materials, specular_surfels);
+        self.emissive = scene.has_emission();
+        self.activity = TileActivity::new(&self.tiles);
+        self.activity.seed(&light_kept);
+        self.active_written = None;
+        // Direct and environment light for the new leaves (and the faces drawn again), a new
+        // G-buffer, and bounces counted afresh as for a new renderer.
+        self.direct_valid = false;
+        self.env_valid = false;
+        self.gbuffer_stale = true;
+        self.stats_now = PassStats::default();
+        Ok(Some(update))
+    }
+
+    /// Bytes of the tile pools (what `--gpu-memory` bounds: nodes, radiance pyramid, mip order,
+    /// leaves, leaf light, surfels, tile records).
+    pub fn pool_bytes(&self) -> u64 {
+        self.pools.caps().bytes(self.settings.radiance_f16)
+    }
+
+    /// The pools' capacities.
+    pub fn pool_caps(&self) -> PoolCaps {
+        self.pools.caps()
+    }
+
+    /// Faces of the shadow atlas (six per point light with a map, one per spot light).
+    pub fn shadow_face_count(&self) -> usize {
+        self.shadow_faces
+    }
+
+    /// Shadow faces drawn by every shadow pass so far (a pass draws the faces that see a change).
+    pub fn shadow_faces_drawn(&self) -> u64 {
+        self.shadow_drawn
+    }
+
+    /// The surfel ranges of the tiles a view of `view_proj` may see (every resident surfel where
+    /// tiles cannot be culled, or without a view).
+    fn runs_seen(&self, view_proj: Option<&Mat4>) -> Vec<Range<u32>> {
+        match view_proj {
+            Some(m) if self.cull_tiles => merge_runs(
+                self.tiles
+                    .iter()
+                    .zip(&self.tile_surfels)
+                    .filter(|(t, _)| {
+                        let (lo, hi) = tile_box(t, self.leaf_size_m);
+                        shadow::face_sees_box(m, lo, hi)
+                    })
+                    .map(|(_, r)| r.clone())
+                    .collect(),
+            ),
+            _ => self.surfel_runs.clone(),
+        }
     }
 
     /// Renders one frame (running whatever light work the plan asks for first: progressive, at
@@ -721,6 +1098,7 @@ impl Renderer {
             pad: [[0.0; 4]; 9],
         };
         self.gbuffer.set_camera(&self.gpu, &u);
+        self.camera_view_proj = Some(m);
         let reuse = self.view.as_ref().is_some_and(|v| v.targets.width == w && v.targets.height == h);
         if !reuse {
             // The largest per-view buffer first, before any target is allocated.
@@ -752,10 +1130,20 @@ impl Renderer {
             end_of_pass_write_index: Some(i + 1),
         });
         match pass {
-            Pass::Shadow => self.shadow.record(enc, &self.surfels, self.surfel_count, render_ts),
+            Pass::Shadow => {
+                let draws: Vec<Option<Vec<Range<u32>>>> = self
+                    .shadow
+                    .faces()
+                    .iter()
+                    .zip(&self.shadow_dirty)
+                    .map(|(f, &dirty)| dirty.then(|| self.runs_seen(Some(&f.view_proj))))
+                    .collect();
+                self.shadow.record(enc, &self.surfels, &draws, render_ts);
+            }
             Pass::Gbuffer => {
                 let v = self.view("gbuffer")?;
-                self.gbuffer.record(enc, &v.targets, &self.surfels, self.surfel_count, render_ts);
+                let runs = self.runs_seen(self.camera_view_proj.as_ref());
+                self.gbuffer.record(enc, &v.targets, &self.surfels, &runs, render_ts);
             }
             compute => {
                 let tw = ts.map(|(set, i)| wgpu::ComputePassTimestampWrites {
@@ -873,6 +1261,13 @@ impl Renderer {
                 }
             }
         }
+        if ran.contains(&Pass::Shadow) {
+            self.shadow_drawn += self.shadow_dirty.iter().filter(|d| **d).count() as u64;
+            self.shadow_dirty.fill(false);
+        }
+        if ran.contains(&Pass::Gbuffer) {
+            self.gbuffer_stale = false;
+        }
         if ran.contains(&Pass::Inject) || (self.point_lights + self.spot_lights == 0) {
             self.direct_valid = true;
         }
@@ -929,6 +1324,13 @@ impl Renderer {
         }
         let bytes = self.gpu.read_buffer(&self.faces, n as u64 * 16)?;
         Ok(bytemuck::pod_collect_to_vec(&bytes[..n * 16]))
+    }
+
+    /// Makes the next [`Renderer::update_scene`] repack the pools (compact every slot, carrying
+    /// the light of the forms that stay) even where the new forms fit the holes: to defragment
+    /// at a quiet moment, and for tests of the repack path.
+    pub fn repack_next_update(&mut self) {
+        self.pools.repack_next();
     }
 
     /// Runs only the mip pass (tests).

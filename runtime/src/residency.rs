@@ -77,6 +77,9 @@ pub struct Budget {
     pub gpu_bytes: u64,
     /// Surfels drawn (`--point-budget`).
     pub points: u64,
+    /// Elements of each of the renderer's tile pools (pool.rs), once they are allocated: a
+    /// residency must fit each pool, not only the bytes.
+    pub pools: Option<crate::pool::PoolCaps>,
 }
 
 /// The view residency serves.
@@ -352,14 +355,35 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
         b.relevance.cmp(&a.relevance).then(a.distance_m.total_cmp(&b.distance_m)).then(a.tile.cmp(&b.tile))
     });
     let (mut bytes, mut surfels) = (reserve_bytes, reserve_surfels);
+    // Elements of each pool in use: (nodes, leaves), surfels counted above.
+    let mut used =
+        (tiles.iter().map(|t| t.far.nodes).sum::<u64>(), tiles.iter().map(|t| t.far.leaves).sum::<u64>());
+    let fits_pools = |nodes: u64, leaves: u64, surfels: u64| {
+        budget.pools.is_none_or(|p| nodes <= p.nodes && leaves <= p.leaves && surfels <= p.surfels)
+    };
+    if !fits_pools(used.0, used.1, surfels) {
+        return Err(Error::Budget {
+            what: format!("the far levels of all {} tiles do not fit the renderer's tile pools", tiles.len()),
+            hint: "raise --gpu-memory".into(),
+        });
+    }
     for &k in &order {
         let t = &tiles[k];
         for mode in [TileMode::Full, TileMode::Coarse] {
-            let extra_bytes = t.cost(mode).bytes.saturating_sub(t.far.bytes);
-            let extra_surfels = t.cost(mode).surfels.saturating_sub(t.far.surfels);
-            if bytes + extra_bytes <= budget.gpu_bytes && surfels + extra_surfels <= budget.points {
+            let c = t.cost(mode);
+            let extra_bytes = c.bytes.saturating_sub(t.far.bytes);
+            let extra_surfels = c.surfels.saturating_sub(t.far.surfels);
+            let (nodes, leaves) = (
+                used.0 + c.nodes.saturating_sub(t.far.nodes),
+                used.1 + c.leaves.saturating_sub(t.far.leaves),
+            );
+            if bytes + extra_bytes <= budget.gpu_bytes
+                && surfels + extra_surfels <= budget.points
+                && fits_pools(nodes, leaves, surfels + extra_surfels)
+            {
                 bytes += extra_bytes;
                 surfels += extra_surfels;
+                used = (nodes, leaves);
                 decisions[k].mode = mode;
                 break;
             }
@@ -380,6 +404,79 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
         visible_coarse,
     };
     Ok(Residency { decisions, totals })
+}
+
+/// How fine a mode is (far 0, coarse 1, full 2).
+fn fineness(m: TileMode) -> u8 {
+    match m {
+        TileMode::Skip => 0,
+        TileMode::Far => 1,
+        TileMode::Coarse => 2,
+        TileMode::Full => 3,
+    }
+}
+
+/// `next` with its changes from `current` bounded by an upload of `max_bytes` (`--upload-per-frame`):
+/// every change to a coarser form is made (it frees room, and the deferred ones hold less), then
+/// changes to finer forms in `next`'s priority order while their bytes fit, at least one; the
+/// rest keep `current`'s form and wait for a later frame. Each tile's form costs at most what
+/// `next` gives it, so the result keeps every budget `next` keeps. Returns it and the changes
+/// deferred.
+pub fn limit_uploads(
+    tiles: &[TileFootprint],
+    current: &Residency,
+    next: Residency,
+    max_bytes: u64,
+) -> (Residency, usize) {
+    let now = current.modes();
+    let by_index: std::collections::HashMap<usize, &TileFootprint> =
+        tiles.iter().map(|t| (t.index, t)).collect();
+    let mode_now = |i: usize| now.get(i).copied().unwrap_or(TileMode::Far);
+    let mut upload = 0u64;
+    let mut decisions = next.decisions;
+    for d in &mut decisions {
+        let was = mode_now(d.tile);
+        if fineness(d.mode) < fineness(was) {
+            upload += by_index.get(&d.tile).map_or(0, |t| t.cost(d.mode).bytes);
+        }
+    }
+    let (mut deferred, mut upgraded) = (0, 0);
+    for d in &mut decisions {
+        let was = mode_now(d.tile);
+        if fineness(d.mode) <= fineness(was) {
+            continue;
+        }
+        let cost = by_index.get(&d.tile).map_or(0, |t| t.cost(d.mode).bytes);
+        if upgraded == 0 || upload + cost <= max_bytes {
+            upload += cost;
+            upgraded += 1;
+        } else {
+            d.mode = was;
+            deferred += 1;
+        }
+    }
+    let budget = next.totals.budget;
+    let (mut bytes, mut surfels) = (0u64, 0u64);
+    for d in &decisions {
+        if let Some(t) = by_index.get(&d.tile) {
+            bytes += t.cost(d.mode).bytes;
+            surfels += t.cost(d.mode).surfels;
+        }
+    }
+    let count = |m: TileMode| decisions.iter().filter(|d| d.mode == m).count();
+    let visible_coarse =
+        decisions.iter().filter(|d| d.mode != TileMode::Full && d.relevance == Relevance::Visible).count();
+    let totals = ResidencyTotals {
+        budget,
+        resident_bytes: bytes,
+        coarse_bytes: next.totals.coarse_bytes,
+        surfels,
+        full_tiles: count(TileMode::Full),
+        coarse_tiles: count(TileMode::Coarse),
+        far_tiles: count(TileMode::Far),
+        visible_coarse,
+    };
+    (Residency { decisions, totals }, deferred)
 }
 
 #[cfg(test)]
@@ -418,7 +515,7 @@ mod tests {
         let tiles = row(10);
         // In tile 5 looking along +x: tiles 5..9 visible; 4 lights them (adjacent); the rest not.
         let view = looking(Vec3::new(22.0, 2.0, 2.0), Vec3::X);
-        let budget = Budget { gpu_bytes: 10 * 100 + 3 * 900, points: u64::MAX };
+        let budget = Budget { gpu_bytes: 10 * 100 + 3 * 900, points: u64::MAX, pools: None };
         let r = choose(&tiles, &view, budget).unwrap();
         let order: Vec<usize> = r.decisions.iter().map(|d| d.tile).collect();
         assert_eq!(order, [5, 6, 7, 8, 9, 4, 3, 2, 1, 0]);
@@ -437,7 +534,7 @@ mod tests {
         );
         // Never over the budget, whatever it is.
         for gpu_bytes in (1000..=10_000).step_by(77) {
-            let r = choose(&tiles, &view, Budget { gpu_bytes, points: u64::MAX }).unwrap();
+            let r = choose(&tiles, &view, Budget { gpu_bytes, points: u64::MAX, pools: None }).unwrap();
             assert!(r.totals.resident_bytes <= gpu_bytes);
             let held: u64 = r.decisions.iter().map(|d| tiles[d.tile].cost(d.mode).bytes).sum();
             assert_eq!(held, r.totals.resident_bytes);
@@ -454,7 +551,7 @@ mod tests {
             t.far = TileCost { nodes: 0, leaves: 0, surfels: 1, bytes: 10 };
         }
         let view = looking(Vec3::new(-1.0, 2.0, 2.0), Vec3::X);
-        let budget = Budget { gpu_bytes: 10 * 10 + 2 * 990 + 4 * 90, points: u64::MAX };
+        let budget = Budget { gpu_bytes: 10 * 10 + 2 * 990 + 4 * 90, points: u64::MAX, pools: None };
         let r = choose(&tiles, &view, budget).unwrap();
         let modes: Vec<TileMode> = r.decisions.iter().map(|d| d.mode).collect();
         use TileMode::{Coarse, Far, Full};
@@ -463,13 +560,13 @@ mod tests {
         assert_eq!(r.totals.resident_bytes, budget.gpu_bytes);
         assert!(r.explain(0).contains("2 tiles full, 4 coarse, 4 far (8 in view not full)"));
         for gpu_bytes in (1000..=10_000).step_by(37) {
-            let r = choose(&tiles, &view, Budget { gpu_bytes, points: u64::MAX }).unwrap();
+            let r = choose(&tiles, &view, Budget { gpu_bytes, points: u64::MAX, pools: None }).unwrap();
             let held: u64 = r.decisions.iter().map(|d| tiles[d.tile].cost(d.mode).bytes).sum();
             assert!(held == r.totals.resident_bytes && held <= gpu_bytes, "{held} of {gpu_bytes}");
         }
         let mut one = tiles[..1].to_vec();
         one[0].full.bytes = 5;
-        let err = choose(&one, &view, Budget { gpu_bytes: 9, points: u64::MAX }).unwrap_err();
+        let err = choose(&one, &view, Budget { gpu_bytes: 9, points: u64::MAX, pools: None }).unwrap_err();
         assert!(err.to_string().contains("far levels of all 1 tiles"), "{err}");
     }
 
@@ -478,7 +575,7 @@ mod tests {
         let tiles = row(10);
         let mut view = looking(Vec3::new(22.0, 2.0, 2.0), Vec3::X);
         view.lights_m.push(Vec3::new(2.0, 2.0, 2.0));
-        let r = choose(&tiles, &view, Budget { gpu_bytes: 100_000, points: u64::MAX }).unwrap();
+        let r = choose(&tiles, &view, Budget { gpu_bytes: 100_000, points: u64::MAX, pools: None }).unwrap();
         let lights: Vec<usize> =
             r.decisions.iter().filter(|d| d.relevance == Relevance::Lights).map(|d| d.tile).collect();
         assert_eq!(lights, [4, 0]);
@@ -489,7 +586,8 @@ mod tests {
     fn the_point_budget_bounds_the_surfels_drawn() {
         let tiles = row(10);
         let view = looking(Vec3::new(22.0, 2.0, 2.0), Vec3::X);
-        let r = choose(&tiles, &view, Budget { gpu_bytes: u64::MAX, points: 10 * 5 + 2 * 45 }).unwrap();
+        let r = choose(&tiles, &view, Budget { gpu_bytes: u64::MAX, points: 10 * 5 + 2 * 45, pools: None })
+            .unwrap();
         assert_eq!(r.totals.full_tiles, 2);
         assert_eq!(r.totals.surfels, 140);
     }
@@ -498,11 +596,60 @@ mod tests {
     fn budgets_too_small_for_the_coarse_levels_or_one_tile_are_clear_errors() {
         let mut tiles = row(4);
         let view = looking(Vec3::ZERO, Vec3::X);
-        let err = choose(&tiles, &view, Budget { gpu_bytes: 399, points: u64::MAX }).unwrap_err();
+        let err =
+            choose(&tiles, &view, Budget { gpu_bytes: 399, points: u64::MAX, pools: None }).unwrap_err();
         assert!(err.to_string().contains("far levels of all 4 tiles"), "{err}");
         tiles[2].full.bytes = 5000;
-        let err = choose(&tiles, &view, Budget { gpu_bytes: 4000, points: u64::MAX }).unwrap_err();
+        let err =
+            choose(&tiles, &view, Budget { gpu_bytes: 4000, points: u64::MAX, pools: None }).unwrap_err();
         let msg = err.to_string();
         assert!(msg.contains("tile 2") && msg.contains("--max-tile-m"), "{msg}");
+    }
+
+    #[test]
+    fn the_tile_pools_bound_each_kind_of_element() {
+        // Full tiles of 10 leaves (far: 1); pools of 10 far leaves plus two full tiles' extra.
+        let mut tiles = row(10);
+        for t in &mut tiles {
+            t.full.leaves = 10;
+            t.far.leaves = 1;
+            t.coarse.leaves = 1;
+        }
+        let view = looking(Vec3::new(22.0, 2.0, 2.0), Vec3::X);
+        let pools = crate::pool::PoolCaps { tiles: 10, nodes: 0, leaves: 10 + 2 * 9, surfels: u64::MAX };
+        let budget = Budget { gpu_bytes: u64::MAX, points: u64::MAX, pools: Some(pools) };
+        let r = choose(&tiles, &view, budget).unwrap();
+        assert_eq!(r.totals.full_tiles, 2, "the leaf pool holds two full tiles");
+        let small = crate::pool::PoolCaps { leaves: 9, ..pools };
+        let err = choose(&tiles, &view, Budget { pools: Some(small), ..budget }).unwrap_err();
+        assert!(err.to_string().contains("pools"), "{err}");
+    }
+
+    #[test]
+    fn uploads_per_frame_are_bounded_in_priority_order_and_coarser_forms_always_go_through() {
+        let tiles = row(10);
+        let budget = Budget { gpu_bytes: 10 * 100 + 5 * 900, points: u64::MAX, pools: None };
+        // Looking at tiles 0..4 from before them, then at 5..9 from inside 5.
+        let before = choose(&tiles, &looking(Vec3::new(-1.0, 2.0, 2.0), Vec3::X), budget).unwrap();
+        let next = choose(&tiles, &looking(Vec3::new(22.0, 2.0, 2.0), Vec3::X), budget).unwrap();
+        let full = |r: &Residency| -> Vec<usize> {
+            let mut v: Vec<usize> =
+                r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect();
+            v.sort();
+            v
+        };
+        assert_eq!(full(&before), [0, 1, 2, 3, 4]);
+        assert_eq!(full(&next), [5, 6, 7, 8, 9]);
+        let (limited, deferred) = limit_uploads(&tiles, &before, next.clone(), 2500);
+        // 0..4 go coarse (5 x 100 B), then the nearest two new full tiles fit 2500 B.
+        assert_eq!(full(&limited), [5, 6]);
+        assert_eq!(deferred, 3);
+        assert_eq!(limited.totals.full_tiles, 2);
+        assert!(limited.totals.resident_bytes <= next.totals.resident_bytes);
+        // At least one change to a finer form goes through whatever the limit.
+        let (one, _) = limit_uploads(&tiles, &before, next.clone(), 0);
+        assert_eq!(full(&one), [5]);
+        let (all, none) = limit_uploads(&tiles, &before, next.clone(), u64::MAX);
+        assert_eq!((all, none), (next, 0));
     }
 }

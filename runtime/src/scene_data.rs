@@ -69,6 +69,10 @@ pub struct SceneData {
     pub nodes: Vec<NodeGpu>,
     pub leaves: Vec<LeafGpu>,
     pub surfels: Vec<SurfelGpu>,
+    /// Each tile's surfels (a range of `surfels`, tiles in order), so the renderer's pools can
+    /// keep a tile's surfels in its slot (pool.rs). Empty where the scene was put together by
+    /// hand; the renderer then counts every surfel as the first tile's.
+    pub tile_surfels: Vec<std::ops::Range<u32>>,
     pub lights: Vec<SceneLight>,
     pub cameras: Vec<SceneCamera>,
     /// Environment radiance as 9 real SH coefficients (RGB, world axes, which the frame shares),
@@ -416,8 +420,14 @@ impl SceneData {
 
     /// Node indices ordered by height (0 = leaves) and the range of each height, for the mip pass.
     pub fn nodes_by_height(&self) -> (Vec<u32>, Vec<MipRange>) {
+        self.nodes_by_height_at(&self.tiles)
+    }
+
+    /// As [`SceneData::nodes_by_height`], with the scene's tiles (in order) held at `placed`'s
+    /// node offsets (the renderer's pools, pool.rs).
+    pub fn nodes_by_height_at(&self, placed: &[TileGpu]) -> (Vec<u32>, Vec<MipRange>) {
         let mut buckets: Vec<Vec<u32>> = Vec::new();
-        for t in &self.tiles {
+        for (t, at) in self.tiles.iter().zip(placed) {
             for i in 0..t.node_count {
                 let n = t.node_offset + i;
                 // Height above the tile's own leaves (a coarse tile's are 2^leaf_lod wide).
@@ -425,7 +435,7 @@ impl SceneData {
                 if buckets.len() <= h {
                     buckets.resize(h + 1, Vec::new());
                 }
-                buckets[h].push(n);
+                buckets[h].push(at.node_offset + i);
             }
         }
         let mut order = Vec::with_capacity(self.nodes.len());
@@ -540,6 +550,7 @@ impl SceneData {
             };
             let node_offset = out.nodes.len() as u32;
             let leaf_offset = out.leaves.len() as u32;
+            let surfel_offset = out.surfels.len() as u32;
             if leaf_lod > 0 {
                 let level = match (stored_coarse, &svo) {
                     (Some(c), _) => {
@@ -590,6 +601,7 @@ impl SceneData {
                 leaf_lod,
                 pad: [0; 3],
             });
+            out.tile_surfels.push(surfel_offset..out.surfels.len() as u32);
         }
         let frame = DVec3::from_array(out.frame_origin_m);
         let to_frame = |p: [f64; 3]| (DVec3::from_array(p) - frame).as_vec3();
@@ -723,6 +735,7 @@ impl SceneData {
                 leaf_lod: 0,
                 pad: [0; 3],
             });
+            out.tile_surfels.push(0..0);
         }
         out.rock = crate::rock::classify(out.leaf_size_m, &out.leaves);
         out

@@ -11,6 +11,7 @@ use glam::Vec3;
 use grotto_format::Package;
 use grotto_runtime::camera::Camera;
 use grotto_runtime::gpu::{Gpu, GpuOptions};
+use grotto_runtime::pool::PoolCaps;
 use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
 use grotto_runtime::renderer::{Renderer, Settings};
 use grotto_runtime::residency::{self, Budget, Relevance, View};
@@ -149,7 +150,7 @@ fn coarse_neighbours_keep_the_image_and_dropping_them_does_not() {
     // under the budget that takes; the policy must choose exactly that split. The coarse level
     // must keep the image within the golden tolerance, and clearly closer than no tiles there
     // (measured: mean 0.07 / p99 1 with coarse neighbours, 0.43 / 8 without).
-    let unlimited = Budget { gpu_bytes: u64::MAX, points: u64::MAX };
+    let unlimited = Budget { gpu_bytes: u64::MAX, points: u64::MAX, pools: None };
     let ranked = residency::choose(&tiles, &view_of(&cam, &full, 1.0), unlimited).unwrap();
     let out_of_view: Vec<usize> =
         ranked.decisions.iter().filter(|d| d.relevance != Relevance::Visible).map(|d| d.tile).collect();
@@ -159,7 +160,7 @@ fn coarse_neighbours_keep_the_image_and_dropping_them_does_not() {
         out_of_view.len(),
         tiles.len()
     );
-    let budget = Budget { gpu_bytes: held(&out_of_view), points: u64::MAX };
+    let budget = Budget { gpu_bytes: held(&out_of_view), points: u64::MAX, pools: None };
     let chosen = residency::choose(&tiles, &view_of(&cam, &full, 1.0), budget).unwrap();
     let mut coarse_ids: Vec<usize> =
         chosen.decisions.iter().filter(|d| d.mode == TileMode::Coarse).map(|d| d.tile).collect();
@@ -259,6 +260,9 @@ fn a_fly_through_under_a_tiny_budget_loads_and_evicts_and_never_exceeds_it() {
     for f in &s.frames {
         eprintln!("{f:?}");
         assert!(f.tile_bytes <= gpu_memory, "frame {}: {} > {gpu_memory}", f.frame, f.tile_bytes);
+        // The pools are allocated once, from the budget, and every byte of them counts.
+        assert!(f.pool_bytes <= gpu_memory, "frame {}: pools {} > {gpu_memory}", f.frame, f.pool_bytes);
+        assert!(f.tile_bytes <= f.pool_bytes);
         assert_eq!(f.full_tiles + f.coarse_tiles + f.far_tiles, tiles.len());
         if f.loaded + f.evicted > 0 {
             assert!(
@@ -266,12 +270,93 @@ fn a_fly_through_under_a_tiny_budget_loads_and_evicts_and_never_exceeds_it() {
                 "frame {}: tiles resident before and after keep their light",
                 f.frame
             );
+            // In place: the renderer stays; unless the pools had to repack, only the new forms
+            // are written.
+            let u = f.update.as_ref().expect("a change of tiles updates the pools in place");
+            assert!(!f.made_anew);
+            if !u.repacked {
+                assert!(u.kept_tiles > 0 && u.uploaded_tiles < tiles.len(), "{u:?}");
+                assert!(u.upload_bytes < f.pool_bytes / 2, "{u:?}");
+            }
         }
     }
+    let updates: Vec<_> = s.frames.iter().filter_map(|f| f.update.as_ref()).collect();
+    assert!(updates.iter().any(|u| !u.repacked), "the headroom lets changes of tiles go in place");
     let moved: usize = s.frames.iter().map(|f| f.loaded + f.evicted).sum();
     assert!(moved > 0, "the path crosses the cave: tiles must come and go");
     assert!(s.frames.iter().skip(1).any(|f| f.loaded > 0 && f.bounces > 0), "loaded tiles get their light");
     assert_eq!(s.images.len(), 6);
+
+    // The same path with at most 64 KiB of tile uploads a frame: the changes to finer forms wait
+    // their turn (at least one a frame), the budget still holds.
+    let limited = RenderOptions { upload_per_frame: Some(64 << 10), ..opts.clone() };
+    let l = render_job::run(&limited, |_| {}).unwrap();
+    let deferred: usize = l.frames.iter().map(|f| f.deferred).sum();
+    eprintln!(
+        "deferred by frame: {:?}; uploaded bytes by frame: {:?}",
+        l.frames.iter().map(|f| f.deferred).collect::<Vec<_>>(),
+        l.frames.iter().map(|f| f.update.as_ref().map_or(0, |u| u.upload_bytes)).collect::<Vec<_>>()
+    );
+    assert!(deferred > 0, "a 64 KiB upload bound defers some changes on this path");
+    for f in &l.frames {
+        assert!(f.tile_bytes <= gpu_memory && f.pool_bytes <= gpu_memory);
+    }
+}
+
+#[test]
+fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer() {
+    // The tiles the view wants change: the renderer keeps the forms that stay in their pool slots
+    // with their light, writes only the new ones, redraws only the shadow faces that see a changed
+    // tile, and settles to what a renderer made for the new scene renders. Back to the first scene
+    // (holes reused) and through a forced repack (light read back and moved), the same.
+    let pkg = Package::open(small_tiles_cave()).unwrap();
+    let gpu = Gpu::new(&gpu_options()).unwrap();
+    let n = pkg.tile_count() as usize;
+    let scene = |full: usize| {
+        SceneData::from_package_with(&pkg, |i| if i < full { TileMode::Full } else { TileMode::Coarse })
+            .unwrap()
+    };
+    let (half, most) = (scene(n / 2), scene(3 * n / 4));
+    let cam = Camera::from_scene(most.cameras.iter().find(|c| c.name == "chamber").unwrap());
+    let settings = Settings { bounces: 40, shadow_map_size: 128, exposure: 8.0, ..Settings::default() };
+    let batch = |s: &SceneData| {
+        let mut r = Renderer::new(&gpu, s, settings.clone()).unwrap();
+        r.settle(|_, _| {}).unwrap();
+        r.render(&cam, W, H).unwrap().0.ldr
+    };
+    let (batch_half, batch_most) = (batch(&half), batch(&most));
+    // Pools with room to spare, as streaming makes them (pool.rs, POOL_HEADROOM).
+    let caps = PoolCaps::filling(PoolCaps::of(&most), PoolCaps::of(&most).bytes(false) * 5 / 4, false);
+    let mut r = Renderer::with_pools(&gpu, &half, settings.clone(), caps).unwrap();
+    r.settle(|_, _| {}).unwrap();
+    let faces = r.shadowed_lights();
+    let check = |r: &mut Renderer, to: &SceneData, batch: &[[u8; 4]], what: &str| {
+        let u = r.update_scene(to).unwrap().expect("same lights and bounds: in place");
+        let bounces = r.settle(|_, _| {}).unwrap();
+        let image = r.render(&cam, W, H).unwrap().0.ldr;
+        let d = golden::diff(batch, &image);
+        eprintln!("{what}: {u:?}; {bounces} bounces; {d:?}");
+        assert!(golden::within_tolerance(&d), "{what}: {d:?}");
+        assert!(r.pool_bytes() <= caps.bytes(false));
+        u
+    };
+    let u = check(&mut r, &most, &batch_most, "half -> most");
+    assert!(!u.repacked && u.kept_tiles > 0 && u.uploaded_tiles < most.tiles.len(), "{u:?}");
+    assert!(u.carried_leaves > 0);
+    assert!(u.upload_bytes < most.tile_bytes(false), "only the new forms are written: {u:?}");
+    let u = check(&mut r, &half, &batch_half, "most -> half");
+    assert!(u.freed_tiles > 0 && u.kept_tiles > 0, "{u:?}");
+    r.repack_next_update();
+    let u = check(&mut r, &most, &batch_most, "half -> most, repacked");
+    assert!(u.repacked && u.carried_leaves > 0, "a repack carries the light of the forms that stay: {u:?}");
+    assert!(faces > 0);
+    // A scene the pools cannot hold is refused in place, and the renderer is untouched.
+    let full = scene(n);
+    if !caps.holds(&PoolCaps::of(&full)) {
+        assert!(r.update_scene(&full).unwrap().is_none());
+        let d = golden::diff(&batch_most, &r.render(&cam, W, H).unwrap().0.ldr);
+        assert!(golden::within_tolerance(&d), "{d:?}");
+    }
 }
 
 /// A copy of `package` without the sections format 1.1 added (coarse levels, rock), as a 1.0

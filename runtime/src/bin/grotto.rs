@@ -151,6 +151,11 @@ struct RenderArgs {
     /// resident before and after keep their light either way.
     #[arg(long)]
     frame_bounces: Option<u32>,
+    /// Along a path, most tile bytes uploaded before a frame, e.g. 16M (default: no limit, every
+    /// frame gets the tiles its view wants). Changes to coarser forms always go through; finer
+    /// ones go in priority order while they fit, and the rest wait for later frames.
+    #[arg(long, value_parser = grotto_format::parse_bytes)]
+    upload_per_frame: Option<u64>,
     /// Indirect light filter at pixels: trilinear, tricubic or off.
     #[arg(long)]
     indirect: Option<String>,
@@ -243,6 +248,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
         gpu_memory: a.gpu_memory,
         point_budget: a.point_budget,
         frame_bounces: a.frame_bounces,
+        upload_per_frame: a.upload_per_frame,
     })
 }
 
@@ -320,11 +326,20 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
     }
     if summary.residency.is_some() && summary.frames.len() > 1 {
         println!(
-            "frame  tile MiB  full  coarse  far  loaded  evicted  surfels  bounces  carried leaves  propagated leaves"
+            "frame  tile MiB  full  coarse  far  loaded  evicted  surfels  bounces  carried leaves  propagated leaves  \
+             uploaded MiB  repacked  shadow faces  deferred"
         );
         for f in &summary.frames {
+            let uploaded = f.update.as_ref().map_or(0, |u| u.upload_bytes);
+            let repacked = if f.update.as_ref().is_some_and(|u| u.repacked) {
+                "yes"
+            } else if f.made_anew {
+                "new"
+            } else {
+                ""
+            };
             println!(
-                "{:5}  {:8.1}  {:4}  {:6}  {:3}  {:6}  {:7}  {:7}  {:7}  {:14}  {:17}",
+                "{:5}  {:8.1}  {:4}  {:6}  {:3}  {:6}  {:7}  {:7}  {:7}  {:14}  {:17}  {:12.1}  {:>8}  {:>12}  {:8}",
                 f.frame,
                 f.tile_bytes as f64 / f64::from(1u32 << 20),
                 f.full_tiles,
@@ -335,7 +350,11 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
                 f.surfels,
                 f.bounces,
                 f.carried_leaves,
-                f.propagated_leaves
+                f.propagated_leaves,
+                uploaded as f64 / f64::from(1u32 << 20),
+                repacked,
+                format!("{} of {}", f.shadow_faces, f.shadow_faces_total),
+                f.deferred
             );
         }
     }

@@ -73,7 +73,7 @@ impl Gbuffer {
         enc: &mut wgpu::CommandEncoder,
         targets: &Targets,
         surfels: &wgpu::Buffer,
-        surfel_count: u32,
+        runs: &[std::ops::Range<u32>],
         timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
     ) {
         let views =
@@ -101,6 +101,9 @@ impl Gbuffer {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.camera.groups[0], &[]);
         pass.set_vertex_buffer(0, surfels.slice(..));
-        pass.draw(0..6, 0..surfel_count);
+        // The surfel ranges of the tiles in view (renderer.rs culls by tile box).
+        for r in runs {
+            pass.draw(0..6, r.clone());
+        }
     }
 }

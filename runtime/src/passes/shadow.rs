@@ -3,8 +3,14 @@
 //! neither renders nor copies into array layers), with a depth buffer for the nearest disc. Owns
 //! the atlas and the faces' splat uniforms; inject and shade read the atlas with a 3x3
 //! percentage-closer filter (shaders/lights.wgsl).
+//!
+//! A face draws only the tiles its frustum meets ([`face_sees_box`]), and after a change of
+//! resident tiles only the faces that see a changed tile are drawn again (the others keep their
+//! texels: the pass loads the atlas and clears a redrawn face by copying a blank one over it).
 
-use glam::{Mat4, Vec3};
+use std::ops::Range;
+
+use glam::{Mat4, Vec3, Vec4};
 
 use super::splat;
 use crate::error::Result;
@@ -30,14 +36,36 @@ pub struct Face {
     pub proj_scale: f32,
 }
 
+/// Whether the box `lo..hi` (frame metres) may show in a view of `view_proj` (wgpu clip space: z
+/// in 0..=w): false only where all eight corners lie outside one clip plane, so it never culls
+/// what shows.
+pub fn face_sees_box(view_proj: &Mat4, lo: Vec3, hi: Vec3) -> bool {
+    let corners: [Vec4; 8] = std::array::from_fn(|i| {
+        let c = Vec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        );
+        *view_proj * c.extend(1.0)
+    });
+    let outside = |plane: fn(Vec4) -> f32| corners.iter().all(|&c| plane(c) < 0.0);
+    let planes: [fn(Vec4) -> f32; 6] =
+        [|c| c.w + c.x, |c| c.w - c.x, |c| c.w + c.y, |c| c.w - c.y, |c| c.z, |c| c.w - c.z];
+    !planes.into_iter().any(outside)
+}
+
 #[derive(Debug)]
 pub struct Shadow {
     pipeline: wgpu::RenderPipeline,
     face_size: u32,
     cols: u32,
     atlas: wgpu::TextureView,
+    atlas_texture: wgpu::Texture,
+    /// One face cleared to "nothing within 1e30 m", copied over a face before it is redrawn.
+    blank: wgpu::Texture,
     depth: wgpu::TextureView,
     uniforms: splat::Uniforms,
+    faces: Vec<Face>,
     atlas_bytes: u64,
 }
 
@@ -66,15 +94,44 @@ impl Shadow {
         let face_size =
             if faces.is_empty() { 1 } else { face_size.min(max_dim / cols).min(max_dim / rows).max(1) };
         let (width, height) = (face_size * cols, face_size * rows);
-        let atlas = gpu
-            .texture_2d(
-                "shadow atlas",
-                width,
-                height,
-                DISTANCE_FORMAT,
-                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-            )?
-            .create_view(&Default::default());
+        let atlas_texture = gpu.texture_2d(
+            "shadow atlas",
+            width,
+            height,
+            DISTANCE_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_DST,
+        )?;
+        let atlas = atlas_texture.create_view(&Default::default());
+        let blank = gpu.texture_2d(
+            "shadow blank face",
+            face_size,
+            face_size,
+            DISTANCE_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        )?;
+        {
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            let view = blank.create_view(&Default::default());
+            enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("shadow blank face"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(packed_clear(1e30)),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            gpu.queue.submit([enc.finish()]);
+        }
         let depth = gpu
             .texture_2d(
                 "shadow depth",
@@ -95,8 +152,19 @@ impl Shadow {
             };
             uniforms.write(gpu, i, &u);
         }
-        let atlas_bytes = u64::from(width) * u64::from(height) * 8;
-        Ok(Self { pipeline, face_size, cols, atlas, depth, uniforms, atlas_bytes })
+        let atlas_bytes = (u64::from(width) * u64::from(height) + u64::from(face_size * face_size)) * 8;
+        Ok(Self {
+            pipeline,
+            face_size,
+            cols,
+            atlas,
+            atlas_texture,
+            blank,
+            depth,
+            uniforms,
+            faces: faces.to_vec(),
+            atlas_bytes,
+        })
     }
 
     /// The distance atlas, as inject and shade bind it.
@@ -112,29 +180,57 @@ impl Shadow {
         self.cols
     }
 
-    /// GPU bytes of the atlas and its depth buffer (4 bytes a texel each).
+    /// The faces, as [`Shadow::new`] was given them.
+    pub fn faces(&self) -> &[Face] {
+        &self.faces
+    }
+
+    /// GPU bytes of the atlas, its depth buffer (4 bytes a texel each) and the blank face.
     pub fn bytes(&self) -> u64 {
         self.atlas_bytes
     }
 
-    /// Renders every face into its square of the atlas in one pass (one viewport per face).
+    /// Renders the faces `draws` names (`Some(surfel ranges)`: the surfels of the tiles the face
+    /// sees) into their squares of the atlas in one pass (one viewport per face). With every face
+    /// named the atlas is cleared; else the other faces keep their texels and each named one is
+    /// cleared first (the blank face copied over it).
     pub fn record(
         &self,
         enc: &mut wgpu::CommandEncoder,
         surfels: &wgpu::Buffer,
-        surfel_count: u32,
+        draws: &[Option<Vec<Range<u32>>>],
         timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
     ) {
+        let every = draws.iter().all(Option::is_some);
+        let corner =
+            |i: usize| ((i as u32 % self.cols) * self.face_size, (i as u32 / self.cols) * self.face_size);
+        if !every {
+            for (i, _) in draws.iter().enumerate().filter(|(_, d)| d.is_some()) {
+                let (x, y) = corner(i);
+                enc.copy_texture_to_texture(
+                    self.blank.as_image_copy(),
+                    wgpu::TexelCopyTextureInfo {
+                        texture: &self.atlas_texture,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d { x, y, z: 0 },
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    wgpu::Extent3d {
+                        width: self.face_size,
+                        height: self.face_size,
+                        depth_or_array_layers: 1,
+                    },
+                );
+            }
+        }
+        let load = if every { wgpu::LoadOp::Clear(packed_clear(1e30)) } else { wgpu::LoadOp::Load };
         let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("shadow"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
                 view: &self.atlas,
                 depth_slice: None,
                 resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(packed_clear(1e30)),
-                    store: wgpu::StoreOp::Store,
-                },
+                ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
             })],
             depth_stencil_attachment: Some(splat::depth_cleared(&self.depth)),
             timestamp_writes: timestamps,
@@ -145,11 +241,33 @@ impl Shadow {
         pass.set_vertex_buffer(0, surfels.slice(..));
         let s = self.face_size as f32;
         // One uniform group per face.
-        for (i, group) in self.uniforms.groups.iter().enumerate() {
-            let (x, y) = ((i as u32 % self.cols) as f32 * s, (i as u32 / self.cols) as f32 * s);
-            pass.set_viewport(x, y, s, s, 0.0, 1.0);
+        for (i, (group, runs)) in self.uniforms.groups.iter().zip(draws).enumerate() {
+            let Some(runs) = runs else { continue };
+            let (x, y) = corner(i);
+            pass.set_viewport(x as f32, y as f32, s, s, 0.0, 1.0);
             pass.set_bind_group(0, group, &[]);
-            pass.draw(0..6, 0..surfel_count);
+            for r in runs {
+                pass.draw(0..6, r.clone());
+            }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_box_is_culled_only_when_wholly_outside_the_frustum() {
+        let proj = Mat4::perspective_rh(90f32.to_radians(), 1.0, 0.1, 100.0);
+        let view = Mat4::look_at_rh(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y);
+        let m = proj * view;
+        let sees = |lo: [f32; 3], hi: [f32; 3]| face_sees_box(&m, Vec3::from(lo), Vec3::from(hi));
+        assert!(sees([-1.0, -1.0, -6.0], [1.0, 1.0, -4.0]), "ahead");
+        assert!(!sees([-1.0, -1.0, 4.0], [1.0, 1.0, 6.0]), "behind");
+        assert!(!sees([20.0, -1.0, -6.0], [22.0, 1.0, -4.0]), "right of the 90 degree cone");
+        assert!(!sees([-1.0, -1.0, -300.0], [1.0, 1.0, -200.0]), "past the far plane");
+        assert!(sees([-100.0, -100.0, -50.0], [100.0, 100.0, 50.0]), "around the eye");
+        assert!(sees([4.0, -1.0, -6.0], [8.0, 1.0, -4.0]), "across the edge");
     }
 }

@@ -1,0 +1,494 @@
+//! Fixed GPU pools for tile data. The renderer allocates its node, leaf and surfel buffers once,
+//! at a capacity chosen from the GPU memory budget ([`PoolCaps`]), and keeps every resident tile
+//! form (a tile at a level: [`TileKey`]) in one [`Slot`] of each pool for as long as it stays
+//! resident. A change of residency then frees the slots of the forms that left, allocates slots
+//! for the forms that arrived, and uploads only those; the tiles that stayed keep their place and
+//! their light on the GPU, with no read-back.
+//!
+//! Slots are contiguous ranges (a tile's nodes index its own nodes and leaves by offset, and
+//! propagation walks a tile's leaves as one range), allocated best-fit (`range-alloc`, the
+//! allocator wgpu-hal uses). When the free space is enough but too fragmented for a new form, the
+//! placement repacks: every tile gets a new slot, in scene order, and the renderer carries the light
+//! of the forms that stayed through a read-back ([`Placement::repacked`]).
+//!
+//! Pure bookkeeping, no GPU, so the policy is unit-tested here.
+
+use std::collections::HashMap;
+use std::ops::Range;
+
+use range_alloc::RangeAllocator;
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::gpu_types::TileGpu;
+use crate::scene_data::SceneData;
+
+/// Share of each pool residency leaves free when streaming, so a new tile form usually finds a
+/// hole or the tail and the pools rarely need a repack (measured in docs/benchmarks.md: with no
+/// headroom every change of tiles repacked).
+pub const POOL_HEADROOM: f64 = 0.1;
+
+/// A tile form: where the tile is (its corner in frame leaves), its SVO depth, and the level it is
+/// held at. Two scenes holding the same key hold the same nodes, leaves and surfels.
+pub type TileKey = ([i32; 3], u32, u32);
+
+/// The key of a placed or loaded tile.
+pub fn key(t: &TileGpu) -> TileKey {
+    (t.origin_leaf, t.depth, t.leaf_lod)
+}
+
+/// Elements each pool holds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct PoolCaps {
+    /// Tile records (every tile of a package is held in some form, so this is the package's
+    /// tile count when streaming).
+    pub tiles: u64,
+    pub nodes: u64,
+    pub leaves: u64,
+    pub surfels: u64,
+}
+
+impl PoolCaps {
+    /// What `scene` uses.
+    pub fn of(scene: &SceneData) -> Self {
+        Self {
+            tiles: scene.tiles.len() as u64,
+            nodes: scene.nodes.len() as u64,
+            leaves: scene.leaves.len() as u64,
+            surfels: scene.surfels.len() as u64,
+        }
+    }
+
+    /// GPU bytes of pools this large (the formula residency counts with, `residency::tile_bytes`).
+    pub fn bytes(&self, radiance_f16: bool) -> u64 {
+        crate::residency::tile_bytes(self.nodes, self.leaves, self.surfels, radiance_f16)
+            + self.tiles.saturating_sub(1) * size_of::<TileGpu>() as u64
+    }
+
+    /// These pools less `share` of each (nodes, leaves, surfels; tile records kept): what
+    /// residency may fill when `share` is kept free ([`POOL_HEADROOM`]).
+    pub fn less(&self, share: f64) -> Self {
+        let keep = |n: u64| (n as f64 * (1.0 - share.clamp(0.0, 1.0))).floor() as u64;
+        Self {
+            tiles: self.tiles,
+            nodes: keep(self.nodes),
+            leaves: keep(self.leaves),
+            surfels: keep(self.surfels),
+        }
+    }
+
+    /// Whether `used` fits in these pools.
+    pub fn holds(&self, used: &PoolCaps) -> bool {
+        used.tiles <= self.tiles
+            && used.nodes <= self.nodes
+            && used.leaves <= self.leaves
+            && used.surfels <= self.surfels
+    }
+
+    /// Pools with `used`'s mix of nodes, leaves and surfels, grown in proportion until their bytes
+    /// reach `budget_bytes`; never smaller than `used`. The mix of the first view's residency is
+    /// the best guess of the mix of the next ones (a cave's tiles are alike), and residency keeps
+    /// within each pool from then on (`residency::Budget::pools`).
+    pub fn filling(used: PoolCaps, budget_bytes: u64, radiance_f16: bool) -> Self {
+        let used_bytes = used.bytes(radiance_f16).max(1);
+        let record = used.tiles * size_of::<TileGpu>() as u64;
+        let scale =
+            budget_bytes.saturating_sub(record) as f64 / used_bytes.saturating_sub(record).max(1) as f64;
+        let grow = |n: u64| ((n as f64 * scale).floor() as u64).max(n);
+        // Rounding each pool down keeps the sum within the budget; where `used` itself was over
+        // (it never is: residency chose it within the budget), `used` wins.
+        Self {
+            tiles: used.tiles,
+            nodes: grow(used.nodes),
+            leaves: grow(used.leaves),
+            surfels: grow(used.surfels),
+        }
+    }
+}
+
+/// Where one tile form lives in the pools.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Slot {
+    pub nodes: Range<u32>,
+    pub leaves: Range<u32>,
+    pub surfels: Range<u32>,
+}
+
+/// What [`Pools::place`] decided for a scene.
+#[derive(Clone, Debug, Default)]
+pub struct Placement {
+    /// The scene's tiles in scene order, their offsets moved to their slots.
+    pub tiles: Vec<TileGpu>,
+    /// Each scene tile's slot.
+    pub slots: Vec<Slot>,
+    /// Each scene tile: it was resident before in this form and kept its slot (nothing to upload).
+    pub kept: Vec<bool>,
+    /// Every slot was reallocated (the free space was fragmented): everything is uploaded again,
+    /// and the forms resident before lost their place (their light is carried by the caller).
+    pub repacked: bool,
+    /// Slots freed (forms that left).
+    pub freed: usize,
+}
+
+impl Placement {
+    /// Scene tiles uploaded.
+    pub fn uploaded(&self) -> usize {
+        self.kept.iter().filter(|k| !**k).count()
+    }
+}
+
+/// The three pools' allocators and the slot of every resident tile form.
+#[derive(Debug)]
+pub struct Pools {
+    caps: PoolCaps,
+    nodes: RangeAllocator<u32>,
+    leaves: RangeAllocator<u32>,
+    surfels: RangeAllocator<u32>,
+    slots: HashMap<TileKey, Slot>,
+    /// The next placement repacks whatever the free space ([`Pools::repack_next`]).
+    repack_next: bool,
+}
+
+/// Each tile's surfels: `scene.tile_surfels` where it covers the surfels exactly, tile after tile;
+/// else (a scene put together by hand) every surfel counted as the first tile's. Either way each
+/// surfel has one owner, so a slot holds whole tiles. The flag: the ranges were the scene's own
+/// (each tile's surfels lie in its box).
+pub fn surfel_owners(scene: &SceneData) -> (Vec<Range<u32>>, bool) {
+    let n = scene.surfels.len() as u32;
+    let mut next = 0;
+    let exact = scene.tile_surfels.len() == scene.tiles.len()
+        && scene.tile_surfels.iter().all(|r| {
+            let ok = r.start == next && r.end >= r.start;
+            next = r.end;
+            ok
+        })
+        && next == n;
+    if exact {
+        return (scene.tile_surfels.clone(), true);
+    }
+    ((0..scene.tiles.len()).map(|t| if t == 0 { 0..n } else { n..n }).collect(), false)
+}
+
+/// Elements of each kind a scene tile holds: (nodes, leaves, surfels).
+fn tile_counts(scene: &SceneData, owners: &[Range<u32>], t: usize) -> (u32, u32, u32) {
+    let tile = &scene.tiles[t];
+    (tile.node_count, tile.leaf_count, owners.get(t).map_or(0, |r| r.len() as u32))
+}
+
+impl Pools {
+    /// Empty pools of `caps` elements (each at most `u32::MAX`: GPU indices are u32).
+    pub fn new(caps: PoolCaps) -> Result<Self> {
+        let cap = |what: &str, n: u64| {
+            u32::try_from(n).map_err(|_| Error::Budget {
+                what: format!("a pool of {n} {what} is over the 2^32 a GPU index can address"),
+                hint: "lower --gpu-memory".into(),
+            })
+        };
+        Ok(Self {
+            caps,
+            nodes: RangeAllocator::new(0..cap("nodes", caps.nodes)?),
+            leaves: RangeAllocator::new(0..cap("leaves", caps.leaves)?),
+            surfels: RangeAllocator::new(0..cap("surfels", caps.surfels)?),
+            slots: HashMap::new(),
+            repack_next: false,
+        })
+    }
+
+    /// Makes the next [`Pools::place`] repack (compact every slot) even where the new forms fit
+    /// the holes: to defragment on purpose, and for tests of the repack path.
+    pub fn repack_next(&mut self) {
+        self.repack_next = true;
+    }
+
+    pub fn caps(&self) -> PoolCaps {
+        self.caps
+    }
+
+    /// The slot of every resident form.
+    pub fn slots(&self) -> &HashMap<TileKey, Slot> {
+        &self.slots
+    }
+
+    /// One past the highest leaf in use: the leaf passes dispatch over `0..leaf_end` (holes
+    /// included; their results are never read).
+    pub fn leaf_end(&self) -> u32 {
+        self.slots.values().map(|s| s.leaves.end).max().unwrap_or(0)
+    }
+
+    /// The surfel ranges in use, merged where they touch, in order: what the splat passes draw.
+    pub fn surfel_runs(&self) -> Vec<Range<u32>> {
+        let mut r: Vec<Range<u32>> =
+            self.slots.values().map(|s| s.surfels.clone()).filter(|r| !r.is_empty()).collect();
+        r.sort_by_key(|r| r.start);
+        let mut out: Vec<Range<u32>> = Vec::with_capacity(r.len());
+        for x in r {
+            match out.last_mut() {
+                Some(last) if last.end == x.start => last.end = x.end,
+                _ => out.push(x),
+            }
+        }
+        out
+    }
+
+    fn alloc(a: &mut RangeAllocator<u32>, n: u32) -> Option<Range<u32>> {
+        if n == 0 {
+            return Some(0..0);
+        }
+        a.allocate_range(n).ok()
+    }
+
+    fn free(&mut self, s: &Slot) {
+        for (a, r) in
+            [(&mut self.nodes, &s.nodes), (&mut self.leaves, &s.leaves), (&mut self.surfels, &s.surfels)]
+        {
+            if !r.is_empty() {
+                a.free_range(r.clone());
+            }
+        }
+    }
+
+    /// Gives every tile of `scene` a slot: the forms already resident keep theirs, the others
+    /// get new ones, the forms that left are freed (`owners`: [`surfel_owners`]). Pools that
+    /// hold nothing yet are filled in scene order, so a scene placed once lies as it was loaded.
+    /// An error when the scene needs more than the pools hold (residency keeps within them, so
+    /// that is a bug, not a user's mistake).
+    pub fn place(&mut self, scene: &SceneData, owners: &[Range<u32>]) -> Result<Placement> {
+        let need = PoolCaps::of(scene);
+        if !self.caps.holds(&need) {
+            return Err(Error::Budget {
+                what: format!("the scene needs {need:?} pool elements, over the pools' {:?}", self.caps),
+                hint: "raise --gpu-memory".into(),
+            });
+        }
+        let keys: Vec<TileKey> = scene.tiles.iter().map(key).collect();
+        let wanted: HashMap<TileKey, usize> = keys.iter().enumerate().map(|(i, k)| (*k, i)).collect();
+        // Free what left (or what a same-keyed tile no longer matches).
+        let mut freed = 0;
+        let gone: Vec<TileKey> = self
+            .slots
+            .iter()
+            .filter(|(k, s)| {
+                wanted.get(*k).is_none_or(|&t| {
+                    let (n, l, su) = tile_counts(scene, owners, t);
+                    (s.nodes.len() as u32, s.leaves.len() as u32, s.surfels.len() as u32) != (n, l, su)
+                })
+            })
+            .map(|(k, _)| *k)
+            .collect();
+        for k in gone {
+            if let Some(s) = self.slots.remove(&k) {
+                self.free(&s);
+                freed += 1;
+            }
+        }
+        let mut kept: Vec<bool> = keys.iter().map(|k| self.slots.contains_key(k)).collect();
+        // The new forms, largest first (best fit packs better that way).
+        let mut new: Vec<usize> = (0..keys.len()).filter(|&t| !kept[t]).collect();
+        if !self.slots.is_empty() {
+            new.sort_by_key(|&t| {
+                let (n, l, s) = tile_counts(scene, owners, t);
+                std::cmp::Reverse((l, n, s))
+            });
+        }
+        let mut repacked = std::mem::take(&mut self.repack_next) && !self.slots.is_empty();
+        for &t in &new {
+            if repacked {
+                break;
+            }
+            let (n, l, s) = tile_counts(scene, owners, t);
+            let slot = (|| {
+                let nodes = Self::alloc(&mut self.nodes, n)?;
+                let Some(leaves) = Self::alloc(&mut self.leaves, l) else {
+                    self.free(&Slot { nodes, ..Default::default() });
+                    return None;
+                };
+                let Some(surfels) = Self::alloc(&mut self.surfels, s) else {
+                    self.free(&Slot { nodes, leaves, ..Default::default() });
+                    return None;
+                };
+                Some(Slot { nodes, leaves, surfels })
+            })();
+            match slot {
+                Some(slot) => {
+                    self.slots.insert(keys[t], slot);
+                }
+                None => {
+                    repacked = true;
+                    break;
+                }
+            }
+        }
+        if repacked {
+            // Fragmented: start over, every tile in scene order (it fits: checked above).
+            *self = Self::new(self.caps)?;
+            for (t, k) in keys.iter().enumerate() {
+                let (n, l, s) = tile_counts(scene, owners, t);
+                let (Some(nodes), Some(leaves), Some(surfels)) = (
+                    Self::alloc(&mut self.nodes, n),
+                    Self::alloc(&mut self.leaves, l),
+                    Self::alloc(&mut self.surfels, s),
+                ) else {
+                    return Err(Error::Internal {
+                        what: "pools",
+                        message: "a checked scene did not fit empty pools".into(),
+                    });
+                };
+                self.slots.insert(*k, Slot { nodes, leaves, surfels });
+            }
+            kept.fill(false);
+        }
+        let slots: Vec<Slot> = keys.iter().map(|k| self.slots[k].clone()).collect();
+        let tiles = scene
+            .tiles
+            .iter()
+            .zip(&slots)
+            .map(|(t, s)| TileGpu { node_offset: s.nodes.start, leaf_offset: s.leaves.start, ..*t })
+            .collect();
+        Ok(Placement { tiles, slots, kept, repacked, freed })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scene of tiles with these (x, nodes, leaves, surfels), at distinct places.
+    fn scene(tiles: &[(i32, u32, u32, u32)]) -> SceneData {
+        let mut s = SceneData::default();
+        for &(x, n, l, su) in tiles {
+            let (node_offset, leaf_offset) = (s.nodes.len() as u32, s.leaves.len() as u32);
+            s.nodes.resize(s.nodes.len() + n as usize, Default::default());
+            s.leaves.resize(s.leaves.len() + l as usize, Default::default());
+            let first = s.surfels.len() as u32;
+            s.surfels.resize(s.surfels.len() + su as usize, Default::default());
+            s.tile_surfels.push(first..first + su);
+            s.tiles.push(TileGpu {
+                origin_leaf: [x, 0, 0],
+                depth: 4,
+                node_offset,
+                leaf_offset,
+                node_count: n,
+                leaf_count: l,
+                leaf_lod: 0,
+                pad: [0; 3],
+            });
+        }
+        s
+    }
+
+    fn place(p: &mut Pools, s: &SceneData) -> Result<Placement> {
+        p.place(s, &surfel_owners(s).0)
+    }
+
+    fn caps(n: u64) -> PoolCaps {
+        PoolCaps { tiles: 8, nodes: n, leaves: n, surfels: n }
+    }
+
+    /// No two resident slots share an element of any pool, and all lie within the caps.
+    fn sound(p: &Pools) {
+        let all: Vec<&Slot> = p.slots.values().collect();
+        type Field = fn(&Slot) -> Range<u32>;
+        let pools: [(Field, u64); 3] = [
+            (|s| s.nodes.clone(), p.caps.nodes),
+            (|s| s.leaves.clone(), p.caps.leaves),
+            (|s| s.surfels.clone(), p.caps.surfels),
+        ];
+        for (get, cap) in pools {
+            let mut r: Vec<Range<u32>> = all.iter().map(|s| get(s)).filter(|r| !r.is_empty()).collect();
+            r.sort_by_key(|r| r.start);
+            for w in r.windows(2) {
+                assert!(w[0].end <= w[1].start, "{:?} overlaps {:?}", w[0], w[1]);
+            }
+            assert!(r.last().is_none_or(|r| u64::from(r.end) <= cap));
+        }
+    }
+
+    #[test]
+    fn a_first_scene_lies_as_loaded() {
+        let s = scene(&[(0, 3, 2, 5), (1, 4, 3, 0), (2, 1, 1, 1)]);
+        let mut p = Pools::new(PoolCaps::of(&s)).unwrap();
+        let placed = place(&mut p, &s).unwrap();
+        assert_eq!(placed.tiles, s.tiles, "fresh pools are filled in scene order");
+        assert_eq!(placed.uploaded(), 3);
+        assert_eq!(p.leaf_end(), 6);
+        assert_eq!(p.surfel_runs(), vec![0..6]);
+        sound(&p);
+    }
+
+    #[test]
+    fn tiles_that_stay_keep_their_slots_and_only_new_ones_upload() {
+        let a = scene(&[(0, 3, 2, 5), (1, 4, 3, 2), (2, 1, 1, 1)]);
+        let mut p = Pools::new(caps(20)).unwrap();
+        place(&mut p, &a).unwrap();
+        let before = p.slots().clone();
+        // Tile 1 leaves, tile 3 arrives, tiles 0 and 2 stay.
+        let b = scene(&[(0, 3, 2, 5), (2, 1, 1, 1), (3, 6, 5, 4)]);
+        let placed = place(&mut p, &b).unwrap();
+        assert!(!placed.repacked);
+        assert_eq!(placed.kept, vec![true, true, false]);
+        assert_eq!(placed.freed, 1);
+        for k in [key(&b.tiles[0]), key(&b.tiles[1])] {
+            assert_eq!(p.slots()[&k], before[&k], "a tile that stays keeps its slot");
+        }
+        sound(&p);
+        // The same place at another level is another form: placed anew.
+        let mut c = b.clone();
+        c.tiles[0].leaf_lod = 3;
+        let placed = place(&mut p, &c).unwrap();
+        assert_eq!(placed.kept, vec![false, true, true]);
+        sound(&p);
+        assert_eq!(p.surfel_runs().iter().map(|r| r.len()).sum::<usize>(), 10);
+    }
+
+    #[test]
+    fn holes_are_reused_and_a_fragmented_pool_repacks() {
+        let mut p = Pools::new(caps(6)).unwrap();
+        // 2 + 2 + 2 in order; the first and last leave: two holes of 2.
+        place(&mut p, &scene(&[(0, 2, 2, 2), (1, 2, 2, 2), (2, 2, 2, 2)])).unwrap();
+        assert_eq!(p.slots()[&([1, 0, 0], 4, 0)].leaves, 2..4);
+        // Two tiles of 2 fit the holes: no repack, the middle tile stays.
+        let placed = place(&mut p, &scene(&[(1, 2, 2, 2), (3, 2, 2, 2), (4, 2, 2, 2)])).unwrap();
+        assert!(!placed.repacked);
+        assert_eq!(placed.kept, vec![true, false, false]);
+        sound(&p);
+        // Tiles 3 and 4 leave; one of 4 arrives: 4 free in two holes of 2 -> repack.
+        let placed = place(&mut p, &scene(&[(1, 2, 2, 2), (5, 4, 4, 4)])).unwrap();
+        assert!(placed.repacked, "4 leaves in two holes of 2 need a repack");
+        assert_eq!(placed.kept, vec![false, false]);
+        assert_eq!(p.leaf_end(), 6);
+        sound(&p);
+    }
+
+    #[test]
+    fn a_scene_over_the_pools_is_refused_and_changes_nothing() {
+        let mut p = Pools::new(caps(10)).unwrap();
+        place(&mut p, &scene(&[(0, 4, 4, 4)])).unwrap();
+        let before = p.slots().clone();
+        let err = place(&mut p, &scene(&[(0, 4, 4, 4), (8, 7, 7, 7)])).unwrap_err();
+        assert!(err.to_string().contains("pool"), "{err}");
+        assert_eq!(p.slots(), &before);
+        let err = Pools::new(PoolCaps { leaves: 1 << 33, ..caps(1) }).unwrap_err();
+        assert!(err.to_string().contains("2^32"), "{err}");
+    }
+
+    #[test]
+    fn surfels_of_a_hand_made_scene_belong_to_its_first_tile() {
+        let mut s = scene(&[(0, 1, 1, 3), (1, 1, 1, 2)]);
+        assert_eq!(surfel_owners(&s), (vec![0..3, 3..5], true));
+        s.tile_surfels.clear();
+        assert_eq!(surfel_owners(&s), (vec![0..5, 5..5], false));
+    }
+
+    #[test]
+    fn pools_fill_the_budget_in_the_used_mix() {
+        let used = PoolCaps { tiles: 10, nodes: 1000, leaves: 500, surfels: 2000 };
+        let used_bytes = used.bytes(false);
+        let caps = PoolCaps::filling(used, 3 * used_bytes, false);
+        assert!(caps.bytes(false) <= 3 * used_bytes);
+        assert!(caps.bytes(false) > 3 * used_bytes - 3 * used_bytes / 100);
+        assert!(caps.holds(&used));
+        assert_eq!(caps.tiles, 10);
+        // Over the budget already: the used counts, not less.
+        assert_eq!(PoolCaps::filling(used, used_bytes / 2, false), used);
+    }
+}
