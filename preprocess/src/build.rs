@@ -2,7 +2,7 @@
 //!
 //! Three steps, each resumable (the brief's plan / build-tile / assemble jobs):
 //! 1. plan: resolve scans and tile them out of core ([`crate::tiling`]);
-//! 2. build-tile: per tile, in parallel batches of `threads` tiles: normals, spread and radii
+//! 2. build-tile: per tile, in parallel batches of tiles: normals, spread and radii
 //!    ([`crate::normals`]), surfels in Morton order, colours -> a one-tile package
 //!    `WORK/tiles/NNNNNNN.grotto`, whose provenance carries a fingerprint of the plan and the
 //!    build parameters. A tile package with the right fingerprint is kept, not rebuilt, so an
@@ -11,8 +11,12 @@
 //!    output, in plan order, with scene and provenance; the output is written atomically and is
 //!    the same for the same input whatever the thread count.
 //!
-//! Memory: the tiler's buffers take a quarter of the budget; each tile being built costs about
-//! [`BUILD_BYTES_PER_POINT`] per point, so `max_points_per_tile = 3/4 budget / threads / that`.
+//! The package depends only on the inputs and the options that change its content (leaf, tile
+//! extents, `max_tile_points`, normals, colours...), never on the thread count, the memory budget
+//! or how the tiles were split into shards: those change how fast and in how many passes the work
+//! runs. Memory: the tiler's buffers take a quarter of the budget; each tile being built costs
+//! about [`BUILD_BYTES_PER_POINT`] per point, so the budget bounds how many tiles are built at
+//! once ([`BuildParams::tiles_at_once`]), not how large a tile is.
 
 use std::path::{Path, PathBuf};
 
@@ -38,11 +42,19 @@ use crate::{Error, Result};
 /// samples (48) and sort keys (16); peak memory is measured in docs/benchmarks.md.
 pub const BUILD_BYTES_PER_POINT: u64 = 256;
 
+/// Default of [`BuildParams::max_tile_points`]: 2^21 points, 512 MiB to build at
+/// [`BUILD_BYTES_PER_POINT`]. A content option with the same default on every machine (it was
+/// the budget divided by the thread count, so two machines built different packages).
+pub const DEFAULT_MAX_TILE_POINTS: u64 = 1 << 21;
+
 #[derive(Clone, Debug, Serialize)]
 pub struct BuildParams {
     pub work_dir: PathBuf,
     pub memory_budget_bytes: u64,
     pub threads: usize,
+    /// A tile is split while it holds more points than this (down to the smallest tile edge):
+    /// content, recorded in provenance and in every fingerprint.
+    pub max_tile_points: u64,
     /// Edge of a leaf voxel, metres; a power of two <= the smallest tile. Every tile's SVO depth is
     /// `log2(tile extent / leaf)`, so all tiles share one voxel grid.
     pub leaf_m: f64,
@@ -110,6 +122,7 @@ impl BuildParams {
             work_dir,
             memory_budget_bytes: 2 << 30,
             threads: std::thread::available_parallelism().map_or(1, usize::from),
+            max_tile_points: DEFAULT_MAX_TILE_POINTS,
             leaf_m,
             colors: ColorCodec::Bc1,
             sh_window: true,
@@ -122,13 +135,20 @@ impl BuildParams {
         }
     }
 
+    /// Tiles built at once: the threads, fewer where three quarters of the memory budget do not
+    /// hold that many tiles of `max_tile_points` (at least one). How fast, not what.
+    pub fn tiles_at_once(&self) -> usize {
+        let budget = self.memory_budget_bytes.max(64 << 20);
+        let per_tile = self.max_tile_points.max(1).saturating_mul(BUILD_BYTES_PER_POINT);
+        ((budget * 3 / 4 / per_tile) as usize).clamp(1, self.threads.max(1))
+    }
+
     pub fn tiling(&self) -> TilingParams {
         let budget = self.memory_budget_bytes.max(64 << 20);
         TilingParams {
             min_tile_extent_m: self.min_tile_extent_m,
             max_tile_extent_m: self.max_tile_extent_m,
-            max_points_per_tile: (budget * 3 / 4 / self.threads.max(1) as u64 / BUILD_BYTES_PER_POINT)
-                .max(1000),
+            max_points_per_tile: self.max_tile_points,
             halo_m: self.halo_m,
             // Voxel faces fall on quanta, so voxel cells are exact integer shifts (see tiling.rs).
             quantum_m: self.leaf_m / 2048.0,
@@ -687,7 +707,7 @@ fn tile_stage(
     std::fs::create_dir_all(&tiles_dir).map_err(|source| Error::Io { path: tiles_dir.clone(), source })?;
     let fingerprint = tile_fingerprint(plan, params);
     let mine: Vec<usize> = (0..plan.tiles.len()).filter(|&t| shard.takes(t)).collect();
-    let batch = params.threads.max(1);
+    let batch = params.tiles_at_once();
     let mut stage = TileStage::default();
     for (b, group) in mine.chunks(batch).enumerate() {
         let done: Vec<Result<bool>> = pool.install(|| {

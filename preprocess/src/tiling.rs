@@ -230,7 +230,10 @@ fn fingerprint(scans: &[ResolvedScan], params: &TilingParams) -> Result<String> 
             .as_bytes(),
         );
     }
-    h.update(serde_json::to_string(params).unwrap_or_default().as_bytes());
+    // The buffer and chunk sizes follow the memory budget: how many passes, not what the bins
+    // hold, so they stay out of the fingerprint (a plan made under one budget serves another).
+    let content = TilingParams { chunk_points: 0, buffer_bytes: 0, ..params.clone() };
+    h.update(serde_json::to_string(&content).unwrap_or_default().as_bytes());
     Ok(format!("{:016x}", h.digest()))
 }
 

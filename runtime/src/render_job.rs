@@ -610,7 +610,8 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             let (mut loaded, mut evicted, mut bounces, mut carried_leaves) = (0, 0, 0, 0);
             let mut load_wait_ms = 0.0;
             let (mut update, mut made_anew, mut deferred) = (None, false, 0);
-            let shadow_before = r.shadow_faces_drawn();
+            // The first frame counts the faces its settled light drew.
+            let shadow_before = if i == 0 { 0 } else { r.shadow_faces_drawn() };
             if i == 0 {
                 bounces = r.stats().bounces_done;
             } else if let (Some(handle), Some(current)) = (next_load.take(), &residency) {

@@ -75,6 +75,7 @@ fn export_writes_points_other_tools_read() {
         work_dir: dir.path().join("w"),
         memory_budget_bytes: 64 << 20,
         threads: 2,
+        max_tile_points: 98_304,
         leaf_m: 0.125,
         min_tile_extent_m: 4.0,
         max_tile_extent_m: 16.0,

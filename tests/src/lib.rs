@@ -12,6 +12,8 @@ pub fn small_build(work_dir: &Path, min_tile_m: f64, max_tile_m: f64, halo_m: f6
         work_dir: work_dir.to_path_buf(),
         memory_budget_bytes: 64 << 20,
         threads: 2,
+        // The tile cap these packages were built with when it was 3/4 budget / threads / 256 B.
+        max_tile_points: 98_304,
         leaf_m: 0.125,
         colors: ColorCodec::Raw,
         min_tile_extent_m: min_tile_m,

@@ -140,6 +140,14 @@ fn an_interrupted_build_resumes_and_gives_the_same_bytes() {
     assert_eq!(third.reused_tiles, 0);
 }
 
+/// The package at `path` has exactly the bytes `want` (a failure says where they part, not all
+/// of them).
+fn same_bytes(path: &std::path::Path, want: &[u8], what: &str) {
+    let got = std::fs::read(path).unwrap();
+    let first = got.iter().zip(want).position(|(a, b)| a != b);
+    assert!(got == want, "{what}: {} bytes against {}, first difference at {first:?}", got.len(), want.len());
+}
+
 #[test]
 fn plan_shards_and_assemble_give_the_same_package_as_build() {
     let dir = tempfile::tempdir().unwrap();
@@ -162,26 +170,51 @@ fn plan_shards_and_assemble_give_the_same_package_as_build() {
     let whole = build::build(&manifest, &manifest_path, &dir.path().join("whole.grotto"), &bp("w1"), &|_| {})
         .unwrap();
     assert!(whole.tiles >= 4);
+    let whole_bytes = std::fs::read(dir.path().join("whole.grotto")).unwrap();
 
-    let cluster = bp("w2");
+    // The thread count and the memory budget change how the work runs, never the package. With
+    // 16 threads under 64 MiB the old per-tile cap (3/4 budget / threads / 256 B = 12,288 points)
+    // split this cloud's tiles differently, so this fails if either leaks into the tiling.
+    let many = BuildParams { threads: 16, ..bp("w16") };
+    assert!(many.tiles_at_once() <= 16);
+    build::build(&manifest, &manifest_path, &dir.path().join("many.grotto"), &many, &|_| {}).unwrap();
+    same_bytes(&dir.path().join("many.grotto"), &whole_bytes, "16 threads");
+    let big = BuildParams { threads: 2, memory_budget_bytes: 1 << 30, ..bp("w2g") };
+    build::build(&manifest, &manifest_path, &dir.path().join("big.grotto"), &big, &|_| {}).unwrap();
+    same_bytes(&dir.path().join("big.grotto"), &whole_bytes, "2 threads, 1 GiB");
+    // The tile size cap is content: honoured, and recorded.
+    let small = BuildParams { max_tile_points: 2_000, ..bp("wsmall") };
+    let split =
+        build::build(&manifest, &manifest_path, &dir.path().join("small.grotto"), &small, &|_| {}).unwrap();
+    assert!(split.tiles > whole.tiles, "{} tiles at 2,000 points against {}", split.tiles, whole.tiles);
+    let prov = Package::open(dir.path().join("small.grotto")).unwrap().provenance().unwrap().unwrap();
+    assert_eq!(prov.parameters["max_points_per_tile"], serde_json::json!(2_000));
+
+    // The cluster steps with a different thread count and budget each, as on a login node and
+    // compute nodes of other sizes.
+    let cluster = BuildParams { threads: 2, memory_budget_bytes: 256 << 20, ..bp("w2") };
+    let shard_a = BuildParams { threads: 1, ..bp("w2") };
+    let shard_b = BuildParams { threads: 3, memory_budget_bytes: 128 << 20, ..bp("w2") };
+    let assembler = BuildParams { threads: 4, ..bp("w2") };
     let err =
         build::build_tiles(&manifest, &manifest_path, &cluster, build::Shard::ALL, &|_| {}).unwrap_err();
     assert!(err.to_string().contains("run the plan step first"), "{err}");
     let (plan, reused) = build::plan(&manifest, &cluster, &|_| {}).unwrap();
     assert!(!reused && plan.tiles.len() == whole.tiles);
     let first =
-        build::build_tiles(&manifest, &manifest_path, &cluster, build::Shard { index: 0, count: 2 }, &|_| {})
+        build::build_tiles(&manifest, &manifest_path, &shard_a, build::Shard { index: 0, count: 2 }, &|_| {})
             .unwrap();
-    let err = build::assemble(&manifest, &manifest_path, &dir.path().join("early.grotto"), &cluster, &|_| {})
-        .unwrap_err();
+    let err =
+        build::assemble(&manifest, &manifest_path, &dir.path().join("early.grotto"), &assembler, &|_| {})
+            .unwrap_err();
     assert!(err.to_string().contains("run build-tile"), "{err}");
     assert!(!dir.path().join("early.grotto").exists());
     let second =
-        build::build_tiles(&manifest, &manifest_path, &cluster, build::Shard { index: 1, count: 2 }, &|_| {})
+        build::build_tiles(&manifest, &manifest_path, &shard_b, build::Shard { index: 1, count: 2 }, &|_| {})
             .unwrap();
     assert_eq!(first.built + second.built, whole.tiles);
     let out = dir.path().join("cluster.grotto");
-    let assembled = build::assemble(&manifest, &manifest_path, &out, &cluster, &|_| {}).unwrap();
+    let assembled = build::assemble(&manifest, &manifest_path, &out, &assembler, &|_| {}).unwrap();
     assert_eq!(assembled.tiles, whole.tiles);
-    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(dir.path().join("whole.grotto")).unwrap());
+    same_bytes(&out, &whole_bytes, "plan, shards and assemble with mixed threads");
 }

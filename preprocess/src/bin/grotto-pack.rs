@@ -149,9 +149,14 @@ struct BuildOpts {
     /// Memory budget, e.g. 2G, 512M.
     #[arg(long, default_value = "2G")]
     memory_budget: String,
-    /// Worker threads (default: all cores).
+    /// Worker threads (default: all cores). Changes how fast the build runs, never the package.
     #[arg(long)]
     threads: Option<usize>,
+    /// Split a tile while it holds more points than this (down to --min-tile-m). Part of the
+    /// package's content, with the same default everywhere; the memory budget bounds how many
+    /// tiles are built at once (each takes about 256 bytes a point).
+    #[arg(long, default_value_t = grotto_preprocess::build::DEFAULT_MAX_TILE_POINTS)]
+    max_tile_points: u64,
     /// Leaf voxel edge, metres (a power of two, at most --min-tile-m), or "auto": the smallest
     /// power of two at or above the median point spacing of the scans, at least 0.0625.
     #[arg(long, default_value = "auto")]
@@ -297,6 +302,7 @@ fn setup(
     let params = BuildParams {
         memory_budget_bytes: parse_bytes(&opts.memory_budget)?,
         threads: opts.threads.unwrap_or(defaults.threads),
+        max_tile_points: opts.max_tile_points,
         colors: if opts.colors == "raw" { ColorCodec::Raw } else { ColorCodec::Bc1 },
         sh_window: !opts.no_sh_window,
         k: opts.k,
