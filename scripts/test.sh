@@ -20,3 +20,7 @@ fi
 # No session bus or display here; wgpu's GL backend only needs a writable runtime dir for EGL.
 export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-$(mktemp -d)}
 cargo test --workspace --locked
+# The cluster steps on a real scheduler (issue 20): plan, a build-tile job array and assemble on a
+# one-node Slurm cluster started here, against one build. Skipped with a message where a scheduler
+# cannot start; a failed job or a different package fails.
+GROTTO_PACK=target/debug/grotto-pack GROTTO_SLURM_OPTIONAL=1 ./scripts/test-slurm.sh

@@ -42,7 +42,9 @@ fn load(data: &[u8]) {
         lights_m: Vec::new(),
         light_reach_m: 4.0,
     };
-    if let Ok(r) = residency::choose(&tiles, &view, Budget { gpu_bytes: full / 2, points: u64::MAX }) {
+    if let Ok(r) =
+        residency::choose(&tiles, &view, Budget { gpu_bytes: full / 2, points: u64::MAX, pools: None })
+    {
         if let Ok(scene) = SceneData::from_package_with(&pkg, r.mode_of()) {
             let _ = scene.nodes_by_height();
             let _ = TileIndex::build("fuzz", &scene.tiles);

@@ -18,8 +18,12 @@ static HOOK: Once = Once::new();
 fuzz_target!(|data: &[u8]| {
     HOOK.call_once(|| std::panic::set_hook(Box::new(|_| {})));
     let Some((&pick, body)) = data.split_first() else { return };
-    let (format, ext) = [(ScanFormat::Las, "las"), (ScanFormat::Laz, "laz"), (ScanFormat::Ply, "ply"), (ScanFormat::E57, "e57")]
-        [usize::from(pick) % 4];
+    let (format, ext) = [
+        (ScanFormat::Las, "las"),
+        (ScanFormat::Laz, "laz"),
+        (ScanFormat::Ply, "ply"),
+        (ScanFormat::E57, "e57"),
+    ][usize::from(pick) % 4];
     let dir = std::env::temp_dir();
     let path = dir.join(format!("grotto-fuzz-{}.{ext}", std::process::id()));
     if std::fs::write(&path, body).is_err() {
