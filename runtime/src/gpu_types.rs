@@ -206,9 +206,19 @@ pub mod flags {
     /// Some surfels have a specular material: shade adds Fresnel-weighted reflection (a specular
     /// cone through the SVO, the environment where it escapes, GGX highlights of the lamps).
     pub const SPECULAR: u32 = 128;
+    /// View modes (settings.rs `ViewMode`): shade writes albedo, normals or the tile level
+    /// instead of light, or lights every surface as if its albedo were 1.
+    pub const VIEW_ALBEDO: u32 = 256;
+    pub const VIEW_NORMALS: u32 = 512;
+    pub const VIEW_LIGHT: u32 = 1024;
+    pub const VIEW_LEVEL: u32 = 2048;
 
     /// Every flag with its WGSL name.
-    pub const ALL: [(&str, u32); 8] = [
+    pub const ALL: [(&str, u32); 12] = [
+        ("FLAG_VIEW_ALBEDO", VIEW_ALBEDO),
+        ("FLAG_VIEW_NORMALS", VIEW_NORMALS),
+        ("FLAG_VIEW_LIGHT", VIEW_LIGHT),
+        ("FLAG_VIEW_LEVEL", VIEW_LEVEL),
         ("FLAG_INDIRECT", INDIRECT),
         ("FLAG_DIRECT", DIRECT),
         ("FLAG_SHADOWS", SHADOWS),

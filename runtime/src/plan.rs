@@ -119,6 +119,9 @@ pub struct PlanInputs {
     pub frame: bool,
     /// The G-buffer matches the requested camera and size.
     pub gbuffer_valid: bool,
+    /// The image shows no light (a view mode: albedo, normals, level), by name: the light passes
+    /// wait until a view shows light.
+    pub plain_view: Option<&'static str>,
 }
 
 /// Decides the passes for one frame or light update.
@@ -262,6 +265,12 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
     } else {
         Step { pass: Pass::Shade, run: false, reason: "light update only, no image requested".into() }
     });
+    if let Some(view) = i.plain_view {
+        for s in steps.iter_mut().filter(|s| s.run && !matches!(s.pass, Pass::Gbuffer | Pass::Shade)) {
+            s.run = false;
+            s.reason = format!("the {view} view shows no light (else: {})", s.reason);
+        }
+    }
     EffectPlan { steps }
 }
 
@@ -295,6 +304,7 @@ mod tests {
             tiles_why: "1 no light yet".into(),
             frame: true,
             gbuffer_valid: false,
+            plain_view: None,
         }
     }
 
@@ -374,5 +384,15 @@ mod tests {
         let p = plan(&PlanInputs { point_lights: 0, ..base() });
         assert!(!p.runs(Pass::Propagate) && !p.runs(Pass::Mip));
         assert!(p.runs(Pass::Shade));
+    }
+
+    #[test]
+    fn a_view_without_light_skips_the_light_passes_and_says_why() {
+        let p = plan(&PlanInputs { plain_view: Some("albedo"), frame: true, ..base() });
+        for pass in [Pass::Shadow, Pass::Inject, Pass::Mip, Pass::Propagate] {
+            let step = p.steps.iter().find(|s| s.pass == pass).unwrap();
+            assert!(!step.run && step.reason.contains("albedo view shows no light"), "{step:?}");
+        }
+        assert!(p.runs(Pass::Gbuffer) && p.runs(Pass::Shade));
     }
 }

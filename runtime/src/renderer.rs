@@ -27,7 +27,7 @@ use crate::plan::{self, EffectPlan, Pass, PlanInputs};
 use crate::pool::{PoolCaps, Pools, TileKey, key, surfel_owners};
 use crate::scene_data::{EnvChain, MAX_ENV_LEVELS, MAX_MATERIALS, SceneData, SceneLight};
 
-pub use crate::settings::{IndirectFilter, MAX_SHADOWED_LIGHTS, Quality, Settings, ShadowFallback};
+pub use crate::settings::{IndirectFilter, MAX_SHADOWED_LIGHTS, Quality, Settings, ShadowFallback, ViewMode};
 
 /// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
 /// to the hemisphere), equal weights summing to 1, and the half-angle tangent that makes the cones
@@ -659,6 +659,12 @@ impl Renderer {
         self.settings.exposure = exposure;
     }
 
+    /// Shows `view` from the next frame on (the light state stays: back to a lit view, the light
+    /// passes run only where they had not).
+    pub fn set_view(&mut self, view: ViewMode) {
+        self.settings.view = view;
+    }
+
     /// Marks the lights changed: the next update re-renders shadow maps and re-injects.
     pub fn invalidate_lights(&mut self) {
         self.direct_valid = false;
@@ -709,6 +715,7 @@ impl Renderer {
             tiles_why: self.activity.pending_why(),
             frame: frame.is_some(),
             gbuffer_valid,
+            plain_view: (!self.settings.view.shows_light()).then(|| self.settings.view.name()),
         }
     }
 
@@ -1060,6 +1067,13 @@ impl Renderer {
         if self.specular_surfels > 0 {
             f |= flags::SPECULAR;
         }
+        f |= match s.view {
+            ViewMode::Lit => 0,
+            ViewMode::Albedo => flags::VIEW_ALBEDO,
+            ViewMode::Normals => flags::VIEW_NORMALS,
+            ViewMode::Light => flags::VIEW_LIGHT,
+            ViewMode::Level => flags::VIEW_LEVEL,
+        };
         p.flags = f;
         if let Some((c, w, h)) = frame {
             p.width = w;

@@ -64,6 +64,51 @@ pub struct Settings {
     /// Irradiance, W/m^2, under which a light's contribution is dropped: it bounds each light's
     /// range for culling (0: every light reaches everywhere).
     pub light_cutoff_w_m2: f32,
+    /// What the image shows (`--view`): the lit scene, or one of the views survey users judge
+    /// their data with. Views that show no light skip the light passes (plan.rs).
+    pub view: ViewMode,
+}
+
+/// What a rendered image shows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ViewMode {
+    /// The scene lit (direct, indirect, environment, specular), tonemapped.
+    #[default]
+    Lit,
+    /// Each surfel's albedo, sRGB, no light.
+    Albedo,
+    /// Each surfel's normal as colour (`0.5 + 0.5 n`, world axes), no light.
+    Normals,
+    /// The light alone: the lit scene with every albedo 1 (grey walls), tonemapped.
+    Light,
+    /// The level each tile is held at (full green, coarse yellow, far red; magenta where no tile
+    /// holds the point), shaded by the angle to the eye: to see what residency chose.
+    Level,
+}
+
+impl ViewMode {
+    pub const ALL: [ViewMode; 5] =
+        [ViewMode::Lit, ViewMode::Albedo, ViewMode::Normals, ViewMode::Light, ViewMode::Level];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ViewMode::Lit => "lit",
+            ViewMode::Albedo => "albedo",
+            ViewMode::Normals => "normals",
+            ViewMode::Light => "light",
+            ViewMode::Level => "level",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|v| v.name() == s)
+    }
+
+    /// The image shows no light: the light passes have nothing to do for it.
+    pub fn shows_light(self) -> bool {
+        matches!(self, ViewMode::Lit | ViewMode::Light)
+    }
 }
 
 /// What lights beyond the shadow-map budget do (lights.rs).
@@ -121,6 +166,7 @@ impl Default for Settings {
             shadowed_lights: 16,
             shadow_fallback: ShadowFallback::Cone,
             light_cutoff_w_m2: 2e-4,
+            view: ViewMode::Lit,
         }
     }
 }

@@ -59,6 +59,8 @@ pub fn constants() -> String {
     for (name, bit) in flags::ALL {
         out += &format!("const {name}: u32 = {bit}u;\n");
     }
+    // The level a coarse tile's leaves are held at (coarse.rs): the level view tells coarse from far.
+    out += &format!("const COARSE_LEVELS: u32 = {}u;\n", crate::coarse::COARSE_LEVELS);
     for kind in LightShadow::ALL {
         out += &format!("const {}: u32 = {}u;\n", kind.wgsl_name(), kind as u32);
     }

@@ -811,3 +811,64 @@ fn a_validation_error_names_the_pass_whose_scope_caught_it() {
     g.check("after").unwrap();
     assert!(g.scoped("clean", || Ok(())).is_ok());
 }
+
+#[test]
+fn views_without_light_skip_the_light_passes_and_show_albedo_normals_and_level() {
+    use grotto_runtime::camera::Camera;
+    use grotto_runtime::plan::Pass;
+    use grotto_runtime::renderer::{Frame, ViewMode};
+    let scene = testscenes::dogleg();
+    let cam = Camera::from_scene(&scene.cameras[0]);
+    let render = |view| {
+        let settings = Settings { bounces: 2, exposure: 4.0, view, ..Default::default() };
+        let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+        r.settle(|_, _| {}).unwrap();
+        let (f, plan) = r.render(&cam, 64, 48).unwrap();
+        (f, plan, r.stats().dispatches.clone())
+    };
+    let covered = |f: &Frame| -> Vec<[u8; 4]> {
+        f.hdr.iter().zip(&f.ldr).filter(|(h, _)| h[3] >= 0.5).map(|(_, l)| *l).collect()
+    };
+    for view in [ViewMode::Albedo, ViewMode::Normals, ViewMode::Level] {
+        let (f, plan, d) = render(view);
+        for pass in [Pass::Shadow, Pass::Inject, Pass::Mip, Pass::Propagate] {
+            assert!(!plan.runs(pass) && !d.contains_key(&pass), "{view:?}: {}", plan.explain());
+        }
+        let px = covered(&f);
+        assert!(px.len() > 64 * 48 / 4, "{view:?}: {} pixels covered", px.len());
+        match view {
+            // Every pixel shows a surfel's own colour (sRGB, through the 8-bit G-buffer).
+            ViewMode::Albedo => {
+                let mut colors: Vec<[u8; 4]> = scene.surfels.iter().map(|s| s.color).collect();
+                colors.sort();
+                colors.dedup();
+                let near = |p: &[u8; 4]| {
+                    colors.iter().any(|c| (0..3).all(|k| (i32::from(p[k]) - i32::from(c[k])).abs() <= 3))
+                };
+                assert!(px.iter().all(near), "albedo view shows colours no surfel has");
+            }
+            // 0.5 + 0.5 n: unit normals.
+            ViewMode::Normals => {
+                let n =
+                    |p: &[u8; 4]| Vec3::from_array([0, 1, 2].map(|k| f32::from(p[k]) / 255.0 * 2.0 - 1.0));
+                assert!(
+                    px.iter().all(|p| (n(p).length() - 1.0).abs() < 0.05),
+                    "normals view: not unit normals"
+                );
+                let first = n(&px[0]);
+                assert!(px.iter().any(|p| n(p).dot(first) < 0.5), "normals view: walls of every direction");
+            }
+            // Every tile is held in full: green, shaded.
+            ViewMode::Level => {
+                assert!(px.iter().all(|p| p[1] > p[0] && p[1] > p[2]), "level view: full tiles are green");
+            }
+            _ => unreachable!(),
+        }
+    }
+    // The light view: the same light on white walls, so at least as bright as the lit view.
+    let (lit, _, _) = render(ViewMode::Lit);
+    let (light, plan, _) = render(ViewMode::Light);
+    let sum = |f: &Frame| f.hdr.iter().map(|p| f64::from(p[0] + p[1] + p[2])).sum::<f64>();
+    assert!(plan.steps.iter().all(|s| s.pass != Pass::Propagate || !s.reason.contains("view")));
+    assert!(sum(&light) > sum(&lit), "light view {} against lit {}", sum(&light), sum(&lit));
+}

@@ -127,6 +127,11 @@ struct RenderArgs {
     /// Lights beyond the shadow-map budget: "cone" (SVO shadow cones) or "none" (unshadowed).
     #[arg(long, default_value = "cone")]
     shadow_fallback: String,
+    /// What the image shows: lit (default), albedo, normals (0.5 + 0.5 n as colour), light (the
+    /// light alone: every albedo 1), or level (each tile's level: full green, coarse yellow, far
+    /// red). Albedo, normals and level skip the light passes.
+    #[arg(long, default_value = "lit")]
+    view: String,
     /// Irradiance (W/m^2) under which a light is culled: bounds each light's range (0: no culling).
     #[arg(long)]
     light_cutoff: Option<f32>,
@@ -221,6 +226,8 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
     settings.shadowed_lights = a.shadowed_lights.unwrap_or(settings.shadowed_lights);
     settings.shadow_fallback = ShadowFallback::parse(&a.shadow_fallback)
         .ok_or_else(|| anyhow::anyhow!("--shadow-fallback {:?}: use cone or none", a.shadow_fallback))?;
+    settings.view = grotto_runtime::renderer::ViewMode::parse(&a.view)
+        .ok_or_else(|| anyhow::anyhow!("--view {:?}: use lit, albedo, normals, light or level", a.view))?;
     settings.light_cutoff_w_m2 = a.light_cutoff.unwrap_or(settings.light_cutoff_w_m2);
     settings.radiance_f16 = a.radiance_f16;
     settings.splat_scale = a.splat_scale;

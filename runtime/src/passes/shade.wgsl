@@ -214,7 +214,28 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         let p = params.camera_eye_m.xyz + ray * d;
         let n = unpack_normal(textureLoad(gb_normal, src, 0));
         let albedo_slot = textureLoad(gb_albedo, src, 0);
-        let albedo = albedo_slot.rgb;
+        // The light view lights every surface as if it were white.
+        let albedo = select(albedo_slot.rgb, vec3<f32>(1.0), (params.flags & FLAG_VIEW_LIGHT) != 0u);
+        let plain = params.flags & (FLAG_VIEW_ALBEDO | FLAG_VIEW_NORMALS | FLAG_VIEW_LEVEL);
+        if plain != 0u {
+            // Views without light (settings.rs ViewMode): the value as an sRGB colour, no exposure.
+            var shown = albedo_slot.rgb;
+            if plain == FLAG_VIEW_NORMALS {
+                shown = srgb_to_linear(0.5 + 0.5 * n);
+            } else if plain == FLAG_VIEW_LEVEL {
+                let q = p - n * (0.25 * params.leaf_size_m);
+                let t = find_tile(vec3<i32>(floor(q / params.leaf_size_m)));
+                var level = vec3<f32>(1.0, 0.0, 1.0);
+                if t != EMPTY {
+                    let lod = tiles[t].leaf_lod;
+                    level = select(select(vec3<f32>(0.9, 0.15, 0.1), vec3<f32>(0.95, 0.8, 0.1), lod <= COARSE_LEVELS), vec3<f32>(0.15, 0.75, 0.2), lod == 0u);
+                }
+                shown = level * (0.35 + 0.65 * max(dot(n, -ray), 0.0));
+            }
+            out_hdr[idx] = vec4<f32>(shown, coverage);
+            out_ldr[idx] = pack4x8unorm(vec4<f32>(linear_to_srgb(clamp(shown, vec3<f32>(0.0), vec3<f32>(1.0))), 1.0));
+            return;
+        }
         // Material slot from the albedo's alpha: 0 diffuse, 1..=7 specular (Params::materials).
         let slot = min(u32(round(albedo_slot.a * 255.0)), 7u);
         let specular = (params.flags & FLAG_SPECULAR) != 0u && slot > 0u;
@@ -299,6 +320,9 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             color = color * (1.0 - mat.x * f) + mat.x * (f * reflected + highlight);
         }
         hdr = color;
+    }
+    if d <= 0.0 && (params.flags & (FLAG_VIEW_ALBEDO | FLAG_VIEW_NORMALS | FLAG_VIEW_LEVEL)) != 0u {
+        hdr = vec3<f32>(0.0);
     }
     out_hdr[idx] = vec4<f32>(hdr, coverage);
     let ldr = tonemap(hdr * params.exposure);
