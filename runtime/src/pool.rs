@@ -149,6 +149,20 @@ pub struct Pools {
     repack_next: bool,
 }
 
+/// Ranges sorted and merged where they touch, empty ones dropped: one draw call a run.
+pub fn merge_runs(mut r: Vec<Range<u32>>) -> Vec<Range<u32>> {
+    r.retain(|r| !r.is_empty());
+    r.sort_by_key(|r| r.start);
+    let mut out: Vec<Range<u32>> = Vec::with_capacity(r.len());
+    for x in r {
+        match out.last_mut() {
+            Some(last) if last.end == x.start => last.end = x.end,
+            _ => out.push(x),
+        }
+    }
+    out
+}
+
 /// Each tile's surfels: `scene.tile_surfels` where it covers the surfels exactly, tile after tile;
 /// else (a scene put together by hand) every surfel counted as the first tile's. Either way each
 /// surfel has one owner, so a slot holds whole tiles. The flag: the ranges were the scene's own
@@ -217,17 +231,7 @@ impl Pools {
 
     /// The surfel ranges in use, merged where they touch, in order: what the splat passes draw.
     pub fn surfel_runs(&self) -> Vec<Range<u32>> {
-        let mut r: Vec<Range<u32>> =
-            self.slots.values().map(|s| s.surfels.clone()).filter(|r| !r.is_empty()).collect();
-        r.sort_by_key(|r| r.start);
-        let mut out: Vec<Range<u32>> = Vec::with_capacity(r.len());
-        for x in r {
-            match out.last_mut() {
-                Some(last) if last.end == x.start => last.end = x.end,
-                _ => out.push(x),
-            }
-        }
-        out
+        merge_runs(self.slots.values().map(|s| s.surfels.clone()).collect())
     }
 
     fn alloc(a: &mut RangeAllocator<u32>, n: u32) -> Option<Range<u32>> {

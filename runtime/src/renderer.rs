@@ -24,7 +24,7 @@ use crate::gpu_types::{
 use crate::lights::LightSetup;
 use crate::passes::{self, gbuffer, shade, shadow};
 use crate::plan::{self, EffectPlan, Pass, PlanInputs};
-use crate::pool::{PoolCaps, Pools, TileKey, key, surfel_owners};
+use crate::pool::{PoolCaps, Pools, TileKey, key, merge_runs, surfel_owners};
 use crate::scene_data::{EnvChain, MAX_ENV_LEVELS, MAX_MATERIALS, SceneData, SceneLight};
 
 pub use crate::settings::{IndirectFilter, MAX_SHADOWED_LIGHTS, Quality, Settings, ShadowFallback, ViewMode};
@@ -416,20 +416,6 @@ fn tile_box(t: &TileGpu, leaf_m: f32) -> (Vec3, Vec3) {
     let edge = (1u64 << t.depth.min(40)) as f32 * leaf_m;
     let margin = ((1u64 << t.leaf_lod.min(40)) as f32 + 2.0) * leaf_m;
     (lo - Vec3::splat(margin), lo + Vec3::splat(edge + margin))
-}
-
-/// Merges ranges (sorted here) where they touch.
-fn merge_runs(mut r: Vec<Range<u32>>) -> Vec<Range<u32>> {
-    r.retain(|r| !r.is_empty());
-    r.sort_by_key(|r| r.start);
-    let mut out: Vec<Range<u32>> = Vec::with_capacity(r.len());
-    for x in r {
-        match out.last_mut() {
-            Some(last) if last.end == x.start => last.end = x.end,
-            _ => out.push(x),
-        }
-    }
-    out
 }
 
 /// What [`Renderer::update_scene`] did.

@@ -390,20 +390,35 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
         }
     }
     let decisions: Vec<Decision> = order.into_iter().map(|k| decisions[k]).collect();
-    let count = |m: TileMode| decisions.iter().filter(|d| d.mode == m).count();
-    let visible_coarse =
-        decisions.iter().filter(|d| d.mode != TileMode::Full && d.relevance == Relevance::Visible).count();
-    let totals = ResidencyTotals {
-        budget,
-        resident_bytes: bytes,
-        coarse_bytes: reserve_bytes,
-        surfels,
-        full_tiles: count(TileMode::Full),
-        coarse_tiles: count(TileMode::Coarse),
-        far_tiles: count(TileMode::Far),
-        visible_coarse,
-    };
+    let totals = ResidencyTotals::of(&decisions, budget, bytes, reserve_bytes, surfels);
     Ok(Residency { decisions, totals })
+}
+
+impl ResidencyTotals {
+    /// The totals of `decisions` holding `resident_bytes` (of them `coarse_bytes` the reserve)
+    /// and drawing `surfels`.
+    fn of(
+        decisions: &[Decision],
+        budget: Budget,
+        resident_bytes: u64,
+        coarse_bytes: u64,
+        surfels: u64,
+    ) -> Self {
+        let count = |m: TileMode| decisions.iter().filter(|d| d.mode == m).count();
+        Self {
+            budget,
+            resident_bytes,
+            coarse_bytes,
+            surfels,
+            full_tiles: count(TileMode::Full),
+            coarse_tiles: count(TileMode::Coarse),
+            far_tiles: count(TileMode::Far),
+            visible_coarse: decisions
+                .iter()
+                .filter(|d| d.mode != TileMode::Full && d.relevance == Relevance::Visible)
+                .count(),
+        }
+    }
 }
 
 /// How fine a mode is (far 0, coarse 1, full 2).
@@ -463,19 +478,7 @@ pub fn limit_uploads(
             surfels += t.cost(d.mode).surfels;
         }
     }
-    let count = |m: TileMode| decisions.iter().filter(|d| d.mode == m).count();
-    let visible_coarse =
-        decisions.iter().filter(|d| d.mode != TileMode::Full && d.relevance == Relevance::Visible).count();
-    let totals = ResidencyTotals {
-        budget,
-        resident_bytes: bytes,
-        coarse_bytes: next.totals.coarse_bytes,
-        surfels,
-        full_tiles: count(TileMode::Full),
-        coarse_tiles: count(TileMode::Coarse),
-        far_tiles: count(TileMode::Far),
-        visible_coarse,
-    };
+    let totals = ResidencyTotals::of(&decisions, budget, bytes, next.totals.coarse_bytes, surfels);
     (Residency { decisions, totals }, deferred)
 }
 
