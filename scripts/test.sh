@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # The test suite. Installs what the tests need on a fresh Debian machine (Mesa's software Vulkan
-# driver lavapipe, and EGL + llvmpipe for wgpu's GL backend), then runs every test of the
-# workspace. Tests that read third-party files expect ../shared/data beside the repository (or
+# driver lavapipe, EGL + llvmpipe for wgpu's GL backend, and Xvfb for the window of `grotto
+# view`), then runs every test of the workspace. Tests that read third-party files expect ../shared/data beside the repository (or
 # GROTTO_SHARED_DATA) and fail without it; GROTTO_SKIP_SHARED_DATA=1 skips them instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-packages=(mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri)
+packages=(mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri xvfb xauth)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

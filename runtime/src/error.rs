@@ -39,6 +39,12 @@ pub enum Error {
     Camera(String),
     #[error("setting {name}: {problem}")]
     Setting { name: &'static str, problem: String },
+    /// `grotto view` found no display to open its window on.
+    #[error(
+        "no display to open a window on ({0}); set DISPLAY or WAYLAND_DISPLAY (under Xvfb: \
+         xvfb-run grotto view ...), or write images with grotto render"
+    )]
+    NoDisplay(String),
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;

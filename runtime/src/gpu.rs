@@ -71,6 +71,8 @@ pub struct GpuOptions {
 /// A device and queue ready for grotto's passes.
 #[derive(Debug, Clone)]
 pub struct Gpu {
+    /// The adapter the device is on (a window asks it what its surface can show).
+    pub adapter: wgpu::Adapter,
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub info: wgpu::AdapterInfo,
@@ -100,8 +102,36 @@ impl Gpu {
             desc.backends = b;
         }
         let backends = desc.backends;
+        Self::open(&wgpu::Instance::new(desc), backends, opts, |_| true)
+    }
+
+    /// As [`Gpu::new`], for a window: the instance knows the window's display, and only adapters
+    /// that can present to its surface are considered. Returns the surface too.
+    pub fn for_window<W>(opts: &GpuOptions, window: W) -> Result<(Self, wgpu::Surface<'static>)>
+    where
+        W: wgpu::WindowHandle + wgpu::wgt::WgpuHasDisplayHandle + Clone + 'static,
+    {
+        let mut desc = wgpu::InstanceDescriptor::new_with_display_handle_from_env(Box::new(window.clone()));
+        if let Some(b) = opts.backends {
+            desc.backends = b;
+        }
+        let backends = desc.backends;
         let instance = wgpu::Instance::new(desc);
+        let surface = instance
+            .create_surface(window)
+            .map_err(|e| Error::Device(format!("cannot make a surface for the window: {e}")))?;
+        let gpu = Self::open(&instance, backends, opts, |a| a.is_surface_supported(&surface))?;
+        Ok((gpu, surface))
+    }
+
+    fn open(
+        instance: &wgpu::Instance,
+        backends: wgpu::Backends,
+        opts: &GpuOptions,
+        accept: impl Fn(&wgpu::Adapter) -> bool,
+    ) -> Result<Self> {
         let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
+        adapters.retain(|a| accept(a));
         if let Ok(name) = std::env::var("GROTTO_ADAPTER") {
             let name = name.to_ascii_lowercase();
             adapters.retain(|a| a.get_info().name.to_ascii_lowercase().contains(&name));
@@ -168,7 +198,7 @@ impl Gpu {
                 v.push(e.to_string());
             }
         }));
-        Ok(Self { device, queue, info, timestamps, errors })
+        Ok(Self { adapter, device, queue, info, timestamps, errors })
     }
 
     /// "name (backend, type)" for logs and reports.

@@ -29,5 +29,6 @@ pub mod scene_data;
 pub mod settings;
 pub mod shaders;
 pub mod tile_index;
+pub mod window;
 
 pub use error::{Error, Result};

@@ -1009,6 +1009,19 @@ impl Renderer {
     /// Renders one frame (running whatever light work the plan asks for first: progressive, at
     /// most one bounce per frame).
     pub fn render(&mut self, camera: &Camera, width: u32, height: u32) -> Result<(Frame, EffectPlan)> {
+        let p = self.draw(camera, width, height)?;
+        let view = self.view("shade")?;
+        let pixels = u64::from(width) * u64::from(height);
+        let hdr_bytes = self.gpu.read_buffer(&view.outputs.hdr, pixels * 16)?;
+        let ldr_bytes = self.gpu.read_buffer(&view.outputs.ldr, pixels * 4)?;
+        let hdr: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&hdr_bytes[..(pixels * 16) as usize]);
+        let ldr: Vec<[u8; 4]> = bytemuck::pod_collect_to_vec(&ldr_bytes[..(pixels * 4) as usize]);
+        Ok((Frame { width, height, hdr, ldr }, p))
+    }
+
+    /// Renders one frame as [`Renderer::render`] does, leaving it on the GPU ([`Renderer::ldr_output`])
+    /// instead of reading it back: what a window presents.
+    pub fn draw(&mut self, camera: &Camera, width: u32, height: u32) -> Result<EffectPlan> {
         camera.validate()?;
         if width == 0 || height == 0 || width > 16384 || height > 16384 {
             return Err(Error::Setting {
@@ -1018,13 +1031,13 @@ impl Renderer {
         }
         let p = self.plan(Some((camera, width, height)));
         self.execute(&p, Some((camera, width, height)))?;
-        let view = self.view("shade")?;
-        let pixels = u64::from(width) * u64::from(height);
-        let hdr_bytes = self.gpu.read_buffer(&view.outputs.hdr, pixels * 16)?;
-        let ldr_bytes = self.gpu.read_buffer(&view.outputs.ldr, pixels * 4)?;
-        let hdr: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&hdr_bytes[..(pixels * 16) as usize]);
-        let ldr: Vec<[u8; 4]> = bytemuck::pod_collect_to_vec(&ldr_bytes[..(pixels * 4) as usize]);
-        Ok((Frame { width, height, hdr, ldr }, p))
+        Ok(p)
+    }
+
+    /// The last frame's tonemapped pixels (one packed RGBA8 u32 a pixel, rows top to bottom) and
+    /// its size; `None` before the first frame.
+    pub fn ldr_output(&self) -> Option<(&wgpu::Buffer, u32, u32)> {
+        self.view.as_ref().map(|v| (&v.outputs.ldr, v.targets.width, v.targets.height))
     }
 
     fn frame_params(&self, frame: Option<(&Camera, u32, u32)>) -> Params {

@@ -34,6 +34,8 @@ pub const INJECT: &str = include_str!("passes/inject.wgsl");
 pub const MIP: &str = include_str!("passes/mip.wgsl");
 pub const PROPAGATE: &str = include_str!("passes/propagate.wgsl");
 pub const SPLAT: &str = include_str!("passes/splat.wgsl");
+/// Presents a frame in `grotto view`'s window (window.rs).
+pub const WINDOW: &str = include_str!("window.wgsl");
 pub const SHADE: &str = include_str!("passes/shade.wgsl");
 
 /// Constants shared with the Rust side, generated from it so the two cannot drift.

@@ -1,4 +1,5 @@
-//! The `grotto` binary as a user runs it: inspect (text and JSON) and verify (exit codes).
+//! The `grotto` binary as a user runs it: inspect (text and JSON) and verify (exit codes), and the
+//! window of `grotto view` under Xvfb (which scripts/test.sh installs) and without a display.
 
 use std::process::Command;
 
@@ -153,4 +154,44 @@ fn negative_vectors_parse_as_written_and_gpu_memory_is_reported() {
     assert!(leaves > 0);
     assert_eq!(json["bytes"]["leaves"].as_u64().unwrap(), leaves * 64);
     assert!(json["total_bytes"].as_u64().unwrap() > json["bytes"]["surfels"].as_u64().unwrap());
+}
+
+#[test]
+fn view_opens_a_window_under_xvfb_and_says_so_clearly_without_a_display() {
+    let dir = tempfile::tempdir().unwrap();
+    let path =
+        grotto_fixtures::small_cave_package(dir.path(), &grotto_fixtures::SmallCave::default()).unwrap();
+    let p = path.to_str().unwrap();
+    let shot = dir.path().join("shot.png");
+    let args = ["view", p, "--size", "160x120", "--quality", "fast", "--after-frames", "3", "--screenshot"];
+
+    // No display: a clear message and a non-zero exit, not a panic.
+    let out = Command::new(env!("CARGO_BIN_EXE_grotto"))
+        .args(args)
+        .arg(&shot)
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .env_remove("WAYLAND_SOCKET")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("no display"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+
+    // A real window on Xvfb's display, on the software adapter: three frames presented, then the
+    // screenshot written.
+    let xvfb = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 640x480x24", env!("CARGO_BIN_EXE_grotto")])
+        .args(args)
+        .arg(&shot)
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap_or_else(|e| panic!("xvfb-run (scripts/test.sh installs the xvfb package): {e}"));
+    let text = format!("{}{}", String::from_utf8_lossy(&xvfb.stdout), String::from_utf8_lossy(&xvfb.stderr));
+    assert!(xvfb.status.success(), "{text}");
+    assert!(text.contains("3 frames"), "{text}");
+    let img = image::open(&shot).unwrap().to_rgba8();
+    assert_eq!((img.width(), img.height()), (80, 60), "half the window by default");
+    let lit = img.pixels().filter(|p| p.0[0].max(p.0[1]).max(p.0[2]) > 8).count();
+    assert!(lit * 2 > (80 * 60) as usize, "the view shows the cave: {lit} of 4800 pixels lit");
 }

@@ -48,6 +48,11 @@ enum Command {
     /// Time every pass (GPU timestamps where the adapter has them) on a package: shadow maps,
     /// injection, one bounce (mip + propagate), G-buffer and shading, repeated; median per pass.
     Bench(Box<BenchArgs>),
+    /// Explore a package in a window: mouse drag looks, WASD flies (Q/E down/up), the wheel sets
+    /// the speed, Tab jumps to the next named camera, R back to the first, 1-5 switch the view
+    /// (lit, albedo, normals, light, level), F11 full screen, P screenshot, Esc quits. The light
+    /// converges a bounce a frame. Takes the render options (--size is the window's size).
+    View(Box<ViewArgs>),
     /// Check a package's structure and every checksum and section; exits non-zero on any problem.
     Verify {
         package: PathBuf,
@@ -257,6 +262,42 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
         frame_bounces: a.frame_bounces,
         upload_per_frame: a.upload_per_frame,
     })
+}
+
+#[derive(clap::Args, Debug)]
+struct ViewArgs {
+    #[command(flatten)]
+    render: RenderArgs,
+    /// Draw at the window's size times this (software adapters are slow per pixel).
+    #[arg(long, default_value_t = 0.5)]
+    render_scale: f32,
+    /// Write the frame after --after-frames frames to this image and exit (scripts, tests).
+    #[arg(long)]
+    screenshot: Option<PathBuf>,
+    #[arg(long, default_value_t = 3)]
+    after_frames: u32,
+}
+
+fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
+    let render = options(&v.render)?;
+    let summary = grotto_runtime::window::run(grotto_runtime::window::ViewOptions {
+        render,
+        render_scale: v.render_scale,
+        screenshot: v.screenshot,
+        after_frames: v.after_frames,
+    })?;
+    println!(
+        "{} frames in {:.1} s on {}{}",
+        summary.frames,
+        summary.seconds,
+        summary.device,
+        if summary.screenshots.is_empty() {
+            String::new()
+        } else {
+            format!("; wrote {}", summary.screenshots.join(", "))
+        }
+    );
+    Ok(ExitCode::SUCCESS)
 }
 
 fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
@@ -500,6 +541,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Render(args) => render(*args),
         Command::Bench(args) => bench(*args),
+        Command::View(args) => view(*args),
         Command::Verify { package, json } => {
             let report = match Package::open(&package) {
                 Ok(pkg) => inspect::verify(&pkg),
