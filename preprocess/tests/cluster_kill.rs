@@ -89,6 +89,8 @@ fn a_killed_shard_and_a_killed_assemble_rerun_to_the_same_package() {
     let killed = kill_when(c, || finished_tiles(&work) >= 1, Duration::from_secs(120));
     let done = finished_tiles(&work);
     eprintln!("build-tile killed: {killed}, with {done} tiles finished");
+    // The shard has dozens of tiles and is killed at its first: it must not have finished.
+    assert!(killed, "build-tile finished before it could be killed: the kill path went untested");
     let mut c = pack();
     c.arg("build-tile");
     common(&mut c, &work);

@@ -1,6 +1,6 @@
 //! Pinhole cameras in frame coordinates and camera paths between named viewpoints.
 
-use glam::{Mat4, Vec3};
+use glam::{Mat4, Vec3, Vec4};
 
 use crate::error::{Error, Result};
 use crate::scene_data::SceneCamera;
@@ -78,4 +78,42 @@ pub fn path(keys: &[Camera], frames: u32) -> Vec<Camera> {
             keys[keys.len() - 1]
         })
         .collect()
+}
+
+/// Whether the box `lo..hi` (frame metres) may show in a view of `view_proj` (wgpu clip space: z
+/// in 0..=w): false only where all eight corners lie outside one clip plane, so it never culls
+/// what shows. Shadow faces and the G-buffer cull tiles with it; residency's `in_frustum` is the
+/// same test from view parameters, with no far plane.
+pub fn sees_box(view_proj: &Mat4, lo: Vec3, hi: Vec3) -> bool {
+    let corners: [Vec4; 8] = std::array::from_fn(|i| {
+        let c = Vec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        );
+        *view_proj * c.extend(1.0)
+    });
+    let outside = |plane: fn(Vec4) -> f32| corners.iter().all(|&c| plane(c) < 0.0);
+    let planes: [fn(Vec4) -> f32; 6] =
+        [|c| c.w + c.x, |c| c.w - c.x, |c| c.w + c.y, |c| c.w - c.y, |c| c.z, |c| c.w - c.z];
+    !planes.into_iter().any(outside)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_box_is_culled_only_when_wholly_outside_the_view() {
+        let proj = Mat4::perspective_rh(90f32.to_radians(), 1.0, 0.1, 100.0);
+        let view = Mat4::look_at_rh(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y);
+        let m = proj * view;
+        let sees = |lo: [f32; 3], hi: [f32; 3]| sees_box(&m, Vec3::from(lo), Vec3::from(hi));
+        assert!(sees([-1.0, -1.0, -6.0], [1.0, 1.0, -4.0]), "ahead");
+        assert!(!sees([-1.0, -1.0, 4.0], [1.0, 1.0, 6.0]), "behind");
+        assert!(!sees([20.0, -1.0, -6.0], [22.0, 1.0, -4.0]), "right of the 90 degree cone");
+        assert!(!sees([-1.0, -1.0, -300.0], [1.0, 1.0, -200.0]), "past the far plane");
+        assert!(sees([-100.0, -100.0, -50.0], [100.0, 100.0, 50.0]), "around the eye");
+        assert!(sees([4.0, -1.0, -6.0], [8.0, 1.0, -4.0]), "across the edge");
+    }
 }

@@ -97,12 +97,18 @@ fn rank(t: wgpu::DeviceType, prefer_software: bool) -> u32 {
 impl Gpu {
     /// Opens the best adapter under `opts` and creates a device on it.
     pub fn new(opts: &GpuOptions) -> Result<Self> {
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        let (instance, backends) =
+            Self::instance(opts, wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        Self::open(&instance, backends, opts, |_| true)
+    }
+
+    /// An instance from `desc` (read from the environment) with `opts.backends` where given.
+    fn instance(opts: &GpuOptions, mut desc: wgpu::InstanceDescriptor) -> (wgpu::Instance, wgpu::Backends) {
         if let Some(b) = opts.backends {
             desc.backends = b;
         }
         let backends = desc.backends;
-        Self::open(&wgpu::Instance::new(desc), backends, opts, |_| true)
+        (wgpu::Instance::new(desc), backends)
     }
 
     /// As [`Gpu::new`], for a window: the instance knows the window's display, and only adapters
@@ -111,12 +117,10 @@ impl Gpu {
     where
         W: wgpu::WindowHandle + wgpu::wgt::WgpuHasDisplayHandle + Clone + 'static,
     {
-        let mut desc = wgpu::InstanceDescriptor::new_with_display_handle_from_env(Box::new(window.clone()));
-        if let Some(b) = opts.backends {
-            desc.backends = b;
-        }
-        let backends = desc.backends;
-        let instance = wgpu::Instance::new(desc);
+        let (instance, backends) = Self::instance(
+            opts,
+            wgpu::InstanceDescriptor::new_with_display_handle_from_env(Box::new(window.clone())),
+        );
         let surface = instance
             .create_surface(window)
             .map_err(|e| Error::Device(format!("cannot make a surface for the window: {e}")))?;

@@ -24,8 +24,9 @@ use crate::gpu_types::TileGpu;
 use crate::scene_data::SceneData;
 
 /// Share of each pool residency leaves free when streaming, so a new tile form usually finds a
-/// hole or the tail and the pools rarely need a repack (measured in docs/benchmarks.md: with no
-/// headroom every change of tiles repacked).
+/// hole or the tail and the pools rarely need a repack: with none, residency fills every pool and
+/// any fragmentation forces one (repacks per frame are in the fly-through tables of
+/// docs/benchmarks.md).
 pub const POOL_HEADROOM: f64 = 0.1;
 
 /// A tile form: where the tile is (its corner in frame leaves), its SVO depth, and the level it is
@@ -74,6 +75,16 @@ impl PoolCaps {
             nodes: keep(self.nodes),
             leaves: keep(self.leaves),
             surfels: keep(self.surfels),
+        }
+    }
+
+    /// These pools, each grown to at least `need`'s.
+    pub fn at_least(self, need: PoolCaps) -> Self {
+        Self {
+            tiles: self.tiles.max(need.tiles),
+            nodes: self.nodes.max(need.nodes),
+            leaves: self.leaves.max(need.leaves),
+            surfels: self.surfels.max(need.surfels),
         }
     }
 
@@ -128,13 +139,6 @@ pub struct Placement {
     pub repacked: bool,
     /// Slots freed (forms that left).
     pub freed: usize,
-}
-
-impl Placement {
-    /// Scene tiles uploaded.
-    pub fn uploaded(&self) -> usize {
-        self.kept.iter().filter(|k| !**k).count()
-    }
 }
 
 /// The three pools' allocators and the slot of every resident tile form.
@@ -241,6 +245,21 @@ impl Pools {
         a.allocate_range(n).ok()
     }
 
+    /// A slot of `n` nodes, `l` leaves and `s` surfels, or `None` (nothing taken) where one pool
+    /// has no free range that long.
+    fn alloc_slot(&mut self, (n, l, s): (u32, u32, u32)) -> Option<Slot> {
+        let nodes = Self::alloc(&mut self.nodes, n)?;
+        let Some(leaves) = Self::alloc(&mut self.leaves, l) else {
+            self.free(&Slot { nodes, ..Default::default() });
+            return None;
+        };
+        let Some(surfels) = Self::alloc(&mut self.surfels, s) else {
+            self.free(&Slot { nodes, leaves, ..Default::default() });
+            return None;
+        };
+        Some(Slot { nodes, leaves, surfels })
+    }
+
     fn free(&mut self, s: &Slot) {
         for (a, r) in
             [(&mut self.nodes, &s.nodes), (&mut self.leaves, &s.leaves), (&mut self.surfels, &s.surfels)]
@@ -299,20 +318,7 @@ impl Pools {
             if repacked {
                 break;
             }
-            let (n, l, s) = tile_counts(scene, owners, t);
-            let slot = (|| {
-                let nodes = Self::alloc(&mut self.nodes, n)?;
-                let Some(leaves) = Self::alloc(&mut self.leaves, l) else {
-                    self.free(&Slot { nodes, ..Default::default() });
-                    return None;
-                };
-                let Some(surfels) = Self::alloc(&mut self.surfels, s) else {
-                    self.free(&Slot { nodes, leaves, ..Default::default() });
-                    return None;
-                };
-                Some(Slot { nodes, leaves, surfels })
-            })();
-            match slot {
+            match self.alloc_slot(tile_counts(scene, owners, t)) {
                 Some(slot) => {
                     self.slots.insert(keys[t], slot);
                 }
@@ -326,18 +332,11 @@ impl Pools {
             // Fragmented: start over, every tile in scene order (it fits: checked above).
             *self = Self::new(self.caps)?;
             for (t, k) in keys.iter().enumerate() {
-                let (n, l, s) = tile_counts(scene, owners, t);
-                let (Some(nodes), Some(leaves), Some(surfels)) = (
-                    Self::alloc(&mut self.nodes, n),
-                    Self::alloc(&mut self.leaves, l),
-                    Self::alloc(&mut self.surfels, s),
-                ) else {
-                    return Err(Error::Internal {
-                        what: "pools",
-                        message: "a checked scene did not fit empty pools".into(),
-                    });
-                };
-                self.slots.insert(*k, Slot { nodes, leaves, surfels });
+                let slot = self.alloc_slot(tile_counts(scene, owners, t)).ok_or_else(|| Error::Internal {
+                    what: "pools",
+                    message: "a checked scene did not fit empty pools".into(),
+                })?;
+                self.slots.insert(*k, slot);
             }
             kept.fill(false);
         }
@@ -413,7 +412,7 @@ mod tests {
         let mut p = Pools::new(PoolCaps::of(&s)).unwrap();
         let placed = place(&mut p, &s).unwrap();
         assert_eq!(placed.tiles, s.tiles, "fresh pools are filled in scene order");
-        assert_eq!(placed.uploaded(), 3);
+        assert_eq!(placed.kept, vec![false; 3], "every tile is uploaded");
         assert_eq!(p.leaf_end(), 6);
         assert_eq!(p.surfel_runs(), vec![0..6]);
         sound(&p);

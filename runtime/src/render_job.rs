@@ -567,11 +567,10 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     image_out::kind_of(&opts.out)?;
     let gpu = Gpu::new(&opts.gpu)?;
     let t_load = Instant::now();
-    let Prepared { mut scene, cameras, notes, mut residency, streaming } = prepare(opts, &gpu)?;
+    let Prepared { mut scene, cameras, notes, mut residency, mut streaming } = prepare(opts, &gpu)?;
     let load_s = t_load.elapsed().as_secs_f64();
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
-    let mut streaming = streaming;
     let mut r = match &mut streaming {
         // Pools for the whole budget, in the mix of the first view's tiles, so the tiles of later
         // views replace these in place (pool.rs); residency then keeps within each pool.
@@ -584,7 +583,6 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         }
         None => Renderer::new(&gpu, &scene, settings.clone())?,
     };
-    let streaming = streaming;
     let first_plan = r.plan(Some((&cameras[0], opts.width, opts.height)));
     let t0 = Instant::now();
     let budget = settings.bounces;
@@ -610,8 +608,6 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             let (mut loaded, mut evicted, mut bounces, mut carried_leaves) = (0, 0, 0, 0);
             let mut load_wait_ms = 0.0;
             let (mut update, mut made_anew, mut deferred) = (None, false, 0);
-            // The first frame counts the faces its settled light drew.
-            let shadow_before = if i == 0 { 0 } else { r.shadow_faces_drawn() };
             if i == 0 {
                 bounces = r.stats().bounces_done;
             } else if let (Some(handle), Some(current)) = (next_load.take(), &residency) {
@@ -712,12 +708,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
                 update,
                 made_anew,
                 deferred,
-                // A renderer made anew counts from zero.
-                shadow_faces: if made_anew {
-                    r.shadow_faces_drawn()
-                } else {
-                    r.shadow_faces_drawn() - shadow_before
-                },
+                shadow_faces: r.take_shadow_faces_drawn(),
                 shadow_faces_total: r.shadow_face_count(),
                 load_wait_ms,
                 pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),

@@ -90,7 +90,6 @@ pub struct Renderer {
     leaf_count: u32,
     #[cfg(feature = "test-hooks")]
     node_count: u32,
-    surfel_count: u32,
     leaf_size_m: f32,
     scene_diag_m: f32,
     base_params: Params,
@@ -135,8 +134,6 @@ pub struct Renderer {
     /// The resident tiles as the GPU holds them (offsets into the pools), and each one's surfels.
     tiles: Vec<TileGpu>,
     tile_surfels: Vec<Range<u32>>,
-    /// The surfel ranges in use, merged.
-    surfel_runs: Vec<Range<u32>>,
     /// Tiles may be culled by their boxes (their surfels lie in them: false for a scene put
     /// together by hand, whose surfels all count as its first tile's).
     cull_tiles: bool,
@@ -145,7 +142,8 @@ pub struct Renderer {
     leaves_buf: wgpu::Buffer,
     tile_index_buf: wgpu::Buffer,
     /// Shadow faces the next shadow pass draws (every face after a change of lights; after a
-    /// change of tiles, the faces that see one), and how many the last one drew.
+    /// change of tiles, the faces that see one), and how many were drawn since the last
+    /// [`Renderer::take_shadow_faces_drawn`].
     shadow_dirty: Vec<bool>,
     shadow_drawn: u64,
     /// The camera's view-projection of the G-buffer (tiles outside it are not drawn), and whether
@@ -464,10 +462,6 @@ pub struct CarriedLight {
 }
 
 impl CarriedLight {
-    fn key(t: &TileGpu) -> TileKey {
-        key(t)
-    }
-
     /// Leaves held.
     pub fn leaves(&self) -> usize {
         self.tiles.values().map(Vec::len).sum()
@@ -483,13 +477,7 @@ impl Renderer {
     /// scenes of other tile forms can replace this one in place ([`Renderer::update_scene`]).
     pub fn with_pools(gpu: &Gpu, scene: &SceneData, settings: Settings, caps: PoolCaps) -> Result<Self> {
         settings.validate()?;
-        let need = PoolCaps::of(scene);
-        let caps = PoolCaps {
-            tiles: caps.tiles.max(need.tiles),
-            nodes: caps.nodes.max(need.nodes),
-            leaves: caps.leaves.max(need.leaves),
-            surfels: caps.surfels.max(need.surfels),
-        };
+        let caps = caps.at_least(PoolCaps::of(scene));
         let mut pools = Pools::new(caps)?;
         let (owners, cull_tiles) = surfel_owners(scene);
         let placed = pools.place(scene, &owners)?;
@@ -556,7 +544,6 @@ impl Renderer {
             leaf_count: scene.leaves.len() as u32,
             #[cfg(feature = "test-hooks")]
             node_count: scene.nodes.len() as u32,
-            surfel_count: scene.surfels.len() as u32,
             leaf_size_m: leaf,
             scene_diag_m,
             base_params,
@@ -583,7 +570,6 @@ impl Renderer {
             active_written: None,
             bounce_work: Vec::new(),
             surfels: up.surfels,
-            surfel_runs: pools.surfel_runs(),
             tile_surfels: placed.slots.iter().map(|s| s.surfels.clone()).collect(),
             tiles: placed.tiles,
             pools,
@@ -764,26 +750,34 @@ impl Renderer {
     /// for, or last updated to), to carry into the renderer of another scene that holds some of
     /// the same tiles.
     pub fn light_by_tile(&self, scene: &SceneData) -> Result<CarriedLight> {
-        let size = size_of::<LeafLightGpu>();
-        if scene.tiles.len() != self.tiles.len()
-            || scene.tiles.iter().zip(&self.tiles).any(|(a, b)| key(a) != key(b))
-        {
-            return Err(Error::Internal {
-                what: "light_by_tile",
-                message: "not the scene this renderer holds".into(),
-            });
-        }
-        let bytes = self.gpu.read_buffer(&self.leaf_light, u64::from(self.leaf_count) * size as u64)?;
-        let state: Vec<LeafLightGpu> =
-            bytemuck::pod_collect_to_vec(&bytes[..self.leaf_count as usize * size]);
+        self.check_holds(scene, "light_by_tile")?;
+        let state = self.read_light(self.leaf_count)?;
         let mut tiles = HashMap::new();
         for t in &self.tiles {
             let range = t.leaf_offset as usize..(t.leaf_offset + t.leaf_count) as usize;
             if let Some(leaves) = state.get(range) {
-                tiles.insert(CarriedLight::key(t), leaves.to_vec());
+                tiles.insert(key(t), leaves.to_vec());
             }
         }
         Ok(CarriedLight { tiles })
+    }
+
+    /// An error unless `scene` holds this renderer's tiles in the same forms, in order.
+    fn check_holds(&self, scene: &SceneData, what: &'static str) -> Result<()> {
+        let same = scene.tiles.len() == self.tiles.len()
+            && scene.tiles.iter().zip(&self.tiles).all(|(a, b)| key(a) == key(b));
+        if same {
+            Ok(())
+        } else {
+            Err(Error::Internal { what, message: "not the scene this renderer holds".into() })
+        }
+    }
+
+    /// The light state of leaves `0..n`, read back.
+    fn read_light(&self, n: u32) -> Result<Vec<LeafLightGpu>> {
+        let size = size_of::<LeafLightGpu>();
+        let bytes = self.gpu.read_buffer(&self.leaf_light, u64::from(n) * size as u64)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes[..n as usize * size]))
     }
 
     /// Starts every tile of `scene` (this renderer's scene) that `carried` holds in the same form
@@ -793,18 +787,11 @@ impl Renderer {
     /// usual. Returns the leaves seeded. ([`Renderer::update_scene`] keeps the light in place
     /// instead, with no read-back; this is for a renderer made anew.)
     pub fn seed_light(&mut self, scene: &SceneData, carried: &CarriedLight) -> Result<usize> {
-        if scene.tiles.len() != self.tiles.len()
-            || scene.tiles.iter().zip(&self.tiles).any(|(a, b)| key(a) != key(b))
-        {
-            return Err(Error::Internal {
-                what: "seed_light",
-                message: "not the scene this renderer holds".into(),
-            });
-        }
+        self.check_holds(scene, "seed_light")?;
         let mut seeded = 0;
         let mut kept = vec![false; self.tiles.len()];
         for (t, k) in self.tiles.iter().zip(&mut kept) {
-            if let Some(from) = carried.tiles.get(&CarriedLight::key(t))
+            if let Some(from) = carried.tiles.get(&key(t))
                 && from.len() == t.leaf_count as usize
             {
                 let at = u64::from(t.leaf_offset) * size_of::<LeafLightGpu>() as u64;
@@ -850,9 +837,7 @@ impl Renderer {
         // The light of the forms that stayed, where a repack moved them: read back before
         // anything is written.
         let moved: HashMap<TileKey, Vec<LeafLightGpu>> = if placed.repacked {
-            let size = size_of::<LeafLightGpu>();
-            let raw = self.gpu.read_buffer(&self.leaf_light, u64::from(old_leaf_end) * size as u64)?;
-            let state: Vec<LeafLightGpu> = bytemuck::pod_collect_to_vec(&raw[..old_leaf_end as usize * size]);
+            let state = self.read_light(old_leaf_end)?;
             placed
                 .tiles
                 .iter()
@@ -934,7 +919,7 @@ impl Renderer {
             .map(|t| tile_box(t, self.leaf_size_m))
             .collect();
         for (face, dirty) in self.shadow.faces().iter().zip(&mut self.shadow_dirty) {
-            if changed.iter().any(|(lo, hi)| shadow::face_sees_box(&face.view_proj, *lo, *hi)) {
+            if changed.iter().any(|(lo, hi)| crate::camera::sees_box(&face.view_proj, *lo, *hi)) {
                 *dirty = true;
             }
         }
@@ -942,13 +927,11 @@ impl Renderer {
 
         self.tile_surfels = placed.slots.iter().map(|s| s.surfels.clone()).collect();
         self.tiles = placed.tiles;
-        self.surfel_runs = self.pools.surfel_runs();
         self.leaf_count = self.pools.leaf_end();
         #[cfg(feature = "test-hooks")]
         {
             self.node_count = self.pools.slots().values().map(|s| s.nodes.end).max().unwrap_or(0);
         }
-        self.surfel_count = scene.surfels.len() as u32;
         self.base_params.tile_count = self.tiles.len() as u32;
         self.base_params.leaf_count = self.leaf_count;
         let (_, specular_materials, specular_surfels) = material_slots(scene, &self.settings);
@@ -982,41 +965,49 @@ impl Renderer {
         self.shadow_faces
     }
 
-    /// Shadow faces drawn by every shadow pass so far (a pass draws the faces that see a change).
-    pub fn shadow_faces_drawn(&self) -> u64 {
-        self.shadow_drawn
+    /// Shadow faces drawn since the last call (a shadow pass draws the faces that see a change),
+    /// drained like [`Renderer::take_bounce_work`].
+    pub fn take_shadow_faces_drawn(&mut self) -> u64 {
+        std::mem::take(&mut self.shadow_drawn)
     }
 
-    /// The surfel ranges of the tiles a view of `view_proj` may see (every resident surfel where
-    /// tiles cannot be culled, or without a view).
+    /// The surfel ranges of the tiles a view of `view_proj` may see, merged (every resident surfel
+    /// where tiles cannot be culled, or without a view).
     fn runs_seen(&self, view_proj: Option<&Mat4>) -> Vec<Range<u32>> {
-        match view_proj {
-            Some(m) if self.cull_tiles => merge_runs(
-                self.tiles
-                    .iter()
-                    .zip(&self.tile_surfels)
-                    .filter(|(t, _)| {
-                        let (lo, hi) = tile_box(t, self.leaf_size_m);
-                        shadow::face_sees_box(m, lo, hi)
-                    })
-                    .map(|(_, r)| r.clone())
-                    .collect(),
-            ),
-            _ => self.surfel_runs.clone(),
-        }
+        let seen = |t: &TileGpu| match view_proj {
+            Some(m) if self.cull_tiles => {
+                let (lo, hi) = tile_box(t, self.leaf_size_m);
+                crate::camera::sees_box(m, lo, hi)
+            }
+            _ => true,
+        };
+        merge_runs(
+            self.tiles
+                .iter()
+                .zip(&self.tile_surfels)
+                .filter(|(t, _)| seen(t))
+                .map(|(_, r)| r.clone())
+                .collect(),
+        )
     }
 
     /// Renders one frame (running whatever light work the plan asks for first: progressive, at
     /// most one bounce per frame).
     pub fn render(&mut self, camera: &Camera, width: u32, height: u32) -> Result<(Frame, EffectPlan)> {
         let p = self.draw(camera, width, height)?;
+        Ok((self.read_frame()?, p))
+    }
+
+    /// The last frame [`Renderer::draw`] (or render) made, read back.
+    pub fn read_frame(&self) -> Result<Frame> {
         let view = self.view("shade")?;
+        let (width, height) = (view.targets.width, view.targets.height);
         let pixels = u64::from(width) * u64::from(height);
         let hdr_bytes = self.gpu.read_buffer(&view.outputs.hdr, pixels * 16)?;
         let ldr_bytes = self.gpu.read_buffer(&view.outputs.ldr, pixels * 4)?;
         let hdr: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&hdr_bytes[..(pixels * 16) as usize]);
         let ldr: Vec<[u8; 4]> = bytemuck::pod_collect_to_vec(&ldr_bytes[..(pixels * 4) as usize]);
-        Ok((Frame { width, height, hdr, ldr }, p))
+        Ok(Frame { width, height, hdr, ldr })
     }
 
     /// Renders one frame as [`Renderer::render`] does, leaving it on the GPU ([`Renderer::ldr_output`])
@@ -1306,9 +1297,7 @@ impl Renderer {
     /// Each leaf's light state (direct, gather, out), for tests and the reference comparison.
     #[cfg(feature = "test-hooks")]
     pub fn read_leaf_light(&self) -> Result<Vec<LeafLightGpu>> {
-        let size = size_of::<LeafLightGpu>();
-        let bytes = self.gpu.read_buffer(&self.leaf_light, u64::from(self.leaf_count) * size as u64)?;
-        Ok(bytemuck::pod_collect_to_vec(&bytes[..self.leaf_count as usize * size]))
+        self.read_light(self.leaf_count)
     }
 
     /// Overwrites each leaf's light state (tests: a known radiance field before a mip or gather).

@@ -449,7 +449,7 @@ pub fn limit_uploads(
     let mode_now = |i: usize| now.get(i).copied().unwrap_or(TileMode::Far);
     let mut upload = 0u64;
     let mut decisions = next.decisions;
-    for d in &mut decisions {
+    for d in &decisions {
         let was = mode_now(d.tile);
         if fineness(d.mode) < fineness(was) {
             upload += by_index.get(&d.tile).map_or(0, |t| t.cost(d.mode).bytes);

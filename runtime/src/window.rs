@@ -316,8 +316,8 @@ impl App {
         if let Some(path) = &self.opts.screenshot
             && self.summary.frames >= self.opts.after_frames.max(1)
         {
-            let shot = s.renderer.render(&cam, w, h)?.0;
-            image_out::write_frame(&shot, path)?;
+            // The frame just presented, read back (not drawn again).
+            image_out::write_frame(&s.renderer.read_frame()?, path)?;
             self.summary.screenshots.push(path.display().to_string());
             event_loop.exit();
             return Ok(());

@@ -4,13 +4,13 @@
 //! the atlas and the faces' splat uniforms; inject and shade read the atlas with a 3x3
 //! percentage-closer filter (shaders/lights.wgsl).
 //!
-//! A face draws only the tiles its frustum meets ([`face_sees_box`]), and after a change of
+//! A face draws only the tiles its frustum meets (`camera::sees_box`), and after a change of
 //! resident tiles only the faces that see a changed tile are drawn again (the others keep their
 //! texels: the pass loads the atlas and clears a redrawn face by copying a blank one over it).
 
 use std::ops::Range;
 
-use glam::{Mat4, Vec3, Vec4};
+use glam::{Mat4, Vec3};
 
 use super::splat;
 use crate::error::Result;
@@ -34,24 +34,6 @@ pub struct Face {
     pub view_proj: Mat4,
     pub eye_m: Vec3,
     pub proj_scale: f32,
-}
-
-/// Whether the box `lo..hi` (frame metres) may show in a view of `view_proj` (wgpu clip space: z
-/// in 0..=w): false only where all eight corners lie outside one clip plane, so it never culls
-/// what shows.
-pub fn face_sees_box(view_proj: &Mat4, lo: Vec3, hi: Vec3) -> bool {
-    let corners: [Vec4; 8] = std::array::from_fn(|i| {
-        let c = Vec3::new(
-            if i & 1 == 0 { lo.x } else { hi.x },
-            if i & 2 == 0 { lo.y } else { hi.y },
-            if i & 4 == 0 { lo.z } else { hi.z },
-        );
-        *view_proj * c.extend(1.0)
-    });
-    let outside = |plane: fn(Vec4) -> f32| corners.iter().all(|&c| plane(c) < 0.0);
-    let planes: [fn(Vec4) -> f32; 6] =
-        [|c| c.w + c.x, |c| c.w - c.x, |c| c.w + c.y, |c| c.w - c.y, |c| c.z, |c| c.w - c.z];
-    !planes.into_iter().any(outside)
 }
 
 #[derive(Debug)]
@@ -250,24 +232,5 @@ impl Shadow {
                 pass.draw(0..6, r.clone());
             }
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_box_is_culled_only_when_wholly_outside_the_frustum() {
-        let proj = Mat4::perspective_rh(90f32.to_radians(), 1.0, 0.1, 100.0);
-        let view = Mat4::look_at_rh(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y);
-        let m = proj * view;
-        let sees = |lo: [f32; 3], hi: [f32; 3]| face_sees_box(&m, Vec3::from(lo), Vec3::from(hi));
-        assert!(sees([-1.0, -1.0, -6.0], [1.0, 1.0, -4.0]), "ahead");
-        assert!(!sees([-1.0, -1.0, 4.0], [1.0, 1.0, 6.0]), "behind");
-        assert!(!sees([20.0, -1.0, -6.0], [22.0, 1.0, -4.0]), "right of the 90 degree cone");
-        assert!(!sees([-1.0, -1.0, -300.0], [1.0, 1.0, -200.0]), "past the far plane");
-        assert!(sees([-100.0, -100.0, -50.0], [100.0, 100.0, 50.0]), "around the eye");
-        assert!(sees([4.0, -1.0, -6.0], [8.0, 1.0, -4.0]), "across the edge");
     }
 }
