@@ -5,7 +5,7 @@
 # GROTTO_SHARED_DATA) and fail without it; GROTTO_SKIP_SHARED_DATA=1 skips them instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-packages=(mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri xvfb xauth)
+packages=(mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri xvfb xauth xdotool)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

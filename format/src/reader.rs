@@ -591,7 +591,7 @@ fn check_structure(bytes: &[u8]) -> Result<(RawHeader, Range<usize>, Range<usize
         if end > file_len {
             return Err(Problem::OutOfBounds { region, offset: s.offset, len: s.stored_len, file_len });
         }
-        if s.offset % SECTION_ALIGN != 0 {
+        if !s.offset.is_multiple_of(SECTION_ALIGN) {
             return Err(Problem::Misaligned { region, offset: s.offset, align: SECTION_ALIGN });
         }
         if let Scope::Tile(t) = s.scope
@@ -674,7 +674,7 @@ fn array_range(
     if end > file_len {
         return Err(Problem::OutOfBounds { region, offset, len, file_len });
     }
-    if offset % 8 != 0 {
+    if !offset.is_multiple_of(8) {
         return Err(Problem::Misaligned { region, offset, align: 8 });
     }
     Ok(offset as usize..end as usize)
@@ -707,7 +707,7 @@ fn check_known_entry(s: &SectionInfo, kind: SectionKind) -> Result<(), Problem> 
         Codec::Raw => {}
     }
     let element_size = kind.element().size();
-    if s.raw_len % element_size as u64 != 0 {
+    if !s.raw_len.is_multiple_of(element_size as u64) {
         return Err(Problem::BadElementLength {
             section: s.index,
             kind: name(),

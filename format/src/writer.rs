@@ -135,7 +135,7 @@ impl PackageWriter {
         compression: Compression,
     ) -> Result<u32> {
         let element = kind.element().size();
-        if bytes.len() % element != 0 {
+        if !bytes.len().is_multiple_of(element) {
             return Err(self.refuse(format!(
                 "{} is {} bytes, not whole {element}-byte elements",
                 kind.name(),

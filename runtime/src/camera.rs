@@ -117,3 +117,159 @@ mod tests {
         assert!(sees([4.0, -1.0, -6.0], [8.0, 1.0, -4.0]), "across the edge");
     }
 }
+
+/// A camera path file: `[[camera]]` tables as the build manifest writes them (world metres, f64),
+/// in order. `grotto view` records one (K, or `--record-path`); `grotto render --path FILE.toml`
+/// flies along it; its tables can be pasted into a manifest as named cameras.
+pub mod path_file {
+    use std::path::Path;
+
+    use glam::{DVec3, Vec3};
+    use serde::{Deserialize, Serialize};
+
+    use super::Camera;
+    use crate::error::{Error, Result};
+
+    #[derive(Debug, Deserialize, Serialize)]
+    #[serde(deny_unknown_fields)]
+    struct File {
+        camera: Vec<Key>,
+    }
+
+    #[derive(Debug, Deserialize, Serialize)]
+    #[serde(deny_unknown_fields)]
+    struct Key {
+        #[serde(default)]
+        name: String,
+        eye: [f64; 3],
+        look_at: [f64; 3],
+        #[serde(default = "z_up")]
+        up: [f64; 3],
+        #[serde(default = "sixty")]
+        fov_deg: f64,
+    }
+
+    fn z_up() -> [f64; 3] {
+        [0.0, 0.0, 1.0]
+    }
+
+    fn sixty() -> f64 {
+        60.0
+    }
+
+    /// Whether `--path` names a file rather than cameras: one value ending in `.toml`.
+    pub fn is_file(path: &[String]) -> bool {
+        matches!(path, [one] if one.ends_with(".toml"))
+    }
+
+    /// The cameras of a path file, in the frame whose origin is `frame_origin_m` (world metres).
+    pub fn read(file: &Path, frame_origin_m: [f64; 3]) -> Result<Vec<Camera>> {
+        let err = |problem: String| Error::CameraPath { path: file.display().to_string(), problem };
+        let text = std::fs::read_to_string(file).map_err(|e| err(e.to_string()))?;
+        let parsed: File = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
+        if parsed.camera.is_empty() {
+            return Err(err("no [[camera]] in the file".into()));
+        }
+        let origin = DVec3::from(frame_origin_m);
+        parsed
+            .camera
+            .iter()
+            .enumerate()
+            .map(|(i, k)| {
+                let c = Camera {
+                    eye_m: (DVec3::from(k.eye) - origin).as_vec3(),
+                    look_at_m: (DVec3::from(k.look_at) - origin).as_vec3(),
+                    up: DVec3::from(k.up).as_vec3(),
+                    fov_y_deg: k.fov_deg as f32,
+                };
+                c.validate().map_err(|e| err(format!("camera {} ({:?}): {e}", i + 1, k.name)))?;
+                Ok(c)
+            })
+            .collect()
+    }
+
+    /// The text of a path file for `cameras` (frame coordinates; `frame_origin_m` makes them
+    /// world coordinates again).
+    pub fn to_text(cameras: &[Camera], frame_origin_m: [f64; 3]) -> String {
+        let origin = DVec3::from(frame_origin_m);
+        let world = |v: Vec3| (origin + v.as_dvec3()).to_array();
+        let file = File {
+            camera: cameras
+                .iter()
+                .enumerate()
+                .map(|(i, c)| Key {
+                    name: format!("key-{i:03}"),
+                    eye: world(c.eye_m),
+                    look_at: world(c.look_at_m),
+                    up: c.up.as_dvec3().to_array(),
+                    fov_deg: f64::from(c.fov_y_deg),
+                })
+                .collect(),
+        };
+        let body = toml::to_string(&file).unwrap_or_default();
+        format!(
+            "# A camera path recorded by grotto view (world metres). Fly along it with\n\
+             # grotto render PACKAGE --path THIS.toml --frames N\n{body}"
+        )
+    }
+
+    /// Writes a path file atomically (a temporary file renamed into place).
+    pub fn write(file: &Path, cameras: &[Camera], frame_origin_m: [f64; 3]) -> Result<()> {
+        let err = |problem: String| Error::CameraPath { path: file.display().to_string(), problem };
+        let dir = file.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| err(e.to_string()))?;
+        std::io::Write::write_all(&mut tmp, to_text(cameras, frame_origin_m).as_bytes())
+            .map_err(|e| err(e.to_string()))?;
+        tmp.persist(file).map_err(|e| err(e.to_string()))?;
+        Ok(())
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::*;
+
+        #[test]
+        fn a_path_survives_the_file_at_survey_coordinates() {
+            let origin = [512_340.0, 5_123_450.0, 330.0];
+            let keys = [
+                Camera {
+                    eye_m: Vec3::new(1.0, 2.0, 3.0),
+                    look_at_m: Vec3::new(4.0, 2.0, 3.0),
+                    up: Vec3::Z,
+                    fov_y_deg: 70.0,
+                },
+                Camera {
+                    eye_m: Vec3::new(2.5, 2.0, 3.0),
+                    look_at_m: Vec3::new(2.5, 6.0, 2.0),
+                    up: Vec3::Z,
+                    fov_y_deg: 60.0,
+                },
+            ];
+            let dir = tempfile::tempdir().unwrap();
+            let f = dir.path().join("walk.toml");
+            write(&f, &keys, origin).unwrap();
+            let text = std::fs::read_to_string(&f).unwrap();
+            assert!(text.contains("[[camera]]") && text.contains("512341"), "{text}");
+            let back = read(&f, origin).unwrap();
+            assert_eq!(back.len(), 2);
+            for (a, b) in keys.iter().zip(&back) {
+                assert!((a.eye_m - b.eye_m).length() < 1e-4 && (a.look_at_m - b.look_at_m).length() < 1e-4);
+                assert_eq!(a.fov_y_deg, b.fov_y_deg);
+            }
+            assert!(is_file(&["walk.toml".into()]) && !is_file(&["entrance".into(), "chamber".into()]));
+        }
+
+        #[test]
+        fn a_bad_path_file_names_itself_and_the_problem() {
+            let dir = tempfile::tempdir().unwrap();
+            let f = dir.path().join("bad.toml");
+            std::fs::write(&f, "[[camera]]\neye = [0, 0, 0]\nlook_at = [0, 0, 0]\n").unwrap();
+            let e = read(&f, [0.0; 3]).unwrap_err().to_string();
+            assert!(e.contains("bad.toml") && e.contains("coincide"), "{e}");
+            std::fs::write(&f, "").unwrap();
+            assert!(read(&f, [0.0; 3]).unwrap_err().to_string().contains("camera"));
+            let missing = read(&dir.path().join("none.toml"), [0.0; 3]).unwrap_err().to_string();
+            assert!(missing.contains("none.toml"), "{missing}");
+        }
+    }
+}

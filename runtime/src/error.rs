@@ -37,6 +37,9 @@ pub enum Error {
     Budget { what: String, hint: String },
     #[error("camera: {0}")]
     Camera(String),
+    /// A camera path file (`grotto render --path FILE.toml`, `grotto view --record-path`).
+    #[error("{path}: {problem}")]
+    CameraPath { path: String, problem: String },
     #[error("setting {name}: {problem}")]
     Setting { name: &'static str, problem: String },
     /// `grotto view` found no display to open its window on.

@@ -12,6 +12,7 @@ pub mod coarse;
 pub mod cpu_ref;
 pub mod error;
 pub mod export;
+pub mod follow;
 pub mod framing;
 pub mod gpu;
 pub mod gpu_types;

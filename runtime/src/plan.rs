@@ -122,6 +122,12 @@ pub struct PlanInputs {
     /// The image shows no light (a view mode: albedo, normals, level), by name: the light passes
     /// wait until a view shows light.
     pub plain_view: Option<&'static str>,
+    /// Why a viewer holds the bounces (its camera moves: frames stay responsive, the direct light
+    /// and the image still update; or it ran this frame's light already, within its budget).
+    pub light_held: Option<&'static str>,
+    /// A bounce under way in slices: the next leaf and the bounce's leaves (the pyramid is kept
+    /// until it ends).
+    pub bounce_part: Option<(u32, u32)>,
 }
 
 /// Decides the passes for one frame or light update.
@@ -232,10 +238,26 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
     } else {
         (true, format!("bounce {} of {}", i.bounces_done + 1, i.bounce_budget))
     };
+    let propagate = match (propagate.0, i.light_held, i.bounce_part) {
+        (true, Some(why), _) => (false, format!("{why}: bounce {} waits", i.bounces_done + 1)),
+        (true, None, Some((next, of))) => (
+            true,
+            format!(
+                "bounce {} of {}, continued: leaves {next}.. of {of}",
+                i.bounces_done + 1,
+                i.bounce_budget
+            ),
+        ),
+        _ => propagate,
+    };
+    // A sliced bounce gathers from the pyramid its mip made.
+    let mid_bounce = i.bounce_part.is_some();
     steps.push(Step {
         pass: Pass::Mip,
-        run: propagate.0 || env.run,
-        reason: if propagate.0 {
+        run: (propagate.0 && !mid_bounce) || env.run,
+        reason: if propagate.0 && mid_bounce {
+            "the bounce under way keeps the pyramid its mip made".into()
+        } else if propagate.0 {
             "propagation needs the radiance pyramid".into()
         } else if env.run {
             "the env pass needs the pyramid's opacity".into()
@@ -305,6 +327,8 @@ mod tests {
             frame: true,
             gbuffer_valid: false,
             plain_view: None,
+            light_held: None,
+            bounce_part: None,
         }
     }
 
@@ -313,6 +337,23 @@ mod tests {
         let p = plan(&PlanInputs { point_lights: 0, emissive_leaves: true, ..base() });
         assert!(!p.runs(Pass::Shadow) && !p.runs(Pass::Inject));
         assert!(p.runs(Pass::Propagate), "emission still propagates");
+    }
+
+    #[test]
+    fn a_moving_camera_holds_the_bounces_but_not_the_direct_light_or_the_image() {
+        let moving = plan(&PlanInputs { light_held: Some("the camera is moving"), ..base() });
+        assert!(!moving.runs(Pass::Propagate) && !moving.runs(Pass::Mip));
+        assert!(moving.runs(Pass::Shadow) && moving.runs(Pass::Inject) && moving.runs(Pass::Shade));
+        assert!(moving.explain().contains("the camera is moving: bounce 1 waits"), "{}", moving.explain());
+        // Held or not, a converged light does not propagate, and says so.
+        let settled = PlanInputs { direct_valid: true, bounces_done: 4, ..base() };
+        let p = plan(&PlanInputs { light_held: Some("the camera is moving"), ..settled.clone() });
+        assert!(!p.runs(Pass::Propagate) && p.explain().contains("converged by budget"));
+        assert!(plan(&PlanInputs { light_held: None, ..base() }).runs(Pass::Propagate));
+        // A bounce in slices: the rest of it runs on the pyramid it started with.
+        let part = plan(&PlanInputs { bounce_part: Some((4096, 10_000)), direct_valid: true, ..base() });
+        assert!(part.runs(Pass::Propagate) && !part.runs(Pass::Mip), "{}", part.explain());
+        assert!(part.explain().contains("leaves 4096.. of 10000"));
     }
 
     #[test]

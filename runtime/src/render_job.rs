@@ -11,6 +11,7 @@ use serde::Serialize;
 
 use crate::camera::{self, Camera};
 use crate::error::{Error, Result};
+use crate::follow::Follow;
 use crate::framing::Framing;
 use crate::gpu::{Gpu, GpuOptions};
 use crate::image_out;
@@ -196,6 +197,24 @@ pub struct Streaming {
 }
 
 impl Streaming {
+    pub fn tiles(&self) -> &[residency::TileFootprint] {
+        &self.tiles
+    }
+
+    pub fn tile_count(&self) -> usize {
+        self.tiles.len()
+    }
+
+    /// `--gpu-memory`: what the renderer's tile pools take.
+    pub fn pool_bytes(&self) -> u64 {
+        self.pool_bytes
+    }
+
+    /// Residency keeps within these pools from now on (with their headroom taken off already).
+    pub fn set_pool_limits(&mut self, caps: PoolCaps) {
+        self.budget.pools = Some(caps);
+    }
+
     /// The residency for a camera.
     pub fn choose(&self, cam: &Camera) -> Result<Residency> {
         let view = residency::View {
@@ -222,10 +241,6 @@ impl Streaming {
         Ok(scene)
     }
 }
-
-/// What the loader thread hands the next frame: its residency, its scene where the tiles
-/// changed, and the changes deferred by `--upload-per-frame`.
-type NextTiles = (Residency, Option<SceneData>, usize);
 
 /// One frame of a job, for `--json` and the fly-through tables.
 #[derive(Clone, Debug, Serialize)]
@@ -398,6 +413,10 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
         notes.extend(f.as_ref().map(|f| framing_note(&scene, f)));
         framed = f;
         vec![c]
+    } else if camera::path_file::is_file(&opts.path) {
+        // A path recorded by `grotto view` (or written by hand): keyframes in world metres.
+        let keys = camera::path_file::read(Path::new(&opts.path[0]), scene.frame_origin_m)?;
+        camera::path(&keys, opts.frames.max(1))
     } else {
         let keys = opts
             .path
@@ -567,21 +586,14 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     image_out::kind_of(&opts.out)?;
     let gpu = Gpu::new(&opts.gpu)?;
     let t_load = Instant::now();
-    let Prepared { mut scene, cameras, notes, mut residency, mut streaming } = prepare(opts, &gpu)?;
+    let Prepared { mut scene, cameras, notes, residency, mut streaming } = prepare(opts, &gpu)?;
     let load_s = t_load.elapsed().as_secs_f64();
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
-    let mut r = match &mut streaming {
-        // Pools for the whole budget, in the mix of the first view's tiles, so the tiles of later
-        // views replace these in place (pool.rs); residency then keeps within each pool.
-        Some(st) => {
-            let used = PoolCaps { tiles: st.tiles.len() as u64, ..PoolCaps::of(&scene) };
-            let caps = PoolCaps::filling(used, st.pool_bytes, settings.radiance_f16);
-            let r = Renderer::with_pools(&gpu, &scene, settings.clone(), caps)?;
-            st.budget.pools = Some(r.pool_caps().less(POOL_HEADROOM));
-            r
-        }
-        None => Renderer::new(&gpu, &scene, settings.clone())?,
+    let mut r = crate::follow::first_renderer(&gpu, &scene, settings.clone(), streaming.as_mut())?;
+    let mut follow = match (streaming, &residency) {
+        (Some(st), Some(first)) => Some(Follow::new(st, first.clone(), opts.upload_per_frame)),
+        _ => None,
     };
     let first_plan = r.plan(Some((&cameras[0], opts.width, opts.height)));
     let t0 = Instant::now();
@@ -602,124 +614,90 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     };
     // The next frame's tiles are chosen and read from the package on a loader thread while
     // this frame renders, so a frame waits only for what the loader has not finished.
-    std::thread::scope(|scope| -> Result<()> {
-        let mut next_load: Option<std::thread::ScopedJoinHandle<'_, Result<NextTiles>>> = None;
-        for (i, cam) in cameras.iter().enumerate() {
-            let (mut loaded, mut evicted, mut bounces, mut carried_leaves) = (0, 0, 0, 0);
-            let mut load_wait_ms = 0.0;
-            let (mut update, mut made_anew, mut deferred) = (None, false, 0);
-            if i == 0 {
-                bounces = r.stats().bounces_done;
-            } else if let (Some(handle), Some(current)) = (next_load.take(), &residency) {
-                let t_wait = Instant::now();
-                let (next, new_scene, waiting) = handle.join().map_err(|_| Error::Internal {
-                    what: "tile loader",
-                    message: "the loader thread panicked".into(),
-                })??;
+    for (i, cam) in cameras.iter().enumerate() {
+        let (mut loaded, mut evicted, mut bounces, mut carried_leaves) = (0, 0, 0, 0);
+        let mut load_wait_ms = 0.0;
+        let (mut update, mut made_anew, mut deferred) = (None, false, 0);
+        if i == 0 {
+            bounces = r.stats().bounces_done;
+        } else if let Some(f) = &mut follow {
+            let t_wait = Instant::now();
+            if let Some(arrived) = f.wait()? {
                 load_wait_ms = t_wait.elapsed().as_secs_f64() * 1e3;
-                deferred = waiting;
+                deferred = arrived.deferred;
                 // Where the tiles differ, the new scene replaces the old one in the renderer's
                 // pools (only the new tile forms are written; the others keep their place and
                 // light), and its light is settled again from there.
-                if let Some(new_scene) = new_scene {
-                    let (before, after) = (full(current), full(&next));
+                if let Some(new_scene) = arrived.scene {
+                    let (before, after) = (full(f.current()), full(&arrived.residency));
                     loaded = after.difference(&before).count();
                     evicted = before.difference(&after).count();
-                    match r.update_scene(&new_scene)? {
-                        Some(u) => {
-                            carried_leaves = u.carried_leaves;
-                            update = Some(u);
-                            scene = new_scene;
-                        }
-                        None => {
-                            // Not in place: a new renderer, tiles resident before and after
-                            // keeping their light through a read-back.
-                            let carried = r.light_by_tile(&scene)?;
-                            let caps = r.pool_caps();
-                            scene = new_scene;
-                            settings.exposure = exposure;
-                            r = Renderer::with_pools(&gpu, &scene, settings.clone(), caps)?;
-                            carried_leaves = r.seed_light(&scene, &carried)?;
-                            made_anew = true;
-                        }
-                    }
+                    let swapped = crate::follow::swap_tiles(&gpu, &mut r, &mut scene, new_scene)?;
+                    (update, made_anew, carried_leaves) =
+                        (swapped.update, swapped.made_anew, swapped.carried_leaves);
                     let report = |done, change| progress(Progress::Bounce { done, budget, change });
                     bounces = match opts.frame_bounces {
                         Some(n) => r.settle_at_most(n, report)?,
                         None => r.settle(report)?,
                     };
                 }
-                residency = Some(next);
+                f.accept(arrived.residency);
             }
-            if let (Some(st), Some(current), Some(next_cam)) = (&streaming, &residency, cameras.get(i + 1)) {
-                let (now, lights, headlamp) = (current.clone(), scene.lights.clone(), scene.headlamp);
-                let limit = opts.upload_per_frame;
-                next_load = Some(scope.spawn(move || {
-                    let mut next = st.choose(next_cam)?;
-                    let mut deferred = 0;
-                    if let Some(max) = limit {
-                        (next, deferred) = residency::limit_uploads(&st.tiles, &now, next, max);
-                    }
-                    let scene = if next.modes() == now.modes() {
-                        None
-                    } else {
-                        Some(st.load(&next, lights, headlamp)?)
-                    };
-                    Ok((next, scene, deferred))
-                }));
-            }
-            let before_render = r.stats().bounces_done;
-            let (mut frame, plan) = r.render(cam, opts.width, opts.height)?;
-            // A progressive bounce run by the frame itself.
-            bounces += r.stats().bounces_done - before_render;
-            last_plan = plan;
-            // Views without light are not exposed.
-            if opts.exposure.is_none() && i == 0 && settings.view.shows_light() {
-                // Auto exposure from the first frame, kept for the sequence so it does not flicker.
-                exposure = auto_exposure(&frame.hdr);
-                r.set_exposure(exposure);
-                frame = r.render(cam, opts.width, opts.height)?.0;
-            }
-            uncovered_pixels = uncovered_pixels.max(frame.hdr.iter().filter(|p| p[3] < 0.5).count());
-            black_pixels = black_pixels.max(
-                frame
-                    .hdr
-                    .iter()
-                    .zip(&frame.ldr)
-                    .filter(|(h, l)| h[3] >= 0.5 && l[0].max(l[1]).max(l[2]) <= BLACK_LDR)
-                    .count(),
-            );
-            let bounce_work = r.take_bounce_work();
-            frames.push(FrameReport {
-                frame: i as u32,
-                tile_bytes: scene.tile_bytes(f16),
-                full_tiles: residency.as_ref().map_or(scene.tiles.len(), |r| r.totals.full_tiles),
-                coarse_tiles: residency.as_ref().map_or(0, |r| r.totals.coarse_tiles),
-                far_tiles: residency.as_ref().map_or(0, |r| r.totals.far_tiles),
-                loaded,
-                evicted,
-                surfels: scene.surfels.len(),
-                bounces,
-                carried_leaves,
-                propagated_tiles: bounce_work.iter().map(|w| w.tiles).sum(),
-                propagated_leaves: bounce_work.iter().map(|w| w.leaves).sum(),
-                bounce_work,
-                pool_bytes: r.pool_bytes(),
-                update,
-                made_anew,
-                deferred,
-                shadow_faces: r.take_shadow_faces_drawn(),
-                shadow_faces_total: r.shadow_face_count(),
-                load_wait_ms,
-                pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
-            });
-            let path = frame_path(&opts.out, i as u32, n);
-            image_out::write_frame(&frame, &path)?;
-            images.push(path.display().to_string());
-            progress(Progress::Frame { done: i as u32 + 1, total: n });
         }
-        Ok(())
-    })?;
+        if let (Some(f), Some(next_cam)) = (&mut follow, cameras.get(i + 1)) {
+            f.request(next_cam, scene.lights.clone(), scene.headlamp);
+        }
+        let current = follow.as_ref().map(|f| f.current());
+        let before_render = r.stats().bounces_done;
+        let (mut frame, plan) = r.render(cam, opts.width, opts.height)?;
+        // A progressive bounce run by the frame itself.
+        bounces += r.stats().bounces_done - before_render;
+        last_plan = plan;
+        // Views without light are not exposed.
+        if opts.exposure.is_none() && i == 0 && settings.view.shows_light() {
+            // Auto exposure from the first frame, kept for the sequence so it does not flicker.
+            exposure = auto_exposure(&frame.hdr);
+            r.set_exposure(exposure);
+            frame = r.render(cam, opts.width, opts.height)?.0;
+        }
+        uncovered_pixels = uncovered_pixels.max(frame.hdr.iter().filter(|p| p[3] < 0.5).count());
+        black_pixels = black_pixels.max(
+            frame
+                .hdr
+                .iter()
+                .zip(&frame.ldr)
+                .filter(|(h, l)| h[3] >= 0.5 && l[0].max(l[1]).max(l[2]) <= BLACK_LDR)
+                .count(),
+        );
+        let bounce_work = r.take_bounce_work();
+        frames.push(FrameReport {
+            frame: i as u32,
+            tile_bytes: scene.tile_bytes(f16),
+            full_tiles: current.map_or(scene.tiles.len(), |r| r.totals.full_tiles),
+            coarse_tiles: current.map_or(0, |r| r.totals.coarse_tiles),
+            far_tiles: current.map_or(0, |r| r.totals.far_tiles),
+            loaded,
+            evicted,
+            surfels: scene.surfels.len(),
+            bounces,
+            carried_leaves,
+            propagated_tiles: bounce_work.iter().map(|w| w.tiles).sum(),
+            propagated_leaves: bounce_work.iter().map(|w| w.leaves).sum(),
+            bounce_work,
+            pool_bytes: r.pool_bytes(),
+            update,
+            made_anew,
+            deferred,
+            shadow_faces: r.take_shadow_faces_drawn(),
+            shadow_faces_total: r.shadow_face_count(),
+            load_wait_ms,
+            pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
+        });
+        let path = frame_path(&opts.out, i as u32, n);
+        image_out::write_frame(&frame, &path)?;
+        images.push(path.display().to_string());
+        progress(Progress::Frame { done: i as u32 + 1, total: n });
+    }
     Ok(RenderSummary {
         package: opts.package.display().to_string(),
         device: gpu.describe(),
@@ -735,7 +713,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         exposure,
         uncovered_pixels,
         black_pixels,
-        residency,
+        residency: follow.map(|f| f.current().clone()),
         tile_bytes: scene.tile_bytes(settings.radiance_f16),
         frames,
         warnings: image_warnings(

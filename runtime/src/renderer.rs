@@ -162,6 +162,15 @@ pub struct Renderer {
     view: Option<View>,
     direct_valid: bool,
     forced: Vec<Pass>,
+    /// Why a viewer holds the bounces, if it does ([`Renderer::hold_light`]).
+    light_held: Option<&'static str>,
+    /// A bounce run in slices ([`Renderer::update_light_slice`]): the next invocation (active
+    /// leaf) and the bounce's total; the pyramid stays as its mip left it until the bounce ends.
+    bounce_at: Option<(u32, u32)>,
+    /// Most invocations the next propagate dispatch runs (None: the rest of the bounce).
+    slice: Option<u32>,
+    /// The invocations the last propagate dispatch ran.
+    slice_run: (u32, u32),
     stats_now: PassStats,
     queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
 }
@@ -416,6 +425,26 @@ fn tile_box(t: &TileGpu, leaf_m: f32) -> (Vec3, Vec3) {
     (lo - Vec3::splat(margin), lo + Vec3::splat(edge + margin))
 }
 
+/// Where the light stands ([`Renderer::light_progress`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct LightProgress {
+    pub bounces_done: u32,
+    pub bounce_budget: u32,
+    pub last_change: Option<f32>,
+    pub converged: bool,
+}
+
+impl LightProgress {
+    /// 0..=1 for an indicator: 1 when converged, else bounces done of the budget.
+    pub fn fraction(&self) -> f32 {
+        if self.converged {
+            1.0
+        } else {
+            (self.bounces_done as f32 / self.bounce_budget.max(1) as f32).min(0.99)
+        }
+    }
+}
+
 /// What [`Renderer::update_scene`] did.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct SceneUpdate {
@@ -586,6 +615,10 @@ impl Renderer {
             view: None,
             direct_valid: false,
             forced: Vec::new(),
+            light_held: None,
+            bounce_at: None,
+            slice: None,
+            slice_run: (0, 0),
             stats_now: PassStats::default(),
             queries: pass_queries(gpu),
         };
@@ -637,11 +670,65 @@ impl Renderer {
         self.settings.view = view;
     }
 
-    /// Marks the lights changed: the next update re-renders shadow maps and re-injects.
+    /// While held, frames run no bounces, and the plan gives `why`: a viewer holds the light while
+    /// its camera moves, so light work is what yields to the frame rate.
+    pub fn hold_light(&mut self, why: Option<&'static str>) {
+        self.light_held = why;
+    }
+
+    /// A light update (as [`Renderer::update_light`]) whose propagation runs at most `max_leaves`
+    /// leaves of the current bounce: a bounce split over several calls ends as the whole one does
+    /// (each leaf gathers from the same pyramid), and counts once it has run every leaf. Returns
+    /// the leaves propagated.
+    pub fn update_light_slice(&mut self, max_leaves: u32) -> Result<u32> {
+        self.slice = Some(max_leaves.max(64));
+        let out = self.update_light();
+        self.slice = None;
+        if !out?.runs(Pass::Propagate) {
+            return Ok(0);
+        }
+        Ok(self.slice_run.1 - self.slice_run.0)
+    }
+
+    /// Where the light stands: bounces done of the budget, the last change, and whether it has
+    /// converged (no more light work until something changes), held or not.
+    pub fn light_progress(&self) -> LightProgress {
+        let mut i = self.inputs(None);
+        i.light_held = None;
+        let p = plan::plan(&i);
+        LightProgress {
+            bounces_done: self.stats_now.bounces_done,
+            bounce_budget: self.settings.bounces,
+            last_change: self.stats_now.last_change,
+            converged: !(p.runs(Pass::Shadow)
+                || p.runs(Pass::Inject)
+                || p.runs(Pass::Env)
+                || p.runs(Pass::Propagate)),
+        }
+    }
+
+    /// The bounce budget from now on (raising it past the bounces done lets the light go on
+    /// converging; the light already propagated stays).
+    pub fn set_bounces(&mut self, bounces: u32) {
+        self.settings.bounces = bounces;
+    }
+
+    /// Turns shadow maps on or off; the direct light is injected again either way.
+    pub fn set_shadows(&mut self, on: bool) {
+        if self.settings.shadows != on {
+            self.settings.shadows = on;
+            self.invalidate_lights();
+        }
+    }
+
+    /// Marks the lights changed: the next update re-renders shadow maps and re-injects, and the
+    /// bounces are counted afresh (the light converges again from the new direct light).
     pub fn invalidate_lights(&mut self) {
         self.direct_valid = false;
         self.shadow_dirty.fill(true);
         self.stats_now.last_change = None;
+        self.stats_now.bounces_done = 0;
+        self.bounce_at = None;
         self.set_all_active(Why::LightsChanged);
     }
 
@@ -688,6 +775,8 @@ impl Renderer {
             frame: frame.is_some(),
             gbuffer_valid,
             plain_view: (!self.settings.view.shows_light()).then(|| self.settings.view.name()),
+            light_held: self.light_held,
+            bounce_part: self.bounce_at,
         }
     }
 
@@ -946,6 +1035,7 @@ impl Renderer {
         self.env_valid = false;
         self.gbuffer_stale = true;
         self.stats_now = PassStats::default();
+        self.bounce_at = None;
         Ok(Some(update))
     }
 
@@ -1023,6 +1113,40 @@ impl Renderer {
         let p = self.plan(Some((camera, width, height)));
         self.execute(&p, Some((camera, width, height)))?;
         Ok(p)
+    }
+
+    /// The distance in metres from the eye to the surface at pixel `(x, y)` of the last frame
+    /// (its own size, rows top to bottom); None where the background shows or outside the frame.
+    pub fn distance_at(&self, x: u32, y: u32) -> Result<Option<f32>> {
+        let view = self.view("pick")?;
+        if x >= view.targets.width || y >= view.targets.height {
+            return Ok(None);
+        }
+        let buf =
+            self.gpu.buffer("pick", 256, wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST)?;
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        enc.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &view.targets.distance,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x, y, z: 0 },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buf,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(256),
+                    rows_per_image: Some(1),
+                },
+            },
+            wgpu::Extent3d { width: 1, height: 1, depth_or_array_layers: 1 },
+        );
+        self.gpu.queue.submit([enc.finish()]);
+        let b = self.gpu.read_buffer(&buf, 4)?;
+        // The G-buffer packs the f32's bits into RGBA8 (packing.wgsl); cleared pixels are 0.
+        let d = f32::from_bits(u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        Ok((d.is_finite() && d > 0.0).then_some(d))
     }
 
     /// The last frame's tonemapped pixels (one packed RGBA8 u32 a pixel, rows top to bottom) and
@@ -1163,7 +1287,7 @@ impl Renderer {
                     Pass::Inject => self.inject.record(&mut cp, self.leaf_count),
                     Pass::Env => self.env.record(&mut cp, self.leaf_count),
                     Pass::Mip => self.mip.record(&mut cp),
-                    Pass::Propagate => self.propagate.record(&mut cp, self.active_written.unwrap_or(0)),
+                    Pass::Propagate => self.propagate.record(&mut cp, self.slice_run.1 - self.slice_run.0),
                     Pass::Shade => {
                         let v = self.view("shade")?;
                         self.shade.record(&mut cp, &v.outputs, v.targets.width, v.targets.height);
@@ -1179,7 +1303,8 @@ impl Renderer {
     /// no timestamp queries and each is timed on the CPU); `ran` collects the passes recorded.
     fn record_frame(&mut self, plan: &EffectPlan, ran: &mut Vec<Pass>) -> Result<()> {
         let mut enc = self.encoder();
-        if plan.runs(Pass::Propagate) {
+        if plan.runs(Pass::Propagate) && self.slice_run.0 == 0 {
+            // A bounce starts: its changes are gathered over all its slices.
             enc.clear_buffer(&self.stats, 0, None);
             enc.clear_buffer(&self.tile_change, 0, None);
         }
@@ -1211,19 +1336,24 @@ impl Renderer {
         let params = self.frame_params(frame);
         self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         if plan.runs(Pass::Propagate) {
-            if self.activity.pending_tiles() == 0 {
+            if self.bounce_at.is_none() && self.activity.pending_tiles() == 0 {
                 // Forced past convergence: a bounce means every tile.
                 self.set_all_active(Why::Verify);
             }
             if self.active_written.is_none() {
                 let (tiles, items) = self.activity.active_tiles();
-                let header = [tiles.len() as u32, items, 0, 0];
+                let header = [tiles.len() as u32, items];
                 self.gpu.queue.write_buffer(&self.active, 0, bytemuck::cast_slice(&header));
                 if !tiles.is_empty() {
                     self.gpu.queue.write_buffer(&self.active, 16, bytemuck::cast_slice(&tiles));
                 }
                 self.active_written = Some(items);
             }
+            let items = self.active_written.unwrap_or(0);
+            let first = self.bounce_at.map_or(0, |b| b.0).min(items);
+            let end = self.slice.map_or(items, |n| first.saturating_add(n).min(items));
+            self.slice_run = (first, end);
+            self.gpu.queue.write_buffer(&self.active, 8, bytemuck::cast_slice(&[first, end]));
         }
         if let Some((camera, w, h)) = frame
             && plan.runs(Pass::Gbuffer)
@@ -1253,16 +1383,16 @@ impl Renderer {
         }
         outcome?;
         self.gpu.check("frame")?;
-        if let Some((_, buf)) = &self.queries {
-            if !ran.is_empty() {
-                let bytes = self.gpu.read_buffer(buf, 16 * Pass::ALL.len() as u64)?;
-                let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
-                let period = f64::from(self.gpu.queue.get_timestamp_period());
-                for pass in &ran {
-                    let i = Pass::ALL.iter().position(|p| p == pass).unwrap_or(0);
-                    let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period / 1e6;
-                    self.stats_now.last_ms.insert(*pass, dt);
-                }
+        if let Some((_, buf)) = &self.queries
+            && !ran.is_empty()
+        {
+            let bytes = self.gpu.read_buffer(buf, 16 * Pass::ALL.len() as u64)?;
+            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
+            let period = f64::from(self.gpu.queue.get_timestamp_period());
+            for pass in &ran {
+                let i = Pass::ALL.iter().position(|p| p == pass).unwrap_or(0);
+                let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period / 1e6;
+                self.stats_now.last_ms.insert(*pass, dt);
             }
         }
         if ran.contains(&Pass::Shadow) {
@@ -1278,7 +1408,13 @@ impl Renderer {
         if ran.contains(&Pass::Env) {
             self.env_valid = true;
         }
-        if ran.contains(&Pass::Propagate) {
+        let end = self.slice_run.1;
+        let items = self.active_written.unwrap_or(0);
+        if ran.contains(&Pass::Propagate) && end < items {
+            // Part of a bounce: the rest runs in later calls, from the same pyramid.
+            self.bounce_at = Some((end, items));
+        } else if ran.contains(&Pass::Propagate) {
+            self.bounce_at = None;
             let bytes = self.gpu.read_buffer(&self.stats, 16)?;
             let bits = u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
             self.stats_now.last_change = Some(f32::from_bits(bits));

@@ -1,30 +1,46 @@
-//! `grotto view`: a window (winit) on the same renderer `grotto render` uses, with fly controls.
-//! A thin shell: it opens the package as a render job would ([`render_job::prepare`]), renders
-//! each frame with [`Renderer::draw`] (the light converging a bounce a frame, as the effect plan
-//! says) and presents the renderer's tonemapped output through a small blit (window.wgsl).
+//! `grotto view`: a window (winit) on the same renderer `grotto render` uses. A thin shell: it
+//! opens the package as a render job does ([`render_job::prepare`]), keeps the resident tiles
+//! following the camera on a loader thread ([`Follow`]: flying never waits for the disk), renders
+//! each frame with [`Renderer::draw`] and presents the tonemapped output through a small blit
+//! (window.wgsl) with the panel (egui, [`panel`]) over it.
 //!
-//! Controls: mouse drag looks around, WASD flies (Q/E down/up), the wheel sets the speed, Tab
-//! jumps to the next named camera, R goes back to the first, 1-5 switch the view (lit, albedo,
-//! normals, light, level), F11 toggles full screen, P writes a screenshot, Esc quits.
-//! `--screenshot PATH --after-frames N` renders N frames, writes the last and exits (scripts, tests).
+//! Light yields to the frame rate ([`pace`]): while the camera moves the renderer holds its
+//! bounces (the plan says so); at rest the light converges with as many bounces a frame as fit
+//! in the frame budget. A bar along the bottom shows the convergence (grey: waiting for the
+//! camera to rest, amber: converging, green: converged).
+//!
+//! Controls: mouse drag looks around (in orbit, turns around the pivot), WASD flies (Q/E
+//! down/up), the wheel sets the speed (in orbit, the distance), a right click orbits the point
+//! under the cursor and O the point at the centre (O again: fly), Tab jumps to the next named
+//! camera, R back to the first, 1-5 switch the view (lit, albedo, normals, light, level), H hides
+//! the panel, K starts and stops recording a camera path (`grotto render --path FILE.toml` flies
+//! it), P writes a screenshot once the light has converged, F11 toggles full screen, Esc quits.
+
+mod pace;
+mod panel;
 
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Vec3;
+use serde::Serialize;
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, EventLoop};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Fullscreen, Window, WindowId};
 
-use crate::camera::Camera;
+pub use pace::{FrameLog, Pacer};
+
+use crate::camera::{self, Camera};
 use crate::error::{Error, Result};
+use crate::follow::{self, Follow};
 use crate::gpu::Gpu;
 use crate::image_out;
 use crate::render_job::{self, RenderOptions};
-use crate::renderer::{Renderer, ViewMode};
+use crate::renderer::{Quality, Renderer, Settings, ViewMode};
+use crate::scene_data::SceneData;
 
 /// What `grotto view` is asked.
 #[derive(Clone, Debug)]
@@ -32,23 +48,39 @@ pub struct ViewOptions {
     /// The package, camera, settings, GPU and budgets, as `grotto render` takes them; `width` and
     /// `height` are the window's first inner size.
     pub render: RenderOptions,
+    /// The preset the settings came from, as the panel shows it (None: knobs set one by one).
+    pub quality: Option<Quality>,
     /// The renderer draws at the window's size times this (software adapters are slow per pixel).
     pub render_scale: f32,
-    /// Write the frame after `after_frames` frames to this path and exit.
+    /// Where P writes its screenshot (default `grotto-view-N.png`); with `after_frames`, the
+    /// viewer writes it by itself after that many frames, once the camera rests and the light has
+    /// converged (so it matches `grotto render` of the same camera), and exits.
     pub screenshot: Option<PathBuf>,
-    pub after_frames: u32,
+    pub after_frames: Option<u32>,
+    /// Record a camera path from the start and write it here on exit (K does the same by hand).
+    pub record_path: Option<PathBuf>,
+    /// Milliseconds a frame at rest may spend, bounces included.
+    pub frame_budget_ms: f64,
+    /// Show the panel (H toggles it).
+    pub panel: bool,
 }
 
 /// What a viewing session did.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize)]
 pub struct ViewSummary {
     pub device: String,
     pub frames: u32,
     pub seconds: f64,
     pub screenshots: Vec<String>,
+    /// Camera path files written, with their keyframes.
+    pub paths: Vec<(String, usize)>,
+    /// Changes of resident tiles swapped in while flying.
+    pub tile_swaps: u32,
+    /// Frame times while moving and at rest, and how long the light took to converge at rest.
+    pub log: FrameLog,
 }
 
-/// Opens the window and runs until it is closed (or the screenshot is written).
+/// Opens the window and runs until it is closed (or the scripted screenshot is written).
 pub fn run(opts: ViewOptions) -> Result<ViewSummary> {
     let event_loop = EventLoop::new().map_err(|e| Error::NoDisplay(e.to_string()))?;
     let mut app =
@@ -57,8 +89,25 @@ pub fn run(opts: ViewOptions) -> Result<ViewSummary> {
     if let Some(e) = app.error {
         return Err(e);
     }
+    if let Some(s) = app.state.as_mut() {
+        // A recording still running when the window closed is kept.
+        if let Some(keys) = s.recording.take() {
+            let file = app.opts.record_path.clone().unwrap_or_else(|| next_name("grotto-path", "toml"));
+            camera::path_file::write(&file, &keys, s.scene.frame_origin_m)?;
+            app.summary.paths.push((file.display().to_string(), keys.len()));
+        }
+        app.summary.log = std::mem::take(&mut s.log);
+    }
     app.summary.seconds = app.started.elapsed().as_secs_f64();
     Ok(app.summary)
+}
+
+/// `stem-N.ext` for the first N whose file does not exist yet.
+fn next_name(stem: &str, ext: &str) -> PathBuf {
+    (0..)
+        .map(|i| PathBuf::from(format!("{stem}-{i}.{ext}")))
+        .find(|p| !p.exists())
+        .unwrap_or_else(|| PathBuf::from(format!("{stem}.{ext}")))
 }
 
 struct App {
@@ -69,43 +118,72 @@ struct App {
     started: Instant,
 }
 
-/// The window, its surface and the renderer.
+/// The window, its surface, the renderer and what the person is doing.
 struct State {
     window: Arc<Window>,
     gpu: Gpu,
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
     blit: Blit,
+    ui: Ui,
     renderer: Renderer,
+    /// The scene the renderer holds (its tiles change as the camera moves, over budget).
+    scene: SceneData,
+    follow: Option<Follow>,
+    /// The camera the loader last chose tiles for.
+    chosen_for: Option<Camera>,
     cameras: Vec<Camera>,
     camera_index: usize,
-    fly: Fly,
+    nav: Nav,
     /// Keys held (W, A, S, D, Q, E), the mouse button, the last cursor position.
     held: [bool; 6],
     dragging: bool,
     cursor: Option<(f64, f64)>,
     last_frame: Instant,
+    last_camera: Option<Camera>,
+    pacer: Pacer,
+    log: FrameLog,
+    /// Keyframes of the camera path being recorded.
+    recording: Option<Vec<Camera>>,
+    /// Exposure from the frame (not the command line or the panel): set again once when the light
+    /// first converges, since the first frame has only direct light.
+    auto_exposure: AutoExposure,
+    /// A screenshot waiting for the light to converge, and whether Esc asked to quit after it.
+    shot: Option<PathBuf>,
+    quit_after_shot: bool,
+    frame_ms: f64,
 }
 
-/// A fly camera: eye, heading and pitch (z up), speed in metres a second.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum AutoExposure {
+    Off,
+    FirstFrame,
+    AtConvergence,
+    Done,
+}
+
+/// Fly or orbit: eye, heading and pitch (z up), speed in metres a second; in orbit, the eye
+/// circles `pivot_m` at `distance_m`.
 #[derive(Clone, Copy, Debug)]
-struct Fly {
+struct Nav {
     eye_m: Vec3,
     yaw_rad: f32,
     pitch_rad: f32,
     speed_m_s: f32,
     fov_y_deg: f32,
+    orbit: Option<(Vec3, f32)>,
 }
 
-impl Fly {
-    fn from_camera(c: &Camera, scene_size_m: f32) -> Self {
+impl Nav {
+    fn from_camera(c: &Camera, speed_m_s: f32) -> Self {
         let d = (c.look_at_m - c.eye_m).normalize_or(Vec3::X);
         Self {
             eye_m: c.eye_m,
             yaw_rad: d.y.atan2(d.x),
             pitch_rad: d.z.clamp(-1.0, 1.0).asin(),
-            speed_m_s: (scene_size_m / 20.0).max(0.5),
+            speed_m_s,
             fov_y_deg: c.fov_y_deg,
+            orbit: None,
         }
     }
 
@@ -116,13 +194,39 @@ impl Fly {
     }
 
     fn camera(&self) -> Camera {
-        Camera {
-            eye_m: self.eye_m,
-            look_at_m: self.eye_m + self.forward(),
-            up: Vec3::Z,
-            fov_y_deg: self.fov_y_deg,
-        }
+        let f = self.forward();
+        let (eye_m, look_at_m) = match self.orbit {
+            Some((pivot, distance)) => (pivot - f * distance, pivot),
+            None => (self.eye_m, self.eye_m + f),
+        };
+        Camera { eye_m, look_at_m, up: Vec3::Z, fov_y_deg: self.fov_y_deg }
     }
+
+    /// Orbits `pivot_m` from where the eye is now.
+    fn orbit_around(&mut self, pivot_m: Vec3) {
+        let eye = self.camera().eye_m;
+        let d = pivot_m - eye;
+        let distance = d.length().max(1e-3);
+        let f = d / distance;
+        self.yaw_rad = f.y.atan2(f.x);
+        self.pitch_rad = f.z.clamp(-1.0, 1.0).asin();
+        self.orbit = Some((pivot_m, distance));
+    }
+
+    /// Flies on from where the orbit put the eye.
+    fn fly(&mut self) {
+        self.eye_m = self.camera().eye_m;
+        self.orbit = None;
+    }
+}
+
+/// A new keyframe once the camera has moved 0.25 m or turned 10 degrees since the last one.
+fn keyframe_due(last: Option<&Camera>, now: &Camera) -> bool {
+    let Some(last) = last else { return true };
+    let turn = (last.look_at_m - last.eye_m)
+        .normalize_or_zero()
+        .dot((now.look_at_m - now.eye_m).normalize_or_zero());
+    (now.eye_m - last.eye_m).length() > 0.25 || turn < 10f32.to_radians().cos()
 }
 
 /// The presenting pipeline and its uniform.
@@ -185,6 +289,16 @@ impl Blit {
     }
 }
 
+/// The panel's egui context, its winit input and its wgpu painter.
+struct Ui {
+    ctx: egui::Context,
+    input: egui_winit::State,
+    painter: egui_wgpu::Renderer,
+    visible: bool,
+    knobs: panel::PanelKnobs,
+    model: panel::PanelModel,
+}
+
 impl App {
     fn start(&mut self, event_loop: &ActiveEventLoop) -> Result<()> {
         let o = &self.opts.render;
@@ -219,10 +333,38 @@ impl App {
         let prepared = render_job::prepare(o, &gpu)?;
         let mut settings = o.settings.clone();
         settings.exposure = o.exposure.unwrap_or(1.0);
-        let renderer = Renderer::new(&gpu, &prepared.scene, settings)?;
+        let mut streaming = prepared.streaming;
+        let renderer = follow::first_renderer(&gpu, &prepared.scene, settings.clone(), streaming.as_mut())?;
+        let follow = match (streaming, prepared.residency) {
+            (Some(st), Some(first)) => Some(Follow::new(st, first, o.upload_per_frame)),
+            _ => None,
+        };
         let (lo, hi) = prepared.scene.bounds_leaf();
         let size_m = ((hi - lo) * prepared.scene.leaf_size_m).max_element();
-        let fly = Fly::from_camera(&prepared.cameras[0], size_m);
+        let nav = Nav::from_camera(&prepared.cameras[0], (size_m / 20.0).max(0.5));
+        // Tab goes through the package's named cameras, after the one the view opened on.
+        let first = prepared.cameras[0];
+        let cameras: Vec<Camera> = std::iter::once(first)
+            .chain(prepared.scene.cameras.iter().map(Camera::from_scene).filter(|c| *c != first))
+            .collect();
+        let ctx = egui::Context::default();
+        let input = egui_winit::State::new(
+            ctx.clone(),
+            egui::ViewportId::ROOT,
+            &window,
+            Some(window.scale_factor() as f32),
+            None,
+            Some(gpu.device.limits().max_texture_dimension_2d as usize),
+        );
+        let painter = egui_wgpu::Renderer::new(&gpu.device, format, egui_wgpu::RendererOptions::default());
+        let knobs = panel::PanelKnobs {
+            quality: self.opts.quality,
+            bounces: settings.bounces,
+            exposure: settings.exposure,
+            shadows: settings.shadows,
+            view: settings.view,
+        };
+        let ui = Ui { ctx, input, painter, visible: self.opts.panel, knobs, model: Default::default() };
         window.request_redraw();
         self.summary.device = gpu.describe();
         self.state = Some(State {
@@ -231,14 +373,30 @@ impl App {
             surface,
             config,
             blit,
+            ui,
             renderer,
-            cameras: prepared.cameras,
+            scene: prepared.scene,
+            follow,
+            chosen_for: None,
+            cameras,
             camera_index: 0,
-            fly,
+            nav,
             held: [false; 6],
             dragging: false,
             cursor: None,
             last_frame: Instant::now(),
+            last_camera: None,
+            pacer: Pacer::new(self.opts.frame_budget_ms),
+            log: FrameLog::default(),
+            recording: self.opts.record_path.as_ref().map(|_| Vec::new()),
+            auto_exposure: if o.exposure.is_none() && settings.view.shows_light() {
+                AutoExposure::FirstFrame
+            } else {
+                AutoExposure::Off
+            },
+            shot: None,
+            quit_after_shot: false,
+            frame_ms: 0.0,
         });
         Ok(())
     }
@@ -248,23 +406,117 @@ impl App {
         let now = Instant::now();
         let dt = now.duration_since(s.last_frame).as_secs_f32().min(0.25);
         s.last_frame = now;
-        let f = s.fly.forward();
+        let f = s.nav.forward();
         let right = f.cross(Vec3::Z).normalize_or(Vec3::X);
         let axes = [f, -right, -f, right, -Vec3::Z, Vec3::Z];
         let step: Vec3 = s.held.iter().zip(axes).filter(|(h, _)| **h).map(|(_, a)| a).sum();
-        s.fly.eye_m += step * s.fly.speed_m_s * dt;
+        if step != Vec3::ZERO {
+            if s.nav.orbit.is_some() {
+                s.nav.fly();
+            }
+            s.nav.eye_m += step * s.nav.speed_m_s * dt;
+        }
+        let cam = s.nav.camera();
+        let moving = s.last_camera.is_some_and(|c| c != cam);
+        s.last_camera = Some(cam);
+
+        // Tiles follow the camera: take what the loader has ready, ask for the view now.
+        if let Some(f) = &mut s.follow {
+            if let Some(arrived) = f.poll()? {
+                if let Some(new_scene) = arrived.scene {
+                    follow::swap_tiles(&s.gpu, &mut s.renderer, &mut s.scene, new_scene)?;
+                    self.summary.tile_swaps += 1;
+                }
+                f.accept(arrived.residency);
+            }
+            if s.chosen_for != Some(cam) && !f.busy() {
+                f.request(&cam, s.scene.lights.clone(), s.scene.headlamp);
+                s.chosen_for = Some(cam);
+            }
+        }
+
         let scale = self.opts.render_scale.clamp(0.05, 1.0);
         let (w, h) = (
             ((s.config.width as f32 * scale) as u32).max(1),
             ((s.config.height as f32 * scale) as u32).max(1),
         );
-        let cam = s.fly.camera();
-        if self.summary.frames == 0 && self.opts.render.exposure.is_none() {
-            // Automatic exposure from the first frame, as `grotto render` does, kept after.
-            let first = s.renderer.render(&cam, w, h)?.0;
-            s.renderer.set_exposure(render_job::auto_exposure(&first.hdr));
+        let bounces_before = s.renderer.stats().bounces_done;
+        // Light first, in slices of a bounce, for as long as the pacer gives it; then the frame,
+        // with the light held so it adds none.
+        let light_ms = s.pacer.light_ms(moving);
+        let t_light = Instant::now();
+        s.renderer.hold_light(None);
+        for _ in 0..64 {
+            let left_ms = light_ms - t_light.elapsed().as_secs_f64() * 1e3;
+            if moving || left_ms <= 0.0 || s.renderer.light_progress().converged {
+                break;
+            }
+            let t = Instant::now();
+            let leaves = s.renderer.update_light_slice(s.pacer.slice_leaves(left_ms))?;
+            s.pacer.record_slice(t.elapsed().as_secs_f64() * 1e3, leaves);
         }
-        s.renderer.draw(&cam, w, h)?;
+        s.renderer.hold_light(Some(if moving {
+            "the camera is moving"
+        } else {
+            "this frame's light ran before it, within the frame budget"
+        }));
+        let t = Instant::now();
+        let plan = s.renderer.draw(&cam, w, h)?;
+        if !(plan.runs(crate::plan::Pass::Shadow) || plan.runs(crate::plan::Pass::Inject)) {
+            // Direct light (after a change of lights or tiles) is not what a frame costs.
+            s.pacer.record_draw(t.elapsed().as_secs_f64() * 1e3);
+        }
+        let bounces = s.renderer.stats().bounces_done.saturating_sub(bounces_before);
+        let progress = s.renderer.light_progress();
+        let expose = match s.auto_exposure {
+            AutoExposure::FirstFrame => Some(AutoExposure::AtConvergence),
+            AutoExposure::AtConvergence if progress.converged => Some(AutoExposure::Done),
+            _ => None,
+        };
+        if let Some(next) = expose {
+            let e = render_job::auto_exposure(&s.renderer.read_frame()?.hdr);
+            s.renderer.set_exposure(e);
+            s.ui.knobs.exposure = e;
+            s.auto_exposure = next;
+            s.renderer.draw(&cam, w, h)?;
+        }
+
+        self.present(moving, &plan)?;
+        let Some(s) = self.state.as_mut() else { return Ok(()) };
+        let frame_ms = now.elapsed().as_secs_f64() * 1e3;
+        s.frame_ms = if s.frame_ms == 0.0 { frame_ms } else { 0.9 * s.frame_ms + 0.1 * frame_ms };
+        s.log.frame(frame_ms, moving, progress.converged, bounces);
+        self.summary.frames += 1;
+        if let Some(keys) = &mut s.recording
+            && keyframe_due(keys.last(), &cam)
+        {
+            keys.push(cam);
+        }
+
+        let at_rest = !moving && progress.converged && s.follow.as_ref().is_none_or(|f| !f.busy());
+        if self.summary.frames >= self.opts.after_frames.unwrap_or(u32::MAX) && at_rest && s.shot.is_none() {
+            s.shot = Some(self.opts.screenshot.clone().unwrap_or_else(|| next_name("grotto-view", "png")));
+            s.quit_after_shot = true;
+        }
+        if at_rest && let Some(path) = s.shot.take() {
+            // The frame just presented, read back (not drawn again).
+            image_out::write_frame(&s.renderer.read_frame()?, &path)?;
+            self.summary.screenshots.push(path.display().to_string());
+            if s.quit_after_shot {
+                event_loop.exit();
+                return Ok(());
+            }
+        }
+        // At rest with the light converged, nothing changes until an event: the loop waits.
+        if !at_rest || s.shot.is_some() || s.recording.is_some() {
+            s.window.request_redraw();
+        }
+        Ok(())
+    }
+
+    /// Blits the frame with the convergence bar, and draws the panel over it.
+    fn present(&mut self, moving: bool, plan: &crate::plan::EffectPlan) -> Result<()> {
+        let Some(s) = self.state.as_mut() else { return Ok(()) };
         let Some((ldr, src_w, src_h)) = s.renderer.ldr_output() else { return Ok(()) };
         let frame = match s.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
@@ -274,8 +526,25 @@ impl App {
             }
             _ => return Ok(()),
         };
-        let u: [u32; 8] =
-            [src_w, src_h, s.config.width, s.config.height, u32::from(s.config.format.is_srgb()), 0, 0, 0];
+        let progress = s.renderer.light_progress();
+        let held = moving && !progress.converged;
+        let bar = if progress.converged {
+            2
+        } else if held {
+            0
+        } else {
+            1
+        };
+        let u: [u32; 8] = [
+            src_w,
+            src_h,
+            s.config.width,
+            s.config.height,
+            u32::from(s.config.format.is_srgb()),
+            progress.fraction().to_bits(),
+            bar,
+            0,
+        ];
         s.gpu.queue.write_buffer(&s.blit.uniform, 0, bytemuck::cast_slice(&u));
         let group = s.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("window"),
@@ -287,18 +556,18 @@ impl App {
         });
         let view = frame.texture.create_view(&Default::default());
         let mut enc = s.gpu.device.create_command_encoder(&Default::default());
+        let attachment = |load| {
+            Some(wgpu::RenderPassColorAttachment {
+                view: &view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
+            })
+        };
         {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("window"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
+                color_attachments: &[attachment(wgpu::LoadOp::Clear(wgpu::Color::BLACK))],
                 depth_stencil_attachment: None,
                 timestamp_writes: None,
                 occlusion_query_set: None,
@@ -308,21 +577,49 @@ impl App {
             pass.set_bind_group(0, &group, &[]);
             pass.draw(0..3, 0..1);
         }
-        s.gpu.queue.submit([enc.finish()]);
+        if s.ui.visible {
+            s.ui.model = model(s, held, plan);
+            let raw = s.ui.input.take_egui_input(&s.window);
+            let (model, mut knobs) = (&s.ui.model, s.ui.knobs);
+            let mut out = s.ui.ctx.run_ui(raw, |ui| panel::show(ui.ctx(), model, &mut knobs));
+            s.ui.input.handle_platform_output(&s.window, out.platform_output);
+            let screen = egui_wgpu::ScreenDescriptor {
+                size_in_pixels: [s.config.width, s.config.height],
+                pixels_per_point: out.pixels_per_point,
+            };
+            let jobs = s.ui.ctx.tessellate(out.shapes, out.pixels_per_point);
+            for (id, deltas) in &out.textures_delta.set {
+                for delta in deltas {
+                    s.ui.painter.update_texture(&s.gpu.device, &s.gpu.queue, *id, delta);
+                }
+            }
+            let extra = s.ui.painter.update_buffers(&s.gpu.device, &s.gpu.queue, &mut enc, &jobs, &screen);
+            {
+                let pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("panel"),
+                    color_attachments: &[attachment(wgpu::LoadOp::Load)],
+                    depth_stencil_attachment: None,
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                s.ui.painter.render(&mut pass.forget_lifetime(), &jobs, &screen);
+            }
+            s.gpu.queue.submit(extra.into_iter().chain([enc.finish()]));
+            for id in &out.textures_delta.free {
+                s.ui.painter.free_texture(id);
+            }
+            // Applied above (epaint checks that none is dropped unapplied).
+            out.textures_delta.clear();
+            if knobs != s.ui.knobs {
+                apply_knobs(s, knobs, &self.opts.render.settings)?;
+            }
+        } else {
+            s.gpu.queue.submit([enc.finish()]);
+        }
         s.window.pre_present_notify();
         s.gpu.queue.present(frame);
         s.gpu.check("window")?;
-        self.summary.frames += 1;
-        if let Some(path) = &self.opts.screenshot
-            && self.summary.frames >= self.opts.after_frames.max(1)
-        {
-            // The frame just presented, read back (not drawn again).
-            image_out::write_frame(&s.renderer.read_frame()?, path)?;
-            self.summary.screenshots.push(path.display().to_string());
-            event_loop.exit();
-            return Ok(());
-        }
-        s.window.request_redraw();
         Ok(())
     }
 
@@ -339,29 +636,44 @@ impl App {
         let views = [KeyCode::Digit1, KeyCode::Digit2, KeyCode::Digit3, KeyCode::Digit4, KeyCode::Digit5];
         if let Some(k) = views.iter().position(|c| *c == code) {
             s.renderer.set_view(ViewMode::ALL[k]);
+            s.ui.knobs.view = ViewMode::ALL[k];
             return Ok(());
         }
-        let speed = s.fly.speed_m_s;
+        let speed = s.nav.speed_m_s;
         match code {
+            KeyCode::Escape if s.shot.is_some() => s.quit_after_shot = true,
             KeyCode::Escape => event_loop.exit(),
             KeyCode::Tab | KeyCode::KeyR => {
                 s.camera_index =
                     if code == KeyCode::KeyR { 0 } else { (s.camera_index + 1) % s.cameras.len() };
-                s.fly = Fly { speed_m_s: speed, ..Fly::from_camera(&s.cameras[s.camera_index], 0.0) };
+                s.nav = Nav::from_camera(&s.cameras[s.camera_index], speed);
             }
+            KeyCode::KeyO if s.nav.orbit.is_some() => s.nav.fly(),
+            KeyCode::KeyO => {
+                let (w, h) = s.renderer.ldr_output().map_or((0, 0), |(_, w, h)| (w, h));
+                pick_orbit(s, w / 2, h / 2)?;
+            }
+            KeyCode::KeyH => s.ui.visible = !s.ui.visible,
+            KeyCode::KeyK => match s.recording.take() {
+                None => s.recording = Some(Vec::new()),
+                Some(keys) => {
+                    let file =
+                        self.opts.record_path.clone().unwrap_or_else(|| next_name("grotto-path", "toml"));
+                    camera::path_file::write(&file, &keys, s.scene.frame_origin_m)?;
+                    self.summary.paths.push((file.display().to_string(), keys.len()));
+                }
+            },
             KeyCode::F11 => {
                 let full = s.window.fullscreen().is_none().then_some(Fullscreen::Borderless(None));
                 s.window.set_fullscreen(full);
             }
             KeyCode::KeyP => {
-                let (w, h) = (s.config.width, s.config.height);
-                let shot = s.renderer.render(&s.fly.camera(), w, h)?.0;
-                let path = PathBuf::from(format!("grotto-view-{}.png", self.summary.screenshots.len()));
-                image_out::write_frame(&shot, &path)?;
-                self.summary.screenshots.push(path.display().to_string());
+                s.shot =
+                    Some(self.opts.screenshot.clone().unwrap_or_else(|| next_name("grotto-view", "png")));
             }
             _ => {}
         }
+        s.window.request_redraw();
         Ok(())
     }
 
@@ -369,6 +681,94 @@ impl App {
         self.error = Some(e);
         event_loop.exit();
     }
+}
+
+/// Orbits the surface point at pixel `(x, y)` of the last frame (nothing there: no change).
+fn pick_orbit(s: &mut State, x: u32, y: u32) -> Result<()> {
+    let Some((_, w, h)) = s.renderer.ldr_output() else { return Ok(()) };
+    let Some(distance_m) = s.renderer.distance_at(x, y)? else { return Ok(()) };
+    let cam = s.nav.camera();
+    // The pixel's ray (the same projection the G-buffer drew with).
+    let ndc =
+        glam::Vec2::new((x as f32 + 0.5) / w as f32 * 2.0 - 1.0, 1.0 - (y as f32 + 0.5) / h as f32 * 2.0);
+    let inv = cam.view_proj(w, h, 0.01, 1000.0).inverse();
+    let far = inv.project_point3(ndc.extend(1.0));
+    let dir = (far - cam.eye_m).normalize_or(Vec3::X);
+    s.nav.orbit_around(cam.eye_m + dir * distance_m);
+    Ok(())
+}
+
+/// What the panel shows now.
+fn model(s: &State, held: bool, plan: &crate::plan::EffectPlan) -> panel::PanelModel {
+    let r = &s.renderer;
+    let resident = s.follow.as_ref().map(|f| f.current().totals);
+    panel::PanelModel {
+        adapter: s.gpu.describe(),
+        fps: if s.frame_ms > 0.0 { 1e3 / s.frame_ms } else { 0.0 },
+        frame_ms: s.frame_ms,
+        light: Some(r.light_progress()),
+        held,
+        plan: plan.explain(),
+        pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name(), *ms)).collect(),
+        tiles: resident.map(|t| (t.full_tiles, t.coarse_tiles, t.far_tiles)),
+        tile_count: s.scene.tiles.len(),
+        tile_bytes: s.scene.tile_bytes(r.settings().radiance_f16),
+        pool_bytes: r.pool_bytes(),
+        gpu_bytes: r.gpu_bytes(),
+        surfels: s.scene.surfels.len(),
+        recording: s.recording.as_ref().map(Vec::len),
+        orbit: s.nav.orbit.is_some(),
+        speed_m_s: s.nav.speed_m_s,
+    }
+}
+
+/// The settings of preset `q` where presets differ (the march, bounces, shadow maps, filter),
+/// the rest as the session has them.
+fn with_preset(base: &Settings, q: Quality) -> Settings {
+    let p = Settings::preset(q);
+    Settings {
+        cones: p.cones,
+        cone_aperture_scale: p.cone_aperture_scale,
+        step_scale: p.step_scale,
+        max_steps: p.max_steps,
+        bounces: p.bounces,
+        shadow_map_size: p.shadow_map_size,
+        indirect: p.indirect,
+        ..base.clone()
+    }
+}
+
+/// Applies what the panel changed.
+fn apply_knobs(s: &mut State, k: panel::PanelKnobs, _base: &Settings) -> Result<()> {
+    let old = s.ui.knobs;
+    if k.quality != old.quality
+        && let Some(q) = k.quality
+    {
+        // The march's constants are baked into the passes: a new renderer, its light from dark.
+        let settings = with_preset(s.renderer.settings(), q);
+        let caps = s.renderer.pool_caps();
+        s.renderer = match s.follow {
+            Some(_) => Renderer::with_pools(&s.gpu, &s.scene, settings, caps)?,
+            None => Renderer::new(&s.gpu, &s.scene, settings)?,
+        };
+        s.ui.knobs = panel::PanelKnobs { quality: k.quality, bounces: s.renderer.settings().bounces, ..k };
+        return Ok(());
+    }
+    if k.bounces != old.bounces {
+        s.renderer.set_bounces(k.bounces);
+    }
+    if k.exposure != old.exposure {
+        s.renderer.set_exposure(k.exposure);
+        s.auto_exposure = AutoExposure::Off;
+    }
+    if k.shadows != old.shadows {
+        s.renderer.set_shadows(k.shadows);
+    }
+    if k.view != old.view {
+        s.renderer.set_view(k.view);
+    }
+    s.ui.knobs = k;
+    Ok(())
 }
 
 impl ApplicationHandler for App {
@@ -381,6 +781,31 @@ impl ApplicationHandler for App {
     }
 
     fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        // The panel sees input first; what it takes (a click on a slider) does not fly the camera.
+        let taken = match self.state.as_mut() {
+            Some(s) if s.ui.visible => {
+                let r = s.ui.input.on_window_event(&s.window, &event);
+                if r.repaint && !matches!(event, WindowEvent::RedrawRequested) {
+                    s.window.request_redraw();
+                }
+                r.consumed
+            }
+            _ => false,
+        };
+        // Input wakes a loop that waits at rest (other events, such as the redraw itself, do not).
+        if let Some(s) = self.state.as_mut()
+            && matches!(
+                event,
+                WindowEvent::KeyboardInput { .. }
+                    | WindowEvent::MouseInput { .. }
+                    | WindowEvent::CursorMoved { .. }
+                    | WindowEvent::MouseWheel { .. }
+                    | WindowEvent::Resized(_)
+                    | WindowEvent::Focused(_)
+            )
+        {
+            s.window.request_redraw();
+        }
         let outcome = match event {
             WindowEvent::CloseRequested => {
                 event_loop.exit();
@@ -391,11 +816,11 @@ impl ApplicationHandler for App {
                     s.config.width = size.width.max(1);
                     s.config.height = size.height.max(1);
                     s.surface.configure(&s.gpu.device, &s.config);
-                    s.window.request_redraw();
                 }
                 Ok(())
             }
             WindowEvent::RedrawRequested => self.frame(event_loop),
+            _ if taken => Ok(()),
             WindowEvent::KeyboardInput { event, .. } => match event.physical_key {
                 PhysicalKey::Code(code) => self.key(event_loop, code, event.state == ElementState::Pressed),
                 PhysicalKey::Unidentified(_) => Ok(()),
@@ -406,12 +831,25 @@ impl ApplicationHandler for App {
                 }
                 Ok(())
             }
+            WindowEvent::MouseInput { state: ElementState::Pressed, button: MouseButton::Right, .. } => {
+                match self.state.as_mut() {
+                    Some(s) => match (s.cursor, s.renderer.ldr_output().map(|(_, w, _)| w)) {
+                        (Some((x, y)), Some(w)) => {
+                            // Window pixels to the frame's (it is drawn at --render-scale).
+                            let k = w as f64 / f64::from(s.config.width.max(1));
+                            pick_orbit(s, (x * k) as u32, (y * k) as u32)
+                        }
+                        _ => Ok(()),
+                    },
+                    None => Ok(()),
+                }
+            }
             WindowEvent::CursorMoved { position, .. } => {
                 if let Some(s) = self.state.as_mut() {
                     if let (true, Some((x, y))) = (s.dragging, s.cursor) {
                         let k = 0.005;
-                        s.fly.yaw_rad -= (position.x - x) as f32 * k;
-                        s.fly.pitch_rad = (s.fly.pitch_rad - (position.y - y) as f32 * k).clamp(-1.5, 1.5);
+                        s.nav.yaw_rad -= (position.x - x) as f32 * k;
+                        s.nav.pitch_rad = (s.nav.pitch_rad - (position.y - y) as f32 * k).clamp(-1.5, 1.5);
                     }
                     s.cursor = Some((position.x, position.y));
                 }
@@ -423,7 +861,12 @@ impl ApplicationHandler for App {
                         MouseScrollDelta::LineDelta(_, y) => y,
                         MouseScrollDelta::PixelDelta(p) => p.y as f32 / 40.0,
                     };
-                    s.fly.speed_m_s = (s.fly.speed_m_s * 1.25f32.powf(lines)).clamp(0.01, 1000.0);
+                    match &mut s.nav.orbit {
+                        Some((_, distance)) => {
+                            *distance = (*distance * 1.25f32.powf(-lines)).clamp(0.05, 1e4)
+                        }
+                        None => s.nav.speed_m_s = (s.nav.speed_m_s * 1.25f32.powf(lines)).clamp(0.01, 1000.0),
+                    }
                 }
                 Ok(())
             }
@@ -432,5 +875,37 @@ impl ApplicationHandler for App {
         if let Err(e) = outcome {
             self.fail(event_loop, e);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn orbit_keeps_the_pivot_in_view_and_fly_resumes_where_the_orbit_left_the_eye() {
+        let c = Camera { eye_m: Vec3::ZERO, look_at_m: Vec3::X, up: Vec3::Z, fov_y_deg: 60.0 };
+        let mut nav = Nav::from_camera(&c, 1.0);
+        let pivot = Vec3::new(4.0, 3.0, 0.0);
+        nav.orbit_around(pivot);
+        let at = nav.camera();
+        assert!(at.eye_m.length() < 1e-5 && (at.look_at_m - pivot).length() < 1e-5, "{at:?}");
+        nav.yaw_rad += 1.0;
+        let turned = nav.camera();
+        assert!((turned.look_at_m - pivot).length() < 1e-5);
+        assert!(((turned.eye_m - pivot).length() - 5.0).abs() < 1e-4, "same distance");
+        nav.fly();
+        assert!((nav.camera().eye_m - turned.eye_m).length() < 1e-5);
+    }
+
+    #[test]
+    fn keyframes_come_with_movement_not_with_time() {
+        let c = Camera { eye_m: Vec3::ZERO, look_at_m: Vec3::X, up: Vec3::Z, fov_y_deg: 60.0 };
+        assert!(keyframe_due(None, &c));
+        assert!(!keyframe_due(Some(&c), &c));
+        let moved = Camera { eye_m: Vec3::new(0.3, 0.0, 0.0), look_at_m: Vec3::new(1.3, 0.0, 0.0), ..c };
+        assert!(keyframe_due(Some(&c), &moved));
+        let turned = Camera { look_at_m: Vec3::new(1.0, 0.2, 0.0), ..c };
+        assert!(keyframe_due(Some(&c), &turned), "11 degrees");
     }
 }

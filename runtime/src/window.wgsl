@@ -1,19 +1,23 @@
 // Presents the renderer's tonemapped frame (packed RGBA8, rows top to bottom) in a window,
-// scaled to the window by nearest sampling. Where the surface is sRGB, the already encoded values
-// are decoded first so the surface's encoding gives them back.
+// scaled to the window by nearest sampling, with the light's convergence as a bar along the
+// bottom (grey: waiting for the camera to rest, amber: converging, green: converged). Where the
+// surface is sRGB, the already encoded values are decoded first so the surface's encoding gives
+// them back.
 #import color
 
 struct Blit {
     src: vec2<u32>,
     dst: vec2<u32>,
     srgb_target: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
+    progress: f32,
+    bar_state: u32,
+    pad: u32,
 }
 
 @group(0) @binding(0) var<storage, read> ldr: array<u32>;
 @group(0) @binding(1) var<uniform> blit: Blit;
+
+const BAR_PX: f32 = 3.0;
 
 @vertex
 fn vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
@@ -26,6 +30,10 @@ fn fs(@builtin(position) p: vec4<f32>) -> @location(0) vec4<f32> {
     let x = min(u32(p.x * f32(blit.src.x) / f32(blit.dst.x)), blit.src.x - 1u);
     let y = min(u32(p.y * f32(blit.src.y) / f32(blit.dst.y)), blit.src.y - 1u);
     var c = unpack4x8unorm(ldr[y * blit.src.x + x]).rgb;
+    if p.y > f32(blit.dst.y) - BAR_PX && p.x < blit.progress * f32(blit.dst.x) {
+        let colours = array<vec3<f32>, 3>(vec3<f32>(0.5), vec3<f32>(0.9, 0.6, 0.1), vec3<f32>(0.2, 0.8, 0.3));
+        c = colours[min(blit.bar_state, 2u)];
+    }
     if blit.srgb_target != 0u {
         c = srgb_to_linear(c);
     }

@@ -156,19 +156,25 @@ fn negative_vectors_parse_as_written_and_gpu_memory_is_reported() {
     assert!(json["total_bytes"].as_u64().unwrap() > json["bytes"]["surfels"].as_u64().unwrap());
 }
 
+/// The one tolerance every image comparison uses (the end-to-end tests' helper, shared by path).
+#[allow(dead_code)]
+#[path = "../../tests/src/golden.rs"]
+mod golden;
+
 #[test]
-fn view_opens_a_window_under_xvfb_and_says_so_clearly_without_a_display() {
+fn view_flies_the_cave_under_xvfb_matches_grotto_render_and_says_so_clearly_without_a_display() {
     let dir = tempfile::tempdir().unwrap();
     let path =
         grotto_fixtures::small_cave_package(dir.path(), &grotto_fixtures::SmallCave::default()).unwrap();
     let p = path.to_str().unwrap();
-    let shot = dir.path().join("shot.png");
-    let args = ["view", p, "--size", "160x120", "--quality", "fast", "--after-frames", "3", "--screenshot"];
+    let (shot, walk, reference) =
+        (dir.path().join("shot.png"), dir.path().join("walk.toml"), dir.path().join("chamber.png"));
+    let common = ["--size", "160x120", "--quality", "fast", "--software"];
 
     // No display: a clear message and a non-zero exit, not a panic.
     let out = Command::new(env!("CARGO_BIN_EXE_grotto"))
-        .args(args)
-        .arg(&shot)
+        .args(["view", p])
+        .args(common)
         .env_remove("DISPLAY")
         .env_remove("WAYLAND_DISPLAY")
         .env_remove("WAYLAND_SOCKET")
@@ -178,20 +184,68 @@ fn view_opens_a_window_under_xvfb_and_says_so_clearly_without_a_display() {
     assert!(!out.status.success() && err.contains("no display"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 
-    // A real window on Xvfb's display, on the software adapter: three frames presented, then the
-    // screenshot written.
-    let xvfb = Command::new("xvfb-run")
-        .args(["-a", "-s", "-screen 0 640x480x24", env!("CARGO_BIN_EXE_grotto")])
-        .args(args)
-        .arg(&shot)
+    // What grotto render makes of the second named camera, and its exposure.
+    let out = grotto(
+        &["render", p, "--camera", "chamber", "--out", reference.to_str().unwrap(), "--json"]
+            .into_iter()
+            .chain(common)
+            .collect::<Vec<_>>(),
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rendered: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let exposure = rendered["exposure"].as_f64().unwrap().to_string();
+
+    // A real window on Xvfb's display, driven by real X input (xdotool, XTEST): hide the panel,
+    // fly forward, drag the view, jump to the next camera (the chamber), look at the albedo and
+    // back, ask for a screenshot (written once the light has converged) and quit.
+    let script = format!(
+        "{bin} view {p} {common} --render-scale 1 --exposure {exposure} --screenshot {shot} \
+         --record-path {walk} --json > {dir}/view.json 2> {dir}/view.err & pid=$!; \
+         wid=$(timeout 120 xdotool search --sync --name 'grotto view') || exit 3; sleep 2; \
+         xdotool windowfocus --sync $wid key h mousemove 80 60 keydown w sleep 1 keyup w \
+         mousedown 1 mousemove_relative --sync 60 0 mouseup 1 sleep 0.5 key Tab key 2 sleep 0.3 \
+         key 1 key p key Escape; wait $pid",
+        bin = env!("CARGO_BIN_EXE_grotto"),
+        common = common.join(" "),
+        shot = shot.display(),
+        walk = walk.display(),
+        dir = dir.path().display(),
+    );
+    let xvfb = Command::new("timeout")
+        .args(["600", "xvfb-run", "-a", "-s", "-screen 0 640x480x24", "bash", "-c", &script])
         .env_remove("WAYLAND_DISPLAY")
         .output()
-        .unwrap_or_else(|e| panic!("xvfb-run (scripts/test.sh installs the xvfb package): {e}"));
-    let text = format!("{}{}", String::from_utf8_lossy(&xvfb.stdout), String::from_utf8_lossy(&xvfb.stderr));
-    assert!(xvfb.status.success(), "{text}");
-    assert!(text.contains("3 frames"), "{text}");
-    let img = image::open(&shot).unwrap().to_rgba8();
-    assert_eq!((img.width(), img.height()), (80, 60), "half the window by default");
-    let lit = img.pixels().filter(|p| p.0[0].max(p.0[1]).max(p.0[2]) > 8).count();
-    assert!(lit * 2 > (80 * 60) as usize, "the view shows the cave: {lit} of 4800 pixels lit");
+        .unwrap_or_else(|e| panic!("xvfb-run (scripts/test.sh installs xvfb and xdotool): {e}"));
+    let log = std::fs::read_to_string(dir.path().join("view.err")).unwrap_or_default();
+    assert!(
+        xvfb.status.success(),
+        "{}{}\n{log}",
+        String::from_utf8_lossy(&xvfb.stdout),
+        String::from_utf8_lossy(&xvfb.stderr)
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("view.json")).unwrap()).unwrap();
+    assert!(!summary["log"]["moving_ms"].as_array().unwrap().is_empty(), "W flew the camera: {summary}");
+    assert!(!summary["log"]["converge_frames"].as_array().unwrap().is_empty(), "{summary}");
+
+    // The screenshot is the chamber camera as grotto render sees it, through the golden tolerance.
+    let (a, b) = (image::open(&shot).unwrap().to_rgba8(), image::open(&reference).unwrap().to_rgba8());
+    assert_eq!(a.dimensions(), (160, 120));
+    let px = |i: &image::RgbaImage| i.pixels().map(|p| p.0).collect::<Vec<[u8; 4]>>();
+    let d = golden::diff(&px(&a), &px(&b));
+    assert!(golden::within_tolerance(&d), "viewer against grotto render: {d:?}");
+
+    // The recorded path ends at the chamber and flies again in grotto render.
+    let keys = summary["paths"][0][1].as_u64().unwrap();
+    assert!(keys >= 3, "start, flown, chamber: {keys} keys");
+    let frames = dir.path().join("walk.png");
+    let out = grotto(
+        &["render", p, "--path", walk.to_str().unwrap(), "--frames", "3", "--out", frames.to_str().unwrap()]
+            .into_iter()
+            .chain(common)
+            .collect::<Vec<_>>(),
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let last = image::open(dir.path().join("walk_0002.png")).unwrap().to_rgba8();
+    assert_eq!(last.dimensions(), (160, 120));
 }

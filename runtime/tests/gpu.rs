@@ -8,6 +8,7 @@ use grotto_fixtures::testscenes;
 use grotto_runtime::cpu_ref::CpuScene;
 use grotto_runtime::gpu::{Gpu, GpuOptions};
 use grotto_runtime::gpu_types::LeafLightGpu;
+use grotto_runtime::plan::Pass;
 use grotto_runtime::renderer::{Renderer, Settings};
 
 fn gpu() -> &'static Gpu {
@@ -226,6 +227,45 @@ fn hidden_chamber_needs_several_bounces() {
     assert!(many.0 > 10.0 * one.0, "several bounces must light the chamber");
 }
 
+#[test]
+fn a_bounce_in_slices_ends_where_the_whole_bounce_ends_to_the_bit() {
+    // The viewer splits a bounce over frames (Renderer::update_light_slice); every leaf gathers
+    // from the pyramid the bounce's mip made, so the slices give the same light as one dispatch.
+    let scene = testscenes::dogleg();
+    let settings = Settings { bounces: 3, cones: 9, convergence_tolerance: 0.0, ..Default::default() };
+    let mut whole = Renderer::new(gpu(), &scene, settings.clone()).unwrap();
+    whole.settle(|_, _| {}).unwrap();
+    let mut sliced = Renderer::new(gpu(), &scene, settings).unwrap();
+    let leaves = scene.leaves.len() as u32;
+    let slice = leaves / 5 + 7;
+    let mut calls = 0;
+    while !sliced.light_progress().converged {
+        let before = sliced.stats().bounces_done;
+        let ran = sliced.update_light_slice(slice).unwrap();
+        assert!(ran <= slice, "a slice runs at most its leaves");
+        calls += 1;
+        // Mid-bounce the plan keeps the pyramid and says where the bounce stands.
+        if sliced.stats().bounces_done == before && !sliced.light_progress().converged {
+            let p = sliced.plan(None);
+            assert!(!p.runs(Pass::Mip) && p.explain().contains("continued"), "{}", p.explain());
+        }
+        assert!(calls < 100, "the sliced bounces end");
+    }
+    assert_eq!(sliced.stats().bounces_done, 3);
+    assert!(calls >= 3 * 5, "each bounce took several slices ({calls} calls)");
+    let (a, b) = (whole.read_leaf_light().unwrap(), sliced.read_leaf_light().unwrap());
+    let first_diff = a.iter().zip(&b).position(|(p, q)| p.out != q.out);
+    assert_eq!(first_diff, None, "leaf light differs");
+    assert_eq!(whole.stats().last_change, sliced.stats().last_change);
+    // A held renderer runs no bounce, and says why.
+    let mut held = Renderer::new(gpu(), &scene, Settings { bounces: 3, ..Default::default() }).unwrap();
+    held.hold_light(Some("the camera is moving"));
+    let p = held.update_light().unwrap();
+    assert!(p.runs(Pass::Inject) && !p.runs(Pass::Propagate), "{}", p.explain());
+    assert!(p.explain().contains("the camera is moving: bounce 1 waits"));
+    assert_eq!(held.stats().bounces_done, 0);
+}
+
 fn max_abs_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
     a.iter().zip(b).flat_map(|(p, q)| (0..3).map(move |k| (p[k] - q[k]).abs())).fold(0.0, f32::max)
 }
@@ -233,7 +273,6 @@ fn max_abs_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
 #[test]
 fn skipped_passes_are_not_dispatched_and_change_nothing() {
     use grotto_runtime::camera::Camera;
-    use grotto_runtime::plan::Pass;
     // Emission only: no point or spot lights, so no shadow maps and no injection.
     let scene = testscenes::furnace_sphere(4, 5.0, 0.5, 1.0);
     let cam =
@@ -290,7 +329,6 @@ fn skipped_passes_are_not_dispatched_and_change_nothing() {
 
 #[test]
 fn lights_and_shadows_run_once_for_static_lights() {
-    use grotto_runtime::plan::Pass;
     let scene = testscenes::dogleg();
     let mut r = Renderer::new(gpu(), &scene, Settings { bounces: 2, ..Default::default() }).unwrap();
     let cam = grotto_runtime::camera::Camera::from_scene(&scene.cameras[0]);
@@ -388,7 +426,7 @@ fn sh_irradiance_on_the_gpu_matches_the_cpu_for_ten_thousand_normals() {
     let settings = Settings { max_distance_m: Some(0.05), bounces: 1, ..Default::default() };
     let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
     let plan = r.update_light().unwrap();
-    assert!(plan.runs(grotto_runtime::plan::Pass::Env), "{}", plan.explain());
+    assert!(plan.runs(Pass::Env), "{}", plan.explain());
     let light = r.read_leaf_light().unwrap();
     let sh = grotto_format::spec::ShRgb9 { coeffs: sky };
     let mut worst = 0.0f64;
@@ -633,7 +671,7 @@ fn lights_beyond_the_budget_are_shadowed_by_svo_cones_not_lit_through_rock() {
             Settings { bounces: 0, shadowed_lights: budget, shadow_fallback: fallback, ..Default::default() };
         let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
         let plan = r.update_light().unwrap();
-        assert_eq!(plan.runs(grotto_runtime::plan::Pass::Shadow), budget > 0, "{}", plan.explain());
+        assert_eq!(plan.runs(Pass::Shadow), budget > 0, "{}", plan.explain());
         let light = r.read_leaf_light().unwrap();
         (
             mean_of(&light, &chamber, |l| l.direct),
@@ -815,7 +853,6 @@ fn a_validation_error_names_the_pass_whose_scope_caught_it() {
 #[test]
 fn views_without_light_skip_the_light_passes_and_show_albedo_normals_and_level() {
     use grotto_runtime::camera::Camera;
-    use grotto_runtime::plan::Pass;
     use grotto_runtime::renderer::{Frame, ViewMode};
     let scene = testscenes::dogleg();
     let cam = Camera::from_scene(&scene.cameras[0]);

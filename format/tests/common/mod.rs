@@ -179,7 +179,7 @@ pub fn sample_package(dir: &Path, codec_for: impl Fn(SectionKind, u32) -> Compre
 }
 
 pub fn alternating(kind: SectionKind, t: u32) -> Compression {
-    if (kind as u32 + t) % 2 == 0 { Compression::Zstd(3) } else { Compression::Raw }
+    if (kind as u32 + t).is_multiple_of(2) { Compression::Zstd(3) } else { Compression::Raw }
 }
 
 pub fn header(bytes: &[u8]) -> RawHeader {

@@ -48,10 +48,13 @@ enum Command {
     /// Time every pass (GPU timestamps where the adapter has them) on a package: shadow maps,
     /// injection, one bounce (mip + propagate), G-buffer and shading, repeated; median per pass.
     Bench(Box<BenchArgs>),
-    /// Explore a package in a window: mouse drag looks, WASD flies (Q/E down/up), the wheel sets
-    /// the speed, Tab jumps to the next named camera, R back to the first, 1-5 switch the view
-    /// (lit, albedo, normals, light, level), F11 full screen, P screenshot, Esc quits. The light
-    /// converges a bounce a frame. Takes the render options (--size is the window's size).
+    /// Explore a package in a window with a panel (quality, bounces, exposure, shadows, view; the
+    /// effect plan, fps and pass times, resident tiles). Mouse drag looks, WASD flies (Q/E
+    /// down/up), the wheel sets the speed; a right click orbits the point under the cursor, O the
+    /// centre (O again: fly); Tab next named camera, R the first; 1-5 views (lit, albedo, normals,
+    /// light, level); H panel; K records a camera path; P screenshot; F11 full screen; Esc quits.
+    /// Tiles follow the camera; the light waits while it moves and converges when it rests. Takes
+    /// the render options (--size is the window's size).
     View(Box<ViewArgs>),
     /// Check a package's structure and every checksum and section; exits non-zero on any problem.
     Verify {
@@ -85,7 +88,8 @@ struct RenderArgs {
     /// Vertical field of view, degrees (with --eye).
     #[arg(long, default_value_t = 60.0)]
     fov: f64,
-    /// Fly through these named cameras, comma-separated (with --frames).
+    /// Fly through these named cameras, comma-separated (with --frames), or along a camera path
+    /// file (one FILE.toml: [[camera]] tables in world metres, as grotto view records them).
     #[arg(long, value_delimiter = ',')]
     path: Vec<String>,
     /// Frames along --path.
@@ -271,31 +275,76 @@ struct ViewArgs {
     /// Draw at the window's size times this (software adapters are slow per pixel).
     #[arg(long, default_value_t = 0.5)]
     render_scale: f32,
-    /// Write the frame after --after-frames frames to this image and exit (scripts, tests).
+    /// Where P writes its screenshot (default grotto-view-N.png). With --after-frames the viewer
+    /// writes it by itself and exits.
     #[arg(long)]
     screenshot: Option<PathBuf>,
-    #[arg(long, default_value_t = 3)]
-    after_frames: u32,
+    /// Write the screenshot after this many frames, once the camera rests and the light has
+    /// converged (so it matches grotto render of the same camera), and exit (scripts, tests).
+    #[arg(long)]
+    after_frames: Option<u32>,
+    /// Record a camera path from the start and write it here on exit (K starts and stops a
+    /// recording by hand); grotto render --path FILE.toml flies along it.
+    #[arg(long)]
+    record_path: Option<PathBuf>,
+    /// Milliseconds a frame at rest may take: the light gets the bounces that fit beside the
+    /// frame (while the camera moves, bounces wait).
+    #[arg(long, default_value_t = 33.0)]
+    frame_budget_ms: f64,
+    /// Start with the panel hidden (H toggles it).
+    #[arg(long)]
+    no_panel: bool,
 }
 
 fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
     let render = options(&v.render)?;
+    let a = &v.render;
+    // The panel names the preset only where no knob changed it.
+    let knobs_set = a.bounces.is_some()
+        || a.cones.is_some()
+        || a.aperture.is_some()
+        || a.step.is_some()
+        || a.shadow_map.is_some()
+        || a.indirect.is_some();
+    let quality = grotto_runtime::renderer::Quality::parse(&a.quality).filter(|_| !knobs_set);
     let summary = grotto_runtime::window::run(grotto_runtime::window::ViewOptions {
         render,
+        quality,
         render_scale: v.render_scale,
         screenshot: v.screenshot,
         after_frames: v.after_frames,
+        record_path: v.record_path,
+        frame_budget_ms: v.frame_budget_ms,
+        panel: !v.no_panel,
     })?;
+    // --json: frames, frame times moving and at rest, frames the light took to converge.
+    if v.render.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    let log = &summary.log;
+    let ms = |v: &[f64]| {
+        grotto_runtime::window::FrameLog::percentiles(v)
+            .map_or("none".to_string(), |(m, p)| format!("median {m:.1} ms, p95 {p:.1} ms"))
+    };
     println!(
-        "{} frames in {:.1} s on {}{}",
+        "{} frames in {:.1} s on {}; moving: {} frames, {}; at rest: {} frames, {}; light converged \
+         {} times, after {:?} frames{}{}",
         summary.frames,
         summary.seconds,
         summary.device,
+        log.moving_ms.len(),
+        ms(&log.moving_ms),
+        log.rest_ms.len(),
+        ms(&log.rest_ms),
+        log.converge_frames.len(),
+        log.converge_frames,
         if summary.screenshots.is_empty() {
             String::new()
         } else {
             format!("; wrote {}", summary.screenshots.join(", "))
-        }
+        },
+        summary.paths.iter().map(|(p, n)| format!("; camera path {p} ({n} keys)")).collect::<String>(),
     );
     Ok(ExitCode::SUCCESS)
 }

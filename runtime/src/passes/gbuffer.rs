@@ -31,7 +31,10 @@ impl Targets {
                 width,
                 height,
                 format,
-                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+                // Copy source: a viewer reads a pixel's distance back to pick a point.
+                wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC,
             )
         };
         Ok(Self {

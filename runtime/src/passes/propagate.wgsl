@@ -17,8 +17,8 @@
 
 @compute @workgroup_size(64)
 fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let k = linear_index(gid, nwg);
-    if k >= active_tiles.item_count {
+    let k = active_tiles.slice_first + linear_index(gid, nwg);
+    if k >= active_tiles.slice_end {
         return;
     }
     let item = active_leaf(k);

@@ -12,14 +12,15 @@ struct ActiveTile {
     first_item: u32,
 }
 
-// The tiles and the invocations (their leaves) of the bounce, then the tiles in order of
-// first_item: one entry per active tile, not per leaf, so the list the CPU writes each bounce
-// stays small.
+// The tiles and the invocations (their leaves) of the bounce, the slice of them this dispatch
+// runs (a viewer splits a bounce over frames: Renderer::update_light_slice), then the tiles in
+// order of first_item: one entry per active tile, not per leaf, so the list the CPU writes each
+// bounce stays small.
 struct ActiveTiles {
     tile_count: u32,
     item_count: u32,
-    pad0: u32,
-    pad1: u32,
+    slice_first: u32,
+    slice_end: u32,
     tiles: array<ActiveTile>,
 }
 

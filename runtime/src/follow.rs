@@ -1,0 +1,149 @@
+//! Tiles that follow a moving camera, for a package over its GPU budget: the next residency is
+//! chosen and its tiles read from the package on a loader thread while frames render
+//! ([`Follow`]), then swapped into the renderer's pools in place ([`swap_tiles`]). `grotto render
+//! --path` waits for each frame's tiles; `grotto view` takes them when they are ready, so flying
+//! never waits for the disk.
+
+use std::sync::Arc;
+use std::thread::JoinHandle;
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::gpu::Gpu;
+use crate::pool::{POOL_HEADROOM, PoolCaps};
+use crate::render_job::Streaming;
+use crate::renderer::{Renderer, SceneUpdate, Settings};
+use crate::residency::{self, Residency};
+use crate::scene_data::{SceneData, SceneLight};
+
+/// The renderer for a job's first scene: over budget, with tile pools for the whole
+/// `--gpu-memory` in the mix of the first view's tiles, so the tiles of later views replace these
+/// in place (pool.rs), and residency then keeps within each pool (it sets the streaming budget's
+/// pool limits); within budget, a renderer for the scene as it is.
+pub fn first_renderer(
+    gpu: &Gpu,
+    scene: &SceneData,
+    settings: Settings,
+    streaming: Option<&mut Streaming>,
+) -> Result<Renderer> {
+    match streaming {
+        Some(st) => {
+            let used = PoolCaps { tiles: st.tile_count() as u64, ..PoolCaps::of(scene) };
+            let caps = PoolCaps::filling(used, st.pool_bytes(), settings.radiance_f16);
+            let r = Renderer::with_pools(gpu, scene, settings, caps)?;
+            st.set_pool_limits(r.pool_caps().less(POOL_HEADROOM));
+            Ok(r)
+        }
+        None => Renderer::new(gpu, scene, settings),
+    }
+}
+
+/// How a change of tiles reached the renderer.
+#[derive(Clone, Debug, Default)]
+pub struct Swapped {
+    /// Written in place into the pools (None where the renderer was made anew).
+    pub update: Option<SceneUpdate>,
+    /// The pools could not take the scene (its lights or bounds differ): a new renderer, with the
+    /// light of tiles resident before and after carried through a read-back.
+    pub made_anew: bool,
+    /// Leaves whose light was kept.
+    pub carried_leaves: usize,
+}
+
+/// Puts `new_scene` into the renderer in place of `scene` (which it replaces): only the new tile
+/// forms are written; tiles resident before and after keep their place and light. The light is
+/// not settled here: the caller decides how many bounces to spend.
+pub fn swap_tiles(
+    gpu: &Gpu,
+    r: &mut Renderer,
+    scene: &mut SceneData,
+    new_scene: SceneData,
+) -> Result<Swapped> {
+    if let Some(u) = r.update_scene(&new_scene)? {
+        *scene = new_scene;
+        return Ok(Swapped { carried_leaves: u.carried_leaves, update: Some(u), made_anew: false });
+    }
+    let carried = r.light_by_tile(scene)?;
+    let caps = r.pool_caps();
+    *scene = new_scene;
+    *r = Renderer::with_pools(gpu, scene, r.settings().clone(), caps)?;
+    let carried_leaves = r.seed_light(scene, &carried)?;
+    Ok(Swapped { update: None, made_anew: true, carried_leaves })
+}
+
+/// A residency chosen on the loader thread: the scene to swap in where the tiles' forms changed,
+/// and the changes `--upload-per-frame` left for later.
+#[derive(Debug)]
+pub struct Arrived {
+    pub residency: Residency,
+    pub scene: Option<SceneData>,
+    pub deferred: usize,
+}
+
+/// The loader thread and the residency the renderer holds.
+#[derive(Debug)]
+pub struct Follow {
+    streaming: Arc<Streaming>,
+    current: Residency,
+    loading: Option<JoinHandle<Result<Arrived>>>,
+    upload_per_frame: Option<u64>,
+}
+
+impl Follow {
+    /// `current`: the residency the renderer was made with.
+    pub fn new(streaming: Streaming, current: Residency, upload_per_frame: Option<u64>) -> Self {
+        Self { streaming: Arc::new(streaming), current, loading: None, upload_per_frame }
+    }
+
+    pub fn current(&self) -> &Residency {
+        &self.current
+    }
+
+    /// Whether a residency is being chosen and read.
+    pub fn busy(&self) -> bool {
+        self.loading.is_some()
+    }
+
+    /// Starts choosing and reading the tiles of `cam` (lit by `lights`, which every load keeps),
+    /// unless a load is under way already.
+    pub fn request(&mut self, cam: &Camera, lights: Vec<SceneLight>, headlamp: bool) {
+        if self.loading.is_some() {
+            return;
+        }
+        let (st, now, cam, limit) =
+            (self.streaming.clone(), self.current.clone(), *cam, self.upload_per_frame);
+        self.loading = Some(std::thread::spawn(move || {
+            let mut next = st.choose(&cam)?;
+            let mut deferred = 0;
+            if let Some(max) = limit {
+                (next, deferred) = residency::limit_uploads(st.tiles(), &now, next, max);
+            }
+            let scene =
+                if next.modes() == now.modes() { None } else { Some(st.load(&next, lights, headlamp)?) };
+            Ok(Arrived { residency: next, scene, deferred })
+        }));
+    }
+
+    /// The requested residency where the loader has finished, without waiting.
+    pub fn poll(&mut self) -> Result<Option<Arrived>> {
+        match &self.loading {
+            Some(h) if h.is_finished() => self.wait(),
+            _ => Ok(None),
+        }
+    }
+
+    /// The requested residency, waiting for the loader; None where none was requested.
+    pub fn wait(&mut self) -> Result<Option<Arrived>> {
+        let Some(h) = self.loading.take() else { return Ok(None) };
+        let arrived = h.join().map_err(|_| Error::Internal {
+            what: "tile loader",
+            message: "the loader thread panicked".into(),
+        })??;
+        Ok(Some(arrived))
+    }
+
+    /// The renderer now holds `r` (its scene swapped in, or unchanged).
+    pub fn accept(&mut self, r: Residency) {
+        self.current = r;
+    }
+}
