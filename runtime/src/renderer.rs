@@ -693,8 +693,10 @@ impl Renderer {
     /// Where the light stands: bounces done of the budget, the last change, and whether it has
     /// converged (no more light work until something changes), held or not.
     pub fn light_progress(&self) -> LightProgress {
+        // The light's own state: neither a hold nor a view without light is convergence.
         let mut i = self.inputs(None);
         i.light_held = None;
+        i.plain_view = None;
         let p = plan::plan(&i);
         LightProgress {
             bounces_done: self.stats_now.bounces_done,

@@ -444,11 +444,13 @@ impl App {
         // Light first, in slices of a bounce, for as long as the pacer gives it; then the frame,
         // with the light held so it adds none.
         let light_ms = s.pacer.light_ms(moving);
+        // Views without light (albedo, normals, level) leave the light as it is.
+        let shows_light = s.renderer.settings().view.shows_light();
         let t_light = Instant::now();
         s.renderer.hold_light(None);
         for _ in 0..64 {
             let left_ms = light_ms - t_light.elapsed().as_secs_f64() * 1e3;
-            if moving || left_ms <= 0.0 || s.renderer.light_progress().converged {
+            if moving || left_ms <= 0.0 || s.renderer.light_progress().converged || !shows_light {
                 break;
             }
             let t = Instant::now();
@@ -486,6 +488,12 @@ impl App {
         let frame_ms = now.elapsed().as_secs_f64() * 1e3;
         s.frame_ms = if s.frame_ms == 0.0 { frame_ms } else { 0.9 * s.frame_ms + 0.1 * frame_ms };
         s.log.frame(frame_ms, moving, progress.converged, bounces);
+        if std::env::var_os("GROTTO_VIEW_TRACE").is_some() {
+            eprintln!(
+                "frame {} {frame_ms:.1} ms moving {moving} bounces {bounces} {progress:?}",
+                self.summary.frames
+            );
+        }
         self.summary.frames += 1;
         if let Some(keys) = &mut s.recording
             && keyframe_due(keys.last(), &cam)
@@ -493,7 +501,8 @@ impl App {
             keys.push(cam);
         }
 
-        let at_rest = !moving && progress.converged && s.follow.as_ref().is_none_or(|f| !f.busy());
+        let at_rest =
+            !moving && (progress.converged || !shows_light) && s.follow.as_ref().is_none_or(|f| !f.busy());
         if self.summary.frames >= self.opts.after_frames.unwrap_or(u32::MAX) && at_rest && s.shot.is_none() {
             s.shot = Some(self.opts.screenshot.clone().unwrap_or_else(|| next_name("grotto-view", "png")));
             s.quit_after_shot = true;

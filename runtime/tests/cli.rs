@@ -198,13 +198,17 @@ fn view_flies_the_cave_under_xvfb_matches_grotto_render_and_says_so_clearly_with
     // A real window on Xvfb's display, driven by real X input (xdotool, XTEST): hide the panel,
     // fly forward, drag the view, jump to the next camera (the chamber), look at the albedo and
     // back, ask for a screenshot (written once the light has converged) and quit.
+    // Focus is set by hand (no window manager), retried until the server reports it; every step
+    // has a time limit, so a lost event fails the test with the viewer's log instead of hanging.
     let script = format!(
-        "{bin} view {p} {common} --render-scale 1 --exposure {exposure} --screenshot {shot} \
+        "timeout 300 {bin} view {p} {common} --render-scale 1 --exposure {exposure} --screenshot {shot} \
          --record-path {walk} --json > {dir}/view.json 2> {dir}/view.err & pid=$!; \
-         wid=$(timeout 120 xdotool search --sync --name 'grotto view') || exit 3; sleep 2; \
-         xdotool windowfocus --sync $wid key h mousemove 80 60 keydown w sleep 1 keyup w \
+         wid=$(timeout 120 xdotool search --sync --onlyvisible --name 'grotto view') || exit 3; \
+         for i in $(seq 100); do xdotool windowfocus $wid 2>/dev/null; \
+         [ \"$(xdotool getwindowfocus 2>/dev/null)\" = \"$wid\" ] && break; sleep 0.2; done; \
+         timeout 60 xdotool key h mousemove 80 60 keydown w sleep 1 keyup w \
          mousedown 1 mousemove_relative --sync 60 0 mouseup 1 sleep 0.5 key Tab key 2 sleep 0.3 \
-         key 1 key p key Escape; wait $pid",
+         key 1 key p key Escape || exit 4; wait $pid",
         bin = env!("CARGO_BIN_EXE_grotto"),
         common = common.join(" "),
         shot = shot.display(),

@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# The viewer's frame loop at work (issue 18): opens PACKAGE in `grotto view` under Xvfb at SIZE,
+# flies forward (W held through XTEST, as a person's key would be) for MOVE_S seconds from the
+# first frame, then lets the camera rest until the light has converged; the viewer then writes
+# OUT/view.png and exits. Prints frame times while moving and at rest, and the frames and seconds
+# the light took to converge at rest, and grabs the X screen (panel included) to OUT/screen.png.
+# Extra arguments go to grotto view (e.g. --quality high, --frame-budget-ms 16, --render-scale 0.5).
+# Usage: scripts/bench-view.sh PACKAGE [OUT_DIR] [SIZE] [MOVE_S] [view args...]
+#        (default: out/view, 640x480, 5)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+pkg=$1
+out=${2:-out/view}
+size=${3:-640x480}
+move_s=${4:-5}
+shift $(($# < 4 ? $# : 4))
+mkdir -p "$out"
+export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-$(mktemp -d)}
+for tool in xvfb-run xdotool import; do
+    command -v $tool >/dev/null || { echo "needs $tool (apt-get install xvfb xdotool imagemagick)"; exit 1; }
+done
+cargo build --release --locked -p grotto-runtime
+w=${size%x*}
+h=${size#*x}
+xvfb-run -a -s "-screen 0 $((w + 16))x$((h + 16))x24" bash -c '
+    target/release/grotto view "$0" --size "$1" --render-scale 1 --screenshot "$2/view.png" \
+        --after-frames 1 --json "${@:4}" > "$2/view.json" 2> "$2/view.err" & pid=$!
+    wid=$(timeout 300 xdotool search --sync --name "grotto view")
+    xdotool windowfocus --sync "$wid" mousemove 40 40 keydown w sleep "$3" keyup w
+    # The screen while the light converges, panel included.
+    sleep 2; import -window root "$2/screen.png" || true
+    wait $pid' "$pkg" "$size" "$out" "$move_s" "$@"
+python3 - "$out/view.json" <<'PY'
+import json, statistics, sys
+s = json.load(open(sys.argv[1]))
+log = s["log"]
+def q(v):
+    if not v:
+        return "none"
+    v = sorted(v)
+    return f"median {statistics.median(v):.0f} ms, p95 {v[round(0.95 * (len(v) - 1))]:.0f} ms"
+print(f"device: {s['device']}")
+print(f"frames: {s['frames']} in {s['seconds']:.1f} s")
+print(f"moving: {len(log['moving_ms'])} frames, {q(log['moving_ms'])}")
+print(f"at rest: {len(log['rest_ms'])} frames, {q(log['rest_ms'])}, {log['rest_bounces']} bounces")
+print(f"light converged at rest after {log['converge_frames']} frames, {[round(x, 1) for x in log['converge_s']]} s")
+PY
