@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# The viewer's frame loop at work (issue 18): opens PACKAGE in `grotto view` under Xvfb at SIZE,
-# flies forward (W held through XTEST, as a person's key would be) for MOVE_S seconds from the
-# first frame, then lets the camera rest until the light has converged; the viewer then writes
-# OUT/view.png and exits. Prints frame times while moving and at rest, and the frames and seconds
+# The viewer's frame loop at work (issue 18): opens PACKAGE in `grotto view` under Xvfb in a SIZE
+# window (drawn at --render-scale, default 0.5), lets the camera rest for WAIT_S seconds (default
+# 20: the light converges meanwhile), flies forward (W held through XTEST, as a person's key would
+# be) for MOVE_S seconds, then lets it rest until the light has converged; the viewer then writes
+# OUT/view.png (P) and exits (Esc). Prints frame times while moving and at rest, and the frames and seconds
 # the light took to converge at rest, and grabs the X screen (panel included) to OUT/screen.png.
 # Extra arguments go to grotto view (e.g. --quality high, --frame-budget-ms 16, --render-scale 0.5).
 # Usage: scripts/bench-view.sh PACKAGE [OUT_DIR] [SIZE] [MOVE_S] [view args...]
@@ -23,13 +24,21 @@ cargo build --release --locked -p grotto-runtime
 w=${size%x*}
 h=${size#*x}
 xvfb-run -a -s "-screen 0 $((w + 16))x$((h + 16))x24" bash -c '
-    target/release/grotto view "$0" --size "$1" --render-scale 1 --screenshot "$2/view.png" \
-        --after-frames 1 --json "${@:4}" > "$2/view.json" 2> "$2/view.err" & pid=$!
+    target/release/grotto view "$0" --size "$1" --screenshot "$2/view.png" \
+        --json "${@:4}" > "$2/view.json" 2> "$2/view.err" & pid=$!
     wid=$(timeout 300 xdotool search --sync --name "grotto view")
-    xdotool windowfocus --sync "$wid" mousemove 40 40 keydown w sleep "$3" keyup w
-    # The screen while the light converges, panel included.
-    sleep 2; import -window root "$2/screen.png" || true
-    wait $pid' "$pkg" "$size" "$out" "$move_s" "$@"
+    # No window manager: focus by hand, retried until the server reports it.
+    for i in $(seq 100); do
+        xdotool windowfocus "$wid" 2>/dev/null
+        [ "$(xdotool getwindowfocus 2>/dev/null)" = "$wid" ] && break
+        sleep 0.2
+    done
+    sleep "${WAIT_S:-20}"
+    import -window root "$2/screen.png" || true
+    # P: a screenshot once the light has converged at rest; Esc: quit after it.
+    xdotool mousemove 600 400 keydown w sleep "$3" keyup w key p key Escape
+    wait $pid
+' "$pkg" "$size" "$out" "$move_s" "$@"
 python3 - "$out/view.json" <<'PY'
 import json, statistics, sys
 s = json.load(open(sys.argv[1]))

@@ -6,6 +6,13 @@
 
 use serde::Serialize;
 
+/// Longest frame at rest: nothing on screen moves but the light, and a person who starts moving
+/// again waits at most this long for the first moving frame. What a rest frame adds to its draw is
+/// the light's share of the time: held to a 33 ms frame on lavapipe, the demo cave's light got
+/// about half of each frame and took 306 s to converge; at 100 ms it gets about two thirds and
+/// took 169 s, where its four bounces alone take about 110 s (docs/benchmarks.md).
+pub const REST_FRAME_MS: f64 = 100.0;
+
 /// Leaves in the first slice, before a slice has been timed.
 pub const FIRST_SLICE_LEAVES: u32 = 4096;
 
@@ -27,15 +34,15 @@ impl Pacer {
     }
 
     /// Milliseconds of light work for a frame: none while the camera moves; at rest, what the
-    /// budget leaves beside the draw, and at least as long as the draw itself where the draw
-    /// alone overruns the budget (a software adapter), so the light still converges within
-    /// seconds while a frame at rest stays within twice a moving one.
+    /// rest budget (the frame budget, at least [`REST_FRAME_MS`]) leaves beside the draw, and at
+    /// least as long as the draw itself where the draw alone overruns it (a software adapter), so
+    /// a frame at rest stays within twice a moving one.
     pub fn light_ms(&self, moving: bool) -> f64 {
         if moving {
             return 0.0;
         }
         let draw = self.draw_ms.unwrap_or(0.0);
-        (self.budget_ms - draw).max(draw).max(1.0)
+        (self.budget_ms.max(REST_FRAME_MS) - draw).max(draw).max(1.0)
     }
 
     /// Leaves a slice may propagate in `ms`.
@@ -117,18 +124,22 @@ mod tests {
 
     #[test]
     fn moving_frames_get_no_light_and_resting_frames_get_the_rest_of_the_budget() {
-        let mut p = Pacer::new(33.0);
+        let mut p = Pacer::new(133.0);
         assert_eq!(p.slice_leaves(10.0), FIRST_SLICE_LEAVES, "nothing timed yet");
         p.record_draw(13.0);
         p.record_slice(20.0, 10_000);
         assert_eq!(p.light_ms(true), 0.0);
-        assert_eq!(p.light_ms(false), 20.0, "33 - 13");
-        assert_eq!(p.slice_leaves(p.light_ms(false)), 10_000);
+        assert_eq!(p.light_ms(false), 120.0, "133 - 13");
+        assert_eq!(p.slice_leaves(p.light_ms(false)), 60_000);
+        // A 33 ms budget still gives a frame at rest the rest frame's time.
+        let mut q = Pacer::new(33.0);
+        q.record_draw(13.0);
+        assert_eq!(q.light_ms(false), REST_FRAME_MS - 13.0);
         // A software adapter: the draw alone overruns the budget, so the light gets as long again.
         let mut slow = Pacer::new(33.0);
         slow.record_draw(250.0);
         slow.record_slice(100.0, 4096);
-        assert_eq!(slow.light_ms(false), 250.0);
+        assert_eq!(slow.light_ms(false), 250.0, "as long as the draw");
         assert_eq!(slow.slice_leaves(250.0), 10_240);
         // Updates without propagation teach nothing about leaves; tiny budgets still progress.
         slow.record_slice(5000.0, 0);
