@@ -621,7 +621,7 @@ impl App {
             // Applied above (epaint checks that none is dropped unapplied).
             out.textures_delta.clear();
             if knobs != s.ui.knobs {
-                apply_knobs(s, knobs, &self.opts.render.settings)?;
+                apply_knobs(s, knobs)?;
             }
         } else {
             s.gpu.queue.submit([enc.finish()]);
@@ -748,7 +748,7 @@ fn with_preset(base: &Settings, q: Quality) -> Settings {
 }
 
 /// Applies what the panel changed.
-fn apply_knobs(s: &mut State, k: panel::PanelKnobs, _base: &Settings) -> Result<()> {
+fn apply_knobs(s: &mut State, k: panel::PanelKnobs) -> Result<()> {
     let old = s.ui.knobs;
     if k.quality != old.quality
         && let Some(q) = k.quality
