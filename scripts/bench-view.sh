@@ -3,8 +3,9 @@
 # window (drawn at --render-scale, default 0.5), lets the camera rest for WAIT_S seconds (default
 # 20: the light converges meanwhile), flies forward (W held through XTEST, as a person's key would
 # be) for MOVE_S seconds, then lets it rest until the light has converged; the viewer then writes
-# OUT/view.png (P) and exits (Esc). Prints frame times while moving and at rest, and the frames and seconds
-# the light took to converge at rest, and grabs the X screen (panel included) to OUT/screen.png.
+# OUT/view.png (P) and exits (Esc). Prints the viewer's summary (frame times while moving and at
+# rest, frames and seconds the light took to converge at rest) and grabs the X screen (panel
+# included) to OUT/screen.png; `--json` among the view args gives the whole frame log instead.
 # Extra arguments go to grotto view (e.g. --quality high, --frame-budget-ms 16, --render-scale 0.5).
 # Usage: scripts/bench-view.sh PACKAGE [OUT_DIR] [SIZE] [MOVE_S] [view args...]
 #        (default: out/view, 640x480, 5)
@@ -25,7 +26,7 @@ w=${size%x*}
 h=${size#*x}
 xvfb-run -a -s "-screen 0 $((w + 16))x$((h + 16))x24" bash -c '
     target/release/grotto view "$0" --size "$1" --screenshot "$2/view.png" \
-        --json "${@:4}" > "$2/view.json" 2> "$2/view.err" & pid=$!
+        "${@:4}" > "$2/view.txt" 2> "$2/view.err" & pid=$!
     wid=$(timeout 300 xdotool search --sync --name "grotto view")
     # No window manager: focus by hand, retried until the server reports it.
     for i in $(seq 100); do
@@ -39,18 +40,4 @@ xvfb-run -a -s "-screen 0 $((w + 16))x$((h + 16))x24" bash -c '
     xdotool mousemove 600 400 keydown w sleep "$3" keyup w key p key Escape
     wait $pid
 ' "$pkg" "$size" "$out" "$move_s" "$@"
-python3 - "$out/view.json" <<'PY'
-import json, statistics, sys
-s = json.load(open(sys.argv[1]))
-log = s["log"]
-def q(v):
-    if not v:
-        return "none"
-    v = sorted(v)
-    return f"median {statistics.median(v):.0f} ms, p95 {v[round(0.95 * (len(v) - 1))]:.0f} ms"
-print(f"device: {s['device']}")
-print(f"frames: {s['frames']} in {s['seconds']:.1f} s")
-print(f"moving: {len(log['moving_ms'])} frames, {q(log['moving_ms'])}")
-print(f"at rest: {len(log['rest_ms'])} frames, {q(log['rest_ms'])}, {log['rest_bounces']} bounces")
-print(f"light converged at rest after {log['converge_frames']} frames, {[round(x, 1) for x in log['converge_s']]} s")
-PY
+cat "$out/view.txt"

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The test suite. Installs what the tests need on a fresh Debian machine (Mesa's software Vulkan
-# driver lavapipe, EGL + llvmpipe for wgpu's GL backend, and Xvfb for the window of `grotto
-# view`), then runs every test of the workspace. Tests that read third-party files expect ../shared/data beside the repository (or
+# driver lavapipe, EGL + llvmpipe for wgpu's GL backend, and Xvfb and xdotool for the window of
+# `grotto view`), then runs every test of the workspace. Tests that read third-party files expect ../shared/data beside the repository (or
 # GROTTO_SHARED_DATA) and fail without it; GROTTO_SKIP_SHARED_DATA=1 skips them instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -119,7 +119,8 @@ mod tests {
 }
 
 /// A camera path file: `[[camera]]` tables as the build manifest writes them (world metres, f64),
-/// in order. `grotto view` records one (K, or `--record-path`); `grotto render --path FILE.toml`
+/// in order. The manifest's reader (`grotto_preprocess::manifest::CameraSpec`) is not reused: the
+/// runtime does not depend on the build crate, and here a keyframe's name is optional. `grotto view` records one (K, or `--record-path`); `grotto render --path FILE.toml`
 /// flies along it; its tables can be pasted into a manifest as named cameras.
 pub mod path_file {
     use std::path::Path;

@@ -16,25 +16,29 @@ use crate::renderer::{Renderer, SceneUpdate, Settings};
 use crate::residency::{self, Residency};
 use crate::scene_data::{SceneData, SceneLight};
 
-/// The renderer for a job's first scene: over budget, with tile pools for the whole
-/// `--gpu-memory` in the mix of the first view's tiles, so the tiles of later views replace these
-/// in place (pool.rs), and residency then keeps within each pool (it sets the streaming budget's
-/// pool limits); within budget, a renderer for the scene as it is.
-pub fn first_renderer(
+/// The renderer for a job's first scene, and the loader that keeps its tiles following the
+/// camera where the package is over budget (`streaming` and the `first` residency it was chosen
+/// with, from [`crate::render_job::prepare`]): then the pools take the whole `--gpu-memory` in
+/// the mix of the first view's tiles, so the tiles of later views replace these in place
+/// (pool.rs), and residency keeps within each pool from then on. Within budget, a renderer for
+/// the scene as it is and no loader.
+pub fn start(
     gpu: &Gpu,
     scene: &SceneData,
     settings: Settings,
-    streaming: Option<&mut Streaming>,
-) -> Result<Renderer> {
-    match streaming {
-        Some(st) => {
+    streaming: Option<Streaming>,
+    first: Option<Residency>,
+    upload_per_frame: Option<u64>,
+) -> Result<(Renderer, Option<Follow>)> {
+    match (streaming, first) {
+        (Some(mut st), Some(first)) => {
             let used = PoolCaps { tiles: st.tile_count() as u64, ..PoolCaps::of(scene) };
             let caps = PoolCaps::filling(used, st.pool_bytes(), settings.radiance_f16);
             let r = Renderer::with_pools(gpu, scene, settings, caps)?;
             st.set_pool_limits(r.pool_caps().less(POOL_HEADROOM));
-            Ok(r)
+            Ok((r, Some(Follow::new(st, first, upload_per_frame))))
         }
-        None => Renderer::new(gpu, scene, settings),
+        _ => Ok((Renderer::new(gpu, scene, settings)?, None)),
     }
 }
 

@@ -11,7 +11,6 @@ use serde::Serialize;
 
 use crate::camera::{self, Camera};
 use crate::error::{Error, Result};
-use crate::follow::Follow;
 use crate::framing::Framing;
 use crate::gpu::{Gpu, GpuOptions};
 use crate::image_out;
@@ -586,15 +585,12 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     image_out::kind_of(&opts.out)?;
     let gpu = Gpu::new(&opts.gpu)?;
     let t_load = Instant::now();
-    let Prepared { mut scene, cameras, notes, residency, mut streaming } = prepare(opts, &gpu)?;
+    let Prepared { mut scene, cameras, notes, residency, streaming } = prepare(opts, &gpu)?;
     let load_s = t_load.elapsed().as_secs_f64();
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
-    let mut r = crate::follow::first_renderer(&gpu, &scene, settings.clone(), streaming.as_mut())?;
-    let mut follow = match (streaming, &residency) {
-        (Some(st), Some(first)) => Some(Follow::new(st, first.clone(), opts.upload_per_frame)),
-        _ => None,
-    };
+    let (mut r, mut follow) =
+        crate::follow::start(&gpu, &scene, settings.clone(), streaming, residency, opts.upload_per_frame)?;
     let first_plan = r.plan(Some((&cameras[0], opts.width, opts.height)));
     let t0 = Instant::now();
     let budget = settings.bounces;

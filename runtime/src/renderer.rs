@@ -164,11 +164,9 @@ pub struct Renderer {
     forced: Vec<Pass>,
     /// Why a viewer holds the bounces, if it does ([`Renderer::hold_light`]).
     light_held: Option<&'static str>,
-    /// A bounce run in slices ([`Renderer::update_light_slice`]): the next invocation (active
-    /// leaf) and the bounce's total; the pyramid stays as its mip left it until the bounce ends.
-    bounce_at: Option<(u32, u32)>,
-    /// Most invocations the next propagate dispatch runs (None: the rest of the bounce).
-    slice: Option<u32>,
+    /// A bounce under way in slices ([`Renderer::update_light_slice`]): its next invocation
+    /// (active leaf, of `active_written`); the pyramid stays as its mip left it until it ends.
+    bounce_at: Option<u32>,
     /// The invocations the last propagate dispatch ran.
     slice_run: (u32, u32),
     stats_now: PassStats,
@@ -617,7 +615,6 @@ impl Renderer {
             forced: Vec::new(),
             light_held: None,
             bounce_at: None,
-            slice: None,
             slice_run: (0, 0),
             stats_now: PassStats::default(),
             queries: pass_queries(gpu),
@@ -681,10 +678,9 @@ impl Renderer {
     /// (each leaf gathers from the same pyramid), and counts once it has run every leaf. Returns
     /// the leaves propagated.
     pub fn update_light_slice(&mut self, max_leaves: u32) -> Result<u32> {
-        self.slice = Some(max_leaves.max(64));
-        let out = self.update_light();
-        self.slice = None;
-        if !out?.runs(Pass::Propagate) {
+        let p = self.plan(None);
+        self.execute(&p, None, Some(max_leaves.max(64)))?;
+        if !p.runs(Pass::Propagate) {
             return Ok(0);
         }
         Ok(self.slice_run.1 - self.slice_run.0)
@@ -778,7 +774,7 @@ impl Renderer {
             gbuffer_valid,
             plain_view: (!self.settings.view.shows_light()).then(|| self.settings.view.name()),
             light_held: self.light_held,
-            bounce_part: self.bounce_at,
+            bounce_part: self.bounce_at.map(|next| (next, self.active_written.unwrap_or(0))),
         }
     }
 
@@ -807,7 +803,7 @@ impl Renderer {
     /// Runs the light part of the plan (shadow, inject, one bounce); returns the plan it ran.
     pub fn update_light(&mut self) -> Result<EffectPlan> {
         let p = self.plan(None);
-        self.execute(&p, None)?;
+        self.execute(&p, None, None)?;
         Ok(p)
     }
 
@@ -1113,7 +1109,7 @@ impl Renderer {
             });
         }
         let p = self.plan(Some((camera, width, height)));
-        self.execute(&p, Some((camera, width, height)))?;
+        self.execute(&p, Some((camera, width, height)), None)?;
         Ok(p)
     }
 
@@ -1334,7 +1330,14 @@ impl Renderer {
         self.gpu.wait()
     }
 
-    fn execute(&mut self, plan: &EffectPlan, frame: Option<(&Camera, u32, u32)>) -> Result<()> {
+    /// Runs `plan`; its propagation runs at most `slice` invocations of the bounce (None: the
+    /// rest of it).
+    fn execute(
+        &mut self,
+        plan: &EffectPlan,
+        frame: Option<(&Camera, u32, u32)>,
+        slice: Option<u32>,
+    ) -> Result<()> {
         let params = self.frame_params(frame);
         self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         if plan.runs(Pass::Propagate) {
@@ -1352,8 +1355,8 @@ impl Renderer {
                 self.active_written = Some(items);
             }
             let items = self.active_written.unwrap_or(0);
-            let first = self.bounce_at.map_or(0, |b| b.0).min(items);
-            let end = self.slice.map_or(items, |n| first.saturating_add(n).min(items));
+            let first = self.bounce_at.unwrap_or(0).min(items);
+            let end = slice.map_or(items, |n| first.saturating_add(n).min(items));
             self.slice_run = (first, end);
             self.gpu.queue.write_buffer(&self.active, 8, bytemuck::cast_slice(&[first, end]));
         }
@@ -1414,7 +1417,7 @@ impl Renderer {
         let items = self.active_written.unwrap_or(0);
         if ran.contains(&Pass::Propagate) && end < items {
             // Part of a bounce: the rest runs in later calls, from the same pyramid.
-            self.bounce_at = Some((end, items));
+            self.bounce_at = Some(end);
         } else if ran.contains(&Pass::Propagate) {
             self.bounce_at = None;
             let bytes = self.gpu.read_buffer(&self.stats, 16)?;
@@ -1478,7 +1481,7 @@ impl Renderer {
     pub fn run_mip(&mut self) -> Result<()> {
         let p =
             EffectPlan { steps: vec![plan::Step { pass: Pass::Mip, run: true, reason: "requested".into() }] };
-        self.execute(&p, None)
+        self.execute(&p, None, None)
     }
 
     /// Runs only mip + propagate, i.e. one bounce over every tile regardless of the plan (tests).
@@ -1491,6 +1494,6 @@ impl Renderer {
                 plan::Step { pass: Pass::Propagate, run: true, reason: "requested".into() },
             ],
         };
-        self.execute(&p, None)
+        self.execute(&p, None, None)
     }
 }

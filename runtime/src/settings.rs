@@ -231,6 +231,22 @@ impl Settings {
         }
     }
 
+    /// These settings with preset `q`'s knobs where presets differ (the march, bounces, shadow
+    /// map size, indirect filter); the rest as they are (a viewer switching presets).
+    pub fn with_preset(&self, q: Quality) -> Self {
+        let p = Settings::preset(q);
+        Settings {
+            cones: p.cones,
+            cone_aperture_scale: p.cone_aperture_scale,
+            step_scale: p.step_scale,
+            max_steps: p.max_steps,
+            bounces: p.bounces,
+            shadow_map_size: p.shadow_map_size,
+            indirect: p.indirect,
+            ..self.clone()
+        }
+    }
+
     pub fn validate(&self) -> Result<()> {
         if !(1..=MAX_CONES as u32).contains(&self.cones) {
             return Err(Error::Setting {

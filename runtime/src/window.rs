@@ -39,7 +39,7 @@ use crate::follow::{self, Follow};
 use crate::gpu::Gpu;
 use crate::image_out;
 use crate::render_job::{self, RenderOptions};
-use crate::renderer::{Quality, Renderer, Settings, ViewMode};
+use crate::renderer::{LightProgress, Quality, Renderer, ViewMode};
 use crate::scene_data::SceneData;
 
 /// What `grotto view` is asked.
@@ -92,14 +92,25 @@ pub fn run(opts: ViewOptions) -> Result<ViewSummary> {
     if let Some(s) = app.state.as_mut() {
         // A recording still running when the window closed is kept.
         if let Some(keys) = s.recording.take() {
-            let file = app.opts.record_path.clone().unwrap_or_else(|| next_name("grotto-path", "toml"));
-            camera::path_file::write(&file, &keys, s.scene.frame_origin_m)?;
-            app.summary.paths.push((file.display().to_string(), keys.len()));
+            app.summary.paths.push(save_path(&app.opts, &keys, &s.scene)?);
         }
         app.summary.log = std::mem::take(&mut s.log);
     }
     app.summary.seconds = app.started.elapsed().as_secs_f64();
     Ok(app.summary)
+}
+
+/// Writes a recorded camera path to `--record-path` (or the next `grotto-path-N.toml`); returns
+/// the file and its keyframes.
+fn save_path(opts: &ViewOptions, keys: &[Camera], scene: &SceneData) -> Result<(String, usize)> {
+    let file = opts.record_path.clone().unwrap_or_else(|| next_name("grotto-path", "toml"));
+    camera::path_file::write(&file, keys, scene.frame_origin_m)?;
+    Ok((file.display().to_string(), keys.len()))
+}
+
+/// Where a screenshot goes: `--screenshot`, or the next `grotto-view-N.png`.
+fn shot_path(opts: &ViewOptions) -> PathBuf {
+    opts.screenshot.clone().unwrap_or_else(|| next_name("grotto-view", "png"))
 }
 
 /// `stem-N.ext` for the first N whose file does not exist yet.
@@ -296,7 +307,6 @@ struct Ui {
     painter: egui_wgpu::Renderer,
     visible: bool,
     knobs: panel::PanelKnobs,
-    model: panel::PanelModel,
 }
 
 impl App {
@@ -333,12 +343,14 @@ impl App {
         let prepared = render_job::prepare(o, &gpu)?;
         let mut settings = o.settings.clone();
         settings.exposure = o.exposure.unwrap_or(1.0);
-        let mut streaming = prepared.streaming;
-        let renderer = follow::first_renderer(&gpu, &prepared.scene, settings.clone(), streaming.as_mut())?;
-        let follow = match (streaming, prepared.residency) {
-            (Some(st), Some(first)) => Some(Follow::new(st, first, o.upload_per_frame)),
-            _ => None,
-        };
+        let (renderer, follow) = follow::start(
+            &gpu,
+            &prepared.scene,
+            settings.clone(),
+            prepared.streaming,
+            prepared.residency,
+            o.upload_per_frame,
+        )?;
         let (lo, hi) = prepared.scene.bounds_leaf();
         let size_m = ((hi - lo) * prepared.scene.leaf_size_m).max_element();
         let nav = Nav::from_camera(&prepared.cameras[0], (size_m / 20.0).max(0.5));
@@ -364,7 +376,7 @@ impl App {
             shadows: settings.shadows,
             view: settings.view,
         };
-        let ui = Ui { ctx, input, painter, visible: self.opts.panel, knobs, model: Default::default() };
+        let ui = Ui { ctx, input, painter, visible: self.opts.panel, knobs };
         window.request_redraw();
         self.summary.device = gpu.describe();
         self.state = Some(State {
@@ -483,7 +495,7 @@ impl App {
             s.renderer.draw(&cam, w, h)?;
         }
 
-        self.present(moving, &plan)?;
+        self.present(moving, progress, &plan)?;
         let Some(s) = self.state.as_mut() else { return Ok(()) };
         let frame_ms = now.elapsed().as_secs_f64() * 1e3;
         s.frame_ms = if s.frame_ms == 0.0 { frame_ms } else { 0.9 * s.frame_ms + 0.1 * frame_ms };
@@ -504,7 +516,7 @@ impl App {
         let at_rest =
             !moving && (progress.converged || !shows_light) && s.follow.as_ref().is_none_or(|f| !f.busy());
         if self.summary.frames >= self.opts.after_frames.unwrap_or(u32::MAX) && at_rest && s.shot.is_none() {
-            s.shot = Some(self.opts.screenshot.clone().unwrap_or_else(|| next_name("grotto-view", "png")));
+            s.shot = Some(shot_path(&self.opts));
             s.quit_after_shot = true;
         }
         if at_rest && let Some(path) = s.shot.take() {
@@ -524,7 +536,12 @@ impl App {
     }
 
     /// Blits the frame with the convergence bar, and draws the panel over it.
-    fn present(&mut self, moving: bool, plan: &crate::plan::EffectPlan) -> Result<()> {
+    fn present(
+        &mut self,
+        moving: bool,
+        progress: LightProgress,
+        plan: &crate::plan::EffectPlan,
+    ) -> Result<()> {
         let Some(s) = self.state.as_mut() else { return Ok(()) };
         let Some((ldr, src_w, src_h)) = s.renderer.ldr_output() else { return Ok(()) };
         let frame = match s.surface.get_current_texture() {
@@ -535,7 +552,6 @@ impl App {
             }
             _ => return Ok(()),
         };
-        let progress = s.renderer.light_progress();
         let held = moving && !progress.converged;
         let bar = if progress.converged {
             2
@@ -587,10 +603,10 @@ impl App {
             pass.draw(0..3, 0..1);
         }
         if s.ui.visible {
-            s.ui.model = model(s, held, plan);
+            let shown = model(s, progress, held, plan);
             let raw = s.ui.input.take_egui_input(&s.window);
-            let (model, mut knobs) = (&s.ui.model, s.ui.knobs);
-            let mut out = s.ui.ctx.run_ui(raw, |ui| panel::show(ui.ctx(), model, &mut knobs));
+            let mut knobs = s.ui.knobs;
+            let mut out = s.ui.ctx.run_ui(raw, |ui| panel::show(ui.ctx(), &shown, &mut knobs));
             s.ui.input.handle_platform_output(&s.window, out.platform_output);
             let screen = egui_wgpu::ScreenDescriptor {
                 size_in_pixels: [s.config.width, s.config.height],
@@ -665,21 +681,13 @@ impl App {
             KeyCode::KeyH => s.ui.visible = !s.ui.visible,
             KeyCode::KeyK => match s.recording.take() {
                 None => s.recording = Some(Vec::new()),
-                Some(keys) => {
-                    let file =
-                        self.opts.record_path.clone().unwrap_or_else(|| next_name("grotto-path", "toml"));
-                    camera::path_file::write(&file, &keys, s.scene.frame_origin_m)?;
-                    self.summary.paths.push((file.display().to_string(), keys.len()));
-                }
+                Some(keys) => self.summary.paths.push(save_path(&self.opts, &keys, &s.scene)?),
             },
             KeyCode::F11 => {
                 let full = s.window.fullscreen().is_none().then_some(Fullscreen::Borderless(None));
                 s.window.set_fullscreen(full);
             }
-            KeyCode::KeyP => {
-                s.shot =
-                    Some(self.opts.screenshot.clone().unwrap_or_else(|| next_name("grotto-view", "png")));
-            }
+            KeyCode::KeyP => s.shot = Some(shot_path(&self.opts)),
             _ => {}
         }
         s.window.request_redraw();
@@ -708,14 +716,19 @@ fn pick_orbit(s: &mut State, x: u32, y: u32) -> Result<()> {
 }
 
 /// What the panel shows now.
-fn model(s: &State, held: bool, plan: &crate::plan::EffectPlan) -> panel::PanelModel {
+fn model(
+    s: &State,
+    progress: LightProgress,
+    held: bool,
+    plan: &crate::plan::EffectPlan,
+) -> panel::PanelModel {
     let r = &s.renderer;
     let resident = s.follow.as_ref().map(|f| f.current().totals);
     panel::PanelModel {
         adapter: s.gpu.describe(),
         fps: if s.frame_ms > 0.0 { 1e3 / s.frame_ms } else { 0.0 },
         frame_ms: s.frame_ms,
-        light: Some(r.light_progress()),
+        light: Some(progress),
         held,
         plan: plan.explain(),
         pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name(), *ms)).collect(),
@@ -731,22 +744,6 @@ fn model(s: &State, held: bool, plan: &crate::plan::EffectPlan) -> panel::PanelM
     }
 }
 
-/// The settings of preset `q` where presets differ (the march, bounces, shadow maps, filter),
-/// the rest as the session has them.
-fn with_preset(base: &Settings, q: Quality) -> Settings {
-    let p = Settings::preset(q);
-    Settings {
-        cones: p.cones,
-        cone_aperture_scale: p.cone_aperture_scale,
-        step_scale: p.step_scale,
-        max_steps: p.max_steps,
-        bounces: p.bounces,
-        shadow_map_size: p.shadow_map_size,
-        indirect: p.indirect,
-        ..base.clone()
-    }
-}
-
 /// Applies what the panel changed.
 fn apply_knobs(s: &mut State, k: panel::PanelKnobs) -> Result<()> {
     let old = s.ui.knobs;
@@ -754,7 +751,7 @@ fn apply_knobs(s: &mut State, k: panel::PanelKnobs) -> Result<()> {
         && let Some(q) = k.quality
     {
         // The march's constants are baked into the passes: a new renderer, its light from dark.
-        let settings = with_preset(s.renderer.settings(), q);
+        let settings = s.renderer.settings().with_preset(q);
         let caps = s.renderer.pool_caps();
         s.renderer = match s.follow {
             Some(_) => Renderer::with_pools(&s.gpu, &s.scene, settings, caps)?,

@@ -329,7 +329,7 @@ fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
     };
     println!(
         "{} frames in {:.1} s on {}; moving: {} frames, {}; at rest: {} frames, {}; light converged \
-         {} times, after {:?} frames{}{}",
+         {} times, after {:?} frames ({:.1?} s){}{}",
         summary.frames,
         summary.seconds,
         summary.device,
@@ -339,6 +339,7 @@ fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
         ms(&log.rest_ms),
         log.converge_frames.len(),
         log.converge_frames,
+        log.converge_s,
         if summary.screenshots.is_empty() {
             String::new()
         } else {
