@@ -25,7 +25,7 @@ pub use env_chain::{EnvChain, level_table};
 pub use error::{Error, Problem, Region, Result};
 pub use reader::{CoarseData, Element, Package, SectionInfo, SvoData, Tile};
 pub use scene::{
-    Camera, Environment, InputFile, Light, LightShape, Material, MaterialRegion, Provenance, Scene,
+    Camera, Environment, InputFile, Light, LightShape, Material, MaterialRegion, Provenance, ScanInfo, Scene,
 };
 pub use spec::{Codec, Scope, SectionKind};
 pub use summary::{KindSummary, SectionSummary, Summary, TileSummary, parse_bytes};

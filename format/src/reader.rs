@@ -36,7 +36,7 @@ macro_rules! element {
 element!(
     SvoNode => SvoNode, f32 => F32, Rgba8 => Rgba8, LeafNdf => LeafNdf, LeafEmission => LeafEmission,
     Surfel => Surfel, Bc1Block => Bc1Block, ShRgb9 => ShRgb9, EnvMipLevel => EnvMipLevel,
-    Bc6hBlock => Bc6hBlock, CoarseLeaf => CoarseLeaf, RockBrick => RockBrick,
+    Bc6hBlock => Bc6hBlock, CoarseLeaf => CoarseLeaf, RockBrick => RockBrick, u16 => U16,
 );
 
 /// A validated section-table entry.
@@ -864,6 +864,7 @@ fn check_content(kind: SectionKind, data: &[u8], depth: u32) -> Result<(), Strin
         SectionKind::LeafAlbedo
         | SectionKind::SurfelColorsRaw
         | SectionKind::SurfelColorsBc1
+        | SectionKind::SurfelScans
         | SectionKind::EnvMipBc6h => Ok(()),
     }
 }

@@ -17,6 +17,16 @@ pub struct Scene {
     pub materials: Vec<Material>,
     pub cameras: Vec<Camera>,
     pub environment: Option<Environment>,
+    /// The scans the points came from (format 1.2), indexed by the surfel-scans sections.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub scans: Vec<ScanInfo>,
+}
+
+/// One input scan of a package.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ScanInfo {
+    /// The file's name, with `#k` for the k-th scan of a file that holds several (E57).
+    pub name: String,
 }
 
 /// A light source. Colours are linear RGB; `power_w` is radiant power in watts.

@@ -12,7 +12,7 @@ pub const MAGIC: [u8; 8] = *b"\x89GROTTO\n";
 /// Major version this crate writes and reads. A file with a larger major is refused.
 pub const VERSION_MAJOR: u16 = 1;
 /// Minor version this crate writes. Files with a larger minor open; the additions are ignored.
-pub const VERSION_MINOR: u16 = 1;
+pub const VERSION_MINOR: u16 = 2;
 /// Every section starts at a multiple of this, so a raw section can be cast to any element type in
 /// place (the mapping itself is page-aligned).
 pub const SECTION_ALIGN: u64 = 64;
@@ -176,6 +176,9 @@ pub enum SectionKind {
     CoarseLeaves = 15,
     /// Per tile (format 1.1): [`RockBrick`]s, the rock behind the scanned walls near the tile.
     RockBricks = 16,
+    /// Per tile (format 1.2): `u16` per surfel, in surfel order, the index of the scan it came
+    /// from in [`crate::Scene::scans`] (zstd: neighbours in Morton order mostly share a scan).
+    SurfelScans = 17,
 }
 
 /// The Rust type of one element of a section, used to check casts.
@@ -193,6 +196,7 @@ pub enum ElementType {
     Bc6hBlock,
     CoarseLeaf,
     RockBrick,
+    U16,
     Utf8Json,
 }
 
@@ -211,13 +215,14 @@ impl ElementType {
             Self::Bc6hBlock => size_of::<Bc6hBlock>(),
             Self::CoarseLeaf => size_of::<CoarseLeaf>(),
             Self::RockBrick => size_of::<RockBrick>(),
+            Self::U16 => size_of::<u16>(),
             Self::Utf8Json => 1,
         }
     }
 }
 
 impl SectionKind {
-    pub const ALL: [SectionKind; 16] = [
+    pub const ALL: [SectionKind; 17] = [
         Self::SvoNodes,
         Self::LeafOpacity,
         Self::LeafAlbedo,
@@ -234,6 +239,7 @@ impl SectionKind {
         Self::CoarseNodes,
         Self::CoarseLeaves,
         Self::RockBricks,
+        Self::SurfelScans,
     ];
 
     pub fn from_u32(v: u32) -> Option<Self> {
@@ -258,6 +264,7 @@ impl SectionKind {
             Self::CoarseNodes => "coarse-nodes",
             Self::CoarseLeaves => "coarse-leaves",
             Self::RockBricks => "rock-bricks",
+            Self::SurfelScans => "surfel-scans",
         }
     }
 
@@ -275,6 +282,7 @@ impl SectionKind {
             Self::EnvMipBc6h => ElementType::Bc6hBlock,
             Self::CoarseLeaves => ElementType::CoarseLeaf,
             Self::RockBricks => ElementType::RockBrick,
+            Self::SurfelScans => ElementType::U16,
             Self::Scene | Self::Provenance => ElementType::Utf8Json,
         }
     }

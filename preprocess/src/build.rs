@@ -30,6 +30,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bc1;
+use crate::ingest::ScanFormat;
 use crate::manifest::{Manifest, ResolvedScan};
 use crate::normals::{self, NormalStats, Orient, TilePoints};
 use crate::orient::{self, CaveGrid, OrientStats};
@@ -273,6 +274,8 @@ struct BuiltTile {
     /// File normals kept and orientation without a scanner in this tile.
     normals: NormalStats,
     surfels: Vec<Surfel>,
+    /// Index of each surfel's scan (in the plan's scan order), surfel order.
+    scans: Vec<u16>,
     colors: Vec<[u8; 3]>,
     svo: TileSvo,
 }
@@ -402,6 +405,7 @@ fn build_tile(
         })
         .collect();
     let colors: Vec<[u8; 3]> = order.iter().map(|&(_, i)| own_points[i].rgb).collect();
+    let scans: Vec<u16> = order.iter().map(|&(_, i)| own_points[i].scan).collect();
     // The k-th neighbour distance, undone from the radius; a neighbourhood that reaches past the
     // border by more than the halo may miss points the neighbour tile has (a possible seam).
     let k_reach = |r: f32| f64::from(r) / normals::RADIUS_COVER_FACTOR * (params.k as f64).sqrt();
@@ -449,6 +453,7 @@ fn build_tile(
         normals: normal_stats,
         surfels,
         colors,
+        scans,
         svo,
     })
 }
@@ -461,13 +466,14 @@ pub fn tile_package_path(work_dir: &Path, tile: usize) -> PathBuf {
 fn tile_fingerprint(plan: &TilePlan, params: &BuildParams) -> String {
     // Scene lights matter too (area lights become emissive samples); hashed with the parameters.
     format!(
-        "{}-k{}-leaf{}-{:?}-keep{}-v{}",
+        "{}-k{}-leaf{}-{:?}-keep{}-v{}-f{}",
         plan.fingerprint,
         params.k,
         params.leaf_m,
         params.colors,
         params.keep_input_normals,
-        env!("CARGO_PKG_VERSION")
+        env!("CARGO_PKG_VERSION"),
+        grotto_format::spec::VERSION_MINOR
     )
 }
 
@@ -504,6 +510,8 @@ fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: 
             w.add_elements(SectionKind::SurfelColorsRaw, scope, 0, &rgba, Compression::Auto(3))?;
         }
     }
+    // Mostly runs in Morton order (a wall is seen best from one scanner): zstd makes it small.
+    w.add_elements(SectionKind::SurfelScans, scope, 0, &tile.scans, Compression::Auto(3))?;
     let svo = &tile.svo;
     w.add_elements(SectionKind::SvoNodes, scope, 0, &svo.nodes, Compression::Raw)?;
     w.add_elements(SectionKind::LeafOpacity, scope, 0, &svo.opacity, Compression::Auto(3))?;
@@ -525,6 +533,22 @@ fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: 
     })?;
     w.finish()?;
     Ok(())
+}
+
+/// The package's scan list (what the surfel-scans sections index): each scan's file name, with
+/// `#k` where a file format holds several scans.
+fn scan_infos(scans: &[ResolvedScan]) -> Vec<grotto_format::ScanInfo> {
+    scans
+        .iter()
+        .map(|s| {
+            let file = s
+                .path
+                .file_name()
+                .map_or_else(|| s.path.display().to_string(), |n| n.to_string_lossy().into());
+            let name = if s.format == ScanFormat::E57 { format!("{file}#{}", s.index) } else { file };
+            grotto_format::ScanInfo { name }
+        })
+        .collect()
 }
 
 fn hash_file(path: &Path) -> Result<InputFile> {
@@ -886,7 +910,7 @@ fn assemble_plan(
         inputs_extra.push(hash_file(&path)?);
         progress(Progress { stage: "environment", done: 1, total: 1 });
     }
-    writer.add_scene(scene)?;
+    writer.add_scene(&Scene { scans: scan_infos(scans), ..scene.clone() })?;
     let mut inputs = std::mem::take(&mut inputs_extra);
     let mut seen = std::collections::BTreeSet::new();
     for s in scans {

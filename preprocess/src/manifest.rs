@@ -351,6 +351,8 @@ impl Manifest {
                 intensity: e.intensity,
                 source: e.map.display().to_string(),
             }),
+            // The build fills in the scans it read.
+            scans: Vec::new(),
         })
     }
 }

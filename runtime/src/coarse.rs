@@ -49,6 +49,7 @@ pub fn gpu_tile(leaves: &[CoarseLeaf], k: u32, leaf_m: f32, tile_origin_m: Vec3)
                 position_radius: centre.extend(radius).to_array(),
                 normal_spread: normal.normalize_or(Vec3::Z).extend(1.0 - normal.length().min(1.0)).to_array(),
                 color: [albedo[0], albedo[1], albedo[2], 0],
+                scan: crate::gpu_types::NO_SCAN,
             });
         }
     }

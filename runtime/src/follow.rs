@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::pool::{POOL_HEADROOM, PoolCaps};
 use crate::render_job::Streaming;
-use crate::renderer::{Renderer, SceneUpdate, Settings};
+use crate::renderer::{ClipBox, Renderer, SceneUpdate, Settings};
 use crate::residency::{self, Residency};
 use crate::scene_data::{SceneData, SceneLight};
 
@@ -68,9 +68,10 @@ pub fn swap_tiles(
         return Ok(Swapped { carried_leaves: u.carried_leaves, update: Some(u), made_anew: false });
     }
     let carried = r.light_by_tile(scene)?;
-    let caps = r.pool_caps();
+    let (caps, clip) = (r.pool_caps(), r.clip());
     *scene = new_scene;
     *r = Renderer::with_pools(gpu, scene, r.settings().clone(), caps)?;
+    r.set_clip(clip);
     let carried_leaves = r.seed_light(scene, &carried)?;
     Ok(Swapped { update: None, made_anew: true, carried_leaves })
 }
@@ -110,14 +111,14 @@ impl Follow {
 
     /// Starts choosing and reading the tiles of `cam` (lit by `lights`, which every load keeps),
     /// unless a load is under way already.
-    pub fn request(&mut self, cam: &Camera, lights: Vec<SceneLight>, headlamp: bool) {
+    pub fn request(&mut self, cam: &Camera, clip: Option<ClipBox>, lights: Vec<SceneLight>, headlamp: bool) {
         if self.loading.is_some() {
             return;
         }
         let (st, now, cam, limit) =
             (self.streaming.clone(), self.current.clone(), *cam, self.upload_per_frame);
         self.loading = Some(std::thread::spawn(move || {
-            let mut next = st.choose(&cam)?;
+            let mut next = st.choose(&cam, clip)?;
             let mut deferred = 0;
             if let Some(max) = limit {
                 (next, deferred) = residency::limit_uploads(st.tiles(), &now, next, max);

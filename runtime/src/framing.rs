@@ -596,6 +596,7 @@ mod tests {
                     position_radius: p.extend(radius).to_array(),
                     normal_spread: n.extend(0.0).to_array(),
                     color: [200, 200, 200, 0],
+                    scan: 0,
                 })
                 .collect(),
             ..Default::default()

@@ -212,10 +212,14 @@ pub mod flags {
     pub const VIEW_NORMALS: u32 = 512;
     pub const VIEW_LIGHT: u32 = 1024;
     pub const VIEW_LEVEL: u32 = 2048;
+    /// The G-buffer's albedo holds each surfel's scan colour; shade shows it as the level view
+    /// shows levels.
+    pub const VIEW_SCAN: u32 = 4096;
 
     /// Every flag with its WGSL name.
-    pub const ALL: [(&str, u32); 12] = [
+    pub const ALL: [(&str, u32); 13] = [
         ("FLAG_VIEW_ALBEDO", VIEW_ALBEDO),
+        ("FLAG_VIEW_SCAN", VIEW_SCAN),
         ("FLAG_VIEW_NORMALS", VIEW_NORMALS),
         ("FLAG_VIEW_LIGHT", VIEW_LIGHT),
         ("FLAG_VIEW_LEVEL", VIEW_LEVEL),
@@ -285,20 +289,30 @@ pub struct SplatUniform {
     /// x, y: viewport size in pixels; z: smallest splat radius in pixels; w: projection scale
     /// (`proj[1][1]`) for the pixel-size estimate.
     pub viewport: [f32; 4],
-    /// x: surfel radius scale (discs overlap so sparse sampling closes); yzw unused.
+    /// x: surfel radius scale (discs overlap so sparse sampling closes); y: 1 to colour each
+    /// surfel by its scan (the scan view); zw unused.
     pub splat: [f32; 4],
-    pub pad: [[f32; 4]; 9],
+    /// The clip box (settings.rs `ClipBox`), frame metres; w: 1 where it clips, 0 where not.
+    pub clip_min_m: [f32; 4],
+    pub clip_max_m: [f32; 4],
+    pub pad: [[f32; 4]; 7],
 }
 
 /// One surfel as an instance vertex: frame position and radius, unit normal and spread, sRGB colour
-/// with the material slot in alpha (0 diffuse, k: `SceneData::materials[k - 1]`).
+/// with the material slot in alpha (0 diffuse, k: `SceneData::materials[k - 1]`), and the index
+/// of the scan it came from in the package's scan list ([`NO_SCAN`]: none, as for the splats of
+/// coarse levels, which stand for several).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
 pub struct SurfelGpu {
     pub position_radius: [f32; 4],
     pub normal_spread: [f32; 4],
     pub color: [u8; 4],
+    pub scan: u32,
 }
+
+/// [`SurfelGpu::scan`] of a surfel that stands for no one scan.
+pub const NO_SCAN: u32 = u32::MAX;
 
 const _: () = {
     assert!(size_of::<TileGpu>() == 48);
@@ -312,5 +326,5 @@ const _: () = {
     assert!(size_of::<ConeBatch>() == 16);
     assert!(size_of::<ActiveTile>() == 16);
     assert!(size_of::<SplatUniform>() == 256);
-    assert!(size_of::<SurfelGpu>() == 36);
+    assert!(size_of::<SurfelGpu>() == 40);
 };

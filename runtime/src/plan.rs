@@ -272,7 +272,7 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
     } else if i.gbuffer_valid {
         Step { pass: Pass::Gbuffer, run: false, reason: "camera and size unchanged".into() }
     } else {
-        Step { pass: Pass::Gbuffer, run: true, reason: "camera or size changed".into() }
+        Step { pass: Pass::Gbuffer, run: true, reason: "camera, size or what is drawn changed".into() }
     });
     steps.push(if i.frame {
         let reason = if i.specular_materials > 0 {

@@ -16,7 +16,7 @@ use crate::gpu::{Gpu, GpuOptions};
 use crate::image_out;
 use crate::plan::EffectPlan;
 use crate::pool::{POOL_HEADROOM, PoolCaps};
-use crate::renderer::{PassStats, Renderer, Settings};
+use crate::renderer::{ClipBox, PassStats, Renderer, Settings};
 use crate::residency::{self, Budget, Residency};
 use crate::scene_data::{SceneData, TileMode};
 
@@ -83,6 +83,27 @@ pub struct RenderOptions {
     /// Along a path, most tile bytes uploaded before a frame (`--upload-per-frame`,
     /// [`residency::limit_uploads`]); `None`: no limit.
     pub upload_per_frame: Option<u64>,
+    /// Cut the view to this box, world metres `[min, max]` (`--clip`): see [`ClipBox`].
+    pub clip_world_m: Option<[[f64; 3]; 2]>,
+}
+
+/// A box in world metres `[min, max]` in a scene's frame; an error where it is empty or not
+/// finite.
+pub fn clip_in_frame(world_m: [[f64; 3]; 2], frame_origin_m: [f64; 3]) -> Result<ClipBox> {
+    let [lo, hi] = world_m;
+    if !lo.iter().chain(&hi).all(|v| v.is_finite()) || (0..3).any(|a| lo[a] > hi[a]) {
+        return Err(Error::Setting {
+            name: "clip",
+            problem: format!(
+                "the box {lo:?} .. {hi:?} is empty or not finite: give min x,y,z then max x,y,z"
+            ),
+        });
+    }
+    let frame = DVec3::from_array(frame_origin_m);
+    Ok(ClipBox {
+        min_m: (DVec3::from_array(lo) - frame).as_vec3(),
+        max_m: (DVec3::from_array(hi) - frame).as_vec3(),
+    })
 }
 
 impl RenderOptions {
@@ -107,6 +128,7 @@ impl RenderOptions {
             point_budget: None,
             frame_bounces: None,
             upload_per_frame: None,
+            clip_world_m: None,
         }
     }
 }
@@ -214,8 +236,8 @@ impl Streaming {
         self.budget.pools = Some(caps);
     }
 
-    /// The residency for a camera.
-    pub fn choose(&self, cam: &Camera) -> Result<Residency> {
+    /// The residency for a camera, whose view `clip` cuts.
+    pub fn choose(&self, cam: &Camera, clip: Option<ClipBox>) -> Result<Residency> {
         let view = residency::View {
             eye_m: cam.eye_m,
             forward: cam.look_at_m - cam.eye_m,
@@ -224,6 +246,7 @@ impl Streaming {
             aspect: self.aspect,
             lights_m: self.lights_m.clone(),
             light_reach_m: self.light_reach_m,
+            clip,
         };
         residency::choose(&self.tiles, &view, self.budget)
     }
@@ -427,10 +450,11 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
     for c in &cameras {
         c.validate()?;
     }
+    let clip = opts.clip_world_m.map(|b| clip_in_frame(b, scene.frame_origin_m)).transpose()?;
     // Over budget: the tiles the first camera needs in full, the others stay coarse.
     let residency = match &streaming {
         Some(st) => {
-            let r = st.choose(&cameras[0])?;
+            let r = st.choose(&cameras[0], clip)?;
             scene = st.load(&r, std::mem::take(&mut scene.lights), false)?;
             Some(r)
         }
@@ -488,7 +512,7 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
             }
         ));
     }
-    Ok(Prepared { scene, cameras, notes, residency, streaming })
+    Ok(Prepared { scene, cameras, notes, residency, streaming, clip })
 }
 
 /// What [`prepare`] gives a job.
@@ -502,6 +526,8 @@ pub struct Prepared {
     pub residency: Option<Residency>,
     /// Where it did not: how to choose again for another camera.
     pub streaming: Option<Streaming>,
+    /// `--clip` in the scene's frame.
+    pub clip: Option<ClipBox>,
 }
 
 /// Pixels at most this bright (max of sRGB channels, 0..=255) count as black: no light at all,
@@ -585,12 +611,13 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     image_out::kind_of(&opts.out)?;
     let gpu = Gpu::new(&opts.gpu)?;
     let t_load = Instant::now();
-    let Prepared { mut scene, cameras, notes, residency, streaming } = prepare(opts, &gpu)?;
+    let Prepared { mut scene, cameras, notes, residency, streaming, clip } = prepare(opts, &gpu)?;
     let load_s = t_load.elapsed().as_secs_f64();
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
     let (mut r, mut follow) =
         crate::follow::start(&gpu, &scene, settings.clone(), streaming, residency, opts.upload_per_frame)?;
+    r.set_clip(clip);
     let first_plan = r.plan(Some((&cameras[0], opts.width, opts.height)));
     let t0 = Instant::now();
     let budget = settings.bounces;
@@ -641,7 +668,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             }
         }
         if let (Some(f), Some(next_cam)) = (&mut follow, cameras.get(i + 1)) {
-            f.request(next_cam, scene.lights.clone(), scene.headlamp);
+            f.request(next_cam, clip, scene.lights.clone(), scene.headlamp);
         }
         let current = follow.as_ref().map(|f| f.current());
         let before_render = r.stats().bounces_done;
@@ -811,4 +838,23 @@ pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
         settings: r.settings().clone(),
         residency: residency.as_ref().map(|r| r.totals),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_clip_box_at_survey_coordinates_reaches_the_frame_exactly_and_an_empty_one_is_refused() {
+        let frame = [512_300.0, 5_123_400.0, 300.0];
+        let c = clip_in_frame([[512_310.25, 5_123_401.5, 299.0], [512_320.0, 5_123_410.0, 305.125]], frame)
+            .unwrap();
+        assert_eq!(c.min_m, Vec3::new(10.25, 1.5, -1.0));
+        assert_eq!(c.max_m, Vec3::new(20.0, 10.0, 5.125));
+        assert!(c.contains(Vec3::new(15.0, 5.0, 0.0)) && !c.contains(Vec3::new(15.0, 5.0, 6.0)));
+        for bad in [[[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]], [[f64::NAN, 0.0, 0.0], [1.0, 1.0, 1.0]]] {
+            let e = clip_in_frame(bad, frame).unwrap_err();
+            assert!(matches!(e, Error::Setting { name: "clip", .. }), "{e}");
+        }
+    }
 }

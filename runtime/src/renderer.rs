@@ -27,7 +27,9 @@ use crate::plan::{self, EffectPlan, Pass, PlanInputs};
 use crate::pool::{PoolCaps, Pools, TileKey, key, merge_runs, surfel_owners};
 use crate::scene_data::{EnvChain, MAX_ENV_LEVELS, MAX_MATERIALS, SceneData, SceneLight};
 
-pub use crate::settings::{IndirectFilter, MAX_SHADOWED_LIGHTS, Quality, Settings, ShadowFallback, ViewMode};
+pub use crate::settings::{
+    ClipBox, IndirectFilter, MAX_SHADOWED_LIGHTS, Quality, Settings, ShadowFallback, ViewMode, scan_color,
+};
 
 /// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
 /// to the hemisphere), equal weights summing to 1, and the half-angle tangent that makes the cones
@@ -164,6 +166,8 @@ pub struct Renderer {
     forced: Vec<Pass>,
     /// Why a viewer holds the bounces, if it does ([`Renderer::hold_light`]).
     light_held: Option<&'static str>,
+    /// The view's clip box ([`Renderer::set_clip`]).
+    clip: Option<ClipBox>,
     /// A bounce under way in slices ([`Renderer::update_light_slice`]): its next invocation
     /// (active leaf, of `active_written`); the pyramid stays as its mip left it until it ends.
     bounce_at: Option<u32>,
@@ -614,6 +618,7 @@ impl Renderer {
             direct_valid: false,
             forced: Vec::new(),
             light_held: None,
+            clip: None,
             bounce_at: None,
             slice_run: (0, 0),
             stats_now: PassStats::default(),
@@ -664,7 +669,23 @@ impl Renderer {
     /// Shows `view` from the next frame on (the light state stays: back to a lit view, the light
     /// passes run only where they had not).
     pub fn set_view(&mut self, view: ViewMode) {
+        // The scan view colours the G-buffer's albedo; the others only shade it differently.
+        if (view == ViewMode::Scan) != (self.settings.view == ViewMode::Scan) {
+            self.gbuffer_stale = true;
+        }
         self.settings.view = view;
+    }
+
+    /// Cuts the view to a box (frame metres), or not (`None`): see [`ClipBox`].
+    pub fn set_clip(&mut self, clip: Option<ClipBox>) {
+        if clip != self.clip {
+            self.gbuffer_stale = true;
+        }
+        self.clip = clip;
+    }
+
+    pub fn clip(&self) -> Option<ClipBox> {
+        self.clip
     }
 
     /// While held, frames run no bounces, and the plan gives `why`: a viewer holds the light while
@@ -1185,6 +1206,7 @@ impl Renderer {
             ViewMode::Normals => flags::VIEW_NORMALS,
             ViewMode::Light => flags::VIEW_LIGHT,
             ViewMode::Level => flags::VIEW_LEVEL,
+            ViewMode::Scan => flags::VIEW_SCAN,
         };
         p.flags = f;
         if let Some((c, w, h)) = frame {
@@ -1220,8 +1242,15 @@ impl Renderer {
                 self.settings.min_splat_px,
                 1.0 / (camera.fov_y_deg.to_radians() * 0.5).tan(),
             ],
-            splat: [self.settings.splat_scale, 0.0, 0.0, 0.0],
-            pad: [[0.0; 4]; 9],
+            splat: [
+                self.settings.splat_scale,
+                f32::from(u8::from(self.settings.view == ViewMode::Scan)),
+                0.0,
+                0.0,
+            ],
+            clip_min_m: self.clip.map_or([0.0; 4], |c| c.min_m.extend(1.0).to_array()),
+            clip_max_m: self.clip.map_or([0.0; 4], |c| c.max_m.extend(1.0).to_array()),
+            pad: [[0.0; 4]; 7],
         };
         self.gbuffer.set_camera(&self.gpu, &u);
         self.camera_view_proj = Some(m);

@@ -94,6 +94,8 @@ pub struct View {
     pub lights_m: Vec<Vec3>,
     /// How far light travels between tiles that matters (cone reach).
     pub light_reach_m: f32,
+    /// The view's clip box: a tile wholly outside it is not drawn, so it is not visible.
+    pub clip: Option<crate::settings::ClipBox>,
 }
 
 /// Why a tile ranks where it does.
@@ -324,7 +326,12 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
                 .into(),
         });
     }
-    let visible: Vec<bool> = tiles.iter().map(|t| in_frustum(view, t.min_m, t.max_m)).collect();
+    // A tile the clip box cuts away still lights the ones inside (it keeps its light class), but
+    // its points are not drawn: the point budget goes to the tiles inside the box.
+    let visible: Vec<bool> = tiles
+        .iter()
+        .map(|t| in_frustum(view, t.min_m, t.max_m) && view.clip.is_none_or(|c| c.meets(t.min_m, t.max_m)))
+        .collect();
     let visible_boxes: Vec<(Vec3, Vec3)> =
         tiles.iter().zip(&visible).filter(|(_, v)| **v).map(|(t, _)| (t.min_m, t.max_m)).collect();
     let mut decisions: Vec<Decision> = tiles
@@ -510,7 +517,39 @@ mod tests {
             aspect: 1.0,
             lights_m: Vec::new(),
             light_reach_m: 2.0,
+            clip: None,
         }
+    }
+
+    #[test]
+    fn a_clip_box_gives_the_point_budget_to_the_tiles_inside_it() {
+        // From tile 0 looking along +x every tile is visible; the budget holds 3 tiles in full.
+        // Without a clip box they are the nearest three; with the view cut to tiles 6..=8 they
+        // are those, and the cut-away tiles stop being visible (tile 5 and 9, next to the box,
+        // still light it).
+        let tiles = row(10);
+        let mut view = looking(Vec3::new(2.0, 2.0, 2.0), Vec3::X);
+        let budget = Budget { gpu_bytes: 10 * 100 + 3 * 900, points: u64::MAX, pools: None };
+        let full = |r: &Residency| -> Vec<usize> {
+            let mut f: Vec<usize> =
+                r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect();
+            f.sort_unstable();
+            f
+        };
+        assert_eq!(full(&choose(&tiles, &view, budget).unwrap()), [0, 1, 2]);
+        view.clip = Some(crate::settings::ClipBox {
+            min_m: Vec3::new(24.5, -1.0, -1.0),
+            max_m: Vec3::new(35.5, 5.0, 5.0),
+        });
+        let r = choose(&tiles, &view, budget).unwrap();
+        assert_eq!(full(&r), [6, 7, 8]);
+        let relevance = |t: usize| r.decisions.iter().find(|d| d.tile == t).unwrap().relevance;
+        assert_eq!((relevance(6), relevance(8)), (Relevance::Visible, Relevance::Visible));
+        assert_eq!((relevance(5), relevance(9)), (Relevance::Lights, Relevance::Lights));
+        assert_eq!(relevance(0), Relevance::Other, "the eye's own tile is cut away");
+        // The same with a point budget of three full tiles: it goes to the same tiles.
+        let points = Budget { gpu_bytes: u64::MAX, points: 10 * 5 + 3 * 45, pools: None };
+        assert_eq!(full(&choose(&tiles, &view, points).unwrap()), [6, 7, 8]);
     }
 
     #[test]

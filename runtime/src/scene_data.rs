@@ -88,6 +88,8 @@ pub struct SceneData {
     /// The last light is a headlamp the render job added because the scene had no light
     /// (framing.rs); the plan says so.
     pub headlamp: bool,
+    /// The package's scans by index (`SurfelGpu::scan`), for the scan view's legend.
+    pub scan_names: Vec<String>,
 }
 
 /// GPU bytes of the scene-sized buffers ([`SceneData::buffer_bytes`]).
@@ -247,6 +249,30 @@ pub fn frame_of(pkg: &Package) -> Result<Option<([f64; 3], f64)>> {
         .tiles()
         .find(|t| t.find(SectionKind::SvoNodes, 0).is_some_and(|s| s.raw_len > 0))
         .map(|t| (t.origin_m(), t.leaf_size_m())))
+}
+
+/// Each surfel's scan index (format 1.2: the tile's surfel-scans section), or [`NO_SCAN`] for
+/// all where the package has none. A section of another length, or an index past the scene's
+/// scan list, is a damaged package.
+fn tile_scans(
+    tile: &grotto_format::Tile<'_>,
+    surfels: usize,
+    scans: usize,
+) -> std::result::Result<Vec<u32>, String> {
+    let Some(stored) = tile.read::<u16>(SectionKind::SurfelScans).map_err(|e| e.to_string())? else {
+        return Ok(vec![crate::gpu_types::NO_SCAN; surfels]);
+    };
+    if stored.len() != surfels {
+        return Err(format!(
+            "tile {} has {} surfel scan indices for {surfels} surfels",
+            tile.index(),
+            stored.len()
+        ));
+    }
+    if let Some(bad) = stored.iter().find(|&&s| usize::from(s) >= scans) {
+        return Err(format!("tile {} names scan {bad}, but the scene lists {scans} scans", tile.index()));
+    }
+    Ok(stored.iter().map(|&s| u32::from(s)).collect())
 }
 
 impl SceneData {
@@ -484,7 +510,11 @@ impl SceneData {
         let name = pkg.path().display().to_string();
         let bad = |problem: String| Error::Scene { package: name.clone(), problem };
         let scene = pkg.scene()?;
-        let mut out = SceneData { name: name.clone(), ..Default::default() };
+        let mut out = SceneData {
+            name: name.clone(),
+            scan_names: scene.scans.iter().map(|s| s.name.clone()).collect(),
+            ..Default::default()
+        };
         // The frame does not depend on which tiles are loaded: cameras and lights keep their
         // place whatever residency chose.
         let leaf_size = frame_of(pkg)?.map(|(origin, leaf)| {
@@ -580,13 +610,15 @@ impl SceneData {
                 // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
                 if let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? {
                     let colors = crate::export::tile_colors(&tile, surfels.len())?;
+                    let scans = tile_scans(&tile, surfels.len(), scene.scans.len()).map_err(&bad)?;
                     let shift = DVec3::from_array(tile.origin_m()) - DVec3::from_array(out.frame_origin_m);
-                    for (s, c) in surfels.iter().zip(colors) {
+                    for ((s, c), scan) in surfels.iter().zip(colors).zip(scans) {
                         let p = (DVec3::from_array(s.position_tile_m.map(f64::from)) + shift).as_vec3();
                         out.surfels.push(SurfelGpu {
                             position_radius: p.extend(s.radius_m).to_array(),
                             normal_spread: [s.normal[0], s.normal[1], s.normal[2], s.spread],
                             color: [c[0], c[1], c[2], 0],
+                            scan,
                         });
                     }
                 }

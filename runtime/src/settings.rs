@@ -85,11 +85,58 @@ pub enum ViewMode {
     /// The level each tile is held at (full green, coarse yellow, far red; magenta where no tile
     /// holds the point), shaded by the angle to the eye: to see what residency chose.
     Level,
+    /// Each surfel's source scan as a colour ([`scan_color`]; grey where a splat stands for
+    /// several, as coarse levels do), shaded by the angle to the eye: where two scans' walls do
+    /// not coincide, the nearer one shows through in stripes and patches (misregistration).
+    Scan,
+}
+
+/// The colour of scan `index` in the scan view, linear RGB: hues a golden angle apart, so
+/// neighbouring indices differ most and any count of scans gets distinct colours. The same
+/// formula runs in `color.wgsl` (`scan_color`); the scan view's test checks they agree.
+pub fn scan_color(index: u32) -> [f32; 3] {
+    if index == crate::gpu_types::NO_SCAN {
+        return [0.5; 3];
+    }
+    let h = (index as f32 * 0.618_034).fract() * 6.0;
+    let (s, v) = (0.7_f32, 0.95_f32);
+    let hsv = |k: f32| {
+        let k = (k + h) % 6.0;
+        v - v * s * (k.min(4.0 - k)).clamp(0.0, 1.0)
+    };
+    [hsv(5.0), hsv(3.0), hsv(1.0)]
+}
+
+/// A box that cuts the view (`--clip`, the viewer's section tool), frame metres: surfels outside
+/// it are not drawn, so a passage shows from above with its ceiling cut away, and residency gives
+/// the point budget to the tiles inside it. It cuts what is seen, not the light: the rock outside
+/// still casts shadows and bounces light, so the passage is lit as it is in the whole cave.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClipBox {
+    pub min_m: glam::Vec3,
+    pub max_m: glam::Vec3,
+}
+
+impl ClipBox {
+    /// Whether the box `lo..hi` has a point inside the clip box.
+    pub fn meets(&self, lo: glam::Vec3, hi: glam::Vec3) -> bool {
+        lo.cmple(self.max_m).all() && hi.cmpge(self.min_m).all()
+    }
+
+    pub fn contains(&self, p: glam::Vec3) -> bool {
+        p.cmpge(self.min_m).all() && p.cmple(self.max_m).all()
+    }
 }
 
 impl ViewMode {
-    pub const ALL: [ViewMode; 5] =
-        [ViewMode::Lit, ViewMode::Albedo, ViewMode::Normals, ViewMode::Light, ViewMode::Level];
+    pub const ALL: [ViewMode; 6] = [
+        ViewMode::Lit,
+        ViewMode::Albedo,
+        ViewMode::Normals,
+        ViewMode::Light,
+        ViewMode::Level,
+        ViewMode::Scan,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -98,6 +145,7 @@ impl ViewMode {
             ViewMode::Normals => "normals",
             ViewMode::Light => "light",
             ViewMode::Level => "level",
+            ViewMode::Scan => "scan",
         }
     }
 

@@ -12,8 +12,9 @@
 //! Controls: mouse drag looks around (in orbit, turns around the pivot), WASD flies (Q/E
 //! down/up), the wheel sets the speed (in orbit, the distance), a right click orbits the point
 //! under the cursor and O the point at the centre (O again: fly), Tab jumps to the next named
-//! camera, R back to the first, 1-5 switch the view (lit, albedo, normals, light, level), H hides
-//! the panel, K starts and stops recording a camera path (`grotto render --path FILE.toml` flies
+//! camera, R back to the first, 1-6 switch the view (lit, albedo, normals, light, level, scan),
+//! C cuts the view to a clip box (a section at eye height; the panel edits it), H hides the
+//! panel, K starts and stops recording a camera path (`grotto render --path FILE.toml` flies
 //! it), P writes a screenshot once the light has converged, F11 toggles full screen, Esc quits.
 
 mod pace;
@@ -39,7 +40,7 @@ use crate::follow::{self, Follow};
 use crate::gpu::Gpu;
 use crate::image_out;
 use crate::render_job::{self, RenderOptions};
-use crate::renderer::{LightProgress, Quality, Renderer, ViewMode};
+use crate::renderer::{ClipBox, LightProgress, Quality, Renderer, ViewMode, scan_color};
 use crate::scene_data::SceneData;
 
 /// What `grotto view` is asked.
@@ -141,8 +142,10 @@ struct State {
     /// The scene the renderer holds (its tiles change as the camera moves, over budget).
     scene: SceneData,
     follow: Option<Follow>,
-    /// The camera the loader last chose tiles for.
-    chosen_for: Option<Camera>,
+    /// The camera and clip box the loader last chose tiles for.
+    chosen_for: Option<(Camera, Option<ClipBox>)>,
+    /// The scene's box, frame metres (the clip box's range).
+    bounds_m: (Vec3, Vec3),
     cameras: Vec<Camera>,
     camera_index: usize,
     nav: Nav,
@@ -343,7 +346,7 @@ impl App {
         let prepared = render_job::prepare(o, &gpu)?;
         let mut settings = o.settings.clone();
         settings.exposure = o.exposure.unwrap_or(1.0);
-        let (renderer, follow) = follow::start(
+        let (mut renderer, follow) = follow::start(
             &gpu,
             &prepared.scene,
             settings.clone(),
@@ -351,7 +354,9 @@ impl App {
             prepared.residency,
             o.upload_per_frame,
         )?;
+        renderer.set_clip(prepared.clip);
         let (lo, hi) = prepared.scene.bounds_leaf();
+        let bounds_m = (lo * prepared.scene.leaf_size_m, hi * prepared.scene.leaf_size_m);
         let size_m = ((hi - lo) * prepared.scene.leaf_size_m).max_element();
         let nav = Nav::from_camera(&prepared.cameras[0], (size_m / 20.0).max(0.5));
         // Tab goes through the package's named cameras, after the one the view opened on.
@@ -375,6 +380,7 @@ impl App {
             exposure: settings.exposure,
             shadows: settings.shadows,
             view: settings.view,
+            clip: prepared.clip,
         };
         let ui = Ui { ctx, input, painter, visible: self.opts.panel, knobs };
         window.request_redraw();
@@ -389,7 +395,8 @@ impl App {
             renderer,
             scene: prepared.scene,
             follow,
-            chosen_for: None,
+            chosen_for: Some((prepared.cameras[0], prepared.clip)),
+            bounds_m,
             cameras,
             camera_index: 0,
             nav,
@@ -441,9 +448,10 @@ impl App {
                 }
                 f.accept(arrived.residency);
             }
-            if s.chosen_for != Some(cam) && !f.busy() {
-                f.request(&cam, s.scene.lights.clone(), s.scene.headlamp);
-                s.chosen_for = Some(cam);
+            let want = (cam, s.renderer.clip());
+            if s.chosen_for != Some(want) && !f.busy() {
+                f.request(&cam, want.1, s.scene.lights.clone(), s.scene.headlamp);
+                s.chosen_for = Some(want);
             }
         }
 
@@ -658,7 +666,14 @@ impl App {
         if !pressed {
             return Ok(());
         }
-        let views = [KeyCode::Digit1, KeyCode::Digit2, KeyCode::Digit3, KeyCode::Digit4, KeyCode::Digit5];
+        let views = [
+            KeyCode::Digit1,
+            KeyCode::Digit2,
+            KeyCode::Digit3,
+            KeyCode::Digit4,
+            KeyCode::Digit5,
+            KeyCode::Digit6,
+        ];
         if let Some(k) = views.iter().position(|c| *c == code) {
             s.renderer.set_view(ViewMode::ALL[k]);
             s.ui.knobs.view = ViewMode::ALL[k];
@@ -679,6 +694,14 @@ impl App {
                 pick_orbit(s, w / 2, h / 2)?;
             }
             KeyCode::KeyH => s.ui.visible = !s.ui.visible,
+            KeyCode::KeyC => {
+                let clip = match s.renderer.clip() {
+                    Some(_) => None,
+                    None => Some(panel::section_at_eye(s.bounds_m, s.nav.camera().eye_m)),
+                };
+                s.renderer.set_clip(clip);
+                s.ui.knobs.clip = clip;
+            }
             KeyCode::KeyK => match s.recording.take() {
                 None => s.recording = Some(Vec::new()),
                 Some(keys) => self.summary.paths.push(save_path(&self.opts, &keys, &s.scene)?),
@@ -741,6 +764,18 @@ fn model(
         recording: s.recording.as_ref().map(Vec::len),
         orbit: s.nav.orbit.is_some(),
         speed_m_s: s.nav.speed_m_s,
+        bounds_m: s.bounds_m,
+        eye_m: s.nav.camera().eye_m,
+        scans: match r.settings().view {
+            ViewMode::Scan => s
+                .scene
+                .scan_names
+                .iter()
+                .enumerate()
+                .map(|(i, n)| (n.clone(), scan_color(i as u32)))
+                .collect(),
+            _ => Vec::new(),
+        },
     }
 }
 
@@ -757,6 +792,7 @@ fn apply_knobs(s: &mut State, k: panel::PanelKnobs) -> Result<()> {
             Some(_) => Renderer::with_pools(&s.gpu, &s.scene, settings, caps)?,
             None => Renderer::new(&s.gpu, &s.scene, settings)?,
         };
+        s.renderer.set_clip(k.clip);
         s.ui.knobs = panel::PanelKnobs { quality: k.quality, bounces: s.renderer.settings().bounces, ..k };
         return Ok(());
     }
@@ -772,6 +808,9 @@ fn apply_knobs(s: &mut State, k: panel::PanelKnobs) -> Result<()> {
     }
     if k.view != old.view {
         s.renderer.set_view(k.view);
+    }
+    if k.clip != old.clip {
+        s.renderer.set_clip(k.clip);
     }
     s.ui.knobs = k;
     Ok(())

@@ -129,7 +129,10 @@ fn shared() -> Vec<(&'static str, RustLayout)> {
         ("InjectBatch", rust_layout!(InjectBatch { first, count, reset, pad })),
         ("ConeBatch", rust_layout!(ConeBatch { first, count, pad0, pad1 })),
         ("ActiveTile", rust_layout!(ActiveTile { tile, first_leaf, leaf_count, first_item })),
-        ("Splat", rust_layout!(SplatUniform { view_proj, eye_m, viewport, splat, pad })),
+        (
+            "Splat",
+            rust_layout!(SplatUniform { view_proj, eye_m, viewport, splat, clip_min_m, clip_max_m, pad }),
+        ),
     ]
 }
 

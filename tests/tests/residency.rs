@@ -81,6 +81,7 @@ fn view_of(cam: &Camera, scene: &SceneData, reach_m: f32) -> View {
         aspect: W as f32 / H as f32,
         lights_m: scene.lights.iter().map(|l| l.position_m).collect(),
         light_reach_m: reach_m,
+        clip: None,
     }
 }
 

@@ -84,6 +84,9 @@ pub fn content(kind: SectionKind, seed: u32) -> Vec<u8> {
                 .collect::<Vec<_>>(),
         )
         .to_vec(),
+        SectionKind::SurfelScans => {
+            bytemuck::cast_slice(&(0..n).map(|i| (i / 3) as u16 + seed as u16).collect::<Vec<u16>>()).to_vec()
+        }
         SectionKind::SurfelColorsBc1 => (0..n * 8).map(|i| (i as u32 * 7 + seed) as u8).collect(),
         SectionKind::EnvSh9 => {
             bytemuck::bytes_of(&ShRgb9 { coeffs: [[f(seed as usize), 0.5, 0.25]; 9] }).to_vec()
@@ -146,6 +149,7 @@ pub fn sample_scene() -> Scene {
             fov_y_deg: 60.0,
         }],
         environment: Some(Environment { index: 0, intensity: 1.5, source: "sky.hdr".into() }),
+        scans: vec![ScanInfo { name: "a.las".into() }, ScanInfo { name: "site.e57#1".into() }],
     }
 }
 

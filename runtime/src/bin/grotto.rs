@@ -137,10 +137,16 @@ struct RenderArgs {
     #[arg(long, default_value = "cone")]
     shadow_fallback: String,
     /// What the image shows: lit (default), albedo, normals (0.5 + 0.5 n as colour), light (the
-    /// light alone: every albedo 1), or level (each tile's level: full green, coarse yellow, far
-    /// red). Albedo, normals and level skip the light passes.
+    /// light alone: every albedo 1), level (each tile's level: full green, coarse yellow, far
+    /// red), or scan (each point's source scan as a colour, to see misregistration). All but lit
+    /// and light skip the light passes.
     #[arg(long, default_value = "lit")]
     view: String,
+    /// Cut the view to a box, world metres: MINX,MINY,MINZ,MAXX,MAXY,MAXZ (a section: cut the
+    /// ceiling away to see a passage from above). Points outside are not drawn and get no point
+    /// budget; the light is the whole cave's.
+    #[arg(long, value_parser = parse_box, allow_hyphen_values = true)]
+    clip: Option<[[f64; 3]; 2]>,
     /// Irradiance (W/m^2) under which a light is culled: bounds each light's range (0: no culling).
     #[arg(long)]
     light_cutoff: Option<f32>,
@@ -210,6 +216,17 @@ fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
     }
 }
 
+fn parse_box(s: &str) -> Result<[[f64; 3]; 2], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>().map_err(|e| format!("{t:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [x0, y0, z0, x1, y1, z1] if v.iter().all(|c| c.is_finite()) => Ok([[x0, y0, z0], [x1, y1, z1]]),
+        _ => Err(format!("expected six finite numbers MINX,MINY,MINZ,MAXX,MAXY,MAXZ, got {s:?}")),
+    }
+}
+
 fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderOptions> {
     use grotto_runtime::render_job::{CameraChoice, Headlamp, RenderOptions};
     use grotto_runtime::renderer::{IndirectFilter, Quality, Settings, ShadowFallback};
@@ -235,8 +252,9 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
     settings.shadowed_lights = a.shadowed_lights.unwrap_or(settings.shadowed_lights);
     settings.shadow_fallback = ShadowFallback::parse(&a.shadow_fallback)
         .ok_or_else(|| anyhow::anyhow!("--shadow-fallback {:?}: use cone or none", a.shadow_fallback))?;
-    settings.view = grotto_runtime::renderer::ViewMode::parse(&a.view)
-        .ok_or_else(|| anyhow::anyhow!("--view {:?}: use lit, albedo, normals, light or level", a.view))?;
+    settings.view = grotto_runtime::renderer::ViewMode::parse(&a.view).ok_or_else(|| {
+        anyhow::anyhow!("--view {:?}: use lit, albedo, normals, light, level or scan", a.view)
+    })?;
     settings.light_cutoff_w_m2 = a.light_cutoff.unwrap_or(settings.light_cutoff_w_m2);
     settings.radiance_f16 = a.radiance_f16;
     settings.splat_scale = a.splat_scale;
@@ -265,6 +283,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
         point_budget: a.point_budget,
         frame_bounces: a.frame_bounces,
         upload_per_frame: a.upload_per_frame,
+        clip_world_m: a.clip,
     })
 }
 

@@ -216,7 +216,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         let albedo_slot = textureLoad(gb_albedo, src, 0);
         // The light view lights every surface as if it were white.
         let albedo = select(albedo_slot.rgb, vec3<f32>(1.0), (params.flags & FLAG_VIEW_LIGHT) != 0u);
-        let plain = params.flags & (FLAG_VIEW_ALBEDO | FLAG_VIEW_NORMALS | FLAG_VIEW_LEVEL);
+        let plain = params.flags & (FLAG_VIEW_ALBEDO | FLAG_VIEW_NORMALS | FLAG_VIEW_LEVEL | FLAG_VIEW_SCAN);
         if plain != 0u {
             // Views without light (settings.rs ViewMode): the value as an sRGB colour, no exposure.
             var shown = albedo_slot.rgb;
@@ -231,6 +231,9 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                     level = select(select(vec3<f32>(0.9, 0.15, 0.1), vec3<f32>(0.95, 0.8, 0.1), lod <= COARSE_LEVELS), vec3<f32>(0.15, 0.75, 0.2), lod == 0u);
                 }
                 shown = level * (0.35 + 0.65 * max(dot(n, -ray), 0.0));
+            } else if plain == FLAG_VIEW_SCAN {
+                // The G-buffer's albedo is the scan colour (splat.wgsl).
+                shown = albedo_slot.rgb * (0.35 + 0.65 * max(dot(n, -ray), 0.0));
             }
             out_hdr[idx] = vec4<f32>(shown, coverage);
             out_ldr[idx] = pack4x8unorm(vec4<f32>(linear_to_srgb(clamp(shown, vec3<f32>(0.0), vec3<f32>(1.0))), 1.0));
@@ -321,7 +324,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         hdr = color;
     }
-    if d <= 0.0 && (params.flags & (FLAG_VIEW_ALBEDO | FLAG_VIEW_NORMALS | FLAG_VIEW_LEVEL)) != 0u {
+    if d <= 0.0 && (params.flags & (FLAG_VIEW_ALBEDO | FLAG_VIEW_NORMALS | FLAG_VIEW_LEVEL | FLAG_VIEW_SCAN)) != 0u {
         hdr = vec3<f32>(0.0);
     }
     out_hdr[idx] = vec4<f32>(hdr, coverage);

@@ -130,7 +130,10 @@ impl Shadow {
                 eye_m: f.eye_m.extend(1.0).to_array(),
                 viewport: [face_size as f32, face_size as f32, min_splat_px, f.proj_scale],
                 splat: [splat_scale, 0.0, 0.0, 0.0],
-                pad: [[0.0; 4]; 9],
+                // Shadows come from the whole cave: the clip box cuts the view only.
+                clip_min_m: [0.0; 4],
+                clip_max_m: [0.0; 4],
+                pad: [[0.0; 4]; 7],
             };
             uniforms.write(gpu, i, &u);
         }

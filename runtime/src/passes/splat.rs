@@ -80,10 +80,11 @@ impl Uniforms {
     }
 }
 
-const SURFEL_ATTRIBUTES: [wgpu::VertexAttribute; 3] = wgpu::vertex_attr_array![
+const SURFEL_ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
     0 => Float32x4,
     1 => Float32x4,
     2 => Unorm8x4,
+    3 => Uint32,
 ];
 
 /// A render pipeline drawing every surfel as an oriented disc into `targets`.

@@ -11,9 +11,12 @@ struct Splat {
     eye_m: vec4<f32>,
     // x, y: viewport size in pixels; z: smallest radius in pixels; w: proj[1][1].
     viewport: vec4<f32>,
-    // x: surfel radius scale.
+    // x: surfel radius scale; y: 1 to colour by scan.
     splat: vec4<f32>,
-    pad: array<vec4<f32>, 9>,
+    // The clip box, frame metres; w: 1 where it clips.
+    clip_min_m: vec4<f32>,
+    clip_max_m: vec4<f32>,
+    pad: array<vec4<f32>, 7>,
 }
 
 @group(0) @binding(0) var<uniform> splat: Splat;
@@ -33,7 +36,15 @@ fn vs(
     @location(0) position_radius: vec4<f32>,
     @location(1) normal_spread: vec4<f32>,
     @location(2) color: vec4<f32>,
+    @location(3) scan: u32,
 ) -> VsOut {
+    var out: VsOut;
+    let p = position_radius.xyz;
+    if splat.clip_min_m.w > 0.0 && (any(p < splat.clip_min_m.xyz) || any(p > splat.clip_max_m.xyz)) {
+        // Cut away: every corner at one point outside the clip volume draws nothing.
+        out.clip = vec4<f32>(2.0, 2.0, 2.0, 1.0);
+        return out;
+    }
     var corners = array<vec2<f32>, 6>(
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
         vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
@@ -52,13 +63,15 @@ fn vs(
         }
     }
     let world = position_radius.xyz + (t1 * c.x + t2 * c.y) * r;
-    var out: VsOut;
     out.clip = splat.view_proj * vec4<f32>(world, 1.0);
     out.disc = c;
     out.world = world;
     out.normal_spread = vec4<f32>(n, normal_spread.w);
     // Alpha carries the material slot (0 diffuse, k / 255 for SceneData::materials[k - 1]).
     out.color = vec4<f32>(srgb_to_linear(color.rgb), color.a);
+    if splat.splat.y > 0.5 {
+        out.color = vec4<f32>(scan_color(scan), color.a);
+    }
     return out;
 }
 

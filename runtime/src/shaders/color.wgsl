@@ -18,3 +18,16 @@ fn tonemap(hdr: vec3<f32>) -> vec3<f32> {
     let mapped = clamp((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), vec3<f32>(0.0), vec3<f32>(1.0));
     return linear_to_srgb(mapped);
 }
+
+// The scan view's colour of scan `index` (settings.rs `scan_color`, the same formula): hues a
+// golden angle apart; grey for 0xffffffff, a splat that stands for several scans.
+fn scan_color(index: u32) -> vec3<f32> {
+    if index == 0xffffffffu {
+        return vec3<f32>(0.5);
+    }
+    let h = fract(f32(index) * 0.618034) * 6.0;
+    let s = 0.7;
+    let v = 0.95;
+    let k = (vec3<f32>(5.0, 3.0, 1.0) + h) % 6.0;
+    return v - v * s * clamp(min(k, 4.0 - k), vec3<f32>(0.0), vec3<f32>(1.0));
+}

@@ -4,7 +4,9 @@
 //! the budget, the adapter). It reads a [`PanelModel`] and edits [`PanelKnobs`]; the window
 //! applies what changed, so the panel never touches the renderer.
 
-use crate::renderer::{LightProgress, Quality, ViewMode};
+use glam::Vec3;
+
+use crate::renderer::{ClipBox, LightProgress, Quality, ViewMode};
 
 /// What the panel shows, gathered by the window each frame.
 #[derive(Clone, Debug, Default)]
@@ -29,6 +31,18 @@ pub struct PanelModel {
     pub recording: Option<usize>,
     pub orbit: bool,
     pub speed_m_s: f32,
+    /// The scene's box (frame metres): the clip box's range.
+    pub bounds_m: (Vec3, Vec3),
+    pub eye_m: Vec3,
+    /// The scan view's legend: each scan's name and colour (linear RGB).
+    pub scans: Vec<(String, [f32; 3])>,
+}
+
+/// The clip box the section tool starts with: the whole scene with everything above the eye cut
+/// away (a passage seen from above once the camera rises).
+pub fn section_at_eye(bounds_m: (Vec3, Vec3), eye_m: Vec3) -> ClipBox {
+    let (lo, hi) = bounds_m;
+    ClipBox { min_m: lo, max_m: Vec3::new(hi.x, hi.y, eye_m.z.clamp(lo.z, hi.z)) }
 }
 
 /// What the panel can change.
@@ -40,6 +54,8 @@ pub struct PanelKnobs {
     pub exposure: f32,
     pub shadows: bool,
     pub view: ViewMode,
+    /// The section tool's box (None: the whole cave shows).
+    pub clip: Option<ClipBox>,
 }
 
 fn bytes(b: u64) -> String {
@@ -81,6 +97,10 @@ pub fn show(ctx: &egui::Context, m: &PanelModel, k: &mut PanelKnobs) {
                     ui.selectable_value(&mut k.view, v, v.name());
                 }
             });
+            if k.view == ViewMode::Scan {
+                scan_legend(ui, m);
+            }
+            clip_box(ui, m, k);
             ui.separator();
             match m.tiles {
                 Some((full, coarse, far)) => {
@@ -114,10 +134,61 @@ pub fn show(ctx: &egui::Context, m: &PanelModel, k: &mut PanelKnobs) {
                 ui.small(
                     "drag: look (orbit: turn)  WASD: fly, Q/E down/up  wheel: speed (orbit: \
                      distance)\nright click: orbit the point under the cursor  O: orbit the \
-                     centre / fly\nTab: next camera  R: first camera  1-5: view  H: panel\n\
-                     K: record a camera path  P: screenshot  F11: full screen  Esc: quit",
+                     centre / fly\nTab: next camera  R: first camera  1-6: view  H: panel\n\
+                     C: clip box (section at eye height) on/off  K: record a camera path\n\
+                     P: screenshot  F11: full screen  Esc: quit",
                 );
             });
         },
     );
+}
+
+/// The scan view's legend: a colour swatch and name per scan (the first 24; a survey of more is
+/// judged by the colours' differences, not by looking each up).
+fn scan_legend(ui: &mut egui::Ui, m: &PanelModel) {
+    egui::CollapsingHeader::new(format!("scans ({})", m.scans.len())).default_open(true).show(ui, |ui| {
+        if m.scans.is_empty() {
+            ui.small("this package stores no scan per point (built before format 1.2): all grey");
+        }
+        for (name, rgb) in m.scans.iter().take(24) {
+            ui.horizontal(|ui| {
+                let c = rgb.map(grotto_format::color::linear_to_srgb8);
+                let (rect, _) = ui.allocate_exact_size(egui::vec2(12.0, 12.0), egui::Sense::hover());
+                ui.painter().rect_filled(rect, 2.0, egui::Color32::from_rgb(c[0], c[1], c[2]));
+                ui.small(name);
+            });
+        }
+        if m.scans.len() > 24 {
+            ui.small(format!("... {} more", m.scans.len() - 24));
+        }
+    });
+}
+
+/// The section tool: a box (frame metres, within the scene's) outside which nothing is drawn.
+fn clip_box(ui: &mut egui::Ui, m: &PanelModel, k: &mut PanelKnobs) {
+    egui::CollapsingHeader::new("clip box").show(ui, |ui| {
+        let mut on = k.clip.is_some();
+        if ui.checkbox(&mut on, "cut the view to a box (C)").changed() {
+            k.clip = on.then(|| section_at_eye(m.bounds_m, m.eye_m));
+        }
+        let Some(c) = &mut k.clip else { return };
+        let (lo, hi) = m.bounds_m;
+        for (axis, name) in ["x", "y", "z"].iter().enumerate() {
+            ui.horizontal(|ui| {
+                ui.label(format!("{name} m"));
+                let range = lo[axis]..=hi[axis];
+                let step = f64::from((hi[axis] - lo[axis]) / 200.0);
+                let mut a = c.min_m[axis];
+                let mut b = c.max_m[axis];
+                ui.add(egui::DragValue::new(&mut a).range(range.clone()).speed(step));
+                ui.add(egui::DragValue::new(&mut b).range(range).speed(step));
+                c.min_m[axis] = a.min(b);
+                c.max_m[axis] = b.max(a);
+            });
+        }
+        if ui.button("cut above the eye").clicked() {
+            c.max_m.z = m.eye_m.z.clamp(lo.z, hi.z);
+        }
+        ui.small("cuts what is drawn, not the light; tiles outside get no point budget");
+    });
 }
