@@ -741,7 +741,8 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         frames,
         warnings: image_warnings(
             &scene,
-            uncovered_pixels,
+            // A clip box shows the background where it cuts: that is no sign of a lost camera.
+            if clip.is_some() { 0 } else { uncovered_pixels },
             black_pixels,
             opts.width as usize * opts.height as usize,
         ),
