@@ -41,6 +41,7 @@ fn load(data: &[u8]) {
         aspect: 1.5,
         lights_m: Vec::new(),
         light_reach_m: 4.0,
+        clip: None,
     };
     if let Ok(r) =
         residency::choose(&tiles, &view, Budget { gpu_bytes: full / 2, points: u64::MAX, pools: None })

@@ -536,8 +536,10 @@ impl App {
                 return Ok(());
             }
         }
-        // At rest with the light converged, nothing changes until an event: the loop waits.
-        if !at_rest || s.shot.is_some() || s.recording.is_some() {
+        // At rest with the light converged, nothing changes until an event: the loop waits
+        // (but for the frames a scripted screenshot waits for: a view without light rests at once).
+        let scripted = self.summary.frames < self.opts.after_frames.unwrap_or(0);
+        if !at_rest || scripted || s.shot.is_some() || s.recording.is_some() {
             s.window.request_redraw();
         }
         Ok(())

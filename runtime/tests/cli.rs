@@ -252,4 +252,49 @@ fn view_flies_the_cave_under_xvfb_matches_grotto_render_and_says_so_clearly_with
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let last = image::open(dir.path().join("walk_0002.png")).unwrap().to_rgba8();
     assert_eq!(last.dimensions(), (160, 120));
+
+    // A section at the chamber camera's eye height, in a view without light (normals: smooth,
+    // where the scan view's patches flip with the last bit of the camera, tested against the
+    // palette in tests/tests/sections.rs). Such a view rests at once; the scripted screenshot
+    // still comes after its frames, and matches grotto render's through the golden tolerance.
+    let pkg = grotto_format::Package::open(&path).unwrap();
+    let eye_z = pkg.scene().unwrap().cameras.iter().find(|c| c.name == "chamber").unwrap().eye_m[2];
+    let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
+    for t in pkg.tiles() {
+        for a in 0..3 {
+            lo[a] = lo[a].min(t.origin_m()[a]);
+            hi[a] = hi[a].max(t.origin_m()[a] + t.extent_m());
+        }
+    }
+    let clip = format!("{},{},{},{},{},{eye_z}", lo[0], lo[1], lo[2], hi[0], hi[1]);
+    let survey = ["--camera", "chamber", "--view", "normals", "--clip", &clip];
+    let (cut_view, cut_render) = (dir.path().join("cut-view.png"), dir.path().join("cut-render.png"));
+    let out = grotto(
+        &["render", p, "--out", cut_render.to_str().unwrap()]
+            .into_iter()
+            .chain(survey)
+            .chain(common)
+            .collect::<Vec<_>>(),
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let script = format!(
+        "timeout 120 {bin} view {p} {common} {survey} --render-scale 1 --no-panel --after-frames 3 \
+         --screenshot {shot}",
+        bin = env!("CARGO_BIN_EXE_grotto"),
+        common = common.join(" "),
+        survey = survey.join(" "),
+        shot = cut_view.display(),
+    );
+    let xvfb = Command::new("timeout")
+        .args(["300", "xvfb-run", "-a", "-s", "-screen 0 640x480x24", "bash", "-c", &script])
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap();
+    assert!(xvfb.status.success(), "{}", String::from_utf8_lossy(&xvfb.stderr));
+    let (a, b) = (image::open(&cut_view).unwrap().to_rgba8(), image::open(&cut_render).unwrap().to_rgba8());
+    let d = golden::diff(&px(&a), &px(&b));
+    assert!(golden::within_tolerance(&d), "normals with a clip box, viewer against grotto render: {d:?}");
+    // The cut shows: the top rows (the chamber's ceiling) are background, the bottom rows rock.
+    let row_lit = |y: u32| (0..160).filter(|&x| a.get_pixel(x, y).0[..3] != [0, 0, 0]).count();
+    assert!(row_lit(2) < 16 && row_lit(117) > 144, "top row {} lit, bottom row {}", row_lit(2), row_lit(117));
 }
