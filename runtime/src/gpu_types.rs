@@ -215,6 +215,8 @@ pub mod flags {
     /// The G-buffer's albedo holds each surfel's scan colour; shade shows it as the level view
     /// shows levels.
     pub const VIEW_SCAN: u32 = 4096;
+    /// The views shade writes without light (settings.rs `ViewMode::shows_light`).
+    pub const VIEWS_WITHOUT_LIGHT: u32 = VIEW_ALBEDO | VIEW_NORMALS | VIEW_LEVEL | VIEW_SCAN;
 
     /// Every flag with its WGSL name.
     pub const ALL: [(&str, u32); 13] = [

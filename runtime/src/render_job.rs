@@ -852,7 +852,8 @@ mod tests {
             .unwrap();
         assert_eq!(c.min_m, Vec3::new(10.25, 1.5, -1.0));
         assert_eq!(c.max_m, Vec3::new(20.0, 10.0, 5.125));
-        assert!(c.contains(Vec3::new(15.0, 5.0, 0.0)) && !c.contains(Vec3::new(15.0, 5.0, 6.0)));
+        let (inside, above) = (Vec3::new(15.0, 5.0, 0.0), Vec3::new(15.0, 5.0, 6.0));
+        assert!(c.meets(inside, inside) && !c.meets(above, above));
         for bad in [[[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]], [[f64::NAN, 0.0, 0.0], [1.0, 1.0, 1.0]]] {
             let e = clip_in_frame(bad, frame).unwrap_err();
             assert!(matches!(e, Error::Setting { name: "clip", .. }), "{e}");

@@ -122,10 +122,6 @@ impl ClipBox {
     pub fn meets(&self, lo: glam::Vec3, hi: glam::Vec3) -> bool {
         lo.cmple(self.max_m).all() && hi.cmpge(self.min_m).all()
     }
-
-    pub fn contains(&self, p: glam::Vec3) -> bool {
-        p.cmpge(self.min_m).all() && p.cmple(self.max_m).all()
-    }
 }
 
 impl ViewMode {

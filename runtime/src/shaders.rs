@@ -61,6 +61,8 @@ pub fn constants() -> String {
     for (name, bit) in flags::ALL {
         out += &format!("const {name}: u32 = {bit}u;\n");
     }
+    out += &format!("const FLAG_VIEWS_WITHOUT_LIGHT: u32 = {}u;\n", flags::VIEWS_WITHOUT_LIGHT);
+    out += &format!("const NO_SCAN: u32 = {}u;\n", crate::gpu_types::NO_SCAN);
     // The level a coarse tile's leaves are held at (coarse.rs): the level view tells coarse from far.
     out += &format!("const COARSE_LEVELS: u32 = {}u;\n", crate::coarse::COARSE_LEVELS);
     for kind in LightShadow::ALL {

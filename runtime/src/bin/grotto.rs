@@ -205,26 +205,25 @@ struct BenchArgs {
     reps: u32,
 }
 
-fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
+/// `N` finite comma-separated numbers.
+fn parse_floats<const N: usize>(s: &str, expected: &str) -> Result<[f64; N], String> {
     let v: Vec<f64> = s
         .split(',')
         .map(|t| t.trim().parse::<f64>().map_err(|e| format!("{t:?}: {e}")))
         .collect::<Result<_, _>>()?;
-    match v[..] {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
-        _ => Err(format!("expected three finite numbers x,y,z, got {s:?}")),
+    match <[f64; N]>::try_from(v) {
+        Ok(a) if a.iter().all(|c| c.is_finite()) => Ok(a),
+        _ => Err(format!("expected {N} finite numbers {expected}, got {s:?}")),
     }
 }
 
+fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
+    parse_floats(s, "x,y,z")
+}
+
 fn parse_box(s: &str) -> Result<[[f64; 3]; 2], String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|t| t.trim().parse::<f64>().map_err(|e| format!("{t:?}: {e}")))
-        .collect::<Result<_, _>>()?;
-    match v[..] {
-        [x0, y0, z0, x1, y1, z1] if v.iter().all(|c| c.is_finite()) => Ok([[x0, y0, z0], [x1, y1, z1]]),
-        _ => Err(format!("expected six finite numbers MINX,MINY,MINZ,MAXX,MAXY,MAXZ, got {s:?}")),
-    }
+    let [x0, y0, z0, x1, y1, z1] = parse_floats(s, "MINX,MINY,MINZ,MAXX,MAXY,MAXZ")?;
+    Ok([[x0, y0, z0], [x1, y1, z1]])
 }
 
 fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderOptions> {

@@ -216,7 +216,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         let albedo_slot = textureLoad(gb_albedo, src, 0);
         // The light view lights every surface as if it were white.
         let albedo = select(albedo_slot.rgb, vec3<f32>(1.0), (params.flags & FLAG_VIEW_LIGHT) != 0u);
-        let plain = params.flags & (FLAG_VIEW_ALBEDO | FLAG_VIEW_NORMALS | FLAG_VIEW_LEVEL | FLAG_VIEW_SCAN);
+        let plain = params.flags & FLAG_VIEWS_WITHOUT_LIGHT;
         if plain != 0u {
             // Views without light (settings.rs ViewMode): the value as an sRGB colour, no exposure.
             var shown = albedo_slot.rgb;
@@ -324,7 +324,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         hdr = color;
     }
-    if d <= 0.0 && (params.flags & (FLAG_VIEW_ALBEDO | FLAG_VIEW_NORMALS | FLAG_VIEW_LEVEL | FLAG_VIEW_SCAN)) != 0u {
+    if d <= 0.0 && (params.flags & FLAG_VIEWS_WITHOUT_LIGHT) != 0u {
         hdr = vec3<f32>(0.0);
     }
     out_hdr[idx] = vec4<f32>(hdr, coverage);

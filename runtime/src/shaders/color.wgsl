@@ -20,9 +20,9 @@ fn tonemap(hdr: vec3<f32>) -> vec3<f32> {
 }
 
 // The scan view's colour of scan `index` (settings.rs `scan_color`, the same formula): hues a
-// golden angle apart; grey for 0xffffffff, a splat that stands for several scans.
+// golden angle apart; grey for NO_SCAN, a splat that stands for several scans.
 fn scan_color(index: u32) -> vec3<f32> {
-    if index == 0xffffffffu {
+    if index == NO_SCAN {
         return vec3<f32>(0.5);
     }
     let h = fract(f32(index) * 0.618034) * 6.0;
