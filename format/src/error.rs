@@ -11,6 +11,8 @@ pub enum Region {
     SectionTable,
     TileDirectory,
     Section(u32),
+    /// Bytes fetched for a package read over HTTP.
+    Fetched,
 }
 
 impl fmt::Display for Region {
@@ -20,6 +22,7 @@ impl fmt::Display for Region {
             Self::SectionTable => f.write_str("section table"),
             Self::TileDirectory => f.write_str("tile directory"),
             Self::Section(i) => write!(f, "section {i}"),
+            Self::Fetched => f.write_str("fetched range"),
         }
     }
 }
@@ -100,6 +103,10 @@ pub enum Error {
     /// The writer was asked to write something the format cannot hold.
     #[error("{path}: cannot write: {reason}")]
     Write { path: PathBuf, reason: String },
+    /// A section of a package read over HTTP whose bytes have not arrived yet
+    /// (`Package::from_directory`): the reader fetches `Package::missing` first.
+    #[error("{path}: section {section} ({kind}, {offset}..+{len}) has not been fetched")]
+    NotFetched { path: PathBuf, section: u32, kind: String, offset: u64, len: u64 },
 }
 
 impl Error {

@@ -19,14 +19,17 @@ mod source;
 pub mod spec;
 mod summary;
 pub mod svo;
+#[cfg(not(target_arch = "wasm32"))]
 mod writer;
 
 pub use env_chain::{EnvChain, level_table};
 pub use error::{Error, Problem, Region, Result};
+pub use reader::TileInfo;
 pub use reader::{CoarseData, Element, Package, SectionInfo, SvoData, Tile};
 pub use scene::{
     Camera, Environment, InputFile, Light, LightShape, Material, MaterialRegion, Provenance, ScanInfo, Scene,
 };
 pub use spec::{Codec, Scope, SectionKind};
 pub use summary::{KindSummary, SectionSummary, Summary, TileSummary, parse_bytes};
-pub use writer::{Compression, PackageWriter, TileInfo};
+#[cfg(not(target_arch = "wasm32"))]
+pub use writer::{Compression, PackageWriter};

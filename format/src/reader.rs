@@ -6,7 +6,6 @@
 //! checked (once, cached) and zstd sections are decoded. [`Package::verify`] does that for all.
 
 use std::borrow::Cow;
-use std::fs::File;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -38,6 +37,16 @@ element!(
     Surfel => Surfel, Bc1Block => Bc1Block, ShRgb9 => ShRgb9, EnvMipLevel => EnvMipLevel,
     Bc6hBlock => Bc6hBlock, CoarseLeaf => CoarseLeaf, RockBrick => RockBrick, u16 => U16,
 );
+
+/// Tile directory fields the caller provides; section references are filled in by the writer (`PackageWriter`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TileInfo {
+    pub origin_m: [f64; 3],
+    pub extent_m: f64,
+    pub grid: [i32; 3],
+    pub depth: u32,
+    pub point_count: u64,
+}
 
 /// A validated section-table entry.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -79,14 +88,15 @@ impl SectionInfo {
     }
 }
 
-/// An open, structurally valid package.
+/// An open, structurally valid package: a whole file, or (in a browser) its directory and the
+/// sections fetched so far ([`Package::from_directory`], [`Package::insert`]).
 #[derive(Debug)]
 pub struct Package {
     path: PathBuf,
     backing: Backing,
     header: RawHeader,
-    table: Range<usize>,
-    tiles: Range<usize>,
+    sections: Box<[RawSectionEntry]>,
+    tile_entries: Box<[RawTileEntry]>,
     /// Per section: checksum and content checked (lazily, once).
     checked: Box<[OnceLock<Result<(), Problem>>]>,
 }
@@ -101,10 +111,11 @@ pub struct Tile<'a> {
 
 impl Package {
     /// Memory-maps and validates the package at `path`.
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref().to_path_buf();
         let io = |op, source| Error::Io { path: path.clone(), op, source };
-        let file = File::open(&path).map_err(|e| io("open", e))?;
+        let file = std::fs::File::open(&path).map_err(|e| io("open", e))?;
         let len = file.metadata().map_err(|e| io("stat", e))?.len();
         // Some platforms refuse to map an empty file; it is invalid anyway.
         let backing = if len < size_of::<RawHeader>() as u64 {
@@ -122,13 +133,124 @@ impl Package {
     }
 
     fn validate(path: PathBuf, backing: Backing) -> Result<Self> {
-        match check_structure(backing.bytes()) {
-            Ok((header, table, tiles)) => {
-                let checked = (0..header.section_count).map(|_| OnceLock::new()).collect();
-                Ok(Self { path, backing, header, table, tiles, checked })
+        match check_structure(backing.whole().unwrap_or_default()) {
+            Ok((header, tables)) => Ok(Self::assemble(path, backing, header, tables)),
+            Err(problem) => Err(Error::Invalid { path, problem }),
+        }
+    }
+
+    fn assemble(
+        path: PathBuf,
+        backing: Backing,
+        header: RawHeader,
+        (sections, tile_entries): Tables,
+    ) -> Self {
+        let checked = (0..sections.len()).map(|_| OnceLock::new()).collect();
+        Self { path, backing, header, sections, tile_entries, checked }
+    }
+
+    /// Where the section table and tile directory of a `file_len`-byte package lie, from its
+    /// first bytes (`head`: the first [`Package::HEAD_BYTES`] bytes, or the whole file where it is
+    /// shorter): what a reader over HTTP fetches second. Checks the header.
+    pub fn directory_range(name: impl Into<PathBuf>, head: &[u8], file_len: u64) -> Result<Range<u64>> {
+        let path = name.into();
+        let invalid = |problem| Error::Invalid { path: path.clone(), problem };
+        let header = check_header(head, file_len).map_err(invalid)?;
+        let (table, tiles) = table_ranges(&header, file_len).map_err(invalid)?;
+        Ok(table.start.min(tiles.start)..table.end.max(tiles.end))
+    }
+
+    /// Bytes a reader over HTTP fetches first: enough for any header.
+    pub const HEAD_BYTES: u64 = MAX_HEADER_SIZE as u64;
+
+    /// A package of `file_len` bytes of which only the directory is here yet: `head` as for
+    /// [`Package::directory_range`], and `directory` the bytes at `directory_offset` that cover that
+    /// range. Validated as [`Package::open`] validates a file; sections are read once their bytes
+    /// were added with [`Package::insert`] (before that, reading one is [`Error::NotFetched`]).
+    pub fn from_directory(
+        name: impl Into<PathBuf>,
+        file_len: u64,
+        head: &[u8],
+        directory_offset: u64,
+        directory: &[u8],
+    ) -> Result<Self> {
+        let path = name.into();
+        let checked = || -> Result<(RawHeader, Tables), Problem> {
+            let header = check_header(head, file_len)?;
+            let (table, tiles) = table_ranges(&header, file_len)?;
+            let part = |r: &Range<u64>, region| {
+                let start = r.start.checked_sub(directory_offset);
+                let end = r.end.checked_sub(directory_offset);
+                match (start, end) {
+                    (Some(s), Some(e)) if e <= directory.len() as u64 => {
+                        Ok(&directory[s as usize..e as usize])
+                    }
+                    _ => Err(Problem::OutOfBounds {
+                        region,
+                        offset: r.start,
+                        len: r.end - r.start,
+                        file_len: directory_offset + directory.len() as u64,
+                    }),
+                }
+            };
+            let t = part(&table, Region::SectionTable)?;
+            let d = part(&tiles, Region::TileDirectory)?;
+            Ok((header, check_tables(&header, t, d, file_len)?))
+        };
+        match checked() {
+            Ok((header, tables)) => {
+                let mut backing = Backing::Sparse(Default::default());
+                let head_len = head.len().min(header.header_size as usize);
+                backing.insert(0, &head[..head_len]);
+                Ok(Self::assemble(path, backing, header, tables))
             }
             Err(problem) => Err(Error::Invalid { path, problem }),
         }
+    }
+
+    /// Adds fetched bytes at `offset` (a multiple of 64, within the file) to a package made with
+    /// [`Package::from_directory`]; a whole file has them already. Checked when a section in them
+    /// is read, like any other.
+    pub fn insert(&mut self, offset: u64, bytes: &[u8]) -> Result<()> {
+        let end = offset.checked_add(bytes.len() as u64);
+        if !offset.is_multiple_of(SECTION_ALIGN) || end.is_none_or(|e| e > self.header.file_size) {
+            return Err(Error::Invalid {
+                path: self.path.clone(),
+                problem: Problem::OutOfBounds {
+                    region: Region::Fetched,
+                    offset,
+                    len: bytes.len() as u64,
+                    file_len: self.header.file_size,
+                },
+            });
+        }
+        self.backing.insert(offset, bytes);
+        Ok(())
+    }
+
+    /// The byte ranges still to fetch for `sections` (each starting at a multiple of 64), nearby
+    /// ones merged where less than `gap` bytes lie between them: fewer, larger requests.
+    pub fn missing(&self, sections: impl IntoIterator<Item = SectionInfo>, gap: u64) -> Vec<Range<u64>> {
+        let mut ranges: Vec<Range<u64>> = sections
+            .into_iter()
+            .filter(|s| s.stored_len > 0 && self.backing.range(s.offset, s.stored_len).is_none())
+            .map(|s| s.offset / SECTION_ALIGN * SECTION_ALIGN..s.offset + s.stored_len)
+            .collect();
+        ranges.sort_unstable_by_key(|r| r.start);
+        let mut out: Vec<Range<u64>> = Vec::new();
+        for r in ranges {
+            match out.last_mut() {
+                Some(last) if r.start <= last.end.saturating_add(gap) => last.end = last.end.max(r.end),
+                _ => out.push(r),
+            }
+        }
+        out
+    }
+
+    /// Bytes of the file this package holds in memory: the fetched pieces of one made with
+    /// [`Package::from_directory`], all of one from bytes, none of a memory-mapped file.
+    pub fn held_bytes(&self) -> u64 {
+        self.backing.held_bytes()
     }
 
     pub fn path(&self) -> &Path {
@@ -144,16 +266,12 @@ impl Package {
         self.header.file_size
     }
 
-    fn bytes(&self) -> &[u8] {
-        self.backing.bytes()
-    }
-
     fn raw_sections(&self) -> &[RawSectionEntry] {
-        bytemuck::cast_slice(&self.bytes()[self.table.clone()])
+        &self.sections
     }
 
     fn raw_tiles(&self) -> &[RawTileEntry] {
-        bytemuck::cast_slice(&self.bytes()[self.tiles.clone()])
+        &self.tile_entries
     }
 
     pub fn section_count(&self) -> u32 {
@@ -197,13 +315,19 @@ impl Package {
 
     /// The bytes of a section as stored in the file (compressed for zstd), unchecked. For copying
     /// sections between packages; readers want [`Package::read`].
-    pub fn stored_bytes(&self, s: &SectionInfo) -> &[u8] {
+    pub fn stored_bytes(&self, s: &SectionInfo) -> Result<&[u8]> {
         self.stored(s)
     }
 
-    fn stored(&self, s: &SectionInfo) -> &[u8] {
-        // In bounds: checked at open.
-        &self.bytes()[s.offset as usize..(s.offset + s.stored_len) as usize]
+    /// In bounds (checked at open); absent only from a package whose bytes are still being fetched.
+    fn stored(&self, s: &SectionInfo) -> Result<&[u8]> {
+        self.backing.range(s.offset, s.stored_len).ok_or_else(|| Error::NotFetched {
+            path: self.path.clone(),
+            section: s.index,
+            kind: s.kind_name(),
+            offset: s.offset,
+            len: s.stored_len,
+        })
     }
 
     /// The decoded bytes of a section, after its checksum (and, for known kinds, its content) has
@@ -226,16 +350,17 @@ impl Package {
     }
 
     fn read_checked<T: Pod>(&self, s: &SectionInfo) -> Result<Cow<'_, [T]>> {
+        let stored = self.stored(s)?;
         let mut decoded = None;
         let status = self.checked[s.index as usize].get_or_init(|| {
-            let data = self.check_section(s)?;
+            let data = self.check_section(s, stored)?;
             decoded = Some(data);
             Ok(())
         });
         status.clone().map_err(|p| self.invalid(p))?;
         let data = match decoded {
             Some(d) => d,
-            None => self.decode(s).map_err(|p| self.invalid(p))?,
+            None => decode(s, stored).map_err(|p| self.invalid(p))?,
         };
         Ok(match data {
             Cow::Borrowed(b) => Cow::Borrowed(bytemuck::cast_slice(b)),
@@ -244,8 +369,7 @@ impl Package {
     }
 
     /// Checksum, decode, and content check of one section; returns the decoded bytes.
-    fn check_section(&self, s: &SectionInfo) -> Result<Cow<'_, [u8]>, Problem> {
-        let stored = self.stored(s);
+    fn check_section<'a>(&self, s: &SectionInfo, stored: &'a [u8]) -> Result<Cow<'a, [u8]>, Problem> {
         let computed = xxh3_64(stored);
         if computed != s.checksum {
             return Err(Problem::SectionChecksum {
@@ -255,7 +379,7 @@ impl Package {
                 computed,
             });
         }
-        let data = self.decode(s)?;
+        let data = decode(s, stored)?;
         if let Some(kind) = s.kind {
             let tile_depth = match s.scope {
                 Scope::Tile(t) => self.raw_tiles()[t as usize].depth,
@@ -287,31 +411,6 @@ impl Package {
             })?;
         }
         Ok(data)
-    }
-
-    fn decode(&self, s: &SectionInfo) -> Result<Cow<'_, [u8]>, Problem> {
-        let stored = self.stored(s);
-        match s.codec {
-            Some(Codec::Raw) | None => Ok(Cow::Borrowed(stored)),
-            Some(Codec::Zstd) => {
-                use std::io::Read;
-                let fail =
-                    |message: String| Problem::Decompress { section: s.index, kind: s.kind_name(), message };
-                // The table's length is a claim: reserve only what typical ratios justify and let the
-                // buffer grow with bytes that really decode, so a lie costs no memory.
-                let hint = s.raw_len.min(s.stored_len.saturating_mul(64)) as usize;
-                let mut out = Vec::with_capacity(hint);
-                zstd::stream::read::Decoder::with_buffer(stored)
-                    .map_err(|e| fail(e.to_string()))?
-                    .take(s.raw_len + 1)
-                    .read_to_end(&mut out)
-                    .map_err(|e| fail(e.to_string()))?;
-                if out.len() as u64 != s.raw_len {
-                    return Err(fail(format!("decoded {} bytes, table says {}", out.len(), s.raw_len)));
-                }
-                Ok(Cow::Owned(out))
-            }
-        }
     }
 
     /// The scene; an empty scene if the package has none.
@@ -458,8 +557,8 @@ impl<'a> Tile<'a> {
     }
 
     /// The tile's directory fields as a writer takes them, to copy the tile into another package.
-    pub fn info(&self) -> crate::TileInfo {
-        crate::TileInfo {
+    pub fn info(&self) -> TileInfo {
+        TileInfo {
             origin_m: self.origin_m(),
             extent_m: self.extent_m(),
             grid: self.grid(),
@@ -511,12 +610,51 @@ impl<'a> Tile<'a> {
     }
 }
 
-/// Structural validation of the whole file. Returns the header and the byte ranges of the table
-/// and the tile directory. Touches only the header, table and directory.
-fn check_structure(bytes: &[u8]) -> Result<(RawHeader, Range<usize>, Range<usize>), Problem> {
+/// A section's stored bytes decoded.
+fn decode<'a>(s: &SectionInfo, stored: &'a [u8]) -> Result<Cow<'a, [u8]>, Problem> {
+    match s.codec {
+        Some(Codec::Raw) | None => Ok(Cow::Borrowed(stored)),
+        Some(Codec::Zstd) => {
+            use std::io::Read;
+            let fail =
+                |message: String| Problem::Decompress { section: s.index, kind: s.kind_name(), message };
+            // The table's length is a claim: reserve only what typical ratios justify and let the
+            // buffer grow with bytes that really decode, so a lie costs no memory.
+            let hint = s.raw_len.min(s.stored_len.saturating_mul(64)) as usize;
+            let mut out = Vec::with_capacity(hint);
+            #[cfg(not(target_arch = "wasm32"))]
+            let decoder =
+                zstd::stream::read::Decoder::with_buffer(stored).map_err(|e| fail(e.to_string()))?;
+            #[cfg(target_arch = "wasm32")]
+            let decoder = ruzstd::decoding::StreamingDecoder::new(stored).map_err(|e| fail(e.to_string()))?;
+            decoder.take(s.raw_len + 1).read_to_end(&mut out).map_err(|e| fail(e.to_string()))?;
+            if out.len() as u64 != s.raw_len {
+                return Err(fail(format!("decoded {} bytes, table says {}", out.len(), s.raw_len)));
+            }
+            Ok(Cow::Owned(out))
+        }
+    }
+}
+
+/// The section table and tile directory, checked.
+type Tables = (Box<[RawSectionEntry]>, Box<[RawTileEntry]>);
+
+/// Structural validation of a whole file: the header, table and directory, nothing else.
+fn check_structure(bytes: &[u8]) -> Result<(RawHeader, Tables), Problem> {
     let file_len = bytes.len() as u64;
+    let header = check_header(bytes, file_len)?;
+    let (table, tiles) = table_ranges(&header, file_len)?;
+    let part = |r: Range<u64>| &bytes[r.start as usize..r.end as usize];
+    let tables = check_tables(&header, part(table), part(tiles), file_len)?;
+    Ok((header, tables))
+}
+
+/// The header of a file of `file_len` bytes, from its first bytes (`head`: at least the header's
+/// own size, or the whole file where it is shorter).
+fn check_header(head: &[u8], file_len: u64) -> Result<RawHeader, Problem> {
+    let bytes = head;
     let header_len = size_of::<RawHeader>();
-    if bytes.len() < header_len {
+    if file_len < header_len as u64 || bytes.len() < header_len {
         return Err(Problem::TooShort { len: file_len, needed: header_len as u64 });
     }
     let header: RawHeader = bytemuck::pod_read_unaligned(&bytes[..header_len]);
@@ -536,6 +674,9 @@ fn check_structure(bytes: &[u8]) -> Result<(RawHeader, Range<usize>, Range<usize
     if hs < header_len as u32 || hs > MAX_HEADER_SIZE || u64::from(hs) > file_len {
         return Err(Problem::BadHeaderSize { header_size: hs, minimum: header_len as u32, file_len });
     }
+    if bytes.len() < hs as usize {
+        return Err(Problem::TooShort { len: bytes.len() as u64, needed: u64::from(hs) });
+    }
     let mut h = Xxh3::new();
     h.update(&bytes[..HEADER_CHECKSUM_OFFSET]);
     h.update(&[0u8; 8]);
@@ -547,7 +688,11 @@ fn check_structure(bytes: &[u8]) -> Result<(RawHeader, Range<usize>, Range<usize
     if header.file_size != file_len {
         return Err(Problem::Truncated { expected: header.file_size, actual: file_len });
     }
+    Ok(header)
+}
 
+/// Byte ranges of the section table and the tile directory, checked against the file.
+fn table_ranges(header: &RawHeader, file_len: u64) -> Result<(Range<u64>, Range<u64>), Problem> {
     let table = array_range(
         Region::SectionTable,
         header.section_table_offset,
@@ -566,20 +711,35 @@ fn check_structure(bytes: &[u8]) -> Result<(RawHeader, Range<usize>, Range<usize
     if header.section_count >= u64::from(u32::MAX) || header.tile_count >= u64::from(GLOBAL) {
         return Err(Problem::Overflow { what: "section or tile count".into() });
     }
+    Ok((table, tiles))
+}
+
+/// Checks the section table and tile directory (their bytes, at the ranges [`table_ranges`] gave)
+/// against each other and the file, and copies them out.
+fn check_tables(
+    header: &RawHeader,
+    table_bytes: &[u8],
+    tile_bytes: &[u8],
+    file_len: u64,
+) -> Result<Tables, Problem> {
     let mut h = Xxh3::new();
-    h.update(&bytes[table.clone()]);
-    h.update(&bytes[tiles.clone()]);
+    h.update(table_bytes);
+    h.update(tile_bytes);
     let computed = h.digest();
     if computed != header.table_checksum {
         return Err(Problem::TableChecksum { stored: header.table_checksum, computed });
     }
-
-    let sections: &[RawSectionEntry] = bytemuck::cast_slice(&bytes[table.clone()]);
-    let tile_entries: &[RawTileEntry] = bytemuck::cast_slice(&bytes[tiles.clone()]);
+    let (table, tiles) = (
+        header.section_table_offset..header.section_table_offset + table_bytes.len() as u64,
+        header.tile_directory_offset..header.tile_directory_offset + tile_bytes.len() as u64,
+    );
+    // Copied (the table is a small part of any file), so the bytes may come from anywhere.
+    let sections: Vec<RawSectionEntry> = bytemuck::pod_collect_to_vec(table_bytes);
+    let tile_entries: Vec<RawTileEntry> = bytemuck::pod_collect_to_vec(tile_bytes);
     let mut regions = vec![
-        (0, u64::from(hs), Region::Header),
-        (table.start as u64, table.end as u64, Region::SectionTable),
-        (tiles.start as u64, tiles.end as u64, Region::TileDirectory),
+        (0, u64::from(header.header_size), Region::Header),
+        (table.start, table.end, Region::SectionTable),
+        (tiles.start, tiles.end, Region::TileDirectory),
     ];
     for (i, e) in sections.iter().enumerate() {
         let s = SectionInfo::from_raw(i as u32, e);
@@ -636,7 +796,7 @@ fn check_structure(bytes: &[u8]) -> Result<(RawHeader, Range<usize>, Range<usize
     }
 
     for (t, tile) in tile_entries.iter().enumerate() {
-        check_tile(t as u32, tile, sections)?;
+        check_tile(t as u32, tile, &sections)?;
     }
     // Every per-tile section sits in its tile's run.
     for (i, e) in sections.iter().enumerate() {
@@ -649,7 +809,7 @@ fn check_structure(bytes: &[u8]) -> Result<(RawHeader, Range<usize>, Range<usize
             }
         }
     }
-    Ok((header, table, tiles))
+    Ok((sections.into_boxed_slice(), tile_entries.into_boxed_slice()))
 }
 
 fn scope_name(scope: Scope) -> String {
@@ -666,7 +826,7 @@ fn array_range(
     count: u64,
     size: usize,
     file_len: u64,
-) -> Result<Range<usize>, Problem> {
+) -> Result<Range<u64>, Problem> {
     let len = count
         .checked_mul(size as u64)
         .ok_or_else(|| Problem::Overflow { what: format!("{region} length ({count} entries)") })?;
@@ -677,7 +837,7 @@ fn array_range(
     if !offset.is_multiple_of(8) {
         return Err(Problem::Misaligned { region, offset, align: 8 });
     }
-    Ok(offset as usize..end as usize)
+    Ok(offset..end)
 }
 
 fn check_known_entry(s: &SectionInfo, kind: SectionKind) -> Result<(), Problem> {

@@ -1,6 +1,8 @@
-//! Where a package's bytes live: a read-only memory map of the file, or an owned, 64-byte-aligned
-//! copy. Both hand out one `&[u8]` whose base is aligned to at least [`crate::spec::SECTION_ALIGN`],
-//! so validated raw sections can be cast in place.
+//! Where a package's bytes live: a read-only memory map of the file, an owned, 64-byte-aligned
+//! copy, or the parts of a file fetched so far (a browser reads a package by HTTP range requests,
+//! the directory first, then the sections a view needs). Each hands out slices whose base is
+//! aligned to at least [`crate::spec::SECTION_ALIGN`] at every 64-aligned file offset, so validated
+//! raw sections can be cast in place.
 //!
 //! This module holds the crate's only `unsafe` (the map). Audit note: a memory map is undefined
 //! behaviour in Rust if another process truncates or rewrites the file while it is mapped. grotto
@@ -9,7 +11,7 @@
 //! while it is open is outside what this can guard against (as with every mmap-based reader).
 #![allow(unsafe_code)]
 
-use std::fs::File;
+use std::collections::BTreeMap;
 
 use bytemuck::{Pod, Zeroable};
 
@@ -18,22 +20,48 @@ use bytemuck::{Pod, Zeroable};
 #[derive(Clone, Copy, Pod, Zeroable)]
 pub(crate) struct Align64([u8; 64]);
 
+/// Bytes copied into 64-byte-aligned storage.
+pub(crate) struct Aligned {
+    blocks: Vec<Align64>,
+    len: usize,
+}
+
+impl Aligned {
+    pub(crate) fn copy_of(bytes: &[u8]) -> Self {
+        let mut blocks = vec![Align64([0; 64]); bytes.len().div_ceil(64)];
+        bytemuck::cast_slice_mut::<Align64, u8>(&mut blocks)[..bytes.len()].copy_from_slice(bytes);
+        Self { blocks, len: bytes.len() }
+    }
+
+    fn bytes(&self) -> &[u8] {
+        &bytemuck::cast_slice::<Align64, u8>(&self.blocks)[..self.len]
+    }
+}
+
 pub(crate) enum Backing {
+    #[cfg(not(target_arch = "wasm32"))]
     Mapped(memmap2::Mmap),
-    Owned { blocks: Vec<Align64>, len: usize },
+    Owned(Aligned),
+    /// Pieces of the file by their offset (a multiple of 64, so alignment carries over).
+    Sparse(BTreeMap<u64, Aligned>),
 }
 
 impl std::fmt::Debug for Backing {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
+            #[cfg(not(target_arch = "wasm32"))]
             Self::Mapped(m) => write!(f, "Mapped({} bytes)", m.len()),
-            Self::Owned { len, .. } => write!(f, "Owned({len} bytes)"),
+            Self::Owned(a) => write!(f, "Owned({} bytes)", a.len),
+            Self::Sparse(p) => {
+                write!(f, "Sparse({} pieces, {} bytes)", p.len(), p.values().map(|a| a.len).sum::<usize>())
+            }
         }
     }
 }
 
 impl Backing {
-    pub(crate) fn map(file: &File) -> std::io::Result<Self> {
+    #[cfg(not(target_arch = "wasm32"))]
+    pub(crate) fn map(file: &std::fs::File) -> std::io::Result<Self> {
         // SAFETY: the map is read-only and lives as long as `Backing`; see the module note on
         // concurrent modification, the one hazard a map carries.
         let map = unsafe { memmap2::MmapOptions::new().map(file)? };
@@ -46,15 +74,51 @@ impl Backing {
     }
 
     pub(crate) fn copy_of(bytes: &[u8]) -> Self {
-        let mut blocks = vec![Align64([0; 64]); bytes.len().div_ceil(64)];
-        bytemuck::cast_slice_mut::<Align64, u8>(&mut blocks)[..bytes.len()].copy_from_slice(bytes);
-        Self::Owned { blocks, len: bytes.len() }
+        Self::Owned(Aligned::copy_of(bytes))
     }
 
-    pub(crate) fn bytes(&self) -> &[u8] {
+    /// The whole file, where it is all here.
+    pub(crate) fn whole(&self) -> Option<&[u8]> {
         match self {
-            Self::Mapped(m) => m,
-            Self::Owned { blocks, len } => &bytemuck::cast_slice::<Align64, u8>(blocks)[..*len],
+            #[cfg(not(target_arch = "wasm32"))]
+            Self::Mapped(m) => Some(m),
+            Self::Owned(a) => Some(a.bytes()),
+            Self::Sparse(_) => None,
+        }
+    }
+
+    /// The bytes `offset..offset + len` of the file, where they are here. A caller checked the
+    /// range against the file's length.
+    pub(crate) fn range(&self, offset: u64, len: u64) -> Option<&[u8]> {
+        let end = offset.checked_add(len)?;
+        match self {
+            Self::Sparse(pieces) => pieces.range(..=offset).rev().find_map(|(&start, piece)| {
+                let bytes = piece.bytes();
+                (start + bytes.len() as u64 >= end)
+                    .then(|| &bytes[(offset - start) as usize..(end - start) as usize])
+            }),
+            whole => whole.whole()?.get(offset as usize..end as usize),
+        }
+    }
+
+    /// Adds a piece at `offset` (a multiple of 64) to a sparse backing; whole files have every
+    /// byte already.
+    pub(crate) fn insert(&mut self, offset: u64, bytes: &[u8]) {
+        if let Self::Sparse(pieces) = self {
+            let longer = pieces.get(&offset).is_none_or(|p| p.len < bytes.len());
+            if longer {
+                pieces.insert(offset, Aligned::copy_of(bytes));
+            }
+        }
+    }
+
+    /// Bytes held in memory (all of a copy, the pieces of a sparse file; a map holds none).
+    pub(crate) fn held_bytes(&self) -> u64 {
+        match self {
+            #[cfg(not(target_arch = "wasm32"))]
+            Self::Mapped(_) => 0,
+            Self::Owned(a) => a.len as u64,
+            Self::Sparse(p) => p.values().map(|a| a.len as u64).sum(),
         }
     }
 }

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 
 use xxhash_rust::xxh3::{Xxh3, xxh3_64};
 
+use crate::TileInfo;
 use crate::error::{Error, Result};
 use crate::scene::{Provenance, Scene};
 use crate::spec::*;
@@ -23,16 +24,6 @@ pub enum Compression {
     Zstd(i32),
     /// zstd at this level if that saves at least 1/8 of the bytes, else raw ("zstd where it pays").
     Auto(i32),
-}
-
-/// Tile directory fields the caller provides; section references are filled in by the writer.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TileInfo {
-    pub origin_m: [f64; 3],
-    pub extent_m: f64,
-    pub grid: [i32; 3],
-    pub depth: u32,
-    pub point_count: u64,
 }
 
 /// Streams a package to `path` atomically. Call [`PackageWriter::finish`]; dropping it discards
@@ -229,7 +220,7 @@ impl PackageWriter {
                 section.item
             )));
         }
-        let stored = from.stored_bytes(section);
+        let stored = from.stored_bytes(section)?;
         self.pad_to(SECTION_ALIGN)?;
         let entry = RawSectionEntry {
             kind: kind as u32,

@@ -122,6 +122,7 @@ mod tests {
 /// in order. The manifest's reader (`grotto_preprocess::manifest::CameraSpec`) is not reused: the
 /// runtime does not depend on the build crate, and here a keyframe's name is optional. `grotto view` records one (K, or `--record-path`); `grotto render --path FILE.toml`
 /// flies along it; its tables can be pasted into a manifest as named cameras.
+#[cfg(not(target_arch = "wasm32"))]
 pub mod path_file {
     use std::path::Path;
 

@@ -14,7 +14,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
-use grotto_format::spec::{Bc1Block, Rgba8, Surfel};
+use grotto_format::spec::Surfel;
 use grotto_format::{Package, SectionKind};
 
 use crate::Error;
@@ -33,21 +33,11 @@ struct Point {
     rgb: [u8; 3],
 }
 
-pub(crate) fn tile_colors(tile: &grotto_format::Tile<'_>, n: usize) -> Result<Vec<[u8; 3]>, Error> {
-    if let Some(bc1) = tile.read::<Bc1Block>(SectionKind::SurfelColorsBc1)? {
-        return Ok(grotto_format::color::decode_bc1(&bc1, n));
-    }
-    if let Some(raw) = tile.read::<Rgba8>(SectionKind::SurfelColorsRaw)? {
-        return Ok(raw.iter().take(n).map(|c| [c.0[0], c.0[1], c.0[2]]).collect());
-    }
-    Ok(vec![[180; 3]; n])
-}
-
 fn points(pkg: &Package) -> Result<Vec<Point>, Error> {
     let mut out = Vec::new();
     for tile in pkg.tiles() {
         let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? else { continue };
-        let mut colors = tile_colors(&tile, surfels.len())?;
+        let mut colors = crate::scene_data::tile_colors(&tile, surfels.len())?;
         colors.resize(surfels.len(), [180; 3]);
         let o = tile.origin_m();
         for (s, c) in surfels.iter().zip(colors) {

@@ -19,7 +19,7 @@ use crate::error::{Error, Result};
 
 /// Storage buffers one compute stage binds at most: shade's, whose imports declare the most
 /// (runtime/tests/shaders.rs reflects every pass and checks this).
-pub const STORAGE_BUFFERS_NEEDED: u32 = 13;
+pub const STORAGE_BUFFERS_NEEDED: u32 = 8;
 
 /// What a user can change when the resource named `label` outgrows the adapter.
 fn hint_for(label: &str) -> String {
@@ -33,13 +33,15 @@ fn hint_for(label: &str) -> String {
             "the package has too many points for one vertex buffer: build it from fewer points (thin \
              the scans) or use a GPU with larger buffers"
         }
-        "rock" | "tiles" | "tile index" => {
-            "build the package with a larger leaf size (grotto-pack build --leaf-m)"
+        "tiles" => "build the package with a larger leaf size (grotto-pack build --leaf-m)",
+        // The rock table, the light grid and the tile index (lookup.wgsl).
+        "lookup" => {
+            "build the package with a larger leaf size (grotto-pack build --leaf-m), or raise \
+             --light-cutoff (shorter light ranges) or use fewer lights"
         }
-        "lights" | "shadow matrices" | "shadow atlas" | "shadow depth" | "splat uniforms" => {
+        "lights" | "shadow atlas" | "shadow depth" | "splat uniforms" => {
             "lower --shadowed-lights or --shadow-map"
         }
-        "light grid" => "raise --light-cutoff (shorter light ranges) or use fewer lights",
         "env atlas" => "rebuild the package with a smaller environment map",
         l if l.starts_with("gbuffer") || l.starts_with("shade") => "render a smaller --size",
         _ => "use a GPU with larger limits",
@@ -66,6 +68,9 @@ pub struct GpuOptions {
     /// Ask the device for at most this storage-buffer binding size (bytes), to see what a smaller
     /// adapter does with a package (WebGPU's default is 128 MiB).
     pub max_storage_binding_bytes: Option<u64>,
+    /// Ask the device for WebGPU's default limits only (what every browser grants without being
+    /// asked for more), to check on a native adapter that the passes fit in a browser.
+    pub webgpu_limits: bool,
 }
 
 /// A device and queue ready for grotto's passes.
@@ -82,6 +87,7 @@ pub struct Gpu {
     errors: Arc<Mutex<Vec<String>>>,
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 fn rank(t: wgpu::DeviceType, prefer_software: bool) -> u32 {
     use wgpu::DeviceType::*;
     match (t, prefer_software) {
@@ -96,6 +102,7 @@ fn rank(t: wgpu::DeviceType, prefer_software: bool) -> u32 {
 
 impl Gpu {
     /// Opens the best adapter under `opts` and creates a device on it.
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn new(opts: &GpuOptions) -> Result<Self> {
         let (instance, backends) =
             Self::instance(opts, wgpu::InstanceDescriptor::new_without_display_handle_from_env());
@@ -103,6 +110,7 @@ impl Gpu {
     }
 
     /// An instance from `desc` (read from the environment) with `opts.backends` where given.
+    #[cfg(not(target_arch = "wasm32"))]
     fn instance(opts: &GpuOptions, mut desc: wgpu::InstanceDescriptor) -> (wgpu::Instance, wgpu::Backends) {
         if let Some(b) = opts.backends {
             desc.backends = b;
@@ -113,6 +121,7 @@ impl Gpu {
 
     /// As [`Gpu::new`], for a window: the instance knows the window's display, and only adapters
     /// that can present to its surface are considered. Returns the surface too.
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn for_window<W>(opts: &GpuOptions, window: W) -> Result<(Self, wgpu::Surface<'static>)>
     where
         W: wgpu::WindowHandle + wgpu::wgt::WgpuHasDisplayHandle + Clone + 'static,
@@ -128,6 +137,7 @@ impl Gpu {
         Ok((gpu, surface))
     }
 
+    #[cfg(not(target_arch = "wasm32"))]
     fn open(
         instance: &wgpu::Instance,
         backends: wgpu::Backends,
@@ -148,9 +158,16 @@ impl Gpu {
         });
         let adapter =
             adapters.into_iter().next().ok_or_else(|| Error::NoAdapter { tried: format!("{backends:?}") })?;
+        pollster::block_on(Self::on_adapter(adapter, opts))
+    }
+
+    /// A device on `adapter` with the limits and features grotto needs, or an error that says
+    /// what is missing. Async because a browser cannot block: its shell awaits this on the
+    /// adapter `navigator.gpu` gave; native callers go through [`Gpu::new`].
+    pub async fn on_adapter(adapter: wgpu::Adapter, opts: &GpuOptions) -> Result<Self> {
         let info = adapter.get_info();
         let name = format!("{} ({:?})", info.name, info.backend);
-        let mut limits = adapter.limits();
+        let mut limits = if opts.webgpu_limits { wgpu::Limits::default() } else { adapter.limits() };
         if let Some(b) = opts.max_storage_binding_bytes {
             limits.max_storage_buffer_binding_size = limits.max_storage_buffer_binding_size.min(b);
         }
@@ -188,13 +205,15 @@ impl Gpu {
         if timestamps {
             features |= wgpu::Features::TIMESTAMP_QUERY;
         }
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("grotto"),
-            required_features: features,
-            required_limits: limits,
-            ..Default::default()
-        }))
-        .map_err(|e| Error::Device(format!("{name}: {e}")))?;
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("grotto"),
+                required_features: features,
+                required_limits: limits,
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| Error::Device(format!("{name}: {e}")))?;
         let errors = Arc::new(Mutex::new(Vec::new()));
         let sink = errors.clone();
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
@@ -225,11 +244,27 @@ impl Gpu {
     /// Runs `f` inside a validation error scope: an error it causes (creating a pipeline,
     /// finishing a pass's commands) comes back as [`Error::Gpu`] naming `pass`.
     pub fn scoped<T>(&self, pass: &'static str, f: impl FnOnce() -> Result<T>) -> Result<T> {
-        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let out = f();
-        match pollster::block_on(scope.pop()) {
-            Some(e) => Err(Error::Gpu { pass, message: e.to_string() }),
+        let (out, error) = self.capture(f);
+        match error {
+            Some(message) => Err(Error::Gpu { pass, message }),
             None => out,
+        }
+    }
+
+    /// `f`'s result and the first validation error what it did caused, where the platform can
+    /// wait for it (native). A browser cannot block on the error scope's promise: there errors
+    /// reach the uncaptured-error sink a little later and [`Gpu::check`] reports them.
+    pub fn capture<T>(&self, f: impl FnOnce() -> T) -> (T, Option<String>) {
+        #[cfg(not(target_arch = "wasm32"))]
+        {
+            let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+            let out = f();
+            let error = pollster::block_on(scope.pop()).map(|e| e.to_string());
+            (out, error)
+        }
+        #[cfg(target_arch = "wasm32")]
+        {
+            (f(), None)
         }
     }
 
@@ -325,7 +360,19 @@ impl Gpu {
         }))
     }
 
+    /// Copies `size` bytes of `buffer` (which needs COPY_SRC) to the CPU, blocking. Not in a
+    /// browser, which cannot block on the GPU: there it is an error naming what asked.
+    #[cfg(target_arch = "wasm32")]
+    pub fn read_buffer(&self, _buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
+        Err(Error::Unsupported {
+            adapter: self.describe(),
+            what: format!("a blocking read-back of {size} bytes"),
+            hint: "a browser cannot wait for the GPU".into(),
+        })
+    }
+
     /// Copies `size` bytes of `buffer` (which needs COPY_SRC) to the CPU, blocking.
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn read_buffer(&self, buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
         let size = size.max(4).next_multiple_of(4);
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {

@@ -185,6 +185,9 @@ pub struct Params {
     /// x: levels in the env atlas (0: glossy reflection falls back to the SH), y: atlas width;
     /// zw unused.
     pub env_chain: [u32; 4],
+    /// Word offsets of the tables in the lookup buffer (lookup.wgsl): x rock, y light grid,
+    /// z tile index; w unused.
+    pub lookup_base: [u32; 4],
 }
 
 /// `Params::flags` bits (generated into WGSL as `FLAG_*` by `shaders::constants`).
@@ -322,7 +325,7 @@ const _: () = {
     assert!(size_of::<LeafGpu>() == 64);
     assert!(size_of::<LeafLightGpu>() == 80);
     assert!(size_of::<LightGpu>() == 64);
-    assert!(size_of::<Params>() == 80 + 16 + 48 + 64 + 16 * MAX_CONES + 16 * 9 + 16 * 8 * 2 + 16);
+    assert!(size_of::<Params>() == 80 + 16 + 48 + 64 + 16 * MAX_CONES + 16 * 9 + 16 * 8 * 2 + 16 + 16);
     assert!(size_of::<MipRange>() == 16);
     assert!(size_of::<InjectBatch>() == 16);
     assert!(size_of::<ConeBatch>() == 16);

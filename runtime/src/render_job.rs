@@ -3,7 +3,7 @@
 //! only parses arguments and draws progress; everything else is here so tests run the same code.
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use web_time::Instant;
 
 use glam::{DVec3, Vec3};
 use grotto_format::Package;

@@ -9,7 +9,7 @@
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::ops::Range;
-use std::time::Instant;
+use web_time::Instant;
 
 use glam::{Mat4, Vec3};
 use serde::Serialize;
@@ -19,7 +19,8 @@ use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::gpu_types::{
-    ActiveTile, LeafGpu, LeafLightGpu, MAX_CONES, NodeGpu, Params, SplatUniform, SurfelGpu, TileGpu, flags,
+    ActiveTile, LeafGpu, LeafLightGpu, LightGpu, MAX_CONES, NodeGpu, Params, SplatUniform, SurfelGpu,
+    TileGpu, flags,
 };
 use crate::lights::LightSetup;
 use crate::passes::{self, gbuffer, shade, shadow};
@@ -120,10 +121,10 @@ pub struct Renderer {
     leaf_light: wgpu::Buffer,
     #[cfg(feature = "test-hooks")]
     faces: wgpu::Buffer,
-    stats: wgpu::Buffer,
-    /// The active tiles propagate reads, and their changes (shaders/activity.wgsl).
+    /// The active tiles propagate reads, and what the bounce changed: its largest change (16
+    /// bytes: the f32 bits, then padding), then each tile's (shaders/activity.wgsl `Changes`).
     active: wgpu::Buffer,
-    tile_change: wgpu::Buffer,
+    changes: wgpu::Buffer,
     activity: TileActivity,
     /// Invocations (leaves) of the active tiles on the GPU; `None` when the tiles changed since
     /// they were written.
@@ -142,7 +143,10 @@ pub struct Renderer {
     tiles_buf: wgpu::Buffer,
     nodes_buf: wgpu::Buffer,
     leaves_buf: wgpu::Buffer,
-    tile_index_buf: wgpu::Buffer,
+    /// The lookup buffer (rock, light grid, tile index: lookup.wgsl) and the tile index's byte
+    /// offset in it (the index runs to the end of the buffer).
+    lookup_buf: wgpu::Buffer,
+    tile_index_offset: u64,
     /// Shadow faces the next shadow pass draws (every face after a change of lights; after a
     /// change of tiles, the faces that see one), and how many were drawn since the last
     /// [`Renderer::take_shadow_faces_drawn`].
@@ -216,6 +220,7 @@ fn base_params(
     scene_diag_m: f32,
     chain: Option<&EnvChain>,
     materials: [[f32; 4]; MAX_MATERIALS + 1],
+    lookup: &Lookup,
 ) -> Params {
     let leaf = scene.leaf_size_m.max(1e-6);
     let (cones, tan_half) = cone_set(settings.cones, settings.cone_aperture_scale);
@@ -257,6 +262,37 @@ fn base_params(
         materials,
         env_levels,
         env_chain,
+        lookup_base: lookup.base,
+    }
+}
+
+/// The one lookup buffer's contents (lookup.wgsl): the rock table, the light grid and the tile
+/// index, at word offsets `base`, with room after the index for the index of a scene with other
+/// tile forms (its size follows how the tiles align; one that outgrows it makes a new renderer,
+/// `update_scene`).
+struct Lookup {
+    base: [u32; 4],
+    words: Vec<u32>,
+}
+
+impl Lookup {
+    fn new(scene: &SceneData, lights: &LightSetup) -> Result<Self> {
+        let index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
+        let (rock, grid) = (&scene.rock.words, &lights.grid.words);
+        let room = 2 * index.words.len() + 64;
+        let mut words = Vec::with_capacity(rock.len() + grid.len() + room);
+        words.extend_from_slice(rock);
+        words.extend_from_slice(grid);
+        let index_base = words.len();
+        words.extend_from_slice(&index.words);
+        words.resize(index_base + room, 0);
+        let base = [0, rock.len() as u32, index_base as u32, 0];
+        Ok(Self { base, words })
+    }
+
+    /// Byte offset of the tile index in the buffer.
+    fn tile_index_offset(&self) -> u64 {
+        4 * u64::from(self.base[2])
     }
 }
 
@@ -267,14 +303,14 @@ struct Upload {
     tiles: wgpu::Buffer,
     nodes: wgpu::Buffer,
     leaves: wgpu::Buffer,
-    tile_index: wgpu::Buffer,
+    lookup: wgpu::Buffer,
     #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
     leaf_light: wgpu::Buffer,
     #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
     faces: wgpu::Buffer,
-    stats: wgpu::Buffer,
     active: wgpu::Buffer,
-    tile_change: wgpu::Buffer,
+    /// The bounce's largest change (16 bytes: the f32 bits, then padding), then each tile's.
+    changes: wgpu::Buffer,
     surfels: wgpu::Buffer,
     shared: passes::Shared,
     /// GPU bytes of all of them.
@@ -290,6 +326,7 @@ impl Upload {
         scene: &SceneData,
         caps: PoolCaps,
         lights: &LightSetup,
+        lookup: &Lookup,
         shadow_atlas: &wgpu::TextureView,
         base_params: &Params,
         f16: bool,
@@ -316,15 +353,11 @@ impl Upload {
         let leaf_light = pool(gpu, "leaf light", caps.leaves, &initial_light(&scene.leaves), STORAGE)?;
         let face_bytes = if f16 { 8 } else { 16 };
         let faces = gpu.buffer("faces", caps.nodes.max(1) * 6 * face_bytes, STORAGE)?;
-        let stats = gpu.buffer_init("stats", &[0u8; 16], STORAGE)?;
         // A 16-byte header, then at most every tile.
         let active =
             gpu.buffer("active tiles", 16 + size_of::<ActiveTile>() as u64 * caps.tiles.max(1), STORAGE)?;
-        let tile_change = gpu.buffer("tile change", 4 * caps.tiles.max(1), STORAGE)?;
-        let index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
-        // Room for the index of a scene with other tile forms (its size follows how the tiles
-        // align); one that outgrows it makes a new renderer (`update_scene`).
-        let tile_index = pool(gpu, "tile index", 2 * index.words.len() as u64 + 64, &index.words, STORAGE)?;
+        let changes = gpu.buffer("changes", 16 + 4 * caps.tiles.max(1), STORAGE)?;
+        let lookup = gpu.buffer_init("lookup", bytemuck::cast_slice(&lookup.words), STORAGE)?;
         let surfels = pool(
             gpu,
             "surfels",
@@ -335,18 +368,19 @@ impl Upload {
         let tiles = pool(gpu, "tiles", caps.tiles, &scene.tiles, STORAGE)?;
         let nodes = pool(gpu, "nodes", caps.nodes, &scene.nodes, STORAGE)?;
         let leaves = pool(gpu, "leaves", caps.leaves, &scene.leaves, STORAGE)?;
-        let shadow_mats: Vec<[[f32; 4]; 4]> =
-            lights.faces.iter().map(|f| f.view_proj.to_cols_array_2d()).collect();
+        // The shadow faces' matrices follow the lights, one 64-byte record each (lights.wgsl).
+        let mut light_records: Vec<LightGpu> = lights.lights.clone();
+        light_records.extend(lights.faces.iter().map(|f| {
+            let [c0, c1, c2, c3] = f.view_proj.to_cols_array_2d();
+            LightGpu { position_kind: c0, intensity_layer: c1, direction_cos_outer: c2, params: c3 }
+        }));
         let static_buffers = [
             (0, params.clone()),
             (1, tiles.clone()),
             (2, nodes.clone()),
             (3, leaves.clone()),
-            (4, gpu.buffer_init("lights", bytemuck::cast_slice(&lights.lights), STORAGE)?),
-            (5, gpu.buffer_init("shadow matrices", bytemuck::cast_slice(&shadow_mats), STORAGE)?),
-            (7, gpu.buffer_init("rock", bytemuck::cast_slice(&scene.rock.words), STORAGE)?),
-            (8, gpu.buffer_init("light grid", bytemuck::cast_slice(&lights.grid.words), STORAGE)?),
-            (9, tile_index.clone()),
+            (4, gpu.buffer_init("lights", bytemuck::cast_slice(&light_records), STORAGE)?),
+            (7, lookup.clone()),
         ];
         let mut shared = passes::Shared::default();
         let mut bytes = surfels.size();
@@ -355,7 +389,7 @@ impl Upload {
             shared.insert(0, binding, passes::Resource::Buffer(b));
         }
         shared.insert(0, 6, passes::Resource::Texture(shadow_atlas.clone()));
-        for (binding, b) in [(0, &leaf_light), (1, &faces), (2, &stats), (3, &active), (4, &tile_change)] {
+        for (binding, b) in [(0, &leaf_light), (1, &faces), (3, &active), (4, &changes)] {
             bytes += b.size();
             shared.insert(1, binding, passes::Resource::Buffer(b.clone()));
         }
@@ -365,12 +399,11 @@ impl Upload {
             tiles,
             nodes,
             leaves,
-            tile_index,
+            lookup,
             leaf_light,
             faces,
-            stats,
             active,
-            tile_change,
+            changes,
             surfels,
             shared,
             bytes,
@@ -425,6 +458,15 @@ fn tile_box(t: &TileGpu, leaf_m: f32) -> (Vec3, Vec3) {
     let edge = (1u64 << t.depth.min(40)) as f32 * leaf_m;
     let margin = ((1u64 << t.leaf_lod.min(40)) as f32 + 2.0) * leaf_m;
     (lo - Vec3::splat(margin), lo + Vec3::splat(edge + margin))
+}
+
+/// A frame on the GPU, for a viewer to present ([`Renderer::ldr_output`]).
+#[derive(Clone, Copy, Debug)]
+pub struct LdrOutput<'a> {
+    pub buffer: &'a wgpu::Buffer,
+    pub first_word: u32,
+    pub width: u32,
+    pub height: u32,
 }
 
 /// Where the light stands ([`Renderer::light_progress`]).
@@ -544,10 +586,20 @@ impl Renderer {
                 settings.splat_scale,
             )
         })?;
-        let base_params =
-            base_params(scene, &settings, &lights, &shadow, (lo, hi), scene_diag_m, chain, materials);
+        let lookup = Lookup::new(scene, &lights)?;
+        let base_params = base_params(
+            scene,
+            &settings,
+            &lights,
+            &shadow,
+            (lo, hi),
+            scene_diag_m,
+            chain,
+            materials,
+            &lookup,
+        );
 
-        let up = Upload::new(gpu, scene, caps, &lights, shadow.atlas(), &base_params, f16)?;
+        let up = Upload::new(gpu, scene, caps, &lights, &lookup, shadow.atlas(), &base_params, f16)?;
         let shared = &up.shared;
 
         let (by_height, ranges) = scene.nodes_by_height();
@@ -594,9 +646,8 @@ impl Renderer {
             leaf_light: up.leaf_light,
             #[cfg(feature = "test-hooks")]
             faces: up.faces,
-            stats: up.stats,
             active: up.active,
-            tile_change: up.tile_change,
+            changes: up.changes,
             activity: TileActivity::new(&scene.tiles),
             active_written: None,
             bounce_work: Vec::new(),
@@ -608,7 +659,8 @@ impl Renderer {
             tiles_buf: up.tiles,
             nodes_buf: up.nodes,
             leaves_buf: up.leaves,
-            tile_index_buf: up.tile_index,
+            lookup_buf: up.lookup,
+            tile_index_offset: lookup.tile_index_offset(),
             shadow_dirty: vec![true; shadow_faces],
             shadow_drawn: 0,
             camera_view_proj: None,
@@ -638,7 +690,7 @@ impl Renderer {
     pub fn gpu_bytes(&self) -> u64 {
         let view = self.view.as_ref().map_or(0, |v| {
             let px = u64::from(v.targets.width) * u64::from(v.targets.height);
-            px * 4 * 4 + v.outputs.hdr.size() + v.outputs.ldr.size()
+            px * 4 * 4 + v.outputs.frame.size()
         });
         self.static_bytes + view
     }
@@ -930,7 +982,7 @@ impl Renderer {
             return Ok(None);
         }
         let index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
-        if 4 * index.words.len() as u64 > self.tile_index_buf.size() {
+        if 4 * index.words.len() as u64 > self.lookup_buf.size() - self.tile_index_offset {
             return Ok(None);
         }
         let old_slots = self.pools.slots().clone();
@@ -1012,7 +1064,7 @@ impl Renderer {
             );
         }
         update.upload_bytes += write(&self.tiles_buf, 0, bytemuck::cast_slice(&placed.tiles))
-            + write(&self.tile_index_buf, 0, bytemuck::cast_slice(&index.words));
+            + write(&self.lookup_buf, self.tile_index_offset, bytemuck::cast_slice(&index.words));
         let (by_height, ranges) = scene.nodes_by_height_at(&placed.tiles);
         self.mip.set_order(&self.gpu, &by_height, &ranges)?;
         update.upload_bytes += 4 * by_height.len() as u64;
@@ -1112,9 +1164,9 @@ impl Renderer {
         let view = self.view("shade")?;
         let (width, height) = (view.targets.width, view.targets.height);
         let pixels = u64::from(width) * u64::from(height);
-        let hdr_bytes = self.gpu.read_buffer(&view.outputs.hdr, pixels * 16)?;
-        let ldr_bytes = self.gpu.read_buffer(&view.outputs.ldr, pixels * 4)?;
-        let hdr: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&hdr_bytes[..(pixels * 16) as usize]);
+        let bytes = self.gpu.read_buffer(&view.outputs.frame, pixels * 20)?;
+        let (hdr_bytes, ldr_bytes) = bytes.split_at(view.outputs.hdr_bytes() as usize);
+        let hdr: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(hdr_bytes);
         let ldr: Vec<[u8; 4]> = bytemuck::pod_collect_to_vec(&ldr_bytes[..(pixels * 4) as usize]);
         Ok(Frame { width, height, hdr, ldr })
     }
@@ -1168,10 +1220,15 @@ impl Renderer {
         Ok((d.is_finite() && d > 0.0).then_some(d))
     }
 
-    /// The last frame's tonemapped pixels (one packed RGBA8 u32 a pixel, rows top to bottom) and
-    /// its size; `None` before the first frame.
-    pub fn ldr_output(&self) -> Option<(&wgpu::Buffer, u32, u32)> {
-        self.view.as_ref().map(|v| (&v.outputs.ldr, v.targets.width, v.targets.height))
+    /// The last frame's tonemapped pixels (one packed RGBA8 u32 a pixel, rows top to bottom, from
+    /// word `first_word` of `buffer`) and its size; `None` before the first frame.
+    pub fn ldr_output(&self) -> Option<LdrOutput<'_>> {
+        self.view.as_ref().map(|v| LdrOutput {
+            buffer: &v.outputs.frame,
+            first_word: v.outputs.ldr_first_word(),
+            width: v.targets.width,
+            height: v.targets.height,
+        })
     }
 
     fn frame_params(&self, frame: Option<(&Camera, u32, u32)>) -> Params {
@@ -1332,8 +1389,7 @@ impl Renderer {
         let mut enc = self.encoder();
         if plan.runs(Pass::Propagate) && self.slice_run.0 == 0 {
             // A bounce starts: its changes are gathered over all its slices.
-            enc.clear_buffer(&self.stats, 0, None);
-            enc.clear_buffer(&self.tile_change, 0, None);
+            enc.clear_buffer(&self.changes, 0, None);
         }
         for step in plan.steps.iter().filter(|s| s.run) {
             let recorded = Instant::now();
@@ -1399,10 +1455,10 @@ impl Renderer {
         // A command buffer per pass would name it directly, but costs lavapipe time on every frame
         // (tried: frames of the bunny at 64x48 went from 0.1 s to 1.5 s), so the fast path stays
         // one encoder and only a failing frame pays for the search.
-        let scope = self.gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut ran: Vec<Pass> = Vec::new();
-        let outcome = self.record_frame(plan, &mut ran);
-        if let Some(e) = pollster::block_on(scope.pop()) {
+        let gpu = self.gpu.clone();
+        let (outcome, error) = gpu.capture(|| self.record_frame(plan, &mut ran));
+        if let Some(e) = error {
             let culprit = ran.iter().copied().find(|&pass| {
                 self.gpu
                     .scoped(pass.name(), || {
@@ -1449,13 +1505,12 @@ impl Renderer {
             self.bounce_at = Some(end);
         } else if ran.contains(&Pass::Propagate) {
             self.bounce_at = None;
-            let bytes = self.gpu.read_buffer(&self.stats, 16)?;
+            let tiles = self.activity.tiles();
+            let bytes = self.gpu.read_buffer(&self.changes, 16 + 4 * tiles as u64)?;
             let bits = u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
             self.stats_now.last_change = Some(f32::from_bits(bits));
             self.stats_now.bounces_done += 1;
-            let tiles = self.activity.tiles();
-            let bytes = self.gpu.read_buffer(&self.tile_change, 4 * tiles.max(1) as u64)?;
-            let change: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[..4 * tiles]);
+            let change: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[16..16 + 4 * tiles]);
             let work = self.activity.finish(&change, self.settings.convergence_tolerance);
             self.stats_now.propagated_leaves += work.leaves;
             self.bounce_work.push(work);

@@ -609,7 +609,7 @@ impl SceneData {
                 out.leaves.extend(leaves);
                 // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
                 if let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? {
-                    let colors = crate::export::tile_colors(&tile, surfels.len())?;
+                    let colors = tile_colors(&tile, surfels.len())?;
                     let scans = tile_scans(&tile, surfels.len(), scene.scans.len()).map_err(&bad)?;
                     let shift = DVec3::from_array(tile.origin_m()) - DVec3::from_array(out.frame_origin_m);
                     for ((s, c), scan) in surfels.iter().zip(colors).zip(scans) {
@@ -772,4 +772,16 @@ impl SceneData {
         out.rock = crate::rock::classify(out.leaf_size_m, &out.leaves);
         out
     }
+}
+
+/// sRGB colour of each of a tile's `n` surfels (BC1 or raw; grey where the package has none).
+pub(crate) fn tile_colors(tile: &grotto_format::Tile<'_>, n: usize) -> Result<Vec<[u8; 3]>> {
+    use grotto_format::spec::Bc1Block;
+    if let Some(bc1) = tile.read::<Bc1Block>(SectionKind::SurfelColorsBc1)? {
+        return Ok(grotto_format::color::decode_bc1(&bc1, n));
+    }
+    if let Some(raw) = tile.read::<Rgba8>(SectionKind::SurfelColorsRaw)? {
+        return Ok(raw.iter().take(n).map(|c| [c.0[0], c.0[1], c.0[2]]).collect());
+    }
+    Ok(vec![[180; 3]; n])
 }

@@ -21,6 +21,7 @@ pub const LIBRARY: &[(&str, &str)] = &[
     ("hash", include_str!("shaders/hash.wgsl")),
     ("light_state", include_str!("shaders/light_state.wgsl")),
     ("lights", include_str!("shaders/lights.wgsl")),
+    ("lookup", include_str!("shaders/lookup.wgsl")),
     ("ndf", include_str!("shaders/ndf.wgsl")),
     ("packing", include_str!("shaders/packing.wgsl")),
     ("rock", include_str!("shaders/rock.wgsl")),

@@ -553,7 +553,7 @@ impl App {
         plan: &crate::plan::EffectPlan,
     ) -> Result<()> {
         let Some(s) = self.state.as_mut() else { return Ok(()) };
-        let Some((ldr, src_w, src_h)) = s.renderer.ldr_output() else { return Ok(()) };
+        let Some(out) = s.renderer.ldr_output() else { return Ok(()) };
         let frame = match s.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
             wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
@@ -571,21 +571,21 @@ impl App {
             1
         };
         let u: [u32; 8] = [
-            src_w,
-            src_h,
+            out.width,
+            out.height,
             s.config.width,
             s.config.height,
             u32::from(s.config.format.is_srgb()),
             progress.fraction().to_bits(),
             bar,
-            0,
+            out.first_word,
         ];
         s.gpu.queue.write_buffer(&s.blit.uniform, 0, bytemuck::cast_slice(&u));
         let group = s.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("window"),
             layout: &s.blit.layout,
             entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: ldr.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 0, resource: out.buffer.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: s.blit.uniform.as_entire_binding() },
             ],
         });
@@ -692,7 +692,7 @@ impl App {
             }
             KeyCode::KeyO if s.nav.orbit.is_some() => s.nav.fly(),
             KeyCode::KeyO => {
-                let (w, h) = s.renderer.ldr_output().map_or((0, 0), |(_, w, h)| (w, h));
+                let (w, h) = s.renderer.ldr_output().map_or((0, 0), |o| (o.width, o.height));
                 pick_orbit(s, w / 2, h / 2)?;
             }
             KeyCode::KeyH => s.ui.visible = !s.ui.visible,
@@ -727,7 +727,8 @@ impl App {
 
 /// Orbits the surface point at pixel `(x, y)` of the last frame (nothing there: no change).
 fn pick_orbit(s: &mut State, x: u32, y: u32) -> Result<()> {
-    let Some((_, w, h)) = s.renderer.ldr_output() else { return Ok(()) };
+    let Some(o) = s.renderer.ldr_output() else { return Ok(()) };
+    let (w, h) = (o.width, o.height);
     let Some(distance_m) = s.renderer.distance_at(x, y)? else { return Ok(()) };
     let cam = s.nav.camera();
     // The pixel's ray (the same projection the G-buffer drew with).
@@ -880,7 +881,7 @@ impl ApplicationHandler for App {
             }
             WindowEvent::MouseInput { state: ElementState::Pressed, button: MouseButton::Right, .. } => {
                 match self.state.as_mut() {
-                    Some(s) => match (s.cursor, s.renderer.ldr_output().map(|(_, w, _)| w)) {
+                    Some(s) => match (s.cursor, s.renderer.ldr_output().map(|o| o.width)) {
                         (Some((x, y)), Some(w)) => {
                             // Window pixels to the frame's (it is drawn at --render-scale).
                             let k = w as f64 / f64::from(s.config.width.max(1));

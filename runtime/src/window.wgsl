@@ -11,7 +11,8 @@ struct Blit {
     srgb_target: u32,
     progress: f32,
     bar_state: u32,
-    pad: u32,
+    // Word of the first pixel in `ldr` (the renderer's frame buffer: HDR first, passes/shade.rs).
+    first_word: u32,
 }
 
 @group(0) @binding(0) var<storage, read> ldr: array<u32>;
@@ -29,7 +30,7 @@ fn vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
 fn fs(@builtin(position) p: vec4<f32>) -> @location(0) vec4<f32> {
     let x = min(u32(p.x * f32(blit.src.x) / f32(blit.dst.x)), blit.src.x - 1u);
     let y = min(u32(p.y * f32(blit.src.y) / f32(blit.dst.y)), blit.src.y - 1u);
-    var c = unpack4x8unorm(ldr[y * blit.src.x + x]).rgb;
+    var c = unpack4x8unorm(ldr[blit.first_word + y * blit.src.x + x]).rgb;
     if p.y > f32(blit.dst.y) - BAR_PX && p.x < blit.progress * f32(blit.dst.x) {
         let colours = array<vec3<f32>, 3>(vec3<f32>(0.5), vec3<f32>(0.9, 0.6, 0.1), vec3<f32>(0.2, 0.8, 0.3));
         c = colours[min(blit.bar_state, 2u)];

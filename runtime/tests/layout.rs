@@ -123,6 +123,7 @@ fn shared() -> Vec<(&'static str, RustLayout)> {
                 materials,
                 env_levels,
                 env_chain,
+                lookup_base,
             }),
         ),
         ("MipRange", rust_layout!(MipRange { first, count, height, pad })),

@@ -159,6 +159,20 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
         assert!(golden::within_tolerance(&d), "wet {camera} differs from the golden image: {d:?}");
         frames.push(pixels);
     }
+    // Every pass (shadow maps, cone shadows, env, specular cones, shade) fits the limits a browser
+    // grants without asking (WebGPU's defaults: 8 storage buffers a stage, issue 19), and the
+    // image does not depend on them.
+    let out = dir.path().join("wet-webgpu-limits.png");
+    let opts = RenderOptions {
+        settings: settings.clone(),
+        exposure: Some(1.0),
+        lamp_string: Some(64),
+        gpu: GpuOptions { webgpu_limits: true, ..view(&package, "chamber", out.clone()).gpu },
+        ..view(&package, "chamber", out.clone())
+    };
+    render_job::run(&opts, |_| {}).unwrap_or_else(|e| panic!("under WebGPU's default limits: {e:#}"));
+    let (_, _, pixels) = grotto_runtime::image_out::read_png(&out).unwrap();
+    assert!(pixels == frames[0], "under WebGPU's default limits: {:?}", golden::diff(&pixels, &frames[0]));
     // The wet walls must show: the same view without specular reflection leaves the tolerance.
     if std::env::var_os("GROTTO_BLESS").is_none() {
         let gpu = grotto_runtime::gpu::Gpu::new(&GpuOptions {

@@ -32,10 +32,10 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     // Shadow cones start one leaf off the surface, like the gather cones.
     let o = leaf_cone_origin(leaf);
     let cell = light_cell(p);
-    let start = light_grid[cell] + batch.first;
-    let last = min(light_grid[cell + 1u], start + batch.count);
+    let start = light_grid_word(cell) + batch.first;
+    let last = min(light_grid_word(cell + 1u), start + batch.count);
     for (var j = start; j < last; j++) {
-        let light = lights[light_grid[j]];
+        let light = lights[light_grid_word(j)];
         let seen = light_seen(light, p);
         if seen.falloff <= 0.0 {
             continue;

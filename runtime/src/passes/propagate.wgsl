@@ -46,6 +46,6 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     let scale = max(max(after.r, max(after.g, after.b)), 1e-6);
     let diff = abs(after - before);
     let change = max(diff.r, max(diff.g, diff.b)) / scale;
-    atomicMax(&stats.max_change_bits, bitcast<u32>(change));
-    atomicMax(&tile_change[item.y], bitcast<u32>(change));
+    atomicMax(&changes.max_change_bits, bitcast<u32>(change));
+    atomicMax(&changes.tiles[item.y], bitcast<u32>(change));
 }

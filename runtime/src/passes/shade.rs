@@ -1,5 +1,5 @@
 //! Deferred shading (shade.wgsl): one thread per pixel over the G-buffer, writing linear HDR and
-//! tonemapped sRGB8 into storage buffers the renderer reads back. Owns the environment atlas it
+//! tonemapped sRGB8 into one storage buffer the renderer reads back or a viewer presents. Owns the environment atlas it
 //! reads for glossy reflections (the prefiltered levels stacked top to bottom).
 
 use super::gbuffer::Targets;
@@ -14,12 +14,25 @@ pub struct Shade {
     env_atlas_bytes: u64,
 }
 
-/// Shade's outputs and bind group for one G-buffer.
+/// Shade's outputs and bind group for one G-buffer: one buffer (WebGPU allows 8 storage buffers
+/// per stage by default), HDR and coverage as 4 f32 a pixel, then sRGB8 as one u32 a pixel.
 #[derive(Debug)]
 pub struct Outputs {
-    pub hdr: wgpu::Buffer,
-    pub ldr: wgpu::Buffer,
+    pub frame: wgpu::Buffer,
+    pub pixels: u64,
     pub bind_group: wgpu::BindGroup,
+}
+
+impl Outputs {
+    /// Bytes of the HDR part, which starts the buffer.
+    pub fn hdr_bytes(&self) -> u64 {
+        self.pixels * 16
+    }
+
+    /// Word offset of the sRGB8 part.
+    pub fn ldr_first_word(&self) -> u32 {
+        (self.pixels * 4) as u32
+    }
 }
 
 impl Shade {
@@ -69,8 +82,7 @@ impl Shade {
         let layout = super::own_layout(&self.pipeline, "shade")?;
         let pixels = u64::from(targets.width) * u64::from(targets.height);
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
-        let hdr = gpu.buffer("shade hdr", pixels * 16, usage)?;
-        let ldr = gpu.buffer("shade ldr", pixels * 4, usage)?;
+        let frame = gpu.buffer("shade frame", pixels * 20, usage)?;
         let views =
             [&targets.distance, &targets.normal, &targets.albedo].map(|t| t.create_view(&Default::default()));
         let view = |v| wgpu::BindingResource::TextureView(v);
@@ -81,12 +93,11 @@ impl Shade {
                 wgpu::BindGroupEntry { binding: 0, resource: view(&views[0]) },
                 wgpu::BindGroupEntry { binding: 1, resource: view(&views[1]) },
                 wgpu::BindGroupEntry { binding: 2, resource: view(&views[2]) },
-                wgpu::BindGroupEntry { binding: 3, resource: hdr.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: ldr.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: frame.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: view(&self.env_atlas) },
             ],
         });
-        Ok(Outputs { hdr, ldr, bind_group })
+        Ok(Outputs { frame, pixels, bind_group })
     }
 
     pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, out: &Outputs, w: u32, h: u32) {

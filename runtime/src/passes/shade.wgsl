@@ -11,8 +11,19 @@
 @group(2) @binding(0) var gb_distance: texture_2d<f32>;
 @group(2) @binding(1) var gb_normal: texture_2d<f32>;
 @group(2) @binding(2) var gb_albedo: texture_2d<f32>;
-@group(2) @binding(3) var<storage, read_write> out_hdr: array<vec4<f32>>;
-@group(2) @binding(4) var<storage, read_write> out_ldr: array<u32>;
+// The frame, one buffer (WebGPU allows 8 storage buffers per stage by default): linear HDR and
+// coverage as 4 f32 words a pixel, then packed sRGB8 one word a pixel (shade.rs `Outputs`).
+@group(2) @binding(3) var<storage, read_write> out: array<u32>;
+
+fn write_pixel(idx: u32, hdr: vec4<f32>, ldr: vec3<f32>) {
+    let b = 4u * idx;
+    let bits = bitcast<vec4<u32>>(hdr);
+    out[b] = bits.x;
+    out[b + 1u] = bits.y;
+    out[b + 2u] = bits.z;
+    out[b + 3u] = bits.w;
+    out[4u * params.width * params.height + idx] = pack4x8unorm(vec4<f32>(ldr, 1.0));
+}
 // The environment's GGX-prefiltered lat-long levels stacked top to bottom (Params::env_levels);
 // a 1x1 placeholder without a chain.
 @group(2) @binding(5) var env_atlas: texture_2d<f32>;
@@ -235,8 +246,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // The G-buffer's albedo is the scan colour (splat.wgsl).
                 shown = albedo_slot.rgb * (0.35 + 0.65 * max(dot(n, -ray), 0.0));
             }
-            out_hdr[idx] = vec4<f32>(shown, coverage);
-            out_ldr[idx] = pack4x8unorm(vec4<f32>(linear_to_srgb(clamp(shown, vec3<f32>(0.0), vec3<f32>(1.0))), 1.0));
+            write_pixel(idx, vec4<f32>(shown, coverage), linear_to_srgb(clamp(shown, vec3<f32>(0.0), vec3<f32>(1.0))));
             return;
         }
         // Material slot from the albedo's alpha: 0 diffuse, 1..=7 specular (Params::materials).
@@ -252,9 +262,9 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             // the lights beyond the budget come from the leaves (`far`, below).
             var irradiance = vec3<f32>(0.0);
             let cell = light_cell(p);
-            let last = light_grid[cell + 1u];
-            for (var j = light_grid[cell]; j < last; j++) {
-                let light = lights[light_grid[j]];
+            let last = light_grid_word(cell + 1u);
+            for (var j = light_grid_word(cell); j < last; j++) {
+                let light = lights[light_grid_word(j)];
                 if light_shadow_kind(light) != LIGHT_MAP {
                     // Lists hold the lights with shadow maps first (lights.rs): the rest are
                     // per leaf.
@@ -327,7 +337,5 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     if d <= 0.0 && (params.flags & FLAG_VIEWS_WITHOUT_LIGHT) != 0u {
         hdr = vec3<f32>(0.0);
     }
-    out_hdr[idx] = vec4<f32>(hdr, coverage);
-    let ldr = tonemap(hdr * params.exposure);
-    out_ldr[idx] = pack4x8unorm(vec4<f32>(ldr, 1.0));
+    write_pixel(idx, vec4<f32>(hdr, coverage), tonemap(hdr * params.exposure));
 }

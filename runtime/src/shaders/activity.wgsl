@@ -24,9 +24,19 @@ struct ActiveTiles {
     tiles: array<ActiveTile>,
 }
 
+// What a bounce changed: the largest relative change of any leaf's outgoing radiance, then that
+// of each tile's leaves, as f32 bits (non-negative floats order like their bit patterns, so
+// atomicMax works). One buffer for both: WebGPU allows 8 storage buffers per stage by default.
+struct Changes {
+    max_change_bits: atomic<u32>,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+    tiles: array<atomic<u32>>,
+}
+
 @group(1) @binding(3) var<storage, read> active_tiles: ActiveTiles;
-// Largest relative change per tile in this bounce, as f32 bits (see Stats::max_change_bits).
-@group(1) @binding(4) var<storage, read_write> tile_change: array<atomic<u32>>;
+@group(1) @binding(4) var<storage, read_write> changes: Changes;
 
 // Leaf index (x) and tile index (y) of invocation `k` (< the list's item total): the last active
 // tile whose first_item is at most k, by binary search (log2 of the active tiles, a few steps).

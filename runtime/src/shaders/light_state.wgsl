@@ -1,5 +1,5 @@
 // Light transport state, which the passes write (bind group 1, read-write): each leaf's light, the
-// anisotropic radiance pyramid and the propagation statistics.
+// anisotropic radiance pyramid (the propagation statistics are activity.wgsl's).
 #import scene
 
 struct LeafLight {
@@ -12,15 +12,6 @@ struct LeafLight {
     far: vec4<f32>,
 }
 
-struct Stats {
-    // Largest relative change of any leaf's outgoing radiance in the last bounce, as f32 bits
-    // (non-negative floats order like their bit patterns, so atomicMax works).
-    max_change_bits: atomic<u32>,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
-}
-
 @group(1) @binding(0) var<storage, read_write> leaf_light: array<LeafLight>;
 // Six anisotropic values per node (premultiplied radiance, opacity), by travel direction:
 // 0 +x, 1 -x, 2 +y, 3 -y, 4 +z, 5 -z. Stored as raw words, 4 per value as f32 or 2 as packed f16
@@ -30,7 +21,6 @@ struct Stats {
 override radiance_f16: bool = false;
 // Largest finite f16: brighter values are clamped rather than turned into infinity.
 const F16_MAX: f32 = 65504.0;
-@group(1) @binding(2) var<storage, read_write> stats: Stats;
 
 fn load_face(i: u32) -> vec4<f32> {
     if radiance_f16 {

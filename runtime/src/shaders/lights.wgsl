@@ -2,6 +2,7 @@
 // maps' atlas (runtime/src/lights.rs, passes/shadow.rs).
 #import scene
 #import packing
+#import lookup
 
 struct Light {
     position_kind: vec4<f32>,
@@ -12,15 +13,23 @@ struct Light {
     params: vec4<f32>,
 }
 
+// The lights, then the shadow faces' view-projection matrices (64 bytes each, like a Light: one
+// buffer for both because WebGPU allows 8 storage buffers per shader stage by default); face k is
+// record light_count + k (shadow_view_proj).
 @group(0) @binding(4) var<storage, read> lights: array<Light>;
-@group(0) @binding(5) var<storage, read> shadow_view_proj: array<mat4x4<f32>>;
 // Shadow atlas: distance from the light to the nearest surfel (packed f32), one square face per
 // cube face of a point light or per spot light, `shadow_cols` faces per row. A 2D atlas rather
 // than an array texture: wgpu's GL backend neither renders nor copies into array layers.
 @group(0) @binding(6) var shadow_dist: texture_2d<f32>;
-// Per-cell lists of the lights in range (runtime/src/lights.rs): cells + 1 offsets (absolute word
-// indices), then the light indices.
-@group(0) @binding(8) var<storage, read> light_grid: array<u32>;
+// The light grid, per-cell lists of the lights in range (runtime/src/lights.rs), lives in the
+// lookup buffer (light_grid_word): cells + 1 offsets (word indices into the grid), then the light
+// indices.
+
+// View-projection of shadow face `layer` (stored after the lights, column by column).
+fn shadow_view_proj(layer: u32) -> mat4x4<f32> {
+    let m = lights[params.light_count + layer];
+    return mat4x4<f32>(m.position_kind, m.intensity_layer, m.direction_cos_outer, m.params);
+}
 
 // Fraction of a light's shadow map that sees past `p` (3x3 percentage-closer filter).
 fn shadow_visibility(light: Light, p: vec3<f32>, dist: f32, bias_m: f32) -> f32 {
@@ -41,7 +50,7 @@ fn shadow_visibility(light: Light, p: vec3<f32>, dist: f32, bias_m: f32) -> f32 
         }
     }
     let layer = u32(first) + face;
-    let clip = shadow_view_proj[layer] * vec4<f32>(p, 1.0);
+    let clip = shadow_view_proj(layer) * vec4<f32>(p, 1.0);
     if clip.w <= 0.0 {
         return 1.0;
     }
@@ -65,7 +74,7 @@ fn shadow_visibility(light: Light, p: vec3<f32>, dist: f32, bias_m: f32) -> f32 
 }
 
 // Index of the light-grid cell holding `p_m` (clamped into the grid); its lights are
-// light_grid[light_grid[c] .. light_grid[c + 1]].
+// light_grid_word(light_grid_word(c) .. light_grid_word(c + 1)).
 fn light_cell(p_m: vec3<f32>) -> u32 {
     let dims = vec3<i32>(i32(params.light_grid_x), i32(params.light_grid_y), i32(params.light_grid_z));
     let f = floor((p_m - params.light_grid_min_m.xyz) / params.light_grid_min_m.w);

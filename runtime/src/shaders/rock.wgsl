@@ -1,31 +1,31 @@
 // Rock behind the scanned surfaces (runtime/src/rock.rs): where cones stop.
 #import scene
 #import hash
+#import lookup
 
 // Rock behind the scanned surfaces (runtime/src/rock.rs, `RockTable`): a hash table of bricks of
 // 4x4x4 rock cells (cells of 2x2x2 leaves). Header: capacity - 1, longest probe, bricks, 0; then
 // ROCK_ENTRY_WORDS words an entry: brick x, y, z, 64 rock bits. Constants come from rock.rs
-// (shaders::constants).
-@group(0) @binding(7) var<storage, read> rock: array<u32>;
+// (shaders::constants). The table lives in the lookup buffer (lookup.wgsl).
 
 // Whether the leaf cell holding `p_leaf` lies in rock (rock.rs, `in_rock`). The probe loop is
 // bounded by the longest probe sequence the table was built with.
 fn in_rock(p_leaf: vec3<f32>) -> bool {
     let cell = vec3<i32>(floor(p_leaf)) >> vec3<u32>(ROCK_LEVEL);
     let b = cell >> vec3<u32>(ROCK_BRICK_SHIFT);
-    let mask = rock[0];
-    let longest = rock[1];
+    let mask = rock_word(0);
+    let longest = rock_word(1);
     var slot = cell_hash(b) & mask;
     for (var i = 0u; i <= longest; i++) {
         let e = ROCK_HEADER_WORDS + slot * ROCK_ENTRY_WORDS;
-        let k = vec3<i32>(bitcast<i32>(rock[e]), bitcast<i32>(rock[e + 1u]), bitcast<i32>(rock[e + 2u]));
+        let k = vec3<i32>(bitcast<i32>(rock_word(e)), bitcast<i32>(rock_word(e + 1u)), bitcast<i32>(rock_word(e + 2u)));
         if k.x == ROCK_EMPTY_KEY {
             return false;
         }
         if all(k == b) {
             let l = cell - (b << vec3<u32>(ROCK_BRICK_SHIFT));
             let bit = u32(l.x + 4 * (l.y + 4 * l.z));
-            return ((rock[e + 3u + bit / 32u] >> (bit % 32u)) & 1u) == 1u;
+            return ((rock_word(e + 3u + bit / 32u) >> (bit % 32u)) & 1u) == 1u;
         }
         slot = (slot + 1u) & mask;
     }

@@ -50,6 +50,8 @@ struct Params {
     env_levels: array<vec4<f32>, 8>,
     // x: env atlas levels (0: none), y: atlas width.
     env_chain: vec4<u32>,
+    // Word offsets in the lookup buffer (lookup.wgsl): x rock, y light grid, z tile index.
+    lookup_base: vec4<u32>,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;

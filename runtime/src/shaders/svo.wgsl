@@ -3,6 +3,7 @@
 #import scene
 #import light_state
 #import hash
+#import lookup
 
 struct Tile {
     origin_leaf: vec3<i32>,
@@ -27,8 +28,7 @@ struct Node {
 // The tile index (runtime/src/tile_index.rs, `TileIndex`): a hash table of (cell at a tile depth,
 // depth) -> tile. Header: capacity - 1, longest probe, mask of the depths entries are keyed at,
 // entries, anchor x, y, z (leaf units), 0; then TILE_ENTRY_WORDS words an entry: cell x, y, z,
-// depth, tile.
-@group(0) @binding(9) var<storage, read> tile_index: array<u32>;
+// depth, tile. It lives in the lookup buffer (lookup.wgsl).
 
 // tile_index.rs `tile_hash`: the cell hash with the depth mixed in.
 fn tile_hash(c: vec3<i32>, depth: u32) -> u32 {
@@ -38,10 +38,10 @@ fn tile_hash(c: vec3<i32>, depth: u32) -> u32 {
 // The tile whose cube holds the leaf cell `v_leaf` (global leaf units), or EMPTY: one hash probe
 // per distinct tile depth, whatever the number of tiles (tile_index.rs, `TileIndex::find`).
 fn find_tile(v_leaf: vec3<i32>) -> u32 {
-    let mask = tile_index[0];
-    let longest = tile_index[1];
-    var depths = tile_index[2];
-    let anchor = vec3<i32>(bitcast<i32>(tile_index[4]), bitcast<i32>(tile_index[5]), bitcast<i32>(tile_index[6]));
+    let mask = tile_index_word(0);
+    let longest = tile_index_word(1);
+    var depths = tile_index_word(2);
+    let anchor = vec3<i32>(bitcast<i32>(tile_index_word(4)), bitcast<i32>(tile_index_word(5)), bitcast<i32>(tile_index_word(6)));
     let rel = v_leaf - anchor;
     while depths != 0u {
         let d = firstTrailingBit(depths);
@@ -50,12 +50,12 @@ fn find_tile(v_leaf: vec3<i32>) -> u32 {
         var slot = tile_hash(c, d) & mask;
         for (var i = 0u; i <= longest; i++) {
             let e = TILE_HEADER_WORDS + slot * TILE_ENTRY_WORDS;
-            let k = vec3<i32>(bitcast<i32>(tile_index[e]), bitcast<i32>(tile_index[e + 1u]), bitcast<i32>(tile_index[e + 2u]));
+            let k = vec3<i32>(bitcast<i32>(tile_index_word(e)), bitcast<i32>(tile_index_word(e + 1u)), bitcast<i32>(tile_index_word(e + 2u)));
             if k.x == TILE_EMPTY_KEY {
                 break;
             }
-            if all(k == c) && tile_index[e + 3u] == d {
-                return tile_index[e + 4u];
+            if all(k == c) && tile_index_word(e + 3u) == d {
+                return tile_index_word(e + 4u);
             }
             slot = (slot + 1u) & mask;
         }
