@@ -24,8 +24,7 @@ mod writer;
 
 pub use env_chain::{EnvChain, level_table};
 pub use error::{Error, Problem, Region, Result};
-pub use reader::TileInfo;
-pub use reader::{CoarseData, Element, Package, SectionInfo, SvoData, Tile};
+pub use reader::{CoarseData, Element, Package, SectionInfo, SvoData, Tile, TileInfo};
 pub use scene::{
     Camera, Environment, InputFile, Light, LightShape, Material, MaterialRegion, Provenance, ScanInfo, Scene,
 };

@@ -133,7 +133,8 @@ impl Package {
     }
 
     fn validate(path: PathBuf, backing: Backing) -> Result<Self> {
-        match check_structure(backing.whole().unwrap_or_default()) {
+        let bytes = backing.whole().unwrap_or_default();
+        match check_structure(bytes, bytes.len() as u64, 0, bytes) {
             Ok((header, tables)) => Ok(Self::assemble(path, backing, header, tables)),
             Err(problem) => Err(Error::Invalid { path, problem }),
         }
@@ -175,34 +176,10 @@ impl Package {
         directory: &[u8],
     ) -> Result<Self> {
         let path = name.into();
-        let checked = || -> Result<(RawHeader, Tables), Problem> {
-            let header = check_header(head, file_len)?;
-            let (table, tiles) = table_ranges(&header, file_len)?;
-            let part = |r: &Range<u64>, region| {
-                let start = r.start.checked_sub(directory_offset);
-                let end = r.end.checked_sub(directory_offset);
-                match (start, end) {
-                    (Some(s), Some(e)) if e <= directory.len() as u64 => {
-                        Ok(&directory[s as usize..e as usize])
-                    }
-                    _ => Err(Problem::OutOfBounds {
-                        region,
-                        offset: r.start,
-                        len: r.end - r.start,
-                        file_len: directory_offset + directory.len() as u64,
-                    }),
-                }
-            };
-            let t = part(&table, Region::SectionTable)?;
-            let d = part(&tiles, Region::TileDirectory)?;
-            Ok((header, check_tables(&header, t, d, file_len)?))
-        };
-        match checked() {
+        match check_structure(head, file_len, directory_offset, directory) {
+            // The header and tables are kept as checked; the backing holds sections only.
             Ok((header, tables)) => {
-                let mut backing = Backing::Sparse(Default::default());
-                let head_len = head.len().min(header.header_size as usize);
-                backing.insert(0, &head[..head_len]);
-                Ok(Self::assemble(path, backing, header, tables))
+                Ok(Self::assemble(path, Backing::Sparse(Default::default()), header, tables))
             }
             Err(problem) => Err(Error::Invalid { path, problem }),
         }
@@ -212,17 +189,16 @@ impl Package {
     /// [`Package::from_directory`]; a whole file has them already. Checked when a section in them
     /// is read, like any other.
     pub fn insert(&mut self, offset: u64, bytes: &[u8]) -> Result<()> {
-        let end = offset.checked_add(bytes.len() as u64);
-        if !offset.is_multiple_of(SECTION_ALIGN) || end.is_none_or(|e| e > self.header.file_size) {
-            return Err(Error::Invalid {
-                path: self.path.clone(),
-                problem: Problem::OutOfBounds {
-                    region: Region::Fetched,
-                    offset,
-                    len: bytes.len() as u64,
-                    file_len: self.header.file_size,
-                },
-            });
+        let (region, len, file_len) = (Region::Fetched, bytes.len() as u64, self.header.file_size);
+        let problem = if !offset.is_multiple_of(SECTION_ALIGN) {
+            Some(Problem::Misaligned { region, offset, align: SECTION_ALIGN })
+        } else if offset.checked_add(len).is_none_or(|e| e > file_len) {
+            Some(Problem::OutOfBounds { region, offset, len, file_len })
+        } else {
+            None
+        };
+        if let Some(problem) = problem {
+            return Err(self.invalid(problem));
         }
         self.backing.insert(offset, bytes);
         Ok(())
@@ -639,20 +615,39 @@ fn decode<'a>(s: &SectionInfo, stored: &'a [u8]) -> Result<Cow<'a, [u8]>, Proble
 /// The section table and tile directory, checked.
 type Tables = (Box<[RawSectionEntry]>, Box<[RawTileEntry]>);
 
-/// Structural validation of a whole file: the header, table and directory, nothing else.
-fn check_structure(bytes: &[u8]) -> Result<(RawHeader, Tables), Problem> {
-    let file_len = bytes.len() as u64;
-    let header = check_header(bytes, file_len)?;
+/// Structural validation (the header, table and directory, nothing else) of a `file_len`-byte
+/// package from its first bytes (`head`) and a piece of it (`directory`, at `directory_offset`)
+/// that covers the table and directory. A whole file is all three.
+fn check_structure(
+    head: &[u8],
+    file_len: u64,
+    directory_offset: u64,
+    directory: &[u8],
+) -> Result<(RawHeader, Tables), Problem> {
+    let header = check_header(head, file_len)?;
     let (table, tiles) = table_ranges(&header, file_len)?;
-    let part = |r: Range<u64>| &bytes[r.start as usize..r.end as usize];
-    let tables = check_tables(&header, part(table), part(tiles), file_len)?;
+    let part = |r: &Range<u64>, region| {
+        let start = r.start.checked_sub(directory_offset);
+        let end = r.end.checked_sub(directory_offset);
+        match (start, end) {
+            (Some(s), Some(e)) if e <= directory.len() as u64 => Ok(&directory[s as usize..e as usize]),
+            _ => Err(Problem::OutOfBounds {
+                region,
+                offset: r.start,
+                len: r.end - r.start,
+                file_len: directory_offset + directory.len() as u64,
+            }),
+        }
+    };
+    let table_bytes = part(&table, Region::SectionTable)?;
+    let tile_bytes = part(&tiles, Region::TileDirectory)?;
+    let tables = check_tables(&header, (table, table_bytes), (tiles, tile_bytes), file_len)?;
     Ok((header, tables))
 }
 
-/// The header of a file of `file_len` bytes, from its first bytes (`head`: at least the header's
+/// The header of a file of `file_len` bytes, from its first bytes (`bytes`: at least the header's
 /// own size, or the whole file where it is shorter).
-fn check_header(head: &[u8], file_len: u64) -> Result<RawHeader, Problem> {
-    let bytes = head;
+fn check_header(bytes: &[u8], file_len: u64) -> Result<RawHeader, Problem> {
     let header_len = size_of::<RawHeader>();
     if file_len < header_len as u64 || bytes.len() < header_len {
         return Err(Problem::TooShort { len: file_len, needed: header_len as u64 });
@@ -714,12 +709,12 @@ fn table_ranges(header: &RawHeader, file_len: u64) -> Result<(Range<u64>, Range<
     Ok((table, tiles))
 }
 
-/// Checks the section table and tile directory (their bytes, at the ranges [`table_ranges`] gave)
-/// against each other and the file, and copies them out.
+/// Checks the section table and tile directory (each its range from [`table_ranges`] and its
+/// bytes) against each other and the file, and copies them out.
 fn check_tables(
     header: &RawHeader,
-    table_bytes: &[u8],
-    tile_bytes: &[u8],
+    (table, table_bytes): (Range<u64>, &[u8]),
+    (tiles, tile_bytes): (Range<u64>, &[u8]),
     file_len: u64,
 ) -> Result<Tables, Problem> {
     let mut h = Xxh3::new();
@@ -729,10 +724,6 @@ fn check_tables(
     if computed != header.table_checksum {
         return Err(Problem::TableChecksum { stored: header.table_checksum, computed });
     }
-    let (table, tiles) = (
-        header.section_table_offset..header.section_table_offset + table_bytes.len() as u64,
-        header.tile_directory_offset..header.tile_directory_offset + tile_bytes.len() as u64,
-    );
     // Copied (the table is a small part of any file), so the bytes may come from anywhere.
     let sections: Vec<RawSectionEntry> = bytemuck::pod_collect_to_vec(table_bytes);
     let tile_entries: Vec<RawTileEntry> = bytemuck::pod_collect_to_vec(tile_bytes);

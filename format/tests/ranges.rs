@@ -13,23 +13,38 @@ fn sample_bytes() -> Vec<u8> {
 }
 
 /// The package as a reader over HTTP first sees it: two requests, head then directory.
-fn directory_only(bytes: &[u8]) -> Package {
+/// Also the byte range of the second request.
+fn directory_only(bytes: &[u8]) -> (Package, std::ops::Range<u64>) {
     let len = bytes.len() as u64;
     let head = &bytes[..(Package::HEAD_BYTES.min(len)) as usize];
     let dir = Package::directory_range("r.grotto", head, len).unwrap();
-    Package::from_directory("r.grotto", len, head, dir.start, &bytes[dir.start as usize..dir.end as usize])
-        .unwrap()
+    let pkg = Package::from_directory(
+        "r.grotto",
+        len,
+        head,
+        dir.start,
+        &bytes[dir.start as usize..dir.end as usize],
+    )
+    .unwrap();
+    (pkg, dir)
 }
 
 #[test]
 fn sections_fetched_by_range_read_as_from_the_whole_file() {
     let bytes = sample_bytes();
     let whole = Package::from_bytes("w.grotto", &bytes).unwrap();
-    let mut ranged = directory_only(&bytes);
+    let (mut ranged, dir) = directory_only(&bytes);
     assert_eq!(ranged.tile_count(), whole.tile_count());
     assert_eq!(ranged.sections().collect::<Vec<_>>(), whole.sections().collect::<Vec<_>>());
-    let directory_bytes = ranged.held_bytes();
-    assert!(directory_bytes < bytes.len() as u64 / 2, "{directory_bytes} of {} bytes", bytes.len());
+    // Opening fetched the directory and no section with it, and holds no section bytes.
+    for s in whole.sections().filter(|s| s.stored_len > 0) {
+        assert!(
+            s.offset + s.stored_len <= dir.start || s.offset >= dir.end,
+            "section {} in {dir:?}",
+            s.index
+        );
+    }
+    assert_eq!(ranged.held_bytes(), 0);
 
     // Before its bytes arrive, a section is named as not fetched (not as damaged).
     let s = whole.sections().find(|s| s.stored_len > 0).unwrap();
@@ -66,7 +81,7 @@ fn sections_fetched_by_range_read_as_from_the_whole_file() {
 #[test]
 fn nearby_ranges_merge_within_the_gap_and_not_beyond() {
     let bytes = sample_bytes();
-    let ranged = directory_only(&bytes);
+    let (ranged, _) = directory_only(&bytes);
     let sections: Vec<SectionInfo> = ranged.sections().filter(|s| s.stored_len > 0).collect();
     let apart = ranged.missing(sections.iter().copied(), 0);
     let merged = ranged.missing(sections.iter().copied(), 1 << 20);
@@ -82,7 +97,7 @@ fn nearby_ranges_merge_within_the_gap_and_not_beyond() {
 fn damaged_or_misplaced_fetches_are_refused() {
     let bytes = sample_bytes();
     let len = bytes.len() as u64;
-    let mut ranged = directory_only(&bytes);
+    let (mut ranged, _) = directory_only(&bytes);
     let s = ranged.sections().find(|s| s.stored_len > 8).unwrap();
     // A flipped byte in what arrived is a checksum error naming the section, as in a file.
     let mut bad = bytes[s.offset as usize..(s.offset + s.stored_len) as usize].to_vec();

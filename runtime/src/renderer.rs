@@ -143,10 +143,9 @@ pub struct Renderer {
     tiles_buf: wgpu::Buffer,
     nodes_buf: wgpu::Buffer,
     leaves_buf: wgpu::Buffer,
-    /// The lookup buffer (rock, light grid, tile index: lookup.wgsl) and the tile index's byte
-    /// offset in it (the index runs to the end of the buffer).
+    /// The lookup buffer (rock, light grid, tile index: lookup.wgsl); the tile index starts at
+    /// word `base_params.lookup_base[2]` and runs to the end of the buffer.
     lookup_buf: wgpu::Buffer,
-    tile_index_offset: u64,
     /// Shadow faces the next shadow pass draws (every face after a change of lights; after a
     /// change of tiles, the faces that see one), and how many were drawn since the last
     /// [`Renderer::take_shadow_faces_drawn`].
@@ -288,11 +287,6 @@ impl Lookup {
         words.resize(index_base + room, 0);
         let base = [0, rock.len() as u32, index_base as u32, 0];
         Ok(Self { base, words })
-    }
-
-    /// Byte offset of the tile index in the buffer.
-    fn tile_index_offset(&self) -> u64 {
-        4 * u64::from(self.base[2])
     }
 }
 
@@ -660,7 +654,6 @@ impl Renderer {
             nodes_buf: up.nodes,
             leaves_buf: up.leaves,
             lookup_buf: up.lookup,
-            tile_index_offset: lookup.tile_index_offset(),
             shadow_dirty: vec![true; shadow_faces],
             shadow_drawn: 0,
             camera_view_proj: None,
@@ -982,7 +975,8 @@ impl Renderer {
             return Ok(None);
         }
         let index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
-        if 4 * index.words.len() as u64 > self.lookup_buf.size() - self.tile_index_offset {
+        let index_offset = 4 * u64::from(self.base_params.lookup_base[2]);
+        if 4 * index.words.len() as u64 > self.lookup_buf.size() - index_offset {
             return Ok(None);
         }
         let old_slots = self.pools.slots().clone();
@@ -1064,7 +1058,7 @@ impl Renderer {
             );
         }
         update.upload_bytes += write(&self.tiles_buf, 0, bytemuck::cast_slice(&placed.tiles))
-            + write(&self.lookup_buf, self.tile_index_offset, bytemuck::cast_slice(&index.words));
+            + write(&self.lookup_buf, index_offset, bytemuck::cast_slice(&index.words));
         let (by_height, ranges) = scene.nodes_by_height_at(&placed.tiles);
         self.mip.set_order(&self.gpu, &by_height, &ranges)?;
         update.upload_bytes += 4 * by_height.len() as u64;
@@ -1164,7 +1158,7 @@ impl Renderer {
         let view = self.view("shade")?;
         let (width, height) = (view.targets.width, view.targets.height);
         let pixels = u64::from(width) * u64::from(height);
-        let bytes = self.gpu.read_buffer(&view.outputs.frame, pixels * 20)?;
+        let bytes = self.gpu.read_buffer(&view.outputs.frame, view.outputs.frame.size())?;
         let (hdr_bytes, ldr_bytes) = bytes.split_at(view.outputs.hdr_bytes() as usize);
         let hdr: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(hdr_bytes);
         let ldr: Vec<[u8; 4]> = bytemuck::pod_collect_to_vec(&ldr_bytes[..(pixels * 4) as usize]);

@@ -1,6 +1,6 @@
 //! Deferred shading (shade.wgsl): one thread per pixel over the G-buffer, writing linear HDR and
-//! tonemapped sRGB8 into one storage buffer the renderer reads back or a viewer presents. Owns the environment atlas it
-//! reads for glossy reflections (the prefiltered levels stacked top to bottom).
+//! tonemapped sRGB8 into one storage buffer the renderer reads back or a viewer presents. Owns the
+//! environment atlas it reads for glossy reflections (the prefiltered levels stacked top to bottom).
 
 use super::gbuffer::Targets;
 use crate::error::Result;
