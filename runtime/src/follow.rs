@@ -1,6 +1,6 @@
 //! Tiles that follow a moving camera, for a package over its GPU budget: the next residency is
 //! chosen and its tiles read from the package on a loader thread while frames render
-//! ([`Follow`]), then swapped into the renderer's pools in place ([`swap_tiles`]). `grotto render
+//! ([`Follow`]), then swapped into the renderer's pools in place ([`stream::swap_tiles`]). `grotto render
 //! --path` waits for each frame's tiles; `grotto view` takes them when they are ready, so flying
 //! never waits for the disk.
 
@@ -10,18 +10,14 @@ use std::thread::JoinHandle;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
-use crate::pool::{POOL_HEADROOM, PoolCaps};
-use crate::render_job::Streaming;
-use crate::renderer::{ClipBox, Renderer, SceneUpdate, Settings};
+use crate::renderer::{ClipBox, Renderer, Settings};
 use crate::residency::{self, Residency};
 use crate::scene_data::{SceneData, SceneLight};
+use crate::stream::{self, Streaming};
 
-/// The renderer for a job's first scene, and the loader that keeps its tiles following the
-/// camera where the package is over budget (`streaming` and the `first` residency it was chosen
-/// with, from [`crate::render_job::prepare`]): then the pools take the whole `--gpu-memory` in
-/// the mix of the first view's tiles, so the tiles of later views replace these in place
-/// (pool.rs), and residency keeps within each pool from then on. Within budget, a renderer for
-/// the scene as it is and no loader.
+/// The renderer for a job's first scene ([`stream::renderer_for`]), and the loader that keeps its
+/// tiles following the camera where the package is over budget (`streaming` and the `first`
+/// residency it was chosen with, from [`crate::render_job::prepare`]).
 pub fn start(
     gpu: &Gpu,
     scene: &SceneData,
@@ -32,48 +28,11 @@ pub fn start(
 ) -> Result<(Renderer, Option<Follow>)> {
     match (streaming, first) {
         (Some(mut st), Some(first)) => {
-            let used = PoolCaps { tiles: st.tile_count() as u64, ..PoolCaps::of(scene) };
-            let caps = PoolCaps::filling(used, st.pool_bytes(), settings.radiance_f16);
-            let r = Renderer::with_pools(gpu, scene, settings, caps)?;
-            st.set_pool_limits(r.pool_caps().less(POOL_HEADROOM));
+            let r = stream::renderer_for(gpu, scene, settings, Some(&mut st))?;
             Ok((r, Some(Follow::new(st, first, upload_per_frame))))
         }
-        _ => Ok((Renderer::new(gpu, scene, settings)?, None)),
+        _ => Ok((stream::renderer_for(gpu, scene, settings, None)?, None)),
     }
-}
-
-/// How a change of tiles reached the renderer.
-#[derive(Clone, Debug, Default)]
-pub struct Swapped {
-    /// Written in place into the pools (None where the renderer was made anew).
-    pub update: Option<SceneUpdate>,
-    /// The pools could not take the scene (its lights or bounds differ): a new renderer, with the
-    /// light of tiles resident before and after carried through a read-back.
-    pub made_anew: bool,
-    /// Leaves whose light was kept.
-    pub carried_leaves: usize,
-}
-
-/// Puts `new_scene` into the renderer in place of `scene` (which it replaces): only the new tile
-/// forms are written; tiles resident before and after keep their place and light. The light is
-/// not settled here: the caller decides how many bounces to spend.
-pub fn swap_tiles(
-    gpu: &Gpu,
-    r: &mut Renderer,
-    scene: &mut SceneData,
-    new_scene: SceneData,
-) -> Result<Swapped> {
-    if let Some(u) = r.update_scene(&new_scene)? {
-        *scene = new_scene;
-        return Ok(Swapped { carried_leaves: u.carried_leaves, update: Some(u), made_anew: false });
-    }
-    let carried = r.light_by_tile(scene)?;
-    let (caps, clip) = (r.pool_caps(), r.clip());
-    *scene = new_scene;
-    *r = Renderer::with_pools(gpu, scene, r.settings().clone(), caps)?;
-    r.set_clip(clip);
-    let carried_leaves = r.seed_light(scene, &carried)?;
-    Ok(Swapped { update: None, made_anew: true, carried_leaves })
 }
 
 /// A residency chosen on the loader thread: the scene to swap in where the tiles' forms changed,

@@ -200,8 +200,11 @@ impl Gpu {
         // Software adapters are timed on the CPU: lavapipe's timestamps do not enclose a compute
         // dispatch whose pipeline binds no texture (measured: propagate read 1.4 ms for a 20 s
         // dispatch once its layout no longer held the shadow atlas; with it, 20.6 s).
+        // In a browser the query results could only be read back a frame late; passes go
+        // untimed there rather than blocking.
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY)
-            && info.device_type != wgpu::DeviceType::Cpu;
+            && info.device_type != wgpu::DeviceType::Cpu
+            && !cfg!(target_arch = "wasm32");
         if timestamps {
             features |= wgpu::Features::TIMESTAMP_QUERY;
         }
@@ -360,20 +363,10 @@ impl Gpu {
         }))
     }
 
-    /// Copies `size` bytes of `buffer` (which needs COPY_SRC) to the CPU, blocking. Not in a
-    /// browser, which cannot block on the GPU: there it is an error naming what asked.
-    #[cfg(target_arch = "wasm32")]
-    pub fn read_buffer(&self, _buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
-        Err(Error::Unsupported {
-            adapter: self.describe(),
-            what: format!("a blocking read-back of {size} bytes"),
-            hint: "a browser cannot wait for the GPU".into(),
-        })
-    }
-
-    /// Copies `size` bytes of `buffer` (which needs COPY_SRC) to the CPU, blocking.
-    #[cfg(not(target_arch = "wasm32"))]
-    pub fn read_buffer(&self, buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
+    /// Starts copying `size` bytes of `buffer` (which needs COPY_SRC) to the CPU without
+    /// waiting: [`PendingRead::take`] has them once the GPU is done. The only read-back a browser
+    /// can do (it cannot block on the GPU; the map completes between its frames).
+    pub fn start_read(&self, buffer: &wgpu::Buffer, size: u64) -> PendingRead {
         let size = size.max(4).next_multiple_of(4);
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
@@ -384,18 +377,33 @@ impl Gpu {
         let mut enc = self.device.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
         self.queue.submit([enc.finish()]);
-        let slice = staging.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| Error::Gpu { pass: "readback", message: e.to_string() })?;
+        let state: Arc<Mutex<Option<std::result::Result<(), String>>>> = Arc::new(Mutex::new(None));
+        let sink = state.clone();
+        staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+            if let Ok(mut s) = sink.lock() {
+                *s = Some(r.map_err(|e| e.to_string()));
+            }
+        });
+        PendingRead { staging, state }
+    }
+
+    /// Copies `size` bytes of `buffer` (which needs COPY_SRC) to the CPU, blocking. Not in a
+    /// browser, which cannot block on the GPU: there it is an error naming what asked
+    /// ([`Gpu::start_read`] is what a browser can do).
+    pub fn read_buffer(&self, buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
+        if cfg!(target_arch = "wasm32") {
+            return Err(Error::Unsupported {
+                adapter: self.describe(),
+                what: format!("a blocking read-back of {size} bytes"),
+                hint: "a browser cannot wait for the GPU".into(),
+            });
+        }
+        let read = self.start_read(buffer, size);
+        self.wait()?;
         self.check("readback")?;
-        let view =
-            slice.get_mapped_range().map_err(|e| Error::Gpu { pass: "readback", message: e.to_string() })?;
-        let out = view.to_vec();
-        drop(view);
-        staging.unmap();
-        Ok(out)
+        read.take().unwrap_or_else(|| {
+            Err(Error::Gpu { pass: "readback", message: "the buffer was not mapped after a wait".into() })
+        })
     }
 
     /// Blocks until all submitted work is done.
@@ -404,5 +412,30 @@ impl Gpu {
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| Error::Gpu { pass: "wait", message: e.to_string() })?;
         Ok(())
+    }
+}
+
+/// A read-back under way ([`Gpu::start_read`]).
+#[derive(Debug)]
+pub struct PendingRead {
+    staging: wgpu::Buffer,
+    /// Set by the map's callback: whether mapping worked.
+    state: Arc<Mutex<Option<std::result::Result<(), String>>>>,
+}
+
+impl PendingRead {
+    /// The bytes where the GPU has finished (None: not yet; ask again after the next frame).
+    pub fn take(&self) -> Option<Result<Vec<u8>>> {
+        let done = self.state.lock().ok()?.take()?;
+        Some(done.map_err(|message| Error::Gpu { pass: "readback", message }).and_then(|()| {
+            let slice = self.staging.slice(..);
+            let view = slice
+                .get_mapped_range()
+                .map_err(|e| Error::Gpu { pass: "readback", message: e.to_string() })?;
+            let out = view.to_vec();
+            drop(view);
+            self.staging.unmap();
+            Ok(out)
+        }))
     }
 }

@@ -38,6 +38,7 @@ pub mod rock;
 pub mod scene_data;
 pub mod settings;
 pub mod shaders;
+pub mod stream;
 pub mod tile_index;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod window;

@@ -15,10 +15,10 @@ use crate::framing::Framing;
 use crate::gpu::{Gpu, GpuOptions};
 use crate::image_out;
 use crate::plan::EffectPlan;
-use crate::pool::{POOL_HEADROOM, PoolCaps};
 use crate::renderer::{ClipBox, PassStats, Renderer, Settings};
 use crate::residency::{self, Budget, Residency};
 use crate::scene_data::{SceneData, TileMode};
+use crate::stream::Streaming;
 
 /// Where the camera comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -182,86 +182,10 @@ fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Stre
         apply_lamps(opts, &mut scene);
         return Ok((scene, None));
     }
-    let mut coarse = non_empty(SceneData::from_package_with(&pkg, |_| TileMode::Far)?)?;
-    apply_lamps(opts, &mut coarse);
-    let largest_tile_m = tiles.iter().map(|t| (t.max_m - t.min_m).max_element()).fold(0.0, f32::max);
-    // Residency fills the pools but for their headroom (pool.rs).
-    let fill = Budget { gpu_bytes: (budget.gpu_bytes as f64 * (1.0 - POOL_HEADROOM)) as u64, ..budget };
-    let streaming = Streaming {
-        pkg,
-        tiles,
-        budget: fill,
-        aspect: opts.width as f32 / opts.height.max(1) as f32,
-        lights_m: coarse.lights.iter().map(|l| l.position_m).collect(),
-        light_reach_m: opts.settings.max_distance_m.unwrap_or(largest_tile_m),
-        rock: coarse.rock.clone(),
-        pool_bytes: budget.gpu_bytes,
-    };
-    Ok((coarse, Some(streaming)))
-}
-
-/// What a job over budget keeps to choose tiles again as its camera moves.
-#[derive(Debug)]
-pub struct Streaming {
-    pkg: Package,
-    tiles: Vec<residency::TileFootprint>,
-    budget: Budget,
-    aspect: f32,
-    lights_m: Vec<Vec3>,
-    light_reach_m: f32,
-    /// `--gpu-memory`: the renderer's tile pools take this much (`budget` keeps their headroom
-    /// free).
-    pool_bytes: u64,
-    /// Read (format 1.1) or classified once: every load holds every tile in some form, so every
-    /// load has the same rock (`from_package_with_rock`).
-    rock: crate::rock::RockTable,
-}
-
-impl Streaming {
-    pub fn tiles(&self) -> &[residency::TileFootprint] {
-        &self.tiles
-    }
-
-    pub fn tile_count(&self) -> usize {
-        self.tiles.len()
-    }
-
-    /// `--gpu-memory`: what the renderer's tile pools take.
-    pub fn pool_bytes(&self) -> u64 {
-        self.pool_bytes
-    }
-
-    /// Residency keeps within these pools from now on (with their headroom taken off already).
-    pub fn set_pool_limits(&mut self, caps: PoolCaps) {
-        self.budget.pools = Some(caps);
-    }
-
-    /// The residency for a camera, whose view `clip` cuts.
-    pub fn choose(&self, cam: &Camera, clip: Option<ClipBox>) -> Result<Residency> {
-        let view = residency::View {
-            eye_m: cam.eye_m,
-            forward: cam.look_at_m - cam.eye_m,
-            up: cam.up,
-            fov_y_rad: cam.fov_y_deg.to_radians(),
-            aspect: self.aspect,
-            lights_m: self.lights_m.clone(),
-            light_reach_m: self.light_reach_m,
-            clip,
-        };
-        residency::choose(&self.tiles, &view, self.budget)
-    }
-
-    /// The scene of a residency with the job's `lights` (`--lamps`, a headlamp: chosen once).
-    pub fn load(
-        &self,
-        r: &Residency,
-        lights: Vec<crate::scene_data::SceneLight>,
-        headlamp: bool,
-    ) -> Result<SceneData> {
-        let mut scene = SceneData::from_package_with_rock(&self.pkg, r.mode_of(), self.rock.clone())?;
-        (scene.lights, scene.headlamp) = (lights, headlamp);
-        Ok(scene)
-    }
+    let aspect = opts.width as f32 / opts.height.max(1) as f32;
+    let (coarse, streaming) =
+        Streaming::far_first(pkg, tiles, budget, aspect, &opts.settings, |s| apply_lamps(opts, s))?;
+    Ok((non_empty(coarse)?, Some(streaming)))
 }
 
 /// One frame of a job, for `--json` and the fly-through tables.
@@ -655,7 +579,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
                     let (before, after) = (full(f.current()), full(&arrived.residency));
                     loaded = after.difference(&before).count();
                     evicted = before.difference(&after).count();
-                    let swapped = crate::follow::swap_tiles(&gpu, &mut r, &mut scene, new_scene)?;
+                    let swapped = crate::stream::swap_tiles(&gpu, &mut r, &mut scene, new_scene)?;
                     (update, made_anew, carried_leaves) =
                         (swapped.update, swapped.made_anew, swapped.carried_leaves);
                     let report = |done, change| progress(Progress::Bounce { done, budget, change });

@@ -169,6 +169,8 @@ pub struct Renderer {
     forced: Vec<Pass>,
     /// Why a viewer holds the bounces, if it does ([`Renderer::hold_light`]).
     light_held: Option<&'static str>,
+    /// The last bounce's change, read back without blocking ([`Renderer::poll_light`]).
+    bounce_readback: Option<crate::gpu::PendingRead>,
     /// The view's clip box ([`Renderer::set_clip`]).
     clip: Option<ClipBox>,
     /// A bounce under way in slices ([`Renderer::update_light_slice`]): its next invocation
@@ -663,6 +665,7 @@ impl Renderer {
             direct_valid: false,
             forced: Vec::new(),
             light_held: None,
+            bounce_readback: None,
             clip: None,
             bounce_at: None,
             slice_run: (0, 0),
@@ -744,6 +747,7 @@ impl Renderer {
     /// (each leaf gathers from the same pyramid), and counts once it has run every leaf. Returns
     /// the leaves propagated.
     pub fn update_light_slice(&mut self, max_leaves: u32) -> Result<u32> {
+        self.poll_light()?;
         let p = self.plan(None);
         self.execute(&p, None, Some(max_leaves.max(64)))?;
         if !p.runs(Pass::Propagate) {
@@ -839,7 +843,9 @@ impl Renderer {
             frame: frame.is_some(),
             gbuffer_valid,
             plain_view: (!self.settings.view.shows_light()).then(|| self.settings.view.name()),
-            light_held: self.light_held,
+            light_held: self.light_held.or_else(|| {
+                self.bounce_readback.is_some().then_some("the last bounce's change is on its way back")
+            }),
             bounce_part: self.bounce_at.map(|next| (next, self.active_written.unwrap_or(0))),
         }
     }
@@ -868,6 +874,7 @@ impl Renderer {
 
     /// Runs the light part of the plan (shadow, inject, one bounce); returns the plan it ran.
     pub fn update_light(&mut self) -> Result<EffectPlan> {
+        self.poll_light()?;
         let p = self.plan(None);
         self.execute(&p, None, None)?;
         Ok(p)
@@ -1175,6 +1182,7 @@ impl Renderer {
                 problem: format!("{width}x{height} is outside 1..=16384"),
             });
         }
+        self.poll_light()?;
         let p = self.plan(Some((camera, width, height)));
         self.execute(&p, Some((camera, width, height)), None)?;
         Ok(p)
@@ -1390,9 +1398,9 @@ impl Renderer {
             self.record(&mut enc, step.pass)?;
             *self.stats_now.dispatches.entry(step.pass).or_default() += 1;
             ran.push(step.pass);
-            if self.queries.is_none() {
+            if self.queries.is_none() && !cfg!(target_arch = "wasm32") {
                 // No timestamp queries: time each pass on the CPU, recording to completion of its
-                // own blocking submit.
+                // own blocking submit (not in a browser, which cannot block).
                 let done = std::mem::replace(&mut enc, self.encoder());
                 self.gpu.queue.submit([done.finish()]);
                 self.gpu.wait()?;
@@ -1500,17 +1508,42 @@ impl Renderer {
         } else if ran.contains(&Pass::Propagate) {
             self.bounce_at = None;
             let tiles = self.activity.tiles();
-            let bytes = self.gpu.read_buffer(&self.changes, 16 + 4 * tiles as u64)?;
-            let bits = u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
-            self.stats_now.last_change = Some(f32::from_bits(bits));
-            self.stats_now.bounces_done += 1;
-            let change: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[16..16 + 4 * tiles]);
-            let work = self.activity.finish(&change, self.settings.convergence_tolerance);
-            self.stats_now.propagated_leaves += work.leaves;
-            self.bounce_work.push(work);
-            self.active_written = None;
+            self.bounce_readback = Some(self.gpu.start_read(&self.changes, 16 + 4 * tiles as u64));
+            // Natively the bounce ends here; a browser collects its change on a later frame
+            // (`poll_light`), and plans no light work until then.
+            if !cfg!(target_arch = "wasm32") {
+                self.gpu.wait()?;
+                if !self.poll_light()? {
+                    return Err(Error::Gpu {
+                        pass: "propagate",
+                        message: "the bounce's change was not read back after a wait".into(),
+                    });
+                }
+            }
         }
         Ok(())
+    }
+
+    /// Finishes the last bounce where its read-back has arrived: its change decides which tiles
+    /// the next bounce updates, and whether the light converged. Returns whether no read-back is
+    /// pending any longer. [`Renderer::render`] and [`Renderer::update_light`] call it; a browser
+    /// shell calls it each frame too, so a bounce that ended on the last frame is counted before
+    /// this frame plans.
+    pub fn poll_light(&mut self) -> Result<bool> {
+        let Some(read) = &self.bounce_readback else { return Ok(true) };
+        let Some(bytes) = read.take() else { return Ok(false) };
+        self.bounce_readback = None;
+        let bytes = bytes?;
+        let tiles = self.activity.tiles();
+        let bits = u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
+        self.stats_now.last_change = Some(f32::from_bits(bits));
+        self.stats_now.bounces_done += 1;
+        let change: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[16..16 + 4 * tiles]);
+        let work = self.activity.finish(&change, self.settings.convergence_tolerance);
+        self.stats_now.propagated_leaves += work.leaves;
+        self.bounce_work.push(work);
+        self.active_written = None;
+        Ok(true)
     }
 
     /// Each leaf's light state (direct, gather, out), for tests and the reference comparison.

@@ -443,7 +443,7 @@ impl App {
         if let Some(f) = &mut s.follow {
             if let Some(arrived) = f.poll()? {
                 if let Some(new_scene) = arrived.scene {
-                    follow::swap_tiles(&s.gpu, &mut s.renderer, &mut s.scene, new_scene)?;
+                    crate::stream::swap_tiles(&s.gpu, &mut s.renderer, &mut s.scene, new_scene)?;
                     self.summary.tile_swaps += 1;
                 }
                 f.accept(arrived.residency);

@@ -525,3 +525,84 @@ fn light_carried_across_a_reload_starts_closer_and_converges_over_frames_to_the_
     let within = |f: &[golden::ImageDiff]| f.iter().position(golden::within_tolerance).unwrap_or(f.len());
     assert!(within(&warm_frames) <= within(&cold_frames), "and reaches the tolerance no later");
 }
+
+/// The package as a browser first holds it: its directory only (two byte ranges).
+fn directory_only(bytes: &[u8]) -> Package {
+    let len = bytes.len() as u64;
+    let head = &bytes[..(Package::HEAD_BYTES.min(len)) as usize];
+    let dir = Package::directory_range("ranged.grotto", head, len).unwrap();
+    Package::from_directory(
+        "ranged.grotto",
+        len,
+        head,
+        dir.start,
+        &bytes[dir.start as usize..dir.end as usize],
+    )
+    .unwrap()
+}
+
+/// Inserts what `pkg` is missing of `sections`, as fetched; returns the bytes fetched.
+fn fetch(pkg: &mut Package, bytes: &[u8], sections: Vec<grotto_format::SectionInfo>) -> u64 {
+    let ranges = pkg.missing(sections, 4096);
+    for r in &ranges {
+        pkg.insert(r.start, &bytes[r.start as usize..r.end as usize]).unwrap();
+    }
+    ranges.iter().map(|r| r.end - r.start).sum()
+}
+
+fn same_scene(what: &str, a: &SceneData, b: &SceneData) {
+    assert!(a.tiles == b.tiles, "{what}: tiles differ");
+    assert!(a.nodes == b.nodes, "{what}: nodes differ");
+    assert!(a.leaves == b.leaves, "{what}: leaves differ");
+    assert!(a.surfels == b.surfels, "{what}: surfels differ");
+    assert!(a.rock == b.rock, "{what}: rock differs");
+    assert_eq!(a.lights.len(), b.lights.len(), "{what}: lights");
+}
+
+#[test]
+fn the_sections_a_residency_reads_are_enough_to_load_it_from_byte_ranges() {
+    // A browser fetches the sections `stream::sections_for` names and nothing else before it
+    // loads a residency: holding exactly those, a package read by ranges must give the scene
+    // the whole file gives (a missing section would be a NotFetched error here), and the far
+    // start must hold a small part of the file. Also for a package without stored levels, whose
+    // far start needs the full tiles (the runtime derives levels and rock from them).
+    use grotto_runtime::stream::{self, Streaming};
+    let bare_path = without_levels(
+        small_tiles_cave(),
+        &Path::new(env!("CARGO_TARGET_TMPDIR")).join("ranges-bare.grotto"),
+    );
+    for (name, path) in [("stored levels", small_tiles_cave()), ("no stored levels", bare_path.as_path())] {
+        let bytes = std::fs::read(path).unwrap();
+        let whole = Package::open(path).unwrap();
+        let mut ranged = directory_only(&bytes);
+        let n = whole.tile_count() as usize;
+        let far_sections = stream::sections_for(&ranged, &vec![TileMode::Far; n], false);
+        let far_bytes = fetch(&mut ranged, &bytes, far_sections);
+        let tiles = residency::footprints(&ranged, false).unwrap();
+        assert_eq!(tiles, residency::footprints(&whole, false).unwrap(), "{name}: footprints");
+        let budget = Budget { gpu_bytes: sizes(&whole).3 * 3, points: u64::MAX, pools: None };
+        let (far, mut st) =
+            Streaming::far_first(ranged, tiles, budget, W as f32 / H as f32, &settings(), |_| {}).unwrap();
+        same_scene(name, &far, &SceneData::from_package_with(&whole, |_| TileMode::Far).unwrap());
+        if name == "stored levels" {
+            assert!(
+                far_bytes * 4 < bytes.len() as u64,
+                "{name}: the far start fetched {far_bytes} of {} bytes",
+                bytes.len()
+            );
+        }
+        // A view's residency: some tiles full, some coarse, some far.
+        let cam = Camera::from_scene(&far.cameras[0]);
+        let r = st.choose(&cam, None).unwrap();
+        let modes = r.modes();
+        assert!(modes.contains(&TileMode::Full) && modes.iter().any(|m| *m != TileMode::Full), "{modes:?}");
+        let sections = st.sections_for(&r);
+        let held_before = st.package().held_bytes();
+        fetch(st.package_mut(), &bytes, sections);
+        assert!(st.package().held_bytes() < bytes.len() as u64 || name != "stored levels");
+        assert!(st.package().held_bytes() > held_before);
+        let loaded = st.load(&r, far.lights.clone(), false).unwrap();
+        let expected = SceneData::from_package_with_rock(&whole, r.mode_of(), far.rock.clone()).unwrap();
+        same_scene(name, &loaded, &expected);
+    }
+}

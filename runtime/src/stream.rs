@@ -1,0 +1,232 @@
+//! Tiles chosen for a camera and brought into the renderer, the same on every platform: which
+//! tiles a view keeps in which form ([`Streaming::choose`]), which package sections those forms
+//! read ([`sections_for`]: what a browser fetches by HTTP range before it can load them), the
+//! scene of a residency ([`Streaming::load`]), a renderer whose pools fit the budget
+//! ([`renderer_for`]) and the swap of one residency's tiles for another's ([`swap_tiles`]).
+//! Threads (follow.rs) and HTTP (the web crate) stay in the shells around this.
+
+use glam::Vec3;
+use grotto_format::{Package, Scope, SectionInfo, SectionKind};
+
+use crate::camera::Camera;
+use crate::error::Result;
+use crate::gpu::Gpu;
+use crate::pool::{POOL_HEADROOM, PoolCaps};
+use crate::renderer::{ClipBox, Renderer, SceneUpdate, Settings};
+use crate::residency::{self, Budget, Residency, TileFootprint};
+use crate::rock::RockTable;
+use crate::scene_data::{SceneData, SceneLight, TileMode};
+
+/// What a view over budget keeps to choose tiles again as its camera moves.
+#[derive(Debug)]
+pub struct Streaming {
+    pkg: Package,
+    tiles: Vec<TileFootprint>,
+    budget: Budget,
+    aspect: f32,
+    lights_m: Vec<Vec3>,
+    light_reach_m: f32,
+    /// `--gpu-memory`: the renderer's tile pools take this much (`budget` keeps their headroom
+    /// free).
+    pool_bytes: u64,
+    /// Read (format 1.1) or classified once: every load holds every tile in some form, so every
+    /// load has the same rock (`from_package_with_rock`).
+    rock: RockTable,
+}
+
+impl Streaming {
+    /// Every tile of `pkg` at its far level (the first scene to show, small enough to fetch
+    /// before anything else), and what chooses finer tiles from then on. `tiles`: the package's
+    /// [`residency::footprints`]; `budget` its `gpu_bytes` and `points` (`--gpu-memory`,
+    /// `--point-budget`); `aspect` the image's; `adjust` changes the far scene's lights before
+    /// they are kept for residency (`--lamps`).
+    pub fn far_first(
+        pkg: Package,
+        tiles: Vec<TileFootprint>,
+        budget: Budget,
+        aspect: f32,
+        settings: &Settings,
+        adjust: impl FnOnce(&mut SceneData),
+    ) -> Result<(SceneData, Self)> {
+        let mut far = SceneData::from_package_with(&pkg, |_| TileMode::Far)?;
+        adjust(&mut far);
+        let largest_tile_m = tiles.iter().map(|t| (t.max_m - t.min_m).max_element()).fold(0.0, f32::max);
+        // Residency fills the pools but for their headroom (pool.rs).
+        let fill = Budget { gpu_bytes: (budget.gpu_bytes as f64 * (1.0 - POOL_HEADROOM)) as u64, ..budget };
+        let streaming = Self {
+            pkg,
+            tiles,
+            budget: fill,
+            aspect,
+            lights_m: far.lights.iter().map(|l| l.position_m).collect(),
+            light_reach_m: settings.max_distance_m.unwrap_or(largest_tile_m),
+            rock: far.rock.clone(),
+            pool_bytes: budget.gpu_bytes,
+        };
+        Ok((far, streaming))
+    }
+
+    pub fn tiles(&self) -> &[TileFootprint] {
+        &self.tiles
+    }
+
+    pub fn tile_count(&self) -> usize {
+        self.tiles.len()
+    }
+
+    /// The package tiles are read from.
+    pub fn package(&self) -> &Package {
+        &self.pkg
+    }
+
+    /// The package, to add the byte ranges a browser fetched ([`Package::insert`]).
+    pub fn package_mut(&mut self) -> &mut Package {
+        &mut self.pkg
+    }
+
+    /// `--gpu-memory`: what the renderer's tile pools take.
+    pub fn pool_bytes(&self) -> u64 {
+        self.pool_bytes
+    }
+
+    /// Residency keeps within these pools from now on (with their headroom taken off already).
+    pub fn set_pool_limits(&mut self, caps: PoolCaps) {
+        self.budget.pools = Some(caps);
+    }
+
+    /// The residency for a camera, whose view `clip` cuts.
+    pub fn choose(&self, cam: &Camera, clip: Option<ClipBox>) -> Result<Residency> {
+        let view = residency::View {
+            eye_m: cam.eye_m,
+            forward: cam.look_at_m - cam.eye_m,
+            up: cam.up,
+            fov_y_rad: cam.fov_y_deg.to_radians(),
+            aspect: self.aspect,
+            lights_m: self.lights_m.clone(),
+            light_reach_m: self.light_reach_m,
+            clip,
+        };
+        residency::choose(&self.tiles, &view, self.budget)
+    }
+
+    /// The sections [`Streaming::load`] reads for `r`.
+    pub fn sections_for(&self, r: &Residency) -> Vec<SectionInfo> {
+        sections_for(&self.pkg, &r.modes(), true)
+    }
+
+    /// The scene of a residency with the job's `lights` (`--lamps`, a headlamp: chosen once).
+    pub fn load(&self, r: &Residency, lights: Vec<SceneLight>, headlamp: bool) -> Result<SceneData> {
+        let mut scene = SceneData::from_package_with_rock(&self.pkg, r.mode_of(), self.rock.clone())?;
+        (scene.lights, scene.headlamp) = (lights, headlamp);
+        Ok(scene)
+    }
+}
+
+/// The sections reading `pkg`'s tiles in these modes (indexed by tile; missing: skipped) reads,
+/// globals included: what a package fetched by byte ranges must hold before
+/// [`SceneData::from_package_with`] (`rock_known: false`) or [`Streaming::load`] (`rock_known:
+/// true`, the rock classified already) can read it. The residency footprints
+/// ([`residency::footprints`]) need only the directory and the scene where every tile stores its
+/// coarse levels (format 1.1 on); otherwise they read each tile's SVO nodes, listed here for
+/// every tile.
+pub fn sections_for(pkg: &Package, modes: &[TileMode], rock_known: bool) -> Vec<SectionInfo> {
+    let mut out: Vec<SectionInfo> = pkg.sections().filter(|s| s.scope == Scope::Global).collect();
+    let has = |t: u32, kind, item| pkg.find(kind, Scope::Tile(t), item).is_some();
+    // The rock is read from every loaded tile's rock bricks; where a loaded tile with an SVO has
+    // none, it is classified from every loaded tile's full leaves instead.
+    let loaded: Vec<u32> = (0..pkg.tile_count()).filter(|&t| mode(modes, t) != TileMode::Skip).collect();
+    let classify = !rock_known
+        && loaded.iter().any(|&t| has(t, SectionKind::SvoNodes, 0) && !has(t, SectionKind::RockBricks, 0));
+    for t in 0..pkg.tile_count() {
+        let Some(tile) = pkg.tile(t) else { continue };
+        let coarse_stored = |k| has(t, SectionKind::CoarseNodes, k) && has(t, SectionKind::CoarseLeaves, k);
+        let all_coarse = [TileMode::Coarse, TileMode::Far]
+            .iter()
+            .all(|m| m.leaf_lod(tile.depth()) == 0 || coarse_stored(m.leaf_lod(tile.depth())));
+        let m = mode(modes, t);
+        let k = m.leaf_lod(tile.depth());
+        let full = m == TileMode::Full || (m != TileMode::Skip && (classify || !coarse_stored(k)));
+        for s in tile.sections() {
+            let Some(kind) = s.kind else { continue };
+            let wanted = match kind {
+                // Footprints read the nodes where a level is not stored.
+                SectionKind::SvoNodes => full || !all_coarse,
+                SectionKind::LeafOpacity
+                | SectionKind::LeafAlbedo
+                | SectionKind::LeafNdf
+                | SectionKind::LeafEmission => full,
+                SectionKind::Surfels
+                | SectionKind::SurfelColorsRaw
+                | SectionKind::SurfelColorsBc1
+                | SectionKind::SurfelScans => m == TileMode::Full,
+                SectionKind::CoarseNodes | SectionKind::CoarseLeaves => k > 0 && s.item == k,
+                SectionKind::RockBricks => m != TileMode::Skip && !rock_known,
+                _ => false,
+            };
+            if wanted {
+                out.push(s);
+            }
+        }
+    }
+    out
+}
+
+fn mode(modes: &[TileMode], tile: u32) -> TileMode {
+    modes.get(tile as usize).copied().unwrap_or(TileMode::Skip)
+}
+
+/// The renderer for a first scene. With `streaming`, its pools take the whole `--gpu-memory` in
+/// the mix of this scene's tiles, so the tiles of later views replace these in place (pool.rs),
+/// and residency keeps within each pool from then on. Without, a renderer for the scene as it
+/// is.
+pub fn renderer_for(
+    gpu: &Gpu,
+    scene: &SceneData,
+    settings: Settings,
+    streaming: Option<&mut Streaming>,
+) -> Result<Renderer> {
+    let Some(st) = streaming else { return Renderer::new(gpu, scene, settings) };
+    let used = PoolCaps { tiles: st.tile_count() as u64, ..PoolCaps::of(scene) };
+    let caps = PoolCaps::filling(used, st.pool_bytes(), settings.radiance_f16);
+    let r = Renderer::with_pools(gpu, scene, settings, caps)?;
+    st.set_pool_limits(r.pool_caps().less(POOL_HEADROOM));
+    Ok(r)
+}
+
+/// How a change of tiles reached the renderer.
+#[derive(Clone, Debug, Default)]
+pub struct Swapped {
+    /// Written in place into the pools (None where the renderer was made anew).
+    pub update: Option<SceneUpdate>,
+    /// The pools could not take the scene (its lights or bounds differ): a new renderer, with the
+    /// light of tiles resident before and after carried through a read-back (natively; a
+    /// browser cannot block on one, and lights the new renderer from the start).
+    pub made_anew: bool,
+    /// Leaves whose light was kept.
+    pub carried_leaves: usize,
+}
+
+/// Puts `new_scene` into the renderer in place of `scene` (which it replaces): only the new tile
+/// forms are written; tiles resident before and after keep their place and light. The light is
+/// not settled here: the caller decides how many bounces to spend.
+pub fn swap_tiles(
+    gpu: &Gpu,
+    r: &mut Renderer,
+    scene: &mut SceneData,
+    new_scene: SceneData,
+) -> Result<Swapped> {
+    if let Some(u) = r.update_scene(&new_scene)? {
+        *scene = new_scene;
+        return Ok(Swapped { carried_leaves: u.carried_leaves, update: Some(u), made_anew: false });
+    }
+    let carried = if cfg!(target_arch = "wasm32") { None } else { Some(r.light_by_tile(scene)?) };
+    let (caps, clip) = (r.pool_caps(), r.clip());
+    *scene = new_scene;
+    *r = Renderer::with_pools(gpu, scene, r.settings().clone(), caps)?;
+    r.set_clip(clip);
+    let carried_leaves = match carried {
+        Some(c) => r.seed_light(scene, &c)?,
+        None => 0,
+    };
+    Ok(Swapped { update: None, made_anew: true, carried_leaves })
+}
