@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # The test suite. Installs what the tests need on a fresh Debian machine (Mesa's software Vulkan
 # driver lavapipe, EGL + llvmpipe for wgpu's GL backend, and Xvfb and xdotool for the window of
-# `grotto view`), then runs every test of the workspace. Tests that read third-party files expect ../shared/data beside the repository (or
+# `grotto view`), and Chromium with its WebDriver for the browser viewer's test, builds that viewer
+# (scripts/build-web.sh, into target/web), then runs every test of the workspace. Tests that read third-party files expect ../shared/data beside the repository (or
 # GROTTO_SHARED_DATA) and fail without it; GROTTO_SKIP_SHARED_DATA=1 skips them instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-packages=(mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri xvfb xauth xdotool)
+packages=(mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri xvfb xauth xdotool chromium chromium-driver)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -19,6 +20,8 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 # No session bus or display here; wgpu's GL backend only needs a writable runtime dir for EGL.
 export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-$(mktemp -d)}
+# The browser viewer the browser test publishes (tests/tests/browser.rs).
+./scripts/build-web.sh > /dev/null
 cargo test --workspace --locked
 # The cluster steps on a real scheduler (issue 20): plan, a build-tile job array and assemble on a
 # one-node Slurm cluster started here, against one build. Skipped with a message where a scheduler

@@ -58,6 +58,64 @@ impl Camera {
     }
 }
 
+/// Fly or orbit: eye, heading and pitch (z up), speed in metres a second; in orbit, the eye
+/// circles `pivot_m` at `distance_m`. The window's and the browser's controls move it.
+#[derive(Clone, Copy, Debug)]
+pub struct Nav {
+    pub eye_m: Vec3,
+    pub yaw_rad: f32,
+    pub pitch_rad: f32,
+    pub speed_m_s: f32,
+    pub fov_y_deg: f32,
+    pub orbit: Option<(Vec3, f32)>,
+}
+
+impl Nav {
+    pub fn from_camera(c: &Camera, speed_m_s: f32) -> Self {
+        let d = (c.look_at_m - c.eye_m).normalize_or(Vec3::X);
+        Self {
+            eye_m: c.eye_m,
+            yaw_rad: d.y.atan2(d.x),
+            pitch_rad: d.z.clamp(-1.0, 1.0).asin(),
+            speed_m_s,
+            fov_y_deg: c.fov_y_deg,
+            orbit: None,
+        }
+    }
+
+    pub fn forward(&self) -> Vec3 {
+        let (sy, cy) = self.yaw_rad.sin_cos();
+        let (sp, cp) = self.pitch_rad.sin_cos();
+        Vec3::new(cy * cp, sy * cp, sp)
+    }
+
+    pub fn camera(&self) -> Camera {
+        let f = self.forward();
+        let (eye_m, look_at_m) = match self.orbit {
+            Some((pivot, distance)) => (pivot - f * distance, pivot),
+            None => (self.eye_m, self.eye_m + f),
+        };
+        Camera { eye_m, look_at_m, up: Vec3::Z, fov_y_deg: self.fov_y_deg }
+    }
+
+    /// Orbits `pivot_m` from where the eye is now.
+    pub fn orbit_around(&mut self, pivot_m: Vec3) {
+        let eye = self.camera().eye_m;
+        let d = pivot_m - eye;
+        let distance = d.length().max(1e-3);
+        let f = d / distance;
+        self.yaw_rad = f.y.atan2(f.x);
+        self.pitch_rad = f.z.clamp(-1.0, 1.0).asin();
+        self.orbit = Some((pivot_m, distance));
+    }
+
+    /// Flies on from where the orbit put the eye.
+    pub fn fly(&mut self) {
+        self.eye_m = self.camera().eye_m;
+        self.orbit = None;
+    }
+}
+
 /// `frames` cameras along the polyline through `keys` (each segment gets frames in proportion to
 /// its length in eye distance, so speed is steady).
 pub fn path(keys: &[Camera], frames: u32) -> Vec<Camera> {

@@ -28,7 +28,7 @@ pub fn start(
 ) -> Result<(Renderer, Option<Follow>)> {
     match (streaming, first) {
         (Some(mut st), Some(first)) => {
-            let r = stream::renderer_for(gpu, scene, settings, Some(&mut st))?;
+            let r = stream::renderer_for(gpu, scene, settings, Some((&mut st, &first)))?;
             Ok((r, Some(Follow::new(st, first, upload_per_frame))))
         }
         _ => Ok((stream::renderer_for(gpu, scene, settings, None)?, None)),

@@ -30,6 +30,9 @@ pub mod lights;
 pub mod passes;
 pub mod plan;
 pub mod pool;
+pub mod present;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod publish;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod render_job;
 pub mod renderer;

@@ -507,23 +507,7 @@ pub fn frame_path(out: &Path, i: u32, n: u32) -> PathBuf {
     out.with_file_name(format!("{stem}_{i:04}.{ext}"))
 }
 
-/// Middle grey over the geometric mean luminance of the pixels that see something.
-pub fn auto_exposure(hdr: &[[f32; 4]]) -> f32 {
-    let mut sum = 0.0f64;
-    let mut n = 0usize;
-    for p in hdr {
-        let l = 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
-        if l.is_finite() && l > 0.0 {
-            sum += f64::from(l.max(1e-6)).ln();
-            n += 1;
-        }
-    }
-    if n == 0 {
-        return 1.0;
-    }
-    let mean = (sum / n as f64).exp();
-    (0.18 / mean).clamp(1e-6, 1e9) as f32
-}
+pub use crate::renderer::auto_exposure;
 
 /// Opens a package and reads its scene; an empty package is an error (nothing to render).
 pub fn load_scene(package: &Path) -> Result<SceneData> {

@@ -51,6 +51,24 @@ pub fn cone_set(n: u32, aperture_scale: f32) -> (Vec<[f32; 4]>, f32) {
     (dirs, half.tan())
 }
 
+/// Middle grey over the geometric mean luminance of the pixels that see something.
+pub fn auto_exposure(hdr: &[[f32; 4]]) -> f32 {
+    let mut sum = 0.0f64;
+    let mut n = 0usize;
+    for p in hdr {
+        let l = 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+        if l.is_finite() && l > 0.0 {
+            sum += f64::from(l.max(1e-6)).ln();
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return 1.0;
+    }
+    let mean = (sum / n as f64).exp();
+    (0.18 / mean).clamp(1e-6, 1e9) as f32
+}
+
 /// One rendered image.
 #[derive(Clone, Debug)]
 pub struct Frame {
@@ -797,6 +815,8 @@ impl Renderer {
         self.stats_now.last_change = None;
         self.stats_now.bounces_done = 0;
         self.bounce_at = None;
+        // A bounce under the old lights still on its way back counts for nothing now.
+        self.bounce_readback = None;
         self.set_all_active(Why::LightsChanged);
     }
 
@@ -1108,6 +1128,8 @@ impl Renderer {
         self.gbuffer_stale = true;
         self.stats_now = PassStats::default();
         self.bounce_at = None;
+        // The change of a bounce over the old tiles, still on its way back, is not this scene's.
+        self.bounce_readback = None;
         Ok(Some(update))
     }
 
@@ -1158,6 +1180,12 @@ impl Renderer {
     pub fn render(&mut self, camera: &Camera, width: u32, height: u32) -> Result<(Frame, EffectPlan)> {
         let p = self.draw(camera, width, height)?;
         Ok((self.read_frame()?, p))
+    }
+
+    /// The buffer the last frame's HDR radiance is in (4 f32 a pixel, rows top to bottom, from
+    /// its start): what a browser reads back without blocking for its exposure.
+    pub fn hdr_output(&self) -> Option<&wgpu::Buffer> {
+        self.view.as_ref().map(|v| &v.outputs.frame)
     }
 
     /// The last frame [`Renderer::draw`] (or render) made, read back.

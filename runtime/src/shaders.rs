@@ -35,8 +35,8 @@ pub const INJECT: &str = include_str!("passes/inject.wgsl");
 pub const MIP: &str = include_str!("passes/mip.wgsl");
 pub const PROPAGATE: &str = include_str!("passes/propagate.wgsl");
 pub const SPLAT: &str = include_str!("passes/splat.wgsl");
-/// Presents a frame in `grotto view`'s window (window.rs).
-pub const WINDOW: &str = include_str!("window.wgsl");
+/// Presents a frame in a window or a browser's canvas (present.rs).
+pub const PRESENT: &str = include_str!("present.wgsl");
 pub const SHADE: &str = include_str!("passes/shade.wgsl");
 
 /// Constants shared with the Rust side, generated from it so the two cannot drift.

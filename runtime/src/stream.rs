@@ -109,6 +109,32 @@ impl Streaming {
         residency::choose(&self.tiles, &view, self.budget)
     }
 
+    /// Every tile at its far level: what [`Streaming::far_first`]'s scene holds.
+    pub fn far_residency(&self) -> Residency {
+        let decisions = self
+            .tiles
+            .iter()
+            .map(|t| residency::Decision {
+                tile: t.index,
+                relevance: residency::Relevance::Other,
+                distance_m: 0.0,
+                mode: TileMode::Far,
+            })
+            .collect();
+        let far_bytes: u64 = self.tiles.iter().map(|t| t.far.bytes).sum();
+        let totals = residency::ResidencyTotals {
+            budget: self.budget,
+            resident_bytes: far_bytes,
+            coarse_bytes: far_bytes,
+            surfels: self.tiles.iter().map(|t| t.far.surfels).sum(),
+            full_tiles: 0,
+            coarse_tiles: 0,
+            far_tiles: self.tiles.len(),
+            visible_coarse: 0,
+        };
+        Residency { decisions, totals }
+    }
+
     /// The sections [`Streaming::load`] reads for `r`.
     pub fn sections_for(&self, r: &Residency) -> Vec<SectionInfo> {
         sections_for(&self.pkg, &r.modes(), true)
@@ -175,18 +201,29 @@ fn mode(modes: &[TileMode], tile: u32) -> TileMode {
     modes.get(tile as usize).copied().unwrap_or(TileMode::Skip)
 }
 
-/// The renderer for a first scene. With `streaming`, its pools take the whole `--gpu-memory` in
-/// the mix of this scene's tiles, so the tiles of later views replace these in place (pool.rs),
-/// and residency keeps within each pool from then on. Without, a renderer for the scene as it
-/// is.
+/// The renderer for a first scene. With `streaming` and the residency `sized_for`, its pools take
+/// the whole `--gpu-memory` in the mix of that residency's tiles (the first view's: natively the
+/// scene itself, in a browser the view the far scene is drawn for while its tiles arrive), so the
+/// tiles of later views replace these in place (pool.rs), and residency keeps within each pool
+/// from then on. Without, a renderer for the scene as it is.
 pub fn renderer_for(
     gpu: &Gpu,
     scene: &SceneData,
     settings: Settings,
-    streaming: Option<&mut Streaming>,
+    streaming: Option<(&mut Streaming, &Residency)>,
 ) -> Result<Renderer> {
-    let Some(st) = streaming else { return Renderer::new(gpu, scene, settings) };
-    let used = PoolCaps { tiles: st.tile_count() as u64, ..PoolCaps::of(scene) };
+    let Some((st, sized_for)) = streaming else { return Renderer::new(gpu, scene, settings) };
+    let tiles = st.tile_count() as u64;
+    let used = sized_for.decisions.iter().fold(PoolCaps { tiles, ..Default::default() }, |acc, d| {
+        let c = st.tiles.iter().find(|t| t.index == d.tile).map(|t| t.cost(d.mode)).unwrap_or_default();
+        PoolCaps {
+            tiles: acc.tiles,
+            nodes: acc.nodes + c.nodes,
+            leaves: acc.leaves + c.leaves,
+            surfels: acc.surfels + c.surfels,
+        }
+    });
+    let used = used.at_least(PoolCaps { tiles, ..PoolCaps::of(scene) });
     let caps = PoolCaps::filling(used, st.pool_bytes(), settings.radiance_f16);
     let r = Renderer::with_pools(gpu, scene, settings, caps)?;
     st.set_pool_limits(r.pool_caps().less(POOL_HEADROOM));

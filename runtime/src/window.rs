@@ -2,7 +2,7 @@
 //! opens the package as a render job does ([`render_job::prepare`]), keeps the resident tiles
 //! following the camera on a loader thread ([`Follow`]: flying never waits for the disk), renders
 //! each frame with [`Renderer::draw`] and presents the tonemapped output through a small blit
-//! (window.wgsl) with the panel (egui, [`panel`]) over it.
+//! (present.rs) with the panel (egui, [`panel`]) over it.
 //!
 //! Light yields to the frame rate ([`pace`]): while the camera moves the renderer holds its
 //! bounces (the plan says so); at rest the light converges with as many bounces a frame as fit
@@ -34,11 +34,12 @@ use winit::window::{Fullscreen, Window, WindowId};
 
 pub use pace::{FrameLog, Pacer};
 
-use crate::camera::{self, Camera};
+use crate::camera::{self, Camera, Nav};
 use crate::error::{Error, Result};
 use crate::follow::{self, Follow};
 use crate::gpu::Gpu;
 use crate::image_out;
+use crate::present::{Bar, Blit, Target};
 use crate::render_job::{self, RenderOptions};
 use crate::renderer::{ClipBox, LightProgress, Quality, Renderer, ViewMode, scan_color};
 use crate::scene_data::SceneData;
@@ -176,64 +177,6 @@ enum AutoExposure {
     Done,
 }
 
-/// Fly or orbit: eye, heading and pitch (z up), speed in metres a second; in orbit, the eye
-/// circles `pivot_m` at `distance_m`.
-#[derive(Clone, Copy, Debug)]
-struct Nav {
-    eye_m: Vec3,
-    yaw_rad: f32,
-    pitch_rad: f32,
-    speed_m_s: f32,
-    fov_y_deg: f32,
-    orbit: Option<(Vec3, f32)>,
-}
-
-impl Nav {
-    fn from_camera(c: &Camera, speed_m_s: f32) -> Self {
-        let d = (c.look_at_m - c.eye_m).normalize_or(Vec3::X);
-        Self {
-            eye_m: c.eye_m,
-            yaw_rad: d.y.atan2(d.x),
-            pitch_rad: d.z.clamp(-1.0, 1.0).asin(),
-            speed_m_s,
-            fov_y_deg: c.fov_y_deg,
-            orbit: None,
-        }
-    }
-
-    fn forward(&self) -> Vec3 {
-        let (sy, cy) = self.yaw_rad.sin_cos();
-        let (sp, cp) = self.pitch_rad.sin_cos();
-        Vec3::new(cy * cp, sy * cp, sp)
-    }
-
-    fn camera(&self) -> Camera {
-        let f = self.forward();
-        let (eye_m, look_at_m) = match self.orbit {
-            Some((pivot, distance)) => (pivot - f * distance, pivot),
-            None => (self.eye_m, self.eye_m + f),
-        };
-        Camera { eye_m, look_at_m, up: Vec3::Z, fov_y_deg: self.fov_y_deg }
-    }
-
-    /// Orbits `pivot_m` from where the eye is now.
-    fn orbit_around(&mut self, pivot_m: Vec3) {
-        let eye = self.camera().eye_m;
-        let d = pivot_m - eye;
-        let distance = d.length().max(1e-3);
-        let f = d / distance;
-        self.yaw_rad = f.y.atan2(f.x);
-        self.pitch_rad = f.z.clamp(-1.0, 1.0).asin();
-        self.orbit = Some((pivot_m, distance));
-    }
-
-    /// Flies on from where the orbit put the eye.
-    fn fly(&mut self) {
-        self.eye_m = self.camera().eye_m;
-        self.orbit = None;
-    }
-}
-
 /// A new keyframe once the camera has moved 0.25 m or turned 10 degrees since the last one.
 fn keyframe_due(last: Option<&Camera>, now: &Camera) -> bool {
     let Some(last) = last else { return true };
@@ -241,66 +184,6 @@ fn keyframe_due(last: Option<&Camera>, now: &Camera) -> bool {
         .normalize_or_zero()
         .dot((now.look_at_m - now.eye_m).normalize_or_zero());
     (now.eye_m - last.eye_m).length() > 0.25 || turn < 10f32.to_radians().cos()
-}
-
-/// The presenting pipeline and its uniform.
-struct Blit {
-    pipeline: wgpu::RenderPipeline,
-    layout: wgpu::BindGroupLayout,
-    uniform: wgpu::Buffer,
-}
-
-impl Blit {
-    fn new(gpu: &Gpu, format: wgpu::TextureFormat) -> Result<Self> {
-        let src = crate::shaders::compose(crate::shaders::WINDOW)?;
-        let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("window"),
-            source: wgpu::ShaderSource::Wgsl(src.into()),
-        });
-        let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
-            count: None,
-        };
-        let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("window"),
-            entries: &[
-                entry(0, wgpu::BufferBindingType::Storage { read_only: true }),
-                entry(1, wgpu::BufferBindingType::Uniform),
-            ],
-        });
-        let pl = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("window"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("window"),
-            layout: Some(&pl),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: Default::default(),
-            depth_stencil: None,
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs"),
-                compilation_options: Default::default(),
-                targets: &[Some(format.into())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
-        let uniform =
-            gpu.buffer("window blit", 32, wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST)?;
-        gpu.check("window")?;
-        Ok(Self { pipeline, layout, uniform })
-    }
 }
 
 /// The panel's egui context, its winit input and its wgpu painter.
@@ -563,55 +446,15 @@ impl App {
             _ => return Ok(()),
         };
         let held = moving && !progress.converged;
-        let bar = if progress.converged {
-            2
-        } else if held {
-            0
-        } else {
-            1
-        };
-        let u: [u32; 8] = [
-            out.width,
-            out.height,
-            s.config.width,
-            s.config.height,
-            u32::from(s.config.format.is_srgb()),
-            progress.fraction().to_bits(),
-            bar,
-            out.first_word,
-        ];
-        s.gpu.queue.write_buffer(&s.blit.uniform, 0, bytemuck::cast_slice(&u));
-        let group = s.gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("window"),
-            layout: &s.blit.layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: out.buffer.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: s.blit.uniform.as_entire_binding() },
-            ],
-        });
         let view = frame.texture.create_view(&Default::default());
         let mut enc = s.gpu.device.create_command_encoder(&Default::default());
-        let attachment = |load| {
-            Some(wgpu::RenderPassColorAttachment {
-                view: &view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
-            })
+        let target = Target {
+            view: &view,
+            width: s.config.width,
+            height: s.config.height,
+            srgb: s.config.format.is_srgb(),
         };
-        {
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("window"),
-                color_attachments: &[attachment(wgpu::LoadOp::Clear(wgpu::Color::BLACK))],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&s.blit.pipeline);
-            pass.set_bind_group(0, &group, &[]);
-            pass.draw(0..3, 0..1);
-        }
+        s.blit.record(&s.gpu, &mut enc, &out, &target, progress.fraction(), Bar::of(&progress, moving));
         if s.ui.visible {
             let shown = model(s, progress, held, plan);
             let raw = s.ui.input.take_egui_input(&s.window);
@@ -632,7 +475,12 @@ impl App {
             {
                 let pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("panel"),
-                    color_attachments: &[attachment(wgpu::LoadOp::Load)],
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &view,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations { load: wgpu::LoadOp::Load, store: wgpu::StoreOp::Store },
+                    })],
                     depth_stencil_attachment: None,
                     timestamp_writes: None,
                     occlusion_query_set: None,

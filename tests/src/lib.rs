@@ -49,3 +49,5 @@ pub fn shared_data_dir() -> Option<PathBuf> {
 
 /// Golden images: the one tolerance every image comparison uses.
 pub mod golden;
+/// A static server with HTTP ranges, for the browser test.
+pub mod serve;

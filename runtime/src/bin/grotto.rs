@@ -56,6 +56,11 @@ enum Command {
     /// Tiles follow the camera; the light waits while it moves and converges when it rests. Takes
     /// the render options (--size is the window's size).
     View(Box<ViewArgs>),
+    /// Write a static web site that shows a package in the browser (WebGPU): the viewer, the
+    /// package as it is, and viewer.json. The viewer fetches the package by HTTP range requests
+    /// (directory first, then the tiles the view needs), so any static host that answers ranges
+    /// serves it (docs/web.md). Needs the viewer bundle scripts/build-web.sh builds.
+    Publish(Box<PublishArgs>),
     /// Check a package's structure and every checksum and section; exits non-zero on any problem.
     Verify {
         package: PathBuf,
@@ -63,6 +68,82 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+}
+
+#[derive(clap::Args, Debug)]
+struct PublishArgs {
+    package: PathBuf,
+    /// The site's folder (made; replaced whole if it exists).
+    #[arg(long)]
+    out: PathBuf,
+    /// The viewer bundle (default: $GROTTO_WEB_BUNDLE, else `web` beside the binary's folder,
+    /// where scripts/build-web.sh puts it: target/web).
+    #[arg(long)]
+    bundle: Option<PathBuf>,
+    /// The page's title (default: the package's name).
+    #[arg(long)]
+    title: Option<String>,
+    /// The camera the page opens on (default: the package's first).
+    #[arg(long)]
+    camera: Option<String>,
+    /// Quality preset the page starts with: fast, balanced, high (as grotto render --quality).
+    #[arg(long)]
+    quality: Option<String>,
+    /// Most light bounces.
+    #[arg(long)]
+    bounces: Option<u32>,
+    /// Fixed exposure (default: automatic, as grotto render).
+    #[arg(long)]
+    exposure: Option<f32>,
+    /// Machine-readable output.
+    #[arg(long)]
+    json: bool,
+}
+
+fn publish(a: PublishArgs) -> anyhow::Result<ExitCode> {
+    use grotto_runtime::publish;
+    if let Some(q) = &a.quality {
+        anyhow::ensure!(
+            grotto_runtime::renderer::Quality::parse(q).is_some(),
+            "--quality {q}: expected fast, balanced or high"
+        );
+    }
+    let mut viewer_options = serde_json::Map::new();
+    if let Some(c) = a.camera {
+        viewer_options.insert("camera".into(), c.into());
+    }
+    if let Some(q) = a.quality {
+        viewer_options.insert("quality".into(), q.into());
+    }
+    if let Some(b) = a.bounces {
+        viewer_options.insert("bounces".into(), b.into());
+    }
+    if let Some(e) = a.exposure {
+        anyhow::ensure!(e.is_finite() && e > 0.0, "--exposure {e}: expected a number > 0");
+        viewer_options.insert("exposure".into(), e.into());
+    }
+    let summary = publish::publish(&publish::PublishOptions {
+        package: a.package,
+        out: a.out,
+        bundle: a.bundle,
+        title: a.title,
+        viewer_options,
+    })?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        let mb = |b: u64| b as f64 / 1e6;
+        println!(
+            "wrote {}: {} ({:.2} MB package, {:.2} MB viewer of which {:.2} MB wasm); serve it from any \
+             static host that answers range requests (docs/web.md)",
+            summary.site,
+            summary.files.join(", "),
+            mb(summary.package_bytes),
+            mb(summary.bundle_bytes),
+            mb(summary.wasm_bytes)
+        );
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 #[derive(clap::Args, Debug)]
@@ -610,6 +691,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Render(args) => render(*args),
         Command::Bench(args) => bench(*args),
         Command::View(args) => view(*args),
+        Command::Publish(args) => publish(*args),
         Command::Verify { package, json } => {
             let report = match Package::open(&package) {
                 Ok(pkg) => inspect::verify(&pkg),

@@ -1,4 +1,4 @@
-// Presents the renderer's tonemapped frame (packed RGBA8, rows top to bottom) in a window,
+// Presents the renderer's tonemapped frame (packed RGBA8, rows top to bottom) in a window or canvas,
 // scaled to the window by nearest sampling, with the light's convergence as a bar along the
 // bottom (grey: waiting for the camera to rest, amber: converging, green: converged). Where the
 // surface is sRGB, the already encoded values are decoded first so the surface's encoding gives

@@ -1,0 +1,326 @@
+//! The browser viewer end to end (issue 19), in a real browser: a demo cave published with
+//! `grotto publish` (the library call the command makes), served on 127.0.0.1 by a static server
+//! that answers range requests (tests/src/serve.rs), opened in headless Chromium on its software
+//! WebGPU adapter (SwiftShader) driven by chromedriver (WebDriver). The test waits for the ready
+//! marker the page sets (light converged on the tiles the view wants), takes a screenshot of the
+//! canvas and compares it with `grotto render` of the same camera (lavapipe) through the golden
+//! tolerance helper. It also checks how the package arrived: by ranges only, the first frame after
+//! a small part of it, nothing fetched twice. A page in a browser without WebGPU must say so.
+//!
+//! Needs Debian's `chromium` and `chromium-driver` and the viewer bundle (`scripts/build-web.sh`,
+//! target/web): `scripts/test.sh` installs and builds them. Without them these tests fail, naming
+//! what is missing, unless `GROTTO_SKIP_BROWSER=1` says to skip them.
+
+use std::io::{BufRead, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use base64::Engine;
+use grotto_preprocess::build;
+use grotto_preprocess::ingest::ScanFormat;
+use grotto_preprocess::manifest::Manifest;
+use grotto_preprocess::synth::{self, SynthParams};
+use grotto_runtime::gpu::GpuOptions;
+use grotto_runtime::publish::{self, PublishOptions};
+use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
+use grotto_runtime::renderer::{Quality, Settings};
+use grotto_tests::{golden, serve};
+use serde_json::{Value, json};
+
+/// One browser at a time: two would share the machine's 2 cores and slow each other past their
+/// timeouts.
+static BROWSER: Mutex<()> = Mutex::new(());
+
+const W: u32 = 320;
+const H: u32 = 240;
+
+/// The browser, its driver and the viewer bundle, or None where the tests are to be skipped.
+fn tools() -> Option<(PathBuf, PathBuf, PathBuf)> {
+    if std::env::var_os("GROTTO_SKIP_BROWSER").is_some_and(|v| v == "1") {
+        eprintln!("GROTTO_SKIP_BROWSER=1: browser test skipped");
+        return None;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    let bundle = std::env::var_os("GROTTO_WEB_BUNDLE").map_or_else(|| root.join("target/web"), PathBuf::from);
+    let chromium = PathBuf::from(std::env::var_os("GROTTO_CHROMIUM").unwrap_or("/usr/bin/chromium".into()));
+    let driver =
+        PathBuf::from(std::env::var_os("GROTTO_CHROMEDRIVER").unwrap_or("/usr/bin/chromedriver".into()));
+    for (what, p) in [("chromium", &chromium), ("chromedriver", &driver)] {
+        assert!(
+            p.is_file(),
+            "{what} not found at {}: run scripts/test.sh (installs Debian's chromium and chromium-driver), \
+             or set GROTTO_SKIP_BROWSER=1 to skip the browser tests",
+            p.display()
+        );
+    }
+    assert!(
+        bundle.join("grotto_web_bg.wasm").is_file(),
+        "no viewer bundle in {}: run scripts/build-web.sh (scripts/test.sh does), or set GROTTO_SKIP_BROWSER=1",
+        bundle.display()
+    );
+    Some((chromium, driver, bundle))
+}
+
+/// One HTTP/1.1 exchange with chromedriver (JSON in and out).
+fn http(port: u16, method: &str, path: &str, body: Option<&Value>) -> Value {
+    let body = body.map(Value::to_string).unwrap_or_default();
+    let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(300))).unwrap();
+    write!(
+        s,
+        "{method} {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nContent-Type: application/json\r\n\
+         Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    )
+    .unwrap();
+    // chromedriver keeps the connection open: read the head, then Content-Length bytes.
+    let mut reader = std::io::BufReader::new(s);
+    let mut len = 0usize;
+    loop {
+        let mut line = String::new();
+        reader.read_line(&mut line).unwrap();
+        if line.trim().is_empty() {
+            break;
+        }
+        if let Some((k, v)) = line.split_once(':')
+            && k.eq_ignore_ascii_case("content-length")
+        {
+            len = v.trim().parse().unwrap();
+        }
+    }
+    let mut out = vec![0; len];
+    reader.read_exact(&mut out).unwrap();
+    let text = String::from_utf8_lossy(&out);
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("chromedriver {method} {path}: {e}: {text}"))
+}
+
+/// A chromedriver with one headless Chromium session; both end on drop.
+struct Browser {
+    driver: Child,
+    port: u16,
+    session: String,
+}
+
+impl Browser {
+    fn start(chromium: &Path, driver: &Path, webgpu: bool) -> Self {
+        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let driver = Command::new(driver)
+            .arg(format!("--port={port}"))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let t0 = Instant::now();
+        while TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(t0.elapsed() < Duration::from_secs(30), "chromedriver did not start");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        // The flags the issue gives for WebGPU on SwiftShader; without WebGPU, the page's API
+        // is switched off as in a browser that lacks it.
+        let mut args =
+            vec!["--headless=new", "--no-sandbox", "--window-size=640,480", "--force-device-scale-factor=1"];
+        if webgpu {
+            args.extend([
+                "--enable-unsafe-webgpu",
+                "--enable-features=Vulkan",
+                "--use-vulkan=swiftshader",
+                "--use-angle=swiftshader",
+            ]);
+        } else {
+            args.push("--disable-blink-features=WebGPU");
+        }
+        let caps = json!({"capabilities": {"alwaysMatch": {
+            "goog:chromeOptions": {"binary": chromium, "args": args},
+        }}});
+        let mut b = Self { driver, port, session: String::new() };
+        let v = http(port, "POST", "/session", Some(&caps));
+        b.session = v["value"]["sessionId"].as_str().unwrap_or_else(|| panic!("no session: {v}")).to_owned();
+        b
+    }
+
+    fn call(&self, method: &str, path: &str, body: Option<&Value>) -> Value {
+        let v = http(self.port, method, &format!("/session/{}{path}", self.session), body);
+        assert!(v["value"].get("error").is_none(), "WebDriver {method} {path}: {v}");
+        v["value"].clone()
+    }
+
+    fn eval(&self, script: &str) -> Value {
+        self.call("POST", "/execute/sync", Some(&json!({"script": script, "args": []})))
+    }
+
+    /// Waits for the page's marker to leave loading/converging; returns it and the status.
+    fn wait_for_marker(&self, limit: Duration) -> (String, Value) {
+        let t0 = Instant::now();
+        loop {
+            let v = self.eval(
+                "return [document.documentElement.dataset.grotto || '', \
+                 JSON.stringify(window.grottoStatus || null), document.getElementById('message').innerText]",
+            );
+            let state = v[0].as_str().unwrap_or_default().to_owned();
+            let status: Value = serde_json::from_str(v[1].as_str().unwrap_or("null")).unwrap_or(Value::Null);
+            if !matches!(state.as_str(), "" | "loading" | "converging") {
+                if state != "ready" {
+                    eprintln!("page says: {}", v[2]);
+                }
+                return (state, status);
+            }
+            assert!(t0.elapsed() < limit, "not ready after {limit:?}: {state} {status}");
+            std::thread::sleep(Duration::from_millis(500));
+        }
+    }
+}
+
+impl Drop for Browser {
+    fn drop(&mut self) {
+        if !self.session.is_empty() {
+            let _ = http(self.port, "DELETE", &format!("/session/{}", self.session), None);
+        }
+        let _ = self.driver.kill();
+        let _ = self.driver.wait();
+    }
+}
+
+/// A demo cave small enough for a software GPU in a browser: 60k points over 8 segments, cut
+/// into many tiles so the viewer has tiles to stream.
+fn small_demo(dir: &Path) -> PathBuf {
+    let params = SynthParams { points: 60_000, segments: 8, ..SynthParams::default() };
+    let formats = [ScanFormat::Las, ScanFormat::Ply];
+    let summary = synth::write_dataset(&dir.join("scans"), &params, &formats, &|_, _| {}).unwrap();
+    let manifest_path = PathBuf::from(&summary.manifest);
+    let manifest = Manifest::load(&manifest_path).unwrap();
+    let out = dir.join("demo.grotto");
+    let bp = build::BuildParams {
+        max_tile_points: 16_384,
+        ..build::BuildParams::with_leaf(dir.join("work"), 0.0625)
+    };
+    build::build(&manifest, &manifest_path, &out, &bp, &|_| {}).unwrap();
+    out
+}
+
+fn settings() -> Settings {
+    Settings { bounces: 1, ..Settings::preset(Quality::Fast) }
+}
+
+#[test]
+fn a_published_site_streams_the_package_by_ranges_and_shows_what_grotto_render_shows() {
+    let Some((chromium, driver, bundle)) = tools() else { return };
+    let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let package = small_demo(dir.path());
+    let pkg = grotto_format::Package::open(&package).unwrap();
+    assert!(pkg.tile_count() >= 4, "{} tiles", pkg.tile_count());
+    let package_bytes = pkg.file_size();
+    drop(pkg);
+
+    let site = dir.path().join("site");
+    let summary = publish::publish(&PublishOptions {
+        package: package.clone(),
+        out: site.clone(),
+        bundle: Some(bundle),
+        title: Some("demo".into()),
+        viewer_options: serde_json::from_value(json!({"camera": "chamber"})).unwrap(),
+    })
+    .unwrap();
+    assert!(summary.files.iter().any(|f| f == "demo.grotto"));
+    let server = serve::serve(&site).unwrap();
+
+    let browser = Browser::start(&chromium, &driver, true);
+    let url = format!(
+        "http://127.0.0.1:{}/index.html?width={W}&height={H}&quality=fast&bounces=1&panel=hidden&bar=hidden",
+        server.port
+    );
+    browser.call("POST", "/url", Some(&json!({"url": url})));
+    let (state, status) = browser.wait_for_marker(Duration::from_secs(300));
+    assert_eq!(state, "ready", "{status}");
+    eprintln!("viewer status: {status}");
+    let canvas =
+        browser.call("POST", "/element", Some(&json!({"using": "css selector", "value": "#canvas"})));
+    let id = canvas.as_object().and_then(|o| o.values().next()).and_then(Value::as_str).unwrap().to_owned();
+    let png = browser.call("GET", &format!("/element/{id}/screenshot"), None);
+    let png = base64::engine::general_purpose::STANDARD.decode(png.as_str().unwrap()).unwrap();
+    let shot = image::load_from_memory(&png).unwrap().to_rgba8();
+    drop(browser);
+    assert_eq!(shot.dimensions(), (W, H), "the canvas shows the frame pixel for pixel");
+
+    // How the package arrived: by ranges only, the first frame after a small part of it, and
+    // every byte the page counted is one the server sent.
+    let log = server.log.lock().unwrap().clone();
+    let package_requests: Vec<_> = log.iter().filter(|s| s.path == "demo.grotto").collect();
+    assert!(package_requests.iter().all(|s| s.status == 206 && s.range.is_some()), "{package_requests:?}");
+    let served: u64 = package_requests.iter().map(|s| s.bytes).sum();
+    assert_eq!(served, status["fetched_bytes"].as_u64().unwrap());
+    assert_eq!(status["requests"].as_u64().unwrap(), package_requests.len() as u64);
+    let first = status["first_frame_bytes"].as_u64().unwrap();
+    assert!(first * 10 < package_bytes, "first frame after {first} of {package_bytes} bytes");
+    // Merged ranges may carry a few bytes twice or between sections, never much.
+    assert!(served <= package_bytes + package_bytes / 20, "served {served} of {package_bytes}");
+    assert_eq!(
+        status["tiles"][0].as_u64().unwrap() as u32,
+        grotto_format::Package::open(&package).unwrap().tile_count()
+    );
+
+    // The same camera through `grotto render` (lavapipe), compared through the one tolerance.
+    let native = dir.path().join("native.png");
+    let opts = RenderOptions {
+        camera: CameraChoice::Named("chamber".into()),
+        width: W,
+        height: H,
+        settings: settings(),
+        gpu: GpuOptions {
+            prefer_software: true,
+            backends: Some(wgpu::Backends::VULKAN),
+            ..Default::default()
+        },
+        ..RenderOptions::defaults(package.clone(), native.clone())
+    };
+    let rendered = render_job::run(&opts, |_| {}).unwrap();
+    let expected = image::open(&native).unwrap().to_rgba8();
+    // Two rasterisers: compared per 2 x 2 block (golden::block_mean says why).
+    let px = |img: &image::RgbaImage| {
+        let p: Vec<[u8; 4]> = img.pixels().map(|p| p.0).collect();
+        golden::block_mean(&p, W, H, 2)
+    };
+    let d = golden::diff(&px(&shot), &px(&expected));
+    eprintln!(
+        "browser vs grotto render: mean {:.2}, p99 {}, max {}; exposure {} vs {}",
+        d.mean_abs, d.p99_abs, d.max_abs, status["exposure"], rendered.exposure
+    );
+    if !golden::within_tolerance(&d) {
+        let keep = Path::new(env!("CARGO_TARGET_TMPDIR"));
+        shot.save(keep.join("browser.png")).unwrap();
+        expected.save(keep.join("browser-native.png")).unwrap();
+        panic!("the browser's frame differs from grotto render's: {d:?} (both in {})", keep.display());
+    }
+}
+
+#[test]
+fn a_browser_without_webgpu_gets_a_message_not_a_blank_page() {
+    let Some((chromium, driver, bundle)) = tools() else { return };
+    let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    // Any valid package will do: the page stops before fetching it.
+    let package = dir.path().join("tiny.grotto");
+    let params = grotto_preprocess::demo::DemoParams { points: 2_000, ..Default::default() };
+    grotto_preprocess::demo::build(&package, &params).unwrap();
+    let site = dir.path().join("site");
+    publish::publish(&PublishOptions {
+        package,
+        out: site.clone(),
+        bundle: Some(bundle),
+        title: None,
+        viewer_options: Default::default(),
+    })
+    .unwrap();
+    let server = serve::serve(&site).unwrap();
+    let browser = Browser::start(&chromium, &driver, false);
+    browser.call("POST", "/url", Some(&json!({"url": format!("http://127.0.0.1:{}/", server.port)})));
+    let (state, _) = browser.wait_for_marker(Duration::from_secs(60));
+    assert_eq!(state, "no-webgpu");
+    let text = browser.eval("return document.getElementById('message').innerText");
+    assert!(text.as_str().unwrap().contains("no WebGPU"), "{text}");
+    let log = server.log.lock().unwrap().clone();
+    assert!(log.iter().all(|s| s.path != "tiny.grotto"), "the package was fetched: {log:?}");
+}

@@ -1,0 +1,711 @@
+//! The browser viewer: grotto's renderer on WebGPU, in a page `grotto publish` writes. A thin
+//! shell, like the window's: the package arrives by HTTP range requests ([`fetch`]) — its head
+//! and directory first, then the sections of every tile at its far level (the first frame), then
+//! finer tiles in the streaming priority residency gives them (`grotto_runtime::stream`), a step
+//! of at most `step_mb` at a time, swapped into the renderer's pools in place. Nothing blocks on
+//! the GPU: a bounce's change arrives on a later frame (`Renderer::poll_light`), and a frame
+//! is recorded only once the last one's work is done, so light work never piles up in the
+//! queue. The page's script (web/static/index.html) owns the DOM: it forwards input to a
+//! [`Viewer`], shows the status [`Viewer::frame`] returns, and sets the ready marker.
+//!
+//! On other targets the crate is empty.
+#![cfg(target_arch = "wasm32")]
+
+mod fetch;
+
+use std::cell::RefCell;
+use std::rc::Rc;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use glam::Vec3;
+use grotto_format::Package;
+use grotto_runtime::camera::{Camera, Nav};
+use grotto_runtime::gpu::{Gpu, GpuOptions, PendingRead};
+use grotto_runtime::present::{Bar, Blit, Target};
+use grotto_runtime::renderer::{Quality, Renderer, Settings, ViewMode};
+use grotto_runtime::residency::{self, Budget, Residency};
+use grotto_runtime::scene_data::{SceneData, TileMode};
+use grotto_runtime::stream::{self, Streaming};
+use serde::{Deserialize, Serialize};
+use wasm_bindgen::prelude::*;
+use web_time::Instant;
+
+/// What can go wrong in the viewer, shown in the page as it is.
+#[derive(Debug)]
+pub enum Error {
+    Fetch { url: String, problem: String },
+    Runtime(grotto_runtime::Error),
+    Package(grotto_format::Error),
+    Setting(String),
+}
+
+impl std::fmt::Display for Error {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Fetch { url, problem } => write!(f, "fetching {url}: {problem}"),
+            Self::Runtime(e) => write!(f, "{e}"),
+            Self::Package(e) => write!(f, "{e}"),
+            Self::Setting(s) => write!(f, "{s}"),
+        }
+    }
+}
+
+impl From<grotto_runtime::Error> for Error {
+    fn from(e: grotto_runtime::Error) -> Self {
+        Self::Runtime(e)
+    }
+}
+
+impl From<grotto_format::Error> for Error {
+    fn from(e: grotto_format::Error) -> Self {
+        Self::Package(e)
+    }
+}
+
+fn to_js(e: Error) -> JsError {
+    JsError::new(&e.to_string())
+}
+
+/// What the page asks for (JSON; every field optional): the query string's values, over
+/// `viewer.json`'s.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Options {
+    /// A camera named in the package (default: its first, else a view framed on the data).
+    pub camera: Option<String>,
+    /// The rendered image's size (default: the canvas's).
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    /// fast, balanced, high (as `grotto render --quality`).
+    pub quality: Option<String>,
+    pub bounces: Option<u32>,
+    /// Fixed exposure (default: automatic, from the frame once the light has converged).
+    pub exposure: Option<f32>,
+    /// Tile budget on the GPU in MB (default: half the largest buffer the adapter allows, at
+    /// most 2 GiB, as natively).
+    pub gpu_memory_mb: Option<u64>,
+    /// Most bytes of finer tiles one streaming step uploads (default 32 MB).
+    pub step_mb: Option<u64>,
+    /// lit, albedo, normals, light, level, scan.
+    pub view: Option<String>,
+    /// Shadow maps for the brightest lights (default true, as natively).
+    pub shadows: Option<bool>,
+    /// Draw the convergence bar along the bottom (default true; a screenshot compared with
+    /// `grotto render` turns it off).
+    pub bar: Option<bool>,
+}
+
+/// The status of a frame, for the page's panel and the ready marker (JSON).
+#[derive(Clone, Debug, Serialize)]
+pub struct Status {
+    /// "converging", or "ready": the light has converged, the tiles the view wants are resident
+    /// and no fetch is under way (what a test waits for).
+    pub state: &'static str,
+    pub adapter: String,
+    pub package_bytes: u64,
+    /// Bytes fetched so far, and before the first frame.
+    pub fetched_bytes: u64,
+    pub first_frame_bytes: u64,
+    pub requests: u32,
+    pub fetching: bool,
+    /// Tiles full, coarse, far, not held.
+    pub tiles: [usize; 4],
+    pub bounces_done: u32,
+    pub bounce_budget: u32,
+    pub light_fraction: f32,
+    pub converged: bool,
+    pub frames: u32,
+    pub camera: String,
+    pub view: &'static str,
+    pub exposure: f32,
+    pub width: u32,
+    pub height: u32,
+    /// The server sent the whole file to a range request.
+    pub no_ranges: bool,
+    /// Milliseconds from opening to the first frame, and to "ready".
+    pub first_frame_ms: f64,
+    pub ready_ms: Option<f64>,
+}
+
+/// The package as fetched so far, and what was fetched.
+struct Source {
+    url: String,
+    package_bytes: u64,
+    fetched_bytes: u64,
+    requests: u32,
+    no_ranges: bool,
+}
+
+/// Merge ranges closer than this: fewer requests for a few wasted bytes.
+const FETCH_GAP: u64 = 64 << 10;
+
+impl Source {
+    /// Head, then directory: a package with no section yet.
+    async fn open(url: &str) -> Result<(Self, Package), Error> {
+        let mut src =
+            Self { url: url.to_owned(), package_bytes: 0, fetched_bytes: 0, requests: 0, no_ranges: false };
+        let head = fetch::range(url, 0..Package::HEAD_BYTES, false).await?;
+        src.count(&head);
+        let name = url.rsplit('/').next().unwrap_or(url).to_owned();
+        if head.whole_file {
+            src.no_ranges = true;
+            src.package_bytes = head.bytes.len() as u64;
+            return Ok((src, Package::from_bytes(name, &head.bytes)?));
+        }
+        let file_len = head.file_len.ok_or_else(|| Error::Fetch {
+            url: url.into(),
+            problem: "the server answered a range request without Content-Range (the file's size)".into(),
+        })?;
+        src.package_bytes = file_len;
+        let dir = Package::directory_range(name.clone(), &head.bytes, file_len)?;
+        let d = fetch::range(url, dir.clone(), true).await?;
+        src.count(&d);
+        Ok((src, Package::from_directory(name, file_len, &head.bytes, dir.start, &d.bytes)?))
+    }
+
+    fn count(&mut self, f: &fetch::Fetched) {
+        self.fetched_bytes += f.bytes.len() as u64;
+        self.requests += 1;
+    }
+}
+
+/// Fetches `ranges` one after another (they are merged already, so few).
+async fn fetch_all(url: String, ranges: Vec<std::ops::Range<u64>>) -> Result<Vec<fetch::Fetched>, Error> {
+    let mut out = Vec::with_capacity(ranges.len());
+    for r in ranges {
+        out.push(fetch::range(&url, r, true).await?);
+    }
+    Ok(out)
+}
+
+/// Inserts fetched ranges into the package; returns the bytes.
+fn insert(pkg: &mut Package, src: &mut Source, fetched: &[fetch::Fetched]) -> Result<(), Error> {
+    for f in fetched {
+        src.count(f);
+        pkg.insert(f.offset, &f.bytes)?;
+    }
+    Ok(())
+}
+
+/// Where a fetch under way leaves its result for the next frame.
+type Slot = Rc<RefCell<Option<Result<Vec<fetch::Fetched>, Error>>>>;
+
+/// A step of tiles on its way: the residency, and the fetch's result once it arrived.
+struct Step {
+    residency: Residency,
+    arrived: Slot,
+}
+
+struct State {
+    gpu: Gpu,
+    surface: wgpu::Surface<'static>,
+    config: wgpu::SurfaceConfiguration,
+    blit: Blit,
+    renderer: Renderer,
+    scene: SceneData,
+    streaming: Streaming,
+    source: Source,
+    current: Residency,
+    step: Option<Step>,
+    step_bytes: u64,
+    /// The camera residency last chose for; None: choose again.
+    chosen_for: Option<Camera>,
+    /// The view wants no other tiles than those resident.
+    settled: bool,
+    nav: Nav,
+    cameras: Vec<(String, Camera)>,
+    camera_index: usize,
+    width: u32,
+    height: u32,
+    held: [bool; 6],
+    last_input: Instant,
+    last_frame: Instant,
+    opened: Instant,
+    first_frame_ms: f64,
+    ready_ms: Option<f64>,
+    frames: u32,
+    first_frame_bytes: u64,
+    /// The GPU has finished the last frame's work.
+    idle: Arc<AtomicBool>,
+    submitted: Instant,
+    slice_leaves: u32,
+    auto_exposure: bool,
+    exposure: f32,
+    bar: bool,
+    /// The frame read back for automatic exposure, and whether the light had converged then.
+    exposure_read: Option<(PendingRead, bool)>,
+    exposure_final: bool,
+}
+
+/// Light work a frame at rest aims for: what the window viewer allows too (window/pace.rs).
+const TARGET_FRAME_MS: f64 = 100.0;
+
+/// The viewer the page drives.
+#[wasm_bindgen]
+pub struct Viewer {
+    state: State,
+}
+
+impl std::fmt::Debug for Viewer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Viewer").field("adapter", &self.state.gpu.describe()).finish_non_exhaustive()
+    }
+}
+
+fn parse_options(json: &str) -> Result<Options, Error> {
+    if json.trim().is_empty() {
+        return Ok(Options::default());
+    }
+    serde_json::from_str(json).map_err(|e| Error::Setting(format!("viewer options {json}: {e}")))
+}
+
+fn settings_of(o: &Options) -> Result<(Settings, f32), Error> {
+    let quality = match &o.quality {
+        Some(p) => Quality::parse(p)
+            .ok_or_else(|| Error::Setting(format!("unknown quality {p:?} (fast, balanced, high)")))?,
+        None => Quality::Balanced,
+    };
+    let mut s = Settings::preset(quality);
+    if let Some(b) = o.bounces {
+        s.bounces = b;
+    }
+    if let Some(on) = o.shadows {
+        s.shadows = on;
+    }
+    if let Some(v) = &o.view {
+        s.view = ViewMode::parse(v).ok_or_else(|| Error::Setting(format!("unknown view {v:?}")))?;
+    }
+    s.exposure = o.exposure.unwrap_or(1.0);
+    s.validate()?;
+    Ok((s.clone(), s.exposure))
+}
+
+#[wasm_bindgen]
+impl Viewer {
+    /// Opens the package at `url` on `canvas`; `options` is [`Options`] as JSON. Fetches the
+    /// head, directory and the far level of every tile, then draws nothing yet: the first
+    /// [`Viewer::frame`] draws.
+    pub async fn open(
+        canvas: web_sys::HtmlCanvasElement,
+        url: String,
+        options: String,
+    ) -> Result<Viewer, JsError> {
+        Self::open_inner(canvas, url, options).await.map_err(to_js)
+    }
+
+    async fn open_inner(
+        canvas: web_sys::HtmlCanvasElement,
+        url: String,
+        options: String,
+    ) -> Result<Viewer, Error> {
+        let opened = Instant::now();
+        let o = parse_options(&options)?;
+        let (settings, exposure) = settings_of(&o)?;
+        let width = o.width.unwrap_or(canvas.width()).clamp(1, 4096);
+        let height = o.height.unwrap_or(canvas.height()).clamp(1, 4096);
+        canvas.set_width(width);
+        canvas.set_height(height);
+
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = wgpu::Backends::BROWSER_WEBGPU;
+        let instance = wgpu::Instance::new(desc);
+        let surface = instance
+            .create_surface(wgpu::SurfaceTarget::Canvas(canvas))
+            .map_err(|e| Error::Setting(format!("no WebGPU canvas: {e}")))?;
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                compatible_surface: Some(&surface),
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| Error::Setting(format!("this browser gives no WebGPU adapter: {e}")))?;
+        let gpu = Gpu::on_adapter(adapter, &GpuOptions::default()).await?;
+
+        let (mut source, mut pkg) = Source::open(&url).await?;
+        // The first frame: every tile at its far level.
+        let far_sections = stream::sections_for(&pkg, &vec![TileMode::Far; pkg.tile_count() as usize], false);
+        let ranges = pkg.missing(far_sections, FETCH_GAP);
+        let fetched = fetch_all(url.clone(), ranges).await?;
+        insert(&mut pkg, &mut source, &fetched)?;
+        let tiles = residency::footprints(&pkg, settings.radiance_f16)?;
+        let gpu_bytes = o
+            .gpu_memory_mb
+            .map(|mb| mb << 20)
+            .unwrap_or_else(|| (gpu.device.limits().max_buffer_size / 2).min(2 << 30));
+        let budget = Budget { gpu_bytes, points: u64::MAX, pools: None };
+        let aspect = width as f32 / height as f32;
+        let (mut far, mut streaming) = Streaming::far_first(pkg, tiles, budget, aspect, &settings, |_| {})?;
+        if far.leaves.is_empty() {
+            return Err(Error::Setting(format!("{url}: no voxels to show (empty package)")));
+        }
+
+        let mut cameras: Vec<(String, Camera)> =
+            far.cameras.iter().map(|c| (c.name.clone(), Camera::from_scene(c))).collect();
+        let first = match &o.camera {
+            Some(name) => cameras.iter().position(|(n, _)| n == name).ok_or_else(|| {
+                let names: Vec<&str> = cameras.iter().map(|(n, _)| n.as_str()).collect();
+                Error::Setting(format!("no camera named {name:?} (the package has: {})", names.join(", ")))
+            })?,
+            None => 0,
+        };
+        if cameras.is_empty() {
+            let f = grotto_runtime::framing::frame(&far, aspect, settings.splat_scale)
+                .ok_or_else(|| Error::Setting("no surfels to frame a view on".into()))?;
+            cameras.push(("framed".into(), f.camera));
+        }
+        let camera = cameras[first].1;
+        if !far.has_own_light() {
+            let (lo, hi) = far.bounds_leaf();
+            let distance_m = ((hi - lo) * far.leaf_size_m).length() * 0.25;
+            far.lights.push(grotto_runtime::framing::headlamp(&camera, aspect, distance_m));
+            far.headlamp = true;
+        }
+        // The pools are sized for the tiles this view wants, which arrive after the first frame.
+        let want = streaming.choose(&camera, None)?;
+        let renderer = stream::renderer_for(&gpu, &far, settings, Some((&mut streaming, &want)))?;
+        let current = streaming.far_residency();
+        let (lo, hi) = far.bounds_leaf();
+        let size_m = ((hi - lo) * far.leaf_size_m).max_element();
+
+        let caps = surface.get_capabilities(&gpu.adapter);
+        let format = caps.formats.iter().copied().find(|f| !f.is_srgb()).unwrap_or(caps.formats[0]);
+        let mut config = surface
+            .get_default_config(&gpu.adapter, width, height)
+            .ok_or_else(|| Error::Setting(format!("the canvas cannot show {} frames", gpu.describe())))?;
+        config.format = format;
+        config.present_mode = wgpu::PresentMode::Fifo;
+        surface.configure(&gpu.device, &config);
+        let blit = Blit::new(&gpu, format)?;
+        let now = Instant::now();
+        Ok(Viewer {
+            state: State {
+                first_frame_bytes: source.fetched_bytes,
+                gpu,
+                surface,
+                config,
+                blit,
+                renderer,
+                scene: far,
+                streaming,
+                source,
+                current,
+                step: None,
+                step_bytes: o.step_mb.unwrap_or(32) << 20,
+                chosen_for: None,
+                settled: false,
+                nav: Nav::from_camera(&camera, (size_m / 20.0).max(0.5)),
+                cameras,
+                camera_index: first,
+                width,
+                height,
+                held: [false; 6],
+                last_input: now,
+                last_frame: now,
+                opened,
+                first_frame_ms: 0.0,
+                ready_ms: None,
+                frames: 0,
+                idle: Arc::new(AtomicBool::new(true)),
+                submitted: now,
+                slice_leaves: 4096,
+                auto_exposure: o.exposure.is_none(),
+                bar: o.bar.unwrap_or(true),
+                exposure,
+                exposure_read: None,
+                exposure_final: o.exposure.is_some(),
+            },
+        })
+    }
+
+    /// One animation frame: takes arrived tiles, moves the camera, plans and records the passes
+    /// the scene calls for, presents. Returns the [`Status`] as JSON.
+    pub fn frame(&mut self) -> Result<String, JsError> {
+        self.state.frame().map_err(to_js)
+    }
+
+    /// A key went down or up (`KeyboardEvent.code`): WASD fly, Q/E down/up, Tab next camera, R
+    /// the first, 1-6 the view. Returns whether the viewer used it.
+    pub fn key(&mut self, code: &str, down: bool) -> bool {
+        self.state.key(code, down)
+    }
+
+    /// The mouse dragged by (dx, dy) CSS pixels: look around.
+    pub fn drag(&mut self, dx: f32, dy: f32) {
+        let s = &mut self.state;
+        s.nav.yaw_rad -= dx * 0.005;
+        s.nav.pitch_rad = (s.nav.pitch_rad - dy * 0.005).clamp(-1.5, 1.5);
+        s.last_input = Instant::now();
+    }
+
+    /// The wheel turned (lines, up positive): flying speed.
+    pub fn wheel(&mut self, lines: f32) {
+        let s = &mut self.state;
+        s.nav.speed_m_s = (s.nav.speed_m_s * 1.25f32.powf(lines)).clamp(0.01, 1000.0);
+    }
+
+    /// The package's camera names, in order (JSON).
+    pub fn cameras(&self) -> String {
+        serde_json::to_string(&self.state.cameras.iter().map(|(n, _)| n).collect::<Vec<_>>())
+            .unwrap_or_default()
+    }
+
+    /// Jumps to camera `i` of [`Viewer::cameras`].
+    pub fn set_camera(&mut self, i: usize) {
+        let s = &mut self.state;
+        if let Some((_, c)) = s.cameras.get(i) {
+            s.camera_index = i;
+            s.nav = Nav::from_camera(c, s.nav.speed_m_s);
+            s.last_input = Instant::now();
+        }
+    }
+
+    /// Shows `view` (lit, albedo, normals, light, level, scan).
+    pub fn set_view(&mut self, view: &str) -> Result<(), JsError> {
+        let v = ViewMode::parse(view).ok_or_else(|| JsError::new(&format!("unknown view {view:?}")))?;
+        self.state.renderer.set_view(v);
+        Ok(())
+    }
+}
+
+/// The input stops counting as movement this long after the last event.
+const REST_AFTER_MS: u128 = 200;
+
+impl State {
+    fn moving(&self) -> bool {
+        self.held.iter().any(|h| *h) || self.last_input.elapsed().as_millis() < REST_AFTER_MS
+    }
+
+    fn key(&mut self, code: &str, down: bool) -> bool {
+        let held = ["KeyW", "KeyA", "KeyS", "KeyD", "KeyQ", "KeyE"];
+        if let Some(k) = held.iter().position(|c| *c == code) {
+            self.held[k] = down;
+            self.last_input = Instant::now();
+            return true;
+        }
+        if !down {
+            return false;
+        }
+        if let Some(d) = code.strip_prefix("Digit").and_then(|d| d.parse::<usize>().ok()) {
+            if let Some(v) = d.checked_sub(1).and_then(|i| ViewMode::ALL.get(i)) {
+                self.renderer.set_view(*v);
+                return true;
+            }
+            return false;
+        }
+        match code {
+            "Tab" | "KeyR" => {
+                let i = if code == "KeyR" { 0 } else { (self.camera_index + 1) % self.cameras.len() };
+                self.camera_index = i;
+                self.nav = Nav::from_camera(&self.cameras[i].1, self.nav.speed_m_s);
+                self.last_input = Instant::now();
+                true
+            }
+            _ => false,
+        }
+    }
+
+    fn frame(&mut self) -> Result<String, Error> {
+        let now = Instant::now();
+        let dt = now.duration_since(self.last_frame).as_secs_f32().min(0.25);
+        self.last_frame = now;
+        let f = self.nav.forward();
+        let right = f.cross(Vec3::Z).normalize_or(Vec3::X);
+        let axes = [f, -right, -f, right, -Vec3::Z, Vec3::Z];
+        let step: Vec3 = self.held.iter().zip(axes).filter(|(h, _)| **h).map(|(_, a)| a).sum();
+        self.nav.eye_m += step * self.nav.speed_m_s * dt;
+        let moving = self.moving();
+        let camera = self.nav.camera();
+
+        // The GPU still works on the last frame: record nothing more (the queue would only grow).
+        if !self.idle.load(Ordering::Acquire) {
+            return self.status(moving);
+        }
+        if self.frames > 0 {
+            // Light work adapts to what a frame cost: about TARGET_FRAME_MS at rest.
+            let ms = self.submitted.elapsed().as_secs_f64() * 1e3;
+            let k = (TARGET_FRAME_MS / ms.max(1.0)).clamp(0.5, 1.5);
+            self.slice_leaves = ((self.slice_leaves as f64 * k) as u32).clamp(256, 1 << 22);
+        }
+        self.tiles(&camera, moving)?;
+        self.exposure_step()?;
+        self.renderer.hold_light(moving.then_some("the camera is moving"));
+        if !moving {
+            self.renderer.update_light_slice(self.slice_leaves)?;
+        }
+        self.renderer.draw(&camera, self.width, self.height)?;
+        self.present(moving)?;
+        self.frames += 1;
+        if self.frames == 1 {
+            self.first_frame_ms = self.opened.elapsed().as_secs_f64() * 1e3;
+        }
+        self.submitted = Instant::now();
+        self.idle.store(false, Ordering::Release);
+        let idle = self.idle.clone();
+        self.gpu.queue.on_submitted_work_done(move || idle.store(true, Ordering::Release));
+        self.status(moving)
+    }
+
+    /// Streaming: takes a step of tiles that arrived, or starts the next one where the camera
+    /// rests and the view wants other tiles.
+    fn tiles(&mut self, camera: &Camera, moving: bool) -> Result<(), Error> {
+        if let Some(step) = &self.step {
+            let Some(arrived) = step.arrived.borrow_mut().take() else { return Ok(()) };
+            let step = self.step.take().expect("checked above");
+            insert(self.streaming.package_mut(), &mut self.source, &arrived?)?;
+            return self.swap(step.residency);
+        }
+        if moving || self.chosen_for.as_ref() == Some(camera) {
+            return Ok(());
+        }
+        let want = self.streaming.choose(camera, self.renderer.clip())?;
+        let (next, deferred) =
+            residency::limit_uploads(self.streaming.tiles(), &self.current, want, self.step_bytes);
+        self.settled = deferred == 0 && next.modes() == self.current.modes();
+        if next.modes() == self.current.modes() {
+            self.chosen_for = Some(*camera);
+            return Ok(());
+        }
+        let ranges = self.streaming.package().missing(self.streaming.sections_for(&next), FETCH_GAP);
+        if ranges.is_empty() {
+            return self.swap(next);
+        }
+        let arrived: Slot = Rc::new(RefCell::new(None));
+        let slot = arrived.clone();
+        let url = self.source.url.clone();
+        wasm_bindgen_futures::spawn_local(async move {
+            let r = fetch_all(url, ranges).await;
+            *slot.borrow_mut() = Some(r);
+        });
+        self.step = Some(Step { residency: next, arrived });
+        Ok(())
+    }
+
+    fn swap(&mut self, next: Residency) -> Result<(), Error> {
+        let scene = self.streaming.load(&next, self.scene.lights.clone(), self.scene.headlamp)?;
+        stream::swap_tiles(&self.gpu, &mut self.renderer, &mut self.scene, scene)?;
+        self.current = next;
+        // Choose again: the step may have been one of several.
+        self.chosen_for = None;
+        self.settled = false;
+        // New tiles change the light, and so the exposure.
+        if self.auto_exposure {
+            self.exposure_final = false;
+        }
+        Ok(())
+    }
+
+    /// Automatic exposure as `grotto render` sets it (middle grey over the mean log luminance,
+    /// `renderer::auto_exposure`), from a frame read back without blocking: once early, and
+    /// again once the light has converged on the tiles the view wants.
+    fn exposure_step(&mut self) -> Result<(), Error> {
+        if !self.auto_exposure {
+            return Ok(());
+        }
+        if let Some((read, converged)) = &self.exposure_read {
+            let Some(bytes) = read.take() else { return Ok(()) };
+            let converged = *converged;
+            self.exposure_read = None;
+            let bytes = bytes?;
+            let pixels = (self.width * self.height) as usize;
+            let hdr: Vec<[f32; 4]> = bytemuck_hdr(&bytes, pixels);
+            self.exposure = grotto_runtime::renderer::auto_exposure(&hdr);
+            self.renderer.set_exposure(self.exposure);
+            self.exposure_final = converged;
+            return Ok(());
+        }
+        let converged = self.renderer.light_progress().converged && self.settled && self.step.is_none();
+        let due = (self.frames == 1) || (converged && !self.exposure_final);
+        if due && let Some(out) = self.renderer.hdr_output() {
+            let read = self.gpu.start_read(out, u64::from(self.width * self.height) * 16);
+            self.exposure_read = Some((read, converged));
+        }
+        Ok(())
+    }
+
+    fn present(&mut self, moving: bool) -> Result<(), Error> {
+        let Some(out) = self.renderer.ldr_output() else { return Ok(()) };
+        let frame = match self.surface.get_current_texture() {
+            wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
+            wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
+                self.surface.configure(&self.gpu.device, &self.config);
+                return Ok(());
+            }
+            _ => return Ok(()),
+        };
+        let view = frame.texture.create_view(&Default::default());
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        let progress = self.renderer.light_progress();
+        let target = Target {
+            view: &view,
+            width: self.config.width,
+            height: self.config.height,
+            srgb: self.config.format.is_srgb(),
+        };
+        let shown = if self.bar { progress.fraction() } else { 0.0 };
+        self.blit.record(&self.gpu, &mut enc, &out, &target, shown, Bar::of(&progress, moving));
+        self.gpu.queue.submit([enc.finish()]);
+        self.gpu.queue.present(frame);
+        self.gpu.check("present")?;
+        Ok(())
+    }
+
+    fn status(&mut self, moving: bool) -> Result<String, Error> {
+        let progress = self.renderer.light_progress();
+        let mut tiles = [0usize; 4];
+        for m in self.current.modes() {
+            tiles[match m {
+                TileMode::Full => 0,
+                TileMode::Coarse => 1,
+                TileMode::Far => 2,
+                TileMode::Skip => 3,
+            }] += 1;
+        }
+        let ready = progress.converged
+            && !moving
+            && self.step.is_none()
+            && self.settled
+            && self.exposure_final
+            && self.exposure_read.is_none()
+            && self.frames > 0;
+        if ready && self.ready_ms.is_none() {
+            self.ready_ms = Some(self.opened.elapsed().as_secs_f64() * 1e3);
+        }
+        let s = Status {
+            state: if ready { "ready" } else { "converging" },
+            adapter: self.gpu.describe(),
+            package_bytes: self.source.package_bytes,
+            fetched_bytes: self.source.fetched_bytes,
+            first_frame_bytes: self.first_frame_bytes,
+            requests: self.source.requests,
+            fetching: self.step.is_some(),
+            tiles,
+            bounces_done: progress.bounces_done,
+            bounce_budget: progress.bounce_budget,
+            light_fraction: progress.fraction(),
+            converged: progress.converged,
+            frames: self.frames,
+            camera: self.cameras.get(self.camera_index).map(|(n, _)| n.clone()).unwrap_or_default(),
+            view: self.renderer.settings().view.name(),
+            exposure: self.exposure,
+            width: self.width,
+            height: self.height,
+            no_ranges: self.source.no_ranges,
+            first_frame_ms: self.first_frame_ms,
+            ready_ms: self.ready_ms,
+        };
+        serde_json::to_string(&s).map_err(|e| Error::Setting(e.to_string()))
+    }
+}
+
+/// The HDR part of the frame buffer (4 f32 a pixel, first in it: passes/shade.rs).
+fn bytemuck_hdr(bytes: &[u8], pixels: usize) -> Vec<[f32; 4]> {
+    bytes
+        .chunks_exact(16)
+        .take(pixels)
+        .map(|c| {
+            std::array::from_fn(|i| f32::from_le_bytes([c[4 * i], c[4 * i + 1], c[4 * i + 2], c[4 * i + 3]]))
+        })
+        .collect()
+}
