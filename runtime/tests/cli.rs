@@ -298,3 +298,69 @@ fn view_flies_the_cave_under_xvfb_matches_grotto_render_and_says_so_clearly_with
     let row_lit = |y: u32| (0..160).filter(|&x| a.get_pixel(x, y).0[..3] != [0, 0, 0]).count();
     assert!(row_lit(2) < 16 && row_lit(117) > 144, "top row {} lit, bottom row {}", row_lit(2), row_lit(117));
 }
+
+#[test]
+fn publish_writes_a_site_replaces_it_whole_and_refuses_what_it_cannot_serve() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("demo.grotto");
+    demo::build(&path, &DemoParams { points: 3_000, ..DemoParams::default() }).unwrap();
+    // A stand-in bundle: publish copies it, the browser test runs the real one.
+    let bundle = dir.path().join("bundle");
+    std::fs::create_dir(&bundle).unwrap();
+    for f in grotto_runtime::publish::BUNDLE_FILES {
+        std::fs::write(bundle.join(f), f).unwrap();
+    }
+    let site = dir.path().join("site");
+    let (p, s, b) = (path.to_str().unwrap(), site.to_str().unwrap(), bundle.to_str().unwrap());
+    let out = grotto(&[
+        "publish",
+        p,
+        "--out",
+        s,
+        "--bundle",
+        b,
+        "--camera",
+        "centre",
+        "--quality",
+        "fast",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(summary["package_bytes"], std::fs::metadata(&path).unwrap().len());
+    assert_eq!(std::fs::read(site.join("demo.grotto")).unwrap(), std::fs::read(&path).unwrap());
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(site.join("viewer.json")).unwrap()).unwrap();
+    assert_eq!(config["package"], "demo.grotto");
+    assert_eq!(config["options"]["camera"], "centre");
+    assert_eq!(config["options"]["quality"], "fast");
+    // Published again, the site is replaced whole: a stray file of the old one is gone.
+    std::fs::write(site.join("stray.txt"), "old").unwrap();
+    assert!(grotto(&["publish", p, "--out", s, "--bundle", b]).status.success());
+    assert!(!site.join("stray.txt").exists() && site.join("index.html").is_file());
+
+    // No bundle: a clear error, and the site that was there stays.
+    std::fs::write(site.join("stray.txt"), "kept").unwrap();
+    let missing = dir.path().join("no-bundle");
+    let out = grotto(&["publish", p, "--out", s, "--bundle", missing.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("scripts/build-web.sh"), "{err}");
+    assert_eq!(std::fs::read_to_string(site.join("stray.txt")).unwrap(), "kept");
+    // A damaged package is refused before anything is written.
+    let mut bytes = std::fs::read(&path).unwrap();
+    let n = bytes.len();
+    bytes[n - 100] ^= 0xff;
+    let bad = dir.path().join("bad.grotto");
+    std::fs::write(&bad, bytes).unwrap();
+    let other = dir.path().join("other-site");
+    let out = grotto(&["publish", bad.to_str().unwrap(), "--out", other.to_str().unwrap(), "--bundle", b]);
+    assert!(!out.status.success(), "a damaged package was published");
+    assert!(!other.exists());
+    // Nothing left beside the sites.
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".grotto-publish"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}

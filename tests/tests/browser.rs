@@ -324,3 +324,55 @@ fn a_browser_without_webgpu_gets_a_message_not_a_blank_page() {
     let log = server.log.lock().unwrap().clone();
     assert!(log.iter().all(|s| s.path != "tiny.grotto"), "the package was fetched: {log:?}");
 }
+
+/// What the page fetched before its first frame, on a package of your choice: the figures in
+/// docs/web.md ("What a visitor downloads"). Run by `scripts/bench-web.sh PACKAGE`; ignored in
+/// the suite (it needs a large package).
+#[test]
+#[ignore = "a measurement: scripts/bench-web.sh PACKAGE"]
+fn bytes_before_the_first_frame() {
+    let Some((chromium, driver, bundle)) = tools() else { return };
+    let package =
+        PathBuf::from(std::env::var_os("GROTTO_WEB_BENCH_PACKAGE").expect("GROTTO_WEB_BENCH_PACKAGE"));
+    let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let site = dir.path().join("site");
+    let summary = publish::publish(&PublishOptions {
+        package: package.clone(),
+        out: site.clone(),
+        bundle: Some(bundle),
+        title: None,
+        viewer_options: Default::default(),
+    })
+    .unwrap();
+    let server = serve::serve(&site).unwrap();
+    let browser = Browser::start(&chromium, &driver, true);
+    let url = format!("http://127.0.0.1:{}/index.html?width={W}&height={H}&quality=fast", server.port);
+    browser.call("POST", "/url", Some(&json!({"url": url})));
+    let t0 = Instant::now();
+    let status = loop {
+        let v = browser.eval("return JSON.stringify(window.grottoStatus || null)");
+        let s: Value = serde_json::from_str(v.as_str().unwrap_or("null")).unwrap_or(Value::Null);
+        if s["frames"].as_u64().unwrap_or(0) >= 1 {
+            break s;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(600), "no first frame");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let name = package.file_name().unwrap().to_string_lossy().into_owned();
+    let served: Vec<_> = server.log.lock().unwrap().clone();
+    let site_bytes: u64 = served.iter().filter(|s| s.path != name).map(|s| s.bytes).sum();
+    let first = status["first_frame_bytes"].as_u64().unwrap();
+    let total = status["package_bytes"].as_u64().unwrap();
+    println!(
+        "| package | bytes | fetched before the first frame | share | requests | viewer (HTML, JS, wasm) | first frame |"
+    );
+    println!(
+        "| {name} | {total} | {first} | {:.3}% | {} | {site_bytes} ({} wasm) | {:.1} s |",
+        100.0 * first as f64 / total as f64,
+        status["requests"],
+        summary.wasm_bytes,
+        status["first_frame_ms"].as_f64().unwrap_or(0.0) / 1e3
+    );
+    assert!(first * 10 < total, "the first frame waited for {first} of {total} bytes");
+}
