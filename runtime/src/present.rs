@@ -40,6 +40,23 @@ pub struct Target<'a> {
     pub srgb: bool,
 }
 
+/// The surface's next texture to draw into; None where there is none this frame (the surface was
+/// outdated or lost, and is configured again for the next, or timed out).
+pub fn acquire(
+    gpu: &Gpu,
+    surface: &wgpu::Surface<'_>,
+    config: &wgpu::SurfaceConfiguration,
+) -> Option<wgpu::SurfaceTexture> {
+    match surface.get_current_texture() {
+        wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => Some(t),
+        wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
+            surface.configure(&gpu.device, config);
+            None
+        }
+        _ => None,
+    }
+}
+
 /// The presenting pipeline and its uniform.
 #[derive(Debug)]
 pub struct Blit {

@@ -437,14 +437,7 @@ impl App {
     ) -> Result<()> {
         let Some(s) = self.state.as_mut() else { return Ok(()) };
         let Some(out) = s.renderer.ldr_output() else { return Ok(()) };
-        let frame = match s.surface.get_current_texture() {
-            wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
-            wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
-                s.surface.configure(&s.gpu.device, &s.config);
-                return Ok(());
-            }
-            _ => return Ok(()),
-        };
+        let Some(frame) = crate::present::acquire(&s.gpu, &s.surface, &s.config) else { return Ok(()) };
         let held = moving && !progress.converged;
         let view = frame.texture.create_view(&Default::default());
         let mut enc = s.gpu.device.create_command_encoder(&Default::default());

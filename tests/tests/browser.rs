@@ -200,6 +200,25 @@ fn small_demo(dir: &Path) -> PathBuf {
     out
 }
 
+/// `package` published with `bundle` into `dir/site`, served on 127.0.0.1.
+fn published(
+    dir: &Path,
+    package: &Path,
+    bundle: PathBuf,
+    viewer_options: Value,
+) -> (publish::PublishSummary, serve::Server) {
+    let site = dir.join("site");
+    let summary = publish::publish(&PublishOptions {
+        package: package.to_path_buf(),
+        out: site.clone(),
+        bundle: Some(bundle),
+        title: None,
+        viewer_options: serde_json::from_value(viewer_options).unwrap(),
+    })
+    .unwrap();
+    (summary, serve::serve(&site).unwrap())
+}
+
 fn settings() -> Settings {
     Settings { bounces: 1, ..Settings::preset(Quality::Fast) }
 }
@@ -215,18 +234,8 @@ fn a_published_site_streams_the_package_by_ranges_and_shows_what_grotto_render_s
     let package_bytes = pkg.file_size();
     drop(pkg);
 
-    let site = dir.path().join("site");
-    let summary = publish::publish(&PublishOptions {
-        package: package.clone(),
-        out: site.clone(),
-        bundle: Some(bundle),
-        title: Some("demo".into()),
-        viewer_options: serde_json::from_value(json!({"camera": "chamber"})).unwrap(),
-    })
-    .unwrap();
+    let (summary, server) = published(dir.path(), &package, bundle, json!({"camera": "chamber"}));
     assert!(summary.files.iter().any(|f| f == "demo.grotto"));
-    let server = serve::serve(&site).unwrap();
-
     let browser = Browser::start(&chromium, &driver, true);
     let url = format!(
         "http://127.0.0.1:{}/index.html?width={W}&height={H}&quality=fast&bounces=1&panel=hidden&bar=hidden",
@@ -305,16 +314,7 @@ fn a_browser_without_webgpu_gets_a_message_not_a_blank_page() {
     let package = dir.path().join("tiny.grotto");
     let params = grotto_preprocess::demo::DemoParams { points: 2_000, ..Default::default() };
     grotto_preprocess::demo::build(&package, &params).unwrap();
-    let site = dir.path().join("site");
-    publish::publish(&PublishOptions {
-        package,
-        out: site.clone(),
-        bundle: Some(bundle),
-        title: None,
-        viewer_options: Default::default(),
-    })
-    .unwrap();
-    let server = serve::serve(&site).unwrap();
+    let (_, server) = published(dir.path(), &package, bundle, json!({}));
     let browser = Browser::start(&chromium, &driver, false);
     browser.call("POST", "/url", Some(&json!({"url": format!("http://127.0.0.1:{}/", server.port)})));
     let (state, _) = browser.wait_for_marker(Duration::from_secs(60));
@@ -336,16 +336,7 @@ fn bytes_before_the_first_frame() {
         PathBuf::from(std::env::var_os("GROTTO_WEB_BENCH_PACKAGE").expect("GROTTO_WEB_BENCH_PACKAGE"));
     let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
-    let site = dir.path().join("site");
-    let summary = publish::publish(&PublishOptions {
-        package: package.clone(),
-        out: site.clone(),
-        bundle: Some(bundle),
-        title: None,
-        viewer_options: Default::default(),
-    })
-    .unwrap();
-    let server = serve::serve(&site).unwrap();
+    let (summary, server) = published(dir.path(), &package, bundle, json!({}));
     let browser = Browser::start(&chromium, &driver, true);
     let url = format!("http://127.0.0.1:{}/index.html?width={W}&height={H}&quality=fast", server.port);
     browser.call("POST", "/url", Some(&json!({"url": url})));

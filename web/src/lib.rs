@@ -15,13 +15,13 @@ mod fetch;
 
 use std::cell::RefCell;
 use std::rc::Rc;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 
 use glam::Vec3;
 use grotto_format::Package;
 use grotto_runtime::camera::{Camera, Nav};
 use grotto_runtime::gpu::{Gpu, GpuOptions, PendingRead};
+use grotto_runtime::plan::Pass;
 use grotto_runtime::present::{Bar, Blit, Target};
 use grotto_runtime::renderer::{Quality, Renderer, Settings, ViewMode};
 use grotto_runtime::residency::{self, Budget, Residency};
@@ -126,6 +126,8 @@ pub struct Status {
     /// Milliseconds from opening to the first frame, and to "ready".
     pub first_frame_ms: f64,
     pub ready_ms: Option<f64>,
+    /// What the effect plan says of propagation.
+    pub light_plan: String,
 }
 
 /// The package as fetched so far, and what was fetched.
@@ -226,10 +228,15 @@ struct State {
     ready_ms: Option<f64>,
     frames: u32,
     first_frame_bytes: u64,
-    /// The GPU has finished the last frame's work.
-    idle: Arc<AtomicBool>,
-    submitted: Instant,
+    /// When the GPU finished the last frame's work (None: not yet).
+    frame_done: Arc<Mutex<Option<Instant>>>,
+    /// The last frame recorded, to time once it is done.
+    last: Option<LastFrame>,
+    /// GPU milliseconds of recent frames, and the leaves of the next light slice.
+    recent_ms: Vec<f64>,
     slice_leaves: u32,
+    /// What the plan said of propagation at the last frame (the panel shows it).
+    light_plan: String,
     auto_exposure: bool,
     exposure: f32,
     bar: bool,
@@ -238,8 +245,17 @@ struct State {
     exposure_final: bool,
 }
 
-/// Light work a frame at rest aims for: what the window viewer allows too (window/pace.rs).
-const TARGET_FRAME_MS: f64 = 100.0;
+/// Longest frame at rest, as the window viewer's (window/pace.rs `REST_FRAME_MS`).
+const REST_FRAME_MS: f64 = 100.0;
+
+/// A frame recorded: when, the leaves its light slice propagated, and whether it was a plain
+/// draw (no shadow maps or injection, which a frame does not usually pay for).
+#[derive(Clone, Copy, Debug)]
+struct LastFrame {
+    submitted: Instant,
+    leaves: u32,
+    plain: bool,
+}
 
 /// The viewer the page drives.
 #[wasm_bindgen]
@@ -407,9 +423,12 @@ impl Viewer {
                 first_frame_ms: 0.0,
                 ready_ms: None,
                 frames: 0,
-                idle: Arc::new(AtomicBool::new(true)),
-                submitted: now,
+                // Nothing submitted yet: the first frame may go.
+                frame_done: Arc::new(Mutex::new(Some(now))),
+                last: None,
+                recent_ms: Vec::new(),
                 slice_leaves: 4096,
+                light_plan: String::new(),
                 auto_exposure: o.exposure.is_none(),
                 bar: o.bar.unwrap_or(true),
                 exposure,
@@ -519,32 +538,80 @@ impl State {
         let camera = self.nav.camera();
 
         // The GPU still works on the last frame: record nothing more (the queue would only grow).
-        if !self.idle.load(Ordering::Acquire) {
+        let Some(done) = self.frame_done.lock().ok().and_then(|t| *t) else {
             return self.status(moving);
-        }
-        if self.frames > 0 {
-            // Light work adapts to what a frame cost: about TARGET_FRAME_MS at rest.
-            let ms = self.submitted.elapsed().as_secs_f64() * 1e3;
-            let k = (TARGET_FRAME_MS / ms.max(1.0)).clamp(0.5, 1.5);
-            self.slice_leaves = ((self.slice_leaves as f64 * k) as u32).clamp(256, 1 << 22);
+        };
+        if let Some(last) = self.last.take() {
+            self.pace(last, done);
         }
         self.tiles(&camera, moving)?;
         self.exposure_step()?;
-        self.renderer.hold_light(moving.then_some("the camera is moving"));
-        if !moving {
-            self.renderer.update_light_slice(self.slice_leaves)?;
+        // Light first, one slice of a bounce at rest sized by `pace` (as the window viewer does,
+        // window.rs); then the frame with the light held, so the draw does not run the rest of
+        // the bounce.
+        let submitted = Instant::now();
+        *self.frame_done.lock().map_err(|_| Error::Setting("frame timing poisoned".into()))? = None;
+        self.renderer.hold_light(None);
+        let light_plan = self.renderer.plan(None);
+        self.light_plan = light_plan
+            .steps
+            .iter()
+            .find(|s| s.pass == Pass::Propagate)
+            .map(|s| s.reason.clone())
+            .unwrap_or_default();
+        let mut leaves = 0;
+        let light = !moving
+            && self.renderer.settings().view.shows_light()
+            && !self.renderer.light_progress().converged;
+        if light {
+            leaves = self.renderer.update_light_slice(self.slice_leaves)?;
         }
-        self.renderer.draw(&camera, self.width, self.height)?;
+        self.renderer.hold_light(Some(if moving {
+            "the camera is moving"
+        } else {
+            "this frame's light ran before it, within the frame budget"
+        }));
+        let plan = self.renderer.draw(&camera, self.width, self.height)?;
         self.present(moving)?;
         self.frames += 1;
         if self.frames == 1 {
             self.first_frame_ms = self.opened.elapsed().as_secs_f64() * 1e3;
         }
-        self.submitted = Instant::now();
-        self.idle.store(false, Ordering::Release);
-        let idle = self.idle.clone();
-        self.gpu.queue.on_submitted_work_done(move || idle.store(true, Ordering::Release));
+        // Direct light (after a change of lights or tiles) is not what a frame costs.
+        let direct = |p: &grotto_runtime::plan::EffectPlan| p.runs(Pass::Shadow) || p.runs(Pass::Inject);
+        let plain = !(direct(&plan) || light && direct(&light_plan));
+        self.last = Some(LastFrame { submitted, leaves, plain });
+        let frame_done = self.frame_done.clone();
+        self.gpu.queue.on_submitted_work_done(move || {
+            if let Ok(mut t) = frame_done.lock() {
+                *t = Some(Instant::now());
+            }
+        });
         self.status(moving)
+    }
+
+    /// Sizes the next light slice from what the last frame took on the GPU (submitted onto an
+    /// idle queue, reported done: the only timing a browser gives without timestamp queries,
+    /// and too coarse to split a frame into its light and its draw). As the window's pacer
+    /// (window/pace.rs): a frame at rest aims at `REST_FRAME_MS`, or at twice the draw where the
+    /// draw alone takes more, so the light always gets at least the draw's time; the draw is
+    /// the quickest recent frame.
+    fn pace(&mut self, last: LastFrame, done: Instant) {
+        let ms = done.saturating_duration_since(last.submitted).as_secs_f64() * 1e3;
+        if !last.plain {
+            return;
+        }
+        self.recent_ms.push(ms);
+        if self.recent_ms.len() > 32 {
+            self.recent_ms.remove(0);
+        }
+        if last.leaves == 0 {
+            return;
+        }
+        let draw_ms = self.recent_ms.iter().copied().fold(f64::INFINITY, f64::min);
+        let target = REST_FRAME_MS.max(2.0 * draw_ms);
+        let k = (target / ms.max(1.0)).clamp(0.5, 1.5);
+        self.slice_leaves = ((f64::from(self.slice_leaves) * k) as u32).clamp(64, 1 << 24);
     }
 
     /// Streaming: takes a step of tiles that arrived, or starts the next one where the camera
@@ -626,13 +693,8 @@ impl State {
 
     fn present(&mut self, moving: bool) -> Result<(), Error> {
         let Some(out) = self.renderer.ldr_output() else { return Ok(()) };
-        let frame = match self.surface.get_current_texture() {
-            wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
-            wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
-                self.surface.configure(&self.gpu.device, &self.config);
-                return Ok(());
-            }
-            _ => return Ok(()),
+        let Some(frame) = grotto_runtime::present::acquire(&self.gpu, &self.surface, &self.config) else {
+            return Ok(());
         };
         let view = frame.texture.create_view(&Default::default());
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
@@ -694,6 +756,7 @@ impl State {
             no_ranges: self.source.no_ranges,
             first_frame_ms: self.first_frame_ms,
             ready_ms: self.ready_ms,
+            light_plan: self.light_plan.clone(),
         };
         serde_json::to_string(&s).map_err(|e| Error::Setting(e.to_string()))
     }
