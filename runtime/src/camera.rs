@@ -83,6 +83,13 @@ impl Nav {
         }
     }
 
+    /// At `c`, flying a twentieth of `scene`'s largest extent a second (at least 0.5 m/s).
+    pub fn for_scene(c: &Camera, scene: &crate::scene_data::SceneData) -> Self {
+        let (lo, hi) = scene.bounds_leaf();
+        let size_m = ((hi - lo) * scene.leaf_size_m).max_element();
+        Self::from_camera(c, (size_m / 20.0).max(0.5))
+    }
+
     pub fn forward(&self) -> Vec3 {
         let (sy, cy) = self.yaw_rad.sin_cos();
         let (sp, cp) = self.pitch_rad.sin_cos();
@@ -113,6 +120,36 @@ impl Nav {
     pub fn fly(&mut self) {
         self.eye_m = self.camera().eye_m;
         self.orbit = None;
+    }
+
+    /// Flies for `dt_s` with these keys held (forward, left, back, right, down, up: W A S D Q
+    /// E); an orbit ends where a key moves the eye.
+    pub fn step(&mut self, held: [bool; 6], dt_s: f32) {
+        let f = self.forward();
+        let right = f.cross(Vec3::Z).normalize_or(Vec3::X);
+        let axes = [f, -right, -f, right, -Vec3::Z, Vec3::Z];
+        let step: Vec3 = held.iter().zip(axes).filter(|(h, _)| **h).map(|(_, a)| a).sum();
+        if step != Vec3::ZERO {
+            if self.orbit.is_some() {
+                self.fly();
+            }
+            self.eye_m += step * self.speed_m_s * dt_s;
+        }
+    }
+
+    /// Looks around by a drag of (dx, dy) pixels.
+    pub fn look(&mut self, dx: f32, dy: f32) {
+        let k = 0.005;
+        self.yaw_rad -= dx * k;
+        self.pitch_rad = (self.pitch_rad - dy * k).clamp(-1.5, 1.5);
+    }
+
+    /// A turn of the wheel by `lines` (up positive): flying speed, or in orbit, the distance.
+    pub fn wheel(&mut self, lines: f32) {
+        match &mut self.orbit {
+            Some((_, distance)) => *distance = (*distance * 1.25f32.powf(-lines)).clamp(0.05, 1e4),
+            None => self.speed_m_s = (self.speed_m_s * 1.25f32.powf(lines)).clamp(0.01, 1000.0),
+        }
     }
 }
 

@@ -21,9 +21,10 @@
 //! disc splatter into a 64x48 depth buffer are a few lines each; the choice of views is the
 //! project's own.
 
-use glam::{IVec3, Vec3};
+use glam::{DVec3, IVec3, Vec3};
 
 use crate::camera::Camera;
+use crate::error::{Error, Result};
 use crate::scene_data::{SceneData, SceneLight, Spot};
 
 /// Cells per side of the occupancy grid at most.
@@ -581,6 +582,90 @@ pub fn headlamp(camera: &Camera, aspect: f32, distance_m: f32) -> SceneLight {
         intensity_w_sr: Vec3::from_array(HEADLAMP_COLOR) * (HEADLAMP_IRRADIANCE_W_M2 * d * d),
         spot: Some(Spot { direction: forward, inner_angle_rad: 0.8 * outer, outer_angle_rad: outer }),
     }
+}
+
+/// Where the camera comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CameraChoice {
+    /// A camera named in the package's scene.
+    Named(String),
+    /// World coordinates (f64, like the manifest).
+    Explicit { eye_m: [f64; 3], look_at_m: [f64; 3], up: [f64; 3], fov_y_deg: f64 },
+    /// The package's first camera, or, if it has none, the best view measured on the data
+    /// (framing.rs).
+    Default,
+}
+
+/// The camera a choice names in `scene`, for an image of `aspect` (width / height), and the
+/// framing when it was framed on the data rather than given.
+pub fn resolve_camera(
+    scene: &SceneData,
+    choice: &CameraChoice,
+    aspect: f32,
+    splat_scale: f32,
+) -> Result<(Camera, Option<Framing>)> {
+    match choice {
+        CameraChoice::Named(name) => {
+            scene.cameras.iter().find(|c| &c.name == name).map(|c| (Camera::from_scene(c), None)).ok_or_else(
+                || {
+                    let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
+                    Error::Camera(format!(
+                        "no camera named {name:?} in {} (it has: {})",
+                        scene.name,
+                        if names.is_empty() { "none".into() } else { names.join(", ") }
+                    ))
+                },
+            )
+        }
+        CameraChoice::Explicit { eye_m, look_at_m, up, fov_y_deg } => {
+            let frame = DVec3::from_array(scene.frame_origin_m);
+            Ok((
+                Camera {
+                    eye_m: (DVec3::from_array(*eye_m) - frame).as_vec3(),
+                    look_at_m: (DVec3::from_array(*look_at_m) - frame).as_vec3(),
+                    up: DVec3::from_array(*up).as_vec3(),
+                    fov_y_deg: *fov_y_deg as f32,
+                },
+                None,
+            ))
+        }
+        CameraChoice::Default => {
+            if let Some(c) = scene.cameras.first() {
+                return Ok((Camera::from_scene(c), None));
+            }
+            let f = frame(scene, aspect, splat_scale).ok_or_else(|| Error::Scene {
+                package: scene.name.clone(),
+                problem: "no surfels to frame a view on".into(),
+            })?;
+            Ok((f.camera, Some(f)))
+        }
+    }
+}
+
+/// A headlamp at `camera` sized for what it sees: 1 W/m^2 at the median distance of the surfaces
+/// in view (`seen`: that estimate where the caller has it; else estimated here), or, with nothing
+/// in view, at half the scene's diagonal. What `grotto render --headlamp` and the browser put in a
+/// scene without light of its own.
+pub fn scene_headlamp(
+    scene: &SceneData,
+    camera: &Camera,
+    aspect: f32,
+    splat_scale: f32,
+    seen: Option<ViewEstimate>,
+) -> SizedLamp {
+    let seen = seen.or_else(|| estimate(scene, camera, aspect, splat_scale));
+    let sized_for_m = seen.map(|e| e.median_distance_m).filter(|&d| d > 0.0).unwrap_or_else(|| {
+        let (lo, hi) = scene.bounds_leaf();
+        ((hi - lo) * scene.leaf_size_m).length() * 0.5
+    });
+    SizedLamp { light: headlamp(camera, aspect, sized_for_m), sized_for_m }
+}
+
+/// A headlamp and the distance it was sized for ([`scene_headlamp`]).
+#[derive(Clone, Debug)]
+pub struct SizedLamp {
+    pub light: SceneLight,
+    pub sized_for_m: f32,
 }
 
 #[cfg(test)]

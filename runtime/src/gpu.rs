@@ -21,6 +21,13 @@ use crate::error::{Error, Result};
 /// (runtime/tests/shaders.rs reflects every pass and checks this).
 pub const STORAGE_BUFFERS_NEEDED: u32 = 8;
 
+/// The tile budget when `--gpu-memory` is not given. wgpu reports no adapter memory, so this is
+/// half the largest buffer the adapter allows, at most 2 GiB. Binding limits are checked per
+/// buffer as before (`Error::TooLarge` says what to change).
+pub fn default_gpu_memory(gpu: &Gpu) -> u64 {
+    (gpu.device.limits().max_buffer_size / 2).min(2 << 30)
+}
+
 /// What a user can change when the resource named `label` outgrows the adapter.
 fn hint_for(label: &str) -> String {
     match label {

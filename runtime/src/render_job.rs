@@ -20,18 +20,6 @@ use crate::residency::{self, Budget, Residency};
 use crate::scene_data::{SceneData, TileMode};
 use crate::stream::Streaming;
 
-/// Where the camera comes from.
-#[derive(Clone, Debug, PartialEq)]
-pub enum CameraChoice {
-    /// A camera named in the package's scene.
-    Named(String),
-    /// World coordinates (f64, like the manifest).
-    Explicit { eye_m: [f64; 3], look_at_m: [f64; 3], up: [f64; 3], fov_y_deg: f64 },
-    /// The package's first camera, or, if it has none, the best view measured on the data
-    /// (framing.rs).
-    Default,
-}
-
 /// Whether to light the view with a headlamp at the camera.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -138,12 +126,8 @@ pub const STRING_LAMP_W: f32 = 8.0;
 /// Height of a `--lamps` lamp above its floor, metres.
 pub const STRING_LAMP_LIFT_M: f32 = 0.6;
 
-/// The tile budget when `--gpu-memory` is not given. wgpu reports no adapter memory, so this is
-/// half the largest buffer the adapter allows, at most 2 GiB. Binding limits are checked per
-/// buffer as before (`Error::TooLarge` says what to change).
-pub fn default_gpu_memory(gpu: &Gpu) -> u64 {
-    (gpu.device.limits().max_buffer_size / 2).min(2 << 30)
-}
+pub use crate::framing::{CameraChoice, resolve_camera};
+pub use crate::gpu::default_gpu_memory;
 
 /// `--lamps`: the lights replaced by a lamp string.
 fn apply_lamps(opts: &RenderOptions, scene: &mut SceneData) {
@@ -283,52 +267,6 @@ pub enum Progress {
     Frame { done: u32, total: u32 },
 }
 
-/// The camera a choice names in `scene`, for an image of `aspect` (width / height), and the
-/// framing when it was framed on the data rather than given.
-pub fn resolve_camera(
-    scene: &SceneData,
-    choice: &CameraChoice,
-    aspect: f32,
-    splat_scale: f32,
-) -> Result<(Camera, Option<Framing>)> {
-    match choice {
-        CameraChoice::Named(name) => {
-            scene.cameras.iter().find(|c| &c.name == name).map(|c| (Camera::from_scene(c), None)).ok_or_else(
-                || {
-                    let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
-                    Error::Camera(format!(
-                        "no camera named {name:?} in {} (it has: {})",
-                        scene.name,
-                        if names.is_empty() { "none".into() } else { names.join(", ") }
-                    ))
-                },
-            )
-        }
-        CameraChoice::Explicit { eye_m, look_at_m, up, fov_y_deg } => {
-            let frame = DVec3::from_array(scene.frame_origin_m);
-            Ok((
-                Camera {
-                    eye_m: (DVec3::from_array(*eye_m) - frame).as_vec3(),
-                    look_at_m: (DVec3::from_array(*look_at_m) - frame).as_vec3(),
-                    up: DVec3::from_array(*up).as_vec3(),
-                    fov_y_deg: *fov_y_deg as f32,
-                },
-                None,
-            ))
-        }
-        CameraChoice::Default => {
-            if let Some(c) = scene.cameras.first() {
-                return Ok((Camera::from_scene(c), None));
-            }
-            let f = crate::framing::frame(scene, aspect, splat_scale).ok_or_else(|| Error::Scene {
-                package: scene.name.clone(),
-                problem: "no surfels to frame a view on".into(),
-            })?;
-            Ok((f.camera, Some(f)))
-        }
-    }
-}
-
 /// What `framing` chose, in world coordinates a user can pass back as options.
 fn framing_note(scene: &SceneData, f: &Framing) -> String {
     let frame = DVec3::from_array(scene.frame_origin_m);
@@ -392,16 +330,10 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
     if want {
         let first = cameras[0];
         // A framed view was estimated already; a given one is estimated here.
-        let seen = match &framed {
-            Some(f) => Some(f.estimate),
-            None => crate::framing::estimate(&scene, &first, aspect, splat),
-        };
-        // Nothing in view: size the lamp for the scene's extent instead.
-        let distance_m = seen.map(|e| e.median_distance_m).filter(|&d| d > 0.0).unwrap_or_else(|| {
-            let (lo, hi) = scene.bounds_leaf();
-            ((hi - lo) * scene.leaf_size_m).length() * 0.5
-        });
-        let lamp = crate::framing::headlamp(&first, aspect, distance_m);
+        let seen = framed.as_ref().map(|f| f.estimate);
+        let lamp = crate::framing::scene_headlamp(&scene, &first, aspect, splat, seen);
+        let distance_m = lamp.sized_for_m;
+        let lamp = lamp.light;
         notes.push(format!(
             "light: {}; a headlamp at the camera, {:.3} W/sr (1 W/m^2 at {distance_m:.2} m){}",
             if scene.has_own_light() {

@@ -187,7 +187,7 @@ pub struct Renderer {
     forced: Vec<Pass>,
     /// Why a viewer holds the bounces, if it does ([`Renderer::hold_light`]).
     light_held: Option<&'static str>,
-    /// The last bounce's change, read back without blocking ([`Renderer::poll_light`]).
+    /// The last bounce's change, read back without blocking (`poll_light`).
     bounce_readback: Option<crate::gpu::PendingRead>,
     /// The view's clip box ([`Renderer::set_clip`]).
     clip: Option<ClipBox>,
@@ -1183,9 +1183,10 @@ impl Renderer {
     }
 
     /// The buffer the last frame's HDR radiance is in (4 f32 a pixel, rows top to bottom, from
-    /// its start): what a browser reads back without blocking for its exposure.
-    pub fn hdr_output(&self) -> Option<&wgpu::Buffer> {
-        self.view.as_ref().map(|v| &v.outputs.frame)
+    /// its start) and its bytes there: what a browser reads back without blocking for its
+    /// exposure.
+    pub fn hdr_output(&self) -> Option<(&wgpu::Buffer, u64)> {
+        self.view.as_ref().map(|v| (&v.outputs.frame, v.outputs.hdr_bytes()))
     }
 
     /// The last frame [`Renderer::draw`] (or render) made, read back.
@@ -1554,10 +1555,10 @@ impl Renderer {
 
     /// Finishes the last bounce where its read-back has arrived: its change decides which tiles
     /// the next bounce updates, and whether the light converged. Returns whether no read-back is
-    /// pending any longer. [`Renderer::render`] and [`Renderer::update_light`] call it; a browser
-    /// shell calls it each frame too, so a bounce that ended on the last frame is counted before
-    /// this frame plans.
-    pub fn poll_light(&mut self) -> Result<bool> {
+    /// pending any longer. Every call that plans (`draw`, `update_light`, `update_light_slice`)
+    /// calls it first, so in a browser a bounce that ended on an earlier frame is counted before
+    /// the next plan.
+    fn poll_light(&mut self) -> Result<bool> {
         let Some(read) = &self.bounce_readback else { return Ok(true) };
         let Some(bytes) = read.take() else { return Ok(false) };
         self.bounce_readback = None;

@@ -240,8 +240,7 @@ impl App {
         renderer.set_clip(prepared.clip);
         let (lo, hi) = prepared.scene.bounds_leaf();
         let bounds_m = (lo * prepared.scene.leaf_size_m, hi * prepared.scene.leaf_size_m);
-        let size_m = ((hi - lo) * prepared.scene.leaf_size_m).max_element();
-        let nav = Nav::from_camera(&prepared.cameras[0], (size_m / 20.0).max(0.5));
+        let nav = Nav::for_scene(&prepared.cameras[0], &prepared.scene);
         // Tab goes through the package's named cameras, after the one the view opened on.
         let first = prepared.cameras[0];
         let cameras: Vec<Camera> = std::iter::once(first)
@@ -308,16 +307,7 @@ impl App {
         let now = Instant::now();
         let dt = now.duration_since(s.last_frame).as_secs_f32().min(0.25);
         s.last_frame = now;
-        let f = s.nav.forward();
-        let right = f.cross(Vec3::Z).normalize_or(Vec3::X);
-        let axes = [f, -right, -f, right, -Vec3::Z, Vec3::Z];
-        let step: Vec3 = s.held.iter().zip(axes).filter(|(h, _)| **h).map(|(_, a)| a).sum();
-        if step != Vec3::ZERO {
-            if s.nav.orbit.is_some() {
-                s.nav.fly();
-            }
-            s.nav.eye_m += step * s.nav.speed_m_s * dt;
-        }
+        s.nav.step(s.held, dt);
         let cam = s.nav.camera();
         let moving = s.last_camera.is_some_and(|c| c != cam);
         s.last_camera = Some(cam);
@@ -736,9 +726,7 @@ impl ApplicationHandler for App {
             WindowEvent::CursorMoved { position, .. } => {
                 if let Some(s) = self.state.as_mut() {
                     if let (true, Some((x, y))) = (s.dragging, s.cursor) {
-                        let k = 0.005;
-                        s.nav.yaw_rad -= (position.x - x) as f32 * k;
-                        s.nav.pitch_rad = (s.nav.pitch_rad - (position.y - y) as f32 * k).clamp(-1.5, 1.5);
+                        s.nav.look((position.x - x) as f32, (position.y - y) as f32);
                     }
                     s.cursor = Some((position.x, position.y));
                 }
@@ -750,12 +738,7 @@ impl ApplicationHandler for App {
                         MouseScrollDelta::LineDelta(_, y) => y,
                         MouseScrollDelta::PixelDelta(p) => p.y as f32 / 40.0,
                     };
-                    match &mut s.nav.orbit {
-                        Some((_, distance)) => {
-                            *distance = (*distance * 1.25f32.powf(-lines)).clamp(0.05, 1e4)
-                        }
-                        None => s.nav.speed_m_s = (s.nav.speed_m_s * 1.25f32.powf(lines)).clamp(0.01, 1000.0),
-                    }
+                    s.nav.wheel(lines);
                 }
                 Ok(())
             }

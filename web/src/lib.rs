@@ -3,7 +3,7 @@
 //! and directory first, then the sections of every tile at its far level (the first frame), then
 //! finer tiles in the streaming priority residency gives them (`grotto_runtime::stream`), a step
 //! of at most `step_mb` at a time, swapped into the renderer's pools in place. Nothing blocks on
-//! the GPU: a bounce's change arrives on a later frame (`Renderer::poll_light`), and a frame
+//! the GPU: a bounce's change arrives on a later frame (the renderer counts it before its next plan), and a frame
 //! is recorded only once the last one's work is done, so light work never piles up in the
 //! queue. The page's script (web/static/index.html) owns the DOM: it forwards input to a
 //! [`Viewer`], shows the status [`Viewer::frame`] returns, and sets the ready marker.
@@ -17,10 +17,10 @@ use std::cell::RefCell;
 use std::rc::Rc;
 use std::sync::{Arc, Mutex};
 
-use glam::Vec3;
 use grotto_format::Package;
 use grotto_runtime::camera::{Camera, Nav};
-use grotto_runtime::gpu::{Gpu, GpuOptions, PendingRead};
+use grotto_runtime::framing::{CameraChoice, resolve_camera, scene_headlamp};
+use grotto_runtime::gpu::{Gpu, GpuOptions, PendingRead, default_gpu_memory};
 use grotto_runtime::plan::Pass;
 use grotto_runtime::present::{Bar, Blit, Target};
 use grotto_runtime::renderer::{Quality, Renderer, Settings, ViewMode};
@@ -32,35 +32,16 @@ use wasm_bindgen::prelude::*;
 use web_time::Instant;
 
 /// What can go wrong in the viewer, shown in the page as it is.
-#[derive(Debug)]
+#[derive(Debug, thiserror::Error)]
 pub enum Error {
+    #[error("fetching {url}: {problem}")]
     Fetch { url: String, problem: String },
-    Runtime(grotto_runtime::Error),
-    Package(grotto_format::Error),
+    #[error(transparent)]
+    Runtime(#[from] grotto_runtime::Error),
+    #[error(transparent)]
+    Package(#[from] grotto_format::Error),
+    #[error("{0}")]
     Setting(String),
-}
-
-impl std::fmt::Display for Error {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::Fetch { url, problem } => write!(f, "fetching {url}: {problem}"),
-            Self::Runtime(e) => write!(f, "{e}"),
-            Self::Package(e) => write!(f, "{e}"),
-            Self::Setting(s) => write!(f, "{s}"),
-        }
-    }
-}
-
-impl From<grotto_runtime::Error> for Error {
-    fn from(e: grotto_runtime::Error) -> Self {
-        Self::Runtime(e)
-    }
-}
-
-impl From<grotto_format::Error> for Error {
-    fn from(e: grotto_format::Error) -> Self {
-        Self::Package(e)
-    }
 }
 
 fn to_js(e: Error) -> JsError {
@@ -181,7 +162,7 @@ async fn fetch_all(url: String, ranges: Vec<std::ops::Range<u64>>) -> Result<Vec
     Ok(out)
 }
 
-/// Inserts fetched ranges into the package; returns the bytes.
+/// Inserts fetched ranges into the package, counting them.
 fn insert(pkg: &mut Package, src: &mut Source, fetched: &[fetch::Fetched]) -> Result<(), Error> {
     for f in fetched {
         src.count(f);
@@ -276,7 +257,7 @@ fn parse_options(json: &str) -> Result<Options, Error> {
     serde_json::from_str(json).map_err(|e| Error::Setting(format!("viewer options {json}: {e}")))
 }
 
-fn settings_of(o: &Options) -> Result<(Settings, f32), Error> {
+fn settings_of(o: &Options) -> Result<Settings, Error> {
     let quality = match &o.quality {
         Some(p) => Quality::parse(p)
             .ok_or_else(|| Error::Setting(format!("unknown quality {p:?} (fast, balanced, high)")))?,
@@ -294,7 +275,7 @@ fn settings_of(o: &Options) -> Result<(Settings, f32), Error> {
     }
     s.exposure = o.exposure.unwrap_or(1.0);
     s.validate()?;
-    Ok((s.clone(), s.exposure))
+    Ok(s)
 }
 
 #[wasm_bindgen]
@@ -317,7 +298,8 @@ impl Viewer {
     ) -> Result<Viewer, Error> {
         let opened = Instant::now();
         let o = parse_options(&options)?;
-        let (settings, exposure) = settings_of(&o)?;
+        let settings = settings_of(&o)?;
+        let exposure = settings.exposure;
         let width = o.width.unwrap_or(canvas.width()).clamp(1, 4096);
         let height = o.height.unwrap_or(canvas.height()).clamp(1, 4096);
         canvas.set_width(width);
@@ -346,10 +328,7 @@ impl Viewer {
         let fetched = fetch_all(url.clone(), ranges).await?;
         insert(&mut pkg, &mut source, &fetched)?;
         let tiles = residency::footprints(&pkg, settings.radiance_f16)?;
-        let gpu_bytes = o
-            .gpu_memory_mb
-            .map(|mb| mb << 20)
-            .unwrap_or_else(|| (gpu.device.limits().max_buffer_size / 2).min(2 << 30));
+        let gpu_bytes = o.gpu_memory_mb.map_or_else(|| default_gpu_memory(&gpu), |mb| mb << 20);
         let budget = Budget { gpu_bytes, points: u64::MAX, pools: None };
         let aspect = width as f32 / height as f32;
         let (mut far, mut streaming) = Streaming::far_first(pkg, tiles, budget, aspect, &settings, |_| {})?;
@@ -357,33 +336,29 @@ impl Viewer {
             return Err(Error::Setting(format!("{url}: no voxels to show (empty package)")));
         }
 
-        let mut cameras: Vec<(String, Camera)> =
-            far.cameras.iter().map(|c| (c.name.clone(), Camera::from_scene(c))).collect();
-        let first = match &o.camera {
-            Some(name) => cameras.iter().position(|(n, _)| n == name).ok_or_else(|| {
-                let names: Vec<&str> = cameras.iter().map(|(n, _)| n.as_str()).collect();
-                Error::Setting(format!("no camera named {name:?} (the package has: {})", names.join(", ")))
-            })?,
-            None => 0,
-        };
-        if cameras.is_empty() {
-            let f = grotto_runtime::framing::frame(&far, aspect, settings.splat_scale)
-                .ok_or_else(|| Error::Setting("no surfels to frame a view on".into()))?;
-            cameras.push(("framed".into(), f.camera));
-        }
-        let camera = cameras[first].1;
+        // The first camera as `grotto render` resolves it (named, the package's first, or
+        // framed on the data); Tab goes through the package's named cameras after it.
+        let choice = o.camera.clone().map_or(CameraChoice::Default, CameraChoice::Named);
+        let (camera, framed) = resolve_camera(&far, &choice, aspect, settings.splat_scale)?;
+        let first_name = o.camera.clone().or_else(|| far.cameras.first().map(|c| c.name.clone()));
+        let cameras: Vec<(String, Camera)> =
+            std::iter::once((first_name.unwrap_or_else(|| "framed".into()), camera))
+                .chain(
+                    far.cameras
+                        .iter()
+                        .map(|c| (c.name.clone(), Camera::from_scene(c)))
+                        .filter(|(_, c)| *c != camera),
+                )
+                .collect();
         if !far.has_own_light() {
-            let (lo, hi) = far.bounds_leaf();
-            let distance_m = ((hi - lo) * far.leaf_size_m).length() * 0.25;
-            far.lights.push(grotto_runtime::framing::headlamp(&camera, aspect, distance_m));
+            let seen = framed.map(|f| f.estimate);
+            far.lights.push(scene_headlamp(&far, &camera, aspect, settings.splat_scale, seen).light);
             far.headlamp = true;
         }
         // The pools are sized for the tiles this view wants, which arrive after the first frame.
         let want = streaming.choose(&camera, None)?;
         let renderer = stream::renderer_for(&gpu, &far, settings, Some((&mut streaming, &want)))?;
         let current = streaming.far_residency();
-        let (lo, hi) = far.bounds_leaf();
-        let size_m = ((hi - lo) * far.leaf_size_m).max_element();
 
         let caps = surface.get_capabilities(&gpu.adapter);
         let format = caps.formats.iter().copied().find(|f| !f.is_srgb()).unwrap_or(caps.formats[0]);
@@ -394,6 +369,7 @@ impl Viewer {
         config.present_mode = wgpu::PresentMode::Fifo;
         surface.configure(&gpu.device, &config);
         let blit = Blit::new(&gpu, format)?;
+        let nav = Nav::for_scene(&camera, &far);
         let now = Instant::now();
         Ok(Viewer {
             state: State {
@@ -411,9 +387,9 @@ impl Viewer {
                 step_bytes: o.step_mb.unwrap_or(32) << 20,
                 chosen_for: None,
                 settled: false,
-                nav: Nav::from_camera(&camera, (size_m / 20.0).max(0.5)),
+                nav,
                 cameras,
-                camera_index: first,
+                camera_index: 0,
                 width,
                 height,
                 held: [false; 6],
@@ -452,16 +428,13 @@ impl Viewer {
 
     /// The mouse dragged by (dx, dy) CSS pixels: look around.
     pub fn drag(&mut self, dx: f32, dy: f32) {
-        let s = &mut self.state;
-        s.nav.yaw_rad -= dx * 0.005;
-        s.nav.pitch_rad = (s.nav.pitch_rad - dy * 0.005).clamp(-1.5, 1.5);
-        s.last_input = Instant::now();
+        self.state.nav.look(dx, dy);
+        self.state.last_input = Instant::now();
     }
 
     /// The wheel turned (lines, up positive): flying speed.
     pub fn wheel(&mut self, lines: f32) {
-        let s = &mut self.state;
-        s.nav.speed_m_s = (s.nav.speed_m_s * 1.25f32.powf(lines)).clamp(0.01, 1000.0);
+        self.state.nav.wheel(lines);
     }
 
     /// The package's camera names, in order (JSON).
@@ -529,11 +502,7 @@ impl State {
         let now = Instant::now();
         let dt = now.duration_since(self.last_frame).as_secs_f32().min(0.25);
         self.last_frame = now;
-        let f = self.nav.forward();
-        let right = f.cross(Vec3::Z).normalize_or(Vec3::X);
-        let axes = [f, -right, -f, right, -Vec3::Z, Vec3::Z];
-        let step: Vec3 = self.held.iter().zip(axes).filter(|(h, _)| **h).map(|(_, a)| a).sum();
-        self.nav.eye_m += step * self.nav.speed_m_s * dt;
+        self.nav.step(self.held, dt);
         let moving = self.moving();
         let camera = self.nav.camera();
 
@@ -675,8 +644,7 @@ impl State {
             let converged = *converged;
             self.exposure_read = None;
             let bytes = bytes?;
-            let pixels = (self.width * self.height) as usize;
-            let hdr: Vec<[f32; 4]> = bytemuck_hdr(&bytes, pixels);
+            let hdr: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
             self.exposure = grotto_runtime::renderer::auto_exposure(&hdr);
             self.renderer.set_exposure(self.exposure);
             self.exposure_final = converged;
@@ -684,8 +652,8 @@ impl State {
         }
         let converged = self.renderer.light_progress().converged && self.settled && self.step.is_none();
         let due = (self.frames == 1) || (converged && !self.exposure_final);
-        if due && let Some(out) = self.renderer.hdr_output() {
-            let read = self.gpu.start_read(out, u64::from(self.width * self.height) * 16);
+        if due && let Some((out, hdr_bytes)) = self.renderer.hdr_output() {
+            let read = self.gpu.start_read(out, hdr_bytes);
             self.exposure_read = Some((read, converged));
         }
         Ok(())
@@ -760,15 +728,4 @@ impl State {
         };
         serde_json::to_string(&s).map_err(|e| Error::Setting(e.to_string()))
     }
-}
-
-/// The HDR part of the frame buffer (4 f32 a pixel, first in it: passes/shade.rs).
-fn bytemuck_hdr(bytes: &[u8], pixels: usize) -> Vec<[f32; 4]> {
-    bytes
-        .chunks_exact(16)
-        .take(pixels)
-        .map(|c| {
-            std::array::from_fn(|i| f32::from_le_bytes([c[4 * i], c[4 * i + 1], c[4 * i + 2], c[4 * i + 3]]))
-        })
-        .collect()
 }
