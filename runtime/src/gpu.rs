@@ -406,11 +406,36 @@ impl Gpu {
             });
         }
         let read = self.start_read(buffer, size);
+        let mut bytes = None;
+        self.wait_until("readback", || {
+            bytes = read.take();
+            Ok(bytes.is_some())
+        })?;
+        bytes
+            .unwrap_or_else(|| Err(Error::Gpu { pass: "readback", message: "no bytes after the map".into() }))
+    }
+
+    /// Blocks until the GPU is done and `arrived` (which looks at a read-back's callback) says
+    /// its result is in. The map's callback runs in whichever thread polls the device: where
+    /// threads share one device (the tests do), another thread's poll can take our callback and
+    /// run it just after our own wait returned, so the wait alone does not promise it has run.
+    pub fn wait_until(&self, pass: &'static str, mut arrived: impl FnMut() -> Result<bool>) -> Result<()> {
         self.wait()?;
-        self.check("readback")?;
-        read.take().unwrap_or_else(|| {
-            Err(Error::Gpu { pass: "readback", message: "the buffer was not mapped after a wait".into() })
-        })
+        self.check(pass)?;
+        let start = std::time::Instant::now();
+        while !arrived()? {
+            if start.elapsed() > std::time::Duration::from_secs(30) {
+                return Err(Error::Gpu {
+                    pass,
+                    message: "the read-back had not arrived 30 s after the GPU finished".into(),
+                });
+            }
+            self.device
+                .poll(wgpu::PollType::Poll)
+                .map_err(|e| Error::Gpu { pass: "wait", message: e.to_string() })?;
+            std::thread::sleep(std::time::Duration::from_micros(200));
+        }
+        Ok(())
     }
 
     /// Blocks until all submitted work is done.

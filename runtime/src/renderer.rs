@@ -1541,13 +1541,8 @@ impl Renderer {
             // Natively the bounce ends here; a browser collects its change on a later frame
             // (`poll_light`), and plans no light work until then.
             if !cfg!(target_arch = "wasm32") {
-                self.gpu.wait()?;
-                if !self.poll_light()? {
-                    return Err(Error::Gpu {
-                        pass: "propagate",
-                        message: "the bounce's change was not read back after a wait".into(),
-                    });
-                }
+                let gpu = self.gpu.clone();
+                gpu.wait_until("propagate", || self.poll_light())?;
             }
         }
         Ok(())
