@@ -54,8 +54,9 @@ pub struct LeafGpu {
     pub albedo_opacity: [f32; 4],
     /// Toksvig mean normal (length = 1 - spread); w unused.
     pub normal_mean: [f32; 4],
-    /// Leaf centre in frame metres; w: the leaf's edge in metres where it is a coarse leaf (wider
-    /// than the package's leaves), else 0.
+    /// Where the leaf's surface is, frame metres: its surfels' area-weighted centroid, inside its
+    /// cell (the cell's centre where it has no surfel; a coarse leaf's centroid); w: the leaf's
+    /// edge in metres where it is a coarse leaf (wider than the package's leaves), else 0.
     pub center_m: [f32; 4],
     /// Emitted radiance, W / (sr m^2); w unused.
     pub emission: [f32; 4],

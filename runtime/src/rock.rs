@@ -23,7 +23,8 @@ pub fn classify(leaf_m: f32, leaves: &[LeafGpu]) -> RockTable {
     let surface: Vec<SurfaceLeaf> = leaves
         .iter()
         .map(|l| SurfaceLeaf {
-            center_leaf: Vec3::from_slice(&l.center_m[..3]) / leaf_m,
+            // The cell's centre, as the packer classifies (a leaf's centre is its surface's).
+            center_leaf: (Vec3::from_slice(&l.center_m[..3]) / leaf_m).floor() + 0.5,
             normal_mean: Vec3::from_slice(&l.normal_mean[..3]),
         })
         .collect();

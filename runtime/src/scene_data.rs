@@ -241,6 +241,67 @@ fn full_leaves(svo: &SvoData<'_>, depth: u32, origin_leaf: IVec3, leaf_m: f32) -
         .collect()
 }
 
+/// Moves each of a tile's full leaves (in SVO leaf order, `svo`'s leaf nodes) from its cell's
+/// centre to the area-weighted centroid of the surfels in it, kept inside the cell. Light is then
+/// evaluated, and cones start, at the surface the leaf holds, wherever the leaf grid falls: with
+/// the cell's centre a wall on a cell face had its leaf light taken half a leaf off the wall and
+/// its cones started half a leaf nearer to or farther from it than on a wall through the cell's
+/// middle (issue 21: moving a room by a fraction of a leaf changed its first bounce by 4%).
+/// Leaves with no surfel (none in their cell) keep the cell's centre.
+fn move_leaves_to_surfels(
+    leaves: &mut [LeafGpu],
+    svo: &SvoData<'_>,
+    depth: u32,
+    surfels: &[Surfel],
+    leaf_m: f32,
+    tile_shift_m: DVec3,
+) {
+    let mut by_morton: Vec<(u64, usize)> = svo
+        .nodes
+        .iter()
+        .filter(|n| u32::from(n.level) == depth)
+        .enumerate()
+        .map(|(i, n)| (n.morton, i))
+        .collect();
+    by_morton.sort_unstable();
+    let side = 1u64 << depth.min(21);
+    let mut sums = vec![(DVec3::ZERO, 0.0f64); leaves.len()];
+    // Surfels are stored in Morton order, so most share the previous one's leaf.
+    let mut last: Option<(u64, usize)> = None;
+    for s in surfels {
+        let p = DVec3::from_array(s.position_tile_m.map(f64::from));
+        let c = (p / f64::from(leaf_m)).floor();
+        if !c.is_finite() || c.min_element() < 0.0 || c.max_element() >= side as f64 {
+            continue;
+        }
+        let m = morton_encode(c.x as u32, c.y as u32, c.z as u32);
+        let leaf = match last {
+            Some((lm, i)) if lm == m => Some(i),
+            _ => by_morton.binary_search_by_key(&m, |&(k, _)| k).ok().map(|k| by_morton[k].1),
+        };
+        let Some(i) = leaf else { continue };
+        last = Some((m, i));
+        if let Some(sum) = sums.get_mut(i) {
+            let w = f64::from(s.radius_m).powi(2).max(1e-12);
+            sum.0 += w * p;
+            sum.1 += w;
+        }
+    }
+    let leaf_m = f64::from(leaf_m);
+    for (l, (sum, w)) in leaves.iter_mut().zip(sums) {
+        if w <= 0.0 {
+            continue;
+        }
+        let centre = Vec3::from_slice(&l.center_m[..3]).as_dvec3();
+        let low = centre - tile_shift_m - DVec3::splat(0.5 * leaf_m);
+        // Inside the cell, a hair from its faces, so the cell is still `floor(centre / leaf)`.
+        let inset = 1e-3 * leaf_m;
+        let local = (sum / w).clamp(low + inset, low + DVec3::splat(leaf_m - inset));
+        let moved = (local + tile_shift_m).as_vec3();
+        l.center_m[..3].copy_from_slice(&moved.to_array());
+    }
+}
+
 /// The frame every loaded scene of `pkg` shares: the corner of its first tile with an SVO (f64
 /// world metres) and that tile's leaf edge; None when no tile has one.
 /// From the section table alone: no tile data is read.
@@ -349,7 +410,9 @@ impl SceneData {
                 if r < 0.5 || m.z / r < 0.8 {
                     return None;
                 }
-                let base = Vec3::from_slice(&l.center_m[..3]);
+                // From the cell's centre (a leaf's centre is on its surface), as before leaves
+                // moved there, so the lamps measured with stay where they were.
+                let base = ((Vec3::from_slice(&l.center_m[..3]) / leaf).floor() + 0.5) * leaf;
                 let lamp = base + Vec3::Z * lift_m;
                 // The way up from two leaves above the floor to the lamp must be open too.
                 let clear = (2..=steps).all(|k| {
@@ -606,12 +669,19 @@ impl SceneData {
                     continue;
                 }
                 out.push_nodes(svo.nodes.as_ref(), depth, node_offset, leaf_offset);
-                out.leaves.extend(leaves);
+                let mut leaves = leaves;
                 // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
-                if let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? {
+                let surfels = tile.read::<Surfel>(SectionKind::Surfels)?;
+                let shift = DVec3::from_array(tile.origin_m()) - DVec3::from_array(out.frame_origin_m);
+                if let Some(surfels) = &surfels {
+                    // The tile's frame offset as the leaves have it (whole leaves).
+                    let leaf_shift = origin_leaf.as_dvec3() * f64::from(out.leaf_size_m);
+                    move_leaves_to_surfels(&mut leaves, svo, depth, surfels, out.leaf_size_m, leaf_shift);
+                }
+                out.leaves.extend(leaves);
+                if let Some(surfels) = surfels {
                     let colors = tile_colors(&tile, surfels.len())?;
                     let scans = tile_scans(&tile, surfels.len(), scene.scans.len()).map_err(&bad)?;
-                    let shift = DVec3::from_array(tile.origin_m()) - DVec3::from_array(out.frame_origin_m);
                     for ((s, c), scan) in surfels.iter().zip(colors).zip(scans) {
                         let p = (DVec3::from_array(s.position_tile_m.map(f64::from)) + shift).as_vec3();
                         out.surfels.push(SurfelGpu {

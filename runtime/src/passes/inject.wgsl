@@ -53,7 +53,10 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
         let kind = light_shadow_kind(light);
         var vis = 1.0;
         if kind == LIGHT_MAP {
-            vis = shadow_visibility(light, p, dist, params.shadow_bias_m);
+            // The leaf sits on its surface (its surfels' centroid), and the shadow maps hold the
+            // same discs: look up a little in front, as shade does for a surfel.
+            let q = p + leaf_normal(leaf.normal_mean.xyz) * (0.25 * params.leaf_size_m);
+            vis = shadow_visibility(light, q, distance(light.position_kind.xyz, q), params.shadow_bias_m);
         } else if kind == LIGHT_CONE {
             let to = light.position_kind.xyz - o;
             let d = length(to);
