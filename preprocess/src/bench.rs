@@ -236,6 +236,7 @@ pub fn normals(
                                     grid,
                                     tile_origin_m: t.origin,
                                     no_scanner,
+                                    seen_from_outside: &[],
                                 }),
                             },
                             k,

@@ -199,6 +199,9 @@ pub struct BuildSummary {
     pub cut_short: Vec<String>,
     /// Scans with no scanner position (no `origin`, no pose): a merged cloud.
     pub scans_without_scanner: usize,
+    /// Of those, the scans seen from outside their surface (`seen_from = "outside"`,
+    /// `--seen-from outside`): their normals face away from what the walls enclose.
+    pub scans_seen_from_outside: usize,
     /// Points whose file carried a normal, and how many of those were kept (`--normals keep`
     /// keeps those within 60 degrees of the local plane's normal; the rest are estimated).
     pub input_normals: u64,
@@ -235,9 +238,18 @@ impl BuildSummary {
             ));
         }
         if let Some(o) = &self.orientation {
+            let side = match (self.scans_seen_from_outside, self.scans_without_scanner) {
+                (0, _) => "toward the side their walls enclose (seen from inside, as a cave; \
+                           --seen-from outside for an object scanned from around it)"
+                    .to_string(),
+                (o, n) if o == n => "away from what their surface encloses (seen from outside)".to_string(),
+                (o, _) => format!(
+                    "toward the side their walls enclose, or away from it for the {o} seen from outside"
+                ),
+            };
             h.push(format!(
                 "{} scan(s) have no scanner position (no `origin =`, no pose): the normals of their {} points \
-                 were oriented toward the side their walls enclose ({} turned away from the scan frame's \
+                 were oriented {side} ({} turned away from the scan frame's \
                  origin, {} set by their neighbours against their own votes, {} without evidence turned \
                  up, mean confidence {:.2}); give `origin =` per scan in a manifest where scanner positions \
                  are known (docs/manifest.md)",
@@ -372,6 +384,11 @@ fn build_tile(
         points.iter().map(|p| p.normal_snorm.map(|c| f32::from(c) / 32767.0)).collect();
     let no_scanner: Vec<bool> =
         points.iter().map(|p| !plan.scanner_known.get(p.scan as usize).copied().unwrap_or(true)).collect();
+    let seen_from_outside: Vec<bool> = if plan.seen_from_outside.iter().any(|&o| o) {
+        points.iter().map(|p| plan.seen_from_outside.get(p.scan as usize).copied().unwrap_or(false)).collect()
+    } else {
+        Vec::new()
+    };
     let (estimated, normal_stats) = normals::estimate_with_stats(
         &TilePoints {
             positions: &positions,
@@ -380,7 +397,12 @@ fn build_tile(
             input_normals: &input_normals,
             isolated_radius_m: 0.5 * params.leaf_m as f32,
             keep_input_normals: params.keep_input_normals,
-            orient: grid.map(|grid| Orient { grid, tile_origin_m: origin, no_scanner: &no_scanner }),
+            orient: grid.map(|grid| Orient {
+                grid,
+                tile_origin_m: origin,
+                no_scanner: &no_scanner,
+                seen_from_outside: &seen_from_outside,
+            }),
         },
         params.k,
     );
@@ -958,6 +980,12 @@ fn assemble_plan(
         input_normals_kept: normals.input_kept,
         keep_input_normals: params.keep_input_normals,
         scans_without_scanner: plan.scanner_known.iter().filter(|k| !**k).count(),
+        scans_seen_from_outside: plan
+            .scanner_known
+            .iter()
+            .zip(&plan.seen_from_outside)
+            .filter(|(known, outside)| !**known && **outside)
+            .count(),
         peak_rss_bytes: crate::bench::peak_rss_bytes(),
         leaf_m: params.leaf_m,
         lights: scene.lights.len(),

@@ -46,6 +46,32 @@ pub struct ScanSpec {
     pub origin: Option<[f64; 3]>,
     /// For files with several scans (E57): which one; all when absent.
     pub scan: Option<usize>,
+    /// Which side of its surface a scan without a scanner position was taken from: `inside` (a
+    /// cave: normals face the space its walls enclose) or `outside` (an object or a building
+    /// scanned from around it: normals face away from what it encloses). Absent: what the
+    /// command line says (`--seen-from`), else inside. A scan with a scanner is oriented by it.
+    pub seen_from: Option<SeenFrom>,
+}
+
+/// Where a merged cloud was scanned from (`seen_from` in a manifest, `--seen-from`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SeenFrom {
+    /// From the space the scanned surfaces enclose (a cave, a room).
+    #[default]
+    Inside,
+    /// From around the surface (an object, a statue, a building's outside).
+    Outside,
+}
+
+impl SeenFrom {
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "inside" => Some(SeenFrom::Inside),
+            "outside" => Some(SeenFrom::Outside),
+            _ => None,
+        }
+    }
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -154,6 +180,8 @@ pub struct ResolvedScan {
     /// A bare file with neither is a merged, registered cloud: its frame origin is a survey datum,
     /// not a scanner, and its normals are oriented by enclosure instead (orient.rs).
     pub scanner_known: bool,
+    /// For a scan without a scanner: which side of its surface it was seen from.
+    pub seen_from: SeenFrom,
 }
 
 fn manifest_error(path: &Path, reason: impl std::fmt::Display) -> Error {
@@ -283,6 +311,7 @@ impl Manifest {
                     scanner_world_m: world_from_scan.apply(origin),
                     pose_from_file: file_pose.is_some(),
                     scanner_known: spec.origin.is_some() || manifest_pose.is_some() || file_pose.is_some(),
+                    seen_from: spec.seen_from.unwrap_or_default(),
                 });
             }
         }

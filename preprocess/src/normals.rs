@@ -178,6 +178,9 @@ pub struct Orient<'a> {
     pub tile_origin_m: [f64; 3],
     /// Per point: its scan has no scanner position.
     pub no_scanner: &'a [bool],
+    /// Per point (empty: none): its scan was seen from outside the surface, so its normals face
+    /// away from what the walls enclose.
+    pub seen_from_outside: &'a [bool],
 }
 
 /// Normals for the own points of a tile, in order. `k` neighbours (the point itself included).
@@ -256,7 +259,10 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
                     kept = true;
                 }
                 let score = match bare {
-                    Some(o) => o.grid.score(std::array::from_fn(|a| o.tile_origin_m[a] + p[a]), normal),
+                    Some(o) => {
+                        let score = o.grid.score(std::array::from_fn(|a| o.tile_origin_m[a] + p[a]), normal);
+                        if o.seen_from_outside.get(i).copied().unwrap_or(false) { -score } else { score }
+                    }
                     None => MAX_SCORE,
                 };
                 let d2 = found.iter().map(|nb| nb.distance).fold(0.0f32, f32::max);

@@ -121,6 +121,10 @@ pub struct TilePlan {
     /// the others are oriented by enclosure. Empty in plans from before this field: all known.
     #[serde(default)]
     pub scanner_known: Vec<bool>,
+    /// Whether each scan without a scanner was seen from outside its surface
+    /// (`ResolvedScan::seen_from`). Empty in plans from before this field: all inside.
+    #[serde(default)]
+    pub seen_from_outside: Vec<bool>,
     pub bins_complete: bool,
 }
 
@@ -218,14 +222,16 @@ fn fingerprint(scans: &[ResolvedScan], params: &TilingParams) -> Result<String> 
             .map(|d| d.as_nanos());
         h.update(
             format!(
-                "{}|{}|{:?}|{}|{:?}|{:?}|{}\n",
+                "{}|{}|{:?}|{}|{:?}|{:?}|{}{}\n",
                 s.path.display(),
                 meta.len(),
                 mtime,
                 s.index,
                 s.world_from_scan,
                 s.scanner_world_m,
-                s.scanner_known
+                s.scanner_known,
+                // Only where it differs from before the field, so older plans still resume.
+                if s.seen_from == crate::manifest::SeenFrom::Outside { "|outside" } else { "" }
             )
             .as_bytes(),
         );
@@ -456,6 +462,7 @@ fn count_and_plan(
         halo_points: 0,
         scanners_world_m: scans.iter().map(|s| s.scanner_world_m).collect(),
         scanner_known: scans.iter().map(|s| s.scanner_known).collect(),
+        seen_from_outside: scans.iter().map(|s| s.seen_from == crate::manifest::SeenFrom::Outside).collect(),
         bins_complete: false,
     })
 }

@@ -8,7 +8,7 @@ use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
 use grotto_preprocess::build::{self, BuildParams, BuildSummary, ColorCodec};
 use grotto_preprocess::ingest::ScanFormat;
-use grotto_preprocess::manifest::Manifest;
+use grotto_preprocess::manifest::{Manifest, SeenFrom};
 use grotto_preprocess::synth::{self, SynthParams};
 use grotto_preprocess::tiling::Progress;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -171,6 +171,11 @@ struct BuildOpts {
     /// local plane (within 60 degrees; oriented like estimated ones), or estimate every normal.
     #[arg(long, default_value = "keep", value_parser = ["keep", "estimate"])]
     normals: String,
+    /// Where scans without a scanner position (bare files, merged clouds) were taken from: inside
+    /// (a cave: normals face the passage its walls enclose) or outside (an object scanned from
+    /// around it). A manifest's `seen_from` for a scan wins; scans with a scanner use it.
+    #[arg(long, default_value = "inside", value_parser = ["inside", "outside"])]
+    seen_from: String,
     /// Smallest tile edge, metres (power of two; default 16 leaves: 1 m at 6.25 cm leaves).
     #[arg(long)]
     min_tile_m: Option<f64>,
@@ -263,12 +268,17 @@ fn setup(
     out: Option<&Path>,
     opts: &BuildOpts,
 ) -> anyhow::Result<(Manifest, PathBuf, BuildParams)> {
-    let (manifest, manifest_path) = match inputs {
+    let (mut manifest, manifest_path) = match inputs {
         [one] if matches!(one.extension().and_then(|e| e.to_str()), Some("toml" | "conf")) => {
             (Manifest::load(one)?, one.clone())
         }
         files => (Manifest::from_files(files), PathBuf::from("<command line>")),
     };
+    let seen_from = SeenFrom::parse(&opts.seen_from)
+        .ok_or_else(|| anyhow::anyhow!("--seen-from {:?}: inside or outside", opts.seen_from))?;
+    for scan in &mut manifest.scans {
+        scan.seen_from.get_or_insert(seen_from);
+    }
     let work_dir = match (&opts.work_dir, out) {
         (Some(dir), _) => dir.clone(),
         (None, Some(out)) => {
