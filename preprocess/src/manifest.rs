@@ -200,6 +200,14 @@ impl Manifest {
         Ok(m)
     }
 
+    /// Gives every scan that does not say where it was seen from `seen_from` (the command
+    /// line's `--seen-from`); a scan's own `seen_from` wins.
+    pub fn default_seen_from(&mut self, seen_from: SeenFrom) {
+        for scan in &mut self.scans {
+            scan.seen_from.get_or_insert(seen_from);
+        }
+    }
+
     /// A bare list of scan files, identity poses.
     pub fn from_files(paths: &[PathBuf]) -> Self {
         Manifest {
@@ -383,5 +391,35 @@ impl Manifest {
             // The build fills in the scans it read.
             scans: Vec::new(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn manifest(dir: &Path, text: &str) -> Result<Manifest> {
+        let path = dir.join("m.toml");
+        std::fs::write(&path, text).unwrap();
+        Manifest::from_toml_file(&path)
+    }
+
+    #[test]
+    fn seen_from_is_read_per_scan_and_the_command_line_fills_the_rest() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut m = manifest(
+            dir.path(),
+            "[[scan]]\npath = \"a.ply\"\nseen_from = \"inside\"\n\n[[scan]]\npath = \"b.ply\"\n\n\
+             [[scan]]\npath = \"c.ply\"\nseen_from = \"outside\"\n",
+        )
+        .unwrap();
+        let given: Vec<_> = m.scans.iter().map(|s| s.seen_from).collect();
+        assert_eq!(given, [Some(SeenFrom::Inside), None, Some(SeenFrom::Outside)]);
+        m.default_seen_from(SeenFrom::Outside);
+        let now: Vec<_> = m.scans.iter().map(|s| s.seen_from).collect();
+        assert_eq!(now, [Some(SeenFrom::Inside), Some(SeenFrom::Outside), Some(SeenFrom::Outside)]);
+        let err = manifest(dir.path(), "[[scan]]\npath = \"a.ply\"\nseen_from = \"above\"\n").unwrap_err();
+        let text = err.to_string();
+        assert!(text.contains("m.toml") && text.contains("above"), "{text}");
     }
 }

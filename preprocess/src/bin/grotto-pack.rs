@@ -276,9 +276,7 @@ fn setup(
     };
     let seen_from = SeenFrom::parse(&opts.seen_from)
         .ok_or_else(|| anyhow::anyhow!("--seen-from {:?}: inside or outside", opts.seen_from))?;
-    for scan in &mut manifest.scans {
-        scan.seen_from.get_or_insert(seen_from);
-    }
+    manifest.default_seen_from(seen_from);
     let work_dir = match (&opts.work_dir, out) {
         (Some(dir), _) => dir.clone(),
         (None, Some(out)) => {
