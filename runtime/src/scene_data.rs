@@ -263,11 +263,16 @@ fn move_leaves_to_surfels(
         .enumerate()
         .map(|(i, n)| (n.morton, i))
         .collect();
-    by_morton.sort_unstable();
+    // Leaves are stored in Morton order; sorting is only for a package that is not.
+    if !by_morton.is_sorted() {
+        by_morton.sort_unstable();
+    }
     let side = 1u64 << depth.min(21);
     let mut sums = vec![(DVec3::ZERO, 0.0f64); leaves.len()];
-    // Surfels are stored in Morton order, so most share the previous one's leaf.
-    let mut last: Option<(u64, usize)> = None;
+    // Surfels are stored in Morton order too, so a surfel is mostly in the previous one's leaf
+    // or the next: the search runs only when neither is. The pass costs about 27 ns a surfel
+    // (docs/benchmarks.md, "Opening a package and time to first frame").
+    let mut at: Option<usize> = None;
     for s in surfels {
         let p = DVec3::from_array(s.position_tile_m.map(f64::from));
         let c = (p / f64::from(leaf_m)).floor();
@@ -275,13 +280,14 @@ fn move_leaves_to_surfels(
             continue;
         }
         let m = morton_encode(c.x as u32, c.y as u32, c.z as u32);
-        let leaf = match last {
-            Some((lm, i)) if lm == m => Some(i),
-            _ => by_morton.binary_search_by_key(&m, |&(k, _)| k).ok().map(|k| by_morton[k].1),
+        let found = match at {
+            Some(k) if by_morton[k].0 == m => Some(k),
+            Some(k) if by_morton.get(k + 1).is_some_and(|&(n, _)| n == m) => Some(k + 1),
+            _ => by_morton.binary_search_by_key(&m, |&(k, _)| k).ok(),
         };
-        let Some(i) = leaf else { continue };
-        last = Some((m, i));
-        if let Some(sum) = sums.get_mut(i) {
+        let Some(k) = found else { continue };
+        at = Some(k);
+        if let Some(sum) = sums.get_mut(by_morton[k].1) {
             let w = f64::from(s.radius_m).powi(2).max(1e-12);
             sum.0 += w * p;
             sum.1 += w;
