@@ -215,15 +215,15 @@ pub fn normals(
             None
         };
         let grid_seconds = if by_enclosure { start.elapsed().as_secs_f64() } else { 0.0 };
-        let no_scanner: Vec<Vec<bool>> =
-            tiles.iter().map(|t| vec![by_enclosure; t.positions.len()]).collect();
+        let side = by_enclosure.then_some(crate::manifest::SeenFrom::Inside);
+        let seen_from: Vec<Vec<_>> = tiles.iter().map(|t| vec![side; t.positions.len()]).collect();
         for &k in ks {
             let start = Instant::now();
             let normals: Vec<Vec<crate::normals::PointNormal>> = pool.install(|| {
                 tiles
                     .par_iter()
-                    .zip(&no_scanner)
-                    .map(|(t, no_scanner)| {
+                    .zip(&seen_from)
+                    .map(|(t, seen_from)| {
                         estimate(
                             &TilePoints {
                                 positions: &t.positions,
@@ -235,8 +235,7 @@ pub fn normals(
                                 orient: grid.as_ref().map(|grid| Orient {
                                     grid,
                                     tile_origin_m: t.origin,
-                                    no_scanner,
-                                    seen_from_outside: &[],
+                                    seen_from,
                                 }),
                             },
                             k,

@@ -31,7 +31,7 @@ use serde::Serialize;
 
 use crate::bc1;
 use crate::ingest::ScanFormat;
-use crate::manifest::{Manifest, ResolvedScan};
+use crate::manifest::{Manifest, ResolvedScan, SeenFrom};
 use crate::normals::{self, NormalStats, Orient, TilePoints};
 use crate::orient::{self, CaveGrid, OrientStats};
 use crate::tiling::{self, FLAG_HALO, Progress, TilePlan, TilingParams};
@@ -382,13 +382,7 @@ fn build_tile(
         .collect();
     let input_normals: Vec<[f32; 3]> =
         points.iter().map(|p| p.normal_snorm.map(|c| f32::from(c) / 32767.0)).collect();
-    let no_scanner: Vec<bool> =
-        points.iter().map(|p| !plan.scanner_known.get(p.scan as usize).copied().unwrap_or(true)).collect();
-    let seen_from_outside: Vec<bool> = if plan.seen_from_outside.iter().any(|&o| o) {
-        points.iter().map(|p| plan.seen_from_outside.get(p.scan as usize).copied().unwrap_or(false)).collect()
-    } else {
-        Vec::new()
-    };
+    let seen_from: Vec<Option<SeenFrom>> = points.iter().map(|p| plan.seen_from(p.scan as usize)).collect();
     let (estimated, normal_stats) = normals::estimate_with_stats(
         &TilePoints {
             positions: &positions,
@@ -397,12 +391,7 @@ fn build_tile(
             input_normals: &input_normals,
             isolated_radius_m: 0.5 * params.leaf_m as f32,
             keep_input_normals: params.keep_input_normals,
-            orient: grid.map(|grid| Orient {
-                grid,
-                tile_origin_m: origin,
-                no_scanner: &no_scanner,
-                seen_from_outside: &seen_from_outside,
-            }),
+            orient: grid.map(|grid| Orient { grid, tile_origin_m: origin, seen_from: &seen_from }),
         },
         params.k,
     );
@@ -980,11 +969,8 @@ fn assemble_plan(
         input_normals_kept: normals.input_kept,
         keep_input_normals: params.keep_input_normals,
         scans_without_scanner: plan.scanner_known.iter().filter(|k| !**k).count(),
-        scans_seen_from_outside: plan
-            .scanner_known
-            .iter()
-            .zip(&plan.seen_from_outside)
-            .filter(|(known, outside)| !**known && **outside)
+        scans_seen_from_outside: (0..plan.scanner_known.len())
+            .filter(|&s| plan.seen_from(s) == Some(SeenFrom::Outside))
             .count(),
         peak_rss_bytes: crate::bench::peak_rss_bytes(),
         leaf_m: params.leaf_m,

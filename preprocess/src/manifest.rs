@@ -54,7 +54,7 @@ pub struct ScanSpec {
 }
 
 /// Where a merged cloud was scanned from (`seen_from` in a manifest, `--seen-from`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum SeenFrom {
     /// From the space the scanned surfaces enclose (a cave, a room).
@@ -62,16 +62,6 @@ pub enum SeenFrom {
     Inside,
     /// From around the surface (an object, a statue, a building's outside).
     Outside,
-}
-
-impl SeenFrom {
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "inside" => Some(SeenFrom::Inside),
-            "outside" => Some(SeenFrom::Outside),
-            _ => None,
-        }
-    }
 }
 
 #[derive(Clone, Debug, Deserialize)]

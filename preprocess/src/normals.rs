@@ -21,6 +21,7 @@ use std::num::NonZero;
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
 
+use crate::manifest::SeenFrom;
 use crate::orient::{CaveGrid, MAX_SCORE, OrientStats};
 
 /// Surfel radii are widened by this over the disc that covers the area per point, so neighbouring
@@ -176,11 +177,10 @@ pub struct Orient<'a> {
     pub grid: &'a CaveGrid,
     /// World position of the tile's frame.
     pub tile_origin_m: [f64; 3],
-    /// Per point: its scan has no scanner position.
-    pub no_scanner: &'a [bool],
-    /// Per point (empty: none): its scan was seen from outside the surface, so its normals face
-    /// away from what the walls enclose.
-    pub seen_from_outside: &'a [bool],
+    /// Per point: `None` where its scan has a scanner position (its normal faces the scanner),
+    /// else the side its scan saw the walls from (inside: the normal faces what the walls
+    /// enclose; outside: away from it).
+    pub seen_from: &'a [Option<SeenFrom>],
 }
 
 /// Normals for the own points of a tile, in order. `k` neighbours (the point itself included).
@@ -238,7 +238,7 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
                 scratch.clear();
                 scratch.extend(found.iter().map(|nb| pts[nb.item as usize].map(f64::from)));
                 let p = q.map(f64::from);
-                let bare = tile.orient.filter(|o| o.no_scanner[i]);
+                let bare = tile.orient.and_then(|o| o.seen_from[i].map(|side| (o, side)));
                 // Without a scanner, the PCA sign is provisional (up); the votes decide below.
                 let view = match bare {
                     Some(_) => [0.0, 0.0, 1.0],
@@ -259,9 +259,12 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
                     kept = true;
                 }
                 let score = match bare {
-                    Some(o) => {
+                    Some((o, side)) => {
                         let score = o.grid.score(std::array::from_fn(|a| o.tile_origin_m[a] + p[a]), normal);
-                        if o.seen_from_outside.get(i).copied().unwrap_or(false) { -score } else { score }
+                        match side {
+                            SeenFrom::Inside => score,
+                            SeenFrom::Outside => -score,
+                        }
                     }
                     None => MAX_SCORE,
                 };
@@ -296,7 +299,7 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
         .iter()
         .map(|&i| {
             let list = &neighbour_lists[i * k..(i + 1) * k];
-            let ni = match tile.orient.filter(|o| o.no_scanner[i]) {
+            let ni = match tile.orient.filter(|o| o.seen_from[i].is_some()) {
                 Some(_) => orient_by_neighbourhood(tile, i, list, &normals, &scores, &mut stats.orientation),
                 None => normals[i],
             };

@@ -26,6 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::ingest::{self, PointChunk};
 use crate::manifest::ResolvedScan;
+use crate::manifest::SeenFrom;
 use crate::{Error, Result};
 
 /// Tiling knobs.
@@ -134,6 +135,14 @@ impl TilePlan {
         self.scanner_known.iter().any(|k| !k)
     }
 
+    /// How scan `scan`'s normals are oriented: `None` toward its scanner (known, or a scan index
+    /// from before `scanner_known` was stored), else by enclosure, from the side it was seen from.
+    pub fn seen_from(&self, scan: usize) -> Option<SeenFrom> {
+        let known = self.scanner_known.get(scan).copied().unwrap_or(true);
+        let outside = self.seen_from_outside.get(scan).copied().unwrap_or(false);
+        (!known).then_some(if outside { SeenFrom::Outside } else { SeenFrom::Inside })
+    }
+
     pub fn extent_m(&self, tile: &PlannedTile) -> f64 {
         self.min_extent_m * f64::from(1u32 << tile.level)
     }
@@ -231,7 +240,7 @@ fn fingerprint(scans: &[ResolvedScan], params: &TilingParams) -> Result<String> 
                 s.scanner_world_m,
                 s.scanner_known,
                 // Only where it differs from before the field, so older plans still resume.
-                if s.seen_from == crate::manifest::SeenFrom::Outside { "|outside" } else { "" }
+                if s.seen_from == SeenFrom::Outside { "|outside" } else { "" }
             )
             .as_bytes(),
         );
@@ -462,7 +471,7 @@ fn count_and_plan(
         halo_points: 0,
         scanners_world_m: scans.iter().map(|s| s.scanner_world_m).collect(),
         scanner_known: scans.iter().map(|s| s.scanner_known).collect(),
-        seen_from_outside: scans.iter().map(|s| s.seen_from == crate::manifest::SeenFrom::Outside).collect(),
+        seen_from_outside: scans.iter().map(|s| s.seen_from == SeenFrom::Outside).collect(),
         bins_complete: false,
     })
 }

@@ -406,24 +406,25 @@ impl Gpu {
             });
         }
         let read = self.start_read(buffer, size);
-        let mut bytes = None;
-        self.wait_until("readback", || {
-            bytes = read.take();
-            Ok(bytes.is_some())
-        })?;
-        bytes
-            .unwrap_or_else(|| Err(Error::Gpu { pass: "readback", message: "no bytes after the map".into() }))
+        self.wait_for("readback", || read.take().transpose())
     }
 
-    /// Blocks until the GPU is done and `arrived` (which looks at a read-back's callback) says
-    /// its result is in. The map's callback runs in whichever thread polls the device: where
-    /// threads share one device (the tests do), another thread's poll can take our callback and
-    /// run it just after our own wait returned, so the wait alone does not promise it has run.
-    pub fn wait_until(&self, pass: &'static str, mut arrived: impl FnMut() -> Result<bool>) -> Result<()> {
+    /// Blocks until the GPU is done and `arrived` (which looks at a read-back's callback) has its
+    /// result. The map's callback runs in whichever thread polls the device: where threads share
+    /// one device (the tests do), another thread's poll can take our callback and run it just
+    /// after our own wait returned, so the wait alone does not promise it has run.
+    pub fn wait_for<T>(
+        &self,
+        pass: &'static str,
+        mut arrived: impl FnMut() -> Result<Option<T>>,
+    ) -> Result<T> {
         self.wait()?;
         self.check(pass)?;
         let start = std::time::Instant::now();
-        while !arrived()? {
+        loop {
+            if let Some(done) = arrived()? {
+                return Ok(done);
+            }
             if start.elapsed() > std::time::Duration::from_secs(30) {
                 return Err(Error::Gpu {
                     pass,
@@ -435,7 +436,6 @@ impl Gpu {
                 .map_err(|e| Error::Gpu { pass: "wait", message: e.to_string() })?;
             std::thread::sleep(std::time::Duration::from_micros(200));
         }
-        Ok(())
     }
 
     /// Blocks until all submitted work is done.

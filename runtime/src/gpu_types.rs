@@ -62,6 +62,13 @@ pub struct LeafGpu {
     pub emission: [f32; 4],
 }
 
+impl LeafGpu {
+    /// The leaf's cell on the frame's leaf grid (leaves of `leaf_m`); `center_m` is inside it.
+    pub fn cell(&self, leaf_m: f32) -> glam::IVec3 {
+        (glam::Vec3::from_slice(&self.center_m[..3]) / leaf_m).floor().as_ivec3()
+    }
+}
+
 /// Light state of one leaf, rewritten by inject (direct, out) and propagate (gather, out).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]

@@ -1542,7 +1542,7 @@ impl Renderer {
             // (`poll_light`), and plans no light work until then.
             if !cfg!(target_arch = "wasm32") {
                 let gpu = self.gpu.clone();
-                gpu.wait_until("propagate", || self.poll_light())?;
+                gpu.wait_for("propagate", || Ok(self.poll_light()?.then_some(())))?;
             }
         }
         Ok(())

@@ -24,7 +24,7 @@ pub fn classify(leaf_m: f32, leaves: &[LeafGpu]) -> RockTable {
         .iter()
         .map(|l| SurfaceLeaf {
             // The cell's centre, as the packer classifies (a leaf's centre is its surface's).
-            center_leaf: (Vec3::from_slice(&l.center_m[..3]) / leaf_m).floor() + 0.5,
+            center_leaf: l.cell(leaf_m).as_vec3() + 0.5,
             normal_mean: Vec3::from_slice(&l.normal_mean[..3]),
         })
         .collect();

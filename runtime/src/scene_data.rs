@@ -270,8 +270,7 @@ fn move_leaves_to_surfels(
     let side = 1u64 << depth.min(21);
     let mut sums = vec![(DVec3::ZERO, 0.0f64); leaves.len()];
     // Surfels are stored in Morton order too, so a surfel is mostly in the previous one's leaf
-    // or the next: the search runs only when neither is. The pass costs about 27 ns a surfel
-    // (docs/benchmarks.md, "Opening a package and time to first frame").
+    // or the next: the search runs only when neither is.
     let mut at: Option<usize> = None;
     for s in surfels {
         let p = DVec3::from_array(s.position_tile_m.map(f64::from));
@@ -395,11 +394,7 @@ impl SceneData {
     /// spots. Used to measure how cost and error grow with the number of lights.
     pub fn lamp_string(&self, n: usize, power_w: f32, lift_m: f32) -> Vec<SceneLight> {
         let leaf = self.leaf_size_m;
-        let occupied: std::collections::HashSet<IVec3> = self
-            .leaves
-            .iter()
-            .map(|l| (Vec3::from_slice(&l.center_m[..3]) / leaf).floor().as_ivec3())
-            .collect();
+        let occupied: std::collections::HashSet<IVec3> = self.leaves.iter().map(|l| l.cell(leaf)).collect();
         let open = |p: Vec3| {
             let c = (p / leaf).floor().as_ivec3();
             let near_leaf = (-1..=1)
@@ -418,7 +413,7 @@ impl SceneData {
                 }
                 // From the cell's centre (a leaf's centre is on its surface), as before leaves
                 // moved there, so the lamps measured with stay where they were.
-                let base = ((Vec3::from_slice(&l.center_m[..3]) / leaf).floor() + 0.5) * leaf;
+                let base = (l.cell(leaf).as_vec3() + 0.5) * leaf;
                 let lamp = base + Vec3::Z * lift_m;
                 // The way up from two leaves above the floor to the lamp must be open too.
                 let clear = (2..=steps).all(|k| {

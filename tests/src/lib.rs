@@ -4,6 +4,13 @@
 use std::path::{Path, PathBuf};
 
 use grotto_preprocess::build::{BuildParams, ColorCodec};
+use grotto_runtime::gpu::GpuOptions;
+
+/// The adapter the end-to-end renders run on: Mesa's software Vulkan driver (lavapipe), so
+/// images compare across machines.
+pub fn lavapipe() -> GpuOptions {
+    GpuOptions { prefer_software: true, backends: Some(wgpu::Backends::VULKAN), ..Default::default() }
+}
 
 /// Build parameters for a small test package: 2 threads, a 64 MiB budget, 12.5 cm leaves, raw
 /// colours, tiles of `min_tile_m` to `max_tile_m` and a halo of `halo_m`, working in `work_dir`.

@@ -23,7 +23,6 @@ use grotto_preprocess::build;
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::synth::{self, SynthParams};
-use grotto_runtime::gpu::GpuOptions;
 use grotto_runtime::publish::{self, PublishOptions};
 use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
 use grotto_runtime::renderer::{Quality, Settings};
@@ -278,11 +277,7 @@ fn a_published_site_streams_the_package_by_ranges_and_shows_what_grotto_render_s
         width: W,
         height: H,
         settings: settings(),
-        gpu: GpuOptions {
-            prefer_software: true,
-            backends: Some(wgpu::Backends::VULKAN),
-            ..Default::default()
-        },
+        gpu: grotto_tests::lavapipe(),
         ..RenderOptions::defaults(package.clone(), native.clone())
     };
     let rendered = render_job::run(&opts, |_| {}).unwrap();

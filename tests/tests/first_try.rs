@@ -10,7 +10,6 @@ use std::time::Instant;
 
 use grotto_preprocess::build::{self, BuildParams};
 use grotto_preprocess::manifest::Manifest;
-use grotto_runtime::gpu::GpuOptions;
 use grotto_runtime::render_job::{self, RenderOptions};
 use grotto_tests::shared_data_dir;
 
@@ -78,11 +77,7 @@ fn build_default(file: &Path, out: &Path) -> grotto_preprocess::Result<(build::B
 /// `grotto render PACKAGE -o OUT`: every option at its command-line default.
 fn render_default(package: &Path, out: &Path) -> grotto_runtime::Result<render_job::RenderSummary> {
     let opts = RenderOptions {
-        gpu: GpuOptions {
-            prefer_software: true,
-            backends: Some(wgpu::Backends::VULKAN),
-            ..Default::default()
-        },
+        gpu: grotto_tests::lavapipe(),
         ..RenderOptions::defaults(package.to_path_buf(), out.to_path_buf())
     };
     render_job::run(&opts, |_| {})

@@ -17,11 +17,7 @@ fn view(package: &Path, camera: &str, out: std::path::PathBuf) -> RenderOptions 
         width: 160,
         height: 120,
         settings: Settings::default(),
-        gpu: GpuOptions {
-            prefer_software: true,
-            backends: Some(wgpu::Backends::VULKAN),
-            ..Default::default()
-        },
+        gpu: grotto_tests::lavapipe(),
         ..RenderOptions::defaults(package.to_path_buf(), out)
     }
 }
@@ -175,12 +171,7 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
     assert!(pixels == frames[0], "under WebGPU's default limits: {:?}", golden::diff(&pixels, &frames[0]));
     // The wet walls must show: the same view without specular reflection leaves the tolerance.
     if std::env::var_os("GROTTO_BLESS").is_none() {
-        let gpu = grotto_runtime::gpu::Gpu::new(&GpuOptions {
-            prefer_software: true,
-            backends: Some(wgpu::Backends::VULKAN),
-            ..Default::default()
-        })
-        .unwrap();
+        let gpu = grotto_runtime::gpu::Gpu::new(&grotto_tests::lavapipe()).unwrap();
         let mut scene = scene;
         scene.lights = scene.lamp_string(64, render_job::STRING_LAMP_W, render_job::STRING_LAMP_LIFT_M);
         let cam = render_job::resolve_camera(&scene, &CameraChoice::Named("chamber".into()), 4.0 / 3.0, 2.0)

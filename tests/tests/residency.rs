@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 use glam::Vec3;
 use grotto_format::Package;
 use grotto_runtime::camera::Camera;
-use grotto_runtime::gpu::{Gpu, GpuOptions};
+use grotto_runtime::gpu::Gpu;
 use grotto_runtime::pool::PoolCaps;
 use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
 use grotto_runtime::renderer::{Renderer, Settings};
@@ -20,10 +20,6 @@ use grotto_tests::golden;
 
 const W: u32 = 160;
 const H: u32 = 120;
-
-fn gpu_options() -> GpuOptions {
-    GpuOptions { prefer_software: true, backends: Some(wgpu::Backends::VULKAN), ..Default::default() }
-}
 
 fn settings() -> Settings {
     Settings { bounces: 3, shadow_map_size: 256, exposure: 8.0, ..Settings::default() }
@@ -57,7 +53,7 @@ fn job(package: &Path, out: PathBuf, gpu_memory: u64) -> RenderOptions {
         width: 64,
         height: 48,
         settings: Settings { bounces: 1, shadow_map_size: 128, ..Settings::default() },
-        gpu: gpu_options(),
+        gpu: grotto_tests::lavapipe(),
         gpu_memory: Some(gpu_memory),
         ..RenderOptions::defaults(package.to_path_buf(), out)
     }
@@ -138,7 +134,7 @@ fn split(
 #[test]
 fn coarse_neighbours_keep_the_image_and_dropping_them_does_not() {
     let pkg = Package::open(small_tiles_cave()).unwrap();
-    let gpu = Gpu::new(&gpu_options()).unwrap();
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
     let full = SceneData::from_package(&pkg).unwrap();
     assert!(full.tiles.len() >= 20, "{} tiles: the test needs many", full.tiles.len());
     let cam = Camera::from_scene(full.cameras.iter().find(|c| c.name == "chamber").unwrap());
@@ -311,7 +307,7 @@ fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer()
     // tile, and settles to what a renderer made for the new scene renders. Back to the first scene
     // (holes reused) and through a forced repack (light read back and moved), the same.
     let pkg = Package::open(small_tiles_cave()).unwrap();
-    let gpu = Gpu::new(&gpu_options()).unwrap();
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
     let n = pkg.tile_count() as usize;
     let scene = |full: usize| {
         SceneData::from_package_with(&pkg, |i| if i < full { TileMode::Full } else { TileMode::Coarse })
@@ -434,7 +430,7 @@ fn light_carried_across_a_reload_starts_closer_and_converges_over_frames_to_the_
     // every tile by the fourth: the bounces update 34, 42, 46 tiles, then all, and a clean bounce
     // over every tile ends it (activity.rs), 60,403 leaves in all against 75,189 from darkness.
     let pkg = Package::open(small_tiles_cave()).unwrap();
-    let gpu = Gpu::new(&gpu_options()).unwrap();
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
     let n = pkg.tile_count() as usize;
     let before =
         SceneData::from_package_with(&pkg, |i| if i < n / 2 { TileMode::Full } else { TileMode::Coarse })

@@ -174,8 +174,8 @@ struct BuildOpts {
     /// Where scans without a scanner position (bare files, merged clouds) were taken from: inside
     /// (a cave: normals face the passage its walls enclose) or outside (an object scanned from
     /// around it). A manifest's `seen_from` for a scan wins; scans with a scanner use it.
-    #[arg(long, default_value = "inside", value_parser = ["inside", "outside"])]
-    seen_from: String,
+    #[arg(long, value_enum, default_value_t = SeenFrom::Inside)]
+    seen_from: SeenFrom,
     /// Smallest tile edge, metres (power of two; default 16 leaves: 1 m at 6.25 cm leaves).
     #[arg(long)]
     min_tile_m: Option<f64>,
@@ -274,9 +274,7 @@ fn setup(
         }
         files => (Manifest::from_files(files), PathBuf::from("<command line>")),
     };
-    let seen_from = SeenFrom::parse(&opts.seen_from)
-        .ok_or_else(|| anyhow::anyhow!("--seen-from {:?}: inside or outside", opts.seen_from))?;
-    manifest.default_seen_from(seen_from);
+    manifest.default_seen_from(opts.seen_from);
     let work_dir = match (&opts.work_dir, out) {
         (Some(dir), _) => dir.clone(),
         (None, Some(out)) => {
