@@ -87,6 +87,35 @@ pub struct LeafLightGpu {
     /// shadowed by SVO cones or not at all), without albedo: shade adds `albedo * far`
     /// interpolated over leaves instead of evaluating those lights per pixel. Written by inject.
     pub far: [f32; 4],
+    /// The running sum of a bounce's cones until its last batch (rgb), so that `gather` keeps
+    /// the bounce before for the residual meanwhile.
+    pub pending: [f32; 4],
+    /// What the last bounce changed the gather by (rgb): the ratio of two successive ones
+    /// estimates the bounces not run (`Settings::bounce_tail`). Zeroed where direct or
+    /// environment light is rewritten.
+    pub residual: [f32; 4],
+    /// The estimated gather of the bounces not run (rgb, irradiance / pi): shade adds
+    /// `albedo * (gather + tail)`; `out` and the pyramid hold only the bounces run.
+    pub tail: [f32; 4],
+}
+
+impl LeafLightGpu {
+    /// The radiance the leaf shows (rgb): `out` (the bounces run) plus `albedo * tail` (the
+    /// estimate of those not run), as shade adds them up.
+    pub fn shown(&self, leaf: &LeafGpu) -> [f32; 3] {
+        std::array::from_fn(|k| self.out[k] + leaf.albedo_opacity[k] * self.tail[k])
+    }
+
+    /// The tail the propagate pass adds after a bounce that changed the gather by `residual`
+    /// when the bounce before changed it by `last`, with ratios trusted up to `ratio_max`
+    /// (`Params::tail_ratio_max`): the CPU statement of passes/propagate.wgsl `bounce_tail`.
+    pub fn tail_of(residual: [f32; 3], last: [f32; 3], ratio_max: [f32; 3]) -> [f32; 3] {
+        std::array::from_fn(|k| {
+            let ratio = if last[k].abs() > 1e-20 { residual[k] / last[k] } else { 0.0 };
+            let r = if (0.0..=1.0).contains(&ratio) { ratio.min(ratio_max[k]) } else { 0.0 };
+            residual[k] * r / (1.0 - r)
+        })
+    }
 }
 
 /// A point or spot light in frame metres.
@@ -196,7 +225,13 @@ pub struct Params {
     /// Word offsets of the tables in the lookup buffer (lookup.wgsl): x rock, y light grid,
     /// z tile index; w unused.
     pub lookup_base: [u32; 4],
+    /// Largest ratio of successive bounces the tail estimate trusts, per channel (rgb; the
+    /// scene's largest albedo, at most [`TAIL_RATIO_MAX`]); zero without the tail; w unused.
+    pub tail_ratio_max: [f32; 4],
 }
+
+/// Cap on the bounce ratio of the tail estimate: the tail is `r / (1 - r)` residuals, 19 here.
+pub const TAIL_RATIO_MAX: f32 = 0.95;
 
 /// `Params::flags` bits (generated into WGSL as `FLAG_*` by `shaders::constants`).
 pub mod flags {
@@ -331,9 +366,9 @@ const _: () = {
     assert!(size_of::<TileGpu>() == 48);
     assert!(size_of::<NodeGpu>() == 8);
     assert!(size_of::<LeafGpu>() == 64);
-    assert!(size_of::<LeafLightGpu>() == 80);
+    assert!(size_of::<LeafLightGpu>() == 128);
     assert!(size_of::<LightGpu>() == 64);
-    assert!(size_of::<Params>() == 80 + 16 + 48 + 64 + 16 * MAX_CONES + 16 * 9 + 16 * 8 * 2 + 16 + 16);
+    assert!(size_of::<Params>() == 80 + 16 + 48 + 64 + 16 * MAX_CONES + 16 * 9 + 16 * 8 * 2 + 16 + 16 + 16);
     assert!(size_of::<MipRange>() == 16);
     assert!(size_of::<InjectBatch>() == 16);
     assert!(size_of::<ConeBatch>() == 16);

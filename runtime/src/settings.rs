@@ -34,6 +34,11 @@ pub struct Settings {
     pub bounces: u32,
     /// Propagation stops once a bounce changes no leaf's radiance by more than this (relative).
     pub convergence_tolerance: f32,
+    /// Estimate the bounces not run: from the second bounce on, each leaf adds to its gather the
+    /// rest of a geometric series whose ratio is that of its last two bounces' changes (per
+    /// channel, trusted up to the scene's largest albedo), so bright closed rock converges in a
+    /// few bounces instead of dozens (passes/propagate.wgsl).
+    pub bounce_tail: bool,
     pub shadows: bool,
     pub shadow_map_size: u32,
     pub indirect: IndirectFilter,
@@ -196,6 +201,7 @@ impl Default for Settings {
             max_steps: 256,
             bounces: 8,
             convergence_tolerance: 1e-3,
+            bounce_tail: true,
             shadows: true,
             shadow_map_size: 512,
             indirect: IndirectFilter::Trilinear,
@@ -256,10 +262,10 @@ impl Settings {
         match q {
             Quality::Fast => Settings { cones: 4, step_scale: 1.0, bounces: 2, shadow_map_size: 256, ..d },
             Quality::Balanced => Settings {
-                cones: 9,
+                cones: 14,
                 cone_aperture_scale: 0.7,
                 step_scale: 0.5,
-                bounces: 4,
+                bounces: 3,
                 shadow_map_size: 512,
                 ..d
             },

@@ -144,13 +144,86 @@ fn furnace_with(albedo: f32, settings: Settings) -> (f32, f32, bool) {
     let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
     r.settle(|_, _| {}).unwrap();
     let light = r.read_leaf_light().unwrap();
-    let finite = light.iter().all(|l| l.out.iter().all(|v| v.is_finite()));
+    let shown: Vec<f32> = light.iter().zip(&scene.leaves).map(|(l, leaf)| l.shown(leaf)[0]).collect();
+    let finite = light.iter().all(|l| l.out.iter().chain(&l.tail).all(|v| v.is_finite()));
     let (mut lo, mut hi) = (f32::MAX, f32::MIN);
-    for l in &light {
-        lo = lo.min(l.out[0]);
-        hi = hi.max(l.out[0]);
+    for v in shown {
+        lo = lo.min(v);
+        hi = hi.max(v);
     }
     (lo, hi, finite)
+}
+
+#[test]
+fn the_bounce_tail_brings_the_furnace_to_its_limit_in_a_few_bounces() {
+    // Albedo 0.8, emission 1: exact radiance 5. Four bounces alone reach
+    // 1 + 0.8 + ... + 0.8^4 = 3.36; with the tail, the second bounce's ratio (0.8) gives the rest
+    // of the series, and the light counts as converged once the estimate stops moving.
+    let scene = testscenes::furnace_sphere(5, 11.0, 0.8, 1.0);
+    let run = |bounce_tail: bool| {
+        let settings =
+            Settings { bounces: 4, bounce_tail, convergence_tolerance: 1e-3, ..Default::default() };
+        let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+        r.settle(|_, _| {}).unwrap();
+        let light = r.read_leaf_light().unwrap();
+        let shown: Vec<f32> = light.iter().zip(&scene.leaves).map(|(l, leaf)| l.shown(leaf)[0]).collect();
+        let mean = shown.iter().sum::<f32>() / shown.len() as f32;
+        let worst = shown.iter().map(|v| (v - 5.0).abs() / 5.0).fold(0.0f32, f32::max);
+        (mean, worst, r.stats().bounces_done, r.light_progress().converged)
+    };
+    let (plain, _, plain_bounces, _) = run(false);
+    let (tailed, worst, bounces, converged) = run(true);
+    eprintln!(
+        "furnace 0.8 after at most 4 bounces: {plain:.4} without the tail ({plain_bounces} bounces), \
+         {tailed:.4} with it ({bounces} bounces, converged {converged}, worst leaf {:.2}% off), exact 5",
+        worst * 100.0
+    );
+    assert!((plain - 3.36).abs() < 0.05, "four plain bounces should stop at 3.36, got {plain}");
+    assert!(worst < 0.01, "with the tail every leaf should be within 1% of 5");
+    assert!(converged && bounces <= 3, "the estimate should settle after 3 bounces, took {bounces}");
+}
+
+#[test]
+fn the_bounce_tail_matches_its_cpu_statement() {
+    // Bounces from random light: the third's residual is the change of the gather, and its
+    // tail what LeafLightGpu::tail_of (the CPU statement of propagate.wgsl's bounce_tail) says.
+    let scene = testscenes::colour_box();
+    let settings = Settings { cones: 4, ..Default::default() };
+    let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+    let max_albedo = (0..3)
+        .map(|k| scene.leaves.iter().map(|l| l.albedo_opacity[k]).fold(0.0f32, f32::max).min(0.95))
+        .collect::<Vec<_>>();
+    let ratio_max = r.params().tail_ratio_max;
+    assert_eq!(&ratio_max[..3], &max_albedo[..], "the trusted ratio is the largest albedo per channel");
+    r.write_leaf_light(&random_light(scene.leaves.len(), 5)).unwrap();
+    r.run_bounce().unwrap();
+    let zeroth = r.read_leaf_light().unwrap();
+    // The first bounce has no ratio yet: no tail.
+    assert!(zeroth.iter().all(|l| l.tail[..3] == [0.0; 3]));
+    // Light written at random is not one a bounce makes; from the second bounce on it is.
+    r.run_bounce().unwrap();
+    let first = r.read_leaf_light().unwrap();
+    r.run_bounce().unwrap();
+    let second = r.read_leaf_light().unwrap();
+    let (mut checked, mut tailed, mut worst) = (0usize, 0usize, 0.0f32);
+    for (a, b) in first.iter().zip(&second) {
+        let residual: [f32; 3] = std::array::from_fn(|k| b.gather[k] - a.gather[k]);
+        let want = LeafLightGpu::tail_of(
+            residual,
+            a.residual[..3].try_into().unwrap(),
+            max_albedo[..].try_into().unwrap(),
+        );
+        for k in 0..3 {
+            let scale = residual[k].abs().max(1e-3);
+            worst = worst.max((b.residual[k] - residual[k]).abs() / scale);
+            worst = worst.max((b.tail[k] - want[k]).abs() / (want[k].abs().max(1e-3)));
+        }
+        checked += 1;
+        tailed += usize::from(want.iter().any(|t| t.abs() > 1e-4));
+    }
+    eprintln!("bounce tail: {tailed} of {checked} leaves with a tail, worst error {worst:.2e}");
+    assert!(tailed * 2 > checked, "most leaves should get a tail after three bounces");
+    assert!(worst < 1e-4, "the tail differs from its CPU statement by {worst}");
 }
 
 #[test]

@@ -210,6 +210,10 @@ struct RenderArgs {
     /// Render without shadow maps.
     #[arg(long)]
     no_shadows: bool,
+    /// Run only the bounces counted, without estimating the ones not run as a geometric tail
+    /// (the light then stops short of converged in bright closed rock).
+    #[arg(long)]
+    no_bounce_tail: bool,
     /// Shadow-map budget: the N brightest point and spot lights get shadow maps and per-pixel
     /// light; the others are lit per leaf with --shadow-fallback (default 16).
     #[arg(long)]
@@ -329,6 +333,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
     settings.max_distance_m = a.max_distance;
     settings.convergence_tolerance = a.tolerance;
     settings.shadows = !a.no_shadows;
+    settings.bounce_tail = !a.no_bounce_tail;
     settings.shadowed_lights = a.shadowed_lights.unwrap_or(settings.shadowed_lights);
     settings.shadow_fallback = ShadowFallback::parse(&a.shadow_fallback)
         .ok_or_else(|| anyhow::anyhow!("--shadow-fallback {:?}: use cone or none", a.shadow_fallback))?;

@@ -76,6 +76,8 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let direct = state.direct.rgb + albedo / PI * irradiance;
     state.direct = vec4<f32>(direct, 0.0);
     state.far = vec4<f32>(state.far.rgb + far / PI, 0.0);
+    // New direct light starts a new series: the last bounce's change says nothing of the next.
+    state.residual = vec4<f32>(0.0);
     state.out = leaf_out(leaf, state);
     leaf_light[i] = state;
 }

@@ -7,8 +7,9 @@
 // active tiles (shaders/activity.wgsl): the leaves of the tiles whose light may still change.
 //
 // Cones are traced in batches, one dispatch each (passes/mod.rs `cone_batched` says why); the running sum
-// lives in the leaf's `gather`, added to cone by cone in the same order as one loop would (the
-// result is the same to the bit), and the last batch finishes the leaf.
+// lives in the leaf's `pending`, added to cone by cone in the same order as one loop would (the
+// result is the same to the bit), and the last batch finishes the leaf: gather = the cones' sum,
+// and tail = the estimated gather of the bounces not run (`bounce_tail`).
 #import activity
 #import cone
 #import cone_batch
@@ -25,7 +26,7 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     let i = item.x;
     let leaf = leaves[i];
     var state = leaf_light[i];
-    var gathered = select(state.gather.rgb, vec3<f32>(0.0), batch.first == 0u);
+    var gathered = select(state.pending.rgb, vec3<f32>(0.0), batch.first == 0u);
     let end = batch_end();
     for (var c = batch.first; c < end; c++) {
         let cone = params.cones[c];
@@ -34,18 +35,43 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
         gathered += cone.w * (s.rgb + (1.0 - s.a) * params.background.rgb);
     }
     if end < params.cone_count {
-        state.gather = vec4<f32>(gathered, 0.0);
+        state.pending = vec4<f32>(gathered, 0.0);
         leaf_light[i] = state;
         return;
     }
-    let before = state.out.rgb;
+    // The light a surface shows: out with the tail's share (what shade and the change measure).
+    let albedo = leaf.albedo_opacity.rgb;
+    let before = state.out.rgb + albedo * state.tail.rgb;
+    let residual = gathered - state.gather.rgb;
+    state.tail = vec4<f32>(bounce_tail(residual, state.residual.rgb), 0.0);
+    state.residual = vec4<f32>(residual, 0.0);
     state.gather = vec4<f32>(gathered, 0.0);
     state.out = leaf_out(leaf, state);
-    let after = state.out.rgb;
+    let after = state.out.rgb + albedo * state.tail.rgb;
     leaf_light[i] = state;
     let scale = max(max(after.r, max(after.g, after.b)), 1e-6);
     let diff = abs(after - before);
     let change = max(diff.r, max(diff.g, diff.b)) / scale;
     atomicMax(&changes.max_change_bits, bitcast<u32>(change));
     atomicMax(&changes.tiles[item.y], bitcast<u32>(change));
+}
+
+// The bounces not run, per channel, as the rest of a geometric series: `residual` is what this
+// bounce changed the gather by, `last` what the one before did. Once the light is spread, each
+// bounce changes a leaf by the same ratio r of the one before (the dominant eigenvalue of one
+// bounce), and the changes still to come add up to residual * r / (1 - r) (Aitken's
+// extrapolation). The series itself runs on without the tail (out and the pyramid hold the
+// bounces run), so successive changes stay those of plain propagation, all of one sign; only what
+// a surface shows adds it (shade, and the change that decides convergence: once the estimate
+// stops moving, more bounces would not change the image). Feeding the tail into the next bounce
+// instead converges in fewer bounces but overshoots where neighbours' estimates compound
+// (colour box: bias +0.041 at 4 bounces against -0.001 this way). A ratio above the scene's
+// largest albedo (params.tail_ratio_max; zero without the tail) means light is still arriving, as
+// in a corridor's far end: it gets the largest ratio trusted, and none from 1 on.
+fn bounce_tail(residual: vec3<f32>, last: vec3<f32>) -> vec3<f32> {
+    let ok = abs(last) > vec3<f32>(1e-20);
+    let ratio = select(vec3<f32>(0.0), residual / select(vec3<f32>(1.0), last, ok), ok);
+    let trusted = ratio >= vec3<f32>(0.0) & ratio <= vec3<f32>(1.0);
+    let r = select(vec3<f32>(0.0), min(ratio, params.tail_ratio_max.rgb), trusted);
+    return residual * r / (1.0 - r);
 }

@@ -111,7 +111,7 @@ fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32) ->
                 }
                 let leaf = find_leaf(i0 + vec3<i32>(x, y, z));
                 if leaf != EMPTY {
-                    sum.gather += w * leaf_light[leaf].gather.rgb;
+                    sum.gather += w * (leaf_light[leaf].gather.rgb + leaf_light[leaf].tail.rgb);
                     sum.emission += w * leaves[leaf].emission.rgb;
                     sum.sky += w * leaf_light[leaf].env.w;
                     sum.far += w * leaf_light[leaf].far.rgb;

@@ -10,6 +10,12 @@ struct LeafLight {
     env: vec4<f32>,
     // Irradiance / pi from the lights beyond the shadow-map budget, without albedo (inject).
     far: vec4<f32>,
+    // rgb: a bounce's running cone sum until its last batch (propagate).
+    pending: vec4<f32>,
+    // rgb: the last bounce's change of the gather (propagate's tail estimate).
+    residual: vec4<f32>,
+    // rgb: the estimated gather of the bounces not run (propagate); shade adds it to gather.
+    tail: vec4<f32>,
 }
 
 @group(1) @binding(0) var<storage, read_write> leaf_light: array<LeafLight>;

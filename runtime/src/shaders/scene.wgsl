@@ -52,6 +52,8 @@ struct Params {
     env_chain: vec4<u32>,
     // Word offsets in the lookup buffer (lookup.wgsl): x rock, y light grid, z tile index.
     lookup_base: vec4<u32>,
+    // rgb: largest bounce ratio the tail estimate trusts (0: no tail); w unused.
+    tail_ratio_max: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
