@@ -18,6 +18,26 @@ enum Cli {
     Render(RenderArgs),
     Accuracy(AccuracyArgs),
     Lights(LightsArgs),
+    Mitsuba(MitsubaArgs),
+}
+
+/// Write the furnace, the colour box and the dogleg for Mitsuba 3 (SLUG.xml) beside this
+/// reference's own render of each (SLUG.json: per-pixel mean and standard error), for
+/// scripts/mitsuba-check.py to compare (docs/reference.md).
+#[derive(clap::Args, Debug)]
+struct MitsubaArgs {
+    /// Folder to write into.
+    #[arg(long, default_value = "target/mitsuba")]
+    out: PathBuf,
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "96x72")]
+    size: String,
+    /// Paths per pixel of this reference's render.
+    #[arg(long, default_value_t = 1024)]
+    spp: u32,
+    /// Samples per pixel written into the Mitsuba scenes.
+    #[arg(long, default_value_t = 1024)]
+    mitsuba_spp: u32,
 }
 
 /// The many-lights measurement: the demo cave relit by a lamp string, its path-traced reference,
@@ -99,6 +119,7 @@ fn main() -> anyhow::Result<()> {
         Cli::Render(a) => render(a),
         Cli::Accuracy(a) => accuracy(a),
         Cli::Lights(a) => lights(a),
+        Cli::Mitsuba(a) => mitsuba(a),
     }
 }
 
@@ -134,6 +155,78 @@ fn lights(a: LightsArgs) -> anyhow::Result<()> {
     grotto_runtime::export::write_atomically(&a.out, md.as_bytes())?;
     println!("{md}");
     eprintln!("wrote {} in {:.0} s", a.out.display(), t0.elapsed().as_secs_f64());
+    Ok(())
+}
+
+fn mitsuba(a: MitsubaArgs) -> anyhow::Result<()> {
+    use grotto_reference::accuracy;
+    let (w, h) = grotto_runtime::render_job::parse_size(&a.size).map_err(anyhow::Error::msg)?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let mut index = Vec::new();
+    for (name, description, data) in accuracy::closed_scenes() {
+        let cam = data.cameras.first().with_context(|| format!("scene {name} has no camera"))?;
+        let camera = Camera::from_scene(cam);
+        let splat = grotto_runtime::renderer::Settings::default().splat_scale;
+        let slug = accuracy::slug(name);
+        // The reference's discs, for the path tracer; and, where the surfels are the voxel faces
+        // of a hand-built scene (one per open face, axis-aligned), those faces: the exact
+        // surface the discs stand for.
+        let scene = SurfelScene::from_scene(&data, splat);
+        let on_faces = scene.discs().iter().all(|d| d.normal.abs().max_element() > 0.9999);
+        let mut shapes = vec![("discs", grotto_reference::mitsuba::Shapes::Discs)];
+        if on_faces {
+            shapes.push(("faces", grotto_reference::mitsuba::Shapes::Faces { side_m: data.leaf_size_m }));
+        }
+        let mut entry = serde_json::json!({ "slug": slug, "mitsuba": {}, "reference": {} });
+        for (what, s) in shapes {
+            let xml = grotto_reference::mitsuba::scene_xml(&scene, s, &camera, w, h, a.mitsuba_spp)
+                .with_context(|| format!("scene {name}"))?;
+            let file = format!("{slug}-{what}.xml");
+            grotto_runtime::export::write_atomically(&a.out.join(&file), xml.as_bytes())?;
+            entry["mitsuba"][what] = file.into();
+        }
+        // The reference as the report uses it (shadow rays a quarter leaf off the surface), and
+        // with shadow rays a hair off (what that choice changes).
+        let offsets = [
+            ("quarter leaf", scene),
+            ("hair", SurfelScene::from_scene(&data, splat).with_surface_offset(0.0)),
+        ];
+        for (what, sc) in offsets {
+            let t0 = std::time::Instant::now();
+            let est = sc.render(&camera, w, h, a.spp, &PathSettings::for_scene(&data), 1);
+            let seconds = t0.elapsed().as_secs_f64();
+            let file = format!("{slug}-{}.json", what.replace(' ', "-"));
+            let json = serde_json::json!({
+                "name": name,
+                "description": description,
+                "offset": what,
+                "width": w,
+                "height": h,
+                "spp": a.spp,
+                "seconds": seconds,
+                "discs": sc.discs().len(),
+                "mean": est.iter().map(|e| e.mean.to_array()).collect::<Vec<_>>(),
+                "std_err": est.iter().map(|e| e.std_err.to_array()).collect::<Vec<_>>(),
+            });
+            grotto_runtime::export::write_atomically(&a.out.join(&file), json.to_string().as_bytes())?;
+            entry["reference"][what] = file.into();
+            eprintln!(
+                "{name}: {} discs, reference ({what} offset) {} spp in {seconds:.1} s",
+                sc.discs().len(),
+                a.spp
+            );
+        }
+        index.push(entry);
+    }
+    let command = format!(
+        "cargo run --release -p grotto-reference -- mitsuba --out {} --size {w}x{h} --spp {} --mitsuba-spp {}",
+        a.out.display(),
+        a.spp,
+        a.mitsuba_spp
+    );
+    let index = serde_json::json!({ "scenes": index, "command": command });
+    grotto_runtime::export::write_atomically(&a.out.join("index.json"), index.to_string().as_bytes())?;
+    println!("wrote {} scenes to {}", accuracy::closed_scenes().len(), a.out.display());
     Ok(())
 }
 
