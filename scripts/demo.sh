@@ -4,7 +4,7 @@
 # cameras with global illumination to OUT/chamber.png and OUT/entrance.png.
 # Usage: scripts/demo.sh [OUT_DIR]   (default: out/)
 # Rendering runs on the GPU when there is one; otherwise on Mesa's software Vulkan driver (installed
-# here if missing), where the demo takes about four minutes on 2 cores.
+# here if missing), where the demo takes about five minutes on 2 cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-out}
@@ -20,6 +20,6 @@ target/release/grotto-pack demo --out "$out"
 target/release/grotto inspect "$out/demo.grotto"
 target/release/grotto verify "$out/demo.grotto"
 for camera in chamber entrance; do
-    target/release/grotto render "$out/demo.grotto" --camera "$camera" --size 640x480 --bounces 4 \
+    target/release/grotto render "$out/demo.grotto" --camera "$camera" --size 640x480 \
         --out "$out/$camera.png" --explain
 done
