@@ -692,8 +692,9 @@ pub fn report(
         "Finer march knobs more accurate: `step` 1 > 0.5 > 0.25 > 0.1 in relative RMSE, `aperture` \
          1 > 0.7 > 0.5 > 0.35 in |bias| (with the cone count fixed a narrower cone leaves gaps between cones, \
          which raises the RMSE; the aperture must change blur, not energy), each finer row at most \
-         {MONOTONE_SLACK} above the coarser one; with 4 bounces against full transport, and with 1 bounce \
-         against the reference cut after one bounce:\n"
+         {MONOTONE_SLACK} above the coarser one; with the balanced preset's {} bounces against full \
+         transport, and with 1 bounce against the reference cut after one bounce:\n",
+        Settings::preset(Quality::Balanced).bounces
     );
     let _ = writeln!(
         s,
