@@ -261,11 +261,15 @@ pub mod flags {
     /// The G-buffer's albedo holds each surfel's scan colour; shade shows it as the level view
     /// shows levels.
     pub const VIEW_SCAN: u32 = 4096;
+    /// The light sources changed since the last inject or env pass (new lights, a new
+    /// environment): those passes start a new series for propagate's tail estimate (zero the
+    /// residual). A forced re-run over unchanged light does not, so it changes nothing.
+    pub const NEW_SERIES: u32 = 8192;
     /// The views shade writes without light (settings.rs `ViewMode::shows_light`).
     pub const VIEWS_WITHOUT_LIGHT: u32 = VIEW_ALBEDO | VIEW_NORMALS | VIEW_LEVEL | VIEW_SCAN;
 
     /// Every flag with its WGSL name.
-    pub const ALL: [(&str, u32); 13] = [
+    pub const ALL: [(&str, u32); 14] = [
         ("FLAG_VIEW_ALBEDO", VIEW_ALBEDO),
         ("FLAG_VIEW_SCAN", VIEW_SCAN),
         ("FLAG_VIEW_NORMALS", VIEW_NORMALS),
@@ -279,6 +283,7 @@ pub mod flags {
         ("FLAG_ENV", ENV),
         ("FLAG_FAR_LIGHTS", FAR_LIGHTS),
         ("FLAG_SPECULAR", SPECULAR),
+        ("FLAG_NEW_SERIES", NEW_SERIES),
     ];
 }
 

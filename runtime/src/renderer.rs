@@ -1288,6 +1288,9 @@ impl Renderer {
         // Auto exposure sets it after the light has settled (`set_exposure`).
         p.exposure = s.exposure;
         let mut f = flags::EMISSION;
+        if !self.direct_valid || (self.environment && !self.env_valid) {
+            f |= flags::NEW_SERIES;
+        }
         if s.direct && p.light_count > 0 {
             f |= flags::DIRECT;
         }

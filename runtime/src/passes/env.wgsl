@@ -44,8 +44,10 @@ fn env(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) n
     let albedo = leaf.albedo_opacity.rgb;
     let env_light = albedo * sh_irradiance_ndf_over_pi(leaf.normal_mean.xyz) * v;
     state.env = vec4<f32>(env_light, v);
-    // New environment light starts a new series (propagate's tail).
-    state.residual = vec4<f32>(0.0);
+    // New environment light starts a new series (propagate's tail); a forced re-run keeps it.
+    if (params.flags & FLAG_NEW_SERIES) != 0u {
+        state.residual = vec4<f32>(0.0);
+    }
     state.out = leaf_out(leaf, state);
     leaf_light[i] = state;
 }

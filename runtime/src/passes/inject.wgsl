@@ -76,8 +76,11 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let direct = state.direct.rgb + albedo / PI * irradiance;
     state.direct = vec4<f32>(direct, 0.0);
     state.far = vec4<f32>(state.far.rgb + far / PI, 0.0);
-    // New direct light starts a new series: the last bounce's change says nothing of the next.
-    state.residual = vec4<f32>(0.0);
+    // New direct light starts a new series: the last bounce's change says nothing of the next
+    // (a forced re-run over the same lights keeps it, and so changes nothing).
+    if (params.flags & FLAG_NEW_SERIES) != 0u {
+        state.residual = vec4<f32>(0.0);
+    }
     state.out = leaf_out(leaf, state);
     leaf_light[i] = state;
 }
