@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Checks grotto-reference against Mitsuba 3 (issue 17) and writes docs/reference.md.
+"""Checks grotto-reference against Mitsuba 3 (issue 17) and writes docs/reference-mitsuba.md.
 
 Renders each scene `grotto-reference mitsuba` wrote (SLUG.xml: the same discs, albedos, emission,
 point lights and camera) with Mitsuba 3's `scalar_rgb` path tracer, in two halves with different
@@ -8,7 +8,7 @@ reference's render of the same scene (SLUG.json: per-pixel mean and standard err
 
 Usage (outside CI; needs `pip install mitsuba numpy`):
     cargo run --release -p grotto-reference -- mitsuba --out target/mitsuba
-    python3 scripts/mitsuba-check.py target/mitsuba --out docs/reference.md
+    python3 scripts/mitsuba-check.py target/mitsuba --out docs/reference-mitsuba.md
 """
 
 import argparse
@@ -84,7 +84,7 @@ def load_reference(folder, file):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("folder", help="what `grotto-reference mitsuba` wrote")
-    ap.add_argument("--out", default="docs/reference.md", help="the report to write")
+    ap.add_argument("--out", default="docs/reference-mitsuba.md", help="the report to write")
     ap.add_argument("--spp", type=int, default=None, help="Mitsuba samples per pixel (default: the scenes')")
     ap.add_argument("--json", action="store_true", help="print the rows as JSON")
     a = ap.parse_args()
