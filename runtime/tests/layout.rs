@@ -87,7 +87,7 @@ fn shared() -> Vec<(&'static str, RustLayout)> {
         ),
         ("Node", rust_layout!(NodeGpu { first_child, mask_level })),
         ("Leaf", rust_layout!(LeafGpu { albedo_opacity, normal_mean, center_m, emission })),
-        ("LeafLight", rust_layout!(LeafLightGpu { direct, gather, out, env, far })),
+        ("LeafLight", rust_layout!(LeafLightGpu { direct, gather, out, env, far, pending, residual, tail })),
         ("Light", rust_layout!(LightGpu { position_kind, intensity_layer, direction_cos_outer, params })),
         (
             "Params",
@@ -124,6 +124,7 @@ fn shared() -> Vec<(&'static str, RustLayout)> {
                 env_levels,
                 env_chain,
                 lookup_base,
+                tail_ratio_max,
             }),
         ),
         ("MipRange", rust_layout!(MipRange { first, count, height, pad })),
