@@ -1031,6 +1031,8 @@ mod tests {
             .collect();
         assert_eq!(knob_monotone(&st, ONE_BOUNCE_STEP), Some(true));
         assert!(judged_cut(ONE_BOUNCE_STEP) && judged_cut(CUT_BOUNCES) && !judged_cut("step"));
+        // The bounce sweep runs with the tail, so it is judged against full transport.
+        assert!(!judged_cut("bounces"));
     }
 
     #[test]
@@ -1048,7 +1050,5 @@ mod tests {
         assert_eq!(presets_monotone(&presets([0.2, 0.2, 0.1], [1.0, 2.0, 3.0])), Some(false));
         assert_eq!(presets_monotone(&presets([0.3, 0.2, 0.1], [1.0, 3.0, 2.0])), Some(false));
         assert_eq!(presets_monotone(&presets([0.3, 0.2, 0.1], [1.0, 2.0, 3.0])[..2]), None);
-        // The bounce sweep runs with the tail, so it is judged against full transport.
-        assert!(!judged_cut("bounces"));
     }
 }

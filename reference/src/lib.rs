@@ -168,8 +168,9 @@ pub struct SurfelScene {
     /// --scene bunny` shows the runtime's direct light 10% brighter than the reference's).
     shadow_offset_m: f32,
     /// Offset of bounce rays along the normal: a hair (`epsilon_m`). Checked against Mitsuba 3
-    /// on the same discs (docs/reference.md): a quarter leaf here too made the dogleg's
-    /// reference 3.8% brighter than Mitsuba's (the colour box 0.8%); a hair, 0.8% and 0.0%.
+    /// on the same discs (docs/reference-mitsuba.md, `grotto-reference mitsuba`, which renders
+    /// both): a quarter leaf here too makes the dogleg's reference brighter than Mitsuba's by
+    /// several percent.
     bounce_offset_m: f32,
     /// The runtime's rock (runtime/src/rock.rs): tiles and rock bits only. A ray that would leave
     /// the scene through a gap between scanned discs but crosses rock on the way is absorbed, as
@@ -285,11 +286,11 @@ impl SurfelScene {
         &self.discs
     }
 
-    /// The same scene with shadow and bounce rays both offset `offset_m` from the surface (at
-    /// least a hair): the Mitsuba check measures what the offsets change.
-    pub fn with_surface_offset(mut self, offset_m: f32) -> Self {
-        self.shadow_offset_m = offset_m.max(self.epsilon_m);
-        self.bounce_offset_m = self.shadow_offset_m;
+    /// The same scene with shadow rays offset `shadow_m` and bounce rays `bounce_m` from the
+    /// surface (each at least a hair): the Mitsuba check measures what the offsets change.
+    pub fn with_ray_offsets(mut self, shadow_m: f32, bounce_m: f32) -> Self {
+        self.shadow_offset_m = shadow_m.max(self.epsilon_m);
+        self.bounce_offset_m = bounce_m.max(self.epsilon_m);
         self
     }
 

@@ -4,7 +4,7 @@
 //! an area emitter, the point lights as `point` emitters with the same intensity, the camera with
 //! the same eye, target, up and vertical field of view, and a box pixel filter (the reference
 //! integrates each pixel's area).
-//! `scripts/mitsuba-check.py` renders what this writes and compares (docs/reference.md).
+//! `scripts/mitsuba-check.py` renders what this writes and compares (docs/reference-mitsuba.md).
 //!
 //! Written by hand because it is the project's own mapping: Mitsuba's XML is its scene format,
 //! and no crate writes it.
@@ -65,13 +65,18 @@ pub fn scene_xml(
             v(l.intensity_w_sr)
         );
     }
-    // One BSDF per distinct albedo, referenced by the discs.
+    // One BSDF per distinct albedo, referenced by the discs (`albedo_of`: each disc's).
     let mut albedos: Vec<Vec3> = Vec::new();
-    for d in scene.discs() {
-        if !albedos.contains(&d.albedo) {
-            albedos.push(d.albedo);
-        }
-    }
+    let albedo_of: Vec<usize> = scene
+        .discs()
+        .iter()
+        .map(|d| {
+            albedos.iter().position(|x| *x == d.albedo).unwrap_or_else(|| {
+                albedos.push(d.albedo);
+                albedos.len() - 1
+            })
+        })
+        .collect();
     for (i, a) in albedos.iter().enumerate() {
         let _ = writeln!(
             s,
@@ -79,7 +84,7 @@ pub fn scene_xml(
             v(*a)
         );
     }
-    for d in scene.discs() {
+    for (d, &albedo) in scene.discs().iter().zip(&albedo_of) {
         let emits = d.emission != Vec3::ZERO;
         // A right-handed frame (t1 x t2 = n): Mitsuba's disk is the unit disc and its rectangle
         // the square [-1, 1]^2, both in z = 0 facing +z; for an axis-aligned normal the frame is
@@ -90,7 +95,6 @@ pub fn scene_xml(
                 ("rectangle", 0.5 * side_m, face_normal(d.center_m, d.normal, side_m))
             }
         };
-        let albedo = albedos.iter().position(|x| *x == d.albedo).unwrap_or(0);
         let twin = emits && shapes == Shapes::Discs;
         // The twin sits 1e-3 of the disc's radius behind it: beyond Mitsuba's ray offsets at
         // these scales (~1e-4 relative), far below anything the image resolves.

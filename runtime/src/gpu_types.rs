@@ -91,8 +91,8 @@ pub struct LeafLightGpu {
     /// the bounce before for the residual meanwhile.
     pub pending: [f32; 4],
     /// What the last bounce changed the gather by (rgb): the ratio of two successive ones
-    /// estimates the bounces not run (`Settings::bounce_tail`). Zeroed where direct or
-    /// environment light is rewritten.
+    /// estimates the bounces not run (`Settings::bounce_tail`). Zeroed when the light sources
+    /// change ([`flags::NEW_SERIES`]).
     pub residual: [f32; 4],
     /// The estimated gather of the bounces not run (rgb, irradiance / pi): shade adds
     /// `albedo * (gather + tail)`; `out` and the pyramid hold only the bounces run.
@@ -101,7 +101,7 @@ pub struct LeafLightGpu {
 
 impl LeafLightGpu {
     /// The radiance the leaf shows (rgb): `out` (the bounces run) plus `albedo * tail` (the
-    /// estimate of those not run), as shade adds them up.
+    /// estimate of those not run), as shade adds them up (light_state.wgsl `leaf_shown`).
     pub fn shown(&self, leaf: &LeafGpu) -> [f32; 3] {
         std::array::from_fn(|k| self.out[k] + leaf.albedo_opacity[k] * self.tail[k])
     }

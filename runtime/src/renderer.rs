@@ -1135,6 +1135,8 @@ impl Renderer {
         }
         self.base_params.tile_count = self.tiles.len() as u32;
         self.base_params.leaf_count = self.leaf_count;
+        // New tiles may hold brighter rock: the tail's trusted ratio follows the leaves held.
+        self.base_params.tail_ratio_max = tail_ratio_max(&self.settings, &scene.leaves);
         let (_, specular_materials, specular_surfels) = material_slots(scene, &self.settings);
         (self.specular_materials, self.specular_surfels) = (specular_materials, specular_surfels);
         self.emissive = scene.has_emission();

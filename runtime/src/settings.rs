@@ -34,10 +34,10 @@ pub struct Settings {
     pub bounces: u32,
     /// Propagation stops once a bounce changes no leaf's radiance by more than this (relative).
     pub convergence_tolerance: f32,
-    /// Estimate the bounces not run: from the second bounce on, each leaf adds to its gather the
-    /// rest of a geometric series whose ratio is that of its last two bounces' changes (per
-    /// channel, trusted up to the scene's largest albedo), so bright closed rock converges in a
-    /// few bounces instead of dozens (passes/propagate.wgsl).
+    /// Estimate the bounces not run: from the second bounce on, each leaf keeps beside its gather
+    /// the rest of a geometric series whose ratio is that of its last two bounces' changes (per
+    /// channel, trusted up to the scene's largest albedo), and shade adds it, so bright closed
+    /// rock converges in a few bounces instead of dozens (passes/propagate.wgsl).
     pub bounce_tail: bool,
     pub shadows: bool,
     pub shadow_map_size: u32,

@@ -23,7 +23,7 @@ enum Cli {
 
 /// Write the furnace, the colour box and the dogleg for Mitsuba 3 (SLUG.xml) beside this
 /// reference's own render of each (SLUG.json: per-pixel mean and standard error), for
-/// scripts/mitsuba-check.py to compare (docs/reference.md).
+/// scripts/mitsuba-check.py to compare (docs/reference-mitsuba.md).
 #[derive(clap::Args, Debug)]
 struct MitsubaArgs {
     /// Folder to write into.
@@ -171,7 +171,7 @@ fn mitsuba(a: MitsubaArgs) -> anyhow::Result<()> {
         // The reference's discs, for the path tracer; and, where the surfels are the voxel faces
         // of a hand-built scene (one per open face, axis-aligned), those faces: the exact
         // surface the discs stand for.
-        let scene = SurfelScene::from_scene(&data, splat);
+        let mut scene = SurfelScene::from_scene(&data, splat);
         let on_faces = scene.discs().iter().all(|d| d.normal.abs().max_element() > 0.9999);
         let mut shapes = vec![("discs", grotto_reference::mitsuba::Shapes::Discs)];
         if on_faces {
@@ -185,17 +185,21 @@ fn mitsuba(a: MitsubaArgs) -> anyhow::Result<()> {
             grotto_runtime::export::write_atomically(&a.out.join(&file), xml.as_bytes())?;
             entry["mitsuba"][what] = file.into();
         }
-        // The reference as the report uses it (shadow rays a quarter leaf off the surface), and
-        // with shadow rays a hair off (what that choice changes).
-        let offsets = [
-            ("quarter leaf", scene),
-            ("hair", SurfelScene::from_scene(&data, splat).with_surface_offset(0.0)),
-        ];
-        for (what, sc) in offsets {
+        // The reference as the report uses it (shadow rays a quarter leaf off the surface, bounce
+        // rays a hair), with shadow rays a hair off too, and as it was before this check (bounce
+        // rays a quarter leaf off as well): what each choice changes. One scene, its offsets
+        // changed between renders.
+        let quarter = 0.25 * data.leaf_size_m;
+        for (what, shadow_m, bounce_m) in [
+            ("quarter leaf", quarter, 0.0),
+            ("hair", 0.0, 0.0),
+            ("quarter leaf, bounces too", quarter, quarter),
+        ] {
+            scene = scene.with_ray_offsets(shadow_m, bounce_m);
             let t0 = std::time::Instant::now();
-            let est = sc.render(&camera, w, h, a.spp, &PathSettings::for_scene(&data), 1);
+            let est = scene.render(&camera, w, h, a.spp, &PathSettings::for_scene(&data), 1);
             let seconds = t0.elapsed().as_secs_f64();
-            let file = format!("{slug}-{}.json", what.replace(' ', "-"));
+            let file = format!("{slug}-{}.json", what.replace([' ', ','], "-"));
             let json = serde_json::json!({
                 "name": name,
                 "description": description,
@@ -204,7 +208,7 @@ fn mitsuba(a: MitsubaArgs) -> anyhow::Result<()> {
                 "height": h,
                 "spp": a.spp,
                 "seconds": seconds,
-                "discs": sc.discs().len(),
+                "discs": scene.discs().len(),
                 "mean": est.iter().map(|e| e.mean.to_array()).collect::<Vec<_>>(),
                 "std_err": est.iter().map(|e| e.std_err.to_array()).collect::<Vec<_>>(),
             });
@@ -212,7 +216,7 @@ fn mitsuba(a: MitsubaArgs) -> anyhow::Result<()> {
             entry["reference"][what] = file.into();
             eprintln!(
                 "{name}: {} discs, reference ({what} offset) {} spp in {seconds:.1} s",
-                sc.discs().len(),
+                scene.discs().len(),
                 a.spp
             );
         }

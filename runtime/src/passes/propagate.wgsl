@@ -39,15 +39,13 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
         leaf_light[i] = state;
         return;
     }
-    // The light a surface shows: out with the tail's share (what shade and the change measure).
-    let albedo = leaf.albedo_opacity.rgb;
-    let before = state.out.rgb + albedo * state.tail.rgb;
+    let before = leaf_shown(leaf, state);
     let residual = gathered - state.gather.rgb;
     state.tail = vec4<f32>(bounce_tail(residual, state.residual.rgb), 0.0);
     state.residual = vec4<f32>(residual, 0.0);
     state.gather = vec4<f32>(gathered, 0.0);
     state.out = leaf_out(leaf, state);
-    let after = state.out.rgb + albedo * state.tail.rgb;
+    let after = leaf_shown(leaf, state);
     leaf_light[i] = state;
     let scale = max(max(after.r, max(after.g, after.b)), 1e-6);
     let diff = abs(after - before);
@@ -64,14 +62,14 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
 // bounces run), so successive changes stay those of plain propagation, all of one sign; only what
 // a surface shows adds it (shade, and the change that decides convergence: once the estimate
 // stops moving, more bounces would not change the image). Feeding the tail into the next bounce
-// instead converges in fewer bounces but overshoots where neighbours' estimates compound
-// (colour box: bias +0.041 at 4 bounces against -0.001 this way). A ratio above the scene's
+// instead converges in fewer bounces, but then the changes are no longer a plain series and
+// neighbours' estimates compound into overshoot (tried on the colour box, not kept). A ratio above the scene's
 // largest albedo (params.tail_ratio_max; zero without the tail) means light is still arriving, as
 // in a corridor's far end: it gets the largest ratio trusted, and none from 1 on.
 fn bounce_tail(residual: vec3<f32>, last: vec3<f32>) -> vec3<f32> {
     let ok = abs(last) > vec3<f32>(1e-20);
     let ratio = select(vec3<f32>(0.0), residual / select(vec3<f32>(1.0), last, ok), ok);
-    let trusted = ratio >= vec3<f32>(0.0) & ratio <= vec3<f32>(1.0);
+    let trusted = (ratio >= vec3<f32>(0.0)) & (ratio <= vec3<f32>(1.0));
     let r = select(vec3<f32>(0.0), min(ratio, params.tail_ratio_max.rgb), trusted);
     return residual * r / (1.0 - r);
 }

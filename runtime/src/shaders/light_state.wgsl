@@ -56,3 +56,9 @@ fn store_face(i: u32, v: vec4<f32>) {
 fn leaf_out(leaf: Leaf, s: LeafLight) -> vec4<f32> {
     return vec4<f32>(leaf.emission.rgb + s.direct.rgb + s.env.rgb + leaf.albedo_opacity.rgb * s.gather.rgb, 0.0);
 }
+
+// What a leaf shows: out plus the albedo's share of the tail (the bounces not run), as shade adds
+// them up; propagate's change is measured on it. LeafLightGpu::shown on the CPU.
+fn leaf_shown(leaf: Leaf, s: LeafLight) -> vec3<f32> {
+    return s.out.rgb + leaf.albedo_opacity.rgb * s.tail.rgb;
+}
