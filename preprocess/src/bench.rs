@@ -169,7 +169,7 @@ pub fn normals(
         ..TilingParams::default()
     };
     let work = scans.join("work");
-    let plan = tile_scans(&resolved, &work, &tiling, &|_| {})?;
+    let plan = tile_scans(&resolved, &work, &tiling, &|_| {}, &Default::default())?;
     let cave = SynthCave::new(&params);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.max(1))

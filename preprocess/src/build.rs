@@ -34,6 +34,7 @@ use crate::ingest::ScanFormat;
 use crate::manifest::{Manifest, ResolvedScan, SeenFrom};
 use crate::normals::{self, NormalStats, Orient, TilePoints};
 use crate::orient::{self, CaveGrid, OrientStats};
+use crate::profile::{Profile, Stage, StageTime};
 use crate::tiling::{self, FLAG_HALO, Progress, TilePlan, TilingParams};
 use crate::voxels::{self, Sample, TileSvo};
 use crate::{Error, Result};
@@ -210,6 +211,18 @@ pub struct BuildSummary {
     /// What orienting their normals by enclosure did (docs/manifest.md, "Scans without scanner
     /// positions").
     pub orientation: Option<OrientStats>,
+    /// Wall seconds of the three steps (zero for a step this run did not do).
+    pub steps: StepSeconds,
+    /// Seconds per stage ([`crate::profile`]); the tile stages' are summed over threads.
+    pub stages: Vec<StageTime>,
+}
+
+/// Wall seconds of a build's steps.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct StepSeconds {
+    pub plan: f64,
+    pub tiles: f64,
+    pub assemble: f64,
 }
 
 impl BuildSummary {
@@ -365,10 +378,12 @@ fn build_tile(
     params: &BuildParams,
     scene: &Scene,
     grid: Option<&CaveGrid>,
+    profile: &Profile,
 ) -> Result<BuiltTile> {
     let tile = &plan.tiles[t];
     let origin = plan.origin_m(tile);
     let extent = plan.extent_m(tile);
+    let clock = std::time::Instant::now();
     let points = tiling::read_bin(work_dir, t)?;
     let quantum = plan.quantum_m;
     let positions: Vec<[f32; 3]> = points.iter().map(|p| p.pos_tile_m(quantum)).collect();
@@ -383,6 +398,8 @@ fn build_tile(
     let input_normals: Vec<[f32; 3]> =
         points.iter().map(|p| p.normal_snorm.map(|c| f32::from(c) / 32767.0)).collect();
     let seen_from: Vec<Option<SeenFrom>> = points.iter().map(|p| plan.seen_from(p.scan as usize)).collect();
+    profile.add(Stage::ReadBins, clock.elapsed());
+    let clock = std::time::Instant::now();
     let (estimated, normal_stats) = normals::estimate_with_stats(
         &TilePoints {
             positions: &positions,
@@ -395,6 +412,8 @@ fn build_tile(
         },
         params.k,
     );
+    profile.add(Stage::Normals, clock.elapsed());
+    let clock = std::time::Instant::now();
     let own_points: Vec<&tiling::BinPoint> = points.iter().filter(|p| p.flags & FLAG_HALO == 0).collect();
     let q = f64::from(1u32 << 16) / extent;
     let mut order: Vec<(u64, usize)> = own_points
@@ -432,6 +451,8 @@ fn build_tile(
             k_reach(n.radius_m) > border + params.halo_m
         })
         .count() as u64;
+    profile.add(Stage::Surfels, clock.elapsed());
+    let clock = std::time::Instant::now();
     let depth = tile_depth(extent, params.leaf_m)?;
     // Each surfel stands for the area its radius was widened from (see normals.rs).
     let cover = normals::RADIUS_COVER_FACTOR;
@@ -451,6 +472,7 @@ fn build_tile(
         .collect();
     samples.extend(area_light_samples(scene, origin, extent, params.leaf_m));
     let svo = voxels::build(&samples, extent, depth);
+    profile.add(Stage::Voxels, clock.elapsed());
     let grid: [i32; 3] = tile.key.map(|k| i32::try_from(k).unwrap_or(i32::MAX));
     if grid.contains(&i32::MAX) {
         return Err(Error::Parameter {
@@ -500,7 +522,15 @@ fn finished_tile_package(path: &Path, fingerprint: &str) -> Option<(u64, NormalS
     Some((seam, normals))
 }
 
-fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: ColorCodec) -> Result<()> {
+fn write_tile_package(
+    path: &Path,
+    tile: &BuiltTile,
+    fingerprint: &str,
+    colors: ColorCodec,
+    profile: &Profile,
+) -> Result<()> {
+    let clock = std::time::Instant::now();
+    let mut colors_time = std::time::Duration::ZERO;
     let mut w = PackageWriter::create(path)?;
     let index = w.add_tile(tile.info)?;
     let scope = Scope::Tile(index);
@@ -508,13 +538,10 @@ fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: 
     w.add_elements(SectionKind::Surfels, scope, 0, &tile.surfels, Compression::Raw)?;
     match colors {
         ColorCodec::Bc1 => {
-            w.add_elements(
-                SectionKind::SurfelColorsBc1,
-                scope,
-                0,
-                &bc1::encode(&tile.colors),
-                Compression::Raw,
-            )?;
+            let encoding = std::time::Instant::now();
+            let blocks = bc1::encode(&tile.colors);
+            colors_time = encoding.elapsed();
+            w.add_elements(SectionKind::SurfelColorsBc1, scope, 0, &blocks, Compression::Raw)?;
         }
         ColorCodec::Raw => {
             let rgba: Vec<Rgba8> = tile.colors.iter().map(|c| Rgba8([c[0], c[1], c[2], 255])).collect();
@@ -543,6 +570,8 @@ fn write_tile_package(path: &Path, tile: &BuiltTile, fingerprint: &str, colors: 
         .into(),
     })?;
     w.finish()?;
+    profile.add(Stage::Colors, colors_time);
+    profile.add(Stage::WriteTiles, clock.elapsed().saturating_sub(colors_time));
     Ok(())
 }
 
@@ -600,6 +629,8 @@ impl Shard {
 pub struct TileStage {
     pub built: usize,
     pub reused: usize,
+    /// Seconds per stage of the tiles built, summed over threads ([`crate::profile`]).
+    pub stages: Vec<StageTime>,
 }
 
 fn check_params(params: &BuildParams) -> Result<()> {
@@ -629,7 +660,7 @@ pub fn plan(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<(TilePlan, bool)> {
     check_params(params)?;
-    let step = plan_scans(&manifest.resolve()?, params, progress)?;
+    let step = plan_scans(&manifest.resolve()?, params, progress, &Profile::default())?;
     Ok((step.plan, step.reused))
 }
 
@@ -676,14 +707,16 @@ fn plan_scans(
     scans: &[ResolvedScan],
     params: &BuildParams,
     progress: &(dyn Fn(Progress) + Sync),
+    profile: &Profile,
 ) -> Result<PlanStep> {
     let cut = cut_short(scans, params.strict)?;
     let tiling_params = params.tiling();
     let earlier = tiling::existing_plan(scans, &params.work_dir, &tiling_params)?;
-    let plan = tiling::tile_scans(scans, &params.work_dir, &tiling_params, progress)?;
+    let plan = tiling::tile_scans(scans, &params.work_dir, &tiling_params, progress, profile)?;
     let grid = if plan.needs_orientation() {
         progress(Progress { stage: "orientation grid", done: 0, total: 1 });
-        let grid = orient::load_or_build(&plan, &params.work_dir, params.leaf_m)?;
+        let grid = profile
+            .time(Stage::OrientationGrid, || orient::load_or_build(&plan, &params.work_dir, params.leaf_m))?;
         progress(Progress { stage: "orientation grid", done: 1, total: 1 });
         Some(grid)
     } else {
@@ -722,7 +755,11 @@ pub fn build_tiles(
     } else {
         None
     };
-    tile_stage(&plan, &manifest.scene(manifest_path)?, params, shard, grid.as_ref(), progress)
+    let profile = Profile::default();
+    let mut stage =
+        tile_stage(&plan, &manifest.scene(manifest_path)?, params, shard, grid.as_ref(), progress, &profile)?;
+    stage.stages = profile.report();
+    Ok(stage)
 }
 
 /// Builds the shard's tiles; `grid` orients the normals of scans without a scanner position.
@@ -733,6 +770,7 @@ fn tile_stage(
     shard: Shard,
     grid: Option<&CaveGrid>,
     progress: &(dyn Fn(Progress) + Sync),
+    profile: &Profile,
 ) -> Result<TileStage> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(params.threads.max(1))
@@ -753,8 +791,8 @@ fn tile_stage(
                     if finished_tile_package(&path, &fingerprint).is_some() {
                         return Ok(true);
                     }
-                    let built = build_tile(plan, &params.work_dir, t, params, scene, grid)?;
-                    write_tile_package(&path, &built, &fingerprint, params.colors)?;
+                    let built = build_tile(plan, &params.work_dir, t, params, scene, grid, profile)?;
+                    write_tile_package(&path, &built, &fingerprint, params.colors, profile)?;
                     Ok(false)
                 })
                 .collect()
@@ -786,10 +824,17 @@ pub fn build(
     // Resolved once for all three steps (E57 poses and headers are read here).
     let scans = manifest.resolve()?;
     let scene = manifest.scene(manifest_path)?;
-    let PlanStep { plan, reused: resumed_tiling, cut, grid } = plan_scans(&scans, params, progress)?;
-    let stage = tile_stage(&plan, &scene, params, Shard::ALL, grid.as_ref(), progress)?;
+    let profile = Profile::default();
+    let PlanStep { plan, reused: resumed_tiling, cut, grid } =
+        plan_scans(&scans, params, progress, &profile)?;
+    let plan_s = start.elapsed().as_secs_f64();
+    let stage = tile_stage(&plan, &scene, params, Shard::ALL, grid.as_ref(), progress, &profile)?;
     drop(grid);
-    let mut summary = assemble_plan(manifest, &plan, &scans, &scene, out, params, progress)?;
+    let tiles_s = start.elapsed().as_secs_f64() - plan_s;
+    let mut summary = assemble_plan(manifest, &plan, &scans, &scene, out, params, progress, &profile)?;
+    summary.steps.plan = plan_s;
+    summary.steps.tiles = tiles_s;
+    summary.stages = profile.report();
     summary.cut_short = cut;
     summary.resumed_tiling = resumed_tiling;
     summary.reused_tiles = stage.reused;
@@ -809,12 +854,16 @@ pub fn assemble(
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<BuildSummary> {
     let (plan, scans) = planned(manifest, params)?;
-    let mut summary =
-        assemble_plan(manifest, &plan, &scans, &manifest.scene(manifest_path)?, out, params, progress)?;
+    let profile = Profile::default();
+    let scene = manifest.scene(manifest_path)?;
+    let mut summary = assemble_plan(manifest, &plan, &scans, &scene, out, params, progress, &profile)?;
+    summary.stages = profile.report();
     summary.cut_short = cut_short(&scans, false)?;
     Ok(summary)
 }
 
+// The plan step's results, the output and how to report: bundling them would only rename them.
+#[allow(clippy::too_many_arguments)]
 fn assemble_plan(
     manifest: &Manifest,
     plan: &TilePlan,
@@ -823,6 +872,7 @@ fn assemble_plan(
     out: &Path,
     params: &BuildParams,
     progress: &(dyn Fn(Progress) + Sync),
+    profile: &Profile,
 ) -> Result<BuildSummary> {
     let start = std::time::Instant::now();
     let tiling_params = params.tiling();
@@ -848,6 +898,7 @@ fn assemble_plan(
     // only the tiles it shows in full. The rock near a border needs the neighbours' walls, so
     // this runs once every tile is built, over every tile package at once (it reads their SVOs
     // only; the maps are dropped before the copy below touches the surfels).
+    let clock = std::time::Instant::now();
     let levels = {
         let packages = (0..total)
             .map(|t| Package::open(tile_package_path(&params.work_dir, t)))
@@ -874,6 +925,8 @@ fn assemble_plan(
             })
             .collect::<Result<Vec<_>>>()?
     };
+    profile.add(Stage::Levels, clock.elapsed());
+    let clock = std::time::Instant::now();
     let mut writer = PackageWriter::create(out)?;
     for (t, levels) in levels.iter().enumerate() {
         let path = tile_package_path(&params.work_dir, t);
@@ -907,6 +960,8 @@ fn assemble_plan(
         }
         progress(Progress { stage: "assemble", done: t as u64 + 1, total: total as u64 });
     }
+    profile.add(Stage::Assemble, clock.elapsed());
+    let clock = std::time::Instant::now();
     let mut env_window = None;
     if let Some(env) = &manifest.environment {
         let path = manifest.resolve_path(&env.map);
@@ -920,7 +975,9 @@ fn assemble_plan(
         writer.add_elements(SectionKind::EnvMipBc6h, Scope::Global, 0, &blocks, Compression::Raw)?;
         inputs_extra.push(hash_file(&path)?);
         progress(Progress { stage: "environment", done: 1, total: 1 });
+        profile.add(Stage::Environment, clock.elapsed());
     }
+    let clock = std::time::Instant::now();
     writer.add_scene(&Scene { scans: scan_infos(scans), ..scene.clone() })?;
     let mut inputs = std::mem::take(&mut inputs_extra);
     let mut seen = std::collections::BTreeSet::new();
@@ -929,6 +986,8 @@ fn assemble_plan(
             inputs.push(hash_file(&s.path)?);
         }
     }
+    profile.add(Stage::HashInputs, clock.elapsed());
+    let clock = std::time::Instant::now();
     let mut parameters = std::collections::BTreeMap::new();
     for (k, v) in [
         ("leaf_m", serde_json::json!(params.leaf_m)),
@@ -951,6 +1010,7 @@ fn assemble_plan(
         parameters,
     })?;
     let path = writer.finish()?;
+    profile.add(Stage::Assemble, clock.elapsed());
     let bytes = std::fs::metadata(&path).map_err(|source| Error::Io { path: path.clone(), source })?.len();
     Ok(BuildSummary {
         package: path.display().to_string(),
@@ -978,5 +1038,7 @@ fn assemble_plan(
         cameras: scene.cameras.len(),
         environment: scene.environment.is_some(),
         cut_short: Vec::new(),
+        steps: StepSeconds { assemble: start.elapsed().as_secs_f64(), ..StepSeconds::default() },
+        stages: Vec::new(),
     })
 }

@@ -1,7 +1,8 @@
 //! grotto's offline preprocessing: registered scans in, one `.grotto` package out.
 //!
-//! Today this holds the built-in demo scene ([`demo`]); ingest, tiling, normals, SVO and encoding
-//! follow the design brief (`../shared/DESIGN.md`) and land module by module.
+//! Ingest ([`ingest`]), out-of-core tiling ([`tiling`]), normals ([`normals`]), SVO tiles
+//! ([`voxels`]) and the package build ([`build`]), with the built-in demo scene ([`demo`]) and the
+//! synthetic survey ([`synth`]) the benchmarks run on; [`profile`] says where a build's time goes.
 
 pub mod bc1;
 pub mod bench;
@@ -14,6 +15,7 @@ pub mod manifest;
 pub mod normals;
 pub mod orient;
 pub mod pose;
+pub mod profile;
 pub mod scanwrite;
 pub mod synth;
 pub mod tiling;

@@ -20,6 +20,7 @@ use std::collections::HashMap;
 use std::fs::{File, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
@@ -27,6 +28,7 @@ use serde::{Deserialize, Serialize};
 use crate::ingest::{self, PointChunk};
 use crate::manifest::ResolvedScan;
 use crate::manifest::SeenFrom;
+use crate::profile::{Profile, Stage};
 use crate::{Error, Result};
 
 /// Tiling knobs.
@@ -310,15 +312,23 @@ pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Optio
 }
 
 /// Streams every scan through `f(scan_index, chunk_in_world)`, posing points into the world.
+/// Decoding and posing add to `stages.0` of `profile`, `f` to `stages.1`.
 fn stream_world(
     scans: &[ResolvedScan],
     chunk_points: usize,
+    profile: &Profile,
+    stages: (Stage, Stage),
     mut f: impl FnMut(usize, &PointChunk) -> Result<()>,
 ) -> Result<()> {
     let mut chunk = PointChunk::new(chunk_points);
     for (si, scan) in scans.iter().enumerate() {
-        let mut source = ingest::open(&scan.path, scan.format, scan.index)?;
-        while source.fill_chunk(&mut chunk)? > 0 {
+        let mut source = profile.time(stages.0, || ingest::open(&scan.path, scan.format, scan.index))?;
+        loop {
+            let read = Instant::now();
+            if source.fill_chunk(&mut chunk)? == 0 {
+                profile.add(stages.0, read.elapsed());
+                break;
+            }
             let pose = &scan.world_from_scan;
             for p in &mut chunk.xyz {
                 *p = pose.apply(*p);
@@ -327,7 +337,8 @@ fn stream_world(
                 let r = pose.rotate(n.map(f64::from));
                 *n = r.map(|v| v as f32);
             }
-            f(si, &chunk)?;
+            profile.add(stages.0, read.elapsed());
+            profile.time(stages.1, || f(si, &chunk))?;
         }
     }
     Ok(())
@@ -363,6 +374,7 @@ pub fn tile_scans(
     work_dir: &Path,
     params: &TilingParams,
     progress: &dyn Fn(Progress),
+    profile: &Profile,
 ) -> Result<TilePlan> {
     check_params(params)?;
     if scans.len() > usize::from(u16::MAX) {
@@ -387,12 +399,12 @@ pub fn tile_scans(
         // Interrupted while distributing: the plan stands, only the bins are redone.
         Some(plan) => plan,
         None => {
-            let plan = count_and_plan(scans, params, fingerprint, progress)?;
+            let plan = count_and_plan(scans, params, fingerprint, progress, profile)?;
             write_json_atomic(&plan_path, &plan)?;
             plan
         }
     };
-    distribute(scans, work_dir, params, &mut plan, progress)?;
+    distribute(scans, work_dir, params, &mut plan, progress, profile)?;
     plan.bins_complete = true;
     write_json_atomic(&plan_path, &plan)?;
     Ok(plan)
@@ -404,17 +416,20 @@ fn count_and_plan(
     params: &TilingParams,
     fingerprint: String,
     progress: &dyn Fn(Progress),
+    profile: &Profile,
 ) -> Result<TilePlan> {
     // Pass 1: count.
-    let claimed: u64 = scans
-        .iter()
-        .map(|s| ingest::header(&s.path, s.format, s.index).map(|info| info.claimed_points))
-        .sum::<Result<u64>>()?;
+    let claimed: u64 = profile.time(Stage::CountRead, || {
+        scans
+            .iter()
+            .map(|s| ingest::header(&s.path, s.format, s.index).map(|info| info.claimed_points))
+            .sum::<Result<u64>>()
+    })?;
     let inv = 1.0 / params.quantum_m;
     let shift = (params.min_tile_extent_m / params.quantum_m).log2() as u32;
     let mut fine: HashMap<[i64; 3], u64> = HashMap::new();
     let (mut points, mut invalid, mut done) = (0u64, 0u64, 0u64);
-    stream_world(scans, params.chunk_points, |_, chunk| {
+    stream_world(scans, params.chunk_points, profile, (Stage::CountRead, Stage::Count), |_, chunk| {
         for p in &chunk.xyz {
             if p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
                 *fine.entry(fine_key(quantise(p, inv), shift)).or_default() += 1;
@@ -429,6 +444,7 @@ fn count_and_plan(
     })?;
 
     // Plan: pyramid of counts relative to the anchor, tiles chosen top-down.
+    let planning = Instant::now();
     let anchor = fine.keys().fold([i64::MAX; 3], |a, k| std::array::from_fn(|i| a[i].min(k[i])));
     let top = (params.max_tile_extent_m / params.min_tile_extent_m).log2() as u32;
     let mut levels: Vec<HashMap<[i64; 3], u64>> = Vec::with_capacity(top as usize + 1);
@@ -460,6 +476,7 @@ fn count_and_plan(
     // Deterministic order: coarse first, then by position.
     tiles.sort_unstable_by_key(|t| (std::cmp::Reverse(t.level), t.key));
     drop(levels);
+    profile.add(Stage::Count, planning.elapsed());
     Ok(TilePlan {
         fingerprint,
         min_extent_m: params.min_tile_extent_m,
@@ -483,6 +500,7 @@ fn distribute(
     params: &TilingParams,
     plan: &mut TilePlan,
     progress: &dyn Fn(Progress),
+    profile: &Profile,
 ) -> Result<()> {
     let inv = 1.0 / params.quantum_m;
     let shift = (params.min_tile_extent_m / params.quantum_m).log2() as u32;
@@ -510,55 +528,61 @@ fn distribute(
     let h = (params.halo_m * inv).round() as i64;
     let (mut done, mut halo) = (0u64, 0u64);
     let mut neighbours: Vec<usize> = Vec::with_capacity(27);
-    stream_world(scans, params.chunk_points, |si, chunk| {
-        for (i, p) in chunk.xyz.iter().enumerate() {
-            if !p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
-                continue;
-            }
-            let q = quantise(p, inv);
-            let Some(t) = find(q) else { continue };
-            let normal_snorm = chunk.normal.get(i).map_or([0; 3], |n| {
-                let len = n.iter().map(|c| c * c).sum::<f32>().sqrt();
-                if len.is_finite() && len > 1e-6 {
-                    n.map(|c| (c / len * 32767.0).round() as i16)
-                } else {
-                    [0; 3]
+    stream_world(
+        scans,
+        params.chunk_points,
+        profile,
+        (Stage::DistributeRead, Stage::Distribute),
+        |si, chunk| {
+            for (i, p) in chunk.xyz.iter().enumerate() {
+                if !p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
+                    continue;
                 }
-            });
-            // In range: tiles are < 2^24 quanta and halos < one fine cell.
-            let local =
-                |tile: usize| -> [i32; 3] { std::array::from_fn(|a| (q[a] - origins[tile][a]) as i32) };
-            let point =
-                BinPoint { pos_q: local(t), normal_snorm, rgb: chunk.rgb[i], flags: 0, scan: si as u16 };
-            bins.push(t, point)?;
-            // Halo: only points near their tile's border can reach a neighbour.
-            let near = point.pos_q.iter().any(|&c| i64::from(c) < h || i64::from(c) >= extents[t] - h);
-            if h > 0 && near {
-                neighbours.clear();
-                for o in 0..27 {
-                    let d = [o % 3 - 1, o / 3 % 3 - 1, o / 9 - 1];
-                    if d == [0, 0, 0] {
-                        continue;
+                let q = quantise(p, inv);
+                let Some(t) = find(q) else { continue };
+                let normal_snorm = chunk.normal.get(i).map_or([0; 3], |n| {
+                    let len = n.iter().map(|c| c * c).sum::<f32>().sqrt();
+                    if len.is_finite() && len > 1e-6 {
+                        n.map(|c| (c / len * 32767.0).round() as i16)
+                    } else {
+                        [0; 3]
                     }
-                    let probe: [i64; 3] = std::array::from_fn(|a| q[a] + d[a] * h);
-                    if let Some(n) = find(probe)
-                        && n != t
-                        && !neighbours.contains(&n)
-                    {
-                        neighbours.push(n);
+                });
+                // In range: tiles are < 2^24 quanta and halos < one fine cell.
+                let local =
+                    |tile: usize| -> [i32; 3] { std::array::from_fn(|a| (q[a] - origins[tile][a]) as i32) };
+                let point =
+                    BinPoint { pos_q: local(t), normal_snorm, rgb: chunk.rgb[i], flags: 0, scan: si as u16 };
+                bins.push(t, point)?;
+                // Halo: only points near their tile's border can reach a neighbour.
+                let near = point.pos_q.iter().any(|&c| i64::from(c) < h || i64::from(c) >= extents[t] - h);
+                if h > 0 && near {
+                    neighbours.clear();
+                    for o in 0..27 {
+                        let d = [o % 3 - 1, o / 3 % 3 - 1, o / 9 - 1];
+                        if d == [0, 0, 0] {
+                            continue;
+                        }
+                        let probe: [i64; 3] = std::array::from_fn(|a| q[a] + d[a] * h);
+                        if let Some(n) = find(probe)
+                            && n != t
+                            && !neighbours.contains(&n)
+                        {
+                            neighbours.push(n);
+                        }
+                    }
+                    for &n in &neighbours {
+                        bins.push(n, BinPoint { pos_q: local(n), flags: FLAG_HALO, ..point })?;
+                        halo += 1;
                     }
                 }
-                for &n in &neighbours {
-                    bins.push(n, BinPoint { pos_q: local(n), flags: FLAG_HALO, ..point })?;
-                    halo += 1;
-                }
             }
-        }
-        done += chunk.len() as u64;
-        progress(Progress { stage: "distribute", done, total: points + invalid });
-        Ok(())
-    })?;
-    bins.flush_all()?;
+            done += chunk.len() as u64;
+            progress(Progress { stage: "distribute", done, total: points + invalid });
+            Ok(())
+        },
+    )?;
+    profile.time(Stage::Distribute, || bins.flush_all())?;
     plan.halo_points = halo;
     Ok(())
 }

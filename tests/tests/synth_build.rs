@@ -124,6 +124,38 @@ fn an_interrupted_build_resumes_and_gives_the_same_bytes() {
     let second = build::build(&manifest, &manifest_path, &dir.path().join("b.grotto"), &bp, &|_| {}).unwrap();
     assert!(second.resumed_tiling);
     assert_eq!(second.reused_tiles, first.tiles - 2);
+    // The profile names every stage that ran, in order: the first build all of them (no
+    // environment, every scan with its scanner), the resumed one no tiling passes.
+    let names = |s: &build::BuildSummary| s.stages.iter().map(|t| t.stage).collect::<Vec<_>>();
+    assert_eq!(
+        names(&first),
+        [
+            "count: read scans",
+            "count: cells and plan",
+            "distribute: read scans",
+            "distribute: bins",
+            "tiles: read bins",
+            "tiles: normals",
+            "tiles: surfels",
+            "tiles: voxels",
+            "tiles: colours",
+            "tiles: encode and write",
+            "assemble: levels",
+            "assemble: copy and write",
+            "assemble: hash inputs",
+        ]
+    );
+    assert!(names(&second).iter().all(|n| !n.starts_with("count") && !n.starts_with("distribute")));
+    assert!(names(&second).contains(&"tiles: normals"));
+    for s in [&first, &second] {
+        let steps = s.steps.plan + s.steps.tiles + s.steps.assemble;
+        assert!(
+            steps <= s.seconds + 1e-6 && steps > 0.5 * s.seconds,
+            "{:?} against {} s",
+            s.steps,
+            s.seconds
+        );
+    }
     assert_eq!(
         std::fs::read(dir.path().join("a.grotto")).unwrap(),
         std::fs::read(dir.path().join("b.grotto")).unwrap()

@@ -7,6 +7,7 @@ use std::num::NonZero;
 use std::path::Path;
 
 use grotto_preprocess::manifest::{Manifest, ResolvedScan};
+use grotto_preprocess::profile::{Profile, Stage};
 use grotto_preprocess::tiling::{self, FLAG_HALO, TilePlan, TilingParams};
 use grotto_tests::shared_data_dir;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -57,7 +58,7 @@ fn median_overlap_m(scans: &[Vec<[f64; 3]>]) -> Vec<f64> {
 
 fn tile(scans: &[ResolvedScan], params: &TilingParams) -> (tempfile::TempDir, TilePlan) {
     let work = tempfile::tempdir().unwrap();
-    let plan = tiling::tile_scans(scans, work.path(), params, &|_| {}).unwrap();
+    let plan = tiling::tile_scans(scans, work.path(), params, &|_| {}, &Default::default()).unwrap();
     (work, plan)
 }
 
@@ -133,7 +134,7 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
     let scans = Manifest::from_files(&files).resolve().unwrap();
     let params = TilingParams { max_points_per_tile: 5_000, ..bunny_params() };
     let work = tempfile::tempdir().unwrap();
-    let plan = tiling::tile_scans(&scans, work.path(), &params, &|_| {}).unwrap();
+    let plan = tiling::tile_scans(&scans, work.path(), &params, &|_| {}, &Default::default()).unwrap();
     for t in &plan.tiles {
         assert!(t.points <= params.max_points_per_tile || t.level == 0, "{t:?}");
     }
@@ -159,7 +160,7 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
     }
     // A second run with the same inputs reuses the plan and bins.
     let before = std::fs::metadata(tiling::bin_path(work.path(), 0)).unwrap().modified().unwrap();
-    let again = tiling::tile_scans(&scans, work.path(), &params, &|_| {}).unwrap();
+    let again = tiling::tile_scans(&scans, work.path(), &params, &|_| {}, &Default::default()).unwrap();
     assert_eq!(again, plan);
     assert_eq!(std::fs::metadata(tiling::bin_path(work.path(), 0)).unwrap().modified().unwrap(), before);
     // Interrupted while distributing (plan written, bins incomplete and one damaged): only pass 2
@@ -172,16 +173,26 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
     let bin0 = std::fs::read(tiling::bin_path(work.path(), 0)).unwrap();
     std::fs::write(tiling::bin_path(work.path(), 0), &bin0[..bin0.len() / 2]).unwrap();
     let stages = std::sync::Mutex::new(std::collections::BTreeSet::new());
-    let resumed = tiling::tile_scans(&scans, work.path(), &params, &|p| {
-        stages.lock().unwrap().insert(p.stage);
-    })
+    let profile = Profile::default();
+    let resumed = tiling::tile_scans(
+        &scans,
+        work.path(),
+        &params,
+        &|p| {
+            stages.lock().unwrap().insert(p.stage);
+        },
+        &profile,
+    )
     .unwrap();
     assert_eq!(resumed, plan);
     assert_eq!(stages.into_inner().unwrap().into_iter().collect::<Vec<_>>(), vec!["distribute"]);
+    // The profile says the same: no count pass, a distribute pass that read the scans again.
+    assert_eq!(profile.seconds(Stage::CountRead) + profile.seconds(Stage::Count), 0.0);
+    assert!(profile.seconds(Stage::DistributeRead) > 0.0 && profile.seconds(Stage::Distribute) > 0.0);
     assert_eq!(std::fs::read(tiling::bin_path(work.path(), 0)).unwrap(), bin0);
     // Changed parameters redo the work.
     let other = TilingParams { max_points_per_tile: 9_000, ..params };
-    let redone = tiling::tile_scans(&scans, work.path(), &other, &|_| {}).unwrap();
+    let redone = tiling::tile_scans(&scans, work.path(), &other, &|_| {}, &Default::default()).unwrap();
     assert_ne!(redone.fingerprint, plan.fingerprint);
     // Neighbour search helper sanity: kd-tree over a tile finds itself.
     let pts: Vec<[f64; 3]> = tiling::read_bin(work.path(), 0)

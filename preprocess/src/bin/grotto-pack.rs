@@ -356,11 +356,25 @@ fn print_build(summary: &BuildSummary, json: bool) -> anyhow::Result<()> {
                     format!(" (resumed: tiling {}, {n} tiles kept)", if r { "reused" } else { "redone" }),
             }
         );
+        let st = &summary.steps;
+        println!(
+            "time: plan {:.1} s, tiles {:.1} s, assemble {:.1} s; by stage:",
+            st.plan, st.tiles, st.assemble
+        );
+        print_stages(&summary.stages);
         for hint in summary.hints() {
             println!("note: {hint}");
         }
     }
     Ok(())
+}
+
+/// The profile as an indented table; tile stages are summed over threads.
+fn print_stages(stages: &[grotto_preprocess::profile::StageTime]) {
+    for s in stages {
+        let per = if s.thread_seconds { " (summed over threads)" } else { "" };
+        println!("  {:<26} {:>9.2} s{per}", s.stage, s.seconds);
+    }
 }
 
 fn run_synth(dir: &Path, s: &SynthOpts, quiet: bool) -> anyhow::Result<synth::SynthSummary> {
@@ -436,6 +450,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     "shard {}/{}: built {} tiles, {} already built",
                     shard.index, shard.count, stage.built, stage.reused
                 );
+                print_stages(&stage.stages);
             }
         }
         Command::Assemble { inputs, out, opts } => {

@@ -1,0 +1,170 @@
+//! Where a build's time goes: seconds per stage (read scans, count, distribute, normals, voxels,
+//! ...), for `grotto-pack build`'s summary and the per-stage table in docs/benchmarks.md.
+//!
+//! Stages inside the tile step run on several threads at once; their seconds are summed over
+//! threads (thread-seconds, marked as such), so they add up to the work, not to the wall time.
+//! Timing costs two clock reads per stage and tile or per chunk of 64 Ki points: nothing.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+
+/// A stage of a build, in the order they run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// Pass 1 of tiling: decoding scan files and posing their points (count pass).
+    CountRead,
+    /// Pass 1: counting points per fine cell, and choosing the tiles.
+    Count,
+    /// Pass 2 of tiling: decoding and posing again (distribute pass).
+    DistributeRead,
+    /// Pass 2: each point (and its halo copies) into its tile's bin, and the bins' writes.
+    Distribute,
+    /// The occupancy grid that orients scans without a scanner position.
+    OrientationGrid,
+    /// Per tile: reading the bin and preparing positions, scanners and file normals.
+    ReadBins,
+    /// Per tile: k nearest neighbours, PCA, orientation, spread and radii.
+    Normals,
+    /// Per tile: Morton order, surfels and the seam count.
+    Surfels,
+    /// Per tile: splatting samples into leaves and the SVO node layout.
+    Voxels,
+    /// Per tile: BC1 colour blocks.
+    Colors,
+    /// Per tile: encoding (zstd) and writing the tile package.
+    WriteTiles,
+    /// Assemble: every tile's coarse levels and rock.
+    Levels,
+    /// Assemble: copying the tile packages' sections into the output and writing it.
+    Assemble,
+    /// Assemble: the environment map's SH and prefiltered mip chain.
+    Environment,
+    /// Assemble: hashing every input file for the provenance.
+    HashInputs,
+}
+
+impl Stage {
+    pub const ALL: [Stage; 15] = [
+        Stage::CountRead,
+        Stage::Count,
+        Stage::DistributeRead,
+        Stage::Distribute,
+        Stage::OrientationGrid,
+        Stage::ReadBins,
+        Stage::Normals,
+        Stage::Surfels,
+        Stage::Voxels,
+        Stage::Colors,
+        Stage::WriteTiles,
+        Stage::Levels,
+        Stage::Assemble,
+        Stage::Environment,
+        Stage::HashInputs,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::CountRead => "count: read scans",
+            Stage::Count => "count: cells and plan",
+            Stage::DistributeRead => "distribute: read scans",
+            Stage::Distribute => "distribute: bins",
+            Stage::OrientationGrid => "orientation grid",
+            Stage::ReadBins => "tiles: read bins",
+            Stage::Normals => "tiles: normals",
+            Stage::Surfels => "tiles: surfels",
+            Stage::Voxels => "tiles: voxels",
+            Stage::Colors => "tiles: colours",
+            Stage::WriteTiles => "tiles: encode and write",
+            Stage::Levels => "assemble: levels",
+            Stage::Assemble => "assemble: copy and write",
+            Stage::Environment => "assemble: environment",
+            Stage::HashInputs => "assemble: hash inputs",
+        }
+    }
+
+    /// Whether the stage runs on several threads at once (its seconds are thread-seconds).
+    pub fn per_thread(self) -> bool {
+        matches!(
+            self,
+            Stage::ReadBins
+                | Stage::Normals
+                | Stage::Surfels
+                | Stage::Voxels
+                | Stage::Colors
+                | Stage::WriteTiles
+        )
+    }
+}
+
+/// Seconds per stage, shared by the threads of a build.
+#[derive(Debug, Default)]
+pub struct Profile {
+    nanos: [AtomicU64; Stage::ALL.len()],
+}
+
+/// One stage's time in a summary.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StageTime {
+    pub stage: &'static str,
+    pub seconds: f64,
+    /// Summed over the threads that ran it at once.
+    pub thread_seconds: bool,
+}
+
+impl Profile {
+    pub fn add(&self, stage: Stage, elapsed: Duration) {
+        let nanos = u64::try_from(elapsed.as_nanos()).unwrap_or(u64::MAX);
+        self.nanos[stage as usize].fetch_add(nanos, Ordering::Relaxed);
+    }
+
+    /// Runs `f`, adding its time to `stage`.
+    pub fn time<T>(&self, stage: Stage, f: impl FnOnce() -> T) -> T {
+        let start = Instant::now();
+        let out = f();
+        self.add(stage, start.elapsed());
+        out
+    }
+
+    pub fn seconds(&self, stage: Stage) -> f64 {
+        self.nanos[stage as usize].load(Ordering::Relaxed) as f64 * 1e-9
+    }
+
+    /// The stages that took any time, in the order they run.
+    pub fn report(&self) -> Vec<StageTime> {
+        Stage::ALL
+            .iter()
+            .filter(|&&s| self.nanos[s as usize].load(Ordering::Relaxed) > 0)
+            .map(|&s| StageTime { stage: s.name(), seconds: self.seconds(s), thread_seconds: s.per_thread() })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stages_add_up_and_unused_ones_are_left_out() {
+        let p = Profile::default();
+        p.add(Stage::Normals, Duration::from_millis(1500));
+        p.add(Stage::Normals, Duration::from_millis(500));
+        let v = p.time(Stage::Count, || 7);
+        assert_eq!(v, 7);
+        let report = p.report();
+        assert_eq!(report.len(), 2);
+        assert_eq!(report[0].stage, "count: cells and plan");
+        assert!(!report[0].thread_seconds);
+        assert_eq!(report[1], StageTime { stage: "tiles: normals", seconds: 2.0, thread_seconds: true });
+    }
+
+    #[test]
+    fn every_stage_has_its_own_slot_and_name() {
+        for (i, s) in Stage::ALL.iter().enumerate() {
+            assert_eq!(*s as usize, i);
+        }
+        let names: std::collections::BTreeSet<_> = Stage::ALL.iter().map(|s| s.name()).collect();
+        assert_eq!(names.len(), Stage::ALL.len());
+    }
+}
