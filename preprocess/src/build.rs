@@ -213,7 +213,7 @@ pub struct BuildSummary {
     pub orientation: Option<OrientStats>,
     /// Wall seconds of the three steps (zero for a step this run did not do).
     pub steps: StepSeconds,
-    /// Seconds per stage ([`crate::profile`]); the tile stages' are summed over threads.
+    /// Seconds per stage ([`crate::profile`]); the tile stages' are summed over tiles built at once.
     pub stages: Vec<StageTime>,
 }
 
@@ -424,7 +424,8 @@ fn build_tile(
             (morton_encode(c[0], c[1], c[2]), i)
         })
         .collect();
-    order.sort_unstable();
+    // Unique keys (index last): the parallel sort gives the one order a single thread would.
+    order.par_sort_unstable();
     let surfels = order
         .iter()
         .map(|&(_, i)| Surfel {
@@ -629,7 +630,7 @@ impl Shard {
 pub struct TileStage {
     pub built: usize,
     pub reused: usize,
-    /// Seconds per stage of the tiles built, summed over threads ([`crate::profile`]).
+    /// Seconds per stage of the tiles built, summed over tiles built at once ([`crate::profile`]).
     pub stages: Vec<StageTime>,
 }
 

@@ -1,9 +1,12 @@
 //! Where a build's time goes: seconds per stage (read scans, count, distribute, normals, voxels,
 //! ...), for `grotto-pack build`'s summary and the per-stage table in docs/benchmarks.md.
 //!
-//! Stages inside the tile step run on several threads at once; their seconds are summed over
-//! threads (thread-seconds, marked as such), so they add up to the work, not to the wall time.
-//! Timing costs two clock reads per stage and tile or per chunk of 64 Ki points: nothing.
+//! The tile stages are timed per tile and summed over the tiles, which are built several at once
+//! where the memory budget allows (`BuildParams::tiles_at_once`): their sum can exceed the tile
+//! step's wall time. Each tile's normals, surfel and voxel sorts and colour blocks are themselves
+//! parallel. The tiling passes decode on a thread of their own, so a pass's "read scans" and its
+//! own work overlap. Timing costs two clock reads per stage and tile or per chunk of 64 Ki
+//! points: nothing.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -13,6 +16,9 @@ use serde::Serialize;
 /// A stage of a build, in the order they run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Stage {
+    /// Before the build proper (`grotto-pack`): reading the manifest and the scans' headers, and
+    /// sampling point spacing for `--leaf-m auto`.
+    Setup,
     /// Pass 1 of tiling: decoding scan files and posing their points (count pass).
     CountRead,
     /// Pass 1: counting points per fine cell, and choosing the tiles.
@@ -46,7 +52,8 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub const ALL: [Stage; 15] = [
+    pub const ALL: [Stage; 16] = [
+        Stage::Setup,
         Stage::CountRead,
         Stage::Count,
         Stage::DistributeRead,
@@ -66,6 +73,7 @@ impl Stage {
 
     pub fn name(self) -> &'static str {
         match self {
+            Stage::Setup => "setup: scans and leaf size",
             Stage::CountRead => "count: read scans",
             Stage::Count => "count: cells and plan",
             Stage::DistributeRead => "distribute: read scans",
@@ -84,8 +92,8 @@ impl Stage {
         }
     }
 
-    /// Whether the stage runs on several threads at once (its seconds are thread-seconds).
-    pub fn per_thread(self) -> bool {
+    /// Whether the stage is timed per tile and summed over tiles built at once.
+    pub fn summed_over_tiles(self) -> bool {
         matches!(
             self,
             Stage::ReadBins
@@ -109,8 +117,14 @@ pub struct Profile {
 pub struct StageTime {
     pub stage: &'static str,
     pub seconds: f64,
-    /// Summed over the threads that ran it at once.
-    pub thread_seconds: bool,
+    /// Summed over tiles built at once (may exceed the wall time).
+    pub summed_over_tiles: bool,
+}
+
+impl StageTime {
+    pub fn of(stage: Stage, seconds: f64) -> Self {
+        StageTime { stage: stage.name(), seconds, summed_over_tiles: stage.summed_over_tiles() }
+    }
 }
 
 impl Profile {
@@ -136,7 +150,7 @@ impl Profile {
         Stage::ALL
             .iter()
             .filter(|&&s| self.nanos[s as usize].load(Ordering::Relaxed) > 0)
-            .map(|&s| StageTime { stage: s.name(), seconds: self.seconds(s), thread_seconds: s.per_thread() })
+            .map(|&s| StageTime::of(s, self.seconds(s)))
             .collect()
     }
 }
@@ -155,8 +169,8 @@ mod tests {
         let report = p.report();
         assert_eq!(report.len(), 2);
         assert_eq!(report[0].stage, "count: cells and plan");
-        assert!(!report[0].thread_seconds);
-        assert_eq!(report[1], StageTime { stage: "tiles: normals", seconds: 2.0, thread_seconds: true });
+        assert!(!report[0].summed_over_tiles);
+        assert_eq!(report[1], StageTime { stage: "tiles: normals", seconds: 2.0, summed_over_tiles: true });
     }
 
     #[test]

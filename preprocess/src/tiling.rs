@@ -23,6 +23,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::ingest::{self, PointChunk};
@@ -293,14 +294,20 @@ pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Optio
         let tree: kiddo::immutable::float::kdtree::ImmutableKdTree<f32, u32, 3, 64> =
             kiddo::immutable::float::kdtree::ImmutableKdTree::new_from_slice(&local);
         let k = std::num::NonZero::new(8).expect("8 > 0");
-        for q in &local {
-            // The nearest neighbour at a non-zero distance (duplicates say nothing of spacing).
-            if let Some(d2) =
-                tree.nearest_n::<SquaredEuclidean>(q, k).iter().map(|nb| nb.distance).find(|&d2| d2 > 0.0)
-            {
-                spacings.push(f64::from(d2).sqrt());
-            }
-        }
+        // In parallel (the median does not depend on the order), unsorted: the nearest neighbour at
+        // a non-zero distance (duplicates say nothing of spacing) is the smallest of those.
+        let found: Vec<f64> = local
+            .par_iter()
+            .filter_map(|q| {
+                tree.nearest_n_within::<SquaredEuclidean>(q, f32::INFINITY, k, false)
+                    .iter()
+                    .map(|nb| nb.distance)
+                    .filter(|&d2| d2 > 0.0)
+                    .reduce(f32::min)
+                    .map(|d2| f64::from(d2).sqrt())
+            })
+            .collect();
+        spacings.extend(found);
         sampled += pts.len();
     }
     if spacings.is_empty() {
@@ -312,7 +319,11 @@ pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Optio
 }
 
 /// Streams every scan through `f(scan_index, chunk_in_world)`, posing points into the world.
-/// Decoding and posing add to `stages.0` of `profile`, `f` to `stages.1`.
+///
+/// Decoding and posing run on their own thread, a chunk ahead of `f` (two chunks in flight,
+/// recycled), so reading a file overlaps the pass's own work on the other core; `f` sees the
+/// points in file order, as a single thread would. Decoding adds to `stages.0` of `profile`,
+/// `f` to `stages.1`. An error on either side stops both and is returned.
 fn stream_world(
     scans: &[ResolvedScan],
     chunk_points: usize,
@@ -320,28 +331,66 @@ fn stream_world(
     stages: (Stage, Stage),
     mut f: impl FnMut(usize, &PointChunk) -> Result<()>,
 ) -> Result<()> {
-    let mut chunk = PointChunk::new(chunk_points);
-    for (si, scan) in scans.iter().enumerate() {
-        let mut source = profile.time(stages.0, || ingest::open(&scan.path, scan.format, scan.index))?;
-        loop {
-            let read = Instant::now();
-            if source.fill_chunk(&mut chunk)? == 0 {
-                profile.add(stages.0, read.elapsed());
-                break;
-            }
-            let pose = &scan.world_from_scan;
-            for p in &mut chunk.xyz {
-                *p = pose.apply(*p);
-            }
-            for n in &mut chunk.normal {
-                let r = pose.rotate(n.map(f64::from));
-                *n = r.map(|v| v as f32);
-            }
-            profile.add(stages.0, read.elapsed());
-            profile.time(stages.1, || f(si, &chunk))?;
-        }
+    let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Result<(usize, PointChunk)>>(1);
+    let (empty_tx, empty_rx) = std::sync::mpsc::channel::<PointChunk>();
+    for _ in 0..2 {
+        let _ = empty_tx.send(PointChunk::new(chunk_points));
     }
-    Ok(())
+    std::thread::scope(|scope| {
+        scope.spawn(move || {
+            let mut spare: Option<PointChunk> = None;
+            for (si, scan) in scans.iter().enumerate() {
+                let mut source =
+                    match profile.time(stages.0, || ingest::open(&scan.path, scan.format, scan.index)) {
+                        Ok(source) => source,
+                        Err(e) => {
+                            let _ = full_tx.send(Err(e));
+                            return;
+                        }
+                    };
+                loop {
+                    // The consumer gone (it stopped on an error) ends the reading too.
+                    let Some(mut chunk) = spare.take().or_else(|| empty_rx.recv().ok()) else { return };
+                    let read = Instant::now();
+                    match source.fill_chunk(&mut chunk) {
+                        Ok(0) => {
+                            profile.add(stages.0, read.elapsed());
+                            spare = Some(chunk);
+                            break;
+                        }
+                        Ok(_) => {
+                            let pose = &scan.world_from_scan;
+                            for p in &mut chunk.xyz {
+                                *p = pose.apply(*p);
+                            }
+                            for n in &mut chunk.normal {
+                                let r = pose.rotate(n.map(f64::from));
+                                *n = r.map(|v| v as f32);
+                            }
+                            profile.add(stages.0, read.elapsed());
+                            if full_tx.send(Ok((si, chunk))).is_err() {
+                                return;
+                            }
+                        }
+                        Err(e) => {
+                            let _ = full_tx.send(Err(e));
+                            return;
+                        }
+                    }
+                }
+            }
+        });
+        // Owns the consumer's ends, so an early return drops them and the reader stops.
+        let consume = move || -> Result<()> {
+            for message in full_rx {
+                let (si, chunk) = message?;
+                profile.time(stages.1, || f(si, &chunk))?;
+                let _ = empty_tx.send(chunk);
+            }
+            Ok(())
+        };
+        consume()
+    })
 }
 
 /// The point in global quanta: the one rounding every later decision shares.
@@ -427,7 +476,7 @@ fn count_and_plan(
     })?;
     let inv = 1.0 / params.quantum_m;
     let shift = (params.min_tile_extent_m / params.quantum_m).log2() as u32;
-    let mut fine: HashMap<[i64; 3], u64> = HashMap::new();
+    let mut fine: foldhash::HashMap<[i64; 3], u64> = foldhash::HashMap::default();
     let (mut points, mut invalid, mut done) = (0u64, 0u64, 0u64);
     stream_world(scans, params.chunk_points, profile, (Stage::CountRead, Stage::Count), |_, chunk| {
         for p in &chunk.xyz {
@@ -509,15 +558,21 @@ fn distribute(
     let invalid = plan.invalid_points;
     let lookup: HashMap<(u32, [i64; 3]), usize> =
         plan.tiles.iter().enumerate().map(|(i, t)| ((t.level, t.key), i)).collect();
-    let find = |q: [i64; 3]| -> Option<usize> {
+    // The tile of each fine cell met so far: one lookup per point (and per halo probe) instead of
+    // one per tile level. Fine cells are a tile's smallest edge, so there are few of them (one per
+    // square metre of wall at the default leaf) against millions of points.
+    let mut tile_of_cell: foldhash::HashMap<[i64; 3], Option<usize>> = foldhash::HashMap::default();
+    let mut find = |q: [i64; 3]| -> Option<usize> {
         let k = fine_key(q, shift);
-        let rel: [i64; 3] = std::array::from_fn(|i| k[i] - plan.anchor[i]);
-        (0..=top).find_map(|l| lookup.get(&(l, rel.map(|v| v >> l))).copied())
+        *tile_of_cell.entry(k).or_insert_with(|| {
+            let rel: [i64; 3] = std::array::from_fn(|i| k[i] - plan.anchor[i]);
+            (0..=top).find_map(|l| lookup.get(&(l, rel.map(|v| v >> l))).copied())
+        })
     };
     for t in 0..plan.tiles.len() {
         let _ = std::fs::remove_file(bin_path(work_dir, t));
     }
-    let mut bins = Bins::new(work_dir, params.buffer_bytes);
+    let mut bins = Bins::new(work_dir, plan.tiles.len(), params.buffer_bytes);
     // Tile origins and extents in quanta.
     let origins: Vec<[i64; 3]> = plan
         .tiles
@@ -590,29 +645,39 @@ fn distribute(
 /// Per-tile append buffers with a shared byte budget.
 struct Bins {
     dir: PathBuf,
-    buffers: HashMap<usize, Vec<BinPoint>>,
+    /// Indexed by tile; the tiles with points buffered are in `touched`.
+    buffers: Vec<Vec<BinPoint>>,
+    touched: Vec<usize>,
     buffered: usize,
     budget: usize,
 }
 
 impl Bins {
-    fn new(work_dir: &Path, budget: usize) -> Self {
+    fn new(work_dir: &Path, tiles: usize, budget: usize) -> Self {
         Self {
             dir: work_dir.to_path_buf(),
-            buffers: HashMap::new(),
+            buffers: vec![Vec::new(); tiles],
+            touched: Vec::new(),
             buffered: 0,
             budget: budget.max(1 << 16),
         }
     }
 
     fn push(&mut self, tile: usize, p: BinPoint) -> Result<()> {
-        self.buffers.entry(tile).or_default().push(p);
+        let buffer = &mut self.buffers[tile];
+        if buffer.is_empty() {
+            self.touched.push(tile);
+        }
+        buffer.push(p);
         self.buffered += size_of::<BinPoint>();
         if self.buffered >= self.budget { self.flush_all() } else { Ok(()) }
     }
 
+    /// Appends every buffer to its tile's bin; the buffers are freed, so the budget bounds the
+    /// memory held between flushes.
     fn flush_all(&mut self) -> Result<()> {
-        for (tile, points) in self.buffers.drain() {
+        for tile in self.touched.drain(..) {
+            let points = std::mem::take(&mut self.buffers[tile]);
             let path = bin_path(&self.dir, tile);
             let io = |source| Error::Io { path: path.clone(), source };
             let mut f: File = OpenOptions::new().create(true).append(true).open(&path).map_err(io)?;

@@ -67,7 +67,8 @@ pub fn build(samples: &[Sample], extent_m: f64, depth: u32) -> TileSvo {
             (morton_encode(c[0], c[1], c[2]), i as u32)
         })
         .collect();
-    keyed.sort_unstable();
+    // Keys are unique (index last), so the parallel sort's order is the only one.
+    rayon::slice::ParallelSliceMut::par_sort_unstable(&mut keyed[..]);
     let mut leaves = Vec::new();
     let mut out = TileSvo::default();
     let mut start = 0;
