@@ -368,3 +368,155 @@ pub fn bc1(package: &Path) -> Result<Bc1Figure> {
         encode_seconds: seconds,
     })
 }
+
+/// One candidate surfel encoding's size (`grotto-pack bench-encoding`).
+#[derive(Clone, Debug, Serialize)]
+pub struct EncodingRow {
+    pub encoding: &'static str,
+    pub surfel_bytes: u64,
+    pub surfel_bytes_per_point: f64,
+    /// The whole package with its surfels stored this way, per point.
+    pub package_bytes_per_point: f64,
+}
+
+/// What the compact surfel encodings ([`crate::compact`]) cost on a package: sizes, and the
+/// errors of the quantised surfels against the stored full-precision ones.
+#[derive(Clone, Debug, Serialize)]
+pub struct EncodingFigure {
+    pub package: String,
+    pub points: u64,
+    pub package_bytes: u64,
+    /// Leaf sizes in the package, and the position bits each gets for a 1 mm bound.
+    pub position_bits: Vec<(f64, u32)>,
+    /// Leaves holding surfels, and whether every tile's surfels come grouped by leaf (one run per
+    /// leaf), as counts per leaf need.
+    pub leaves: u64,
+    pub grouped_by_leaf: bool,
+    pub rows: Vec<EncodingRow>,
+    /// The bit planes' compressed bytes per point: positions, normals, radii, spreads, counts.
+    pub planes_per_point: Vec<(&'static str, f64)>,
+    pub position_error_max_mm: f64,
+    pub position_error_mean_mm: f64,
+    pub normal_error_max_deg: f64,
+    pub normal_error_mean_deg: f64,
+    pub radius_error_max_rel: f64,
+    pub spread_error_max: f64,
+    /// Quantising and packing every surfel (planes and zstd included), one thread.
+    pub encode_seconds: f64,
+}
+
+pub fn encoding(package: &Path) -> Result<EncodingFigure> {
+    use crate::compact::*;
+    use grotto_format::spec::Surfel;
+    use grotto_format::{Package, SectionKind};
+    let pkg = Package::open(package)?;
+    let package_bytes =
+        std::fs::metadata(package).map_err(|source| Error::Io { path: package.into(), source })?.len();
+    let (mut points, mut stored_surfel_bytes, mut leaves) = (0u64, 0u64, 0u64);
+    let mut grouped = true;
+    let mut bits_by_leaf: Vec<(f64, u32)> = Vec::new();
+    let (mut pos_max, mut pos_sum, mut n_max, mut n_sum, mut r_max, mut s_max) =
+        (0f64, 0f64, 0f64, 0f64, 0f64, 0f64);
+    let mut word_bytes = 0u64;
+    const PLANES: [&str; 5] = ["positions", "normals", "radii", "spreads", "leaf counts"];
+    let mut planes = [0u64; 5];
+    let mut seconds = 0f64;
+    let zstd = |bytes: &[u8]| -> Result<u64> {
+        zstd::bulk::compress(bytes, 3)
+            .map(|c| c.len() as u64)
+            .map_err(|source| Error::Io { path: package.into(), source })
+    };
+    for tile in pkg.tiles() {
+        let Some(s) = tile.find(SectionKind::Surfels, 0) else { continue };
+        stored_surfel_bytes += s.stored_len;
+        let surfels = pkg.read::<Surfel>(&s)?;
+        let leaf_m = tile.leaf_size_m();
+        let cells = 1u32 << tile.depth();
+        let bits = position_bits(leaf_m, 0.001);
+        if !bits_by_leaf.iter().any(|&(l, _)| l == leaf_m) {
+            bits_by_leaf.push((leaf_m, bits));
+        }
+        let start = Instant::now();
+        let (mut pos_plane, mut normal_plane) = (BitWriter::default(), BitWriter::default());
+        let (mut radius_plane, mut spread_plane) = (Vec::new(), Vec::new());
+        let mut counts: Vec<u16> = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        let mut last: Option<[u32; 3]> = None;
+        for sf in surfels.iter() {
+            let (cell, q) = quantise_position(sf.position_tile_m, leaf_m, cells, bits);
+            if last != Some(cell) {
+                grouped &= seen.insert(cell);
+                counts.push(0);
+                last = Some(cell);
+            }
+            let c = counts.last_mut().expect("pushed above");
+            *c = c.saturating_add(1);
+            for a in q {
+                pos_plane.put(a, bits);
+            }
+            let (u, v) = oct_encode(sf.normal);
+            normal_plane.put(u, NORMAL_BITS);
+            normal_plane.put(v, NORMAL_BITS);
+            let (rc, sc) = (radius_code(sf.radius_m), spread_code(sf.spread));
+            radius_plane.push(rc);
+            spread_plane.push(sc);
+            // Errors against the stored surfel.
+            let p = dequantise_position(cell, q, leaf_m, bits);
+            let e = (0..3).map(|a| f64::from(p[a] - sf.position_tile_m[a]).powi(2)).sum::<f64>().sqrt() * 1e3;
+            pos_max = pos_max.max(e);
+            pos_sum += e;
+            let n = oct_decode(u, v);
+            let cos = f64::from(n[0] * sf.normal[0] + n[1] * sf.normal[1] + n[2] * sf.normal[2]);
+            let deg = cos.clamp(-1.0, 1.0).acos().to_degrees();
+            n_max = n_max.max(deg);
+            n_sum += deg;
+            if sf.radius_m > 0.0 {
+                r_max = r_max.max(f64::from((radius_m(rc) / sf.radius_m - 1.0).abs()));
+            }
+            s_max = s_max.max(f64::from((spread(sc) - sf.spread).abs()));
+        }
+        let count_bytes: Vec<u8> = counts.iter().flat_map(|c| c.to_le_bytes()).collect();
+        for (total, bytes) in planes.iter_mut().zip([
+            &pos_plane.finish(),
+            &normal_plane.finish(),
+            &radius_plane,
+            &spread_plane,
+            &count_bytes,
+        ]) {
+            *total += zstd(bytes)?;
+        }
+        seconds += start.elapsed().as_secs_f64();
+        word_bytes += 8 * surfels.len() as u64 + count_bytes.len() as u64;
+        leaves += counts.len() as u64;
+        points += surfels.len() as u64;
+    }
+    let per_point = |b: u64| b as f64 / points.max(1) as f64;
+    let rest = package_bytes - stored_surfel_bytes;
+    let row = |encoding, surfel_bytes: u64| EncodingRow {
+        encoding,
+        surfel_bytes,
+        surfel_bytes_per_point: per_point(surfel_bytes),
+        package_bytes_per_point: per_point(rest + surfel_bytes),
+    };
+    Ok(EncodingFigure {
+        package: package.display().to_string(),
+        points,
+        package_bytes,
+        position_bits: bits_by_leaf,
+        leaves,
+        grouped_by_leaf: grouped,
+        rows: vec![
+            row("f32 (stored today)", stored_surfel_bytes),
+            row("64-bit word + u16 count per leaf", word_bytes),
+            row("bit planes + zstd 3", planes.iter().sum()),
+        ],
+        planes_per_point: PLANES.iter().zip(planes).map(|(&name, b)| (name, per_point(b))).collect(),
+        position_error_max_mm: pos_max,
+        position_error_mean_mm: pos_sum / points.max(1) as f64,
+        normal_error_max_deg: n_max,
+        normal_error_mean_deg: n_sum / points.max(1) as f64,
+        radius_error_max_rel: r_max,
+        spread_error_max: s_max,
+        encode_seconds: seconds,
+    })
+}

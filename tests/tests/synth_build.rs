@@ -86,6 +86,16 @@ fn synthetic_cave_builds_with_accurate_oriented_normals() {
     assert!(off_wall as f64 / (n as f64) < 0.001, "surfels must lie on the wall: {off_wall}");
     assert!(mean.to_degrees() < 4.0 && p95.to_degrees() < 15.0, "mean {mean}, p95 {p95}");
     assert!(flipped_share < 0.005, "wrongly oriented: {flipped_share}");
+    // The compact encodings studied for survey-scale packages (issue 15) keep positions within
+    // 1 mm and normals within a twentieth of a degree of the stored surfels, and are smaller.
+    let enc = grotto_preprocess::bench::encoding(&out).unwrap();
+    assert_eq!(enc.points, summary.points);
+    assert!(enc.grouped_by_leaf, "surfels in Morton order come grouped by leaf");
+    assert!(enc.position_error_max_mm <= 1.0 + 1e-3, "{}", enc.position_error_max_mm);
+    assert!(enc.normal_error_max_deg < 0.05, "{}", enc.normal_error_max_deg);
+    assert!(enc.radius_error_max_rel < 0.022 && enc.spread_error_max <= 0.5 / 255.0 + 1e-6);
+    let sizes: Vec<u64> = enc.rows.iter().map(|r| r.surfel_bytes).collect();
+    assert!(sizes[0] == 32 * enc.points && sizes[1] < sizes[0] / 3 && sizes[2] < sizes[1], "{sizes:?}");
 }
 
 #[test]

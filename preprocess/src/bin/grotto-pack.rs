@@ -113,6 +113,13 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Measure candidate compact surfel encodings on packages (issue 15): bytes per point, and the
+    /// position, normal, radius and spread errors of the quantised surfels.
+    BenchEncoding {
+        packages: Vec<PathBuf>,
+        #[arg(long)]
+        json: bool,
+    },
     /// The main job on the built-in demo scene: synthesise a cave into DIR/demo-scans and build DIR/demo.grotto
     /// (with 6.25 cm leaves unless --leaf-m gives a number).
     Demo {
@@ -563,6 +570,42 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         f.bc1_bytes as f64 / f.raw_bytes as f64
                     );
                 }
+            }
+        }
+        Command::BenchEncoding { packages, json } => {
+            let figures = packages
+                .iter()
+                .map(|p| grotto_preprocess::bench::encoding(p))
+                .collect::<Result<Vec<_>, _>>()?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&figures)?);
+            }
+            for f in figures.iter().filter(|_| !json) {
+                println!(
+                    "{}: {} points in {} leaves (grouped by leaf: {}), position bits {:?}; position error max {:.3} mm mean {:.3} mm, normal max {:.4} deg mean {:.4} deg, radius max {:.2}%, spread max {:.4}; encoded in {:.2} s",
+                    f.package,
+                    f.points,
+                    f.leaves,
+                    f.grouped_by_leaf,
+                    f.position_bits,
+                    f.position_error_max_mm,
+                    f.position_error_mean_mm,
+                    f.normal_error_max_deg,
+                    f.normal_error_mean_deg,
+                    100.0 * f.radius_error_max_rel,
+                    f.spread_error_max,
+                    f.encode_seconds
+                );
+                println!("| encoding | surfel bytes | per point | package per point |\n|---|---:|---:|---:|");
+                for r in &f.rows {
+                    println!(
+                        "| {} | {} | {:.2} | {:.2} |",
+                        r.encoding, r.surfel_bytes, r.surfel_bytes_per_point, r.package_bytes_per_point
+                    );
+                }
+                let planes: Vec<String> =
+                    f.planes_per_point.iter().map(|(n, b)| format!("{n} {b:.2}")).collect();
+                println!("bit planes, bytes per point: {}", planes.join(", "));
             }
         }
         Command::Demo { out, synth, mut opts } => {
