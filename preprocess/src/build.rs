@@ -383,7 +383,7 @@ fn build_tile(
     let tile = &plan.tiles[t];
     let origin = plan.origin_m(tile);
     let extent = plan.extent_m(tile);
-    let clock = std::time::Instant::now();
+    let mut clock = std::time::Instant::now();
     let points = tiling::read_bin(work_dir, t)?;
     let quantum = plan.quantum_m;
     let positions: Vec<[f32; 3]> = points.iter().map(|p| p.pos_tile_m(quantum)).collect();
@@ -398,8 +398,7 @@ fn build_tile(
     let input_normals: Vec<[f32; 3]> =
         points.iter().map(|p| p.normal_snorm.map(|c| f32::from(c) / 32767.0)).collect();
     let seen_from: Vec<Option<SeenFrom>> = points.iter().map(|p| plan.seen_from(p.scan as usize)).collect();
-    profile.add(Stage::ReadBins, clock.elapsed());
-    let clock = std::time::Instant::now();
+    profile.lap(Stage::ReadBins, &mut clock);
     let (estimated, normal_stats) = normals::estimate_with_stats(
         &TilePoints {
             positions: &positions,
@@ -412,8 +411,7 @@ fn build_tile(
         },
         params.k,
     );
-    profile.add(Stage::Normals, clock.elapsed());
-    let clock = std::time::Instant::now();
+    profile.lap(Stage::Normals, &mut clock);
     let own_points: Vec<&tiling::BinPoint> = points.iter().filter(|p| p.flags & FLAG_HALO == 0).collect();
     let q = f64::from(1u32 << 16) / extent;
     let mut order: Vec<(u64, usize)> = own_points
@@ -452,8 +450,7 @@ fn build_tile(
             k_reach(n.radius_m) > border + params.halo_m
         })
         .count() as u64;
-    profile.add(Stage::Surfels, clock.elapsed());
-    let clock = std::time::Instant::now();
+    profile.lap(Stage::Surfels, &mut clock);
     let depth = tile_depth(extent, params.leaf_m)?;
     // Each surfel stands for the area its radius was widened from (see normals.rs).
     let cover = normals::RADIUS_COVER_FACTOR;
@@ -473,7 +470,7 @@ fn build_tile(
         .collect();
     samples.extend(area_light_samples(scene, origin, extent, params.leaf_m));
     let svo = voxels::build(&samples, extent, depth);
-    profile.add(Stage::Voxels, clock.elapsed());
+    profile.lap(Stage::Voxels, &mut clock);
     let grid: [i32; 3] = tile.key.map(|k| i32::try_from(k).unwrap_or(i32::MAX));
     if grid.contains(&i32::MAX) {
         return Err(Error::Parameter {
@@ -530,8 +527,7 @@ fn write_tile_package(
     colors: ColorCodec,
     profile: &Profile,
 ) -> Result<()> {
-    let clock = std::time::Instant::now();
-    let mut colors_time = std::time::Duration::ZERO;
+    let mut clock = std::time::Instant::now();
     let mut w = PackageWriter::create(path)?;
     let index = w.add_tile(tile.info)?;
     let scope = Scope::Tile(index);
@@ -539,9 +535,9 @@ fn write_tile_package(
     w.add_elements(SectionKind::Surfels, scope, 0, &tile.surfels, Compression::Raw)?;
     match colors {
         ColorCodec::Bc1 => {
-            let encoding = std::time::Instant::now();
+            profile.lap(Stage::WriteTiles, &mut clock);
             let blocks = bc1::encode(&tile.colors);
-            colors_time = encoding.elapsed();
+            profile.lap(Stage::Colors, &mut clock);
             w.add_elements(SectionKind::SurfelColorsBc1, scope, 0, &blocks, Compression::Raw)?;
         }
         ColorCodec::Raw => {
@@ -571,8 +567,7 @@ fn write_tile_package(
         .into(),
     })?;
     w.finish()?;
-    profile.add(Stage::Colors, colors_time);
-    profile.add(Stage::WriteTiles, clock.elapsed().saturating_sub(colors_time));
+    profile.lap(Stage::WriteTiles, &mut clock);
     Ok(())
 }
 
@@ -899,7 +894,7 @@ fn assemble_plan(
     // only the tiles it shows in full. The rock near a border needs the neighbours' walls, so
     // this runs once every tile is built, over every tile package at once (it reads their SVOs
     // only; the maps are dropped before the copy below touches the surfels).
-    let clock = std::time::Instant::now();
+    let mut clock = std::time::Instant::now();
     let levels = {
         let packages = (0..total)
             .map(|t| Package::open(tile_package_path(&params.work_dir, t)))
@@ -926,8 +921,7 @@ fn assemble_plan(
             })
             .collect::<Result<Vec<_>>>()?
     };
-    profile.add(Stage::Levels, clock.elapsed());
-    let clock = std::time::Instant::now();
+    profile.lap(Stage::Levels, &mut clock);
     let mut writer = PackageWriter::create(out)?;
     for (t, levels) in levels.iter().enumerate() {
         let path = tile_package_path(&params.work_dir, t);
@@ -961,8 +955,7 @@ fn assemble_plan(
         }
         progress(Progress { stage: "assemble", done: t as u64 + 1, total: total as u64 });
     }
-    profile.add(Stage::Assemble, clock.elapsed());
-    let clock = std::time::Instant::now();
+    profile.lap(Stage::Assemble, &mut clock);
     let mut env_window = None;
     if let Some(env) = &manifest.environment {
         let path = manifest.resolve_path(&env.map);
@@ -976,9 +969,8 @@ fn assemble_plan(
         writer.add_elements(SectionKind::EnvMipBc6h, Scope::Global, 0, &blocks, Compression::Raw)?;
         inputs_extra.push(hash_file(&path)?);
         progress(Progress { stage: "environment", done: 1, total: 1 });
-        profile.add(Stage::Environment, clock.elapsed());
+        profile.lap(Stage::Environment, &mut clock);
     }
-    let clock = std::time::Instant::now();
     writer.add_scene(&Scene { scans: scan_infos(scans), ..scene.clone() })?;
     let mut inputs = std::mem::take(&mut inputs_extra);
     let mut seen = std::collections::BTreeSet::new();
@@ -987,8 +979,7 @@ fn assemble_plan(
             inputs.push(hash_file(&s.path)?);
         }
     }
-    profile.add(Stage::HashInputs, clock.elapsed());
-    let clock = std::time::Instant::now();
+    profile.lap(Stage::HashInputs, &mut clock);
     let mut parameters = std::collections::BTreeMap::new();
     for (k, v) in [
         ("leaf_m", serde_json::json!(params.leaf_m)),
@@ -1011,7 +1002,7 @@ fn assemble_plan(
         parameters,
     })?;
     let path = writer.finish()?;
-    profile.add(Stage::Assemble, clock.elapsed());
+    profile.lap(Stage::Assemble, &mut clock);
     let bytes = std::fs::metadata(&path).map_err(|source| Error::Io { path: path.clone(), source })?.len();
     Ok(BuildSummary {
         package: path.display().to_string(),

@@ -338,46 +338,39 @@ fn stream_world(
     }
     std::thread::scope(|scope| {
         scope.spawn(move || {
-            let mut spare: Option<PointChunk> = None;
-            for (si, scan) in scans.iter().enumerate() {
-                let mut source =
-                    match profile.time(stages.0, || ingest::open(&scan.path, scan.format, scan.index)) {
-                        Ok(source) => source,
-                        Err(e) => {
-                            let _ = full_tx.send(Err(e));
-                            return;
+            let read = || -> Result<()> {
+                let mut spare: Option<PointChunk> = None;
+                for (si, scan) in scans.iter().enumerate() {
+                    let mut source =
+                        profile.time(stages.0, || ingest::open(&scan.path, scan.format, scan.index))?;
+                    loop {
+                        // The consumer gone (it stopped on an error) ends the reading too.
+                        let Some(mut chunk) = spare.take().or_else(|| empty_rx.recv().ok()) else {
+                            return Ok(());
+                        };
+                        let clock = Instant::now();
+                        let filled = source.fill_chunk(&mut chunk)?;
+                        let pose = &scan.world_from_scan;
+                        for p in &mut chunk.xyz {
+                            *p = pose.apply(*p);
                         }
-                    };
-                loop {
-                    // The consumer gone (it stopped on an error) ends the reading too.
-                    let Some(mut chunk) = spare.take().or_else(|| empty_rx.recv().ok()) else { return };
-                    let read = Instant::now();
-                    match source.fill_chunk(&mut chunk) {
-                        Ok(0) => {
-                            profile.add(stages.0, read.elapsed());
+                        for n in &mut chunk.normal {
+                            *n = pose.rotate(n.map(f64::from)).map(|v| v as f32);
+                        }
+                        profile.add(stages.0, clock.elapsed());
+                        if filled == 0 {
                             spare = Some(chunk);
                             break;
                         }
-                        Ok(_) => {
-                            let pose = &scan.world_from_scan;
-                            for p in &mut chunk.xyz {
-                                *p = pose.apply(*p);
-                            }
-                            for n in &mut chunk.normal {
-                                let r = pose.rotate(n.map(f64::from));
-                                *n = r.map(|v| v as f32);
-                            }
-                            profile.add(stages.0, read.elapsed());
-                            if full_tx.send(Ok((si, chunk))).is_err() {
-                                return;
-                            }
-                        }
-                        Err(e) => {
-                            let _ = full_tx.send(Err(e));
-                            return;
+                        if full_tx.send(Ok((si, chunk))).is_err() {
+                            return Ok(());
                         }
                     }
                 }
+                Ok(())
+            };
+            if let Err(e) = read() {
+                let _ = full_tx.send(Err(e));
             }
         });
         // Owns the consumer's ends, so an early return drops them and the reader stops.

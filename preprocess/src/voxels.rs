@@ -15,6 +15,7 @@
 use grotto_format::color::linear_to_srgb8;
 use grotto_format::spec::{LeafEmission, LeafNdf, Rgba8, SvoNode};
 use grotto_format::svo::{morton_encode, nodes_from_leaves};
+use rayon::prelude::*;
 
 /// One scene sample in tile coordinates.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -68,7 +69,7 @@ pub fn build(samples: &[Sample], extent_m: f64, depth: u32) -> TileSvo {
         })
         .collect();
     // Keys are unique (index last), so the parallel sort's order is the only one.
-    rayon::slice::ParallelSliceMut::par_sort_unstable(&mut keyed[..]);
+    keyed.par_sort_unstable();
     let mut leaves = Vec::new();
     let mut out = TileSvo::default();
     let mut start = 0;

@@ -522,8 +522,8 @@ fn light_carried_across_a_reload_starts_closer_and_converges_over_frames_to_the_
     assert!(golden::within_tolerance(&warm_diff), "{warm_diff:?}");
     let last = warm_frames.last().unwrap();
     assert!(golden::within_tolerance(last), "progressive light ends at the batch image: {last:?}");
-    // From darkness, one bounce per frame takes several frames; carried light (with its bounce
-    // tail) may settle at once, never later.
+    // From darkness, one bounce per frame takes several frames; carried light may settle sooner,
+    // never later.
     assert!(cold_frames.len() > 1, "one bounce per frame takes several frames to converge");
     assert!(
         warm_frames.len() <= cold_frames.len(),

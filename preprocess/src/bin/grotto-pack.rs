@@ -579,33 +579,36 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .collect::<Result<Vec<_>, _>>()?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&figures)?);
-            }
-            for f in figures.iter().filter(|_| !json) {
-                println!(
-                    "{}: {} points in {} leaves (grouped by leaf: {}), position bits {:?}; position error max {:.3} mm mean {:.3} mm, normal max {:.4} deg mean {:.4} deg, radius max {:.2}%, spread max {:.4}; encoded in {:.2} s",
-                    f.package,
-                    f.points,
-                    f.leaves,
-                    f.grouped_by_leaf,
-                    f.position_bits,
-                    f.position_error_max_mm,
-                    f.position_error_mean_mm,
-                    f.normal_error_max_deg,
-                    f.normal_error_mean_deg,
-                    100.0 * f.radius_error_max_rel,
-                    f.spread_error_max,
-                    f.encode_seconds
-                );
-                println!("| encoding | surfel bytes | per point | package per point |\n|---|---:|---:|---:|");
-                for r in &f.rows {
+            } else {
+                for f in &figures {
                     println!(
-                        "| {} | {} | {:.2} | {:.2} |",
-                        r.encoding, r.surfel_bytes, r.surfel_bytes_per_point, r.package_bytes_per_point
+                        "{}: {} points in {} leaves (grouped by leaf: {}), position bits {:?}; position error max {:.3} mm mean {:.3} mm, normal max {:.4} deg mean {:.4} deg, radius max {:.2}%, spread max {:.4}; encoded in {:.2} s",
+                        f.package,
+                        f.points,
+                        f.leaves,
+                        f.grouped_by_leaf,
+                        f.position_bits,
+                        f.position_error_max_mm,
+                        f.position_error_mean_mm,
+                        f.normal_error_max_deg,
+                        f.normal_error_mean_deg,
+                        100.0 * f.radius_error_max_rel,
+                        f.spread_error_max,
+                        f.encode_seconds
                     );
+                    println!(
+                        "| encoding | surfel bytes | per point | package per point |\n|---|---:|---:|---:|"
+                    );
+                    for r in &f.rows {
+                        println!(
+                            "| {} | {} | {:.2} | {:.2} |",
+                            r.encoding, r.surfel_bytes, r.surfel_bytes_per_point, r.package_bytes_per_point
+                        );
+                    }
+                    let planes: Vec<String> =
+                        f.planes_per_point.iter().map(|(n, b)| format!("{n} {b:.2}")).collect();
+                    println!("bit planes, bytes per point: {}", planes.join(", "));
                 }
-                let planes: Vec<String> =
-                    f.planes_per_point.iter().map(|(n, b)| format!("{n} {b:.2}")).collect();
-                println!("bit planes, bytes per point: {}", planes.join(", "));
             }
         }
         Command::Demo { out, synth, mut opts } => {

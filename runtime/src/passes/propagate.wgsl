@@ -63,9 +63,10 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
 // a surface shows adds it (shade, and the change that decides convergence: once the estimate
 // stops moving, more bounces would not change the image). Feeding the tail into the next bounce
 // instead converges in fewer bounces, but then the changes are no longer a plain series and
-// neighbours' estimates compound into overshoot (tried on the colour box, not kept). A ratio above the scene's
-// largest albedo (params.tail_ratio_max; zero without the tail) means light is still arriving, as
-// in a corridor's far end: it gets the largest ratio trusted, and none from 1 on.
+// neighbours' estimates compound into overshoot (tried on the colour box, not kept). A ratio
+// above the scene's largest albedo (params.tail_ratio_max; zero without the tail) means light is
+// still arriving, as in a corridor's far end: it gets the largest ratio trusted, and none from 1
+// on.
 fn bounce_tail(residual: vec3<f32>, last: vec3<f32>) -> vec3<f32> {
     let ok = abs(last) > vec3<f32>(1e-20);
     let ratio = select(vec3<f32>(0.0), residual / select(vec3<f32>(1.0), last, ok), ok);
