@@ -37,7 +37,7 @@ pub enum Problem {
     #[error("not a grotto package (magic bytes {found:02x?})")]
     BadMagic { found: [u8; 8] },
     #[error(
-        "package format {found_major}.{found_minor} is newer than this reader ({supported_major}.{supported_minor}); upgrade grotto"
+        "package format {found_major}.{found_minor} is not one this reader opens (1.x to {supported_major}.{supported_minor}); a newer package needs a newer grotto"
     )]
     UnsupportedVersion { found_major: u16, found_minor: u16, supported_major: u16, supported_minor: u16 },
     #[error("header size {header_size} is invalid (minimum {minimum}, file is {file_len} bytes)")]

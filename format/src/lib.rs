@@ -11,6 +11,7 @@
 //! in `source.rs`.
 
 pub mod color;
+pub mod compact;
 mod env_chain;
 mod error;
 mod reader;

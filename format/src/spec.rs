@@ -1,4 +1,4 @@
-//! Raw `#[repr(C)]` mirrors of the on-disk structures of format version 1 (see `docs/format.md`).
+//! Raw `#[repr(C)]` mirrors of the on-disk structures of format versions 1 and 2 (see `docs/format.md`).
 //!
 //! Everything here is plain old data: these types are what the bytes *are*, little-endian, with no
 //! validation. The checked types in [`crate::reader`] sit above them. Keep this file and
@@ -9,10 +9,16 @@ use bytemuck::{Pod, Zeroable};
 /// The first eight bytes of every package. The high byte and the trailing newline catch transfers
 /// that mangle binary files (the PNG trick).
 pub const MAGIC: [u8; 8] = *b"\x89GROTTO\n";
-/// Major version this crate writes and reads. A file with a larger major is refused.
-pub const VERSION_MAJOR: u16 = 1;
-/// Minor version this crate writes. Files with a larger minor open; the additions are ignored.
-pub const VERSION_MINOR: u16 = 2;
+/// Newest major version this crate writes and reads. A file with a larger major is refused.
+pub const VERSION_MAJOR: u16 = 2;
+/// Minor version of [`VERSION_MAJOR`] this crate writes. Files with a larger minor open; the
+/// additions are ignored.
+pub const VERSION_MINOR: u16 = 0;
+/// Oldest major version this crate reads: 1.x packages (full-precision surfels only) still open.
+pub const OLDEST_MAJOR: u16 = 1;
+/// The version a package without any 2.0 section is written as, so that 1.x readers still open
+/// it: 2.0 changed only how surfels may be stored.
+pub const VERSION_1: (u16, u16) = (1, 2);
 /// Every section starts at a multiple of this, so a raw section can be cast to any element type in
 /// place (the mapping itself is page-aligned).
 pub const SECTION_ALIGN: u64 = 64;
@@ -179,6 +185,9 @@ pub enum SectionKind {
     /// Per tile (format 1.2): `u16` per surfel, in surfel order, the index of the scan it came
     /// from in [`crate::Scene::scans`] (zstd: neighbours in Morton order mostly share a scan).
     SurfelScans = 17,
+    /// Per tile (format 2.0): the tile's surfels in the compact encoding of [`crate::compact`],
+    /// bytes; a tile has this or [`SectionKind::Surfels`], not both.
+    SurfelsCompact = 18,
 }
 
 /// The Rust type of one element of a section, used to check casts.
@@ -198,6 +207,8 @@ pub enum ElementType {
     RockBrick,
     U16,
     Utf8Json,
+    /// Bytes whose structure the kind's own codec checks.
+    Bytes,
 }
 
 impl ElementType {
@@ -216,13 +227,13 @@ impl ElementType {
             Self::CoarseLeaf => size_of::<CoarseLeaf>(),
             Self::RockBrick => size_of::<RockBrick>(),
             Self::U16 => size_of::<u16>(),
-            Self::Utf8Json => 1,
+            Self::Utf8Json | Self::Bytes => 1,
         }
     }
 }
 
 impl SectionKind {
-    pub const ALL: [SectionKind; 17] = [
+    pub const ALL: [SectionKind; 18] = [
         Self::SvoNodes,
         Self::LeafOpacity,
         Self::LeafAlbedo,
@@ -240,6 +251,7 @@ impl SectionKind {
         Self::CoarseLeaves,
         Self::RockBricks,
         Self::SurfelScans,
+        Self::SurfelsCompact,
     ];
 
     pub fn from_u32(v: u32) -> Option<Self> {
@@ -265,6 +277,7 @@ impl SectionKind {
             Self::CoarseLeaves => "coarse-leaves",
             Self::RockBricks => "rock-bricks",
             Self::SurfelScans => "surfel-scans",
+            Self::SurfelsCompact => "surfels-compact",
         }
     }
 
@@ -283,6 +296,7 @@ impl SectionKind {
             Self::CoarseLeaves => ElementType::CoarseLeaf,
             Self::RockBricks => ElementType::RockBrick,
             Self::SurfelScans => ElementType::U16,
+            Self::SurfelsCompact => ElementType::Bytes,
             Self::Scene | Self::Provenance => ElementType::Utf8Json,
         }
     }

@@ -157,6 +157,7 @@ impl PackageWriter {
             Scope::Tile(t) if (t as usize) < self.tiles.len() => t,
             Scope::Tile(t) => return Err(self.refuse(format!("section for tile {t}, which was not added"))),
         };
+        self.check_one_surfel_section(kind, tile)?;
         if !self.keys.insert((kind, tile, item)) {
             return Err(self
                 .refuse(format!("a section of kind {kind} for tile {tile:#x} item {item} exists already")));
@@ -213,6 +214,7 @@ impl PackageWriter {
             Scope::Tile(t) if (t as usize) < self.tiles.len() => t,
             Scope::Tile(t) => return Err(self.refuse(format!("section for tile {t}, which was not added"))),
         };
+        self.check_one_surfel_section(kind as u32, tile)?;
         if !self.keys.insert((kind as u32, tile, section.item)) {
             return Err(self.refuse(format!(
                 "a {} section for tile {tile:#x} item {} exists already",
@@ -235,6 +237,20 @@ impl PackageWriter {
         self.write_all(stored)?;
         self.sections.push(entry);
         Ok(self.sections.len() as u32 - 1)
+    }
+
+    /// A tile stores its surfels one way: full or compact, not both.
+    fn check_one_surfel_section(&self, kind: u32, tile: u32) -> Result<()> {
+        let (full, compact) = (SectionKind::Surfels as u32, SectionKind::SurfelsCompact as u32);
+        let other = match kind {
+            k if k == full => compact,
+            k if k == compact => full,
+            _ => return Ok(()),
+        };
+        if self.keys.contains(&(other, tile, 0)) {
+            return Err(self.refuse(format!("tile {tile} already has its surfels in the other encoding")));
+        }
+        Ok(())
     }
 
     /// Adds a section of typed elements.
@@ -299,10 +315,17 @@ impl PackageWriter {
         let mut h = Xxh3::new();
         h.update(bytemuck::cast_slice(&table));
         h.update(bytemuck::cast_slice(&tiles));
+        // 2.0 only where a section needs it, so 1.x readers keep opening everything else.
+        let (version_major, version_minor) =
+            if table.iter().any(|e| e.kind == SectionKind::SurfelsCompact as u32) {
+                (VERSION_MAJOR, VERSION_MINOR)
+            } else {
+                VERSION_1
+            };
         let mut header = RawHeader {
             magic: MAGIC,
-            version_major: VERSION_MAJOR,
-            version_minor: VERSION_MINOR,
+            version_major,
+            version_minor,
             header_size: size_of::<RawHeader>() as u32,
             section_count: table.len() as u64,
             section_table_offset,

@@ -253,11 +253,12 @@ fn lying_lengths_and_codecs_are_refused() {
     assert!(matches!(open_problem(&b), Problem::UnknownCodec { .. }));
 
     // A surfel section whose length is not whole surfels.
-    let surfels =
-        secs.iter().find(|s| s.kind == Some(SectionKind::Surfels) && s.codec == Some(Codec::Raw)).unwrap();
+    let surfels = secs.iter().find(|s| s.kind == Some(SectionKind::Surfels)).unwrap();
     let mut b = bytes.clone();
     patch(&mut b, |_, t, _| {
-        t[surfels.index as usize].stored_len -= 4;
+        if surfels.codec == Some(Codec::Raw) {
+            t[surfels.index as usize].stored_len -= 4;
+        }
         t[surfels.index as usize].raw_len -= 4;
     });
     let p = open_problem(&b);
@@ -289,6 +290,31 @@ fn scopes_tiles_and_duplicates_are_checked() {
     let prov = secs.iter().find(|s| s.kind == Some(SectionKind::Provenance)).unwrap().index as usize;
     patch(&mut b, |_, t, _| t[prov].kind = SectionKind::Scene as u32);
     assert!(matches!(open_problem(&b), Problem::DuplicateSection { .. }));
+
+    // A tile with its surfels both ways (tile 0's scan indices relabelled as compact surfels).
+    let mut b = bytes.clone();
+    let scans = secs
+        .iter()
+        .find(|s| s.kind == Some(SectionKind::SurfelScans) && s.scope == Scope::Tile(0))
+        .unwrap()
+        .index as usize;
+    patch(&mut b, |_, t, _| t[scans].kind = SectionKind::SurfelsCompact as u32);
+    let p = open_problem(&b);
+    assert!(matches!(p, Problem::BadTile { tile: 0, .. }) && p.to_string().contains("both"), "{p}");
+    // Compact surfels that lie about their count, caught when first read.
+    let mut b = bytes.clone();
+    let compact = secs
+        .iter()
+        .find(|s| s.kind == Some(SectionKind::SurfelsCompact) && s.codec == Some(Codec::Raw))
+        .unwrap();
+    let at = compact.offset as usize;
+    b[at..at + 4].copy_from_slice(&1_000_000u32.to_le_bytes());
+    let sum = xxhash_rust::xxh3::xxh3_64(&b[at..at + compact.stored_len as usize]);
+    patch(&mut b, |_, t, _| t[compact.index as usize].checksum = sum);
+    let pkg = Package::from_bytes("lying-compact.grotto", &b).unwrap();
+    let err = pkg.tile(1).unwrap().surfels().unwrap_err();
+    assert!(matches!(err.problem(), Some(Problem::BadContent { .. })), "{err}");
+    assert!(err.to_string().contains("lying-compact.grotto"), "{err}");
 
     // Tile runs that lie.
     let mut b = bytes.clone();
@@ -334,10 +360,10 @@ fn versions_newer_minor_opens_newer_major_is_refused_with_both_versions() {
     let msg = err.to_string();
     assert!(matches!(
         err.problem(),
-        Some(Problem::UnsupportedVersion { found_major: 2, found_minor: 2, .. })
+        Some(Problem::UnsupportedVersion { found_major: 3, found_minor: 2, .. })
     ));
     assert!(
-        msg.contains("2.2")
+        msg.contains("3.2")
             && msg.contains(&format!("{VERSION_MAJOR}.{VERSION_MINOR}"))
             && msg.contains("newer-major.grotto"),
         "{msg}"

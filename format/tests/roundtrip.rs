@@ -18,6 +18,12 @@ fn check_all_content(pkg: &Package) {
             vec![(Scope::Global, 9)]
         };
         for (scope, seed) in scopes {
+            if let Scope::Tile(t) = scope
+                && !holds(kind, t)
+            {
+                assert!(pkg.find(kind, scope, 0).is_none());
+                continue;
+            }
             let s =
                 pkg.find(kind, scope, item_of(kind)).unwrap_or_else(|| panic!("{kind:?} {scope:?} missing"));
             assert_eq!(&*pkg.read_bytes(&s).unwrap(), content(kind, seed).as_slice(), "{kind:?} {scope:?}");
@@ -41,6 +47,7 @@ fn every_kind_round_trips_with_each_codec() {
             std::fs::copy(&path, std::path::Path::new(&seeds).join(format!("sample-{name}.grotto"))).unwrap();
         }
         let pkg = Package::open(&path).unwrap();
+        // Compact surfels make it a 2.0 package.
         assert_eq!(pkg.version(), (VERSION_MAJOR, VERSION_MINOR));
         check_all_content(&pkg);
         assert!(pkg.verify().is_empty(), "{name}: {:?}", pkg.verify());
@@ -60,10 +67,10 @@ fn every_kind_round_trips_with_each_codec() {
 fn typed_reads_cast_raw_sections_in_place_and_check_types() {
     let dir = tempfile::tempdir().unwrap();
     let pkg = Package::open(sample_package(dir.path(), |_, _| Compression::Raw)).unwrap();
-    let tile = pkg.tile(1).unwrap();
+    let tile = pkg.tile(0).unwrap();
     let nodes = tile.read::<SvoNode>(SectionKind::SvoNodes).unwrap().unwrap();
     assert!(matches!(nodes, Cow::Borrowed(_)), "raw sections are zero-copy");
-    assert_eq!(bytemuck::cast_slice::<SvoNode, u8>(&nodes), content(SectionKind::SvoNodes, 1).as_slice());
+    assert_eq!(bytemuck::cast_slice::<SvoNode, u8>(&nodes), content(SectionKind::SvoNodes, 0).as_slice());
     let surfels = tile.read::<Surfel>(SectionKind::Surfels).unwrap().unwrap();
     assert_eq!(surfels[0].normal, [0.0, 0.0, 1.0]);
     // Reading a section as the wrong type is a typed error, not a reinterpretation.
@@ -83,7 +90,8 @@ fn tiles_scene_and_provenance_round_trip() {
     assert_eq!(t.origin_m(), [512_344.0, 5_123_448.0, 336.0]);
     assert_eq!((t.extent_m(), t.depth(), t.point_count(), t.grid()), (8.0, 3, 1001, [64_043, 640_431, 42]));
     assert_eq!(t.leaf_size_m(), 1.0);
-    assert_eq!(t.sections().len(), SectionKind::ALL.iter().filter(|k| k.is_per_tile()).count() + 1);
+    // Every per-tile kind but full surfels (tile 1 has compact ones), and one unknown kind.
+    assert_eq!(t.sections().len(), SectionKind::ALL.iter().filter(|k| k.is_per_tile()).count());
     assert!(t.sections().all(|s| s.scope == Scope::Tile(1)));
     assert_eq!(pkg.scene().unwrap(), sample_scene());
     let prov = pkg.provenance().unwrap().unwrap();
@@ -248,7 +256,7 @@ fn sections_copy_between_packages_as_stored() {
     assert_eq!(copy.scene().unwrap(), src.scene().unwrap());
     // A damaged source section is not carried over.
     let mut bytes = std::fs::read(src.path()).unwrap();
-    let victim = t.find(SectionKind::Surfels, 0).unwrap();
+    let victim = t.find(SectionKind::SurfelsCompact, 0).unwrap();
     bytes[victim.offset as usize] ^= 1;
     let damaged = Package::from_bytes("damaged", &bytes).unwrap();
     let mut w = PackageWriter::create(dir.path().join("x.grotto")).unwrap();
@@ -351,4 +359,46 @@ fn coarse_levels_that_do_not_fit_their_tile_are_refused() {
         assert!(matches!(err.problem(), Some(Problem::BadContent { .. })), "{name}: {err}");
         assert!(!pkg.verify().is_empty(), "{name}: verify finds it too");
     }
+}
+
+#[test]
+fn compact_surfels_decode_within_their_bounds_and_make_the_package_2_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = Package::open(sample_package(dir.path(), alternating)).unwrap();
+    let full: Vec<Surfel> = bytemuck::pod_collect_to_vec(&content(SectionKind::Surfels, 1));
+    let t = pkg.tile(1).unwrap();
+    let compact = t.surfels().unwrap().unwrap();
+    assert!(matches!(compact, Cow::Owned(_)), "compact surfels are decoded");
+    assert_eq!(compact.len(), full.len());
+    for (a, b) in full.iter().zip(compact.iter()) {
+        let moved = (0..3).map(|i| (a.position_tile_m[i] - b.position_tile_m[i]).powi(2)).sum::<f32>().sqrt();
+        assert!(moved <= 0.001, "{a:?} -> {b:?}");
+        assert!(a.normal.iter().zip(b.normal).map(|(x, y)| x * y).sum::<f32>() > 0.05f32.to_radians().cos());
+    }
+    assert_eq!(t.surfel_count_from_table(), Some(full.len() as u64));
+    // Full surfels come in place from the map (raw) or decoded (zstd) as before.
+    assert_eq!(
+        pkg.tile(0).unwrap().surfels().unwrap().unwrap().len(),
+        content(SectionKind::Surfels, 0).len() / 32
+    );
+
+    // A package without compact surfels stays 1.2, which 1.x readers open.
+    let path = dir.path().join("full.grotto");
+    let mut w = PackageWriter::create(&path).unwrap();
+    w.add_tile(t.info()).unwrap();
+    w.add_section(
+        SectionKind::Surfels,
+        Scope::Tile(0),
+        0,
+        &content(SectionKind::Surfels, 1),
+        Compression::Raw,
+    )
+    .unwrap();
+    // One encoding per tile.
+    let compact_bytes = content(SectionKind::SurfelsCompact, 1);
+    let err = w.add_section(SectionKind::SurfelsCompact, Scope::Tile(0), 0, &compact_bytes, Compression::Raw);
+    assert!(err.unwrap_err().to_string().contains("other encoding"));
+    let old = Package::open(w.finish().unwrap()).unwrap();
+    assert_eq!(old.version(), (1, 2));
+    assert_eq!(old.tile(0).unwrap().surfels().unwrap().unwrap().len(), full.len());
 }

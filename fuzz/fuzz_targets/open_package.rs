@@ -32,7 +32,8 @@ fn exercise(data: &[u8]) {
     let _ = pkg.provenance();
     for t in pkg.tiles() {
         let _ = t.read::<SvoNode>(SectionKind::SvoNodes);
-        let _ = t.read::<Surfel>(SectionKind::Surfels);
+        let _ = t.surfels();
+        let _ = t.surfel_count_from_table();
         let _ = t.read::<f32>(SectionKind::LeafOpacity);
         let _ = t.svo();
         for k in 0..8 {

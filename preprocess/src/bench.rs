@@ -369,7 +369,7 @@ pub fn bc1(package: &Path) -> Result<Bc1Figure> {
     })
 }
 
-/// One candidate surfel encoding's size (`grotto-pack bench-encoding`).
+/// One surfel encoding's size (`grotto-pack bench-encoding`).
 #[derive(Clone, Debug, Serialize)]
 pub struct EncodingRow {
     pub encoding: &'static str,
@@ -379,8 +379,9 @@ pub struct EncodingRow {
     pub package_bytes_per_point: f64,
 }
 
-/// What the compact surfel encodings ([`crate::compact`]) cost on a package: sizes, and the
-/// errors of the quantised surfels against the stored full-precision ones.
+/// What format 2.0's compact surfels ([`grotto_format::compact`]) cost on a package: sizes, the
+/// errors of the compact surfels against the package's own (run it on a package built with
+/// `--surfels full`), and the time to encode and to decode them.
 #[derive(Clone, Debug, Serialize)]
 pub struct EncodingFigure {
     pub package: String,
@@ -388,107 +389,85 @@ pub struct EncodingFigure {
     pub package_bytes: u64,
     /// Leaf sizes in the package, and the position bits each gets for a 1 mm bound.
     pub position_bits: Vec<(f64, u32)>,
-    /// Leaves holding surfels, and whether every tile's surfels come grouped by leaf (one run per
-    /// leaf), as counts per leaf need.
-    pub leaves: u64,
-    pub grouped_by_leaf: bool,
+    /// Runs of surfels sharing a leaf (one per leaf when they come grouped, as in Morton order).
+    pub runs: u64,
+    /// Tiles whose surfels the bounds cannot hold, which a build keeps at full precision.
+    pub full_precision_tiles: u64,
     pub rows: Vec<EncodingRow>,
-    /// The bit planes' compressed bytes per point: positions, normals, radii, spreads, counts.
-    pub planes_per_point: Vec<(&'static str, f64)>,
     pub position_error_max_mm: f64,
     pub position_error_mean_mm: f64,
     pub normal_error_max_deg: f64,
     pub normal_error_mean_deg: f64,
     pub radius_error_max_rel: f64,
     pub spread_error_max: f64,
-    /// Quantising and packing every surfel (planes and zstd included), one thread.
+    /// Quantising every surfel, one thread (zstd not included).
     pub encode_seconds: f64,
+    /// Decoding every compact section after zstd, one thread: what loading a tile costs on top of
+    /// reading it.
+    pub decode_seconds: f64,
+    /// zstd of the compact sections, one thread.
+    pub zstd_seconds: f64,
 }
 
 pub fn encoding(package: &Path) -> Result<EncodingFigure> {
-    use crate::compact::*;
-    use grotto_format::spec::Surfel;
+    use grotto_format::compact::{self, Header};
     use grotto_format::{Package, SectionKind};
     let pkg = Package::open(package)?;
     let package_bytes =
         std::fs::metadata(package).map_err(|source| Error::Io { path: package.into(), source })?.len();
-    let (mut points, mut stored_surfel_bytes, mut leaves) = (0u64, 0u64, 0u64);
-    let mut grouped = true;
+    let (mut points, mut stored_surfel_bytes, mut runs, mut full_tiles) = (0u64, 0u64, 0u64, 0u64);
     let mut bits_by_leaf: Vec<(f64, u32)> = Vec::new();
     let (mut pos_max, mut pos_sum, mut n_max, mut n_sum, mut r_max, mut s_max) =
         (0f64, 0f64, 0f64, 0f64, 0f64, 0f64);
-    let mut word_bytes = 0u64;
-    const PLANES: [&str; 5] = ["positions", "normals", "radii", "spreads", "leaf counts"];
-    let mut planes = [0u64; 5];
-    let mut seconds = 0f64;
-    let zstd = |bytes: &[u8]| -> Result<u64> {
-        zstd::bulk::compress(bytes, 3)
-            .map(|c| c.len() as u64)
-            .map_err(|source| Error::Io { path: package.into(), source })
-    };
+    let (mut compact_raw, mut compact_zstd) = (0u64, 0u64);
+    let (mut encode_seconds, mut decode_seconds, mut zstd_seconds) = (0f64, 0f64, 0f64);
+    // Bytes just encoded that do not decode would be a codec bug; reported, not unwrapped.
+    let invalid = |reason: String| Error::Read { path: package.into(), format: "compact surfels", reason };
     for tile in pkg.tiles() {
-        let Some(s) = tile.find(SectionKind::Surfels, 0) else { continue };
-        stored_surfel_bytes += s.stored_len;
-        let surfels = pkg.read::<Surfel>(&s)?;
-        let leaf_m = tile.leaf_size_m();
-        let cells = 1u32 << tile.depth();
-        let bits = position_bits(leaf_m, 0.001);
-        if !bits_by_leaf.iter().any(|&(l, _)| l == leaf_m) {
-            bits_by_leaf.push((leaf_m, bits));
+        let Some(surfels) = tile.surfels()? else { continue };
+        for kind in [SectionKind::Surfels, SectionKind::SurfelsCompact] {
+            stored_surfel_bytes += tile.find(kind, 0).map_or(0, |s| s.stored_len);
         }
+        let (leaf_m, depth) = (tile.leaf_size_m(), tile.depth());
+        points += surfels.len() as u64;
         let start = Instant::now();
-        let (mut pos_plane, mut normal_plane) = (BitWriter::default(), BitWriter::default());
-        let (mut radius_plane, mut spread_plane) = (Vec::new(), Vec::new());
-        let mut counts: Vec<u16> = Vec::new();
-        let mut seen = std::collections::HashSet::new();
-        let mut last: Option<[u32; 3]> = None;
-        for sf in surfels.iter() {
-            let (cell, q) = quantise_position(sf.position_tile_m, leaf_m, cells, bits);
-            if last != Some(cell) {
-                grouped &= seen.insert(cell);
-                counts.push(0);
-                last = Some(cell);
-            }
-            let c = counts.last_mut().expect("pushed above");
-            *c = c.saturating_add(1);
-            for a in q {
-                pos_plane.put(a, bits);
-            }
-            let (u, v) = oct_encode(sf.normal);
-            normal_plane.put(u, NORMAL_BITS);
-            normal_plane.put(v, NORMAL_BITS);
-            let (rc, sc) = (radius_code(sf.radius_m), spread_code(sf.spread));
-            radius_plane.push(rc);
-            spread_plane.push(sc);
-            // Errors against the stored surfel.
-            let p = dequantise_position(cell, q, leaf_m, bits);
-            let e = (0..3).map(|a| f64::from(p[a] - sf.position_tile_m[a]).powi(2)).sum::<f64>().sqrt() * 1e3;
+        let encoded = compact::encode(&surfels, leaf_m, depth, compact::MAX_POSITION_ERROR_M);
+        encode_seconds += start.elapsed().as_secs_f64();
+        let Some(bytes) = encoded else {
+            full_tiles += 1;
+            compact_raw += 32 * surfels.len() as u64;
+            compact_zstd += 32 * surfels.len() as u64;
+            continue;
+        };
+        let header = Header::read(&bytes).map_err(&invalid)?;
+        if !bits_by_leaf.iter().any(|&(l, _)| l == leaf_m) {
+            bits_by_leaf.push((leaf_m, header.position_bits));
+        }
+        runs += u64::from(header.run_count);
+        let start = Instant::now();
+        let packed =
+            zstd::bulk::compress(&bytes, 3).map_err(|source| Error::Io { path: package.into(), source })?;
+        zstd_seconds += start.elapsed().as_secs_f64();
+        compact_raw += bytes.len() as u64;
+        compact_zstd += packed.len().min(bytes.len()) as u64;
+        let start = Instant::now();
+        let back = compact::decode(&bytes, leaf_m, depth).map_err(&invalid)?;
+        decode_seconds += start.elapsed().as_secs_f64();
+        for (sf, d) in surfels.iter().zip(&back) {
+            let e =
+                (0..3).map(|a| f64::from(d.position_tile_m[a] - sf.position_tile_m[a]).powi(2)).sum::<f64>();
+            let e = e.sqrt() * 1e3;
             pos_max = pos_max.max(e);
             pos_sum += e;
-            let n = oct_decode(u, v);
-            let cos = f64::from(n[0] * sf.normal[0] + n[1] * sf.normal[1] + n[2] * sf.normal[2]);
+            let cos = (0..3).map(|a| f64::from(d.normal[a]) * f64::from(sf.normal[a])).sum::<f64>();
             let deg = cos.clamp(-1.0, 1.0).acos().to_degrees();
             n_max = n_max.max(deg);
             n_sum += deg;
             if sf.radius_m > 0.0 {
-                r_max = r_max.max(f64::from((radius_m(rc) / sf.radius_m - 1.0).abs()));
+                r_max = r_max.max(f64::from((d.radius_m / sf.radius_m - 1.0).abs()));
             }
-            s_max = s_max.max(f64::from((spread(sc) - sf.spread).abs()));
+            s_max = s_max.max(f64::from((d.spread - sf.spread).abs()));
         }
-        let count_bytes: Vec<u8> = counts.iter().flat_map(|c| c.to_le_bytes()).collect();
-        for (total, bytes) in planes.iter_mut().zip([
-            &pos_plane.finish(),
-            &normal_plane.finish(),
-            &radius_plane,
-            &spread_plane,
-            &count_bytes,
-        ]) {
-            *total += zstd(bytes)?;
-        }
-        seconds += start.elapsed().as_secs_f64();
-        word_bytes += 8 * surfels.len() as u64 + count_bytes.len() as u64;
-        leaves += counts.len() as u64;
-        points += surfels.len() as u64;
     }
     let per_point = |b: u64| b as f64 / points.max(1) as f64;
     let rest = package_bytes - stored_surfel_bytes;
@@ -503,20 +482,22 @@ pub fn encoding(package: &Path) -> Result<EncodingFigure> {
         points,
         package_bytes,
         position_bits: bits_by_leaf,
-        leaves,
-        grouped_by_leaf: grouped,
+        runs,
+        full_precision_tiles: full_tiles,
         rows: vec![
-            row("f32 (stored today)", stored_surfel_bytes),
-            row("64-bit word + u16 count per leaf", word_bytes),
-            row("bit planes + zstd 3", planes.iter().sum()),
+            row("stored in the package", stored_surfel_bytes),
+            row("f32 (format 1.2, --surfels full)", 32 * points),
+            row("compact, before zstd", compact_raw),
+            row("compact, zstd 3 (format 2.0)", compact_zstd),
         ],
-        planes_per_point: PLANES.iter().zip(planes).map(|(&name, b)| (name, per_point(b))).collect(),
         position_error_max_mm: pos_max,
         position_error_mean_mm: pos_sum / points.max(1) as f64,
         normal_error_max_deg: n_max,
         normal_error_mean_deg: n_sum / points.max(1) as f64,
         radius_error_max_rel: r_max,
         spread_error_max: s_max,
-        encode_seconds: seconds,
+        encode_seconds,
+        decode_seconds,
+        zstd_seconds,
     })
 }

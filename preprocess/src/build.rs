@@ -38,6 +38,7 @@ use crate::profile::{Profile, Stage, StageTime};
 use crate::tiling::{self, FLAG_HALO, Progress, TilePlan, TilingParams};
 use crate::voxels::{self, Sample, TileSvo};
 use crate::{Error, Result};
+use grotto_format::compact;
 
 /// Upper bound of what building one tile holds per input point: bin (24), kd-tree (~24),
 /// neighbour lists (k=16: 64), normals and radii in f64 (32), surfels and colours (36), SVO
@@ -62,6 +63,8 @@ pub struct BuildParams {
     pub leaf_m: f64,
     /// How surfel colours are stored.
     pub colors: ColorCodec,
+    /// How surfels are stored.
+    pub surfels: SurfelCodec,
     /// Window the environment's SH where a bright source would make irradiance negative.
     pub sh_window: bool,
     /// Neighbours for normals.
@@ -127,6 +130,7 @@ impl BuildParams {
             max_tile_points: DEFAULT_MAX_TILE_POINTS,
             leaf_m,
             colors: ColorCodec::Bc1,
+            surfels: SurfelCodec::Compact,
             sh_window: true,
             k: 16,
             min_tile_extent_m: MIN_TILE_LEAVES * leaf_m,
@@ -168,6 +172,19 @@ pub enum ColorCodec {
     Bc1,
     /// sRGB bytes: 4 bytes per surfel (zstd where it pays).
     Raw,
+}
+
+/// Surfel storage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SurfelCodec {
+    /// Format 2.0's compact encoding (`grotto_format::compact`, about 6 bytes a surfel after
+    /// zstd): positions within 1 mm, normals within 0.05 degrees, radius within 2.2%. A tile whose
+    /// surfels those bounds cannot hold (leaves over 75 m) keeps them at full precision.
+    Compact,
+    /// f32 positions, normals, radius and spread: 32 bytes a surfel, cast in place on load; the
+    /// package stays format 1.2 for older readers.
+    Full,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -497,14 +514,15 @@ pub fn tile_package_path(work_dir: &Path, tile: usize) -> PathBuf {
 fn tile_fingerprint(plan: &TilePlan, params: &BuildParams) -> String {
     // Scene lights matter too (area lights become emissive samples); hashed with the parameters.
     format!(
-        "{}-k{}-leaf{}-{:?}-keep{}-v{}-f{}",
+        "{}-k{}-leaf{}-{:?}-{:?}-keep{}-v{}-f{}",
         plan.fingerprint,
         params.k,
         params.leaf_m,
         params.colors,
+        params.surfels,
         params.keep_input_normals,
         env!("CARGO_PKG_VERSION"),
-        grotto_format::spec::VERSION_MINOR
+        grotto_format::spec::VERSION_MAJOR
     )
 }
 
@@ -524,16 +542,29 @@ fn write_tile_package(
     path: &Path,
     tile: &BuiltTile,
     fingerprint: &str,
-    colors: ColorCodec,
+    params: &BuildParams,
     profile: &Profile,
 ) -> Result<()> {
     let mut clock = std::time::Instant::now();
     let mut w = PackageWriter::create(path)?;
     let index = w.add_tile(tile.info)?;
     let scope = Scope::Tile(index);
-    // Zero-copy (raw) where the runtime uploads as is; zstd where it pays on attributes.
-    w.add_elements(SectionKind::Surfels, scope, 0, &tile.surfels, Compression::Raw)?;
-    match colors {
+    let compact = match params.surfels {
+        SurfelCodec::Compact => {
+            let leaf_m = tile.info.extent_m / f64::from(1u32 << tile.info.depth);
+            let bytes =
+                compact::encode(&tile.surfels, leaf_m, tile.info.depth, compact::MAX_POSITION_ERROR_M);
+            profile.lap(Stage::CompactSurfels, &mut clock);
+            bytes
+        }
+        SurfelCodec::Full => None,
+    };
+    match compact {
+        Some(bytes) => w.add_section(SectionKind::SurfelsCompact, scope, 0, &bytes, Compression::Auto(3))?,
+        // Zero-copy (raw) where the runtime uploads as is; zstd where it pays on attributes.
+        None => w.add_elements(SectionKind::Surfels, scope, 0, &tile.surfels, Compression::Raw)?,
+    };
+    match params.colors {
         ColorCodec::Bc1 => {
             profile.lap(Stage::WriteTiles, &mut clock);
             let blocks = bc1::encode(&tile.colors);
@@ -788,7 +819,7 @@ fn tile_stage(
                         return Ok(true);
                     }
                     let built = build_tile(plan, &params.work_dir, t, params, scene, grid, profile)?;
-                    write_tile_package(&path, &built, &fingerprint, params.colors, profile)?;
+                    write_tile_package(&path, &built, &fingerprint, params, profile)?;
                     Ok(false)
                 })
                 .collect()
@@ -984,6 +1015,7 @@ fn assemble_plan(
     for (k, v) in [
         ("leaf_m", serde_json::json!(params.leaf_m)),
         ("colors", serde_json::json!(params.colors)),
+        ("surfels", serde_json::json!(params.surfels)),
         ("k", serde_json::json!(params.k)),
         ("min_tile_extent_m", serde_json::json!(params.min_tile_extent_m)),
         ("max_tile_extent_m", serde_json::json!(params.max_tile_extent_m)),

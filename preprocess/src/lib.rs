@@ -7,7 +7,6 @@
 pub mod bc1;
 pub mod bench;
 pub mod build;
-pub mod compact;
 pub mod demo;
 pub mod env;
 mod error;

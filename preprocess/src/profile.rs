@@ -39,6 +39,8 @@ pub enum Stage {
     Voxels,
     /// Per tile: BC1 colour blocks.
     Colors,
+    /// Per tile: quantising the surfels into the compact encoding (format 2.0).
+    CompactSurfels,
     /// Per tile: encoding (zstd) and writing the tile package.
     WriteTiles,
     /// Assemble: every tile's coarse levels and rock.
@@ -52,7 +54,7 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub const ALL: [Stage; 16] = [
+    pub const ALL: [Stage; 17] = [
         Stage::Setup,
         Stage::CountRead,
         Stage::Count,
@@ -64,6 +66,7 @@ impl Stage {
         Stage::Surfels,
         Stage::Voxels,
         Stage::Colors,
+        Stage::CompactSurfels,
         Stage::WriteTiles,
         Stage::Levels,
         Stage::Assemble,
@@ -84,6 +87,7 @@ impl Stage {
             Stage::Surfels => "tiles: surfels",
             Stage::Voxels => "tiles: voxels",
             Stage::Colors => "tiles: colours",
+            Stage::CompactSurfels => "tiles: compact surfels",
             Stage::WriteTiles => "tiles: encode and write",
             Stage::Levels => "assemble: levels",
             Stage::Assemble => "assemble: copy and write",
@@ -101,6 +105,7 @@ impl Stage {
                 | Stage::Surfels
                 | Stage::Voxels
                 | Stage::Colors
+                | Stage::CompactSurfels
                 | Stage::WriteTiles
         )
     }

@@ -14,8 +14,8 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
+use grotto_format::Package;
 use grotto_format::spec::Surfel;
-use grotto_format::{Package, SectionKind};
 
 use crate::Error;
 
@@ -36,7 +36,7 @@ struct Point {
 fn points(pkg: &Package) -> Result<Vec<Point>, Error> {
     let mut out = Vec::new();
     for tile in pkg.tiles() {
-        let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels)? else { continue };
+        let Some(surfels) = tile.surfels()? else { continue };
         let mut colors = crate::scene_data::tile_colors(&tile, surfels.len())?;
         colors.resize(surfels.len(), [180; 3]);
         let o = tile.origin_m();

@@ -12,7 +12,7 @@
 //! are the bytes the renderer holds for tiles.
 
 use glam::{DVec3, Vec3};
-use grotto_format::spec::{CoarseLeaf, Surfel, SvoNode};
+use grotto_format::spec::{CoarseLeaf, SvoNode};
 use grotto_format::{Package, SectionKind};
 use serde::Serialize;
 
@@ -238,7 +238,7 @@ pub fn footprints(pkg: &Package, radiance_f16: bool) -> Result<Vec<TileFootprint
         if node_count == 0 {
             continue;
         }
-        let surfels = len(SectionKind::Surfels, 0, size_of::<Surfel>()).unwrap_or(0);
+        let surfels = tile.surfel_count_from_table().unwrap_or(0);
         let full = TileCost::new(node_count, leaves, surfels, radiance_f16);
         let level =
             |k: u32, (n, l): (u64, u64)| if k == 0 { full } else { TileCost::new(n, l, l, radiance_f16) };

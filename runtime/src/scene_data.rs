@@ -672,7 +672,7 @@ impl SceneData {
                 out.push_nodes(svo.nodes.as_ref(), depth, node_offset, leaf_offset);
                 let mut leaves = leaves;
                 // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
-                let surfels = tile.read::<Surfel>(SectionKind::Surfels)?;
+                let surfels = tile.surfels()?;
                 let shift = DVec3::from_array(tile.origin_m()) - DVec3::from_array(out.frame_origin_m);
                 if let Some(surfels) = &surfels {
                     // The tile's frame offset as the leaves have it (whole leaves).

@@ -182,6 +182,7 @@ pub fn sections_for(pkg: &Package, modes: &[TileMode], rock_known: bool) -> Vec<
                 | SectionKind::LeafNdf
                 | SectionKind::LeafEmission => full,
                 SectionKind::Surfels
+                | SectionKind::SurfelsCompact
                 | SectionKind::SurfelColorsRaw
                 | SectionKind::SurfelColorsBc1
                 | SectionKind::SurfelScans => m == TileMode::Full,

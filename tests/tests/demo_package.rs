@@ -1,7 +1,7 @@
 //! The demo scene goes through the package and comes back to the millimetre: f64 tile origins plus
 //! f32 tile-local offsets reproduce survey-sized coordinates of an analytic surface.
 
-use grotto_format::spec::{Rgba8, Surfel};
+use grotto_format::spec::Rgba8;
 use grotto_format::{Package, SectionKind};
 use grotto_preprocess::demo::{self, DemoParams};
 
@@ -19,7 +19,7 @@ fn demo_points_survive_the_package_at_survey_coordinates() {
     let mut seen = 0u64;
     let mut worst_radius_err_m = 0f64;
     for tile in pkg.tiles() {
-        let surfels = tile.read::<Surfel>(SectionKind::Surfels).unwrap().unwrap();
+        let surfels = tile.surfels().unwrap().unwrap();
         let colors = tile.read::<Rgba8>(SectionKind::SurfelColorsRaw).unwrap().unwrap();
         assert_eq!(surfels.len() as u64, tile.point_count());
         assert_eq!(colors.len(), surfels.len());

@@ -4,9 +4,9 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+use grotto_format::Package;
 use grotto_format::spec::Surfel;
-use grotto_format::{Package, SectionKind};
-use grotto_preprocess::build::{self, BuildParams, BuildSummary};
+use grotto_preprocess::build::{self, BuildParams, BuildSummary, SurfelCodec};
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::scanwrite::{ScanData, write_scan};
@@ -105,7 +105,7 @@ fn surfels(pkg: &Package) -> Vec<(usize, Surfel, [f64; 3])> {
     let mut out = Vec::new();
     for t in pkg.tiles() {
         let o = t.origin_m();
-        for s in t.read::<Surfel>(SectionKind::Surfels).unwrap().unwrap().iter() {
+        for s in t.surfels().unwrap().unwrap().iter() {
             out.push((
                 t.index() as usize,
                 *s,
@@ -131,10 +131,15 @@ fn survey_coordinates_give_the_same_normals() {
         t[1] += 5_000_000.0;
         t[2] += 1000.0;
     }
-    let (a, _) =
-        build_into(&at_origin, dir.path(), "a.grotto", &small_build(&dir.path().join("w1"), 2.0, 16.0, 0.5));
-    let (b, _) =
-        build_into(&shifted, dir.path(), "b.grotto", &small_build(&dir.path().join("w2"), 2.0, 16.0, 0.5));
+    // The build's own numbers: full-precision surfels, since the compact ones round each normal
+    // to its nearest code (within 0.05 degrees), so two builds that agree to 1e-6 can still differ
+    // by a code.
+    let full = |work: &str| BuildParams {
+        surfels: SurfelCodec::Full,
+        ..small_build(&dir.path().join(work), 2.0, 16.0, 0.5)
+    };
+    let (a, _) = build_into(&at_origin, dir.path(), "a.grotto", &full("w1"));
+    let (b, _) = build_into(&shifted, dir.path(), "b.grotto", &full("w2"));
     // Match surfels by position: the quantisation of a point within f64 rounding (~1e-10 m at
     // 5e6 m) of a quantum boundary can differ by one quantum, which may reorder it.
     let key = |w: [f64; 3], shift: [f64; 3]| -> [i64; 3] {
@@ -187,14 +192,15 @@ fn degenerate_inputs_build_valid_packages_without_nan() {
     }
     // The plane's interior normals are exactly +-z; the lone points' are toward the scanner
     // (at the scan origin, identity pose).
-    // Positions are quantised to leaf / 2048 (61 um here).
-    let plane = all.iter().find(|(_, _, w)| (w[0] - 5.1).abs() < 1e-4 && (w[1] - 5.1).abs() < 1e-4).unwrap();
+    // The package's surfels are compact: positions within 1 mm, normals within 0.05 degrees
+    // (8.7e-4 rad; the octahedral codes hold +-z exactly).
+    let plane = all.iter().find(|(_, _, w)| (w[0] - 5.1).abs() < 1e-3 && (w[1] - 5.1).abs() < 1e-3).unwrap();
     assert!((plane.1.normal[2].abs() - 1.0).abs() < 1e-6);
-    let lone = all.iter().find(|(_, _, w)| (w[0] - 20.5).abs() < 1e-4).unwrap();
+    let lone = all.iter().find(|(_, _, w)| (w[0] - 20.5).abs() < 1e-3).unwrap();
     let toward = [-20.5f32, -0.5, -0.5];
     let l = toward.iter().map(|c| c * c).sum::<f32>().sqrt();
     for (got, want) in lone.1.normal.iter().zip(toward) {
-        assert!((got - want / l).abs() < 1e-5, "{:?}", lone.1.normal);
+        assert!((got - want / l).abs() < 9e-4, "{:?}", lone.1.normal);
     }
     for t in pkg.tiles() {
         let svo = t.svo().unwrap().unwrap();

@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use grotto_format::spec::Surfel;
-use grotto_format::{Package, SectionKind};
+use grotto_format::Package;
 use grotto_preprocess::build::{self, BuildParams};
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
@@ -59,7 +59,7 @@ fn against_truth(pkg: &Package, cave: &SynthCave, synth: &SynthParams) -> Vec<(S
     for tile in pkg.tiles() {
         let origin = tile.origin_m();
         let extent = tile.info().extent_m;
-        for s in tile.read::<Surfel>(SectionKind::Surfels).unwrap().unwrap().iter() {
+        for s in tile.surfels().unwrap().unwrap().iter() {
             let local: [f64; 3] =
                 std::array::from_fn(|a| origin[a] + f64::from(s.position_tile_m[a]) - synth.offset_m[a]);
             let truth = cave.normal(local);
@@ -318,7 +318,7 @@ fn an_object_scanned_from_outside_faces_out_when_the_build_is_told_so() {
         let (mut agree, mut total) = (0usize, 0usize);
         for tile in pkg.tiles() {
             let origin = tile.origin_m();
-            let Some(surfels) = tile.read::<Surfel>(SectionKind::Surfels).unwrap() else { continue };
+            let Some(surfels) = tile.surfels().unwrap() else { continue };
             for s in surfels.iter() {
                 let p: [f64; 3] = std::array::from_fn(|a| origin[a] + f64::from(s.position_tile_m[a]));
                 let i = tree.nearest_one::<SquaredEuclidean>(&p).item as usize;

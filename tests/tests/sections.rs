@@ -5,7 +5,6 @@
 use std::sync::OnceLock;
 
 use glam::Vec3;
-use grotto_format::spec::Surfel;
 use grotto_format::{Package, SectionKind};
 use grotto_runtime::camera::Camera;
 use grotto_runtime::gpu::{Gpu, GpuOptions};
@@ -44,7 +43,7 @@ fn the_scan_view_shows_each_points_scan_and_the_package_stores_it_compactly() {
     let (mut surfels, mut stored) = (0u64, 0u64);
     let mut seen = vec![0u64; scans.len()];
     for tile in pkg.tiles() {
-        let Some(s) = tile.read::<Surfel>(SectionKind::Surfels).unwrap() else { continue };
+        let Some(s) = tile.surfels().unwrap() else { continue };
         let section = tile.find(SectionKind::SurfelScans, 0).expect("a surfel-scans section");
         let idx = tile.read::<u16>(SectionKind::SurfelScans).unwrap().unwrap();
         assert_eq!(idx.len(), s.len());

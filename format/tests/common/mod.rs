@@ -28,6 +28,12 @@ fn coarse_codes(seed: u32) -> Vec<u64> {
     leaves
 }
 
+/// Whether sample tile `t` holds a section of `kind`: tile 0 keeps full surfels, tile 1 compact
+/// ones (a tile holds one or the other).
+pub fn holds(kind: SectionKind, t: u32) -> bool {
+    !matches!((kind, t), (SectionKind::Surfels, 1) | (SectionKind::SurfelsCompact, 0))
+}
+
 /// Valid content for every known kind (JSON kinds get real documents).
 pub fn content(kind: SectionKind, seed: u32) -> Vec<u8> {
     let n = 40 + seed as usize % 7;
@@ -84,6 +90,11 @@ pub fn content(kind: SectionKind, seed: u32) -> Vec<u8> {
                 .collect::<Vec<_>>(),
         )
         .to_vec(),
+        SectionKind::SurfelsCompact => {
+            let surfels: Vec<Surfel> = bytemuck::pod_collect_to_vec(&content(SectionKind::Surfels, seed));
+            // The sample tiles: 8 m, depth 3.
+            compact::encode(&surfels, 1.0, 3, 0.001).unwrap()
+        }
         SectionKind::SurfelScans => {
             bytemuck::cast_slice(&(0..n).map(|i| (i / 3) as u16 + seed as u16).collect::<Vec<u16>>()).to_vec()
         }
@@ -170,7 +181,7 @@ pub fn sample_package(dir: &Path, codec_for: impl Fn(SectionKind, u32) -> Compre
     }
     for kind in SectionKind::ALL {
         if kind.is_per_tile() {
-            for t in 0..2 {
+            for t in (0..2).filter(|&t| holds(kind, t)) {
                 w.add_section(kind, Scope::Tile(t), item_of(kind), &content(kind, t), codec_for(kind, t))
                     .unwrap();
             }

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
-use grotto_preprocess::build::{self, BuildParams, BuildSummary, ColorCodec};
+use grotto_preprocess::build::{self, BuildParams, BuildSummary, ColorCodec, SurfelCodec};
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::{Manifest, SeenFrom};
 use grotto_preprocess::profile::{Stage, StageTime};
@@ -113,8 +113,8 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Measure candidate compact surfel encodings on packages (issue 15): bytes per point, and the
-    /// position, normal, radius and spread errors of the quantised surfels.
+    /// Measure format 2.0's compact surfels on packages built with --surfels full: bytes per point,
+    /// the position, normal, radius and spread errors, and the time to encode and decode them.
     BenchEncoding {
         packages: Vec<PathBuf>,
         #[arg(long)]
@@ -172,6 +172,10 @@ struct BuildOpts {
     /// Surfel colour storage: bc1 (0.5 byte per point) or raw (4 bytes).
     #[arg(long, default_value = "bc1", value_parser = ["bc1", "raw"])]
     colors: String,
+    /// Surfel storage: compact (format 2.0, about 6 bytes a point: positions within 1 mm, normals
+    /// within 0.05 degrees) or full (f32, 32 bytes a point; the package stays format 1.2).
+    #[arg(long, default_value = "compact", value_parser = ["compact", "full"])]
+    surfels: String,
     /// Neighbours for normal estimation.
     #[arg(long, default_value_t = 16)]
     k: usize,
@@ -318,6 +322,7 @@ fn setup(
         threads: opts.threads.unwrap_or(defaults.threads),
         max_tile_points: opts.max_tile_points,
         colors: if opts.colors == "raw" { ColorCodec::Raw } else { ColorCodec::Bc1 },
+        surfels: if opts.surfels == "full" { SurfelCodec::Full } else { SurfelCodec::Compact },
         sh_window: !opts.no_sh_window,
         k: opts.k,
         min_tile_extent_m: opts.min_tile_m.unwrap_or(defaults.min_tile_extent_m),
@@ -582,19 +587,21 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             } else {
                 for f in &figures {
                     println!(
-                        "{}: {} points in {} leaves (grouped by leaf: {}), position bits {:?}; position error max {:.3} mm mean {:.3} mm, normal max {:.4} deg mean {:.4} deg, radius max {:.2}%, spread max {:.4}; encoded in {:.2} s",
+                        "{}: {} points in {} leaf runs, position bits {:?}, {} tiles kept at full precision; position error max {:.3} mm mean {:.3} mm, normal max {:.4} deg mean {:.4} deg, radius max {:.2}%, spread max {:.4}; one thread: encode {:.2} s, zstd {:.2} s, decode {:.2} s",
                         f.package,
                         f.points,
-                        f.leaves,
-                        f.grouped_by_leaf,
+                        f.runs,
                         f.position_bits,
+                        f.full_precision_tiles,
                         f.position_error_max_mm,
                         f.position_error_mean_mm,
                         f.normal_error_max_deg,
                         f.normal_error_mean_deg,
                         100.0 * f.radius_error_max_rel,
                         f.spread_error_max,
-                        f.encode_seconds
+                        f.encode_seconds,
+                        f.zstd_seconds,
+                        f.decode_seconds
                     );
                     println!(
                         "| encoding | surfel bytes | per point | package per point |\n|---|---:|---:|---:|"
@@ -605,9 +612,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                             r.encoding, r.surfel_bytes, r.surfel_bytes_per_point, r.package_bytes_per_point
                         );
                     }
-                    let planes: Vec<String> =
-                        f.planes_per_point.iter().map(|(n, b)| format!("{n} {b:.2}")).collect();
-                    println!("bit planes, bytes per point: {}", planes.join(", "));
                 }
             }
         }
