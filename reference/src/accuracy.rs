@@ -8,7 +8,7 @@ use std::fmt::Write as _;
 
 use glam::Vec3;
 use grotto_fixtures::testscenes;
-use grotto_preprocess::build::ColorCodec;
+use grotto_preprocess::build::{ColorCodec, SurfelCodec};
 use grotto_runtime::camera::Camera;
 use grotto_runtime::gpu::Gpu;
 use grotto_runtime::plan::Pass;
@@ -132,8 +132,8 @@ pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<Swee
     }
     if only.is_none_or(|o| o == "cave with sky") {
         let sky = shared_data().join("envmaps/probulator_ennis.hdr");
-        match demo_cave(ColorCodec::Raw, 0.25, Some(&sky), false).and_then(|raw| {
-            let windowed = demo_cave(ColorCodec::Raw, 0.25, Some(&sky), true)?;
+        match demo_cave(ColorCodec::Raw, SurfelCodec::Full, 0.25, Some(&sky), false).and_then(|raw| {
+            let windowed = demo_cave(ColorCodec::Raw, SurfelCodec::Full, 0.25, Some(&sky), true)?;
             Ok((raw, windowed))
         }) {
             Ok((raw, windowed)) => defs.push((
@@ -187,6 +187,7 @@ pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<Swee
 /// A small synthetic cave built through the whole pipeline (synth -> package -> scene).
 pub fn demo_cave(
     colors: ColorCodec,
+    surfels: SurfelCodec,
     leaf_m: f64,
     sky: Option<&std::path::Path>,
     sh_window: bool,
@@ -194,6 +195,7 @@ pub fn demo_cave(
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let cave = grotto_fixtures::SmallCave {
         colors,
+        surfels,
         leaf_m,
         sky: sky.map(std::path::Path::to_path_buf),
         sh_window,
@@ -228,6 +230,7 @@ pub fn bunny() -> Result<SceneData, String> {
         max_tile_points: 393_216,
         leaf_m: 1.0 / 512.0,
         colors: ColorCodec::Raw,
+        surfels: SurfelCodec::Full,
         min_tile_extent_m: 1.0 / 16.0,
         max_tile_extent_m: 0.25,
         halo_m: 0.004,
@@ -259,17 +262,19 @@ pub fn bunny() -> Result<SceneData, String> {
     Ok(scene)
 }
 
-/// The demo cave with raw colours and 0.25 m leaves (the reference's scene), and the package
-/// knobs around it: one SVO level coarser and finer, BC1 colours.
+/// The demo cave with raw colours, full-precision surfels and 0.25 m leaves (the reference's
+/// scene), and the package knobs around it: one SVO level coarser and finer, BC1 colours, compact
+/// surfels (format 2.0, what `grotto-pack build` writes by default).
 fn demo_cave_variants() -> Result<(SceneData, Vec<Variant>), String> {
-    let base = demo_cave(ColorCodec::Raw, 0.25, None, true)?;
+    let base = demo_cave(ColorCodec::Raw, SurfelCodec::Full, 0.25, None, true)?;
     let mut variants = Vec::new();
-    for (name, knob, colors, leaf_m) in [
-        ("leaf 0.5 m (depth -1)", "svo depth", ColorCodec::Raw, 0.5),
-        ("leaf 0.125 m (depth +1)", "svo depth", ColorCodec::Raw, 0.125),
-        ("BC1 colours", "colours", ColorCodec::Bc1, 0.25),
+    for (name, knob, colors, surfels, leaf_m) in [
+        ("leaf 0.5 m (depth -1)", "svo depth", ColorCodec::Raw, SurfelCodec::Full, 0.5),
+        ("leaf 0.125 m (depth +1)", "svo depth", ColorCodec::Raw, SurfelCodec::Full, 0.125),
+        ("BC1 colours", "colours", ColorCodec::Bc1, SurfelCodec::Full, 0.25),
+        ("compact surfels", "surfels", ColorCodec::Raw, SurfelCodec::Compact, 0.25),
     ] {
-        let v = demo_cave(colors, leaf_m, None, true)?;
+        let v = demo_cave(colors, surfels, leaf_m, None, true)?;
         if v.surfels.len() != base.surfels.len() {
             return Err(format!(
                 "{name}: {} surfels against {} in the reference scene",
@@ -875,7 +880,7 @@ pub fn lights_sweep(
 ) -> Result<(SweepScene, Vec<Row>), String> {
     use grotto_runtime::render_job::{STRING_LAMP_LIFT_M, STRING_LAMP_W};
     use grotto_runtime::renderer::ShadowFallback;
-    let mut data = demo_cave(ColorCodec::Raw, 0.25, None, true)?;
+    let mut data = demo_cave(ColorCodec::Raw, SurfelCodec::Full, 0.25, None, true)?;
     data.lights = data.lamp_string(lamps, STRING_LAMP_W, STRING_LAMP_LIFT_M);
     let camera = Camera::from_scene(&data.cameras[0]);
     let scene = SurfelScene::from_scene(&data, Settings::default().splat_scale);

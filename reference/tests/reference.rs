@@ -148,9 +148,14 @@ fn propagation_gathers_every_cone_on_the_demo_cave_with_every_preset() {
     use grotto_runtime::cpu_ref::CpuScene;
     use grotto_runtime::gpu_types::LeafLightGpu;
     use grotto_runtime::renderer::{Quality, Renderer, Settings};
-    let data =
-        grotto_reference::accuracy::demo_cave(grotto_preprocess::build::ColorCodec::Raw, 0.25, None, true)
-            .unwrap();
+    let data = grotto_reference::accuracy::demo_cave(
+        grotto_preprocess::build::ColorCodec::Raw,
+        grotto_preprocess::build::SurfelCodec::Full,
+        0.25,
+        None,
+        true,
+    )
+    .unwrap();
     let gpu = grotto_runtime::gpu::Gpu::new(&grotto_runtime::gpu::GpuOptions {
         prefer_software: true,
         ..Default::default()

@@ -5,8 +5,8 @@
 
 use std::path::Path;
 
-use grotto_format::spec::Surfel;
 use grotto_format::Package;
+use grotto_format::spec::Surfel;
 use grotto_preprocess::build::{self, BuildParams};
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
