@@ -459,8 +459,12 @@ pub fn encoding(package: &Path) -> Result<EncodingFigure> {
             let e = e.sqrt() * 1e3;
             pos_max = pos_max.max(e);
             pos_sum += e;
-            let cos = (0..3).map(|a| f64::from(d.normal[a]) * f64::from(sf.normal[a])).sum::<f64>();
-            let deg = cos.clamp(-1.0, 1.0).acos().to_degrees();
+            // atan2(|a x b|, a . b): stored normals are unit only to f32 rounding, which an acos
+            // of the dot product near 1 would count as several thousandths of a degree.
+            let (a, b) = (d.normal.map(f64::from), sf.normal.map(f64::from));
+            let cross = [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+            let sin = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
+            let deg = sin.atan2(a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).to_degrees();
             n_max = n_max.max(deg);
             n_sum += deg;
             if sf.radius_m > 0.0 {
