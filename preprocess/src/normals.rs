@@ -117,7 +117,7 @@ pub fn smallest_eigenvector(m: [[f64; 3]; 3]) -> Option<([f64; 3], [f64; 3])> {
     // The cubic's angle comes from an acos near +-1, good to about 2e-8 radians: the smallest
     // eigenvalue to 1.5e-8 p. The vector's error is that over the gap to the middle one, so a gap
     // of p / 10 keeps it within 1.5e-7 radians (an f32 normal's own rounding).
-    if !(middle - smallest > 0.1 * p) {
+    if !middle.is_finite() || middle - smallest <= 0.1 * p {
         return None;
     }
     let rows: [[f64; 3]; 3] =
