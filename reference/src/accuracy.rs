@@ -31,8 +31,8 @@ pub struct SweepScene {
     /// References cut after k indirect bounces, for k in `TRUNCATED_BOUNCES`: the runtime with k
     /// bounces is compared with these to judge propagation alone, without the missing bounces.
     pub truncated: Vec<(u32, Vec<Estimate>)>,
-    /// The same surfels built into other packages (SVO depth, colour codec, SH window), each
-    /// rendered with the balanced preset and judged against this scene's reference.
+    /// The same surfels built into other packages (SVO depth, colour codec, surfel encoding, SH
+    /// window), each rendered with the balanced preset and judged against this scene's reference.
     pub variants: Vec<Variant>,
 }
 
@@ -656,7 +656,7 @@ pub fn report(
          software one: docs/runtime.md, \"Per-pass GPU times\") to converge the light (shadow maps, injection, every bounce until \
          converged or the budget is spent) and to draw one frame. Memory: GPU buffers and textures the \
          renderer holds. Knobs vary one at a time around the balanced preset; package knobs (SVO depth, \
-         colour codec) rebuild the scene's package and run the balanced preset on it, against the same \
+         colour codec, compact surfels) rebuild the scene's package and run the balanced preset on it, against the same \
          reference. Pareto-optimal rows (no other row is both faster and more accurate) are marked *.\n"
     );
     let _ = writeln!(s, "## Presets (`grotto render --quality fast|balanced|high`)\n");
