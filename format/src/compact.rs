@@ -25,10 +25,6 @@ const RADIUS_CODES_PER_OCTAVE: f32 = 16.0;
 const RADIUS_MIN_LOG2: f32 = -12.0;
 /// Smallest non-zero radius code, metres (2^-12 m, 0.24 mm).
 pub const RADIUS_MIN_M: f32 = 1.0 / 4096.0;
-/// Largest radius a code holds, metres (code 255, about 14.7 m).
-pub fn radius_max_m() -> f32 {
-    radius_m(255)
-}
 
 /// The fewest bits per axis (1..=16) whose worst position error inside a leaf of `leaf_m`, half a
 /// step on each axis (`sqrt(3) / 2` steps), is at most `max_error_m`; `None` when 16 do not do.
@@ -133,14 +129,14 @@ pub fn radius_within_bound(stored_m: f32, decoded_m: f32) -> bool {
 
 /// A little-endian bit stream: each value's low bits, least significant first.
 #[derive(Debug, Default)]
-pub struct BitWriter {
+struct BitWriter {
     bytes: Vec<u8>,
     acc: u64,
     filled: u32,
 }
 
 impl BitWriter {
-    pub fn put(&mut self, value: u32, bits: u32) {
+    fn put(&mut self, value: u32, bits: u32) {
         self.acc |= (u64::from(value) & ((1u64 << bits) - 1)) << self.filled;
         self.filled += bits;
         while self.filled >= 8 {
@@ -150,7 +146,7 @@ impl BitWriter {
         }
     }
 
-    pub fn finish(mut self) -> Vec<u8> {
+    fn finish(mut self) -> Vec<u8> {
         if self.filled > 0 {
             self.bytes.push(self.acc as u8);
         }

@@ -5,7 +5,7 @@
 //! mutations reach the structural checks behind the checksums instead of stopping at them.
 #![no_main]
 
-use grotto_format::spec::{Surfel, SvoNode};
+use grotto_format::spec::SvoNode;
 use grotto_format::{Package, SectionKind};
 use libfuzzer_sys::fuzz_target;
 
