@@ -116,6 +116,21 @@ pub fn closed_scenes() -> Vec<(&'static str, &'static str, SceneData)> {
 /// The built-in scenes: the furnace shell, the colour box, the hidden-chamber dogleg and the
 /// synthetic demo cave; `only` keeps the one with that name.
 pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<SweepScene> {
+    scenes_cached(width, height, spp, only, None)
+}
+
+/// [`scenes`], with the reference renders kept in `cache` (a folder) and read back while the scene,
+/// the image size and the paths per pixel are the same: for iterating on the runtime with
+/// `--config`, where the references would otherwise dominate. The key hashes the scene's surfels,
+/// lights, camera and environment, and the path tracer's version below (bump it with any change
+/// to the path tracer).
+pub fn scenes_cached(
+    width: u32,
+    height: u32,
+    spp: u32,
+    only: Option<&str>,
+    cache: Option<&std::path::Path>,
+) -> Vec<SweepScene> {
     let mut out = Vec::new();
     let defs: Vec<_> = closed_scenes().into_iter().filter(|d| only.is_none_or(|o| o == d.0)).collect();
     let mut defs: Vec<_> = defs.into_iter().map(|(a, b, c)| (a, b, c, Vec::new())).collect();
@@ -159,14 +174,22 @@ pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<Swee
     for (name, description, data, variants) in defs {
         let camera = Camera::from_scene(&data.cameras[0]);
         let scene = SurfelScene::from_scene(&data, Settings::default().splat_scale);
+        let key = reference_key(&data, width, height, spp);
         let t0 = std::time::Instant::now();
-        let reference = scene.render(&camera, width, height, spp, &PathSettings::for_scene(&data), 1);
-        let reference_s = t0.elapsed().as_secs_f64();
+        let (reference, cached) = cached_render(cache, name, key, "full", width * height, || {
+            scene.render(&camera, width, height, spp, &PathSettings::for_scene(&data), 1)
+        });
+        // A reference read from the cache has no time of its own: the report's figure is the
+        // render's, taken when it was made.
+        let reference_s = cached.unwrap_or_else(|| t0.elapsed().as_secs_f64());
         let truncated = TRUNCATED_BOUNCES
             .iter()
             .map(|&k| {
                 let cut = PathSettings { max_bounces: k + 1, ..PathSettings::for_scene(&data) };
-                (k, scene.render(&camera, width, height, spp, &cut, 2))
+                let (est, _) = cached_render(cache, name, key, &format!("cut{k}"), width * height, || {
+                    scene.render(&camera, width, height, spp, &cut, 2)
+                });
+                (k, est)
             })
             .collect();
         out.push(SweepScene {
@@ -182,6 +205,67 @@ pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<Swee
         });
     }
     out
+}
+
+/// The path tracer's version in [`scenes_cached`]'s key.
+const REFERENCE_CACHE_VERSION: u64 = 1;
+
+/// FNV-1a over what a reference render depends on.
+fn reference_key(data: &SceneData, width: u32, height: u32, spp: u32) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes {
+            h = (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
+        }
+    };
+    eat(&REFERENCE_CACHE_VERSION.to_le_bytes());
+    eat(&[width, height, spp].map(u32::to_le_bytes).concat());
+    eat(bytemuck::cast_slice(&data.surfels));
+    eat(format!("{:?}{:?}{:?}{:?}", data.lights, data.cameras, data.environment_sh, data.materials)
+        .as_bytes());
+    h
+}
+
+/// `render()`, or its image from `cache` where a file with this key holds one; a fresh render is
+/// written there (a failed write only costs the next run a render). Returns the image and, if it
+/// came from the cache, the seconds the render took when it was made.
+fn cached_render(
+    cache: Option<&std::path::Path>,
+    scene: &str,
+    key: u64,
+    what: &str,
+    pixels: u32,
+    render: impl FnOnce() -> Vec<Estimate>,
+) -> (Vec<Estimate>, Option<f64>) {
+    let Some(dir) = cache else {
+        return (render(), None);
+    };
+    let path = dir.join(format!("{}-{what}-{key:016x}.f32", slug(scene)));
+    let floats = pixels as usize * 6;
+    if let Ok(bytes) = std::fs::read(&path)
+        && bytes.len() == 8 + floats * 4
+    {
+        let seconds = f64::from_le_bytes(bytes[..8].try_into().expect("8 bytes"));
+        let v: Vec<f32> =
+            bytes[8..].chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect();
+        let est = v
+            .chunks_exact(6)
+            .map(|c| Estimate { mean: Vec3::new(c[0], c[1], c[2]), std_err: Vec3::new(c[3], c[4], c[5]) })
+            .collect();
+        return (est, Some(seconds));
+    }
+    let t0 = std::time::Instant::now();
+    let est = render();
+    let mut bytes = t0.elapsed().as_secs_f64().to_le_bytes().to_vec();
+    for e in &est {
+        for x in e.mean.to_array().into_iter().chain(e.std_err.to_array()) {
+            bytes.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    if std::fs::create_dir_all(dir).is_ok() {
+        let _ = grotto_runtime::export::write_atomically(&path, &bytes);
+    }
+    (est, None)
 }
 
 /// A small synthetic cave built through the whole pipeline (synth -> package -> scene).
@@ -325,7 +409,7 @@ pub fn configs() -> Vec<Config> {
     for q in Quality::ALL {
         add("preset", q.name().into(), Settings::preset(q));
     }
-    for cones in [4u32, 6, 16] {
+    for cones in [4u32, 6, 8, 10, 12, 16].into_iter().filter(|&c| c != base.cones) {
         add("cones", format!("cones {cones}"), Settings { cones, ..base.clone() });
     }
     for a in MARCH_APERTURES.into_iter().filter(|&a| a != base.cone_aperture_scale) {

@@ -229,9 +229,15 @@ impl<'a> CpuScene<'a> {
         let lift = f64::from(p.leaf_size_m.max(leaf.center_m[3]));
         let origin = Vec3::from_slice(&leaf.center_m[..3]).as_dvec3() + n * lift;
         let bg = DVec3::new(p.background[0].into(), p.background[1].into(), p.background[2].into());
+        // The interleave angle of ndf.wgsl's `cone_interleave_rad`.
+        let cell = (Vec3::from_slice(&leaf.center_m[..3]) / p.leaf_size_m).floor().as_ivec3();
+        let phi = f64::from((cell.x & 1) + 2 * (cell.y & 1) + 4 * (cell.z & 1)) * std::f64::consts::FRAC_PI_4;
+        let (sin_phi, cos_phi) = phi.sin_cos();
         let mut g = DVec3::ZERO;
         for c in &p.cones[..p.cone_count as usize] {
-            let d = (t1 * f64::from(c[0]) + t2 * f64::from(c[1]) + n * f64::from(c[2])).normalize();
+            let (x, y) = (f64::from(c[0]), f64::from(c[1]));
+            let (x, y) = (cos_phi * x - sin_phi * y, sin_phi * x + cos_phi * y);
+            let d = (t1 * x + t2 * y + n * f64::from(c[2])).normalize();
             let s = self.trace_cone(p, origin, d, [lift, d.dot(n)]);
             g += f64::from(c[3]) * (DVec3::new(s[0], s[1], s[2]) + (1.0 - s[3]) * bg);
         }

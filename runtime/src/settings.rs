@@ -262,8 +262,8 @@ impl Settings {
         match q {
             Quality::Fast => Settings { cones: 4, step_scale: 1.0, bounces: 2, shadow_map_size: 256, ..d },
             Quality::Balanced => Settings {
-                cones: 14,
-                cone_aperture_scale: 0.7,
+                cones: 10,
+                cone_aperture_scale: 0.5,
                 step_scale: 0.5,
                 bounces: 3,
                 shadow_map_size: 512,

@@ -82,6 +82,14 @@ struct AccuracyArgs {
     /// report then covers it alone.
     #[arg(long)]
     scene: Option<String>,
+    /// Only the configs (rows) with this name, for example "balanced" or "bounces 4, no tail";
+    /// repeat for more. The report then covers them alone.
+    #[arg(long = "config")]
+    configs: Vec<String>,
+    /// Keep the reference renders in this folder and reuse them while the scene, the size and the
+    /// paths per pixel are unchanged (iterating on the runtime with --config).
+    #[arg(long)]
+    reference_cache: Option<PathBuf>,
 }
 
 /// Render a package's camera by path tracing its surfels (the runtime's scene, no voxels): linear
@@ -238,20 +246,44 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
     use grotto_reference::accuracy;
     let ((w, h), gpu) = size_and_gpu(&a.size, a.software)?;
     eprintln!("reference renders ({} spp, {w}x{h})...", a.spp);
-    let scenes = accuracy::scenes(w, h, a.spp, a.scene.as_deref());
+    let mut scenes = accuracy::scenes_cached(w, h, a.spp, a.scene.as_deref(), a.reference_cache.as_deref());
     anyhow::ensure!(!scenes.is_empty(), "no scene named {:?}", a.scene);
-    let configs = accuracy::configs();
+    let mut configs = accuracy::configs();
+    if !a.configs.is_empty() {
+        let known: Vec<String> = configs
+            .iter()
+            .map(|c| c.name.clone())
+            .chain(scenes.iter().flat_map(|s| s.variants.iter().map(|v| v.name.clone())))
+            .collect();
+        for name in &a.configs {
+            anyhow::ensure!(
+                known.contains(name),
+                "no config named {name:?}; the configs are: {}",
+                known.join(", ")
+            );
+        }
+        configs.retain(|c| a.configs.contains(&c.name));
+        for s in &mut scenes {
+            s.variants.retain(|v| a.configs.contains(&v.name));
+        }
+    }
     let bar = indicatif::ProgressBar::new((scenes.len() * configs.len()) as u64);
     let rows = accuracy::sweep(&gpu, &scenes, &configs, w, h, |scene, config| {
         bar.set_message(format!("{scene}: {config}"));
         bar.inc(1);
     })?;
     bar.finish_and_clear();
-    let command = format!(
+    let mut command = format!(
         "cargo run --release -p grotto-reference -- accuracy --size {w}x{h} --spp {}{}",
         a.spp,
         if a.software { " --software" } else { "" }
     );
+    // A partial report says which part it is.
+    for (flag, value) in
+        a.scene.iter().map(|s| ("--scene", s)).chain(a.configs.iter().map(|c| ("--config", c)))
+    {
+        command.push_str(&format!(" {flag} {value:?}"));
+    }
     let md = accuracy::report(&scenes, &rows, &gpu.describe(), w, h, &command);
     let json = a.out.with_extension("json");
     grotto_runtime::export::write_atomically(&a.out, md.as_bytes())?;
