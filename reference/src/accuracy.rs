@@ -438,6 +438,8 @@ pub fn configs() -> Vec<Config> {
     // What the tail estimate buys: the balanced preset without it, and propagation alone (the
     // bounces run and nothing more) against the reference cut after the same bounces.
     add("tail", "no tail".into(), Settings { bounce_tail: false, ..base.clone() });
+    // What interleaved cone sets buy: every leaf with the same set, as before they came.
+    add("interleave", "no interleave".into(), Settings { cone_interleave: false, ..base.clone() });
     for b in TRUNCATED_BOUNCES {
         add(
             CUT_BOUNCES,

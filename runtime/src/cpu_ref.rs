@@ -231,7 +231,12 @@ impl<'a> CpuScene<'a> {
         let bg = DVec3::new(p.background[0].into(), p.background[1].into(), p.background[2].into());
         // The interleave angle of ndf.wgsl's `cone_interleave_rad`.
         let cell = (Vec3::from_slice(&leaf.center_m[..3]) / p.leaf_size_m).floor().as_ivec3();
-        let phi = f64::from((cell.x & 1) + 2 * (cell.y & 1) + 4 * (cell.z & 1)) * std::f64::consts::FRAC_PI_4;
+        let k = if p.flags & crate::gpu_types::flags::CONE_INTERLEAVE != 0 {
+            (cell.x & 1) + 2 * (cell.y & 1) + 4 * (cell.z & 1)
+        } else {
+            0
+        };
+        let phi = f64::from(k) * std::f64::consts::FRAC_PI_4;
         let (sin_phi, cos_phi) = phi.sin_cos();
         let mut g = DVec3::ZERO;
         for c in &p.cones[..p.cone_count as usize] {

@@ -265,11 +265,13 @@ pub mod flags {
     /// environment): those passes start a new series for propagate's tail estimate (zero the
     /// residual). A forced re-run over unchanged light does not, so it changes nothing.
     pub const NEW_SERIES: u32 = 8192;
+    /// Each leaf turns its cone set by its interleave angle (`Settings::cone_interleave`).
+    pub const CONE_INTERLEAVE: u32 = 16384;
     /// The views shade writes without light (settings.rs `ViewMode::shows_light`).
     pub const VIEWS_WITHOUT_LIGHT: u32 = VIEW_ALBEDO | VIEW_NORMALS | VIEW_LEVEL | VIEW_SCAN;
 
     /// Every flag with its WGSL name.
-    pub const ALL: [(&str, u32); 14] = [
+    pub const ALL: [(&str, u32); 15] = [
         ("FLAG_VIEW_ALBEDO", VIEW_ALBEDO),
         ("FLAG_VIEW_SCAN", VIEW_SCAN),
         ("FLAG_VIEW_NORMALS", VIEW_NORMALS),
@@ -284,6 +286,7 @@ pub mod flags {
         ("FLAG_FAR_LIGHTS", FAR_LIGHTS),
         ("FLAG_SPECULAR", SPECULAR),
         ("FLAG_NEW_SERIES", NEW_SERIES),
+        ("FLAG_CONE_INTERLEAVE", CONE_INTERLEAVE),
     ];
 }
 

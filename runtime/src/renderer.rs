@@ -1313,6 +1313,9 @@ impl Renderer {
         if self.specular_surfels > 0 {
             f |= flags::SPECULAR;
         }
+        if s.cone_interleave {
+            f |= flags::CONE_INTERLEAVE;
+        }
         f |= match s.view {
             ViewMode::Lit => 0,
             ViewMode::Albedo => flags::VIEW_ALBEDO,

@@ -39,6 +39,11 @@ pub struct Settings {
     /// channel, trusted up to the scene's largest albedo), and shade adds it, so bright closed
     /// rock converges in a few bounces instead of dozens (passes/propagate.wgsl).
     pub bounce_tail: bool,
+    /// Turn each leaf's cone set about its normal by one of eight angles by the parity of its
+    /// cell (interleaved sampling, shaders/ndf.wgsl `cone_interleave_rad`), so neighbouring
+    /// leaves miss different directions and filtering averages the misses instead of one fixed
+    /// set missing the same corridor on a whole wall. Off: every leaf uses the same set.
+    pub cone_interleave: bool,
     pub shadows: bool,
     pub shadow_map_size: u32,
     pub indirect: IndirectFilter,
@@ -202,6 +207,7 @@ impl Default for Settings {
             bounces: 8,
             convergence_tolerance: 1e-3,
             bounce_tail: true,
+            cone_interleave: true,
             shadows: true,
             shadow_map_size: 512,
             indirect: IndirectFilter::Trilinear,

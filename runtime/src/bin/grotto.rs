@@ -214,6 +214,10 @@ struct RenderArgs {
     /// (the light then stops short of converged in bright closed rock).
     #[arg(long)]
     no_bounce_tail: bool,
+    /// Give every leaf the same cone set instead of turning it by the leaf's interleave angle
+    /// (one of eight by cell parity), which averages the directions the cones miss.
+    #[arg(long)]
+    no_cone_interleave: bool,
     /// Shadow-map budget: the N brightest point and spot lights get shadow maps and per-pixel
     /// light; the others are lit per leaf with --shadow-fallback (default 16).
     #[arg(long)]
@@ -334,6 +338,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
     settings.convergence_tolerance = a.tolerance;
     settings.shadows = !a.no_shadows;
     settings.bounce_tail = !a.no_bounce_tail;
+    settings.cone_interleave = !a.no_cone_interleave;
     settings.shadowed_lights = a.shadowed_lights.unwrap_or(settings.shadowed_lights);
     settings.shadow_fallback = ShadowFallback::parse(&a.shadow_fallback)
         .ok_or_else(|| anyhow::anyhow!("--shadow-fallback {:?}: use cone or none", a.shadow_fallback))?;

@@ -52,6 +52,9 @@ fn leaf_cone_dir(leaf: Leaf, local: vec3<f32>) -> vec3<f32> {
 // eight angles by the parity of the leaf's cell makes every 2x2x2 block hold eight different
 // sets, and the trilinear filter of shading (and the next bounce's mip) averages them.
 fn cone_interleave_rad(leaf: Leaf) -> f32 {
+    if (params.flags & FLAG_CONE_INTERLEAVE) == 0u {
+        return 0.0;
+    }
     let cell = vec3<i32>(floor(leaf.center_m.xyz / params.leaf_size_m));
     let k = (cell.x & 1) + 2 * (cell.y & 1) + 4 * (cell.z & 1);
     return f32(k) * 0.7853981634;
