@@ -80,40 +80,51 @@ fn env_glossy(r: vec3<f32>, roughness: f32, tan_half: f32) -> vec3<f32> {
     return mix(env_level(k, r), env_level(k + 1u, r), t);
 }
 
-// Weighted sums of the leaf light around a point (leaf_light_sum).
+// Weighted sums of the leaf light around a point (leaf_light_sum). The cone-traced light (gather
+// and sky visibility) has its own weight: with interleaved cone sets it is filtered wider.
 struct LeafSum {
     gather: vec3<f32>,
     emission: vec3<f32>,
     far: vec3<f32>,
     sky: f32,
     weight: f32,
+    weight_traced: f32,
 }
 
 // Sums the leaves of the cells i0 + lo ..= i0 + hi (each axis) with separable weights at
-// fractional position `f`: 0 trilinear, 1 tricubic B-spline, 2 a tent twice as wide.
-fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32) -> LeafSum {
-    var sum = LeafSum(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
+// fractional position `f`: 0 trilinear, 1 tricubic B-spline, 2 a tent twice as wide, 3 trilinear
+// with the cone-traced light under the tent twice as wide (interleaved cone sets: that tent is
+// two boxes of two leaves, so it averages each 2x2x2 block's eight cone sets at every point,
+// where trilinear would show each leaf's own set at its centre as a mottle of leaf-sized dots).
+fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32, n: vec3<f32>) -> LeafSum {
+    var sum = LeafSum(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0, 0.0);
     for (var z = lo; z <= hi; z++) {
         for (var y = lo; y <= hi; y++) {
             for (var x = lo; x <= hi; x++) {
                 let o = vec3<f32>(f32(x), f32(y), f32(z));
+                let wide3 = max(vec3<f32>(1.0) - 0.5 * abs(o - f), vec3<f32>(0.0));
                 var w3: vec3<f32>;
                 if kernel == 2u {
-                    w3 = max(vec3<f32>(1.0) - 0.5 * abs(o - f), vec3<f32>(0.0));
+                    w3 = wide3;
                 } else if kernel == 1u {
                     w3 = vec3<f32>(bspline(o.x - f.x), bspline(o.y - f.y), bspline(o.z - f.z));
                 } else {
                     w3 = max(vec3<f32>(1.0) - abs(o - f), vec3<f32>(0.0));
                 }
                 let w = w3.x * w3.y * w3.z;
-                if w <= 0.0 {
+                let wt = select(w, wide3.x * wide3.y * wide3.z, kernel == 3u);
+                if w <= 0.0 && wt <= 0.0 {
                     continue;
                 }
                 let leaf = find_leaf(i0 + vec3<i32>(x, y, z));
                 if leaf != EMPTY {
-                    sum.gather += w * (leaf_light[leaf].gather.rgb + leaf_light[leaf].tail.rgb);
+                    // The wider tent reaches past corners and thin walls: there a leaf facing
+                    // another way (another wall) counts by how far its normal agrees.
+                    let wt = select(wt, wt * max(dot(leaf_normal(leaves[leaf].normal_mean.xyz), n), 0.0), kernel == 3u);
+                    sum.gather += wt * (leaf_light[leaf].gather.rgb + leaf_light[leaf].tail.rgb);
+                    sum.sky += wt * leaf_light[leaf].env.w;
+                    sum.weight_traced += wt;
                     sum.emission += w * leaves[leaf].emission.rgb;
-                    sum.sky += w * leaf_light[leaf].env.w;
                     sum.far += w * leaf_light[leaf].far.rgb;
                     sum.weight += w;
                 }
@@ -126,24 +137,29 @@ fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32) ->
 // Leaf gather, emission, sky visibility (x of the third) and the light of the lights beyond the
 // shadow-map budget (`far`) at `p_m`, interpolated over the leaves around it with weights
 // renormalised over the leaves that exist (empty cells carry no light).
-fn leaf_light_at(p_m: vec3<f32>) -> array<vec3<f32>, 4> {
+fn leaf_light_at(p_m: vec3<f32>, n: vec3<f32>) -> array<vec3<f32>, 4> {
     let u = p_m / params.leaf_size_m - vec3<f32>(0.5);
     let base = floor(u);
     let f = u - base;
     let i0 = vec3<i32>(base);
     let cubic = (params.flags & FLAG_TRICUBIC) != 0u;
-    var sum = leaf_light_sum(i0, f, select(0, -1, cubic), select(1, 2, cubic), select(0u, 1u, cubic));
+    let interleaved = (params.flags & FLAG_CONE_INTERLEAVE) != 0u;
+    // Tricubic already takes each 2x2x2 block's sets down to a third per axis; it stays as is.
+    let kernel = select(select(0u, 3u, interleaved), 1u, cubic);
+    let wide = kernel != 0u;
+    var sum = leaf_light_sum(i0, f, select(0, -1, wide), select(1, 2, wide), kernel, n);
     if sum.weight <= 1e-6 {
         // A surfel at the rim of its leaf can have none of the 8 nearest leaf cells occupied:
         // then the 4x4x4 cells around it with a tent twice as wide (measured: black speckles in
         // the per-leaf lamp light otherwise).
-        sum = leaf_light_sum(i0, f, -1, 2, 2u);
+        sum = leaf_light_sum(i0, f, -1, 2, 2u, n);
     }
     let inv = select(0.0, 1.0 / sum.weight, sum.weight > 1e-6);
+    let inv_traced = select(0.0, 1.0 / sum.weight_traced, sum.weight_traced > 1e-6);
     return array<vec3<f32>, 4>(
-        sum.gather * inv,
+        sum.gather * inv_traced,
         sum.emission * inv,
-        vec3<f32>(sum.sky * inv, 0.0, 0.0),
+        vec3<f32>(sum.sky * inv_traced, 0.0, 0.0),
         sum.far * inv,
     );
 }
@@ -300,7 +316,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             // A quarter leaf behind the surface: inside the leaf the surfel belongs to, so the
             // trilinear weights land on leaves, not on the empty cells in front (measured: looking
             // up in front lost the gather wherever a surfel sat on a cell face).
-            let l = leaf_light_at(p - n * (0.25 * params.leaf_size_m));
+            let l = leaf_light_at(p - n * (0.25 * params.leaf_size_m), n);
             if (params.flags & FLAG_INDIRECT) != 0u {
                 color += albedo * l[0];
             }
