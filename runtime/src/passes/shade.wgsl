@@ -89,6 +89,10 @@ struct LeafSum {
     sky: f32,
     weight: f32,
     weight_traced: f32,
+    // The traced light under the near weights too: where no leaf of the wide tent faces the
+    // surface's way (a surfel at a thin pillar's silhouette), the filter falls back to it.
+    gather_near: vec3<f32>,
+    sky_near: f32,
 }
 
 // Sums the leaves of the cells i0 + lo ..= i0 + hi (each axis) with separable weights at
@@ -97,7 +101,7 @@ struct LeafSum {
 // two boxes of two leaves, so it averages each 2x2x2 block's eight cone sets at every point,
 // where trilinear would show each leaf's own set at its centre as a mottle of leaf-sized dots).
 fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32, n: vec3<f32>) -> LeafSum {
-    var sum = LeafSum(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0, 0.0);
+    var sum = LeafSum(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0, 0.0, vec3<f32>(0.0), 0.0);
     for (var z = lo; z <= hi; z++) {
         for (var y = lo; y <= hi; y++) {
             for (var x = lo; x <= hi; x++) {
@@ -121,9 +125,12 @@ fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32, n:
                     // The wider tent reaches past corners and thin walls: there a leaf facing
                     // another way (another wall) counts by how far its normal agrees.
                     let wt = select(wt, wt * max(dot(leaf_normal(leaves[leaf].normal_mean.xyz), n), 0.0), kernel == 3u);
-                    sum.gather += wt * (leaf_light[leaf].gather.rgb + leaf_light[leaf].tail.rgb);
+                    let traced = leaf_light[leaf].gather.rgb + leaf_light[leaf].tail.rgb;
+                    sum.gather += wt * traced;
                     sum.sky += wt * leaf_light[leaf].env.w;
                     sum.weight_traced += wt;
+                    sum.gather_near += w * traced;
+                    sum.sky_near += w * leaf_light[leaf].env.w;
                     sum.emission += w * leaves[leaf].emission.rgb;
                     sum.far += w * leaf_light[leaf].far.rgb;
                     sum.weight += w;
@@ -155,13 +162,13 @@ fn leaf_light_at(p_m: vec3<f32>, n: vec3<f32>) -> array<vec3<f32>, 4> {
         sum = leaf_light_sum(i0, f, -1, 2, 2u, n);
     }
     let inv = select(0.0, 1.0 / sum.weight, sum.weight > 1e-6);
-    let inv_traced = select(0.0, 1.0 / sum.weight_traced, sum.weight_traced > 1e-6);
-    return array<vec3<f32>, 4>(
-        sum.gather * inv_traced,
-        sum.emission * inv,
-        vec3<f32>(sum.sky * inv_traced, 0.0, 0.0),
-        sum.far * inv,
-    );
+    var gather = sum.gather_near * inv;
+    var sky = sum.sky_near * inv;
+    if sum.weight_traced > 1e-6 {
+        gather = sum.gather / sum.weight_traced;
+        sky = sum.sky / sum.weight_traced;
+    }
+    return array<vec3<f32>, 4>(gather, sum.emission * inv, vec3<f32>(sky, 0.0, 0.0), sum.far * inv);
 }
 
 // Cubic B-spline kernel (support 2): smooth, non-negative, sums to 1 over the 4 taps.
