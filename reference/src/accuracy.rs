@@ -175,13 +175,9 @@ pub fn scenes_cached(
         let camera = Camera::from_scene(&data.cameras[0]);
         let scene = SurfelScene::from_scene(&data, Settings::default().splat_scale);
         let key = reference_key(&data, width, height, spp);
-        let t0 = std::time::Instant::now();
-        let (reference, cached) = cached_render(cache, name, key, "full", width * height, || {
+        let (reference, reference_s) = cached_render(cache, name, key, "full", width * height, || {
             scene.render(&camera, width, height, spp, &PathSettings::for_scene(&data), 1)
         });
-        // A reference read from the cache has no time of its own: the report's figure is the
-        // render's, taken when it was made.
-        let reference_s = cached.unwrap_or_else(|| t0.elapsed().as_secs_f64());
         let truncated = TRUNCATED_BOUNCES
             .iter()
             .map(|&k| {
@@ -226,9 +222,10 @@ fn reference_key(data: &SceneData, width: u32, height: u32, spp: u32) -> u64 {
     h
 }
 
-/// `render()`, or its image from `cache` where a file with this key holds one; a fresh render is
-/// written there (a failed write only costs the next run a render). Returns the image and, if it
-/// came from the cache, the seconds the render took when it was made.
+/// `render()` and the seconds it took, or both from `cache` where a file with this key holds
+/// them (the seconds then are the render's when it was made); a fresh render is written there
+/// (a failed write only costs the next run a render). The file: the seconds as f64, then the
+/// image's `Estimate`s, little-endian.
 fn cached_render(
     cache: Option<&std::path::Path>,
     scene: &str,
@@ -236,36 +233,24 @@ fn cached_render(
     what: &str,
     pixels: u32,
     render: impl FnOnce() -> Vec<Estimate>,
-) -> (Vec<Estimate>, Option<f64>) {
-    let Some(dir) = cache else {
-        return (render(), None);
-    };
-    let path = dir.join(format!("{}-{what}-{key:016x}.f32", slug(scene)));
-    let floats = pixels as usize * 6;
-    if let Ok(bytes) = std::fs::read(&path)
-        && bytes.len() == 8 + floats * 4
+) -> (Vec<Estimate>, f64) {
+    let path = cache.map(|dir| dir.join(format!("{}-{what}-{key:016x}.f32", slug(scene))));
+    if let Some(bytes) = path.as_ref().and_then(|p| std::fs::read(p).ok())
+        && bytes.len() == 8 + pixels as usize * size_of::<Estimate>()
     {
         let seconds = f64::from_le_bytes(bytes[..8].try_into().expect("8 bytes"));
-        let v: Vec<f32> =
-            bytes[8..].chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes"))).collect();
-        let est = v
-            .chunks_exact(6)
-            .map(|c| Estimate { mean: Vec3::new(c[0], c[1], c[2]), std_err: Vec3::new(c[3], c[4], c[5]) })
-            .collect();
-        return (est, Some(seconds));
+        return (bytemuck::pod_collect_to_vec(&bytes[8..]), seconds);
     }
     let t0 = std::time::Instant::now();
     let est = render();
-    let mut bytes = t0.elapsed().as_secs_f64().to_le_bytes().to_vec();
-    for e in &est {
-        for x in e.mean.to_array().into_iter().chain(e.std_err.to_array()) {
-            bytes.extend_from_slice(&x.to_le_bytes());
-        }
-    }
-    if std::fs::create_dir_all(dir).is_ok() {
+    let seconds = t0.elapsed().as_secs_f64();
+    if let Some(path) = path
+        && path.parent().is_some_and(|dir| std::fs::create_dir_all(dir).is_ok())
+    {
+        let bytes = [&seconds.to_le_bytes()[..], bytemuck::cast_slice(&est)].concat();
         let _ = grotto_runtime::export::write_atomically(&path, &bytes);
     }
-    (est, None)
+    (est, seconds)
 }
 
 /// A small synthetic cave built through the whole pipeline (synth -> package -> scene).

@@ -178,8 +178,10 @@ pub struct SurfelScene {
     rock: Option<SceneData>,
 }
 
-/// A mean with its standard error.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// A mean with its standard error (Pod: the accuracy sweep's reference cache stores images as
+/// their bytes).
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
 pub struct Estimate {
     pub mean: Vec3,
     pub std_err: Vec3,

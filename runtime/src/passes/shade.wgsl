@@ -122,13 +122,16 @@ fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32, n:
                 }
                 let leaf = find_leaf(i0 + vec3<i32>(x, y, z));
                 if leaf != EMPTY {
-                    // The wider tent reaches past corners and thin walls: there a leaf facing
-                    // another way (another wall) counts by how far its normal agrees.
-                    let wt = select(wt, wt * max(dot(leaf_normal(leaves[leaf].normal_mean.xyz), n), 0.0), kernel == 3u);
+                    var wt_leaf = wt;
+                    if kernel == 3u {
+                        // The wider tent reaches past corners and thin walls: there a leaf facing
+                        // another way (another wall) counts by how far its normal agrees.
+                        wt_leaf *= max(dot(leaf_normal(leaves[leaf].normal_mean.xyz), n), 0.0);
+                    }
                     let traced = leaf_light[leaf].gather.rgb + leaf_light[leaf].tail.rgb;
-                    sum.gather += wt * traced;
-                    sum.sky += wt * leaf_light[leaf].env.w;
-                    sum.weight_traced += wt;
+                    sum.gather += wt_leaf * traced;
+                    sum.sky += wt_leaf * leaf_light[leaf].env.w;
+                    sum.weight_traced += wt_leaf;
                     sum.gather_near += w * traced;
                     sum.sky_near += w * leaf_light[leaf].env.w;
                     sum.emission += w * leaves[leaf].emission.rgb;

@@ -50,7 +50,8 @@ fn leaf_cone_dir(leaf: Leaf, local: vec3<f32>) -> vec3<f32> {
 // leaf whose normal points the same way, so where it misses (a corridor between two cones) it
 // misses on the whole wall, and the error is a bias no filter removes. Turning the set by one of
 // eight angles by the parity of the leaf's cell makes every 2x2x2 block hold eight different
-// sets, and the trilinear filter of shading (and the next bounce's mip) averages them.
+// sets, which shading averages (passes/shade.wgsl: the tent twice as wide under trilinear, the
+// B-spline under tricubic) and the next bounce's mip too.
 fn cone_interleave_rad(leaf: Leaf) -> f32 {
     if (params.flags & FLAG_CONE_INTERLEAVE) == 0u {
         return 0.0;
