@@ -125,7 +125,7 @@ fn presets_trade_time_for_error_on_the_colour_box() {
     let scenes = accuracy::scenes(w, h, 4096, Some("colour box"));
     assert_eq!(scenes.len(), 1);
     let presets: Vec<_> = accuracy::configs().into_iter().filter(|c| c.knob == "preset").collect();
-    let rows = accuracy::sweep(&gpu, &scenes, &presets, w, h, |_, _| {}).unwrap();
+    let rows = accuracy::sweep(&gpu, &scenes, &presets, w, h, None, |_, _| {}).unwrap();
     let err: Vec<f64> = rows.iter().map(|r| r.rel_rmse).collect();
     eprintln!(
         "colour box, fast / balanced / high: relative RMSE {err:?}, reference noise {:.4}",

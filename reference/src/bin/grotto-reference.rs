@@ -86,6 +86,12 @@ struct AccuracyArgs {
     /// repeat for more. The report then covers them alone.
     #[arg(long = "config")]
     configs: Vec<String>,
+    /// Write each run's error map here (SCENE-CONFIG.png: the reference, the runtime and their
+    /// difference side by side; SCENE-CONFIG-cutK.png against the reference cut after K bounces
+    /// for the rows judged against one; each also as .exr in linear radiance, the difference as
+    /// luminance), to see where an error sits.
+    #[arg(long)]
+    error_maps: Option<PathBuf>,
     /// Keep the reference renders in this folder and reuse them while the scene, the size and the
     /// paths per pixel are unchanged (iterating on the runtime with --config).
     #[arg(long)]
@@ -268,7 +274,7 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
         }
     }
     let bar = indicatif::ProgressBar::new((scenes.len() * configs.len()) as u64);
-    let rows = accuracy::sweep(&gpu, &scenes, &configs, w, h, |scene, config| {
+    let rows = accuracy::sweep(&gpu, &scenes, &configs, w, h, a.error_maps.as_deref(), |scene, config| {
         bar.set_message(format!("{scene}: {config}"));
         bar.inc(1);
     })?;
