@@ -348,6 +348,26 @@ impl Gpu {
         }))
     }
 
+    /// A buffer of `count` slots of `slot_size` bytes where each draw binds one slot (a uniform
+    /// per shadow face): the binding limits apply to a slot, the buffer limit to the whole.
+    pub fn slotted_buffer(
+        &self,
+        label: &str,
+        slot_size: u64,
+        count: u64,
+        usage: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer> {
+        self.check_buffer(label, slot_size, usage)?;
+        let total = slot_size.saturating_mul(count.max(1)).max(16);
+        self.check_buffer(label, total, usage - (wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::STORAGE))?;
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: total,
+            usage,
+            mapped_at_creation: false,
+        }))
+    }
+
     /// A single-level 2D texture, checked first.
     pub fn texture_2d(
         &self,

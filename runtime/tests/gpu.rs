@@ -982,3 +982,53 @@ fn views_without_light_skip_the_light_passes_and_show_albedo_normals_and_level()
     assert!(plan.steps.iter().all(|s| s.pass != Pass::Propagate || !s.reason.contains("view")));
     assert!(sum(&light) > sum(&lit), "light view {} against lit {}", sum(&light), sum(&lit));
 }
+
+/// 64 shadowed lamps are 384 shadow faces, each with its own 256-byte splat uniform: 96 KiB in
+/// one buffer, over the 64 KiB a uniform binding may hold on lavapipe and in WebGPU by default.
+/// Each draw binds one face's slot, so the renderer must accept it (it refused, naming the
+/// whole buffer, until the limit was checked per slot); in the convex colour box every lamp sees
+/// every wall, so the shadow-mapped light must equal the unshadowed sum.
+#[test]
+fn sixty_four_shadowed_lamps_fit_the_uniform_binding_limit_and_shadow_nothing_in_a_convex_box() {
+    use grotto_runtime::renderer::ShadowFallback;
+    use grotto_runtime::scene_data::SceneLight;
+    let mut scene = testscenes::colour_box();
+    let (lo, hi) = scene.bounds_leaf();
+    let (lo, hi) = (lo * scene.leaf_size_m, hi * scene.leaf_size_m);
+    scene.lights = (0..64)
+        .map(|i| {
+            let f = Vec3::new((i % 4) as f32 + 0.5, ((i / 4) % 4) as f32 + 0.5, (i / 16) as f32 + 0.5) / 4.0;
+            SceneLight {
+                name: format!("lamp-{i}"),
+                position_m: lo + (hi - lo) * (0.3 + 0.4 * f),
+                intensity_w_sr: Vec3::splat(0.1),
+                spot: None,
+            }
+        })
+        .collect();
+    let faces_bytes = 64 * 6 * size_of::<grotto_runtime::gpu_types::SplatUniform>() as u64;
+    eprintln!(
+        "splat uniforms {faces_bytes} bytes, uniform binding limit {}",
+        gpu().device.limits().max_uniform_buffer_binding_size
+    );
+    let direct = |shadowed_lights: u32, shadow_fallback: ShadowFallback| {
+        let settings = Settings {
+            bounces: 0,
+            shadowed_lights,
+            shadow_fallback,
+            shadow_map_size: 64,
+            light_cutoff_w_m2: 0.0,
+            ..Default::default()
+        };
+        let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+        let plan = r.update_light().unwrap();
+        assert_eq!(plan.runs(Pass::Shadow), shadowed_lights > 0, "{}", plan.explain());
+        let light = r.read_leaf_light().unwrap();
+        light.iter().map(|l| l.direct[1]).sum::<f32>() / light.len() as f32
+    };
+    let mapped = direct(64, ShadowFallback::None);
+    let open = direct(0, ShadowFallback::None);
+    eprintln!("mean direct: 64 shadow-mapped lamps {mapped}, unshadowed {open}");
+    assert!(open > 0.0);
+    assert!((mapped - open).abs() < 0.03 * open, "shadow maps darken a convex box: {mapped} vs {open}");
+}

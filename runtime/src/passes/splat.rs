@@ -43,9 +43,12 @@ pub struct Uniforms {
 impl Uniforms {
     pub fn new(gpu: &Gpu, label: &str, layout: &wgpu::BindGroupLayout, count: usize) -> Result<Self> {
         let size = size_of::<SplatUniform>() as u64;
-        let buffer = gpu.buffer(
+        // Each draw binds one slot, so 64 KiB uniform bindings (WebGPU's default, lavapipe)
+        // still hold hundreds of shadow faces.
+        let buffer = gpu.slotted_buffer(
             label,
-            count.max(1) as u64 * size,
+            size,
+            count as u64,
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         )?;
         let groups = (0..count as u64)
