@@ -11,6 +11,7 @@ pub mod demo;
 pub mod env;
 mod error;
 pub mod ingest;
+pub mod knn;
 pub mod manifest;
 pub mod normals;
 pub mod orient;

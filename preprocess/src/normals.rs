@@ -1,7 +1,7 @@
 //! Per-point normals, normal spread and surfel radius for one tile.
 //!
-//! For each point: its k nearest neighbours (kiddo's immutable kd-tree over the tile and its halo,
-//! so tile borders see across), their covariance on coordinates centred at their mean (in f64),
+//! For each point: its k nearest neighbours (exact, over the tile and its halo so tile borders
+//! see across: `knn.rs`, cells in Morton order with kiddo's kd-tree behind them), their covariance on coordinates centred at their mean (in f64),
 //! and the eigenvector of the smallest eigenvalue as the normal. It is oriented toward the scanner
 //! the point came from: caves are enclosed, so "up" or "away from the centroid" is wrong, while
 //! the scanner always sees the wall from the open side. A plausible input normal (unit length,
@@ -16,11 +16,9 @@
 //! per point: `1.25 * d_k / sqrt(k)` where `d_k` is the distance to the k-th neighbour (1.25 closes
 //! the gaps a square lattice leaves between inscribed discs).
 
-use std::num::NonZero;
-
-use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
 
+use crate::knn::{CellCache, Knn};
 use crate::manifest::SeenFrom;
 use crate::orient::{CaveGrid, MAX_SCORE, OrientStats};
 
@@ -253,15 +251,11 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
         return (Vec::new(), NormalStats::default());
     }
     let k = k.clamp(3, 64).min(n);
-    // Query (and build the tree) in Morton order: consecutive queries then walk the same leaves,
-    // which is most of the speed of a kNN pass. `order[j]` is the input index of sorted point j.
-    let order = morton_order(tile.positions);
-    let pts: Vec<[f32; 3]> = order.iter().map(|&i| tile.positions[i as usize]).collect();
-    // u32 items (a tile's points are bounded by the memory budget) and 64-point leaves: measured
-    // 10-15% faster than kiddo's default (u64, 32) for k = 16 on scan data.
-    let tree: kiddo::immutable::float::kdtree::ImmutableKdTree<f32, u32, 3, 64> =
-        kiddo::immutable::float::kdtree::ImmutableKdTree::new_from_slice(&pts);
-    let kk = NonZero::new(k).expect("k >= 3");
+    // Queries run in Morton order: the grid gathers each cell's candidates once for all of its
+    // points, and the kd-tree (for what the grid cannot prove) walks the same leaves from one
+    // query to the next. `order[j]` is the input index of sorted point j.
+    let (order, knn) = Knn::new(tile.positions);
+    let pts = knn.points();
     let own: Vec<usize> = (0..n).filter(|&i| tile.own[i]).collect();
     // First pass, in parallel over runs of Morton-sorted points: oriented normals and radii for
     // every point (halo included, so spread at the border averages over both sides), and the
@@ -275,26 +269,25 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
         .flat_map_iter(|(chunk, lists)| {
             let first = chunk * 1024;
             let mut scratch: Vec<[f64; 3]> = Vec::with_capacity(k);
-            // Morton neighbours have similar spacing: bound each search by the previous k-th
-            // distance widened (KNN_BOUND_FACTOR), and search unbounded when that finds too few.
+            let mut cache = CellCache::default();
+            let mut found: Vec<(f32, u32)> = Vec::with_capacity(k);
+            // Morton neighbours have similar spacing: the previous k-th distance widened
+            // (KNN_BOUND_FACTOR) is the guess of the next.
             let mut bound = f32::INFINITY;
             let mut out = Vec::with_capacity(lists.len() / k);
             for (off, list) in lists.chunks_mut(k).enumerate() {
                 let j = first + off;
                 let q = &pts[j];
-                let mut found = tree.nearest_n_within::<SquaredEuclidean>(q, bound, kk, false);
-                if found.len() < k {
-                    found = tree.nearest_n_within::<SquaredEuclidean>(q, f32::INFINITY, kk, false);
-                }
+                knn.nearest(j, k, bound, &mut cache, &mut found);
                 let i = order[j] as usize;
                 for (slot, nb) in list
                     .iter_mut()
-                    .zip(found.iter().map(|nb| order[nb.item as usize]).chain(std::iter::repeat(i as u32)))
+                    .zip(found.iter().map(|nb| order[nb.1 as usize]).chain(std::iter::repeat(i as u32)))
                 {
                     *slot = nb;
                 }
                 scratch.clear();
-                scratch.extend(found.iter().map(|nb| pts[nb.item as usize].map(f64::from)));
+                scratch.extend(found.iter().map(|nb| pts[nb.1 as usize].map(f64::from)));
                 let p = q.map(f64::from);
                 let bare = tile.orient.and_then(|o| o.seen_from[i].map(|side| (o, side)));
                 // Without a scanner, the PCA sign is provisional (up); the votes decide below.
@@ -326,7 +319,7 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
                     }
                     None => MAX_SCORE,
                 };
-                let d2 = found.iter().map(|nb| nb.distance).fold(0.0f32, f32::max);
+                let d2 = found.iter().map(|nb| nb.0).fold(0.0f32, f32::max);
                 bound = if d2 > 0.0 { d2 * KNN_BOUND_FACTOR } else { f32::INFINITY };
                 out.push((
                     normal,
@@ -418,29 +411,6 @@ fn orient_by_neighbourhood(
         stats.flipped += 1;
     }
     normal
-}
-
-/// Indices of `positions` sorted by a 30-bit Morton code over their bounding box.
-fn morton_order(positions: &[[f32; 3]]) -> Vec<u32> {
-    let mut lo = [f32::INFINITY; 3];
-    let mut hi = [f32::NEG_INFINITY; 3];
-    for p in positions {
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-    }
-    let scale: [f32; 3] = std::array::from_fn(|a| if hi[a] > lo[a] { 1023.0 / (hi[a] - lo[a]) } else { 0.0 });
-    let mut keyed: Vec<(u64, u32)> = positions
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let c: [u32; 3] = std::array::from_fn(|a| ((p[a] - lo[a]) * scale[a]) as u32);
-            (grotto_format::svo::morton_encode(c[0], c[1], c[2]), i as u32)
-        })
-        .collect();
-    keyed.sort_unstable();
-    keyed.into_iter().map(|(_, i)| i).collect()
 }
 
 #[cfg(test)]

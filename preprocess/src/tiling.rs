@@ -271,7 +271,6 @@ fn write_json_atomic(path: &Path, value: &impl Serialize) -> Result<()> {
 /// scan line, a flight strip), so a scan's first points measure its spacing where a random sample
 /// of a large survey would be too sparse to.
 pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Option<(f64, usize)>> {
-    use kiddo::SquaredEuclidean;
     let mut chunk = PointChunk::new(ingest::DEFAULT_CHUNK.min(per_scan.max(1)));
     let mut spacings: Vec<f64> = Vec::new();
     let mut sampled = 0usize;
@@ -291,20 +290,24 @@ pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Optio
         let Some(first) = pts.first().copied() else { continue };
         // Centred before the cast: survey coordinates in f32 would round to decimetres.
         let local: Vec<[f32; 3]> = pts.iter().map(|p| [0, 1, 2].map(|a| (p[a] - first[a]) as f32)).collect();
-        let tree: kiddo::immutable::float::kdtree::ImmutableKdTree<f32, u32, 3, 64> =
-            kiddo::immutable::float::kdtree::ImmutableKdTree::new_from_slice(&local);
-        let k = std::num::NonZero::new(8).expect("8 > 0");
-        // In parallel (the median does not depend on the order), unsorted: the nearest neighbour at
-        // a non-zero distance (duplicates say nothing of spacing) is the smallest of those.
-        let found: Vec<f64> = local
-            .par_iter()
-            .filter_map(|q| {
-                tree.nearest_n_within::<SquaredEuclidean>(q, f32::INFINITY, k, false)
-                    .iter()
-                    .map(|nb| nb.distance)
-                    .filter(|&d2| d2 > 0.0)
-                    .reduce(f32::min)
-                    .map(|d2| f64::from(d2).sqrt())
+        let (_, knn) = crate::knn::Knn::new(&local);
+        // In parallel over runs of Morton-sorted points (the median does not depend on the
+        // order): the nearest neighbour at a non-zero distance (duplicates say nothing of
+        // spacing) is the smallest of the 8 nearest.
+        let found: Vec<f64> = (0..local.len())
+            .collect::<Vec<_>>()
+            .par_chunks(4096)
+            .flat_map_iter(|run| {
+                let mut cache = crate::knn::CellCache::default();
+                let mut nbs = Vec::with_capacity(8);
+                let mut spacing = Vec::with_capacity(run.len());
+                for &j in run {
+                    knn.nearest(j, 8, f32::INFINITY, &mut cache, &mut nbs);
+                    if let Some(d2) = nbs.iter().map(|nb| nb.0).filter(|&d2| d2 > 0.0).reduce(f32::min) {
+                        spacing.push(f64::from(d2).sqrt());
+                    }
+                }
+                spacing
             })
             .collect();
         spacings.extend(found);
