@@ -255,40 +255,126 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
     // points, and the kd-tree (for what the grid cannot prove) walks the same leaves from one
     // query to the next. `order[j]` is the input index of sorted point j.
     let (order, knn) = Knn::new(tile.positions);
-    let pts = knn.points();
+    let own_sorted: Vec<bool> = order.iter().map(|&i| tile.own[i as usize]).collect();
+    // Everything below is in sorted order (`j`), neighbour lists included. Per point: normal,
+    // radius, the enclosure score of that normal (MAX_SCORE where the point faces its scanner:
+    // that orientation is known), and whether its input normal was kept.
+    let mut lists: Vec<u32> = vec![0; n * k];
+    let mut per_point: Vec<Estimate> = vec![Estimate::default(); n];
+    // Own points first. A halo point's normal only matters where an own point has it as a
+    // neighbour (spread and orientation votes average over the neighbourhood), which is a thin
+    // shell of the halo: only those are estimated next (a quarter of the points at 10^8 were
+    // halo copies, most never a neighbour).
+    estimate_sorted(tile, &knn, &order, k, &|j| own_sorted[j], &mut lists, &mut per_point);
+    let mut needed = vec![false; n];
+    for (j, list) in lists.chunks(k).enumerate() {
+        if own_sorted[j] {
+            for &nb in list {
+                needed[nb as usize] |= !own_sorted[nb as usize];
+            }
+        }
+    }
+    estimate_sorted(tile, &knn, &order, k, &|j| needed[j], &mut lists, &mut per_point);
+    drop(needed);
+    // Own points in input order, in parallel over fixed runs (the orientation statistics are
+    // summed run by run in order, so they do not depend on the thread count).
+    let mut sorted_of = vec![0u32; n];
+    for (j, &i) in order.iter().enumerate() {
+        sorted_of[i as usize] = j as u32;
+    }
     let own: Vec<usize> = (0..n).filter(|&i| tile.own[i]).collect();
-    // First pass, in parallel over runs of Morton-sorted points: oriented normals and radii for
-    // every point (halo included, so spread at the border averages over both sides), and the
-    // neighbour lists, all in sorted order; then scattered to input order.
-    let mut sorted_lists: Vec<u32> = vec![0; n * k];
-    // Per point: normal, radius, the enclosure score of that normal (MAX_SCORE where the point
-    // faces its scanner: that orientation is known), and whether its input normal was kept.
-    let per_point: Vec<([f64; 3], f64, i32, bool)> = sorted_lists
-        .par_chunks_mut(k * 1024)
-        .enumerate()
-        .flat_map_iter(|(chunk, lists)| {
-            let first = chunk * 1024;
+    let runs: Vec<(Vec<PointNormal>, OrientStats)> = own
+        .par_chunks(4096)
+        .map(|run| {
+            let mut orientation = OrientStats::default();
+            let normals = run
+                .iter()
+                .map(|&i| {
+                    let j = sorted_of[i] as usize;
+                    let list = &lists[j * k..(j + 1) * k];
+                    let ni = match tile.orient.filter(|o| o.seen_from[i].is_some()) {
+                        Some(_) => orient_by_neighbourhood(tile, i, j, list, &per_point, &mut orientation),
+                        None => per_point[j].normal,
+                    };
+                    let mut sum = [0.0f64; 3];
+                    for &nb in list {
+                        let nj = per_point[nb as usize].normal;
+                        // Flip neighbours onto this point's side: orientation is not the spread.
+                        let sign = if dot(nj, ni) < 0.0 { -1.0 } else { 1.0 };
+                        for a in 0..3 {
+                            sum[a] += sign * nj[a];
+                        }
+                    }
+                    let mean_len = (dot(sum, sum)).sqrt() / list.len() as f64;
+                    let radius = per_point[j].radius_m;
+                    PointNormal {
+                        normal: ni.map(|c| c as f32),
+                        spread: (1.0 - mean_len).clamp(0.0, 1.0) as f32,
+                        radius_m: if radius > 0.0 { radius as f32 } else { tile.isolated_radius_m },
+                    }
+                })
+                .collect();
+            (normals, orientation)
+        })
+        .collect();
+    let mut stats = NormalStats {
+        input_normals: own.iter().filter(|&&i| tile.input_normals[i] != [0.0; 3]).count() as u64,
+        input_kept: own.iter().filter(|&&i| per_point[sorted_of[i] as usize].kept).count() as u64,
+        orientation: OrientStats::default(),
+    };
+    let mut out = Vec::with_capacity(own.len());
+    for (normals, orientation) in runs {
+        out.extend(normals);
+        stats.orientation.add(&orientation);
+    }
+    (out, stats)
+}
+
+/// What the first pass finds for one point (sorted order).
+#[derive(Clone, Copy, Debug, Default)]
+struct Estimate {
+    normal: [f64; 3],
+    radius_m: f64,
+    /// Enclosure score of `normal` (MAX_SCORE where the point faces its scanner).
+    score: i32,
+    /// Its input normal was kept.
+    kept: bool,
+}
+
+/// Neighbour lists and oriented normals and radii of the sorted points `wanted` picks, in
+/// parallel over runs of sorted points (queries in Morton order reuse the kNN's cells).
+fn estimate_sorted(
+    tile: &TilePoints<'_>,
+    knn: &Knn,
+    order: &[u32],
+    k: usize,
+    wanted: &(dyn Fn(usize) -> bool + Sync),
+    lists: &mut [u32],
+    per_point: &mut [Estimate],
+) {
+    const RUN: usize = 1024;
+    let pts = knn.points();
+    lists.par_chunks_mut(k * RUN).zip(per_point.par_chunks_mut(RUN)).enumerate().for_each(
+        |(run, (lists, per_point))| {
             let mut scratch: Vec<[f64; 3]> = Vec::with_capacity(k);
             let mut cache = CellCache::default();
             let mut found: Vec<(f32, u32)> = Vec::with_capacity(k);
             // Morton neighbours have similar spacing: the previous k-th distance widened
             // (KNN_BOUND_FACTOR) is the guess of the next.
             let mut bound = f32::INFINITY;
-            let mut out = Vec::with_capacity(lists.len() / k);
-            for (off, list) in lists.chunks_mut(k).enumerate() {
-                let j = first + off;
-                let q = &pts[j];
+            for (off, (list, estimate)) in lists.chunks_mut(k).zip(per_point.iter_mut()).enumerate() {
+                let j = run * RUN + off;
+                if !wanted(j) {
+                    continue;
+                }
                 knn.nearest(j, k, bound, &mut cache, &mut found);
-                let i = order[j] as usize;
-                for (slot, nb) in list
-                    .iter_mut()
-                    .zip(found.iter().map(|nb| order[nb.1 as usize]).chain(std::iter::repeat(i as u32)))
-                {
+                for (slot, nb) in list.iter_mut().zip(found.iter().map(|nb| nb.1).chain(std::iter::repeat(j as u32))) {
                     *slot = nb;
                 }
                 scratch.clear();
                 scratch.extend(found.iter().map(|nb| pts[nb.1 as usize].map(f64::from)));
-                let p = q.map(f64::from);
+                let i = order[j] as usize;
+                let p = pts[j].map(f64::from);
                 let bare = tile.orient.and_then(|o| o.seen_from[i].map(|side| (o, side)));
                 // Without a scanner, the PCA sign is provisional (up); the votes decide below.
                 let view = match bare {
@@ -321,72 +407,32 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
                 };
                 let d2 = found.iter().map(|nb| nb.0).fold(0.0f32, f32::max);
                 bound = if d2 > 0.0 { d2 * KNN_BOUND_FACTOR } else { f32::INFINITY };
-                out.push((
+                *estimate = Estimate {
                     normal,
-                    RADIUS_COVER_FACTOR * f64::from(d2).sqrt() / (k as f64).sqrt(),
+                    radius_m: RADIUS_COVER_FACTOR * f64::from(d2).sqrt() / (k as f64).sqrt(),
                     score,
                     kept,
-                ));
+                };
             }
-            out
-        })
-        .collect();
-    let mut neighbour_lists: Vec<u32> = vec![0; n * k];
-    let mut normals = vec![[0.0f64; 3]; n];
-    let mut radii = vec![0.0f64; n];
-    let mut scores = vec![0i32; n];
-    let mut kept = vec![false; n];
-    for (j, &i) in order.iter().enumerate() {
-        let i = i as usize;
-        neighbour_lists[i * k..(i + 1) * k].copy_from_slice(&sorted_lists[j * k..(j + 1) * k]);
-        (normals[i], radii[i], scores[i], kept[i]) = per_point[j];
-    }
-    let mut stats = NormalStats {
-        input_normals: own.iter().filter(|&&i| tile.input_normals[i] != [0.0; 3]).count() as u64,
-        input_kept: own.iter().filter(|&&i| kept[i]).count() as u64,
-        orientation: OrientStats::default(),
-    };
-    let out = own
-        .iter()
-        .map(|&i| {
-            let list = &neighbour_lists[i * k..(i + 1) * k];
-            let ni = match tile.orient.filter(|o| o.seen_from[i].is_some()) {
-                Some(_) => orient_by_neighbourhood(tile, i, list, &normals, &scores, &mut stats.orientation),
-                None => normals[i],
-            };
-            let mut sum = [0.0f64; 3];
-            for &j in list {
-                let nj = normals[j as usize];
-                // Flip neighbours onto this point's side: orientation is not the spread.
-                let sign = if dot(nj, ni) < 0.0 { -1.0 } else { 1.0 };
-                for a in 0..3 {
-                    sum[a] += sign * nj[a];
-                }
-            }
-            let mean_len = (dot(sum, sum)).sqrt() / list.len() as f64;
-            PointNormal {
-                normal: ni.map(|c| c as f32),
-                spread: (1.0 - mean_len).clamp(0.0, 1.0) as f32,
-                radius_m: if radii[i] > 0.0 { radii[i] as f32 } else { tile.isolated_radius_m },
-            }
-        })
-        .collect();
-    (out, stats)
+        },
+    );
 }
 
 /// The sign of point `i`'s normal (no scanner) from its neighbourhood's enclosure votes: each
 /// neighbour's score, turned onto `i`'s normal by the cosine between them (a neighbour across a
 /// crease says little about this side). Zero evidence turns the normal up (+z: open ground).
+/// `i` is the point's input index, `j` its sorted one; `list` and `per_point` are sorted.
 fn orient_by_neighbourhood(
     tile: &TilePoints<'_>,
     i: usize,
+    j: usize,
     list: &[u32],
-    normals: &[[f64; 3]],
-    scores: &[i32],
+    per_point: &[Estimate],
     stats: &mut OrientStats,
 ) -> [f64; 3] {
-    let ni = normals[i];
-    let total: f64 = list.iter().map(|&j| f64::from(scores[j as usize]) * dot(normals[j as usize], ni)).sum();
+    let ni = per_point[j].normal;
+    let total: f64 =
+        list.iter().map(|&nb| f64::from(per_point[nb as usize].score) * dot(per_point[nb as usize].normal, ni)).sum();
     let facing = if total > 0.0 {
         true
     } else if total < 0.0 {
@@ -397,7 +443,8 @@ fn orient_by_neighbourhood(
     };
     let normal = if facing { ni } else { ni.map(|c| -c) };
     stats.points += 1;
-    if scores[i] != 0 && (scores[i] > 0) != facing {
+    let score = per_point[j].score;
+    if score != 0 && (score > 0) != facing {
         stats.corrected += 1;
     }
     if total.abs() < f64::from(MAX_SCORE) {
