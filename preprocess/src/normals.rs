@@ -368,7 +368,9 @@ fn estimate_sorted(
                     continue;
                 }
                 knn.nearest(j, k, bound, &mut cache, &mut found);
-                for (slot, nb) in list.iter_mut().zip(found.iter().map(|nb| nb.1).chain(std::iter::repeat(j as u32))) {
+                for (slot, nb) in
+                    list.iter_mut().zip(found.iter().map(|nb| nb.1).chain(std::iter::repeat(j as u32)))
+                {
                     *slot = nb;
                 }
                 scratch.clear();
@@ -431,8 +433,10 @@ fn orient_by_neighbourhood(
     stats: &mut OrientStats,
 ) -> [f64; 3] {
     let ni = per_point[j].normal;
-    let total: f64 =
-        list.iter().map(|&nb| f64::from(per_point[nb as usize].score) * dot(per_point[nb as usize].normal, ni)).sum();
+    let total: f64 = list
+        .iter()
+        .map(|&nb| f64::from(per_point[nb as usize].score) * dot(per_point[nb as usize].normal, ni))
+        .sum();
     let facing = if total > 0.0 {
         true
     } else if total < 0.0 {

@@ -271,48 +271,44 @@ fn write_json_atomic(path: &Path, value: &impl Serialize) -> Result<()> {
 /// scan line, a flight strip), so a scan's first points measure its spacing where a random sample
 /// of a large survey would be too sparse to.
 pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Option<(f64, usize)>> {
-    let mut chunk = PointChunk::new(ingest::DEFAULT_CHUNK.min(per_scan.max(1)));
-    let mut spacings: Vec<f64> = Vec::new();
-    let mut sampled = 0usize;
-    for scan in scans {
-        let mut source = ingest::open(&scan.path, scan.format, scan.index)?;
-        let mut pts: Vec<[f64; 3]> = Vec::new();
-        while pts.len() < per_scan && source.fill_chunk(&mut chunk)? > 0 {
-            pts.extend(
-                chunk
-                    .xyz
-                    .iter()
-                    .map(|p| scan.world_from_scan.apply(*p))
-                    .filter(|p| p.iter().all(|c| c.is_finite()))
-                    .take(per_scan - pts.len()),
-            );
-        }
-        let Some(first) = pts.first().copied() else { continue };
-        // Centred before the cast: survey coordinates in f32 would round to decimetres.
-        let local: Vec<[f32; 3]> = pts.iter().map(|p| [0, 1, 2].map(|a| (p[a] - first[a]) as f32)).collect();
-        let (_, knn) = crate::knn::Knn::new(&local);
-        // In parallel over runs of Morton-sorted points (the median does not depend on the
-        // order): the nearest neighbour at a non-zero distance (duplicates say nothing of
-        // spacing) is the smallest of the 8 nearest.
-        let found: Vec<f64> = (0..local.len())
-            .collect::<Vec<_>>()
-            .par_chunks(4096)
-            .flat_map_iter(|run| {
-                let mut cache = crate::knn::CellCache::default();
-                let mut nbs = Vec::with_capacity(8);
-                let mut spacing = Vec::with_capacity(run.len());
-                for &j in run {
-                    knn.nearest(j, 8, f32::INFINITY, &mut cache, &mut nbs);
-                    if let Some(d2) = nbs.iter().map(|nb| nb.0).filter(|&d2| d2 > 0.0).reduce(f32::min) {
-                        spacing.push(f64::from(d2).sqrt());
-                    }
+    // Scans in parallel (each decoder is one thread's work), in order for the same median.
+    let per_scan_spacings: Vec<(Vec<f64>, usize)> = scans
+        .par_iter()
+        .map(|scan| -> Result<(Vec<f64>, usize)> {
+            let mut chunk = PointChunk::new(ingest::DEFAULT_CHUNK.min(per_scan.max(1)));
+            let mut source = ingest::open(&scan.path, scan.format, scan.index)?;
+            let mut pts: Vec<[f64; 3]> = Vec::new();
+            while pts.len() < per_scan && source.fill_chunk(&mut chunk)? > 0 {
+                pts.extend(
+                    chunk
+                        .xyz
+                        .iter()
+                        .map(|p| scan.world_from_scan.apply(*p))
+                        .filter(|p| p.iter().all(|c| c.is_finite()))
+                        .take(per_scan - pts.len()),
+                );
+            }
+            let Some(first) = pts.first().copied() else { return Ok((Vec::new(), 0)) };
+            // Centred before the cast: survey coordinates in f32 would round to decimetres.
+            let local: Vec<[f32; 3]> =
+                pts.iter().map(|p| [0, 1, 2].map(|a| (p[a] - first[a]) as f32)).collect();
+            let (_, knn) = crate::knn::Knn::new(&local);
+            // The nearest neighbour at a non-zero distance (duplicates say nothing of spacing)
+            // is the smallest of the 8 nearest; queries in Morton order reuse the kNN's cells.
+            let mut cache = crate::knn::CellCache::default();
+            let mut nbs = Vec::with_capacity(8);
+            let mut spacing = Vec::with_capacity(local.len());
+            for j in 0..local.len() {
+                knn.nearest(j, 8, f32::INFINITY, &mut cache, &mut nbs);
+                if let Some(d2) = nbs.iter().map(|nb| nb.0).filter(|&d2| d2 > 0.0).reduce(f32::min) {
+                    spacing.push(f64::from(d2).sqrt());
                 }
-                spacing
-            })
-            .collect();
-        spacings.extend(found);
-        sampled += pts.len();
-    }
+            }
+            Ok((spacing, pts.len()))
+        })
+        .collect::<Result<_>>()?;
+    let sampled: usize = per_scan_spacings.iter().map(|s| s.1).sum();
+    let mut spacings: Vec<f64> = per_scan_spacings.into_iter().flat_map(|s| s.0).collect();
     if spacings.is_empty() {
         return Ok(None);
     }
@@ -609,9 +605,16 @@ fn distribute(
                 let near = point.pos_q.iter().any(|&c| i64::from(c) < h || i64::from(c) >= extents[t] - h);
                 if h > 0 && near {
                     neighbours.clear();
+                    // A probe that stays inside the tile on every axis it moves along is in
+                    // this tile: only probes that cross a near face are looked up (9 of 26 for a
+                    // point near one face), the same tiles as probing all.
+                    let crosses = |a: usize, d: i64| {
+                        (d < 0 && i64::from(point.pos_q[a]) < h)
+                            || (d > 0 && i64::from(point.pos_q[a]) >= extents[t] - h)
+                    };
                     for o in 0..27 {
                         let d = [o % 3 - 1, o / 3 % 3 - 1, o / 9 - 1];
-                        if d == [0, 0, 0] {
+                        if !(0..3).any(|a| crosses(a, d[a])) {
                             continue;
                         }
                         let probe: [i64; 3] = std::array::from_fn(|a| q[a] + d[a] * h);
