@@ -25,6 +25,7 @@ use std::sync::OnceLock;
 use grotto_format::svo::morton_encode;
 use kiddo::SquaredEuclidean;
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
+use rayon::prelude::*;
 
 /// Points a cell should hold: with `k = 16` on a surface, a cell of edge near the 16th-neighbour
 /// distance holds about five, which is what the block must reach past for the proof to hold.
@@ -151,12 +152,14 @@ impl CellCache {
                 continue;
             }
             let (s, e) = (cell.first as usize, cell.end as usize);
+            // One pass, branch-free: every candidate is written, the kept ones by advancing.
+            // (Distances in a vectorised loop of their own, then the compaction, ran 1.5%
+            // slower in `grotto-pack bench-normals`.)
             for (((&x, &y), &z), &i) in
                 self.xs[s..e].iter().zip(&self.ys[s..e]).zip(&self.zs[s..e]).zip(&self.idx[s..e])
             {
                 let (dx, dy, dz) = (x - q[0], y - q[1], z - q[2]);
                 let d = dx * dx + dy * dy + dz * dz;
-                // Branch-free compaction: always written, kept by advancing.
                 self.found[m] = (d, i);
                 m += usize::from(d <= limit_d2);
             }
@@ -192,7 +195,8 @@ impl MortonGrid {
                 (morton_encode(c[0], c[1], c[2]), i as u32)
             })
             .collect();
-        keyed.sort_unstable();
+        // Unique keys (index last): the parallel sort gives the one order a single thread would.
+        keyed.par_sort_unstable();
         let order: Vec<u32> = keyed.iter().map(|&(_, i)| i).collect();
         let codes: Vec<u64> = keyed.iter().map(|&(c, _)| c).collect();
         let points: Vec<[f32; 3]> = order.iter().map(|&i| positions[i as usize]).collect();
