@@ -40,9 +40,10 @@ use crate::voxels::{self, Sample, TileSvo};
 use crate::{Error, Result};
 use grotto_format::compact;
 
-/// Upper bound of what building one tile holds per input point: bin (24), kd-tree (~24),
-/// neighbour lists (k=16: 64), normals and radii in f64 (32), surfels and colours (36), SVO
-/// samples (48) and sort keys (16); peak memory is measured in docs/benchmarks.md.
+/// Upper bound of what building one tile holds per input point: bin (24), the kNN's sorted
+/// points, codes, order and cell tables (~28), neighbour lists (k=16: 64), normals, radii and
+/// scores in f64 (40), surfels and colours (36), SVO samples (48) and sort keys (16); peak
+/// memory is measured in docs/benchmarks.md.
 pub const BUILD_BYTES_PER_POINT: u64 = 256;
 
 /// Default of [`BuildParams::max_tile_points`]: 2^21 points, 512 MiB to build at
