@@ -96,8 +96,11 @@ struct MortonGrid {
     cube_m: f32,
     /// Morton code of each sorted point.
     codes: Vec<u64>,
-    /// The sorted points.
+    /// The sorted points, and again by axis (a cell's candidates are copied as three runs).
     points: Vec<[f32; 3]>,
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    zs: Vec<f32>,
     /// Level most cells are searched at (mean occupancy at least [`TARGET_PER_CELL`]).
     base_level: u32,
     levels: [OnceLock<Level>; MAX_LEVEL as usize + 1],
@@ -126,8 +129,9 @@ pub struct CellCache {
     /// The block's non-empty cells: their candidates and bounds (a hair wide, so that a point
     /// quantised across a face by rounding is still inside).
     cells: Vec<CachedCell>,
-    /// (squared distance, sorted index) of the candidates a query kept.
-    found: Vec<(f32, u32)>,
+    /// The candidates a query kept, as squared distance (its bits: non-negative floats order
+    /// like their bits) above sorted index, so that selection compares integers.
+    found: Vec<u64>,
     /// Blocks of coarser cells, for the queries this block cannot prove.
     coarse: Option<Box<CellCache>>,
 }
@@ -143,7 +147,7 @@ struct CachedCell {
 impl CellCache {
     /// Puts the candidates within `limit_d2` of `q` first in `found` and returns how many.
     fn within(&mut self, q: [f32; 3], limit_d2: f32) -> usize {
-        self.found.resize(self.idx.len(), (0.0, 0));
+        self.found.resize(self.idx.len(), 0);
         let mut m = 0;
         for cell in &self.cells {
             let gap: [f32; 3] =
@@ -160,7 +164,7 @@ impl CellCache {
             {
                 let (dx, dy, dz) = (x - q[0], y - q[1], z - q[2]);
                 let d = dx * dx + dy * dy + dz * dz;
-                self.found[m] = (d, i);
+                self.found[m] = u64::from(d.to_bits()) << 32 | u64::from(i);
                 m += usize::from(d <= limit_d2);
             }
         }
@@ -200,7 +204,9 @@ impl MortonGrid {
         let order: Vec<u32> = keyed.iter().map(|&(_, i)| i).collect();
         let codes: Vec<u64> = keyed.iter().map(|&(c, _)| c).collect();
         let points: Vec<[f32; 3]> = order.iter().map(|&i| positions[i as usize]).collect();
-        let mut grid = MortonGrid { lo, cube_m, codes, points, base_level: 0, levels: Default::default() };
+        let [xs, ys, zs] = [0, 1, 2].map(|a| points.iter().map(|p| p[a]).collect());
+        let mut grid =
+            MortonGrid { lo, cube_m, codes, points, xs, ys, zs, base_level: 0, levels: Default::default() };
         // The finest level whose non-empty cells hold TARGET_PER_CELL points on average,
         // counted in one pass (two neighbours in sorted order fall in different cells at every
         // level from the one their codes' highest differing bit belongs to), so that only the
@@ -311,16 +317,16 @@ impl MortonGrid {
         }
         let found = &mut cache.found[..m];
         if m > k {
-            found.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            found.select_nth_unstable(k - 1);
         }
-        let dk2 = found[..k].iter().map(|e| e.0).fold(0.0f32, f32::max);
+        let dk2 = f32::from_bits((found[..k].iter().max().copied().unwrap_or(0) >> 32) as u32);
         // Proof: nothing outside the block is nearer than its faces.
         let reach = (0..3)
             .map(|a| (q[a] - cache.block_lo[a]).min(cache.block_hi[a] - q[a]))
             .fold(f32::INFINITY, f32::min)
             - self.cube_m * 1e-5;
         if reach > 0.0 && dk2 < reach * reach {
-            out.extend_from_slice(&found[..k]);
+            out.extend(found[..k].iter().map(|&key| (f32::from_bits((key >> 32) as u32), key as u32)));
             true
         } else {
             false
@@ -389,12 +395,10 @@ impl MortonGrid {
                             lo_m: cell_lo.map(|v| v - eps_m),
                             hi_m: cell_lo.map(|v| v + edge_m + eps_m),
                         });
-                        for (off, pt) in self.points[s..e].iter().enumerate() {
-                            cache.xs.push(pt[0]);
-                            cache.ys.push(pt[1]);
-                            cache.zs.push(pt[2]);
-                            cache.idx.push((s + off) as u32);
-                        }
+                        cache.xs.extend_from_slice(&self.xs[s..e]);
+                        cache.ys.extend_from_slice(&self.ys[s..e]);
+                        cache.zs.extend_from_slice(&self.zs[s..e]);
+                        cache.idx.extend(s as u32..e as u32);
                     }
                 }
             }
