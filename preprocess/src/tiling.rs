@@ -451,6 +451,101 @@ pub fn tile_scans(
     Ok(plan)
 }
 
+/// Pass 1: the points of every fine cell, with the valid and invalid points. Scans are decoded,
+/// posed and counted in parallel, one per worker at a time (counts add up the same in any order;
+/// distribute instead keeps file order, which decides the bins'), and the workers report their
+/// progress to this thread. Decoding adds to `count: read scans` and counting to `count: cells`,
+/// each summed over the workers.
+fn count_cells(
+    scans: &[ResolvedScan],
+    chunk_points: usize,
+    inv_quantum: f64,
+    shift: u32,
+    claimed: u64,
+    progress: &dyn Fn(Progress),
+    profile: &Profile,
+) -> Result<(foldhash::HashMap<[i64; 3], u64>, u64, u64)> {
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    type Counts = (foldhash::HashMap<[i64; 3], u64>, u64, u64);
+    let workers = rayon::current_num_threads().clamp(1, scans.len().max(1));
+    let next = AtomicUsize::new(0);
+    let failed = AtomicBool::new(false);
+    let (done_tx, done_rx) = std::sync::mpsc::channel::<u64>();
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..workers)
+            .map(|_| {
+                let done_tx = done_tx.clone();
+                let (next, failed) = (&next, &failed);
+                scope.spawn(move || -> Result<Counts> {
+                    let mut fine: foldhash::HashMap<[i64; 3], u64> = foldhash::HashMap::default();
+                    let (mut points, mut invalid) = (0u64, 0u64);
+                    let mut chunk = PointChunk::new(chunk_points);
+                    while !failed.load(Ordering::Relaxed) {
+                        let Some(scan) = scans.get(next.fetch_add(1, Ordering::Relaxed)) else { break };
+                        let mut count_scan = || -> Result<()> {
+                            let mut source = profile.time(Stage::CountRead, || {
+                                ingest::open(&scan.path, scan.format, scan.index)
+                            })?;
+                            loop {
+                                let clock = Instant::now();
+                                if source.fill_chunk(&mut chunk)? == 0 {
+                                    return Ok(());
+                                }
+                                for p in &mut chunk.xyz {
+                                    *p = scan.world_from_scan.apply(*p);
+                                }
+                                profile.add(Stage::CountRead, clock.elapsed());
+                                let clock = Instant::now();
+                                for p in &chunk.xyz {
+                                    if p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
+                                        *fine
+                                            .entry(fine_key(quantise(p, inv_quantum), shift))
+                                            .or_default() += 1;
+                                        points += 1;
+                                    } else {
+                                        invalid += 1;
+                                    }
+                                }
+                                profile.add(Stage::Count, clock.elapsed());
+                                let _ = done_tx.send(chunk.len() as u64);
+                            }
+                        };
+                        if let Err(e) = count_scan() {
+                            failed.store(true, Ordering::Relaxed);
+                            return Err(e);
+                        }
+                    }
+                    Ok((fine, points, invalid))
+                })
+            })
+            .collect();
+        // The workers hold the only senders left: the loop ends when they all have.
+        drop(done_tx);
+        let mut done = 0u64;
+        for n in done_rx {
+            done += n;
+            progress(Progress { stage: "count", done, total: claimed });
+        }
+        let mut total: Counts = (foldhash::HashMap::default(), 0, 0);
+        let mut first_error = None;
+        for handle in handles {
+            match handle.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)) {
+                Ok((fine, points, invalid)) => {
+                    for (k, n) in fine {
+                        *total.0.entry(k).or_default() += n;
+                    }
+                    total.1 += points;
+                    total.2 += invalid;
+                }
+                Err(e) => {
+                    first_error.get_or_insert(e);
+                }
+            }
+        }
+        first_error.map_or(Ok(total), Err)
+    })
+}
+
 /// Pass 1 and the plan.
 fn count_and_plan(
     scans: &[ResolvedScan],
@@ -468,21 +563,8 @@ fn count_and_plan(
     })?;
     let inv = 1.0 / params.quantum_m;
     let shift = (params.min_tile_extent_m / params.quantum_m).log2() as u32;
-    let mut fine: foldhash::HashMap<[i64; 3], u64> = foldhash::HashMap::default();
-    let (mut points, mut invalid, mut done) = (0u64, 0u64, 0u64);
-    stream_world(scans, params.chunk_points, profile, (Stage::CountRead, Stage::Count), |_, chunk| {
-        for p in &chunk.xyz {
-            if p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
-                *fine.entry(fine_key(quantise(p, inv), shift)).or_default() += 1;
-                points += 1;
-            } else {
-                invalid += 1;
-            }
-        }
-        done += chunk.len() as u64;
-        progress(Progress { stage: "count", done, total: claimed });
-        Ok(())
-    })?;
+    let (fine, points, invalid) =
+        count_cells(scans, params.chunk_points, inv, shift, claimed, progress, profile)?;
 
     // Plan: pyramid of counts relative to the anchor, tiles chosen top-down.
     let planning = Instant::now();
