@@ -96,7 +96,7 @@ struct MortonGrid {
     cube_m: f32,
     /// Morton code of each sorted point.
     codes: Vec<u64>,
-    /// The sorted points, and again by axis (a cell's candidates are copied as three runs).
+    /// The sorted points, and again by axis (the candidate scan reads three runs per cell).
     points: Vec<[f32; 3]>,
     xs: Vec<f32>,
     ys: Vec<f32>,
@@ -114,20 +114,19 @@ struct Level {
     starts: Vec<u32>,
 }
 
-/// The candidates of one cell, kept while consecutive queries fall in it.
+/// The candidates of one cell's block, kept while consecutive queries fall in the cell: runs of
+/// the grid's sorted points, read in place.
 #[derive(Debug, Default)]
 pub struct CellCache {
     key: Option<(u32, u64)>,
-    xs: Vec<f32>,
-    ys: Vec<f32>,
-    zs: Vec<f32>,
-    idx: Vec<u32>,
+    /// Candidates in all the block's cells.
+    candidates: usize,
     /// The block's inner and outer faces, metres (infinite where the cube ends: no point lies
     /// beyond it).
     block_lo: [f32; 3],
     block_hi: [f32; 3],
-    /// The block's non-empty cells: their candidates and bounds (a hair wide, so that a point
-    /// quantised across a face by rounding is still inside).
+    /// The block's non-empty cells: their runs of sorted points and bounds (a hair wide, so that
+    /// a point quantised across a face by rounding is still inside).
     cells: Vec<CachedCell>,
     /// The candidates a query kept, as squared distance (its bits: non-negative floats order
     /// like their bits) above sorted index, so that selection compares integers.
@@ -146,8 +145,8 @@ struct CachedCell {
 
 impl CellCache {
     /// Puts the candidates within `limit_d2` of `q` first in `found` and returns how many.
-    fn within(&mut self, q: [f32; 3], limit_d2: f32) -> usize {
-        self.found.resize(self.idx.len(), 0);
+    fn within(&mut self, grid: &MortonGrid, q: [f32; 3], limit_d2: f32) -> usize {
+        self.found.resize(self.candidates, 0);
         let mut m = 0;
         for cell in &self.cells {
             let gap: [f32; 3] =
@@ -159,8 +158,8 @@ impl CellCache {
             // One pass, branch-free: every candidate is written, the kept ones by advancing.
             // (Distances in a vectorised loop of their own, then the compaction, ran 1.5%
             // slower in `grotto-pack bench-normals`.)
-            for (((&x, &y), &z), &i) in
-                self.xs[s..e].iter().zip(&self.ys[s..e]).zip(&self.zs[s..e]).zip(&self.idx[s..e])
+            for (((&x, &y), &z), i) in
+                grid.xs[s..e].iter().zip(&grid.ys[s..e]).zip(&grid.zs[s..e]).zip(s as u32..)
             {
                 let (dx, dy, dz) = (x - q[0], y - q[1], z - q[2]);
                 let d = dx * dx + dy * dy + dz * dz;
@@ -283,7 +282,7 @@ impl MortonGrid {
             if coarse.key != Some((l, prefix)) {
                 self.gather(l, prefix, coarse);
             }
-            if coarse.idx.len() > MAX_COARSE_CANDIDATES {
+            if coarse.candidates > MAX_COARSE_CANDIDATES {
                 break;
             }
             if self.prove(j, k, guess_d2, coarse, out) {
@@ -304,16 +303,16 @@ impl MortonGrid {
         out: &mut Vec<(f32, u32)>,
     ) -> bool {
         out.clear();
-        if cache.idx.len() < k {
+        if cache.candidates < k {
             return false;
         }
         let q = self.points[j];
         // The k smallest: first among those within the caller's guess of the k-th distance
         // (a few more than k where the guess is good; cells wholly beyond it are skipped), else
         // among all.
-        let mut m = cache.within(q, guess_d2);
+        let mut m = cache.within(self, q, guess_d2);
         if m < k {
-            m = cache.within(q, f32::INFINITY);
+            m = cache.within(self, q, f32::INFINITY);
         }
         let found = &mut cache.found[..m];
         if m > k {
@@ -356,10 +355,7 @@ impl MortonGrid {
 
     fn gather(&self, l: u32, prefix: u64, cache: &mut CellCache) {
         cache.key = Some((l, prefix));
-        cache.xs.clear();
-        cache.ys.clear();
-        cache.zs.clear();
-        cache.idx.clear();
+        cache.candidates = 0;
         cache.cells.clear();
         let c = morton_decode(prefix);
         let cells = 1i64 << l;
@@ -387,18 +383,14 @@ impl MortonGrid {
                     let p = morton_encode(n[0] as u32, n[1] as u32, n[2] as u32);
                     if let Some(i) = gallop(&level.prefixes, p, hint) {
                         let (s, e) = (level.starts[i] as usize, level.starts[i + 1] as usize);
-                        let first = cache.idx.len() as u32;
                         let cell_lo: [f32; 3] = std::array::from_fn(|a| self.lo[a] + n[a] as f32 * edge_m);
+                        cache.candidates += e - s;
                         cache.cells.push(CachedCell {
-                            first,
-                            end: first + (e - s) as u32,
+                            first: s as u32,
+                            end: e as u32,
                             lo_m: cell_lo.map(|v| v - eps_m),
                             hi_m: cell_lo.map(|v| v + edge_m + eps_m),
                         });
-                        cache.xs.extend_from_slice(&self.xs[s..e]);
-                        cache.ys.extend_from_slice(&self.ys[s..e]);
-                        cache.zs.extend_from_slice(&self.zs[s..e]);
-                        cache.idx.extend(s as u32..e as u32);
                     }
                 }
             }
