@@ -31,6 +31,9 @@ use rayon::prelude::*;
 /// distance holds about five, which is what the block must reach past for the proof to hold.
 const TARGET_PER_CELL: usize = 6;
 
+/// Candidates past k that are dropped one by one rather than by a selection.
+const SMALL_EXCESS: usize = 6;
+
 /// A coarse block holding more candidates than this is left to the kd-tree.
 const MAX_COARSE_CANDIDATES: usize = 4096;
 
@@ -315,8 +318,15 @@ impl MortonGrid {
             m = cache.within(self, q, f32::INFINITY);
         }
         let found = &mut cache.found[..m];
-        if m > k {
+        if m > k + SMALL_EXCESS {
             found.select_nth_unstable(k - 1);
+        } else {
+            // A good guess leaves a few more than k: dropping the largest a few times is
+            // cheaper than a selection.
+            for end in (k..m).rev() {
+                let largest = (0..=end).max_by_key(|&i| found[i]).unwrap_or(end);
+                found.swap(largest, end);
+            }
         }
         let dk2 = f32::from_bits((found[..k].iter().max().copied().unwrap_or(0) >> 32) as u32);
         // Proof: nothing outside the block is nearer than its faces.
