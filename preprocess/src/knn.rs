@@ -16,8 +16,8 @@
 //! there (dense cells are split into their children), so candidate sets stay between about 50
 //! and 150 points in dense and sparse parts of a scan alike; a query the block cannot prove tries
 //! the blocks of coarser cells, then the kd-tree. On the synthetic 10^7 survey 98.8% of queries
-//! are proven by their block and the rest by a coarser one; the normals stage ran 1.45 times as
-//! fast as with kiddo alone (docs/benchmarks.md).
+//! are proven by their block and the rest by a coarser one; the build's normals stage there ran
+//! in half the time it took with kiddo alone (docs/benchmarks.md, "Exact kNN by cells").
 
 use std::num::NonZero;
 use std::sync::OnceLock;
