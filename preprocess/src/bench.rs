@@ -186,7 +186,7 @@ pub fn normals(
     }
     let tiles: Vec<Loaded> = (0..plan.tiles.len())
         .map(|t| -> Result<Loaded> {
-            let bin = read_bin(&work, t)?;
+            let bin = read_bin(&work, &plan, t)?;
             let origin = plan.origin_m(&plan.tiles[t]);
             Ok(Loaded {
                 positions: bin.iter().map(|p| p.pos_tile_m(plan.quantum_m)).collect(),

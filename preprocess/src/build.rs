@@ -402,7 +402,7 @@ fn build_tile(
     let origin = plan.origin_m(tile);
     let extent = plan.extent_m(tile);
     let mut clock = std::time::Instant::now();
-    let points = tiling::read_bin(work_dir, t)?;
+    let points = tiling::read_bin(work_dir, plan, t)?;
     let quantum = plan.quantum_m;
     let positions: Vec<[f32; 3]> = points.iter().map(|p| p.pos_tile_m(quantum)).collect();
     let own: Vec<bool> = points.iter().map(|p| p.flags & FLAG_HALO == 0).collect();

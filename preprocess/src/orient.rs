@@ -139,7 +139,7 @@ impl CaveGrid {
             .into_par_iter()
             .map(|t| {
                 let tile_origin = plan.origin_m(&plan.tiles[t]);
-                let mut keys: Vec<[i32; 3]> = tiling::read_bin(work_dir, t)?
+                let mut keys: Vec<[i32; 3]> = tiling::read_bin(work_dir, plan, t)?
                     .iter()
                     .filter(|p| p.flags & FLAG_HALO == 0)
                     .map(|p| {

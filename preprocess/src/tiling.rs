@@ -129,6 +129,10 @@ pub struct TilePlan {
     /// (`ResolvedScan::seen_from`). Empty in plans from before this field: all inside.
     #[serde(default)]
     pub seen_from_outside: Vec<bool>,
+    /// How many workers wrote the bins, each its own file per tile (`bin_path`); a tile's points
+    /// are the files' points in scan order. 0 in plans from before this field: one file.
+    #[serde(default)]
+    pub bin_writers: usize,
     pub bins_complete: bool,
 }
 
@@ -170,28 +174,40 @@ pub struct Progress {
     pub total: u64,
 }
 
-pub fn bin_path(work_dir: &Path, tile: usize) -> PathBuf {
-    work_dir.join("bins").join(format!("{tile:07}.bin"))
+/// The bin of `tile` written by distribute worker `writer` (the first worker's is the only one
+/// in work directories from before there were several).
+pub fn bin_path(work_dir: &Path, tile: usize, writer: usize) -> PathBuf {
+    let name = if writer == 0 { format!("{tile:07}.bin") } else { format!("{tile:07}.w{writer}.bin") };
+    work_dir.join("bins").join(name)
 }
 
-/// Reads one tile's bin.
-pub fn read_bin(work_dir: &Path, tile: usize) -> Result<Vec<BinPoint>> {
-    let path = bin_path(work_dir, tile);
-    let bytes = match std::fs::read(&path) {
-        Ok(b) => b,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(source) => return Err(Error::Io { path, source }),
-    };
-    if bytes.len() % size_of::<BinPoint>() != 0 {
-        return Err(Error::Io {
-            path,
-            source: std::io::Error::new(
-                std::io::ErrorKind::InvalidData,
-                "bin is not whole points (interrupted write?)",
-            ),
-        });
+/// Reads one tile's points: every worker's file, in scan order (each scan was distributed by one
+/// worker, in file order, so this is the order one worker would have written).
+pub fn read_bin(work_dir: &Path, plan: &TilePlan, tile: usize) -> Result<Vec<BinPoint>> {
+    let mut points = Vec::new();
+    for writer in 0..plan.bin_writers.max(1) {
+        let path = bin_path(work_dir, tile, writer);
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+            Err(source) => return Err(Error::Io { path, source }),
+        };
+        if bytes.len() % size_of::<BinPoint>() != 0 {
+            return Err(Error::Io {
+                path,
+                source: std::io::Error::new(
+                    std::io::ErrorKind::InvalidData,
+                    "bin is not whole points (interrupted write?)",
+                ),
+            });
+        }
+        points.extend(bytemuck::pod_collect_to_vec::<u8, BinPoint>(&bytes));
     }
-    Ok(bytemuck::pod_collect_to_vec(&bytes))
+    if plan.bin_writers > 1 {
+        // Stable, and each file is already in scan order: a merge of a few runs.
+        points.sort_by_key(|p| p.scan);
+    }
+    Ok(points)
 }
 
 fn check_params(p: &TilingParams) -> Result<()> {
@@ -317,71 +333,89 @@ pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Optio
     Ok(Some((median, sampled)))
 }
 
-/// Streams every scan through `f(scan_index, chunk_in_world)`, posing points into the world.
-///
-/// Decoding and posing run on their own thread, a chunk ahead of `f` (two chunks in flight,
-/// recycled), so reading a file overlaps the pass's own work on the other core; `f` sees the
-/// points in file order, as a single thread would. Decoding adds to `stages.0` of `profile`,
-/// `f` to `stages.1`. An error on either side stops both and is returned.
-fn stream_world(
+/// Streams the scans through `workers` threads, one scan per worker at a time, claimed in index
+/// order (so each worker meets its scans in increasing order). Each worker keeps its own state,
+/// made by `init(worker)`; `work(state, scan, chunk)` sees every chunk posed into the world (its
+/// normals too when `pose_normals`). Decoding and posing add to `stages.0` of `profile`, `work`
+/// to `stages.1`, each summed over the workers; the workers report points done to `progress` on
+/// this thread. The first error stops every worker and is returned; else the states, by worker.
+#[allow(clippy::too_many_arguments)]
+fn par_scans<S: Send>(
     scans: &[ResolvedScan],
     chunk_points: usize,
+    pose_normals: bool,
     profile: &Profile,
     stages: (Stage, Stage),
-    mut f: impl FnMut(usize, &PointChunk) -> Result<()>,
-) -> Result<()> {
-    let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Result<(usize, PointChunk)>>(1);
-    let (empty_tx, empty_rx) = std::sync::mpsc::channel::<PointChunk>();
-    for _ in 0..2 {
-        let _ = empty_tx.send(PointChunk::new(chunk_points));
-    }
+    progress: &dyn Fn(u64),
+    init: impl Fn(usize) -> S + Sync,
+    work: impl Fn(&mut S, usize, &PointChunk) -> Result<()> + Sync,
+) -> Result<Vec<S>> {
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    let workers = rayon::current_num_threads().clamp(1, scans.len().max(1));
+    let next = AtomicUsize::new(0);
+    let failed = AtomicBool::new(false);
+    let (done_tx, done_rx) = std::sync::mpsc::channel::<u64>();
     std::thread::scope(|scope| {
-        scope.spawn(move || {
-            let read = || -> Result<()> {
-                let mut spare: Option<PointChunk> = None;
-                for (si, scan) in scans.iter().enumerate() {
-                    let mut source =
-                        profile.time(stages.0, || ingest::open(&scan.path, scan.format, scan.index))?;
-                    loop {
-                        // The consumer gone (it stopped on an error) ends the reading too.
-                        let Some(mut chunk) = spare.take().or_else(|| empty_rx.recv().ok()) else {
-                            return Ok(());
+        let handles: Vec<_> = (0..workers)
+            .map(|w| {
+                let done_tx = done_tx.clone();
+                let (next, failed, init, work) = (&next, &failed, &init, &work);
+                scope.spawn(move || -> Result<S> {
+                    let mut state = init(w);
+                    let mut chunk = PointChunk::new(chunk_points);
+                    while !failed.load(Ordering::Relaxed) {
+                        let si = next.fetch_add(1, Ordering::Relaxed);
+                        let Some(scan) = scans.get(si) else { break };
+                        let mut one_scan = || -> Result<()> {
+                            let mut source = profile
+                                .time(stages.0, || ingest::open(&scan.path, scan.format, scan.index))?;
+                            while !failed.load(Ordering::Relaxed) {
+                                let clock = Instant::now();
+                                if source.fill_chunk(&mut chunk)? == 0 {
+                                    break;
+                                }
+                                let pose = &scan.world_from_scan;
+                                for p in &mut chunk.xyz {
+                                    *p = pose.apply(*p);
+                                }
+                                if pose_normals {
+                                    for n in &mut chunk.normal {
+                                        *n = pose.rotate(n.map(f64::from)).map(|v| v as f32);
+                                    }
+                                }
+                                profile.add(stages.0, clock.elapsed());
+                                profile.time(stages.1, || work(&mut state, si, &chunk))?;
+                                let _ = done_tx.send(chunk.len() as u64);
+                            }
+                            Ok(())
                         };
-                        let clock = Instant::now();
-                        let filled = source.fill_chunk(&mut chunk)?;
-                        let pose = &scan.world_from_scan;
-                        for p in &mut chunk.xyz {
-                            *p = pose.apply(*p);
-                        }
-                        for n in &mut chunk.normal {
-                            *n = pose.rotate(n.map(f64::from)).map(|v| v as f32);
-                        }
-                        profile.add(stages.0, clock.elapsed());
-                        if filled == 0 {
-                            spare = Some(chunk);
-                            break;
-                        }
-                        if full_tx.send(Ok((si, chunk))).is_err() {
-                            return Ok(());
+                        if let Err(e) = one_scan() {
+                            failed.store(true, Ordering::Relaxed);
+                            return Err(e);
                         }
                     }
+                    Ok(state)
+                })
+            })
+            .collect();
+        // The workers hold the only senders left: the loop ends when they all have.
+        drop(done_tx);
+        let mut done = 0u64;
+        for n in done_rx {
+            done += n;
+            progress(done);
+        }
+        let mut states = Vec::with_capacity(workers);
+        let mut first_error = None;
+        for handle in handles {
+            match handle.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)) {
+                Ok(state) => states.push(state),
+                Err(e) => {
+                    first_error.get_or_insert(e);
                 }
-                Ok(())
-            };
-            if let Err(e) = read() {
-                let _ = full_tx.send(Err(e));
             }
-        });
-        // Owns the consumer's ends, so an early return drops them and the reader stops.
-        let consume = move || -> Result<()> {
-            for message in full_rx {
-                let (si, chunk) = message?;
-                profile.time(stages.1, || f(si, &chunk))?;
-                let _ = empty_tx.send(chunk);
-            }
-            Ok(())
-        };
-        consume()
+        }
+        first_error.map_or(Ok(states), Err)
     })
 }
 
@@ -452,10 +486,7 @@ pub fn tile_scans(
 }
 
 /// Pass 1: the points of every fine cell, with the valid and invalid points. Scans are decoded,
-/// posed and counted in parallel, one per worker at a time (counts add up the same in any order;
-/// distribute instead keeps file order, which decides the bins'), and the workers report their
-/// progress to this thread. Decoding adds to `count: read scans` and counting to `count: cells`,
-/// each summed over the workers.
+/// posed and counted in parallel (counts add up the same in any order).
 fn count_cells(
     scans: &[ResolvedScan],
     chunk_points: usize,
@@ -465,85 +496,36 @@ fn count_cells(
     progress: &dyn Fn(Progress),
     profile: &Profile,
 ) -> Result<(foldhash::HashMap<[i64; 3], u64>, u64, u64)> {
-    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
     type Counts = (foldhash::HashMap<[i64; 3], u64>, u64, u64);
-    let workers = rayon::current_num_threads().clamp(1, scans.len().max(1));
-    let next = AtomicUsize::new(0);
-    let failed = AtomicBool::new(false);
-    let (done_tx, done_rx) = std::sync::mpsc::channel::<u64>();
-    std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..workers)
-            .map(|_| {
-                let done_tx = done_tx.clone();
-                let (next, failed) = (&next, &failed);
-                scope.spawn(move || -> Result<Counts> {
-                    let mut fine: foldhash::HashMap<[i64; 3], u64> = foldhash::HashMap::default();
-                    let (mut points, mut invalid) = (0u64, 0u64);
-                    let mut chunk = PointChunk::new(chunk_points);
-                    while !failed.load(Ordering::Relaxed) {
-                        let Some(scan) = scans.get(next.fetch_add(1, Ordering::Relaxed)) else { break };
-                        let mut count_scan = || -> Result<()> {
-                            let mut source = profile.time(Stage::CountRead, || {
-                                ingest::open(&scan.path, scan.format, scan.index)
-                            })?;
-                            loop {
-                                let clock = Instant::now();
-                                if source.fill_chunk(&mut chunk)? == 0 {
-                                    return Ok(());
-                                }
-                                for p in &mut chunk.xyz {
-                                    *p = scan.world_from_scan.apply(*p);
-                                }
-                                profile.add(Stage::CountRead, clock.elapsed());
-                                let clock = Instant::now();
-                                for p in &chunk.xyz {
-                                    if p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
-                                        *fine
-                                            .entry(fine_key(quantise(p, inv_quantum), shift))
-                                            .or_default() += 1;
-                                        points += 1;
-                                    } else {
-                                        invalid += 1;
-                                    }
-                                }
-                                profile.add(Stage::Count, clock.elapsed());
-                                let _ = done_tx.send(chunk.len() as u64);
-                            }
-                        };
-                        if let Err(e) = count_scan() {
-                            failed.store(true, Ordering::Relaxed);
-                            return Err(e);
-                        }
-                    }
-                    Ok((fine, points, invalid))
-                })
-            })
-            .collect();
-        // The workers hold the only senders left: the loop ends when they all have.
-        drop(done_tx);
-        let mut done = 0u64;
-        for n in done_rx {
-            done += n;
-            progress(Progress { stage: "count", done, total: claimed });
-        }
-        let mut total: Counts = (foldhash::HashMap::default(), 0, 0);
-        let mut first_error = None;
-        for handle in handles {
-            match handle.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)) {
-                Ok((fine, points, invalid)) => {
-                    for (k, n) in fine {
-                        *total.0.entry(k).or_default() += n;
-                    }
-                    total.1 += points;
-                    total.2 += invalid;
-                }
-                Err(e) => {
-                    first_error.get_or_insert(e);
+    let states = par_scans(
+        scans,
+        chunk_points,
+        false,
+        profile,
+        (Stage::CountRead, Stage::Count),
+        &|done| progress(Progress { stage: "count", done, total: claimed }),
+        |_| -> Counts { (foldhash::HashMap::default(), 0, 0) },
+        |(fine, points, invalid), _, chunk| {
+            for p in &chunk.xyz {
+                if p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
+                    *fine.entry(fine_key(quantise(p, inv_quantum), shift)).or_default() += 1;
+                    *points += 1;
+                } else {
+                    *invalid += 1;
                 }
             }
+            Ok(())
+        },
+    )?;
+    let mut total: Counts = (foldhash::HashMap::default(), 0, 0);
+    for (fine, points, invalid) in states {
+        for (k, n) in fine {
+            *total.0.entry(k).or_default() += n;
         }
-        first_error.map_or(Ok(total), Err)
-    })
+        total.1 += points;
+        total.2 += invalid;
+    }
+    Ok(total)
 }
 
 /// Pass 1 and the plan.
@@ -612,11 +594,15 @@ fn count_and_plan(
         scanners_world_m: scans.iter().map(|s| s.scanner_world_m).collect(),
         scanner_known: scans.iter().map(|s| s.scanner_known).collect(),
         seen_from_outside: scans.iter().map(|s| s.seen_from == SeenFrom::Outside).collect(),
+        bin_writers: 0,
         bins_complete: false,
     })
 }
 
-/// Pass 2: every point into its tile's bin (and halo copies into neighbours').
+/// Pass 2: every point into its tile's bin (and halo copies into neighbours'). Scans are
+/// distributed in parallel, each worker into its own bin files with its share of the buffer
+/// budget; `read_bin` puts a tile's points back in scan order, so the bins read the same
+/// whatever the number of workers.
 fn distribute(
     scans: &[ResolvedScan],
     work_dir: &Path,
@@ -628,47 +614,44 @@ fn distribute(
     let inv = 1.0 / params.quantum_m;
     let shift = (params.min_tile_extent_m / params.quantum_m).log2() as u32;
     let top = (params.max_tile_extent_m / params.min_tile_extent_m).log2() as u32;
-    let points = plan.points;
-    let invalid = plan.invalid_points;
-    let lookup: HashMap<(u32, [i64; 3]), usize> =
-        plan.tiles.iter().enumerate().map(|(i, t)| ((t.level, t.key), i)).collect();
-    // The tile of each fine cell met so far: one lookup per point (and per halo probe) instead of
-    // one per tile level. Fine cells are a tile's smallest edge, so there are few of them (one per
-    // square metre of wall at the default leaf) against millions of points.
-    let mut tile_of_cell: foldhash::HashMap<[i64; 3], Option<usize>> = foldhash::HashMap::default();
-    let mut find = |q: [i64; 3]| -> Option<usize> {
-        let k = fine_key(q, shift);
-        *tile_of_cell.entry(k).or_insert_with(|| {
-            let rel: [i64; 3] = std::array::from_fn(|i| k[i] - plan.anchor[i]);
-            (0..=top).find_map(|l| lookup.get(&(l, rel.map(|v| v >> l))).copied())
-        })
-    };
-    for t in 0..plan.tiles.len() {
-        let _ = std::fs::remove_file(bin_path(work_dir, t));
+    let total = plan.points + plan.invalid_points;
+    // Every bin of an earlier, interrupted run, whatever its number of workers.
+    let bins_dir = work_dir.join("bins");
+    let entries =
+        std::fs::read_dir(&bins_dir).map_err(|source| Error::Io { path: bins_dir.clone(), source })?;
+    for entry in entries.flatten() {
+        if entry.path().extension().is_some_and(|e| e == "bin") {
+            let _ = std::fs::remove_file(entry.path());
+        }
     }
-    let mut bins = Bins::new(work_dir, plan.tiles.len(), params.buffer_bytes);
+    let workers = rayon::current_num_threads().clamp(1, scans.len().max(1));
+    let frozen: &TilePlan = plan;
     // Tile origins and extents in quanta.
-    let origins: Vec<[i64; 3]> = plan
+    let origins: Vec<[i64; 3]> = frozen
         .tiles
         .iter()
-        .map(|t| std::array::from_fn(|a| (plan.anchor[a] + (t.key[a] << t.level)) << shift))
+        .map(|t| std::array::from_fn(|a| (frozen.anchor[a] + (t.key[a] << t.level)) << shift))
         .collect();
-    let extents: Vec<i64> = plan.tiles.iter().map(|t| 1i64 << (t.level + shift)).collect();
+    let extents: Vec<i64> = frozen.tiles.iter().map(|t| 1i64 << (t.level + shift)).collect();
     let h = (params.halo_m * inv).round() as i64;
-    let (mut done, mut halo) = (0u64, 0u64);
-    let mut neighbours: Vec<usize> = Vec::with_capacity(27);
-    stream_world(
+    let states = par_scans(
         scans,
         params.chunk_points,
+        true,
         profile,
         (Stage::DistributeRead, Stage::Distribute),
-        |si, chunk| {
+        &|done| progress(Progress { stage: "distribute", done, total }),
+        |w| {
+            let bins = Bins::new(work_dir, frozen.tiles.len(), params.buffer_bytes / workers, w);
+            (Routes::new(frozen, shift, top, h), bins, 0u64)
+        },
+        |(routes, bins, halo), si, chunk| {
             for (i, p) in chunk.xyz.iter().enumerate() {
                 if !p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
                     continue;
                 }
                 let q = quantise(p, inv);
-                let Some(t) = find(q) else { continue };
+                let Some(t) = routes.tile(fine_key(q, shift)) else { continue };
                 let normal_snorm = chunk.normal.get(i).map_or([0; 3], |n| {
                     let len = n.iter().map(|c| c * c).sum::<f32>().sqrt();
                     if len.is_finite() && len > 1e-6 {
@@ -686,46 +669,134 @@ fn distribute(
                 // Halo: only points near their tile's border can reach a neighbour.
                 let near = point.pos_q.iter().any(|&c| i64::from(c) < h || i64::from(c) >= extents[t] - h);
                 if h > 0 && near {
-                    neighbours.clear();
-                    // A probe that stays inside the tile on every axis it moves along is in
-                    // this tile: only probes that cross a near face are looked up (9 of 26 for a
-                    // point near one face), the same tiles as probing all.
-                    let crosses = |a: usize, d: i64| {
-                        (d < 0 && i64::from(point.pos_q[a]) < h)
-                            || (d > 0 && i64::from(point.pos_q[a]) >= extents[t] - h)
-                    };
-                    for o in 0..27 {
-                        let d = [o % 3 - 1, o / 3 % 3 - 1, o / 9 - 1];
-                        if !(0..3).any(|a| crosses(a, d[a])) {
-                            continue;
-                        }
-                        let probe: [i64; 3] = std::array::from_fn(|a| q[a] + d[a] * h);
-                        if let Some(n) = find(probe)
-                            && n != t
-                            && !neighbours.contains(&n)
-                        {
-                            neighbours.push(n);
-                        }
-                    }
-                    for &n in &neighbours {
+                    for &n in routes.halo(q, t) {
                         bins.push(n, BinPoint { pos_q: local(n), flags: FLAG_HALO, ..point })?;
-                        halo += 1;
+                        *halo += 1;
                     }
                 }
             }
-            done += chunk.len() as u64;
-            progress(Progress { stage: "distribute", done, total: points + invalid });
             Ok(())
         },
     )?;
-    profile.time(Stage::Distribute, || bins.flush_all())?;
+    let mut halo = 0;
+    for (_, mut bins, worker_halo) in states {
+        profile.time(Stage::Distribute, || bins.flush_all())?;
+        halo += worker_halo;
+    }
     plan.halo_points = halo;
+    plan.bin_writers = workers;
     Ok(())
+}
+
+/// Where the points of each fine cell go: the cell's tile, and for a point within the halo of
+/// some of the cell's faces, the other tiles its halo probes reach. Both depend only on the cell
+/// and on which of its faces the point is near (tiles are unions of fine cells and the halo is at
+/// most one cell, so a probe lands in the cell itself or the next one along each axis it moves),
+/// so they are worked out once per cell and face set, and a point costs one lookup, or none when
+/// it shares the previous point's cell, as scan order mostly does.
+/// A fine cell and which of its faces a point lies within the halo of (bits 2a and 2a + 1: the
+/// low and high face on axis a).
+type NearFaces = ([i64; 3], u8);
+
+struct Routes<'a> {
+    plan: &'a TilePlan,
+    lookup: HashMap<(u32, [i64; 3]), usize>,
+    shift: u32,
+    top: u32,
+    halo_q: i64,
+    /// Fine cell -> its tile (`None` outside every tile).
+    tile_of_cell: foldhash::HashMap<[i64; 3], Option<usize>>,
+    last_cell: Option<([i64; 3], Option<usize>)>,
+    /// (fine cell, near-face bits) -> the range of `neighbours` holding its halo tiles.
+    halo_of_cell: foldhash::HashMap<NearFaces, (u32, u32)>,
+    last_halo: Option<(NearFaces, (u32, u32))>,
+    neighbours: Vec<usize>,
+}
+
+impl<'a> Routes<'a> {
+    fn new(plan: &'a TilePlan, shift: u32, top: u32, halo_q: i64) -> Self {
+        Self {
+            plan,
+            lookup: plan.tiles.iter().enumerate().map(|(i, t)| ((t.level, t.key), i)).collect(),
+            shift,
+            top,
+            halo_q,
+            tile_of_cell: foldhash::HashMap::default(),
+            last_cell: None,
+            halo_of_cell: foldhash::HashMap::default(),
+            last_halo: None,
+            neighbours: Vec::new(),
+        }
+    }
+
+    /// The tile of fine cell `cell`.
+    fn tile(&mut self, cell: [i64; 3]) -> Option<usize> {
+        if let Some((k, t)) = self.last_cell
+            && k == cell
+        {
+            return t;
+        }
+        let (plan, lookup, top) = (self.plan, &self.lookup, self.top);
+        let t = *self.tile_of_cell.entry(cell).or_insert_with(|| {
+            let rel: [i64; 3] = std::array::from_fn(|i| cell[i] - plan.anchor[i]);
+            (0..=top).find_map(|l| lookup.get(&(l, rel.map(|v| v >> l))).copied())
+        });
+        self.last_cell = Some((cell, t));
+        t
+    }
+
+    /// The tiles other than `own` within the halo of quantised point `q` (the tiles of the 26
+    /// probes `q + d * halo`, d in {-1, 0, 1}^3, as if each were looked up).
+    fn halo(&mut self, q: [i64; 3], own: usize) -> &[usize] {
+        let cell = q.map(|v| v >> self.shift);
+        let cell_q = 1i64 << self.shift;
+        let mut near = 0u8;
+        for a in 0..3 {
+            let r = q[a] - (cell[a] << self.shift);
+            near |= u8::from(r < self.halo_q) << (2 * a) | u8::from(r >= cell_q - self.halo_q) << (2 * a + 1);
+        }
+        let key = (cell, near);
+        let range = match self.last_halo {
+            Some((k, range)) if k == key => range,
+            _ => {
+                let range = match self.halo_of_cell.get(&key) {
+                    Some(&range) => range,
+                    None => {
+                        let start = self.neighbours.len();
+                        for o in 0..27i64 {
+                            let d = [o % 3 - 1, o / 3 % 3 - 1, o / 9 - 1];
+                            let step: [i64; 3] = std::array::from_fn(|a| match d[a] {
+                                -1 if near >> (2 * a) & 1 == 1 => -1,
+                                1 if near >> (2 * a + 1) & 1 == 1 => 1,
+                                _ => 0,
+                            });
+                            if step == [0; 3] {
+                                continue;
+                            }
+                            if let Some(n) = self.tile(std::array::from_fn(|a| cell[a] + step[a]))
+                                && n != own
+                                && !self.neighbours[start..].contains(&n)
+                            {
+                                self.neighbours.push(n);
+                            }
+                        }
+                        let range = (start as u32, (self.neighbours.len() - start) as u32);
+                        self.halo_of_cell.insert(key, range);
+                        range
+                    }
+                };
+                self.last_halo = Some((key, range));
+                range
+            }
+        };
+        &self.neighbours[range.0 as usize..(range.0 + range.1) as usize]
+    }
 }
 
 /// Per-tile append buffers with a shared byte budget.
 struct Bins {
     dir: PathBuf,
+    writer: usize,
     /// Indexed by tile; the tiles with points buffered are in `touched`.
     buffers: Vec<Vec<BinPoint>>,
     touched: Vec<usize>,
@@ -734,9 +805,10 @@ struct Bins {
 }
 
 impl Bins {
-    fn new(work_dir: &Path, tiles: usize, budget: usize) -> Self {
+    fn new(work_dir: &Path, tiles: usize, budget: usize, writer: usize) -> Self {
         Self {
             dir: work_dir.to_path_buf(),
+            writer,
             buffers: vec![Vec::new(); tiles],
             touched: Vec::new(),
             buffered: 0,
@@ -759,7 +831,7 @@ impl Bins {
     fn flush_all(&mut self) -> Result<()> {
         for tile in self.touched.drain(..) {
             let points = std::mem::take(&mut self.buffers[tile]);
-            let path = bin_path(&self.dir, tile);
+            let path = bin_path(&self.dir, tile, self.writer);
             let io = |source| Error::Io { path: path.clone(), source };
             let mut f: File = OpenOptions::new().create(true).append(true).open(&path).map_err(io)?;
             f.write_all(bytemuck::cast_slice(&points)).map_err(io)?;

@@ -27,7 +27,7 @@ fn world_points_by_scan(plan: &TilePlan, work: &Path, scans: usize) -> Vec<Vec<[
     let mut out = vec![Vec::new(); scans];
     for (t, tile) in plan.tiles.iter().enumerate() {
         let o = plan.origin_m(tile);
-        for p in tiling::read_bin(work, t).unwrap() {
+        for p in tiling::read_bin(work, plan, t).unwrap() {
             if p.flags & FLAG_HALO == 0 {
                 let local = p.pos_tile_m(plan.quantum_m);
                 out[p.scan as usize].push(std::array::from_fn(|a| o[a] + f64::from(local[a])));
@@ -112,7 +112,8 @@ fn a_cloud_shifted_to_survey_coordinates_tiles_identically() {
     assert_eq!(a.halo_points, b.halo_points);
     let mut worst = 0f64;
     for t in 0..a.tiles.len() {
-        let (pa, pb) = (tiling::read_bin(wa.path(), t).unwrap(), tiling::read_bin(wb.path(), t).unwrap());
+        let (pa, pb) =
+            (tiling::read_bin(wa.path(), &a, t).unwrap(), tiling::read_bin(wb.path(), &b, t).unwrap());
         assert_eq!(pa.len(), pb.len());
         for (x, y) in pa.iter().zip(&pb) {
             assert_eq!((x.scan, x.flags), (y.scan, y.flags));
@@ -125,6 +126,36 @@ fn a_cloud_shifted_to_survey_coordinates_tiles_identically() {
     assert!(worst < 1e-3, "local coordinates differ by {worst} m");
     let (ga, gb) = (a.grid_origin_m(), b.grid_origin_m());
     assert_eq!([gb[0] - ga[0], gb[1] - ga[1], gb[2] - ga[2]], [500_000.0, 5_000_000.0, 1000.0]);
+}
+
+#[test]
+fn bins_read_the_same_whatever_the_number_of_distribute_workers() {
+    let Some(data) = shared_data_dir() else { return };
+    let files: Vec<_> = ["bun000.ply", "bun045.ply", "bun090.ply", "bun180.ply"]
+        .iter()
+        .map(|f| data.join("ply/stanford-bunny/data").join(f))
+        .collect();
+    let scans = Manifest::from_files(&files).resolve().unwrap();
+    // Small tiles and buffers: many tiles with halo copies, several flushes per worker.
+    let params = TilingParams { max_points_per_tile: 3_000, buffer_bytes: 1 << 16, ..bunny_params() };
+    let in_pool = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| tile(&scans, &params))
+    };
+    let (w1, one) = in_pool(1);
+    assert_eq!(one.bin_writers, 1);
+    for threads in [2, 3] {
+        let (wn, many) = in_pool(threads);
+        assert_eq!(many.bin_writers, threads);
+        assert_eq!(TilePlan { bin_writers: 1, ..many.clone() }, one);
+        for t in 0..one.tiles.len() {
+            let (a, b) = (
+                tiling::read_bin(w1.path(), &one, t).unwrap(),
+                tiling::read_bin(wn.path(), &many, t).unwrap(),
+            );
+            assert!(a == b, "tile {t}: {} and {} points, or another order", a.len(), b.len());
+        }
+    }
 }
 
 #[test]
@@ -144,7 +175,7 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
     for (i, t) in plan.tiles.iter().enumerate() {
         let e = plan.extent_m(t) as f32;
         let h = params.halo_m as f32 + 1e-6;
-        for p in tiling::read_bin(work.path(), i).unwrap() {
+        for p in tiling::read_bin(work.path(), &plan, i).unwrap() {
             let c = p.pos_tile_m(plan.quantum_m);
             if p.flags & FLAG_HALO == 0 {
                 assert!(
@@ -159,10 +190,10 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
         }
     }
     // A second run with the same inputs reuses the plan and bins.
-    let before = std::fs::metadata(tiling::bin_path(work.path(), 0)).unwrap().modified().unwrap();
+    let before = std::fs::metadata(tiling::bin_path(work.path(), 0, 0)).unwrap().modified().unwrap();
     let again = tiling::tile_scans(&scans, work.path(), &params, &|_| {}, &Default::default()).unwrap();
     assert_eq!(again, plan);
-    assert_eq!(std::fs::metadata(tiling::bin_path(work.path(), 0)).unwrap().modified().unwrap(), before);
+    assert_eq!(std::fs::metadata(tiling::bin_path(work.path(), 0, 0)).unwrap().modified().unwrap(), before);
     // Interrupted while distributing (plan written, bins incomplete and one damaged): only pass 2
     // runs again, and the bins come back identical.
     let plan_json = work.path().join("plan.json");
@@ -170,8 +201,8 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
         .unwrap()
         .replace("\"bins_complete\": true", "\"bins_complete\": false");
     std::fs::write(&plan_json, text).unwrap();
-    let bin0 = std::fs::read(tiling::bin_path(work.path(), 0)).unwrap();
-    std::fs::write(tiling::bin_path(work.path(), 0), &bin0[..bin0.len() / 2]).unwrap();
+    let bin0 = std::fs::read(tiling::bin_path(work.path(), 0, 0)).unwrap();
+    std::fs::write(tiling::bin_path(work.path(), 0, 0), &bin0[..bin0.len() / 2]).unwrap();
     let stages = std::sync::Mutex::new(std::collections::BTreeSet::new());
     let profile = Profile::default();
     let resumed = tiling::tile_scans(
@@ -189,13 +220,13 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
     // The profile says the same: no count pass, a distribute pass that read the scans again.
     assert_eq!(profile.seconds(Stage::CountRead) + profile.seconds(Stage::Count), 0.0);
     assert!(profile.seconds(Stage::DistributeRead) > 0.0 && profile.seconds(Stage::Distribute) > 0.0);
-    assert_eq!(std::fs::read(tiling::bin_path(work.path(), 0)).unwrap(), bin0);
+    assert_eq!(std::fs::read(tiling::bin_path(work.path(), 0, 0)).unwrap(), bin0);
     // Changed parameters redo the work.
     let other = TilingParams { max_points_per_tile: 9_000, ..params };
     let redone = tiling::tile_scans(&scans, work.path(), &other, &|_| {}, &Default::default()).unwrap();
     assert_ne!(redone.fingerprint, plan.fingerprint);
     // Neighbour search helper sanity: kd-tree over a tile finds itself.
-    let pts: Vec<[f64; 3]> = tiling::read_bin(work.path(), 0)
+    let pts: Vec<[f64; 3]> = tiling::read_bin(work.path(), &plan, 0)
         .unwrap()
         .iter()
         .map(|p| p.pos_tile_m(plan.quantum_m).map(f64::from))
