@@ -4,8 +4,8 @@
 //! The tile stages are timed per tile and summed over the tiles, which are built several at once
 //! where the memory budget allows (`BuildParams::tiles_at_once`): their sum can exceed the tile
 //! step's wall time. Each tile's normals, surfel and voxel sorts and colour blocks are themselves
-//! parallel. The tiling passes decode on a thread of their own, so a pass's "read scans" and its
-//! own work overlap. Timing costs two clock reads per stage and tile or per chunk of 64 Ki
+//! parallel. The tiling passes run one scan per worker, so their rows are summed over the workers
+//! too. Timing costs two clock reads per stage and tile or per chunk of 64 Ki
 //! points: nothing.
 
 use std::sync::atomic::{AtomicU64, Ordering};
