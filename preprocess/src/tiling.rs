@@ -351,7 +351,7 @@ fn par_scans<S: Send>(
     work: impl Fn(&mut S, usize, &PointChunk) -> Result<()> + Sync,
 ) -> Result<Vec<S>> {
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-    let workers = rayon::current_num_threads().clamp(1, scans.len().max(1));
+    let workers = scan_workers(scans);
     let next = AtomicUsize::new(0);
     let failed = AtomicBool::new(false);
     let (done_tx, done_rx) = std::sync::mpsc::channel::<u64>();
@@ -417,6 +417,18 @@ fn par_scans<S: Send>(
         }
         first_error.map_or(Ok(states), Err)
     })
+}
+
+/// How many workers `par_scans` runs: one per thread of the current pool, at most one per scan
+/// (distribute records it as the plan's `bin_writers`).
+fn scan_workers(scans: &[ResolvedScan]) -> usize {
+    rayon::current_num_threads().clamp(1, scans.len().max(1))
+}
+
+/// Whether a posed point is kept: both passes must drop the same points, or the counts the plan
+/// was made from would not be the points distributed.
+fn valid_world(p: &[f64; 3]) -> bool {
+    p.iter().all(|v| v.is_finite() && v.abs() < 1e15)
 }
 
 /// The point in global quanta: the one rounding every later decision shares.
@@ -507,7 +519,7 @@ fn count_cells(
         |_| -> Counts { (foldhash::HashMap::default(), 0, 0) },
         |(fine, points, invalid), _, chunk| {
             for p in &chunk.xyz {
-                if p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
+                if valid_world(p) {
                     *fine.entry(fine_key(quantise(p, inv_quantum), shift)).or_default() += 1;
                     *points += 1;
                 } else {
@@ -624,7 +636,7 @@ fn distribute(
             let _ = std::fs::remove_file(entry.path());
         }
     }
-    let workers = rayon::current_num_threads().clamp(1, scans.len().max(1));
+    let workers = scan_workers(scans);
     let frozen: &TilePlan = plan;
     // Tile origins and extents in quanta.
     let origins: Vec<[i64; 3]> = frozen
@@ -647,7 +659,7 @@ fn distribute(
         },
         |(routes, bins, halo), si, chunk| {
             for (i, p) in chunk.xyz.iter().enumerate() {
-                if !p.iter().all(|v| v.is_finite() && v.abs() < 1e15) {
+                if !valid_world(p) {
                     continue;
                 }
                 let q = quantise(p, inv);
