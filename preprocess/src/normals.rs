@@ -94,9 +94,10 @@ pub fn sym_eigen3(m: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
 }
 
 /// The eigenvalues (ascending) of symmetric `m` and the unit eigenvector of the smallest, in
-/// closed form: the eigenvalues from the trigonometric solution of the characteristic cubic (Smith
-/// 1961), the vector as the longest cross product of two rows of `m - smallest * I`. `None` where
-/// the two smallest eigenvalues lie closer than a tenth of the spectrum's spread, where the vector
+/// closed form: the smallest eigenvalue as the smallest root of the characteristic cubic of the
+/// shifted and scaled matrix, by Newton's method; the other two from the cubic's coefficients;
+/// the vector as the longest cross product of two rows of `m - smallest * I`. `None` where the
+/// two smallest eigenvalues lie closer than a tenth of the spectrum's spread, where the vector
 /// would lose digits (lines, blobs, duplicates): [`sym_eigen3`] is exact there.
 pub fn smallest_eigenvector(m: [[f64; 3]; 3]) -> Option<([f64; 3], [f64; 3])> {
     let p1 = m[0][1] * m[0][1] + m[0][2] * m[0][2] + m[1][2] * m[1][2];
@@ -106,7 +107,8 @@ pub fn smallest_eigenvector(m: [[f64; 3]; 3]) -> Option<([f64; 3], [f64; 3])> {
     if !(p > 0.0 && p.is_finite()) {
         return None;
     }
-    // det((m - q I) / p) / 2, in [-1, 1] but for rounding.
+    // b = (m - q I) / p has trace 0 and tr(b^2) = 6, so its characteristic polynomial is
+    // g(x) = x^3 - 3x - det(b), whose roots lie in [-2, 2] (Smith 1961).
     let b = [
         [d0 / p, m[0][1] / p, m[0][2] / p],
         [m[0][1] / p, d1 / p, m[1][2] / p],
@@ -115,13 +117,39 @@ pub fn smallest_eigenvector(m: [[f64; 3]; 3]) -> Option<([f64; 3], [f64; 3])> {
     let det = b[0][0] * (b[1][1] * b[2][2] - b[1][2] * b[2][1])
         - b[0][1] * (b[1][0] * b[2][2] - b[1][2] * b[2][0])
         + b[0][2] * (b[1][0] * b[2][1] - b[1][1] * b[2][0]);
-    let phi = (det / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
-    let largest = q + 2.0 * p * phi.cos();
-    let smallest = q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
-    let middle = 3.0 * q - largest - smallest;
-    // The cubic's angle comes from an acos near +-1, good to about 2e-8 radians: the smallest
-    // eigenvalue to 1.5e-8 p. The vector's error is that over the gap to the middle one, so a gap
-    // of p / 10 keeps it within 1.5e-7 radians (an f32 normal's own rounding).
+    let r = det.clamp(-2.0, 2.0);
+    // Newton's method from below the smallest root: on [-2, -1] g rises and is concave, so every
+    // step lands between the last point and the root, never past it. The start is a cubic in
+    // sqrt(2 - r) fitted to the root (within 7.4e-4 over all r), lowered by 1e-3 to stay below
+    // it; two or three steps then reach rounding. It replaced Smith's acos and two cos, which
+    // were 7% of `bench-normals` samples, and it is accurate to rounding where acos near +-1 is
+    // good to 2e-8.
+    let u = (2.0 - r).sqrt();
+    let mut x =
+        (((-0.004_723_875_8 * u + 0.045_890_885_5) * u - 0.572_575_913_3) * u - 1.000_730_8 - 1e-3).max(-2.0);
+    for _ in 0..64 {
+        let slope = 3.0 * (x * x - 1.0);
+        if slope <= 0.0 {
+            // At -1 the two smallest roots meet: the gap test below declines.
+            break;
+        }
+        let step = (x * (x * x - 3.0) - r) / slope;
+        x -= step;
+        // The error after a step is about its square (times x / (x^2 - 1), under 11 where the
+        // gap test passes).
+        if step.abs() <= 1e-9 {
+            break;
+        }
+    }
+    let x = x.min(-1.0);
+    // The other roots: they sum to -x and their product is x^2 - 3 (g has no x^2 term and its
+    // pairwise products sum to -3).
+    let half_gap = (12.0 - 3.0 * x * x).max(0.0).sqrt() / 2.0;
+    let smallest = q + p * x;
+    let middle = q + p * (-x / 2.0 - half_gap);
+    let largest = q + p * (-x / 2.0 + half_gap);
+    // The vector's error is the eigenvalue's over the gap to the middle one; a gap under p / 10
+    // (lines, blobs) goes to Jacobi, which is exact there.
     if !middle.is_finite() || middle - smallest <= 0.1 * p {
         return None;
     }
@@ -146,23 +174,42 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-/// Normal of one neighbourhood (already centred covariance input), oriented toward `view`
-/// (unit vector from the point to its scanner).
+/// Normal of one neighbourhood, oriented toward `view` (unit vector from the point to its
+/// scanner).
 pub fn normal_from_neighbourhood(neighbours: &[[f64; 3]], view: [f64; 3]) -> [f64; 3] {
-    let n = neighbours.len() as f64;
-    if neighbours.len() < 3 {
+    normal_from_points(neighbours.len(), || neighbours.iter().copied(), view)
+}
+
+/// [`normal_from_neighbourhood`] over points read twice from `points` (the mean, then the
+/// covariance about it), so the estimator reads the tile's f32 points in place.
+fn normal_from_points<I: Iterator<Item = [f64; 3]>>(
+    count: usize,
+    points: impl Fn() -> I,
+    view: [f64; 3],
+) -> [f64; 3] {
+    if count < 3 {
         return view;
     }
-    let mean: [f64; 3] = std::array::from_fn(|a| neighbours.iter().map(|p| p[a]).sum::<f64>() / n);
+    let n = count as f64;
+    let mut mean = [0.0; 3];
+    for p in points() {
+        for a in 0..3 {
+            mean[a] += p[a];
+        }
+    }
+    let mean = mean.map(|c| c / n);
     let mut cov = [[0.0; 3]; 3];
-    for p in neighbours {
+    for p in points() {
         let d = [p[0] - mean[0], p[1] - mean[1], p[2] - mean[2]];
         for i in 0..3 {
-            for j in 0..3 {
+            for j in i..3 {
                 cov[i][j] += d[i] * d[j];
             }
         }
     }
+    cov[1][0] = cov[0][1];
+    cov[2][0] = cov[0][2];
+    cov[2][1] = cov[1][2];
     // Most neighbourhoods are planes, well separated: closed form. Near-degenerate ones (lines,
     // duplicates, blobs) take Jacobi.
     if let Some((vals, smallest)) = smallest_eigenvector(cov)
@@ -277,21 +324,21 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
     }
     estimate_sorted(tile, &knn, &order, k, &|j| needed[j], &mut lists, &mut per_point);
     drop(needed);
-    // Own points in input order, in parallel over fixed runs (the orientation statistics are
-    // summed run by run in order, so they do not depend on the thread count).
-    let mut sorted_of = vec![0u32; n];
-    for (j, &i) in order.iter().enumerate() {
-        sorted_of[i as usize] = j as u32;
-    }
-    let own: Vec<usize> = (0..n).filter(|&i| tile.own[i]).collect();
-    let runs: Vec<(Vec<PointNormal>, OrientStats)> = own
+    // Spread and final orientation in sorted order, in parallel over fixed runs: a point's
+    // neighbours lie near it in Morton order, so their estimates are mostly in cache (in input
+    // order every neighbour was a miss). The orientation statistics are summed run by run in
+    // order, so they do not depend on the thread count.
+    let sorted_results: Vec<(Vec<PointNormal>, OrientStats)> = order
         .par_chunks(4096)
-        .map(|run| {
+        .enumerate()
+        .map(|(run, inputs)| {
             let mut orientation = OrientStats::default();
-            let normals = run
+            let normals = inputs
                 .iter()
-                .map(|&i| {
-                    let j = sorted_of[i] as usize;
+                .enumerate()
+                .map(|(off, &i)| (run * 4096 + off, i as usize))
+                .filter(|&(j, _)| own_sorted[j])
+                .map(|(j, i)| {
                     let list = &lists[j * k..(j + 1) * k];
                     let ni = match tile.orient.filter(|o| o.seen_from[i].is_some()) {
                         Some(_) => orient_by_neighbourhood(tile, i, j, list, &per_point, &mut orientation),
@@ -318,15 +365,32 @@ pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>
             (normals, orientation)
         })
         .collect();
-    let mut stats = NormalStats {
-        input_normals: own.iter().filter(|&&i| tile.input_normals[i] != [0.0; 3]).count() as u64,
-        input_kept: own.iter().filter(|&&i| per_point[sorted_of[i] as usize].kept).count() as u64,
-        orientation: OrientStats::default(),
-    };
-    let mut out = Vec::with_capacity(own.len());
-    for (normals, orientation) in runs {
-        out.extend(normals);
+    let mut stats = NormalStats::default();
+    // Own points' results in sorted order, then put back in input order.
+    let mut by_sorted = Vec::with_capacity(n);
+    for (normals, orientation) in sorted_results {
+        by_sorted.extend(normals);
         stats.orientation.add(&orientation);
+    }
+    // rank[j]: where sorted point j's result sits in `by_sorted` (own points only).
+    let mut rank = vec![0u32; n];
+    let mut next = 0u32;
+    for (j, r) in rank.iter_mut().enumerate() {
+        if own_sorted[j] {
+            *r = next;
+            next += 1;
+        }
+    }
+    let mut sorted_of = vec![0u32; n];
+    for (j, &i) in order.iter().enumerate() {
+        sorted_of[i as usize] = j as u32;
+    }
+    let mut out = Vec::with_capacity(by_sorted.len());
+    for i in (0..n).filter(|&i| tile.own[i]) {
+        let j = sorted_of[i] as usize;
+        out.push(by_sorted[rank[j] as usize]);
+        stats.input_normals += u64::from(tile.input_normals[i] != [0.0; 3]);
+        stats.input_kept += u64::from(per_point[j].kept);
     }
     (out, stats)
 }
@@ -357,7 +421,6 @@ fn estimate_sorted(
     let pts = knn.points();
     lists.par_chunks_mut(k * RUN).zip(per_point.par_chunks_mut(RUN)).enumerate().for_each(
         |(run, (lists, per_point))| {
-            let mut scratch: Vec<[f64; 3]> = Vec::with_capacity(k);
             let mut cache = CellCache::default();
             let mut found: Vec<(f32, u32)> = Vec::with_capacity(k);
             // Morton neighbours have similar spacing: the previous k-th distance widened
@@ -374,8 +437,6 @@ fn estimate_sorted(
                 {
                     *slot = nb;
                 }
-                scratch.clear();
-                scratch.extend(found.iter().map(|nb| pts[nb.1 as usize].map(f64::from)));
                 let i = order[j] as usize;
                 let p = pts[j].map(f64::from);
                 let bare = tile.orient.and_then(|o| o.seen_from[i].map(|side| (o, side)));
@@ -387,7 +448,11 @@ fn estimate_sorted(
                         normalize([s[0] - p[0], s[1] - p[1], s[2] - p[2]]).unwrap_or([0.0, 0.0, 1.0])
                     }
                 };
-                let mut normal = normal_from_neighbourhood(&scratch, view);
+                let mut normal = normal_from_points(
+                    found.len(),
+                    || found.iter().map(|nb| pts[nb.1 as usize].map(f64::from)),
+                    view,
+                );
                 let input = tile.input_normals[i].map(f64::from);
                 let mut kept = false;
                 if tile.keep_input_normals
@@ -542,7 +607,7 @@ mod tests {
                 Some((got, v)) => {
                     answered += 1;
                     for k in 0..3 {
-                        assert!((got[k] - jvals[k]).abs() <= 2e-8 * vals[2], "{vals:?}: {got:?} {jvals:?}");
+                        assert!((got[k] - jvals[k]).abs() <= 1e-12 * vals[2], "{vals:?}: {got:?} {jvals:?}");
                     }
                     assert!(dot(v, jvecs[0]).abs() > 1.0 - 1e-12, "{vals:?}: {v:?} {:?}", jvecs[0]);
                 }
