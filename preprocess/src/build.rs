@@ -76,6 +76,8 @@ pub struct BuildParams {
     /// Refuse a scan file that ends inside its last point record instead of reading its complete
     /// records and warning (`--strict`).
     pub strict: bool,
+    /// Keep the count pass's posed points for the distribute pass (`TilingParams::spill`).
+    pub spill: bool,
     /// Keep normals the files carry where they agree with the local plane (`--normals keep`), or
     /// estimate every normal (`--normals estimate`).
     pub keep_input_normals: bool,
@@ -138,6 +140,7 @@ impl BuildParams {
             max_tile_extent_m: MAX_TILE_LEAVES * leaf_m,
             halo_m: HALO_LEAVES * leaf_m,
             strict: false,
+            spill: true,
             keep_input_normals: true,
         }
     }
@@ -161,6 +164,7 @@ impl BuildParams {
             quantum_m: self.leaf_m / 2048.0,
             chunk_points: crate::ingest::DEFAULT_CHUNK,
             buffer_bytes: (budget / 4) as usize,
+            spill: self.spill,
         }
     }
 }

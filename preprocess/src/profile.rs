@@ -23,6 +23,8 @@ pub enum Stage {
     CountRead,
     /// Pass 1: counting points per fine cell, and choosing the tiles.
     Count,
+    /// Pass 1: writing the posed points for pass 2 (`TilingParams::spill`).
+    Spill,
     /// Pass 2 of tiling: decoding and posing again (distribute pass).
     DistributeRead,
     /// Pass 2: each point (and its halo copies) into its tile's bin, and the bins' writes.
@@ -54,10 +56,11 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub const ALL: [Stage; 17] = [
+    pub const ALL: [Stage; 18] = [
         Stage::Setup,
         Stage::CountRead,
         Stage::Count,
+        Stage::Spill,
         Stage::DistributeRead,
         Stage::Distribute,
         Stage::OrientationGrid,
@@ -79,6 +82,7 @@ impl Stage {
             Stage::Setup => "setup: scans and leaf size",
             Stage::CountRead => "count: read scans",
             Stage::Count => "count: cells and plan",
+            Stage::Spill => "count: spill points",
             Stage::DistributeRead => "distribute: read scans",
             Stage::Distribute => "distribute: bins",
             Stage::OrientationGrid => "orientation grid",

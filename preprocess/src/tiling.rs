@@ -51,6 +51,11 @@ pub struct TilingParams {
     pub chunk_points: usize,
     /// Bin buffers are flushed to disk when they hold this many bytes together.
     pub buffer_bytes: usize,
+    /// Keep the count pass's posed points on disk (`WORK/spill`, about 15-21 bytes a point,
+    /// deleted once the bins are written) so that distribute reads them rather than decoding
+    /// every scan again. How the bins are made, not what they hold: out of the fingerprint.
+    #[serde(skip)]
+    pub spill: bool,
 }
 
 impl Default for TilingParams {
@@ -63,6 +68,7 @@ impl Default for TilingParams {
             quantum_m: 1.0 / 65_536.0,
             chunk_points: ingest::DEFAULT_CHUNK,
             buffer_bytes: 256 << 20,
+            spill: true,
         }
     }
 }
@@ -335,20 +341,24 @@ pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Optio
 
 /// Streams the scans through `workers` threads, one scan per worker at a time, claimed in index
 /// order (so each worker meets its scans in increasing order). Each worker keeps its own state,
-/// made by `init(worker)`; `work(state, scan, chunk)` sees every chunk posed into the world (its
-/// normals too when `pose_normals`). Decoding and posing add to `stages.0` of `profile`, `work`
-/// to `stages.1`, each summed over the workers; the workers report points done to `progress` on
-/// this thread. The first error stops every worker and is returned; else the states, by worker.
+/// made by `init(worker)`; `work(state, scan, posed)` sees every chunk's valid points posed into
+/// the world and quantised (their normals too when `pose_normals`). A scan with a spill file in
+/// `spill_from` is read from it rather than decoded. Decoding, posing and spill reads add to
+/// `stages.0` of `profile`, `work` to `stages.1`, each summed over the workers; the workers report
+/// points done to `progress` on this thread. The first error stops every worker and is
+/// returned; else the states, by worker.
 #[allow(clippy::too_many_arguments)]
 fn par_scans<S: Send>(
     scans: &[ResolvedScan],
     chunk_points: usize,
+    inv_quantum: f64,
     pose_normals: bool,
+    spill_from: Option<&Path>,
     profile: &Profile,
     stages: (Stage, Stage),
     progress: &dyn Fn(u64),
     init: impl Fn(usize) -> S + Sync,
-    work: impl Fn(&mut S, usize, &PointChunk) -> Result<()> + Sync,
+    work: impl Fn(&mut S, usize, &Posed) -> Result<()> + Sync,
 ) -> Result<Vec<S>> {
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
     let workers = scan_workers(scans);
@@ -363,10 +373,23 @@ fn par_scans<S: Send>(
                 scope.spawn(move || -> Result<S> {
                     let mut state = init(w);
                     let mut chunk = PointChunk::new(chunk_points);
+                    let mut posed = Posed::default();
                     while !failed.load(Ordering::Relaxed) {
                         let si = next.fetch_add(1, Ordering::Relaxed);
                         let Some(scan) = scans.get(si) else { break };
+                        let spilled = spill_from.map(|dir| spill_path(dir, si)).filter(|p| p.is_file());
                         let mut one_scan = || -> Result<()> {
+                            if let Some(path) = &spilled {
+                                let mut reader = profile.time(stages.0, || SpillReader::open(path))?;
+                                while !failed.load(Ordering::Relaxed) {
+                                    if !profile.time(stages.0, || reader.read(&mut posed))? {
+                                        break;
+                                    }
+                                    profile.time(stages.1, || work(&mut state, si, &posed))?;
+                                    let _ = done_tx.send(posed.len() as u64 + posed.invalid);
+                                }
+                                return Ok(());
+                            }
                             let mut source = profile
                                 .time(stages.0, || ingest::open(&scan.path, scan.format, scan.index))?;
                             while !failed.load(Ordering::Relaxed) {
@@ -383,8 +406,9 @@ fn par_scans<S: Send>(
                                         *n = pose.rotate(n.map(f64::from)).map(|v| v as f32);
                                     }
                                 }
+                                posed.fill(&chunk, inv_quantum, pose_normals);
                                 profile.add(stages.0, clock.elapsed());
-                                profile.time(stages.1, || work(&mut state, si, &chunk))?;
+                                profile.time(stages.1, || work(&mut state, si, &posed))?;
                                 let _ = done_tx.send(chunk.len() as u64);
                             }
                             Ok(())
@@ -417,6 +441,219 @@ fn par_scans<S: Send>(
         }
         first_error.map_or(Ok(states), Err)
     })
+}
+
+/// A chunk's valid points as both passes use them: global quanta (the one rounding every later
+/// decision shares), the file normal as snorm16 (zero: none; the vector is empty where the chunk
+/// has no normals) and the colour; and how many points of the chunk were invalid.
+#[derive(Debug, Default)]
+struct Posed {
+    q: Vec<[i64; 3]>,
+    normal_snorm: Vec<[i16; 3]>,
+    rgb: Vec<[u8; 3]>,
+    invalid: u64,
+}
+
+impl Posed {
+    fn len(&self) -> usize {
+        self.q.len()
+    }
+
+    fn clear(&mut self) {
+        self.q.clear();
+        self.normal_snorm.clear();
+        self.rgb.clear();
+        self.invalid = 0;
+    }
+
+    /// The valid points of a chunk already posed into the world.
+    fn fill(&mut self, chunk: &PointChunk, inv_quantum: f64, with_normals: bool) {
+        self.clear();
+        let with_normals = with_normals && !chunk.normal.is_empty();
+        for (i, p) in chunk.xyz.iter().enumerate() {
+            if !valid_world(p) {
+                self.invalid += 1;
+                continue;
+            }
+            self.q.push(quantise(p, inv_quantum));
+            self.rgb.push(chunk.rgb[i]);
+            if with_normals {
+                self.normal_snorm.push(chunk.normal.get(i).map_or([0; 3], |n| {
+                    let len = n.iter().map(|c| c * c).sum::<f32>().sqrt();
+                    if len.is_finite() && len > 1e-6 {
+                        n.map(|c| (c / len * 32767.0).round() as i16)
+                    } else {
+                        [0; 3]
+                    }
+                }));
+            }
+        }
+    }
+
+    fn normal(&self, i: usize) -> [i16; 3] {
+        self.normal_snorm.get(i).copied().unwrap_or([0; 3])
+    }
+}
+
+/// The spill file of one scan: the count pass's posed points, which distribute reads instead of
+/// decoding the scan again (LAZ and E57 decoding was a quarter of the plan step's CPU at 10^8).
+fn spill_path(work_dir: &Path, scan: usize) -> PathBuf {
+    work_dir.join("spill").join(format!("{scan:05}.spill"))
+}
+
+/// One block of a spill file: a chunk's valid points, then `points` positions (`[i32; 3]` offsets
+/// from `base`, or `[i64; 3]` quanta where `SPILL_WIDE`: the chunk spans over 2^31 quanta),
+/// `points` colours, and `points` snorm normals where `SPILL_NORMALS`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct SpillBlock {
+    base: [i64; 3],
+    points: u32,
+    invalid: u32,
+    flags: u32,
+    reserved: u32,
+}
+
+const SPILL_NORMALS: u32 = 1;
+const SPILL_WIDE: u32 = 2;
+/// Most points one block holds (a reader allocates no more than this, whatever the file says).
+const SPILL_MAX_BLOCK: usize = 1 << 22;
+
+/// Writes one scan's spill file, under a temporary name until it is complete.
+struct SpillWriter {
+    scan: usize,
+    tmp: PathBuf,
+    path: PathBuf,
+    out: std::io::BufWriter<File>,
+}
+
+impl SpillWriter {
+    fn create(work_dir: &Path, scan: usize) -> Result<Self> {
+        let path = spill_path(work_dir, scan);
+        let tmp = path.with_extension("spill.tmp");
+        let file = File::create(&tmp).map_err(|source| Error::Io { path: tmp.clone(), source })?;
+        Ok(Self { scan, tmp, path, out: std::io::BufWriter::with_capacity(1 << 20, file) })
+    }
+
+    fn write(&mut self, posed: &Posed) -> Result<()> {
+        let io = |source| Error::Io { path: self.tmp.clone(), source };
+        for start in (0..posed.len().max(1)).step_by(SPILL_MAX_BLOCK) {
+            let end = (start + SPILL_MAX_BLOCK).min(posed.len());
+            let q = &posed.q[start..end];
+            let base = q.first().copied().unwrap_or([0; 3]);
+            let narrow: Option<Vec<[i32; 3]>> = q
+                .iter()
+                .map(|p| {
+                    let d: [Option<i32>; 3] = std::array::from_fn(|a| i32::try_from(p[a] - base[a]).ok());
+                    Some([d[0]?, d[1]?, d[2]?])
+                })
+                .collect();
+            let normals = !posed.normal_snorm.is_empty();
+            let block = SpillBlock {
+                base,
+                points: (end - start) as u32,
+                invalid: if start == 0 { posed.invalid.min(u64::from(u32::MAX)) as u32 } else { 0 },
+                flags: if normals { SPILL_NORMALS } else { 0 }
+                    | if narrow.is_none() { SPILL_WIDE } else { 0 },
+                reserved: 0,
+            };
+            self.out.write_all(bytemuck::bytes_of(&block)).map_err(io)?;
+            match &narrow {
+                Some(offsets) => self.out.write_all(bytemuck::cast_slice(offsets)).map_err(io)?,
+                None => self.out.write_all(bytemuck::cast_slice(q)).map_err(io)?,
+            }
+            self.out.write_all(bytemuck::cast_slice(&posed.rgb[start..end])).map_err(io)?;
+            if normals {
+                self.out.write_all(bytemuck::cast_slice(&posed.normal_snorm[start..end])).map_err(io)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Flushes the file and gives it its final name.
+    fn finish(self) -> Result<()> {
+        let file = self
+            .out
+            .into_inner()
+            .map_err(|e| Error::Io { path: self.tmp.clone(), source: e.into_error() })?;
+        drop(file);
+        std::fs::rename(&self.tmp, &self.path).map_err(|source| Error::Io { path: self.path.clone(), source })
+    }
+}
+
+/// Reads a spill file back block by block, checking every length against the file's.
+struct SpillReader {
+    path: PathBuf,
+    input: std::io::BufReader<File>,
+    left: u64,
+    offsets: Vec<[i32; 3]>,
+}
+
+impl SpillReader {
+    fn open(path: &Path) -> Result<Self> {
+        let io = |source| Error::Io { path: path.to_path_buf(), source };
+        let file = File::open(path).map_err(io)?;
+        let left = file.metadata().map_err(io)?.len();
+        Ok(Self {
+            path: path.to_path_buf(),
+            input: std::io::BufReader::with_capacity(1 << 20, file),
+            left,
+            offsets: Vec::new(),
+        })
+    }
+
+    /// The next block into `posed`; false at the end of the file.
+    fn read(&mut self, posed: &mut Posed) -> Result<bool> {
+        use std::io::Read;
+        posed.clear();
+        if self.left == 0 {
+            return Ok(false);
+        }
+        let corrupt = |what: String| Error::Read {
+            path: self.path.clone(),
+            format: "spill",
+            reason: format!("corrupt spill file (delete WORK/spill to decode the scans again): {what}"),
+        };
+        let mut block = SpillBlock::zeroed();
+        let header = size_of::<SpillBlock>() as u64;
+        if self.left < header {
+            return Err(corrupt(format!("{} trailing bytes", self.left)));
+        }
+        let io = |source| Error::Io { path: self.path.clone(), source };
+        self.input.read_exact(bytemuck::bytes_of_mut(&mut block)).map_err(io)?;
+        self.left -= header;
+        let n = block.points as usize;
+        let wide = block.flags & SPILL_WIDE != 0;
+        let normals = block.flags & SPILL_NORMALS != 0;
+        let per_point = if wide { 24 } else { 12 } + 3 + if normals { 6 } else { 0 };
+        if n > SPILL_MAX_BLOCK
+            || block.flags & !(SPILL_WIDE | SPILL_NORMALS) != 0
+            || (n * per_point) as u64 > self.left
+        {
+            return Err(corrupt(format!(
+                "block of {n} points, flags {:#x}, {} bytes left",
+                block.flags, self.left
+            )));
+        }
+        self.left -= (n * per_point) as u64;
+        posed.invalid = u64::from(block.invalid);
+        if wide {
+            posed.q.resize(n, [0; 3]);
+            self.input.read_exact(bytemuck::cast_slice_mut(&mut posed.q)).map_err(io)?;
+        } else {
+            self.offsets.resize(n, [0; 3]);
+            self.input.read_exact(bytemuck::cast_slice_mut(&mut self.offsets)).map_err(io)?;
+            let base = block.base;
+            posed.q.extend(self.offsets.iter().map(|d| std::array::from_fn(|a| base[a] + i64::from(d[a]))));
+        }
+        posed.rgb.resize(n, [0; 3]);
+        self.input.read_exact(bytemuck::cast_slice_mut(&mut posed.rgb)).map_err(io)?;
+        if normals {
+            posed.normal_snorm.resize(n, [0; 3]);
+            self.input.read_exact(bytemuck::cast_slice_mut(&mut posed.normal_snorm)).map_err(io)?;
+        }
+        Ok(true)
+    }
 }
 
 /// How many workers `par_scans` runs: one per thread of the current pool, at most one per scan
@@ -486,7 +723,14 @@ pub fn tile_scans(
         // Interrupted while distributing: the plan stands, only the bins are redone.
         Some(plan) => plan,
         None => {
-            let plan = count_and_plan(scans, params, fingerprint, progress, profile)?;
+            // Spill files of an earlier run may be of other scans: made afresh.
+            let spill_dir = work_dir.join("spill");
+            let _ = std::fs::remove_dir_all(&spill_dir);
+            if params.spill {
+                std::fs::create_dir_all(&spill_dir).map_err(io(&spill_dir))?;
+            }
+            let spill_to = params.spill.then_some(work_dir);
+            let plan = count_and_plan(scans, params, spill_to, fingerprint, progress, profile)?;
             write_json_atomic(&plan_path, &plan)?;
             plan
         }
@@ -494,17 +738,22 @@ pub fn tile_scans(
     distribute(scans, work_dir, params, &mut plan, progress, profile)?;
     plan.bins_complete = true;
     write_json_atomic(&plan_path, &plan)?;
+    // Only now: an interrupted distribute reads the spill again on resume.
+    let _ = std::fs::remove_dir_all(work_dir.join("spill"));
     Ok(plan)
 }
 
 /// Pass 1: the points of every fine cell, with the valid and invalid points. Scans are decoded,
-/// posed and counted in parallel (counts add up the same in any order).
+/// posed and counted in parallel (counts add up the same in any order); with `spill_to`, each
+/// scan's posed points are written there for pass 2.
+#[allow(clippy::too_many_arguments)]
 fn count_cells(
     scans: &[ResolvedScan],
     chunk_points: usize,
     inv_quantum: f64,
     shift: u32,
     claimed: u64,
+    spill_to: Option<&Path>,
     progress: &dyn Fn(Progress),
     profile: &Profile,
 ) -> Result<(foldhash::HashMap<[i64; 3], u64>, u64, u64)> {
@@ -512,25 +761,39 @@ fn count_cells(
     let states = par_scans(
         scans,
         chunk_points,
-        false,
+        inv_quantum,
+        spill_to.is_some(),
+        None,
         profile,
         (Stage::CountRead, Stage::Count),
         &|done| progress(Progress { stage: "count", done, total: claimed }),
-        |_| -> Counts { (foldhash::HashMap::default(), 0, 0) },
-        |(fine, points, invalid), _, chunk| {
-            for p in &chunk.xyz {
-                if valid_world(p) {
-                    *fine.entry(fine_key(quantise(p, inv_quantum), shift)).or_default() += 1;
-                    *points += 1;
-                } else {
-                    *invalid += 1;
-                }
+        |_| -> (Counts, Option<SpillWriter>) { ((foldhash::HashMap::default(), 0, 0), None) },
+        |((fine, points, invalid), spill), si, posed| {
+            for &q in &posed.q {
+                *fine.entry(fine_key(q, shift)).or_default() += 1;
+            }
+            *points += posed.len() as u64;
+            *invalid += posed.invalid;
+            if let Some(dir) = spill_to {
+                profile.time(Stage::Spill, || -> Result<()> {
+                    // A worker's scans come one after another: the previous one is complete.
+                    if spill.as_ref().is_none_or(|w| w.scan != si) {
+                        if let Some(done) = spill.take() {
+                            done.finish()?;
+                        }
+                        *spill = Some(SpillWriter::create(dir, si)?);
+                    }
+                    spill.as_mut().map_or(Ok(()), |w| w.write(posed))
+                })?;
             }
             Ok(())
         },
     )?;
     let mut total: Counts = (foldhash::HashMap::default(), 0, 0);
-    for (fine, points, invalid) in states {
+    for ((fine, points, invalid), spill) in states {
+        if let Some(done) = spill {
+            profile.time(Stage::Spill, || done.finish())?;
+        }
         for (k, n) in fine {
             *total.0.entry(k).or_default() += n;
         }
@@ -544,6 +807,7 @@ fn count_cells(
 fn count_and_plan(
     scans: &[ResolvedScan],
     params: &TilingParams,
+    spill_to: Option<&Path>,
     fingerprint: String,
     progress: &dyn Fn(Progress),
     profile: &Profile,
@@ -558,7 +822,7 @@ fn count_and_plan(
     let inv = 1.0 / params.quantum_m;
     let shift = (params.min_tile_extent_m / params.quantum_m).log2() as u32;
     let (fine, points, invalid) =
-        count_cells(scans, params.chunk_points, inv, shift, claimed, progress, profile)?;
+        count_cells(scans, params.chunk_points, inv, shift, claimed, spill_to, progress, profile)?;
 
     // Plan: pyramid of counts relative to the anchor, tiles chosen top-down.
     let planning = Instant::now();
@@ -649,7 +913,9 @@ fn distribute(
     let states = par_scans(
         scans,
         params.chunk_points,
+        inv,
         true,
+        Some(work_dir),
         profile,
         (Stage::DistributeRead, Stage::Distribute),
         &|done| progress(Progress { stage: "distribute", done, total }),
@@ -657,26 +923,19 @@ fn distribute(
             let bins = Bins::new(work_dir, frozen.tiles.len(), params.buffer_bytes / workers, w);
             (Routes::new(frozen, shift, top, h), bins, 0u64)
         },
-        |(routes, bins, halo), si, chunk| {
-            for (i, p) in chunk.xyz.iter().enumerate() {
-                if !valid_world(p) {
-                    continue;
-                }
-                let q = quantise(p, inv);
+        |(routes, bins, halo), si, posed| {
+            for (i, &q) in posed.q.iter().enumerate() {
                 let Some(t) = routes.tile(fine_key(q, shift)) else { continue };
-                let normal_snorm = chunk.normal.get(i).map_or([0; 3], |n| {
-                    let len = n.iter().map(|c| c * c).sum::<f32>().sqrt();
-                    if len.is_finite() && len > 1e-6 {
-                        n.map(|c| (c / len * 32767.0).round() as i16)
-                    } else {
-                        [0; 3]
-                    }
-                });
                 // In range: tiles are < 2^24 quanta and halos < one fine cell.
                 let local =
                     |tile: usize| -> [i32; 3] { std::array::from_fn(|a| (q[a] - origins[tile][a]) as i32) };
-                let point =
-                    BinPoint { pos_q: local(t), normal_snorm, rgb: chunk.rgb[i], flags: 0, scan: si as u16 };
+                let point = BinPoint {
+                    pos_q: local(t),
+                    normal_snorm: posed.normal(i),
+                    rgb: posed.rgb[i],
+                    flags: 0,
+                    scan: si as u16,
+                };
                 bins.push(t, point)?;
                 // Halo: only points near their tile's border can reach a neighbour.
                 let near = point.pos_q.iter().any(|&c| i64::from(c) < h || i64::from(c) >= extents[t] - h);
@@ -850,5 +1109,83 @@ impl Bins {
         }
         self.buffered = 0;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn posed(q: Vec<[i64; 3]>, normals: bool, invalid: u64) -> Posed {
+        let n = q.len();
+        Posed {
+            normal_snorm: if normals {
+                (0..n).map(|i| [i as i16, -(i as i16), 32767]).collect()
+            } else {
+                Vec::new()
+            },
+            rgb: (0..n).map(|i| [i as u8, 7, 255]).collect(),
+            q,
+            invalid,
+        }
+    }
+
+    #[test]
+    fn spill_files_read_back_what_was_written() {
+        let work = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(work.path().join("spill")).unwrap();
+        // Survey-scale quanta, a chunk spanning more than 2^31 quanta (stored wide), one with
+        // normals, and one with only invalid points.
+        let chunks = [
+            posed(vec![[5_000_000 << 16, 1 << 40, -3], [(5_000_000 << 16) + 9, (1 << 40) - 4, 12]], false, 2),
+            posed(vec![[0, 0, 0], [1 << 33, -(1 << 33), 5]], true, 0),
+            posed(Vec::new(), false, 4),
+        ];
+        let mut writer = SpillWriter::create(work.path(), 3).unwrap();
+        for c in &chunks {
+            writer.write(c).unwrap();
+        }
+        assert!(!spill_path(work.path(), 3).exists(), "complete only once finished");
+        writer.finish().unwrap();
+        let mut reader = SpillReader::open(&spill_path(work.path(), 3)).unwrap();
+        let mut got = Posed::default();
+        for c in &chunks {
+            assert!(reader.read(&mut got).unwrap());
+            assert_eq!(
+                (&got.q, &got.normal_snorm, &got.rgb, got.invalid),
+                (&c.q, &c.normal_snorm, &c.rgb, c.invalid)
+            );
+        }
+        assert!(!reader.read(&mut got).unwrap());
+    }
+
+    fn anyhow_like(e: Error) -> String {
+        let mut s = e.to_string();
+        let mut src = std::error::Error::source(&e);
+        while let Some(c) = src {
+            s += &format!(": {c}");
+            src = c.source();
+        }
+        s
+    }
+
+    #[test]
+    fn a_damaged_spill_file_is_an_error_naming_it() {
+        let work = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(work.path().join("spill")).unwrap();
+        let mut writer = SpillWriter::create(work.path(), 0).unwrap();
+        writer.write(&posed(vec![[1, 2, 3]; 100], true, 0)).unwrap();
+        writer.finish().unwrap();
+        let path = spill_path(work.path(), 0);
+        let bytes = std::fs::read(&path).unwrap();
+        // Cut short, and a header claiming more points than a block may hold.
+        let mut huge = bytes.clone();
+        huge[24..28].copy_from_slice(&u32::MAX.to_le_bytes());
+        for damaged in [bytes[..bytes.len() - 5].to_vec(), huge, bytes[..10].to_vec()] {
+            std::fs::write(&path, damaged).unwrap();
+            let mut reader = SpillReader::open(&path).unwrap();
+            let err = anyhow_like(reader.read(&mut Posed::default()).unwrap_err());
+            assert!(err.contains("00000.spill") && err.contains("corrupt spill"), "{err}");
+        }
     }
 }

@@ -159,6 +159,33 @@ fn bins_read_the_same_whatever_the_number_of_distribute_workers() {
 }
 
 #[test]
+fn distribute_makes_the_same_bins_from_the_spill_as_from_the_scans() {
+    let Some(data) = shared_data_dir() else { return };
+    let files: Vec<_> = ["bun000.ply", "bun045.ply", "bun090.ply", "bun180.ply"]
+        .iter()
+        .map(|f| data.join("ply/stanford-bunny/data").join(f))
+        .collect();
+    let scans = Manifest::from_files(&files).resolve().unwrap();
+    let params = TilingParams { max_points_per_tile: 3_000, buffer_bytes: 1 << 16, ..bunny_params() };
+    assert!(params.spill, "spilling is the default");
+    let spilled_dir = tempfile::tempdir().unwrap();
+    let profile = Profile::default();
+    let spilled = tiling::tile_scans(&scans, spilled_dir.path(), &params, &|_| {}, &profile).unwrap();
+    assert!(profile.seconds(Stage::Spill) > 0.0, "the count pass wrote the spill");
+    let (decoded_dir, decoded) = tile(&scans, &TilingParams { spill: false, ..params.clone() });
+    assert_eq!(spilled, decoded);
+    // The spill is gone once the bins are written.
+    assert!(!spilled_dir.path().join("spill").exists());
+    for t in 0..spilled.tiles.len() {
+        assert!(
+            tiling::read_bin(spilled_dir.path(), &spilled, t).unwrap()
+                == tiling::read_bin(decoded_dir.path(), &decoded, t).unwrap(),
+            "tile {t}"
+        );
+    }
+}
+
+#[test]
 fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
     let Some(data) = shared_data_dir() else { return };
     let files = vec![data.join("ply/stanford-bunny/reconstruction/bun_zipper.ply")];

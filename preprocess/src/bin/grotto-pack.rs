@@ -204,6 +204,11 @@ struct BuildOpts {
     /// are read and the summary warns).
     #[arg(long)]
     strict: bool,
+    /// Decode every scan twice (count, then distribute) rather than keeping the count pass's
+    /// posed points in WORK/spill (15-21 bytes a point, removed once the bins are written): for a
+    /// work disk too small to hold them beside the bins.
+    #[arg(long)]
+    no_spill: bool,
     /// Remove the work directory after a successful build.
     #[arg(long)]
     clean: bool,
@@ -329,6 +334,7 @@ fn setup(
         max_tile_extent_m: opts.max_tile_m.unwrap_or(defaults.max_tile_extent_m),
         halo_m: opts.halo_m.unwrap_or(defaults.halo_m),
         strict: opts.strict,
+        spill: !opts.no_spill,
         keep_input_normals: opts.normals == "keep",
         ..defaults
     };
