@@ -173,8 +173,11 @@ impl BuildParams {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ColorCodec {
-    /// BC1 blocks of 16 surfels: 0.5 byte per surfel.
+    /// BC1 blocks of 16 surfels: 0.5 byte per surfel (Intel's ISPC encoder).
     Bc1,
+    /// The same blocks by cluster fit: 1-2.4 dB more PSNR, about 40 times the encoding time.
+    #[serde(rename = "bc1-best")]
+    Bc1Best,
     /// sRGB bytes: 4 bytes per surfel (zstd where it pays).
     Raw,
 }
@@ -571,7 +574,12 @@ fn write_tile_package(
             SurfelCodec::Full => None,
         },
         || match params.colors {
-            ColorCodec::Bc1 => Some(profile.time(Stage::Colors, || bc1::encode(&tile.colors))),
+            ColorCodec::Bc1 => {
+                Some(profile.time(Stage::Colors, || bc1::encode(&tile.colors, bc1::Bc1Fit::Fast)))
+            }
+            ColorCodec::Bc1Best => {
+                Some(profile.time(Stage::Colors, || bc1::encode(&tile.colors, bc1::Bc1Fit::Cluster)))
+            }
             ColorCodec::Raw => None,
         },
     );
