@@ -269,20 +269,33 @@ impl Header {
     }
 }
 
-/// Encodes a tile's surfels, in their order, or `None` when one of them cannot be stored within
-/// the bounds (a position more than `max_position_error_m` away, as for a surfel outside the
-/// tile's cube or leaves too large for 16 bits; a radius beyond the codes) or the tile has more
-/// than `u32::MAX` surfels.
-pub fn encode(surfels: &[Surfel], leaf_m: f64, depth: u32, max_position_error_m: f64) -> Option<Vec<u8>> {
+/// One surfel's codes: its leaf's Morton code, its position within the leaf, octahedral normal,
+/// radius and spread codes ([`code_surfels`]), which [`encode_codes`] packs into a section. The
+/// split lets a caller code runs of surfels in parallel (this crate stays single-threaded).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SurfelCodes {
+    morton: u64,
+    q: [u32; 3],
+    normal: [u32; 2],
+    radius: u8,
+    spread: u8,
+}
+
+/// Codes `surfels` into `out` (same length), or `None` when one of them cannot be stored within
+/// the bounds (see [`encode`]).
+pub fn code_surfels(
+    surfels: &[Surfel],
+    leaf_m: f64,
+    depth: u32,
+    max_position_error_m: f64,
+    out: &mut [SurfelCodes],
+) -> Option<()> {
     let position_bits = position_bits(leaf_m, max_position_error_m)?;
-    let surfel_count = u32::try_from(surfels.len()).ok()?;
     let cells = 1u32.checked_shl(depth)?;
-    let (mut positions, mut normals) = (BitWriter::default(), BitWriter::default());
-    let mut radii = Vec::with_capacity(surfels.len());
-    let mut spreads = Vec::with_capacity(surfels.len());
-    let (mut runs, mut counts): (Vec<u64>, Vec<u16>) = (Vec::new(), Vec::new());
-    let mut last_morton = 0u64;
-    for s in surfels {
+    if out.len() != surfels.len() {
+        return None;
+    }
+    for (s, code) in surfels.iter().zip(out) {
         let (cell, q) = quantise_position(s.position_tile_m, leaf_m, cells, position_bits);
         let back = dequantise_position(cell, q, leaf_m, position_bits);
         let moved =
@@ -292,27 +305,57 @@ pub fn encode(surfels: &[Surfel], leaf_m: f64, depth: u32, max_position_error_m:
         if moved.is_nan() || moved.sqrt() > max_position_error_m + f32_slack {
             return None;
         }
-        let rc = radius_code(s.radius_m);
-        if !radius_within_bound(s.radius_m, radius_m(rc)) {
+        let radius = radius_code(s.radius_m);
+        if !radius_within_bound(s.radius_m, radius_m(radius)) {
             return None;
         }
-        let morton = morton_encode(cell[0], cell[1], cell[2]);
+        let (u, v) = oct_encode(s.normal, NORMAL_BITS);
+        *code = SurfelCodes {
+            morton: morton_encode(cell[0], cell[1], cell[2]),
+            q,
+            normal: [u, v],
+            radius,
+            spread: spread_code(s.spread),
+        };
+    }
+    Some(())
+}
+
+/// Encodes a tile's surfels, in their order, or `None` when one of them cannot be stored within
+/// the bounds (a position more than `max_position_error_m` away, as for a surfel outside the
+/// tile's cube or leaves too large for 16 bits; a radius beyond the codes) or the tile has more
+/// than `u32::MAX` surfels.
+pub fn encode(surfels: &[Surfel], leaf_m: f64, depth: u32, max_position_error_m: f64) -> Option<Vec<u8>> {
+    let mut codes = vec![SurfelCodes::default(); surfels.len()];
+    code_surfels(surfels, leaf_m, depth, max_position_error_m, &mut codes)?;
+    encode_codes(&codes, leaf_m, max_position_error_m)
+}
+
+/// Packs surfels coded by [`code_surfels`] (with the same leaf and bound) into a section.
+pub fn encode_codes(codes: &[SurfelCodes], leaf_m: f64, max_position_error_m: f64) -> Option<Vec<u8>> {
+    let position_bits = position_bits(leaf_m, max_position_error_m)?;
+    let surfel_count = u32::try_from(codes.len()).ok()?;
+    let (mut positions, mut normals) = (BitWriter::default(), BitWriter::default());
+    let mut radii = Vec::with_capacity(codes.len());
+    let mut spreads = Vec::with_capacity(codes.len());
+    let (mut runs, mut counts): (Vec<u64>, Vec<u16>) = (Vec::new(), Vec::new());
+    let mut last_morton = 0u64;
+    for c in codes {
         match counts.last_mut() {
-            Some(c) if morton == last_morton && usize::from(*c) < MAX_RUN => *c += 1,
+            Some(n) if c.morton == last_morton && usize::from(*n) < MAX_RUN => *n += 1,
             _ => {
-                runs.push(morton.wrapping_sub(last_morton));
+                runs.push(c.morton.wrapping_sub(last_morton));
                 counts.push(1);
-                last_morton = morton;
+                last_morton = c.morton;
             }
         }
-        for a in q {
+        for a in c.q {
             positions.put(a, position_bits);
         }
-        let (u, v) = oct_encode(s.normal, NORMAL_BITS);
-        normals.put(u, NORMAL_BITS);
-        normals.put(v, NORMAL_BITS);
-        radii.push(rc);
-        spreads.push(spread_code(s.spread));
+        normals.put(c.normal[0], NORMAL_BITS);
+        normals.put(c.normal[1], NORMAL_BITS);
+        radii.push(c.radius);
+        spreads.push(c.spread);
     }
     let header =
         Header { surfel_count, run_count: runs.len() as u32, position_bits, normal_bits: NORMAL_BITS };

@@ -561,15 +561,22 @@ fn write_tile_package(
     let mut w = PackageWriter::create(path)?;
     let index = w.add_tile(tile.info)?;
     let scope = Scope::Tile(index);
-    // The compact encoding is one thread's work and BC1 blocks are encoded in parallel: side by
-    // side, both cores stay busy while one tile is built at a time. Each stage is timed on its
-    // own (summed over tiles, like every tile stage).
+    // Surfels are coded in parallel runs (then packed in order) and BC1 blocks in parallel, side
+    // by side: a serial compact encoding left a core idle at the end of a batch of tiles. Each
+    // stage is timed on its own (summed over tiles, like every tile stage).
     profile.lap(Stage::WriteTiles, &mut clock);
     let leaf_m = tile.info.extent_m / f64::from(1u32 << tile.info.depth);
     let (compact, blocks) = rayon::join(
         || match params.surfels {
             SurfelCodec::Compact => profile.time(Stage::CompactSurfels, || {
-                compact::encode(&tile.surfels, leaf_m, tile.info.depth, compact::MAX_POSITION_ERROR_M)
+                let bound = compact::MAX_POSITION_ERROR_M;
+                let mut codes = vec![compact::SurfelCodes::default(); tile.surfels.len()];
+                tile.surfels
+                    .par_chunks(1 << 16)
+                    .zip(codes.par_chunks_mut(1 << 16))
+                    .map(|(run, out)| compact::code_surfels(run, leaf_m, tile.info.depth, bound, out))
+                    .collect::<Option<Vec<()>>>()?;
+                compact::encode_codes(&codes, leaf_m, bound)
             }),
             SurfelCodec::Full => None,
         },
