@@ -320,8 +320,13 @@ pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Optio
             let mut cache = crate::knn::CellCache::default();
             let mut nbs = Vec::with_capacity(8);
             let mut spacing = Vec::with_capacity(local.len());
+            // The previous query's 8th distance, widened, as the guess of this one's (exact
+            // whatever the guess; a good one skips most candidates, as in normals.rs).
+            let mut guess_d2 = f32::INFINITY;
             for j in 0..local.len() {
-                knn.nearest(j, 8, f32::INFINITY, &mut cache, &mut nbs);
+                knn.nearest(j, 8, guess_d2, &mut cache, &mut nbs);
+                let d2 = nbs.iter().map(|nb| nb.0).fold(0.0f32, f32::max);
+                guess_d2 = if d2 > 0.0 { d2 * 1.3 } else { f32::INFINITY };
                 if let Some(d2) = nbs.iter().map(|nb| nb.0).filter(|&d2| d2 > 0.0).reduce(f32::min) {
                     spacing.push(f64::from(d2).sqrt());
                 }
@@ -769,8 +774,21 @@ fn count_cells(
         &|done| progress(Progress { stage: "count", done, total: claimed }),
         |_| -> (Counts, Option<SpillWriter>) { ((foldhash::HashMap::default(), 0, 0), None) },
         |((fine, points, invalid), spill), si, posed| {
+            // Scan order keeps runs of points in one fine cell: one hash update per run.
+            let mut run: Option<([i64; 3], u64)> = None;
             for &q in &posed.q {
-                *fine.entry(fine_key(q, shift)).or_default() += 1;
+                let key = fine_key(q, shift);
+                match &mut run {
+                    Some((k, n)) if *k == key => *n += 1,
+                    _ => {
+                        if let Some((k, n)) = run.replace((key, 1)) {
+                            *fine.entry(k).or_default() += n;
+                        }
+                    }
+                }
+            }
+            if let Some((k, n)) = run {
+                *fine.entry(k).or_default() += n;
             }
             *points += posed.len() as u64;
             *invalid += posed.invalid;
