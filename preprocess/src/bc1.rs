@@ -1,8 +1,8 @@
 //! Surfel colours as BC1 (DXT1) blocks: each block holds 16 consecutive surfels. Surfels are in
 //! Morton order, so a block's colours are spatial neighbours, which is what makes a 4x4 texture
-//! codec work on points. Two encoders ([`Bc1Fit`]): Intel's ISPC kernel (`intel_tex_2`, SIMD,
-//! the default) and `texpresso`'s cluster fit (a port of libsquish), about 40 times slower for
-//! 1-2.4 dB more PSNR (`grotto-pack bench-bc1`, docs/benchmarks.md). Blocks are encoded in
+//! codec work on points. Two encoders ([`Bc1Fit`]): `texpresso`'s cluster fit (a port of
+//! libsquish, the default) and Intel's ISPC kernel (`intel_tex_2`, SIMD, `--colors bc1-fast`),
+//! about 40 times faster for 0.7-2.4 dB less PSNR (`grotto-pack bench-bc1`, docs/benchmarks.md). Blocks are encoded in
 //! parallel (rayon's current pool): a large tile is built alone.
 
 use grotto_format::spec::Bc1Block;

@@ -325,10 +325,10 @@ pub fn normals(
 pub struct Bc1Figure {
     pub package: String,
     pub points: u64,
-    /// The default (ISPC) encoder.
+    /// Intel's ISPC encoder (`--colors bc1-fast`).
     pub psnr_db: f64,
     pub max_error: u8,
-    /// Cluster fit (`--colors bc1-best`).
+    /// Cluster fit (the default `--colors bc1`).
     pub cluster_psnr_db: f64,
     pub cluster_max_error: u8,
     pub cluster_encode_seconds: f64,
