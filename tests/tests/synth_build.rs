@@ -176,6 +176,7 @@ fn an_interrupted_build_resumes_and_gives_the_same_bytes() {
         [
             "count: read scans",
             "count: cells and plan",
+            "count: spill points",
             "distribute: read scans",
             "distribute: bins",
             "tiles: read bins",
