@@ -27,7 +27,7 @@ use crate::orient::{CaveGrid, MAX_SCORE, OrientStats};
 /// factor (too tight a guess searches all candidates again); it only sets the speed: with the
 /// kNN by cells 1.3 ran 1.5% faster than 1.5 and 0.5% faster than 1.2 (`grotto-pack
 /// bench-normals --points 1000000 --threads 1`, docs/benchmarks.md).
-const KNN_BOUND_FACTOR: f32 = 1.3;
+pub(crate) const KNN_BOUND_FACTOR: f32 = 1.3;
 
 /// Surfel radii are widened by this over the disc that covers the area per point, so neighbouring
 /// discs overlap without holes.

@@ -326,7 +326,7 @@ pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Optio
             for j in 0..local.len() {
                 knn.nearest(j, 8, guess_d2, &mut cache, &mut nbs);
                 let d2 = nbs.iter().map(|nb| nb.0).fold(0.0f32, f32::max);
-                guess_d2 = if d2 > 0.0 { d2 * 1.3 } else { f32::INFINITY };
+                guess_d2 = if d2 > 0.0 { d2 * crate::normals::KNN_BOUND_FACTOR } else { f32::INFINITY };
                 if let Some(d2) = nbs.iter().map(|nb| nb.0).filter(|&d2| d2 > 0.0).reduce(f32::min) {
                     spacing.push(f64::from(d2).sqrt());
                 }

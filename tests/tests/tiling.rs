@@ -128,14 +128,19 @@ fn a_cloud_shifted_to_survey_coordinates_tiles_identically() {
     assert_eq!([gb[0] - ga[0], gb[1] - ga[1], gb[2] - ga[2]], [500_000.0, 5_000_000.0, 1000.0]);
 }
 
-#[test]
-fn bins_read_the_same_whatever_the_number_of_distribute_workers() {
-    let Some(data) = shared_data_dir() else { return };
+/// Four of the bunny's range scans, unposed.
+fn four_bunny_scans(data: &Path) -> Vec<ResolvedScan> {
     let files: Vec<_> = ["bun000.ply", "bun045.ply", "bun090.ply", "bun180.ply"]
         .iter()
         .map(|f| data.join("ply/stanford-bunny/data").join(f))
         .collect();
-    let scans = Manifest::from_files(&files).resolve().unwrap();
+    Manifest::from_files(&files).resolve().unwrap()
+}
+
+#[test]
+fn bins_read_the_same_whatever_the_number_of_distribute_workers() {
+    let Some(data) = shared_data_dir() else { return };
+    let scans = four_bunny_scans(&data);
     // Small tiles and buffers: many tiles with halo copies, several flushes per worker.
     let params = TilingParams { max_points_per_tile: 3_000, buffer_bytes: 1 << 16, ..bunny_params() };
     let in_pool = |threads: usize| {
@@ -161,11 +166,7 @@ fn bins_read_the_same_whatever_the_number_of_distribute_workers() {
 #[test]
 fn distribute_makes_the_same_bins_from_the_spill_as_from_the_scans() {
     let Some(data) = shared_data_dir() else { return };
-    let files: Vec<_> = ["bun000.ply", "bun045.ply", "bun090.ply", "bun180.ply"]
-        .iter()
-        .map(|f| data.join("ply/stanford-bunny/data").join(f))
-        .collect();
-    let scans = Manifest::from_files(&files).resolve().unwrap();
+    let scans = four_bunny_scans(&data);
     let params = TilingParams { max_points_per_tile: 3_000, buffer_bytes: 1 << 16, ..bunny_params() };
     assert!(params.spill, "spilling is the default");
     let spilled_dir = tempfile::tempdir().unwrap();
