@@ -320,32 +320,40 @@ pub fn normals(
     Ok(out)
 }
 
-/// BC1 against raw colours on a package built with `--colors raw`.
+/// BC1 against raw colours on a package built with `--colors raw`, one row per encoder.
 #[derive(Clone, Debug, Serialize)]
 pub struct Bc1Figure {
     pub package: String,
     pub points: u64,
-    /// Intel's ISPC encoder (`--colors bc1-fast`).
-    pub psnr_db: f64,
-    pub max_error: u8,
-    /// Cluster fit (the default `--colors bc1`).
-    pub cluster_psnr_db: f64,
-    pub cluster_max_error: u8,
-    pub cluster_encode_seconds: f64,
+    pub encoders: Vec<Bc1EncoderFigure>,
     /// sRGB bytes as stored raw (4 per point), zstd-compressed raw, and BC1.
     pub raw_bytes: u64,
     pub raw_zstd_bytes: u64,
     pub bc1_bytes: u64,
+}
+
+/// One BC1 encoder on a package's colours.
+#[derive(Clone, Debug, Serialize)]
+pub struct Bc1EncoderFigure {
+    /// The `--colors` value that selects it.
+    pub colors: &'static str,
+    pub psnr_db: f64,
+    pub max_error: u8,
+    /// Wall time to encode every tile's colours (the current rayon pool).
     pub encode_seconds: f64,
 }
 
 pub fn bc1(package: &Path) -> Result<Bc1Figure> {
+    use crate::bc1::Bc1Fit;
     use grotto_format::spec::Rgba8;
     use grotto_format::{Package, SectionKind};
+    const FITS: [(&str, Bc1Fit); 3] =
+        [("bc1", Bc1Fit::Refined), ("bc1-fast", Bc1Fit::Fast), ("bc1-cluster", Bc1Fit::Cluster)];
     let pkg = Package::open(package)?;
-    let (mut all, mut decoded) = (Vec::new(), Vec::new());
-    let (mut raw_bytes, mut zstd_bytes, mut bc1_bytes, mut seconds) = (0u64, 0u64, 0u64, 0f64);
-    let (mut cluster_decoded, mut cluster_seconds) = (Vec::new(), 0f64);
+    let mut all = Vec::new();
+    let mut decoded: [Vec<[u8; 3]>; 3] = Default::default();
+    let mut seconds = [0f64; 3];
+    let (mut raw_bytes, mut zstd_bytes, mut bc1_bytes) = (0u64, 0u64, 0u64);
     for t in pkg.tiles() {
         let s = t.find(SectionKind::SurfelColorsRaw, 0).ok_or_else(|| Error::Parameter {
             name: "package",
@@ -353,33 +361,35 @@ pub fn bc1(package: &Path) -> Result<Bc1Figure> {
         })?;
         let raw = pkg.read::<Rgba8>(&s)?;
         let rgb: Vec<[u8; 3]> = raw.iter().map(|c| [c.0[0], c.0[1], c.0[2]]).collect();
-        let start = Instant::now();
-        let blocks = crate::bc1::encode(&rgb, crate::bc1::Bc1Fit::Fast);
-        seconds += start.elapsed().as_secs_f64();
-        decoded.extend(crate::bc1::decode(&blocks, rgb.len()));
-        let start = Instant::now();
-        let cluster = crate::bc1::encode(&rgb, crate::bc1::Bc1Fit::Cluster);
-        cluster_seconds += start.elapsed().as_secs_f64();
-        cluster_decoded.extend(crate::bc1::decode(&cluster, rgb.len()));
+        for (f, &(_, fit)) in FITS.iter().enumerate() {
+            let start = Instant::now();
+            let blocks = crate::bc1::encode(&rgb, fit);
+            seconds[f] += start.elapsed().as_secs_f64();
+            decoded[f].extend(crate::bc1::decode(&blocks, rgb.len()));
+            if f == 0 {
+                bc1_bytes += (blocks.len() * 8) as u64;
+            }
+        }
         raw_bytes += s.raw_len;
         zstd_bytes += s.stored_len;
-        bc1_bytes += (blocks.len() * 8) as u64;
         all.extend(rgb);
     }
-    let (psnr_db, max_error) = crate::bc1::psnr(&all, &decoded);
-    let (cluster_psnr_db, cluster_max_error) = crate::bc1::psnr(&all, &cluster_decoded);
+    let encoders = FITS
+        .iter()
+        .zip(&decoded)
+        .zip(seconds)
+        .map(|((&(colors, _), decoded), encode_seconds)| {
+            let (psnr_db, max_error) = crate::bc1::psnr(&all, decoded);
+            Bc1EncoderFigure { colors, psnr_db, max_error, encode_seconds }
+        })
+        .collect();
     Ok(Bc1Figure {
         package: package.display().to_string(),
         points: all.len() as u64,
-        psnr_db,
-        max_error,
-        cluster_psnr_db,
-        cluster_max_error,
-        cluster_encode_seconds: cluster_seconds,
+        encoders,
         raw_bytes,
         raw_zstd_bytes: zstd_bytes,
         bc1_bytes,
-        encode_seconds: seconds,
     })
 }
 

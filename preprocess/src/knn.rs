@@ -128,8 +128,11 @@ pub struct CellCache {
     /// beyond it).
     block_lo: [f32; 3],
     block_hi: [f32; 3],
-    /// The block's non-empty cells: their runs of sorted points and bounds (a hair wide, so that
-    /// a point quantised across a face by rounding is still inside).
+    /// The block's three slabs along each axis (below, through and above the central cell):
+    /// their bounds, metres, a hair wide so that a point quantised across a face by rounding is
+    /// still inside.
+    slabs_m: [[(f32, f32); 3]; 3],
+    /// The block's non-empty cells: their runs of sorted points and their slab on each axis.
     cells: Vec<CachedCell>,
     /// The candidates a query kept, as squared distance (its bits: non-negative floats order
     /// like their bits) above sorted index, so that selection compares integers.
@@ -142,8 +145,7 @@ pub struct CellCache {
 struct CachedCell {
     first: u32,
     end: u32,
-    lo_m: [f32; 3],
-    hi_m: [f32; 3],
+    slab: [u8; 3],
 }
 
 impl CellCache {
@@ -151,10 +153,17 @@ impl CellCache {
     fn within(&mut self, grid: &MortonGrid, q: [f32; 3], limit_d2: f32) -> usize {
         self.found.resize(self.candidates, 0);
         let mut m = 0;
+        // A cell's gap to the query is the sum of its slabs' gaps: nine per query rather than
+        // three per cell (the per-cell box test was a third of this function's time).
+        let gap2: [[f32; 3]; 3] = std::array::from_fn(|a| {
+            self.slabs_m[a].map(|(lo, hi)| {
+                let gap = (lo - q[a]).max(q[a] - hi).max(0.0);
+                gap * gap
+            })
+        });
         for cell in &self.cells {
-            let gap: [f32; 3] =
-                std::array::from_fn(|a| (cell.lo_m[a] - q[a]).max(q[a] - cell.hi_m[a]).max(0.0));
-            if gap[0] * gap[0] + gap[1] * gap[1] + gap[2] * gap[2] > limit_d2 {
+            let [sx, sy, sz] = cell.slab.map(usize::from);
+            if gap2[0][sx] + gap2[1][sy] + gap2[2][sz] > limit_d2 {
                 continue;
             }
             let (s, e) = (cell.first as usize, cell.end as usize);
@@ -385,6 +394,12 @@ impl MortonGrid {
             let c0 = i64::from(c[a]);
             if c0 + 1 >= cells { f32::INFINITY } else { self.lo[a] + (c0 + 2) as f32 * edge_m }
         });
+        cache.slabs_m = std::array::from_fn(|a| {
+            std::array::from_fn(|s| {
+                let lo = self.lo[a] + (i64::from(c[a]) + s as i64 - 1) as f32 * edge_m;
+                (lo - eps_m, lo + edge_m + eps_m)
+            })
+        });
         for dz in -1i64..=1 {
             for dy in -1i64..=1 {
                 for dx in -1i64..=1 {
@@ -395,13 +410,11 @@ impl MortonGrid {
                     let p = morton_encode(n[0] as u32, n[1] as u32, n[2] as u32);
                     if let Some(i) = gallop(&level.prefixes, p, hint) {
                         let (s, e) = (level.starts[i] as usize, level.starts[i + 1] as usize);
-                        let cell_lo: [f32; 3] = std::array::from_fn(|a| self.lo[a] + n[a] as f32 * edge_m);
                         cache.candidates += e - s;
                         cache.cells.push(CachedCell {
                             first: s as u32,
                             end: e as u32,
-                            lo_m: cell_lo.map(|v| v - eps_m),
-                            hi_m: cell_lo.map(|v| v + edge_m + eps_m),
+                            slab: [dx, dy, dz].map(|d| (d + 1) as u8),
                         });
                     }
                 }

@@ -336,8 +336,9 @@ pub fn bunny() -> Result<SceneData, String> {
 
 /// The demo cave with raw colours, full-precision surfels and 0.25 m leaves (the reference's
 /// scene), and the package knobs around it: one SVO level coarser and finer, BC1 colours (the
-/// default cluster fit and the ISPC encoder of `--colors bc1-fast`), compact surfels (format 2.0, what `grotto-pack build`
-/// writes by default).
+/// default ISPC kernel refined by cluster fit, ISPC alone as `--colors bc1-fast` and cluster fit
+/// alone as `--colors bc1-cluster`), compact surfels (format 2.0, what `grotto-pack build` writes
+/// by default).
 fn demo_cave_variants() -> Result<(SceneData, Vec<Variant>), String> {
     let base = demo_cave(ColorCodec::Raw, SurfelCodec::Full, 0.25, None, true)?;
     let mut variants = Vec::new();
@@ -346,6 +347,7 @@ fn demo_cave_variants() -> Result<(SceneData, Vec<Variant>), String> {
         ("leaf 0.125 m (depth +1)", "svo depth", ColorCodec::Raw, SurfelCodec::Full, 0.125),
         ("BC1 colours", "colours", ColorCodec::Bc1, SurfelCodec::Full, 0.25),
         ("BC1 colours, ISPC", "colours", ColorCodec::Bc1Fast, SurfelCodec::Full, 0.25),
+        ("BC1 colours, cluster fit", "colours", ColorCodec::Bc1Cluster, SurfelCodec::Full, 0.25),
         ("compact surfels", "surfels", ColorCodec::Raw, SurfelCodec::Compact, 0.25),
     ] {
         let v = demo_cave(colors, surfels, leaf_m, None, true)?;
