@@ -838,39 +838,65 @@ fn tile_stage(
     progress: &(dyn Fn(Progress) + Sync),
     profile: &Profile,
 ) -> Result<TileStage> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(params.threads.max(1))
-        .build()
-        .map_err(|e| Error::Parameter { name: "threads", reason: e.to_string() })?;
     let tiles_dir = params.work_dir.join("tiles");
     std::fs::create_dir_all(&tiles_dir).map_err(|source| Error::Io { path: tiles_dir.clone(), source })?;
     let fingerprint = tile_fingerprint(plan, params);
-    let mine: Vec<usize> = (0..plan.tiles.len()).filter(|&t| shard.takes(t)).collect();
-    let batch = params.tiles_at_once();
-    let mut stage = TileStage::default();
-    for (b, group) in mine.chunks(batch).enumerate() {
-        let done: Vec<Result<bool>> = pool.install(|| {
-            group
-                .par_iter()
-                .map(|&t| {
-                    let path = tile_package_path(&params.work_dir, t);
-                    if finished_tile_package(&path, &fingerprint).is_some() {
-                        return Ok(true);
+    let mut mine: Vec<usize> = (0..plan.tiles.len()).filter(|&t| shard.takes(t)).collect();
+    // Largest first, so that the last tiles to finish are small ones and no core waits long at
+    // the end (what each job builds is still the shard's tiles, whatever the order).
+    mine.sort_by_key(|&t| std::cmp::Reverse(plan.tiles[t].points));
+    // `tiles_at_once` feeders, each taking the next tile as soon as its last one is written, in
+    // a pool of its own: the threads shared out between them. Batches of that many tiles in one
+    // pool waited for their largest (about 6 s of idle cores at 10^8), and one pool fed by
+    // several threads stacked a tile on top of another's waiting work. At most one tile per
+    // feeder is in memory, as the budget wants.
+    let feeders = params.tiles_at_once().min(mine.len()).max(1);
+    let threads = params.threads.max(1);
+    let pools = (0..feeders)
+        .map(|f| {
+            let share = (threads / feeders + usize::from(f < threads % feeders)).max(1);
+            rayon::ThreadPoolBuilder::new().num_threads(share).build()
+        })
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(|e| Error::Parameter { name: "threads", reason: e.to_string() })?;
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let failed = std::sync::atomic::AtomicBool::new(false);
+    let stage = std::sync::Mutex::new((TileStage::default(), None::<Error>));
+    std::thread::scope(|scope| {
+        for pool in &pools {
+            scope.spawn(|| {
+                use std::sync::atomic::Ordering::Relaxed;
+                while !failed.load(Relaxed) {
+                    let Some(&t) = mine.get(next.fetch_add(1, Relaxed)) else { break };
+                    let done = pool.install(|| {
+                        let path = tile_package_path(&params.work_dir, t);
+                        if finished_tile_package(&path, &fingerprint).is_some() {
+                            return Ok(true);
+                        }
+                        let built = build_tile(plan, &params.work_dir, t, params, scene, grid, profile)?;
+                        write_tile_package(&path, &built, &fingerprint, params, profile)?;
+                        Ok(false)
+                    });
+                    // Counted and reported under the lock, so progress only goes up.
+                    let mut stage = stage.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+                    match done {
+                        Ok(true) => stage.0.reused += 1,
+                        Ok(false) => stage.0.built += 1,
+                        Err(e) => {
+                            failed.store(true, Relaxed);
+                            stage.1.get_or_insert(e);
+                            break;
+                        }
                     }
-                    let built = build_tile(plan, &params.work_dir, t, params, scene, grid, profile)?;
-                    write_tile_package(&path, &built, &fingerprint, params, profile)?;
-                    Ok(false)
-                })
-                .collect()
-        });
-        for (i, d) in done.into_iter().enumerate() {
-            if d? {
-                stage.reused += 1
-            } else {
-                stage.built += 1
-            }
-            progress(Progress { stage: "tiles", done: (b * batch + i + 1) as u64, total: mine.len() as u64 });
+                    let finished = (stage.0.built + stage.0.reused) as u64;
+                    progress(Progress { stage: "tiles", done: finished, total: mine.len() as u64 });
+                }
+            });
         }
+    });
+    let (stage, error) = stage.into_inner().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some(e) = error {
+        return Err(e);
     }
     Ok(stage)
 }
