@@ -325,6 +325,17 @@ impl Package {
         self.read_checked::<T>(s)
     }
 
+    /// Checks a section's checksum and content as its first read does, once: a section already
+    /// checked (by a read or an earlier call) is not decoded again. For copying sections whose
+    /// bytes are not needed, and for checking them on another thread first.
+    pub fn check(&self, s: &SectionInfo) -> Result<()> {
+        let stored = self.stored(s)?;
+        self.checked[s.index as usize]
+            .get_or_init(|| self.check_section(s, stored).map(drop))
+            .clone()
+            .map_err(|p| self.invalid(p))
+    }
+
     fn read_checked<T: Pod>(&self, s: &SectionInfo) -> Result<Cow<'_, [T]>> {
         let stored = self.stored(s)?;
         let mut decoded = None;

@@ -201,8 +201,9 @@ impl PackageWriter {
         let kind = section
             .kind
             .ok_or_else(|| self.refuse(format!("cannot copy {} (unknown kind)", section.kind_name())))?;
-        // Checks checksum and content (decoding zstd once), so damage is not carried over.
-        from.read_bytes(section)?;
+        // Checks checksum and content (decoding zstd once, unless `from` checked it already), so
+        // damage is not carried over.
+        from.check(section)?;
         match (kind.is_per_tile(), scope) {
             (true, Scope::Global) | (false, Scope::Tile(_)) => {
                 return Err(self.refuse(format!("{} cannot go to {scope:?}", kind.name())));

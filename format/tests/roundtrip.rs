@@ -263,6 +263,11 @@ fn sections_copy_between_packages_as_stored() {
     w.add_tile(TileInfo { origin_m: [0.0; 3], extent_m: 1.0, grid: [0; 3], depth: 3, point_count: 0 })
         .unwrap();
     assert!(w.copy_section(&damaged, &victim, Scope::Tile(0)).is_err());
+    // `check` finds the same damage, and says so again when asked again (it is kept, not lost).
+    assert!(damaged.check(&victim).is_err());
+    assert!(damaged.check(&victim).is_err());
+    let intact = t.find(SectionKind::SurfelsCompact, 0).unwrap();
+    assert!(src.check(&intact).is_ok());
 }
 
 #[test]

@@ -1019,23 +1019,41 @@ fn assemble_plan(
     };
     profile.lap(Stage::Levels, &mut clock);
     let mut writer = PackageWriter::create(out)?;
+    // Two tile packages mapped at a time (copying touches every page of a tile's surfels): the
+    // next one's sections are checked (checksums, zstd decoded) on another thread while this one
+    // is copied, which was half of the copy's serial time.
+    let open_checked = |t: usize| -> Result<Package> {
+        let pkg = Package::open(tile_package_path(&params.work_dir, t))?;
+        let tile = pkg.tile(0).ok_or_else(|| Error::Parameter {
+            name: "tiles",
+            reason: format!("tile package {t} has no tile"),
+        })?;
+        for s in tile.sections() {
+            pkg.check(&s)?;
+        }
+        Ok(pkg)
+    };
+    let mut next = (total > 0).then(|| open_checked(0));
     for (t, levels) in levels.iter().enumerate() {
         let path = tile_package_path(&params.work_dir, t);
         if let Some((seam, tile_normals)) = finished_tile_package(&path, &fingerprint) {
             seam_limited_points += seam;
             normals.add(&tile_normals);
         }
-        // One tile package mapped at a time: copying touches every page of its surfels.
-        let tile_pkg = Package::open(&path)?;
+        let Some(tile_pkg) = next.take() else { break };
+        let tile_pkg = tile_pkg?;
         let tile = tile_pkg.tile(0).ok_or_else(|| Error::Parameter {
             name: "tiles",
             reason: format!("tile package {t} has no tile"),
         })?;
         let index = writer.add_tile(tile.info())?;
         let scope = Scope::Tile(index);
-        for s in tile.sections() {
-            writer.copy_section(&tile_pkg, &s, scope)?;
-        }
+        let (copied, following) = rayon::join(
+            || tile.sections().try_for_each(|s| writer.copy_section(&tile_pkg, &s, scope).map(drop)),
+            || (t + 1 < total).then(|| open_checked(t + 1)),
+        );
+        copied?;
+        next = following;
         for (k, coarse) in &levels.coarse {
             writer.add_elements(SectionKind::CoarseNodes, scope, *k, &coarse.nodes, Compression::Auto(3))?;
             writer.add_elements(
