@@ -176,7 +176,7 @@ pub enum ColorCodec {
     /// BC1 blocks of 16 surfels: 0.5 byte per surfel (Intel's ISPC kernel, then texpresso's
     /// cluster fit for the blocks it leaves visibly off: `bc1::Bc1Fit::Refined`).
     Bc1,
-    /// The same blocks by the ISPC kernel alone: fastest, 0.3-2.1 dB less PSNR than `Bc1`.
+    /// The same blocks by the ISPC kernel alone: fastest, 0.3-0.6 dB less PSNR than `Bc1`.
     #[serde(rename = "bc1-fast")]
     Bc1Fast,
     /// The same blocks by the cluster fit alone: the best PSNR, about 40 times slower than ISPC.

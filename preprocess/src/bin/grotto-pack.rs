@@ -171,7 +171,7 @@ struct BuildOpts {
     #[arg(long, default_value = "auto")]
     leaf_m: String,
     /// Surfel colour storage: bc1 (0.5 byte per point: Intel's ISPC kernel, then cluster fit for
-    /// the blocks it leaves visibly off), bc1-fast (ISPC alone: fastest, 0.3-2.1 dB less PSNR),
+    /// the blocks it leaves visibly off), bc1-fast (ISPC alone: fastest, 0.3-0.6 dB less PSNR),
     /// bc1-cluster (cluster fit alone: best PSNR, slowest) or raw (4 bytes).
     #[arg(long, default_value = "bc1", value_parser = ["bc1", "bc1-fast", "bc1-cluster", "raw"])]
     colors: String,
