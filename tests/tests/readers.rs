@@ -138,6 +138,18 @@ fn las_points_lie_within_their_header_bounds_and_colours_scale() {
     let mean: f64 = all.rgb.iter().map(|c| f64::from(c[0])).sum::<f64>() / all.rgb.len() as f64;
     let saturated = all.rgb.iter().filter(|c| c[0] == 255).count() as f64 / all.rgb.len() as f64;
     assert!(mean > 30.0 && mean < 230.0 && saturated < 0.05, "mean {mean}, saturated {saturated}");
+    // Read in small chunks the probe is still the first 2^20 points, not the first chunk; and a
+    // source opened for positions alone (no probe) reads the same positions.
+    let mut small = ingest::open(&path, ScanFormat::Laz, 0).unwrap();
+    let mut chunk = ingest::PointChunk::new(1000);
+    let mut rgb = Vec::new();
+    while small.fill_chunk(&mut chunk).unwrap() > 0 {
+        rgb.extend_from_slice(&chunk.rgb);
+    }
+    assert_eq!(rgb, all.rgb);
+    let positions =
+        ingest::read_all(ingest::open_positions(&path, ScanFormat::Laz, 0).unwrap().as_mut()).unwrap();
+    assert_eq!(positions.xyz, all.xyz);
 }
 
 #[test]

@@ -5,7 +5,9 @@
 //! Colours: LAS stores 16-bit RGB, but many writers put 8-bit values in those fields. The first
 //! [`COLOR_PROBE`] points decide: if no channel exceeds 255 the file is taken as 8-bit. Files
 //! without colour get their intensity as grey (its 99th percentile over the probe as white), or a
-//! neutral grey.
+//! neutral grey. The probe is the source's first batch of points, decoded once (a second reader
+//! for it decoded 2^20 LAZ points twice on every open); a source opened for positions alone
+//! ([`super::open_positions`]) skips it.
 
 use std::fs::File;
 use std::io::BufReader;
@@ -32,6 +34,12 @@ pub(super) struct LasSource {
     cursor: usize,
     /// Where a normal sits in each record's extra bytes, when the file stores one there.
     normal_fields: Option<[ExtraField; 3]>,
+    /// Set by the first batch (the probe), unless opened for positions alone.
+    scales: Option<Scales>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Scales {
     /// Divide raw colour by this to get 0..=255.
     color_div: f32,
     /// Divisor of intensity to an 8-bit grey (its 99th percentile maps to 255); `None` when the
@@ -293,14 +301,14 @@ fn open_reader_unguarded(path: &Path, format: ScanFormat) -> Result<Reader> {
 }
 
 impl LasSource {
-    pub(super) fn open(path: &Path, format: ScanFormat) -> Result<Self> {
+    /// `probe`: tell 8-bit from 16-bit colour on the first batch; without it colours and
+    /// intensities are taken as 8-bit (for callers that read positions only).
+    pub(super) fn open(path: &Path, format: ScanFormat, probe: bool) -> Result<Self> {
         let info = header_info(path, format)?;
         let reader = open_reader(path, format)?;
         // Without the record the file cuts short (`SourceInfo::dropped_points`).
         let claimed = reader.header().number_of_points().saturating_sub(info.dropped_points);
         let point_format = *reader.header().point_format();
-        let (color_div, grey_div) =
-            guard(path, format, || probe_scales(path, format, point_format.has_color, claimed))?;
         let data = las::PointDataBuilder::new().for_header(reader.header()).build();
         let normal_fields = normal_fields(reader.header());
         Ok(Self {
@@ -319,8 +327,7 @@ impl LasSource {
             batch_normal: Vec::new(),
             cursor: 0,
             normal_fields,
-            color_div,
-            grey_div,
+            scales: (!probe).then_some(Scales { color_div: 1.0, grey_div: None }),
         })
     }
 }
@@ -431,28 +438,27 @@ fn normal_fields(header: &las::Header) -> Option<[ExtraField; 3]> {
     Some([found[0]?, found[1]?, found[2]?])
 }
 
-/// Looks at up to COLOR_PROBE points to tell 8-bit from 16-bit colour (and intensity) values.
-fn probe_scales(
-    path: &Path,
-    format: ScanFormat,
-    has_color: bool,
-    claimed: u64,
-) -> Result<(f32, Option<f32>)> {
-    let mut reader = open_reader(path, format)?;
-    let data = reader.read_points(claimed.min(COLOR_PROBE)).map_err(|e| read_error(path, format, e))?;
-    let max_color = data.rgb().map_or(0, |rgb| rgb.map(|(r, g, b)| r.max(g).max(b)).max().unwrap_or(0));
+/// Tells 8-bit from 16-bit colour (and intensity) values by the first COLOR_PROBE points of
+/// `data`, the source's first batch.
+fn probe_scales(data: &PointData, has_color: bool) -> Scales {
+    let probe = COLOR_PROBE as usize;
+    let max_color =
+        data.rgb().map_or(0, |rgb| rgb.take(probe).map(|(r, g, b)| r.max(g).max(b)).max().unwrap_or(0));
     let div = |max: u16| if max <= 255 { 1.0 } else { 257.0 };
     // Intensity is not calibrated: sensors write 8, 12 or 16 bits, or a range of their own (a
     // 16-bit scale made most of an airborne file with values up to 600 black). Its 99th
     // percentile over the probe is white.
-    let mut intensity: Vec<u16> = data.intensity().filter(|&i| i > 0).collect();
+    let mut intensity: Vec<u16> = data.intensity().take(probe).filter(|&i| i > 0).collect();
     let white = if intensity.is_empty() {
         0
     } else {
         let k = (intensity.len() - 1) * 99 / 100;
         *intensity.select_nth_unstable(k).1
     };
-    Ok((if has_color { div(max_color) } else { 1.0 }, (white > 0).then(|| f32::from(white) / 255.0)))
+    Scales {
+        color_div: if has_color { div(max_color) } else { 1.0 },
+        grey_div: (white > 0).then(|| f32::from(white) / 255.0),
+    }
 }
 
 impl PointSource for LasSource {
@@ -481,7 +487,7 @@ impl PointSource for LasSource {
 }
 
 /// Requests' worth of points decoded at once from LAZ.
-const LAZ_BATCH: usize = 8;
+pub(crate) const LAZ_BATCH: usize = 8;
 
 impl LasSource {
     fn decode_batch(&mut self, batch: usize) -> Result<()> {
@@ -501,6 +507,8 @@ impl LasSource {
                 format!("after {done} points: reading stopped at corrupt data"),
             ));
         }
+        // The first batch is the colour probe: at least COLOR_PROBE points.
+        let batch = if self.scales.is_none() { batch.max(COLOR_PROBE as usize) } else { batch };
         let want = self.remaining.min(batch as u64);
         let (reader, data) = (&mut self.reader, &mut self.data);
         let n = guard(path, format, || {
@@ -518,6 +526,8 @@ impl LasSource {
         }
         self.remaining -= n;
         let data = &self.data;
+        let Scales { color_div, grey_div } =
+            *self.scales.get_or_insert_with(|| probe_scales(data, self.info.has_color));
         self.batch_xyz.extend(data.x().zip(data.y()).zip(data.z()).map(|((x, y), z)| [x, y, z]));
         if let Some(fields) = &self.normal_fields {
             self.batch_normal.extend(
@@ -528,10 +538,8 @@ impl LasSource {
         }
         let to_u8 = |v: u16, div: f32| (f32::from(v) / div).round().min(255.0) as u8;
         match data.rgb() {
-            Some(rgb) => {
-                self.batch_rgb.extend(rgb.map(|(r, g, b)| [r, g, b].map(|c| to_u8(c, self.color_div))))
-            }
-            None => match self.grey_div {
+            Some(rgb) => self.batch_rgb.extend(rgb.map(|(r, g, b)| [r, g, b].map(|c| to_u8(c, color_div)))),
+            None => match grey_div {
                 Some(div) => self.batch_rgb.extend(data.intensity().map(|i| [to_u8(i, div); 3])),
                 None => self.batch_rgb.resize(self.batch_xyz.len(), NEUTRAL_GREY),
             },
