@@ -141,7 +141,7 @@ fn las_points_lie_within_their_header_bounds_and_colours_scale() {
     // Read in small chunks the probe is still the first 2^20 points, not the first chunk; and a
     // source opened for positions alone (no probe) reads the same positions.
     let mut small = ingest::open(&path, ScanFormat::Laz, 0).unwrap();
-    let mut chunk = ingest::PointChunk::new(1000);
+    let mut chunk = PointChunk::new(1000);
     let mut rgb = Vec::new();
     while small.fill_chunk(&mut chunk).unwrap() > 0 {
         rgb.extend_from_slice(&chunk.rgb);
