@@ -518,6 +518,13 @@ fn build_tile(
     })
 }
 
+/// The one tile of tile package `t`.
+fn tile_of_package(package: &Package, t: usize) -> Result<grotto_format::Tile<'_>> {
+    package
+        .tile(0)
+        .ok_or_else(|| Error::Parameter { name: "tiles", reason: format!("tile package {t} has no tile") })
+}
+
 pub fn tile_package_path(work_dir: &Path, tile: usize) -> PathBuf {
     work_dir.join("tiles").join(format!("{tile:07}.grotto"))
 }
@@ -995,16 +1002,8 @@ fn assemble_plan(
         let packages = (0..total)
             .map(|t| Package::open(tile_package_path(&params.work_dir, t)))
             .collect::<std::result::Result<Vec<_>, _>>()?;
-        let tiles = packages
-            .iter()
-            .enumerate()
-            .map(|(t, p)| {
-                p.tile(0).ok_or_else(|| Error::Parameter {
-                    name: "tiles",
-                    reason: format!("tile package {t} has no tile"),
-                })
-            })
-            .collect::<Result<Vec<_>>>()?;
+        let tiles =
+            packages.iter().enumerate().map(|(t, p)| tile_of_package(p, t)).collect::<Result<Vec<_>>>()?;
         let grid = grotto_levels::TileGrid::of(&tiles);
         let done = std::sync::atomic::AtomicU64::new(0);
         (0..total)
@@ -1024,11 +1023,7 @@ fn assemble_plan(
     // is copied, which was half of the copy's serial time.
     let open_checked = |t: usize| -> Result<Package> {
         let pkg = Package::open(tile_package_path(&params.work_dir, t))?;
-        let tile = pkg.tile(0).ok_or_else(|| Error::Parameter {
-            name: "tiles",
-            reason: format!("tile package {t} has no tile"),
-        })?;
-        for s in tile.sections() {
+        for s in tile_of_package(&pkg, t)?.sections() {
             pkg.check(&s)?;
         }
         Ok(pkg)
@@ -1042,10 +1037,7 @@ fn assemble_plan(
         }
         let Some(tile_pkg) = next.take() else { break };
         let tile_pkg = tile_pkg?;
-        let tile = tile_pkg.tile(0).ok_or_else(|| Error::Parameter {
-            name: "tiles",
-            reason: format!("tile package {t} has no tile"),
-        })?;
+        let tile = tile_of_package(&tile_pkg, t)?;
         let index = writer.add_tile(tile.info())?;
         let scope = Scope::Tile(index);
         let (copied, following) = rayon::join(
