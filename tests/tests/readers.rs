@@ -138,15 +138,29 @@ fn las_points_lie_within_their_header_bounds_and_colours_scale() {
     let mean: f64 = all.rgb.iter().map(|c| f64::from(c[0])).sum::<f64>() / all.rgb.len() as f64;
     let saturated = all.rgb.iter().filter(|c| c[0] == 255).count() as f64 / all.rgb.len() as f64;
     assert!(mean > 30.0 && mean < 230.0 && saturated < 0.05, "mean {mean}, saturated {saturated}");
-    // Read in small chunks the probe is still the first 2^20 points, not the first chunk; and a
-    // source opened for positions alone (no probe) reads the same positions.
-    let mut small = ingest::open(&path, ScanFormat::Laz, 0).unwrap();
+    // Read in small chunks the probe is still the first 2^20 points, not the first chunk: a file
+    // whose 16-bit colours start after its first chunk (a probe of one chunk would take it as
+    // 8-bit); and a source opened for positions alone (no probe) reads the same positions.
+    let dir = tempfile::tempdir().unwrap();
+    let late = dir.path().join("late-16-bit.las");
+    let mut builder = las::Builder::from((1, 2));
+    builder.point_format = las::point::Format::new(2).unwrap();
+    let mut w = las::Writer::from_path(&late, builder.into_header().unwrap()).unwrap();
+    for i in 0..3000u16 {
+        let c = if i < 2000 { 100 } else { 100 * 257 };
+        let color = Some(las::Color { red: c, green: c, blue: c });
+        w.write_point(las::Point { x: f64::from(i), color, ..las::Point::default() }).unwrap();
+    }
+    w.close().unwrap();
+    let whole = ingest::read_all(ingest::open(&late, ScanFormat::Las, 0).unwrap().as_mut()).unwrap();
+    let mut small = ingest::open(&late, ScanFormat::Las, 0).unwrap();
     let mut chunk = PointChunk::new(1000);
     let mut rgb = Vec::new();
     while small.fill_chunk(&mut chunk).unwrap() > 0 {
         rgb.extend_from_slice(&chunk.rgb);
     }
-    assert_eq!(rgb, all.rgb);
+    assert_eq!(rgb, whole.rgb);
+    assert_eq!(whole.rgb[2999], [100; 3], "16-bit colours scaled down");
     let positions =
         ingest::read_all(ingest::open_positions(&path, ScanFormat::Laz, 0).unwrap().as_mut()).unwrap();
     assert_eq!(positions.xyz, all.xyz);

@@ -141,19 +141,24 @@ pub fn scan_count(path: &Path, format: ScanFormat) -> Result<usize> {
 
 /// Opens scan `index` of `path`.
 pub fn open(path: &Path, format: ScanFormat, index: usize) -> Result<Box<dyn PointSource>> {
-    Ok(match format {
-        ScanFormat::Las | ScanFormat::Laz => Box::new(las::LasSource::open(path, format, true)?),
-        ScanFormat::Ply => Box::new(ply::PlySource::open(path)?),
-        ScanFormat::E57 => Box::new(e57::E57Source::open(path, index)?),
-    })
+    open_with(path, format, index, true)
 }
 
 /// [`open`] for a caller that reads positions only (the `--leaf-m auto` sample): LAS and LAZ
 /// colours and intensities come back as stored, without the probe that tells 8-bit from 16-bit
 /// values (which decodes 2^20 points first).
 pub fn open_positions(path: &Path, format: ScanFormat, index: usize) -> Result<Box<dyn PointSource>> {
+    open_with(path, format, index, false)
+}
+
+fn open_with(
+    path: &Path,
+    format: ScanFormat,
+    index: usize,
+    probe_colors: bool,
+) -> Result<Box<dyn PointSource>> {
     Ok(match format {
-        ScanFormat::Las | ScanFormat::Laz => Box::new(las::LasSource::open(path, format, false)?),
+        ScanFormat::Las | ScanFormat::Laz => Box::new(las::LasSource::open(path, format, probe_colors)?),
         ScanFormat::Ply => Box::new(ply::PlySource::open(path)?),
         ScanFormat::E57 => Box::new(e57::E57Source::open(path, index)?),
     })
