@@ -6,9 +6,9 @@
 #![no_main]
 
 use grotto_format::Package;
-use grotto_runtime::residency::{self, Budget, View};
-use grotto_runtime::scene_data::{SceneData, TileMode};
-use grotto_runtime::tile_index::TileIndex;
+use grotto_runtime::stream::residency::{self, Budget, View};
+use grotto_runtime::scene::data::{SceneData, TileMode};
+use grotto_runtime::scene::tile_index::TileIndex;
 use libfuzzer_sys::fuzz_target;
 
 #[path = "reseal.rs"]

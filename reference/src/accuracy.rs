@@ -9,11 +9,11 @@ use std::fmt::Write as _;
 use glam::Vec3;
 use grotto_fixtures::testscenes;
 use grotto_preprocess::build::{ColorCodec, SurfelCodec};
-use grotto_runtime::camera::Camera;
 use grotto_runtime::gpu::Gpu;
-use grotto_runtime::plan::Pass;
-use grotto_runtime::renderer::{Frame, IndirectFilter, Quality, Renderer, Settings};
-use grotto_runtime::scene_data::SceneData;
+use grotto_runtime::light::plan::Pass;
+use grotto_runtime::render::renderer::{Frame, IndirectFilter, Quality, Renderer, Settings};
+use grotto_runtime::scene::data::SceneData;
+use grotto_runtime::view::camera::Camera;
 use serde::Serialize;
 
 use crate::{Estimate, PathSettings, SurfelScene};
@@ -94,7 +94,7 @@ pub struct Row {
 pub fn closed_scenes() -> Vec<(&'static str, &'static str, SceneData)> {
     let mut furnace = testscenes::furnace_sphere(5, 11.0, 0.8, 1.0);
     let c = Vec3::splat(1.6);
-    furnace.cameras.push(grotto_runtime::scene_data::SceneCamera {
+    furnace.cameras.push(grotto_runtime::scene::data::SceneCamera {
         name: "inside".into(),
         eye_m: c,
         look_at_m: c + Vec3::new(1.0, 0.3, -0.2),
@@ -251,7 +251,7 @@ fn cached_render(
         && path.parent().is_some_and(|dir| std::fs::create_dir_all(dir).is_ok())
     {
         let bytes = [&seconds.to_le_bytes()[..], bytemuck::cast_slice(&est)].concat();
-        let _ = grotto_runtime::export::write_atomically(&path, &bytes);
+        let _ = grotto_runtime::cli::export::write_atomically(&path, &bytes);
     }
     (est, seconds)
 }
@@ -317,14 +317,14 @@ pub fn bunny() -> Result<SceneData, String> {
     });
     let (c, size) = ((lo + hi) * 0.5, (hi - lo).max_element());
     let light_m = c + Vec3::new(0.6, 1.2, 1.0) * size;
-    scene.lights.push(grotto_runtime::scene_data::SceneLight {
+    scene.lights.push(grotto_runtime::scene::data::SceneLight {
         name: "lamp".into(),
         position_m: light_m,
         // About 3 W/m^2 on the bunny.
         intensity_w_sr: Vec3::splat(3.0 * (light_m - c).length_squared()),
         spot: None,
     });
-    scene.cameras.push(grotto_runtime::scene_data::SceneCamera {
+    scene.cameras.push(grotto_runtime::scene::data::SceneCamera {
         name: "front".into(),
         eye_m: c + Vec3::new(0.3, 0.25, 1.8) * size,
         look_at_m: c,
@@ -487,7 +487,7 @@ fn box_downsample(big: &[[f32; 4]], width: u32, height: u32, k: u32) -> Vec<[f32
 /// reference's auto-exposure; pixels the runtime leaves uncovered take the reference's value.
 fn flip_mean(got: &[[f32; 4]], reference: &[Estimate], width: u32, height: u32) -> f64 {
     let ref_hdr: Vec<[f32; 4]> = reference.iter().map(|e| [e.mean.x, e.mean.y, e.mean.z, 1.0]).collect();
-    let exposure = grotto_runtime::render_job::auto_exposure(&ref_hdr);
+    let exposure = grotto_runtime::cli::render_job::auto_exposure(&ref_hdr);
     let ldr = |p: &[f32; 4]| [0, 1, 2].map(|c| crate::aces_srgb(p[c] * exposure));
     let r8: Vec<u8> = ref_hdr.iter().flat_map(ldr).collect();
     let t8: Vec<u8> =
@@ -507,7 +507,7 @@ fn flip_mean(got: &[[f32; 4]], reference: &[Estimate], width: u32, height: u32) 
 pub fn error_map(got: &[[f32; 4]], reference: &[Estimate], width: u32, height: u32) -> Frame {
     let lum = |c: [f32; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
     let ref_hdr: Vec<[f32; 4]> = reference.iter().map(|e| [e.mean.x, e.mean.y, e.mean.z, 1.0]).collect();
-    let exposure = grotto_runtime::render_job::auto_exposure(&ref_hdr);
+    let exposure = grotto_runtime::cli::render_job::auto_exposure(&ref_hdr);
     let mean_lum = (ref_hdr.iter().map(|p| f64::from(lum([p[0], p[1], p[2]]))).sum::<f64>()
         / ref_hdr.len().max(1) as f64) as f32;
     let full = (0.5 * mean_lum).max(1e-12);
@@ -669,10 +669,10 @@ fn run_one(
         let stem = format!("{}-{}", slug(&s.name), slug(&c.name));
         let write = |name: String, reference: &[Estimate]| {
             let path = dir.join(name);
-            std::fs::create_dir_all(dir).map_err(|e| grotto_runtime::export::output_error(&path, e))?;
+            std::fs::create_dir_all(dir).map_err(|e| grotto_runtime::cli::export::output_error(&path, e))?;
             let map = error_map(&hdr, reference, width, height);
-            grotto_runtime::image_out::write_frame(&map, &path.with_extension("png"))?;
-            grotto_runtime::image_out::write_frame(&map, &path.with_extension("exr"))
+            grotto_runtime::cli::image_out::write_frame(&map, &path.with_extension("png"))?;
+            grotto_runtime::cli::image_out::write_frame(&map, &path.with_extension("exr"))
         };
         write(stem.clone(), &s.reference)?;
         if let Some((k, img)) = cut {
@@ -1058,8 +1058,8 @@ pub fn lights_sweep(
     spp: u32,
     mut progress: impl FnMut(&str),
 ) -> Result<(SweepScene, Vec<Row>), String> {
-    use grotto_runtime::render_job::{STRING_LAMP_LIFT_M, STRING_LAMP_W};
-    use grotto_runtime::renderer::ShadowFallback;
+    use grotto_runtime::cli::render_job::{STRING_LAMP_LIFT_M, STRING_LAMP_W};
+    use grotto_runtime::render::renderer::ShadowFallback;
     let mut data = demo_cave(ColorCodec::Raw, SurfelCodec::Full, 0.25, None, true)?;
     data.lights = data.lamp_string(lamps, STRING_LAMP_W, STRING_LAMP_LIFT_M);
     let camera = Camera::from_scene(&data.cameras[0]);

@@ -21,9 +21,9 @@ use bvh::bounding_hierarchy::BHShape;
 use bvh::bvh::Bvh;
 use glam::{IVec3, Vec3};
 use grotto_format::color::srgb8_to_linear;
-use grotto_runtime::camera::Camera;
-use grotto_runtime::cpu_ref::CpuScene;
-use grotto_runtime::scene_data::{SceneData, SceneLight};
+use grotto_runtime::passes::cpu_ref::CpuScene;
+use grotto_runtime::scene::data::{SceneData, SceneLight};
+use grotto_runtime::view::camera::Camera;
 use nalgebra::Point3;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -383,10 +383,11 @@ impl SurfelScene {
     fn through_rock(&self, o: Vec3, d: Vec3) -> bool {
         let Some(rock) = &self.rock else { return false };
         let leaf = rock.leaf_size_m;
-        let margin = (grotto_runtime::rock::ROCK_REACH_CELLS << grotto_runtime::rock::ROCK_LEVEL) as f32;
+        let margin =
+            (grotto_runtime::scene::rock::ROCK_REACH_CELLS << grotto_runtime::scene::rock::ROCK_LEVEL) as f32;
         let (lo, hi) = rock.bounds_leaf();
         let (lo, hi) = (lo - Vec3::splat(margin), hi + Vec3::splat(margin));
-        let step = (1u32 << grotto_runtime::rock::ROCK_LEVEL) as f32;
+        let step = (1u32 << grotto_runtime::scene::rock::ROCK_LEVEL) as f32;
         let mut p = o / leaf;
         let max_steps = ((hi - lo).length() / step) as usize + 2;
         for _ in 0..max_steps {
@@ -394,7 +395,7 @@ impl SurfelScene {
             if p.cmplt(lo).any() || p.cmpgt(hi).any() {
                 return false;
             }
-            if grotto_runtime::rock::in_rock(&rock.rock, p.floor().as_ivec3()) {
+            if grotto_runtime::scene::rock::in_rock(&rock.rock, p.floor().as_ivec3()) {
                 return true;
             }
         }

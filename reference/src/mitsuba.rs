@@ -12,7 +12,7 @@
 use std::fmt::Write as _;
 
 use glam::Vec3;
-use grotto_runtime::camera::Camera;
+use grotto_runtime::view::camera::Camera;
 
 use crate::{Error, SurfelScene};
 
@@ -141,7 +141,7 @@ fn face_normal(center_m: Vec3, normal: Vec3, side_m: f32) -> Vec3 {
 mod tests {
     use super::*;
     use crate::Disc;
-    use grotto_runtime::scene_data::{SceneLight, Spot};
+    use grotto_runtime::scene::data::{SceneLight, Spot};
 
     fn camera() -> Camera {
         Camera { eye_m: Vec3::ZERO, look_at_m: Vec3::X, up: Vec3::Z, fov_y_deg: 60.0 }

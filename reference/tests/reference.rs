@@ -4,8 +4,8 @@
 use glam::Vec3;
 use grotto_fixtures::testscenes;
 use grotto_reference::{Disc, PathSettings, SurfelScene};
-use grotto_runtime::camera::Camera;
-use grotto_runtime::scene_data::SceneLight;
+use grotto_runtime::scene::data::SceneLight;
+use grotto_runtime::view::camera::Camera;
 use rayon::prelude::*;
 
 /// A closed sphere of `n` discs (Fibonacci lattice, normals inward), each twice the radius that
@@ -145,9 +145,9 @@ fn presets_trade_time_for_error_on_the_colour_box() {
 /// CPU reference (which has no such budget), so no cone is cut short.
 #[test]
 fn propagation_gathers_every_cone_on_the_demo_cave_with_every_preset() {
-    use grotto_runtime::cpu_ref::CpuScene;
-    use grotto_runtime::gpu_types::LeafLightGpu;
-    use grotto_runtime::renderer::{Quality, Renderer, Settings};
+    use grotto_runtime::gpu::types::LeafLightGpu;
+    use grotto_runtime::passes::cpu_ref::CpuScene;
+    use grotto_runtime::render::renderer::{Quality, Renderer, Settings};
     let data = grotto_reference::accuracy::demo_cave(
         grotto_preprocess::build::ColorCodec::Raw,
         grotto_preprocess::build::SurfelCodec::Full,

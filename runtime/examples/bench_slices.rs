@@ -7,14 +7,14 @@
 use std::time::Instant;
 
 use grotto_runtime::gpu::{Gpu, GpuOptions};
-use grotto_runtime::renderer::{Quality, Renderer, Settings};
+use grotto_runtime::render::renderer::{Quality, Renderer, Settings};
 
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
     let path = args.next().ok_or_else(|| anyhow::anyhow!("usage: bench_slices PACKAGE [QUALITY]"))?;
     let quality = args.next().and_then(|q| Quality::parse(&q)).unwrap_or(Quality::Balanced);
     let gpu = Gpu::new(&GpuOptions::default())?;
-    let scene = grotto_runtime::render_job::load_scene(std::path::Path::new(&path))?;
+    let scene = grotto_runtime::cli::render_job::load_scene(std::path::Path::new(&path))?;
     let settings = Settings { bounces: 2, convergence_tolerance: 0.0, ..Settings::preset(quality) };
     println!("{path} on {}: {} leaves, {} preset", gpu.describe(), scene.leaves.len(), quality.name());
     let mut r = Renderer::new(&gpu, &scene, settings.clone())?;

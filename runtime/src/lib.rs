@@ -4,45 +4,28 @@
 //! openings (SH), cone-traced propagation (one bounce per light update; cones stop in the rock
 //! behind scanned walls), the surfel G-buffer and deferred shading.
 //!
-//! Also: describing and verifying packages ([`inspect`]) and exporting their points ([`export`]).
+//! Also: describing and verifying packages ([`cli::inspect`]) and exporting their points
+//! ([`cli::export`]).
 //!
 //! The library builds for the browser too (wasm32, WebGPU): there, what needs files, threads, a
-//! window or blocking on the GPU (the command line's job, the window viewer, export, images) is
+//! window or blocking on the GPU (the command line's jobs, the window viewer, export, images) is
 //! left out, and the package arrives by HTTP ranges (`grotto_format::Package::from_directory`).
+//!
+//! The modules, lowest layer first; each imports only from those above it in this list
+//! (`tests/tests/layering.rs` checks it):
 
-pub mod activity;
-pub mod camera;
-pub mod coarse;
-pub mod cpu_ref;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod cli;
 pub mod error;
-#[cfg(not(target_arch = "wasm32"))]
-pub mod export;
-#[cfg(not(target_arch = "wasm32"))]
-pub mod follow;
-pub mod framing;
 pub mod gpu;
-pub mod gpu_types;
-#[cfg(not(target_arch = "wasm32"))]
-pub mod image_out;
-#[cfg(not(target_arch = "wasm32"))]
-pub mod inspect;
-pub mod lights;
+pub mod light;
 pub mod passes;
-pub mod plan;
-pub mod pool;
-pub mod present;
-#[cfg(not(target_arch = "wasm32"))]
-pub mod publish;
-#[cfg(not(target_arch = "wasm32"))]
-pub mod render_job;
-pub mod renderer;
-pub mod residency;
-pub mod rock;
-pub mod scene_data;
+pub mod render;
+pub mod scene;
 pub mod settings;
 pub mod shaders;
 pub mod stream;
-pub mod tile_index;
+pub mod view;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod window;
 

@@ -4,7 +4,7 @@
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::gpu_types::MAX_CONES;
+use crate::gpu::types::MAX_CONES;
 
 /// How indirect light is filtered at a pixel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -105,7 +105,7 @@ pub enum ViewMode {
 /// neighbouring indices differ most and any count of scans gets distinct colours. The same
 /// formula runs in `color.wgsl` (`scan_color`); the scan view's test checks they agree.
 pub fn scan_color(index: u32) -> [f32; 3] {
-    if index == crate::gpu_types::NO_SCAN {
+    if index == crate::gpu::types::NO_SCAN {
         return [0.5; 3];
     }
     let h = (index as f32 * 0.618_034).fract() * 6.0;

@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use grotto_format::spec::{Bc6hBlock, EnvMipLevel};
 use grotto_format::{Compression, Environment, Package, PackageWriter, Scene, Scope, SectionKind, TileInfo};
 use grotto_preprocess::env::{self, LatLong};
-use grotto_runtime::scene_data::SceneData;
+use grotto_runtime::scene::data::SceneData;
 
 struct Counting;
 

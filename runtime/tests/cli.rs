@@ -308,7 +308,7 @@ fn publish_writes_a_site_replaces_it_whole_and_refuses_what_it_cannot_serve() {
     // A stand-in bundle: publish copies it, the browser test runs the real one.
     let bundle = dir.path().join("bundle");
     std::fs::create_dir(&bundle).unwrap();
-    for f in grotto_runtime::publish::BUNDLE_FILES {
+    for f in grotto_runtime::cli::publish::BUNDLE_FILES {
         std::fs::write(bundle.join(f), f).unwrap();
     }
     let site = dir.path().join("site");

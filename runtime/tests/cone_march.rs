@@ -9,11 +9,11 @@ use std::sync::OnceLock;
 
 use glam::{DVec3, IVec3, Vec3};
 use grotto_fixtures::testscenes;
-use grotto_runtime::cpu_ref::CpuScene;
+use grotto_runtime::gpu::types::{LeafLightGpu, Params};
 use grotto_runtime::gpu::{Gpu, GpuOptions};
-use grotto_runtime::gpu_types::{LeafLightGpu, Params};
-use grotto_runtime::renderer::{Renderer, Settings};
-use grotto_runtime::scene_data::{SceneData, VoxelLeaf};
+use grotto_runtime::passes::cpu_ref::CpuScene;
+use grotto_runtime::render::renderer::{Renderer, Settings};
+use grotto_runtime::scene::data::{SceneData, VoxelLeaf};
 
 fn gpu() -> &'static Gpu {
     static GPU: OnceLock<Gpu> = OnceLock::new();

@@ -5,11 +5,11 @@ use std::sync::OnceLock;
 
 use glam::Vec3;
 use grotto_fixtures::testscenes;
-use grotto_runtime::cpu_ref::CpuScene;
+use grotto_runtime::gpu::types::LeafLightGpu;
 use grotto_runtime::gpu::{Gpu, GpuOptions};
-use grotto_runtime::gpu_types::LeafLightGpu;
-use grotto_runtime::plan::Pass;
-use grotto_runtime::renderer::{Renderer, Settings};
+use grotto_runtime::light::plan::Pass;
+use grotto_runtime::passes::cpu_ref::CpuScene;
+use grotto_runtime::render::renderer::{Renderer, Settings};
 
 fn gpu() -> &'static Gpu {
     static GPU: OnceLock<Gpu> = OnceLock::new();
@@ -345,7 +345,7 @@ fn max_abs_diff(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
 
 #[test]
 fn skipped_passes_are_not_dispatched_and_change_nothing() {
-    use grotto_runtime::camera::Camera;
+    use grotto_runtime::view::camera::Camera;
     // Emission only: no point or spot lights, so no shadow maps and no injection.
     let scene = testscenes::furnace_sphere(4, 5.0, 0.5, 1.0);
     let cam =
@@ -368,7 +368,7 @@ fn skipped_passes_are_not_dispatched_and_change_nothing() {
     let (brighter, _) = r.render(&cam, 64, 48).unwrap();
     r.set_exposure(settings.exposure);
     assert_eq!(brighter.hdr, a.hdr);
-    let mean = |f: &grotto_runtime::renderer::Frame| {
+    let mean = |f: &grotto_runtime::render::renderer::Frame| {
         f.ldr.iter().map(|p| f64::from(p[0])).sum::<f64>() / f.ldr.len() as f64
     };
     assert!(
@@ -404,7 +404,7 @@ fn skipped_passes_are_not_dispatched_and_change_nothing() {
 fn lights_and_shadows_run_once_for_static_lights() {
     let scene = testscenes::dogleg();
     let mut r = Renderer::new(gpu(), &scene, Settings { bounces: 2, ..Default::default() }).unwrap();
-    let cam = grotto_runtime::camera::Camera::from_scene(&scene.cameras[0]);
+    let cam = grotto_runtime::view::camera::Camera::from_scene(&scene.cameras[0]);
     let (first, plan) = r.render(&cam, 64, 48).unwrap();
     assert!(plan.runs(Pass::Shadow) && plan.runs(Pass::Inject));
     let (_, plan) = r.render(&cam, 64, 48).unwrap();
@@ -413,7 +413,7 @@ fn lights_and_shadows_run_once_for_static_lights() {
     assert!(!plan.runs(Pass::Propagate), "bounce budget of 2 spent: {}", plan.explain());
     assert_eq!(r.stats().dispatches.get(&Pass::Shadow).copied(), Some(1));
     // Shadowed direct light: room A is lit, the hidden chamber is not; bounces add light.
-    let sum = |f: &grotto_runtime::renderer::Frame| f.hdr.iter().map(|p| p[1] as f64).sum::<f64>();
+    let sum = |f: &grotto_runtime::render::renderer::Frame| f.hdr.iter().map(|p| p[1] as f64).sum::<f64>();
     assert!(sum(&third) > sum(&first));
     r.invalidate_lights();
     let (_, plan) = r.render(&cam, 64, 48).unwrap();
@@ -422,7 +422,7 @@ fn lights_and_shadows_run_once_for_static_lights() {
 
 #[test]
 fn spot_light_lights_only_its_cone() {
-    use grotto_runtime::scene_data::{SceneLight, Spot};
+    use grotto_runtime::scene::data::{SceneLight, Spot};
     let mut scene = testscenes::dogleg();
     let leaf = scene.leaf_size_m;
     // Room A spans cells x 2..10, y 1..9, z 2..10; aim at its -x wall (cells x = 1).
@@ -474,7 +474,7 @@ fn random_sky(seed: u32) -> [[f32; 3]; 9] {
 
 #[test]
 fn sh_irradiance_on_the_gpu_matches_the_cpu_for_ten_thousand_normals() {
-    use grotto_runtime::scene_data::{SceneData, VoxelLeaf};
+    use grotto_runtime::scene::data::{SceneData, VoxelLeaf};
     // Isolated leaves on a sparse grid with random unit normals; cones end at once (max distance
     // below a leaf), so every leaf sees the whole sky (V = 1) and gets exactly albedo * E(n) / pi.
     let normals = random_light(10_000, 5);
@@ -519,8 +519,8 @@ fn sh_irradiance_on_the_gpu_matches_the_cpu_for_ten_thousand_normals() {
 
 #[test]
 fn constant_environment_equals_an_equal_ambient_term() {
-    use grotto_runtime::camera::Camera;
-    use grotto_runtime::scene_data::SceneCamera;
+    use grotto_runtime::scene::data::SceneCamera;
+    use grotto_runtime::view::camera::Camera;
     let ambient = [0.3f32, 0.45, 0.6];
     // The shell with an opening, seen from inside with the opening in view: walls lit through it
     // and sky behind it.
@@ -562,7 +562,7 @@ fn constant_environment_equals_an_equal_ambient_term() {
 
 #[test]
 fn a_closed_cave_stays_dark_under_a_sky_and_an_opening_lets_it_in() {
-    use grotto_runtime::renderer::Quality;
+    use grotto_runtime::render::renderer::Quality;
     let sky = {
         let mut sh = [[0.0f32; 3]; 9];
         sh[0] = [1.0 / 0.282_094_8; 3];
@@ -722,7 +722,7 @@ fn mean_of(light: &[LeafLightGpu], set: &[usize], field: fn(&LeafLightGpu) -> [f
 
 #[test]
 fn lights_beyond_the_budget_are_shadowed_by_svo_cones_not_lit_through_rock() {
-    use grotto_runtime::renderer::ShadowFallback;
+    use grotto_runtime::render::renderer::ShadowFallback;
     // The dogleg: one lamp in a room, a chamber behind three right-angle corridors in rock.
     let scene = testscenes::dogleg();
     let select = |want: &dyn Fn(glam::IVec3) -> bool| -> Vec<usize> {
@@ -767,9 +767,9 @@ fn lights_beyond_the_budget_are_shadowed_by_svo_cones_not_lit_through_rock() {
 
 #[test]
 fn a_scene_with_256_lights_renders_and_culling_drops_only_light_under_the_cutoff() {
-    use grotto_runtime::camera::Camera;
-    use grotto_runtime::renderer::ShadowFallback;
-    use grotto_runtime::scene_data::SceneLight;
+    use grotto_runtime::render::renderer::ShadowFallback;
+    use grotto_runtime::scene::data::SceneLight;
+    use grotto_runtime::view::camera::Camera;
     // The colour box with 256 lamps of random power on a grid inside it.
     let mut scene = testscenes::colour_box();
     let (lo, hi) = scene.bounds_leaf();
@@ -852,8 +852,8 @@ fn a_scene_with_256_lights_renders_and_culling_drops_only_light_under_the_cutoff
 
 #[test]
 fn many_cone_shadowed_lamps_add_up_like_the_same_lamps_one_at_a_time() {
-    use grotto_runtime::renderer::ShadowFallback;
-    use grotto_runtime::scene_data::SceneLight;
+    use grotto_runtime::render::renderer::ShadowFallback;
+    use grotto_runtime::scene::data::SceneLight;
     // 48 lamps along the dogleg's air (room, corridors, chamber), all beyond the shadow-map budget:
     // each leaf traces one SVO shadow cone per lamp. Mesa's software drivers end every loop of an
     // invocation once all of them together pass 65535 iterations, which dropped the last lamps of
@@ -925,8 +925,8 @@ fn a_validation_error_names_the_pass_whose_scope_caught_it() {
 
 #[test]
 fn views_without_light_skip_the_light_passes_and_show_albedo_normals_and_level() {
-    use grotto_runtime::camera::Camera;
-    use grotto_runtime::renderer::{Frame, ViewMode};
+    use grotto_runtime::render::renderer::{Frame, ViewMode};
+    use grotto_runtime::view::camera::Camera;
     let scene = testscenes::dogleg();
     let cam = Camera::from_scene(&scene.cameras[0]);
     let render = |view| {
@@ -990,8 +990,8 @@ fn views_without_light_skip_the_light_passes_and_show_albedo_normals_and_level()
 /// every wall, so the shadow-mapped light must equal the unshadowed sum.
 #[test]
 fn sixty_four_shadowed_lamps_fit_the_uniform_binding_limit_and_shadow_nothing_in_a_convex_box() {
-    use grotto_runtime::renderer::ShadowFallback;
-    use grotto_runtime::scene_data::SceneLight;
+    use grotto_runtime::render::renderer::ShadowFallback;
+    use grotto_runtime::scene::data::SceneLight;
     let mut scene = testscenes::colour_box();
     let (lo, hi) = scene.bounds_leaf();
     let (lo, hi) = (lo * scene.leaf_size_m, hi * scene.leaf_size_m);
@@ -1006,7 +1006,7 @@ fn sixty_four_shadowed_lamps_fit_the_uniform_binding_limit_and_shadow_nothing_in
             }
         })
         .collect();
-    let faces_bytes = 64 * 6 * size_of::<grotto_runtime::gpu_types::SplatUniform>() as u64;
+    let faces_bytes = 64 * 6 * size_of::<grotto_runtime::gpu::types::SplatUniform>() as u64;
     eprintln!(
         "splat uniforms {faces_bytes} bytes, uniform binding limit {}",
         gpu().device.limits().max_uniform_buffer_binding_size

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::mem::offset_of;
 
-use grotto_runtime::gpu_types::*;
+use grotto_runtime::gpu::types::*;
 
 /// Size and (field, offset) list of a Rust struct.
 type RustLayout = (usize, Vec<(&'static str, usize)>);

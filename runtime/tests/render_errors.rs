@@ -7,10 +7,10 @@ use glam::Vec3;
 use grotto_format::Package;
 use grotto_preprocess::build::ColorCodec;
 use grotto_runtime::Error;
-use grotto_runtime::cpu_ref::CpuScene;
-use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
-use grotto_runtime::renderer::Settings;
-use grotto_runtime::scene_data::SceneData;
+use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
+use grotto_runtime::passes::cpu_ref::CpuScene;
+use grotto_runtime::render::renderer::Settings;
+use grotto_runtime::scene::data::SceneData;
 
 /// A small synthetic cave at UTM-sized coordinates, several tiles.
 fn fixture(dir: &std::path::Path) -> PathBuf {

@@ -23,9 +23,9 @@ use grotto_preprocess::build;
 use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::synth::{self, SynthParams};
-use grotto_runtime::publish::{self, PublishOptions};
-use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
-use grotto_runtime::renderer::{Quality, Settings};
+use grotto_runtime::cli::publish::{self, PublishOptions};
+use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
+use grotto_runtime::render::renderer::{Quality, Settings};
 use grotto_tests::{golden, serve};
 use serde_json::{Value, json};
 
@@ -277,7 +277,7 @@ fn a_published_site_streams_the_package_by_ranges_and_shows_what_grotto_render_s
     .unwrap();
     let far = grotto_runtime::stream::sections_for(
         &sparse,
-        &vec![grotto_runtime::scene_data::TileMode::Far; sparse.tile_count() as usize],
+        &vec![grotto_runtime::scene::data::TileMode::Far; sparse.tile_count() as usize],
         false,
     );
     let far_bytes: u64 = sparse.missing(far, 64 << 10).iter().map(|r| r.end - r.start).sum();

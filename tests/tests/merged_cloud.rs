@@ -12,8 +12,8 @@ use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::scanwrite::{ScanData, write_scan};
 use grotto_preprocess::synth::{self, SynthCave, SynthParams};
-use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
-use grotto_runtime::renderer::Settings;
+use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
+use grotto_runtime::render::renderer::Settings;
 use grotto_tests::{golden, small_build};
 
 /// Each station's scan in world (survey) coordinates with its station, less the points of the
@@ -93,7 +93,7 @@ fn render(
         ..RenderOptions::defaults(package.to_path_buf(), out.to_path_buf())
     };
     let summary = render_job::run(&opts, |_| {}).unwrap();
-    let (_, _, pixels) = grotto_runtime::image_out::read_png(out).unwrap();
+    let (_, _, pixels) = grotto_runtime::cli::image_out::read_png(out).unwrap();
     (summary.exposure, pixels)
 }
 

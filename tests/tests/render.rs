@@ -4,9 +4,9 @@
 
 use std::path::Path;
 
+use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
 use grotto_runtime::gpu::GpuOptions;
-use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
-use grotto_runtime::renderer::Settings;
+use grotto_runtime::render::renderer::Settings;
 use grotto_tests::golden;
 
 /// A 160x120 single frame of `camera` to `out` on the software Vulkan adapter, default settings;
@@ -41,7 +41,7 @@ fn demo_cave_renders_the_same_on_vulkan_and_gl() {
             };
             let summary = render_job::run(&opts, |_| {}).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert!(summary.tiles > 1, "the demo cave must span several tiles");
-            let (w, h, pixels) = grotto_runtime::image_out::read_png(&out).unwrap();
+            let (w, h, pixels) = grotto_runtime::cli::image_out::read_png(&out).unwrap();
             // No holes: every pixel of an enclosed cave view sees a wall.
             let lit = pixels.iter().filter(|p| p[0] > 0 || p[1] > 0 || p[2] > 0).count();
             assert!(
@@ -94,7 +94,7 @@ fn demo_cave_renders_the_same_on_vulkan_and_gl() {
             let opts =
                 RenderOptions { settings, exposure: Some(8.0), ..view(&package, "chamber", out.clone()) };
             render_job::run(&opts, |_| {}).unwrap();
-            let (w, h, pixels) = grotto_runtime::image_out::read_png(&out).unwrap();
+            let (w, h, pixels) = grotto_runtime::cli::image_out::read_png(&out).unwrap();
             let d = golden::diff(&pixels, &golden_pixels("demo-chamber", w, h));
             eprintln!("{what}: {d:?}");
             assert!(!golden::within_tolerance(&d), "{what} must not pass as the golden image");
@@ -114,7 +114,7 @@ fn golden_pixels(name: &str, w: u32, h: u32) -> Vec<[u8; 4]> {
 /// GL path is covered by the dry goldens above).
 #[test]
 fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
-    use grotto_runtime::renderer::{Renderer, ShadowFallback};
+    use grotto_runtime::render::renderer::{Renderer, ShadowFallback};
     let Some(data) = grotto_tests::shared_data_dir() else { return };
     let dir = tempfile::tempdir().unwrap();
     let cave = grotto_fixtures::SmallCave {
@@ -124,7 +124,7 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
     };
     let package = grotto_fixtures::small_cave_package(dir.path(), &cave).unwrap();
     let pkg = grotto_format::Package::open(&package).unwrap();
-    let scene = grotto_runtime::scene_data::SceneData::from_package(&pkg).unwrap();
+    let scene = grotto_runtime::scene::data::SceneData::from_package(&pkg).unwrap();
     assert_eq!(scene.materials.len(), 2, "wet walls and a pool");
     assert!(scene.materials.iter().all(|m| m.surfels > 100), "{:?}", scene.materials);
     assert!(scene.env_chain.is_some(), "the sky's prefiltered chain is loaded");
@@ -149,7 +149,7 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
         assert!(explain.contains("specular cones for 2 specular materials"), "{explain}");
         assert!(explain.contains("48 more lit per leaf with SVO cone shadows"), "{explain}");
         assert!(explain.contains("run   env"), "{explain}");
-        let (w, h, pixels) = grotto_runtime::image_out::read_png(&out).unwrap();
+        let (w, h, pixels) = grotto_runtime::cli::image_out::read_png(&out).unwrap();
         let d = golden::check(&format!("demo-wet-{camera}"), w, h, &pixels);
         eprintln!("wet {camera}: {d:?}");
         assert!(golden::within_tolerance(&d), "wet {camera} differs from the golden image: {d:?}");
@@ -167,7 +167,7 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
         ..view(&package, "chamber", out.clone())
     };
     render_job::run(&opts, |_| {}).unwrap_or_else(|e| panic!("under WebGPU's default limits: {e:#}"));
-    let (_, _, pixels) = grotto_runtime::image_out::read_png(&out).unwrap();
+    let (_, _, pixels) = grotto_runtime::cli::image_out::read_png(&out).unwrap();
     assert!(pixels == frames[0], "under WebGPU's default limits: {:?}", golden::diff(&pixels, &frames[0]));
     // The wet walls must show: the same view without specular reflection leaves the tolerance.
     if std::env::var_os("GROTTO_BLESS").is_none() {

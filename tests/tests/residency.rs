@@ -9,13 +9,13 @@ use std::sync::OnceLock;
 
 use glam::Vec3;
 use grotto_format::Package;
-use grotto_runtime::camera::Camera;
+use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
 use grotto_runtime::gpu::Gpu;
-use grotto_runtime::pool::PoolCaps;
-use grotto_runtime::render_job::{self, CameraChoice, RenderOptions};
-use grotto_runtime::renderer::{Renderer, Settings};
-use grotto_runtime::residency::{self, Budget, Relevance, View};
-use grotto_runtime::scene_data::{SceneData, TileMode};
+use grotto_runtime::render::pool::PoolCaps;
+use grotto_runtime::render::renderer::{Renderer, Settings};
+use grotto_runtime::scene::data::{SceneData, TileMode};
+use grotto_runtime::stream::residency::{self, Budget, Relevance, View};
+use grotto_runtime::view::camera::Camera;
 use grotto_tests::golden;
 
 const W: u32 = 160;
@@ -497,7 +497,7 @@ fn light_carried_across_a_reload_starts_closer_and_converges_over_frames_to_the_
         for _ in 0..40 {
             let (frame, plan) = r.render(&cam, W, H).unwrap();
             frames.push(golden::diff(&batch, &frame.ldr));
-            if !plan.runs(grotto_runtime::plan::Pass::Propagate) {
+            if !plan.runs(grotto_runtime::light::plan::Pass::Propagate) {
                 break;
             }
         }

@@ -6,10 +6,10 @@ use std::sync::OnceLock;
 
 use glam::Vec3;
 use grotto_format::{Package, SectionKind};
-use grotto_runtime::camera::Camera;
 use grotto_runtime::gpu::{Gpu, GpuOptions};
-use grotto_runtime::renderer::{ClipBox, Renderer, Settings, ViewMode, scan_color};
-use grotto_runtime::scene_data::SceneData;
+use grotto_runtime::render::renderer::{ClipBox, Renderer, Settings, ViewMode, scan_color};
+use grotto_runtime::scene::data::SceneData;
+use grotto_runtime::view::camera::Camera;
 
 fn gpu() -> &'static Gpu {
     static GPU: OnceLock<Gpu> = OnceLock::new();
@@ -108,7 +108,7 @@ fn the_scan_view_shows_each_points_scan_and_the_package_stores_it_compactly() {
     let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
     let cam = level_chamber(&scene);
     let (frame, plan) = r.render(&cam, W, H).unwrap();
-    assert!(!plan.runs(grotto_runtime::plan::Pass::Propagate), "the scan view needs no light");
+    assert!(!plan.runs(grotto_runtime::light::plan::Pass::Propagate), "the scan view needs no light");
     let mut pixels_per_scan = vec![0usize; scans.len()];
     let mut covered = 0;
     for p in frame.hdr.iter().filter(|p| p[3] >= 0.5) {
@@ -184,7 +184,7 @@ fn a_clip_box_cuts_what_is_drawn_but_not_the_light() {
         }
     }
     // The ceiling is gone: the top rows show the background where they showed rock.
-    let covered = |f: &grotto_runtime::renderer::Frame, rows: std::ops::Range<u32>| {
+    let covered = |f: &grotto_runtime::render::renderer::Frame, rows: std::ops::Range<u32>| {
         rows.flat_map(|y| (0..W).map(move |x| (x, y)))
             .filter(|&(x, y)| f.hdr[(y * W + x) as usize][3] >= 0.5)
             .count()

@@ -18,15 +18,15 @@ use std::rc::Rc;
 use std::sync::{Arc, Mutex};
 
 use grotto_format::Package;
-use grotto_runtime::camera::{Camera, Nav};
-use grotto_runtime::framing::{CameraChoice, resolve_camera, scene_headlamp};
 use grotto_runtime::gpu::{Gpu, GpuOptions, PendingRead, default_gpu_memory};
-use grotto_runtime::plan::Pass;
-use grotto_runtime::present::{Bar, Blit, Target};
-use grotto_runtime::renderer::{Quality, Renderer, Settings, ViewMode};
-use grotto_runtime::residency::{self, Budget, Residency};
-use grotto_runtime::scene_data::{SceneData, TileMode};
+use grotto_runtime::light::plan::Pass;
+use grotto_runtime::render::present::{Bar, Blit, Target};
+use grotto_runtime::render::renderer::{Quality, Renderer, Settings, ViewMode};
+use grotto_runtime::scene::data::{SceneData, TileMode};
+use grotto_runtime::stream::residency::{self, Budget, Residency};
 use grotto_runtime::stream::{self, Streaming};
+use grotto_runtime::view::camera::{Camera, Nav};
+use grotto_runtime::view::framing::{CameraChoice, resolve_camera, scene_headlamp};
 use serde::{Deserialize, Serialize};
 use wasm_bindgen::prelude::*;
 use web_time::Instant;
@@ -547,7 +547,8 @@ impl State {
             self.first_frame_ms = self.opened.elapsed().as_secs_f64() * 1e3;
         }
         // Direct light (after a change of lights or tiles) is not what a frame costs.
-        let direct = |p: &grotto_runtime::plan::EffectPlan| p.runs(Pass::Shadow) || p.runs(Pass::Inject);
+        let direct =
+            |p: &grotto_runtime::light::plan::EffectPlan| p.runs(Pass::Shadow) || p.runs(Pass::Inject);
         let plain = !(direct(&plan) || light && direct(&light_plan));
         self.last = Some(LastFrame { submitted, leaves, plain });
         let frame_done = self.frame_done.clone();
@@ -645,7 +646,7 @@ impl State {
             self.exposure_read = None;
             let bytes = bytes?;
             let hdr: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
-            self.exposure = grotto_runtime::renderer::auto_exposure(&hdr);
+            self.exposure = grotto_runtime::render::renderer::auto_exposure(&hdr);
             self.renderer.set_exposure(self.exposure);
             self.exposure_final = converged;
             return Ok(());
@@ -661,7 +662,8 @@ impl State {
 
     fn present(&mut self, moving: bool) -> Result<(), Error> {
         let Some(out) = self.renderer.ldr_output() else { return Ok(()) };
-        let Some(frame) = grotto_runtime::present::acquire(&self.gpu, &self.surface, &self.config) else {
+        let Some(frame) = grotto_runtime::render::present::acquire(&self.gpu, &self.surface, &self.config)
+        else {
             return Ok(());
         };
         let view = frame.texture.create_view(&Default::default());

@@ -7,9 +7,9 @@ use anyhow::Context;
 use clap::Parser;
 use glam::Vec3;
 use grotto_reference::{PathSettings, SurfelScene};
-use grotto_runtime::camera::Camera;
-use grotto_runtime::renderer::Frame;
-use grotto_runtime::scene_data::SceneData;
+use grotto_runtime::render::renderer::Frame;
+use grotto_runtime::scene::data::SceneData;
+use grotto_runtime::view::camera::Camera;
 
 /// Ground truth for grotto: path-traced reference renders, and the accuracy-vs-time sweep.
 #[derive(Parser, Debug)]
@@ -139,7 +139,7 @@ fn main() -> anyhow::Result<()> {
 
 /// The image size of a sweep and the device its runtime runs on.
 fn size_and_gpu(size: &str, software: bool) -> anyhow::Result<((u32, u32), grotto_runtime::gpu::Gpu)> {
-    let wh = grotto_runtime::render_job::parse_size(size).map_err(anyhow::Error::msg)?;
+    let wh = grotto_runtime::cli::render_job::parse_size(size).map_err(anyhow::Error::msg)?;
     let gpu = grotto_runtime::gpu::Gpu::new(&grotto_runtime::gpu::GpuOptions {
         prefer_software: software,
         ..Default::default()
@@ -166,7 +166,7 @@ fn lights(a: LightsArgs) -> anyhow::Result<()> {
         a.lamps, a.spp
     );
     let md = accuracy::lights_report(&scene, &rows, &gpu.describe(), w, h, &command);
-    grotto_runtime::export::write_atomically(&a.out, md.as_bytes())?;
+    grotto_runtime::cli::export::write_atomically(&a.out, md.as_bytes())?;
     println!("{md}");
     eprintln!("wrote {} in {:.0} s", a.out.display(), t0.elapsed().as_secs_f64());
     Ok(())
@@ -174,13 +174,13 @@ fn lights(a: LightsArgs) -> anyhow::Result<()> {
 
 fn mitsuba(a: MitsubaArgs) -> anyhow::Result<()> {
     use grotto_reference::accuracy;
-    let (w, h) = grotto_runtime::render_job::parse_size(&a.size).map_err(anyhow::Error::msg)?;
+    let (w, h) = grotto_runtime::cli::render_job::parse_size(&a.size).map_err(anyhow::Error::msg)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let mut index = Vec::new();
     for (name, description, data) in accuracy::closed_scenes() {
         let cam = data.cameras.first().with_context(|| format!("scene {name} has no camera"))?;
         let camera = Camera::from_scene(cam);
-        let splat = grotto_runtime::renderer::Settings::default().splat_scale;
+        let splat = grotto_runtime::render::renderer::Settings::default().splat_scale;
         let slug = accuracy::slug(name);
         // The reference's discs, for the path tracer; and, where the surfels are the voxel faces
         // of a hand-built scene (one per open face, axis-aligned), those faces: the exact
@@ -196,7 +196,7 @@ fn mitsuba(a: MitsubaArgs) -> anyhow::Result<()> {
             let xml = grotto_reference::mitsuba::scene_xml(&scene, s, &camera, w, h, a.mitsuba_spp)
                 .with_context(|| format!("scene {name}"))?;
             let file = format!("{slug}-{what}.xml");
-            grotto_runtime::export::write_atomically(&a.out.join(&file), xml.as_bytes())?;
+            grotto_runtime::cli::export::write_atomically(&a.out.join(&file), xml.as_bytes())?;
             entry["mitsuba"][what] = file.into();
         }
         // The reference as the report uses it (shadow rays a quarter leaf off the surface, bounce
@@ -226,7 +226,7 @@ fn mitsuba(a: MitsubaArgs) -> anyhow::Result<()> {
                 "mean": est.iter().map(|e| e.mean.to_array()).collect::<Vec<_>>(),
                 "std_err": est.iter().map(|e| e.std_err.to_array()).collect::<Vec<_>>(),
             });
-            grotto_runtime::export::write_atomically(&a.out.join(&file), json.to_string().as_bytes())?;
+            grotto_runtime::cli::export::write_atomically(&a.out.join(&file), json.to_string().as_bytes())?;
             entry["reference"][what] = file.into();
             eprintln!(
                 "{name}: {} discs, reference ({what} offset) {} spp in {seconds:.1} s",
@@ -243,7 +243,7 @@ fn mitsuba(a: MitsubaArgs) -> anyhow::Result<()> {
         a.mitsuba_spp
     );
     let index = serde_json::json!({ "scenes": index, "command": command });
-    grotto_runtime::export::write_atomically(&a.out.join("index.json"), index.to_string().as_bytes())?;
+    grotto_runtime::cli::export::write_atomically(&a.out.join("index.json"), index.to_string().as_bytes())?;
     println!("wrote {} scenes to {}", accuracy::closed_scenes().len(), a.out.display());
     Ok(())
 }
@@ -292,21 +292,21 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
     }
     let md = accuracy::report(&scenes, &rows, &gpu.describe(), w, h, &command);
     let json = a.out.with_extension("json");
-    grotto_runtime::export::write_atomically(&a.out, md.as_bytes())?;
+    grotto_runtime::cli::export::write_atomically(&a.out, md.as_bytes())?;
     let plots = a.out.with_extension("");
     std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
     for sc in &scenes {
         let path = plots.join(format!("{}.svg", accuracy::slug(&sc.name)));
-        grotto_runtime::export::write_atomically(&path, accuracy::plot_svg(&sc.name, &rows).as_bytes())?;
+        grotto_runtime::cli::export::write_atomically(&path, accuracy::plot_svg(&sc.name, &rows).as_bytes())?;
     }
-    grotto_runtime::export::write_atomically(&json, serde_json::to_string_pretty(&rows)?.as_bytes())?;
+    grotto_runtime::cli::export::write_atomically(&json, serde_json::to_string_pretty(&rows)?.as_bytes())?;
     println!("wrote {} and {} ({} runs)", a.out.display(), json.display(), rows.len());
     Ok(())
 }
 
 fn render(cli: RenderArgs) -> anyhow::Result<()> {
-    let (w, h) = grotto_runtime::render_job::parse_size(&cli.size).map_err(anyhow::Error::msg)?;
-    grotto_runtime::image_out::kind_of(&cli.out)?;
+    let (w, h) = grotto_runtime::cli::render_job::parse_size(&cli.size).map_err(anyhow::Error::msg)?;
+    grotto_runtime::cli::image_out::kind_of(&cli.out)?;
     let pkg = grotto_format::Package::open(&cli.package)?;
     let scene_data = SceneData::from_package(&pkg)?;
     let cam = match &cli.camera {
@@ -354,7 +354,7 @@ fn render(cli: RenderArgs) -> anyhow::Result<()> {
             })
             .collect(),
     };
-    grotto_runtime::image_out::write_frame(&frame, &cli.out)?;
+    grotto_runtime::cli::image_out::write_frame(&frame, &cli.out)?;
     let mean = est.iter().map(|e| e.mean).sum::<Vec3>() / est.len() as f32;
     let se = est.iter().map(|e| e.std_err).sum::<Vec3>() / est.len() as f32;
     let secs = t0.elapsed().as_secs_f64();

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use grotto_format::Package;
-use grotto_runtime::inspect;
+use grotto_runtime::cli::inspect;
 
 #[derive(Parser, Debug)]
 #[command(name = "grotto", version, about = "Inspect, verify and render .grotto cave packages")]
@@ -101,10 +101,10 @@ struct PublishArgs {
 }
 
 fn publish(a: PublishArgs) -> anyhow::Result<ExitCode> {
-    use grotto_runtime::publish;
+    use grotto_runtime::cli::publish;
     if let Some(q) = &a.quality {
         anyhow::ensure!(
-            grotto_runtime::renderer::Quality::parse(q).is_some(),
+            grotto_runtime::render::renderer::Quality::parse(q).is_some(),
             "--quality {q}: expected fast, balanced or high"
         );
     }
@@ -177,7 +177,7 @@ struct RenderArgs {
     #[arg(long, default_value_t = 30)]
     frames: u32,
     /// Image size WIDTHxHEIGHT.
-    #[arg(long, default_value = "800x600", value_parser = grotto_runtime::render_job::parse_size)]
+    #[arg(long, default_value = "800x600", value_parser = grotto_runtime::cli::render_job::parse_size)]
     size: (u32, u32),
     /// Output image (.png or .exr); a path sequence appends _NNNN.
     #[arg(long, short, default_value = "render.png")]
@@ -315,9 +315,9 @@ fn parse_box(s: &str) -> Result<[[f64; 3]; 2], String> {
     Ok([[x0, y0, z0], [x1, y1, z1]])
 }
 
-fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderOptions> {
-    use grotto_runtime::render_job::{CameraChoice, Headlamp, RenderOptions};
-    use grotto_runtime::renderer::{IndirectFilter, Quality, Settings, ShadowFallback};
+fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::RenderOptions> {
+    use grotto_runtime::cli::render_job::{CameraChoice, Headlamp, RenderOptions};
+    use grotto_runtime::render::renderer::{IndirectFilter, Quality, Settings, ShadowFallback};
     let quality = Quality::parse(&a.quality)
         .ok_or_else(|| anyhow::anyhow!("--quality {:?}: use fast, balanced or high", a.quality))?;
     let mut settings = Settings::preset(quality);
@@ -342,7 +342,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::render_job::RenderO
     settings.shadowed_lights = a.shadowed_lights.unwrap_or(settings.shadowed_lights);
     settings.shadow_fallback = ShadowFallback::parse(&a.shadow_fallback)
         .ok_or_else(|| anyhow::anyhow!("--shadow-fallback {:?}: use cone or none", a.shadow_fallback))?;
-    settings.view = grotto_runtime::renderer::ViewMode::parse(&a.view).ok_or_else(|| {
+    settings.view = grotto_runtime::render::renderer::ViewMode::parse(&a.view).ok_or_else(|| {
         anyhow::anyhow!("--view {:?}: use lit, albedo, normals, light, level or scan", a.view)
     })?;
     settings.light_cutoff_w_m2 = a.light_cutoff.unwrap_or(settings.light_cutoff_w_m2);
@@ -415,7 +415,7 @@ fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
         || a.step.is_some()
         || a.shadow_map.is_some()
         || a.indirect.is_some();
-    let quality = grotto_runtime::renderer::Quality::parse(&a.quality).filter(|_| !knobs_set);
+    let quality = grotto_runtime::render::renderer::Quality::parse(&a.quality).filter(|_| !knobs_set);
     let summary = grotto_runtime::window::run(grotto_runtime::window::ViewOptions {
         render,
         quality,
@@ -461,7 +461,7 @@ fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
 
 fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
     let opts = options(&b.render)?;
-    let report = grotto_runtime::render_job::bench(&opts, b.reps)?;
+    let report = grotto_runtime::cli::render_job::bench(&opts, b.reps)?;
     if b.render.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -487,7 +487,7 @@ fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
 }
 
 fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
-    use grotto_runtime::render_job::{self, Progress};
+    use grotto_runtime::cli::render_job::{self, Progress};
     let opts = options(&a)?;
     let bounce_bar = indicatif::ProgressBar::new(u64::from(opts.settings.bounces)).with_style(
         indicatif::ProgressStyle::with_template("{prefix:>9} [{bar:30}] {pos}/{len} {msg}")
@@ -606,7 +606,7 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
 
 /// One bounce of `--explain`'s light work: tiles updated of all, why, which (when few), and what
 /// changed.
-fn describe_bounce(w: &grotto_runtime::activity::BounceWork) -> String {
+fn describe_bounce(w: &grotto_runtime::light::activity::BounceWork) -> String {
     let list = w.tile_list.as_ref().map_or(String::new(), |l| {
         format!(" [tiles {}]", l.iter().map(u32::to_string).collect::<Vec<_>>().join(" "))
     });
@@ -615,7 +615,7 @@ fn describe_bounce(w: &grotto_runtime::activity::BounceWork) -> String {
         w.tiles,
         w.of_tiles,
         w.leaves,
-        grotto_runtime::activity::describe_counts(&w.why),
+        grotto_runtime::light::activity::describe_counts(&w.why),
         w.changed,
         w.max_change
     )
@@ -635,7 +635,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Inspect { package, gpu_memory: true, json, .. } => {
             let t0 = std::time::Instant::now();
-            let scene = grotto_runtime::render_job::load_scene(&package)?;
+            let scene = grotto_runtime::cli::render_job::load_scene(&package)?;
             let bytes = scene.buffer_bytes(false);
             let load_s = t0.elapsed().as_secs_f64();
             if json {
@@ -690,7 +690,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Export { package, points, json } => {
             let pkg = Package::open(&package)?;
-            let summary = grotto_runtime::export::export_points(&pkg, &points)?;
+            let summary = grotto_runtime::cli::export::export_points(&pkg, &points)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&summary)?);
             } else {

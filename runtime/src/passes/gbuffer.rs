@@ -5,7 +5,7 @@
 use super::splat;
 use crate::error::Result;
 use crate::gpu::Gpu;
-use crate::gpu_types::SplatUniform;
+use crate::gpu::types::SplatUniform;
 
 /// Packed f32 distance and octahedral normal (splat.wgsl): 8-bit unorm targets render everywhere.
 pub const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;

@@ -12,7 +12,7 @@
 
 use crate::error::Result;
 use crate::gpu::Gpu;
-use crate::gpu_types::InjectBatch;
+use crate::gpu::types::InjectBatch;
 
 /// Lights of a cell handled by one inject dispatch.
 pub const LIGHTS_PER_BATCH: u32 = 4;

@@ -5,7 +5,7 @@
 
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
-use crate::gpu_types::MipRange;
+use crate::gpu::types::MipRange;
 
 /// Most node heights a scene may have (a tile's SVO is at most 21 levels deep: morton codes).
 pub const MAX_HEIGHTS: usize = 32;

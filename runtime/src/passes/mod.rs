@@ -8,6 +8,7 @@
 //! statistics). A pass's own resources are group 2. Layouts are reflected from each composed
 //! module (naga), so a pass binds only what its imports declare.
 
+pub mod cpu_ref;
 pub mod env;
 pub mod gbuffer;
 pub mod inject;
@@ -257,7 +258,7 @@ pub fn cone_batched(
     radiance_f16: bool,
     cones: u32,
 ) -> Result<Batched> {
-    let batches = (0..cones.div_ceil(CONES_PER_BATCH).max(1)).map(|b| crate::gpu_types::ConeBatch {
+    let batches = (0..cones.div_ceil(CONES_PER_BATCH).max(1)).map(|b| crate::gpu::types::ConeBatch {
         first: b * CONES_PER_BATCH,
         count: CONES_PER_BATCH,
         pad0: 0,

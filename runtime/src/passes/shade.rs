@@ -5,7 +5,7 @@
 use super::gbuffer::Targets;
 use crate::error::Result;
 use crate::gpu::Gpu;
-use crate::scene_data::EnvChain;
+use crate::scene::data::EnvChain;
 
 #[derive(Debug)]
 pub struct Shade {

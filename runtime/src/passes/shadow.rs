@@ -15,7 +15,7 @@ use glam::{Mat4, Vec3};
 use super::splat;
 use crate::error::Result;
 use crate::gpu::Gpu;
-use crate::gpu_types::SplatUniform;
+use crate::gpu::types::SplatUniform;
 
 /// Distance to the light as a packed f32 (packing.wgsl `pack_f32`): float targets do not render on GL.
 pub const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;

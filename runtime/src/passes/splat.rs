@@ -3,7 +3,7 @@
 
 use crate::error::Result;
 use crate::gpu::Gpu;
-use crate::gpu_types::{SplatUniform, SurfelGpu};
+use crate::gpu::types::{SplatUniform, SurfelGpu};
 
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 

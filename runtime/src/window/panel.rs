@@ -6,7 +6,7 @@
 
 use glam::Vec3;
 
-use crate::renderer::{ClipBox, LightProgress, Quality, ViewMode};
+use crate::render::renderer::{ClipBox, LightProgress, Quality, ViewMode};
 
 /// What the panel shows, gathered by the window each frame.
 #[derive(Clone, Debug, Default)]

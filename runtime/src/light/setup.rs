@@ -15,9 +15,9 @@
 
 use glam::{Mat4, UVec3, Vec3};
 
-use crate::gpu_types::{LightGpu, LightShadow};
+use crate::gpu::types::{LightGpu, LightShadow};
 use crate::passes::shadow::Face;
-use crate::scene_data::{SceneData, SceneLight};
+use crate::scene::data::{SceneData, SceneLight};
 use crate::settings::{Settings, ShadowFallback};
 
 /// The scene's lights as the GPU takes them: lights with shadow maps first (every light-grid cell

@@ -14,7 +14,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use crate::gpu_types::{ActiveTile, TileGpu};
+use crate::gpu::types::{ActiveTile, TileGpu};
 
 /// Why a bounce updates a tile.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]

@@ -15,7 +15,7 @@
 use glam::{IVec3, Vec3};
 pub use grotto_levels::rock::{BEHIND_SLOPE, BRICK_SHIFT, ROCK_LEVEL, ROCK_REACH_CELLS, SurfaceLeaf};
 
-use crate::gpu_types::{LeafGpu, TileGpu};
+use crate::gpu::types::{LeafGpu, TileGpu};
 
 /// Classifies rock around `leaves` (frame metres, leaves of `leaf_m`) into a [`RockTable`]
 /// (`grotto_levels::rock::classify`, for scenes whose package stores no rock).

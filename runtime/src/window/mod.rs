@@ -34,15 +34,15 @@ use winit::window::{Fullscreen, Window, WindowId};
 
 pub use pace::{FrameLog, Pacer};
 
-use crate::camera::{self, Camera, Nav};
+use crate::cli::image_out;
+use crate::cli::render_job::{self, RenderOptions};
 use crate::error::{Error, Result};
-use crate::follow::{self, Follow};
 use crate::gpu::Gpu;
-use crate::image_out;
-use crate::present::{Bar, Blit, Target};
-use crate::render_job::{self, RenderOptions};
-use crate::renderer::{ClipBox, LightProgress, Quality, Renderer, ViewMode, scan_color};
-use crate::scene_data::SceneData;
+use crate::render::present::{Bar, Blit, Target};
+use crate::render::renderer::{ClipBox, LightProgress, Quality, Renderer, ViewMode, scan_color};
+use crate::scene::data::SceneData;
+use crate::stream::follow::{self, Follow};
+use crate::view::camera::{self, Camera, Nav};
 
 /// What `grotto view` is asked.
 #[derive(Clone, Debug)]
@@ -357,7 +357,7 @@ impl App {
         }));
         let t = Instant::now();
         let plan = s.renderer.draw(&cam, w, h)?;
-        if !(plan.runs(crate::plan::Pass::Shadow) || plan.runs(crate::plan::Pass::Inject)) {
+        if !(plan.runs(crate::light::plan::Pass::Shadow) || plan.runs(crate::light::plan::Pass::Inject)) {
             // Direct light (after a change of lights or tiles) is not what a frame costs.
             s.pacer.record_draw(t.elapsed().as_secs_f64() * 1e3);
         }
@@ -423,11 +423,13 @@ impl App {
         &mut self,
         moving: bool,
         progress: LightProgress,
-        plan: &crate::plan::EffectPlan,
+        plan: &crate::light::plan::EffectPlan,
     ) -> Result<()> {
         let Some(s) = self.state.as_mut() else { return Ok(()) };
         let Some(out) = s.renderer.ldr_output() else { return Ok(()) };
-        let Some(frame) = crate::present::acquire(&s.gpu, &s.surface, &s.config) else { return Ok(()) };
+        let Some(frame) = crate::render::present::acquire(&s.gpu, &s.surface, &s.config) else {
+            return Ok(());
+        };
         let held = moving && !progress.converged;
         let view = frame.texture.create_view(&Default::default());
         let mut enc = s.gpu.device.create_command_encoder(&Default::default());
@@ -577,7 +579,7 @@ fn model(
     s: &State,
     progress: LightProgress,
     held: bool,
-    plan: &crate::plan::EffectPlan,
+    plan: &crate::light::plan::EffectPlan,
 ) -> panel::PanelModel {
     let r = &s.renderer;
     let resident = s.follow.as_ref().map(|f| f.current().totals);

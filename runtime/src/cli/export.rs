@@ -37,7 +37,7 @@ fn points(pkg: &Package) -> Result<Vec<Point>, Error> {
     let mut out = Vec::new();
     for tile in pkg.tiles() {
         let Some(surfels) = tile.surfels()? else { continue };
-        let mut colors = crate::scene_data::tile_colors(&tile, surfels.len())?;
+        let mut colors = crate::scene::data::tile_colors(&tile, surfels.len())?;
         colors.resize(surfels.len(), [180; 3]);
         let o = tile.origin_m();
         for (s, c) in surfels.iter().zip(colors) {

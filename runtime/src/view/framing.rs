@@ -23,9 +23,9 @@
 
 use glam::{DVec3, IVec3, Vec3};
 
-use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::scene_data::{SceneData, SceneLight, Spot};
+use crate::scene::data::{SceneData, SceneLight, Spot};
+use crate::view::camera::Camera;
 
 /// Cells per side of the occupancy grid at most.
 const GRID_CELLS: i32 = 128;
@@ -671,7 +671,7 @@ pub struct SizedLamp {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu_types::SurfelGpu;
+    use crate::gpu::types::SurfelGpu;
 
     fn scene_of(points: &[(Vec3, Vec3)], radius: f32) -> SceneData {
         SceneData {

@@ -8,14 +8,14 @@
 use glam::Vec3;
 use grotto_format::{Package, Scope, SectionInfo, SectionKind};
 
-use crate::camera::Camera;
 use crate::error::Result;
 use crate::gpu::Gpu;
-use crate::pool::{POOL_HEADROOM, PoolCaps};
-use crate::renderer::{ClipBox, Renderer, SceneUpdate, Settings};
-use crate::residency::{self, Budget, Residency, TileFootprint};
-use crate::rock::RockTable;
-use crate::scene_data::{SceneData, SceneLight, TileMode};
+use crate::render::pool::{POOL_HEADROOM, PoolCaps};
+use crate::render::renderer::{ClipBox, Renderer, SceneUpdate, Settings};
+use crate::scene::data::{SceneData, SceneLight, TileMode};
+use crate::scene::rock::RockTable;
+use crate::stream::residency::{self, Budget, Residency, TileFootprint};
+use crate::view::camera::Camera;
 
 /// What a view over budget keeps to choose tiles again as its camera moves.
 #[derive(Debug)]

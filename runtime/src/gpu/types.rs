@@ -384,3 +384,39 @@ const _: () = {
     assert!(size_of::<SplatUniform>() == 256);
     assert!(size_of::<SurfelGpu>() == 40);
 };
+
+/// GPU bytes of the per-element buffers that hold tiles, as the renderer allocates them: tile
+/// records, nodes, the radiance pyramid (six faces a node), the mip order, leaves, leaf light and
+/// surfels. The one formula behind residency's tile costs, the pools' sizes and a scene's bytes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct TileBufferBytes {
+    pub tiles: u64,
+    pub nodes: u64,
+    pub leaves: u64,
+    pub leaf_light: u64,
+    /// The anisotropic radiance pyramid (six values per node).
+    pub faces: u64,
+    pub mip_order: u64,
+    pub surfels: u64,
+}
+
+impl TileBufferBytes {
+    /// The bytes of `tiles` tile records, `nodes` nodes, `leaves` leaves and `surfels` surfels.
+    pub fn of(tiles: u64, nodes: u64, leaves: u64, surfels: u64, radiance_f16: bool) -> Self {
+        let face = if radiance_f16 { 8 } else { 16 };
+        Self {
+            tiles: tiles * size_of::<TileGpu>() as u64,
+            nodes: nodes * size_of::<NodeGpu>() as u64,
+            leaves: leaves * size_of::<LeafGpu>() as u64,
+            leaf_light: leaves * size_of::<LeafLightGpu>() as u64,
+            faces: nodes * 6 * face,
+            mip_order: nodes * 4,
+            surfels: surfels * size_of::<SurfelGpu>() as u64,
+        }
+    }
+
+    /// All of them.
+    pub fn total(&self) -> u64 {
+        self.tiles + self.nodes + self.leaves + self.leaf_light + self.faces + self.mip_order + self.surfels
+    }
+}

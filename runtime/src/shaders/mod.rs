@@ -11,38 +11,38 @@ use crate::error::{Error, Result};
 
 /// The shared library: (import name, source).
 pub const LIBRARY: &[(&str, &str)] = &[
-    ("activity", include_str!("shaders/activity.wgsl")),
-    ("brdf", include_str!("shaders/brdf.wgsl")),
-    ("color", include_str!("shaders/color.wgsl")),
-    ("cone", include_str!("shaders/cone.wgsl")),
-    ("cone_batch", include_str!("shaders/cone_batch.wgsl")),
-    ("dispatch", include_str!("shaders/dispatch.wgsl")),
-    ("geometry", include_str!("shaders/geometry.wgsl")),
-    ("hash", include_str!("shaders/hash.wgsl")),
-    ("light_state", include_str!("shaders/light_state.wgsl")),
-    ("lights", include_str!("shaders/lights.wgsl")),
-    ("lookup", include_str!("shaders/lookup.wgsl")),
-    ("ndf", include_str!("shaders/ndf.wgsl")),
-    ("packing", include_str!("shaders/packing.wgsl")),
-    ("rock", include_str!("shaders/rock.wgsl")),
-    ("scene", include_str!("shaders/scene.wgsl")),
-    ("sh", include_str!("shaders/sh.wgsl")),
-    ("svo", include_str!("shaders/svo.wgsl")),
+    ("activity", include_str!("activity.wgsl")),
+    ("brdf", include_str!("brdf.wgsl")),
+    ("color", include_str!("color.wgsl")),
+    ("cone", include_str!("cone.wgsl")),
+    ("cone_batch", include_str!("cone_batch.wgsl")),
+    ("dispatch", include_str!("dispatch.wgsl")),
+    ("geometry", include_str!("geometry.wgsl")),
+    ("hash", include_str!("hash.wgsl")),
+    ("light_state", include_str!("light_state.wgsl")),
+    ("lights", include_str!("lights.wgsl")),
+    ("lookup", include_str!("lookup.wgsl")),
+    ("ndf", include_str!("ndf.wgsl")),
+    ("packing", include_str!("packing.wgsl")),
+    ("rock", include_str!("rock.wgsl")),
+    ("scene", include_str!("scene.wgsl")),
+    ("sh", include_str!("sh.wgsl")),
+    ("svo", include_str!("svo.wgsl")),
 ];
 
-pub const ENV: &str = include_str!("passes/env.wgsl");
-pub const INJECT: &str = include_str!("passes/inject.wgsl");
-pub const MIP: &str = include_str!("passes/mip.wgsl");
-pub const PROPAGATE: &str = include_str!("passes/propagate.wgsl");
-pub const SPLAT: &str = include_str!("passes/splat.wgsl");
+pub const ENV: &str = include_str!("../passes/env.wgsl");
+pub const INJECT: &str = include_str!("../passes/inject.wgsl");
+pub const MIP: &str = include_str!("../passes/mip.wgsl");
+pub const PROPAGATE: &str = include_str!("../passes/propagate.wgsl");
+pub const SPLAT: &str = include_str!("../passes/splat.wgsl");
 /// Presents a frame in a window or a browser's canvas (present.rs).
-pub const PRESENT: &str = include_str!("present.wgsl");
-pub const SHADE: &str = include_str!("passes/shade.wgsl");
+pub const PRESENT: &str = include_str!("../render/present.wgsl");
+pub const SHADE: &str = include_str!("../passes/shade.wgsl");
 
 /// Constants shared with the Rust side, generated from it so the two cannot drift.
 pub fn constants() -> String {
-    use crate::gpu_types::{LightShadow, flags};
-    use crate::{rock, tile_index};
+    use crate::gpu::types::{LightShadow, flags};
+    use crate::scene::{rock, tile_index};
     let mut out = format!(
         "const EMPTY: u32 = 0xffffffffu;\nconst ROCK_LEVEL: u32 = {}u;\nconst ROCK_BRICK_SHIFT: u32 = {}u;\n\
          const ROCK_HEADER_WORDS: u32 = {}u;\nconst ROCK_ENTRY_WORDS: u32 = {}u;\nconst ROCK_EMPTY_KEY: i32 = {};\n",
@@ -63,9 +63,9 @@ pub fn constants() -> String {
         out += &format!("const {name}: u32 = {bit}u;\n");
     }
     out += &format!("const FLAG_VIEWS_WITHOUT_LIGHT: u32 = {}u;\n", flags::VIEWS_WITHOUT_LIGHT);
-    out += &format!("const NO_SCAN: u32 = {}u;\n", crate::gpu_types::NO_SCAN);
+    out += &format!("const NO_SCAN: u32 = {}u;\n", crate::gpu::types::NO_SCAN);
     // The level a coarse tile's leaves are held at (coarse.rs): the level view tells coarse from far.
-    out += &format!("const COARSE_LEVELS: u32 = {}u;\n", crate::coarse::COARSE_LEVELS);
+    out += &format!("const COARSE_LEVELS: u32 = {}u;\n", crate::scene::coarse::COARSE_LEVELS);
     for kind in LightShadow::ALL {
         out += &format!("const {}: u32 = {}u;\n", kind.wgsl_name(), kind as u32);
     }

@@ -6,7 +6,7 @@ use glam::Vec3;
 use grotto_format::color::srgb8_to_linear;
 use grotto_format::spec::CoarseLeaf;
 
-use crate::gpu_types::{LeafGpu, SurfelGpu};
+use crate::gpu::types::{LeafGpu, SurfelGpu};
 
 pub use grotto_levels::coarse::{COARSE_LEVELS, CoarseLevel, FAR_LEVELS, coarse_level};
 
@@ -49,7 +49,7 @@ pub fn gpu_tile(leaves: &[CoarseLeaf], k: u32, leaf_m: f32, tile_origin_m: Vec3)
                 position_radius: centre.extend(radius).to_array(),
                 normal_spread: normal.normalize_or(Vec3::Z).extend(1.0 - normal.length().min(1.0)).to_array(),
                 color: [albedo[0], albedo[1], albedo[2], 0],
-                scan: crate::gpu_types::NO_SCAN,
+                scan: crate::gpu::types::NO_SCAN,
             });
         }
     }

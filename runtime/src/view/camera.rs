@@ -3,7 +3,7 @@
 use glam::{Mat4, Vec3, Vec4};
 
 use crate::error::{Error, Result};
-use crate::scene_data::SceneCamera;
+use crate::scene::data::SceneCamera;
 
 /// A perspective camera (right-handed, depth 0..1 as wgpu expects).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -84,7 +84,7 @@ impl Nav {
     }
 
     /// At `c`, flying a twentieth of `scene`'s largest extent a second (at least 0.5 m/s).
-    pub fn for_scene(c: &Camera, scene: &crate::scene_data::SceneData) -> Self {
+    pub fn for_scene(c: &Camera, scene: &crate::scene::data::SceneData) -> Self {
         let (lo, hi) = scene.bounds_leaf();
         let size_m = ((hi - lo) * scene.leaf_size_m).max_element();
         Self::from_camera(c, (size_m / 20.0).max(0.5))

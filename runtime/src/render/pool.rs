@@ -20,8 +20,8 @@ use range_alloc::RangeAllocator;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::gpu_types::TileGpu;
-use crate::scene_data::SceneData;
+use crate::gpu::types::{TileBufferBytes, TileGpu};
+use crate::scene::data::SceneData;
 
 /// Share of each pool residency leaves free when streaming, so a new tile form usually finds a
 /// hole or the tail and the pools rarely need a repack: with none, residency fills every pool and
@@ -60,10 +60,10 @@ impl PoolCaps {
         }
     }
 
-    /// GPU bytes of pools this large (the formula residency counts with, `residency::tile_bytes`).
+    /// GPU bytes of pools this large (the formula residency counts with, [`TileBufferBytes`]; the
+    /// tile records' pool holds at least one).
     pub fn bytes(&self, radiance_f16: bool) -> u64 {
-        crate::residency::tile_bytes(self.nodes, self.leaves, self.surfels, radiance_f16)
-            + self.tiles.saturating_sub(1) * size_of::<TileGpu>() as u64
+        TileBufferBytes::of(self.tiles.max(1), self.nodes, self.leaves, self.surfels, radiance_f16).total()
     }
 
     /// These pools less `share` of each (nodes, leaves, surfels; tile records kept): what

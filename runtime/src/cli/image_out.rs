@@ -4,9 +4,9 @@
 use std::io::BufWriter;
 use std::path::Path;
 
+use crate::cli::export::{atomically, output_error};
 use crate::error::{Error, Result};
-use crate::export::{atomically, output_error};
-use crate::renderer::Frame;
+use crate::render::renderer::Frame;
 
 /// Output kind chosen from the file extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -7,17 +7,17 @@
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
-use crate::renderer::{ClipBox, Renderer, Settings};
-use crate::residency::{self, Residency};
-use crate::scene_data::{SceneData, SceneLight};
+use crate::render::renderer::{ClipBox, Renderer, Settings};
+use crate::scene::data::{SceneData, SceneLight};
+use crate::stream::residency::{self, Residency};
 use crate::stream::{self, Streaming};
+use crate::view::camera::Camera;
 
 /// The renderer for a job's first scene ([`stream::renderer_for`]), and the loader that keeps its
 /// tiles following the camera where the package is over budget (`streaming` and the `first`
-/// residency it was chosen with, from [`crate::render_job::prepare`]).
+/// residency it was chosen with, from [`crate::cli::render_job::prepare`]).
 pub fn start(
     gpu: &Gpu,
     scene: &SceneData,

@@ -8,7 +8,7 @@
 //! tile that does not fit is passed over for smaller ones behind it (greedy), never split.
 //!
 //! Pure policy over byte counts, no GPU: the renderer's buffers follow the same per-tile formula
-//! ([`tile_bytes`], checked against `SceneData::buffer_bytes` by a test), so the bytes chosen here
+//! ([`TileBufferBytes`], the formula the pools and `SceneData::buffer_bytes` use), so the bytes chosen here
 //! are the bytes the renderer holds for tiles.
 
 use glam::{DVec3, Vec3};
@@ -17,7 +17,8 @@ use grotto_format::{Package, SectionKind};
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::scene_data::TileMode;
+use crate::gpu::types::TileBufferBytes;
+use crate::scene::data::TileMode;
 
 /// What one representation of a tile costs on the GPU.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -30,20 +31,13 @@ pub struct TileCost {
 
 impl TileCost {
     pub fn new(nodes: u64, leaves: u64, surfels: u64, radiance_f16: bool) -> Self {
-        Self { nodes, leaves, surfels, bytes: tile_bytes(nodes, leaves, surfels, radiance_f16) }
+        Self {
+            nodes,
+            leaves,
+            surfels,
+            bytes: TileBufferBytes::of(1, nodes, leaves, surfels, radiance_f16).total(),
+        }
     }
-}
-
-/// GPU bytes a tile of `nodes` nodes, `leaves` leaves and `surfels` surfels takes: its tile
-/// record, nodes, radiance pyramid (six faces a node), mip order, leaves, leaf light and surfels,
-/// as the renderer allocates them (`SceneData::buffer_bytes` without the rock).
-pub fn tile_bytes(nodes: u64, leaves: u64, surfels: u64, radiance_f16: bool) -> u64 {
-    use crate::gpu_types::{LeafGpu, LeafLightGpu, NodeGpu, SurfelGpu, TileGpu};
-    let face = if radiance_f16 { 8 } else { 16 };
-    size_of::<TileGpu>() as u64
-        + nodes * (size_of::<NodeGpu>() as u64 + 6 * face + 4)
-        + leaves * (size_of::<LeafGpu>() + size_of::<LeafLightGpu>()) as u64
-        + surfels * size_of::<SurfelGpu>() as u64
 }
 
 /// A tile as the policy sees it: its box in frame metres and what each representation costs.
@@ -79,7 +73,7 @@ pub struct Budget {
     pub points: u64,
     /// Elements of each of the renderer's tile pools (pool.rs), once they are allocated: a
     /// residency must fit each pool, not only the bytes.
-    pub pools: Option<crate::pool::PoolCaps>,
+    pub pools: Option<crate::render::pool::PoolCaps>,
 }
 
 /// The view residency serves.
@@ -192,14 +186,14 @@ impl Residency {
 }
 
 /// Every tile of `pkg` with an SVO, with its box in the scene's frame
-/// ([`crate::scene_data::frame_of`]) and its costs full, coarse and far. The node and leaf counts
+/// ([`crate::scene::data::frame_of`]) and its costs full, coarse and far. The node and leaf counts
 /// of each come from the section table where the package stores them (format 1.1: no tile data
 /// is read); otherwise from one read of the tile's node array. A coarse tile's splats are counted
 /// as its leaves (an upper bound: empty blocks draw none), so the bytes chosen are never under
 /// what is held.
 pub fn footprints(pkg: &Package, radiance_f16: bool) -> Result<Vec<TileFootprint>> {
     let mut out = Vec::new();
-    let Some((frame_origin_m, _)) = crate::scene_data::frame_of(pkg)? else { return Ok(out) };
+    let Some((frame_origin_m, _)) = crate::scene::data::frame_of(pkg)? else { return Ok(out) };
     for tile in pkg.tiles() {
         let depth = tile.depth();
         let len = |kind: SectionKind, item: u32, each: usize| {
@@ -658,11 +652,12 @@ mod tests {
             t.coarse.leaves = 1;
         }
         let view = looking(Vec3::new(22.0, 2.0, 2.0), Vec3::X);
-        let pools = crate::pool::PoolCaps { tiles: 10, nodes: 0, leaves: 10 + 2 * 9, surfels: u64::MAX };
+        let pools =
+            crate::render::pool::PoolCaps { tiles: 10, nodes: 0, leaves: 10 + 2 * 9, surfels: u64::MAX };
         let budget = Budget { gpu_bytes: u64::MAX, points: u64::MAX, pools: Some(pools) };
         let r = choose(&tiles, &view, budget).unwrap();
         assert_eq!(r.totals.full_tiles, 2, "the leaf pool holds two full tiles");
-        let small = crate::pool::PoolCaps { leaves: 9, ..pools };
+        let small = crate::render::pool::PoolCaps { leaves: 9, ..pools };
         let err = choose(&tiles, &view, Budget { pools: Some(small), ..budget }).unwrap_err();
         assert!(err.to_string().contains("pools"), "{err}");
     }

@@ -4,8 +4,8 @@
 
 use glam::{DVec3, IVec3, Vec3};
 
-use crate::gpu_types::{LeafLightGpu, Params};
-use crate::scene_data::SceneData;
+use crate::gpu::types::{LeafLightGpu, Params};
+use crate::scene::data::SceneData;
 
 /// Closure of a cone that left the scene nearly opaque (`close_cone` in shaders/cone.wgsl): its
 /// missing share filled with `last`, the colour of the matter it was crossing.
@@ -179,14 +179,14 @@ impl<'a> CpuScene<'a> {
             if t > f64::from(p.max_distance_m) {
                 break;
             }
-            let cell_m = leaf * f64::from(1u32 << crate::rock::ROCK_LEVEL);
+            let cell_m = leaf * f64::from(1u32 << crate::scene::rock::ROCK_LEVEL);
             let n = (((t - t_prev) / cell_m).ceil() as u32).min(64);
             for k in 1..=n {
                 let tk = t_prev + (t - t_prev) * f64::from(k) / f64::from(n);
                 let qk = (origin_m + dir * tk) / leaf;
-                if crate::rock::in_rock(&self.scene.rock, qk.floor().as_ivec3()) {
+                if crate::scene::rock::in_rock(&self.scene.rock, qk.floor().as_ivec3()) {
                     let d = leaf.max(2.0 * tk * tan_half);
-                    let lod = ((d / leaf).log2() + 1.0).max(f64::from(crate::rock::ROCK_LEVEL + 1));
+                    let lod = ((d / leaf).log2() + 1.0).max(f64::from(crate::scene::rock::ROCK_LEVEL + 1));
                     return enter_rock(acc, self.sample_lod(qk, lod, p.max_lod, dir), last);
                 }
             }
@@ -231,7 +231,7 @@ impl<'a> CpuScene<'a> {
         let bg = DVec3::new(p.background[0].into(), p.background[1].into(), p.background[2].into());
         // The interleave angle of ndf.wgsl's `cone_interleave_rad`.
         let cell = (Vec3::from_slice(&leaf.center_m[..3]) / p.leaf_size_m).floor().as_ivec3();
-        let k = if p.flags & crate::gpu_types::flags::CONE_INTERLEAVE != 0 {
+        let k = if p.flags & crate::gpu::types::flags::CONE_INTERLEAVE != 0 {
             (cell.x & 1) + 2 * (cell.y & 1) + 4 * (cell.z & 1)
         } else {
             0

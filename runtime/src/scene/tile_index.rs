@@ -18,8 +18,8 @@
 use glam::IVec3;
 
 use crate::error::{Error, Result};
-use crate::gpu_types::TileGpu;
-use crate::rock::{brick_hash, free_slot};
+use crate::gpu::types::TileGpu;
+use crate::scene::rock::{brick_hash, free_slot};
 
 /// Words before the first entry: capacity - 1 (capacity a power of two), the longest probe
 /// sequence any entry needs, the mask of depths entries are keyed at, the entry count, the anchor
@@ -170,9 +170,9 @@ mod tests {
         TileGpu { origin_leaf: origin, depth, ..Default::default() }
     }
 
-    /// The scan the index replaces ([`crate::scene_data::SceneData::tile_of`]).
+    /// The scan the index replaces ([`crate::scene::data::SceneData::tile_of`]).
     fn linear(tiles: &[TileGpu], v: IVec3) -> Option<u32> {
-        let scene = crate::scene_data::SceneData { tiles: tiles.to_vec(), ..Default::default() };
+        let scene = crate::scene::data::SceneData { tiles: tiles.to_vec(), ..Default::default() };
         scene.tile_of(v).map(|i| i as u32)
     }
 

@@ -14,19 +14,19 @@ use web_time::Instant;
 use glam::{Mat4, Vec3};
 use serde::Serialize;
 
-use crate::activity::{BounceWork, TileActivity, Why};
-use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
-use crate::gpu_types::{
+use crate::gpu::types::{
     ActiveTile, LeafGpu, LeafLightGpu, LightGpu, MAX_CONES, NodeGpu, Params, SplatUniform, SurfelGpu,
     TileGpu, flags,
 };
-use crate::lights::LightSetup;
+use crate::light::activity::{BounceWork, TileActivity, Why};
+use crate::light::plan::{self, EffectPlan, Pass, PlanInputs};
+use crate::light::setup::LightSetup;
 use crate::passes::{self, gbuffer, shade, shadow};
-use crate::plan::{self, EffectPlan, Pass, PlanInputs};
-use crate::pool::{PoolCaps, Pools, TileKey, key, merge_runs, surfel_owners};
-use crate::scene_data::{EnvChain, MAX_ENV_LEVELS, MAX_MATERIALS, SceneData, SceneLight};
+use crate::render::pool::{PoolCaps, Pools, TileKey, key, merge_runs, surfel_owners};
+use crate::scene::data::{EnvChain, MAX_ENV_LEVELS, MAX_MATERIALS, SceneData, SceneLight};
+use crate::view::camera::Camera;
 
 pub use crate::settings::{
     ClipBox, IndirectFilter, MAX_SHADOWED_LIGHTS, Quality, Settings, ShadowFallback, ViewMode, scan_color,
@@ -302,7 +302,7 @@ fn tail_ratio_max(settings: &Settings, leaves: &[LeafGpu]) -> [f32; 4] {
             }
         }
     }
-    m.map(|v| v.min(crate::gpu_types::TAIL_RATIO_MAX))
+    m.map(|v| v.min(crate::gpu::types::TAIL_RATIO_MAX))
 }
 
 /// The one lookup buffer's contents (lookup.wgsl): the rock table, the light grid and the tile
@@ -316,7 +316,7 @@ struct Lookup {
 
 impl Lookup {
     fn new(scene: &SceneData, lights: &LightSetup) -> Result<Self> {
-        let index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
+        let index = crate::scene::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
         let (rock, grid) = (&scene.rock.words, &lights.grid.words);
         let room = 2 * index.words.len() + 64;
         let mut words = Vec::with_capacity(rock.len() + grid.len() + room);
@@ -1021,7 +1021,7 @@ impl Renderer {
         if !exact || !self.cull_tiles || !self.pools.caps().holds(&need) || Compat::of(scene) != self.compat {
             return Ok(None);
         }
-        let index = crate::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
+        let index = crate::scene::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
         let index_offset = 4 * u64::from(self.base_params.lookup_base[2]);
         if 4 * index.words.len() as u64 > self.lookup_buf.size() - index_offset {
             return Ok(None);
@@ -1120,7 +1120,7 @@ impl Renderer {
             .map(|t| tile_box(t, self.leaf_size_m))
             .collect();
         for (face, dirty) in self.shadow.faces().iter().zip(&mut self.shadow_dirty) {
-            if changed.iter().any(|(lo, hi)| crate::camera::sees_box(&face.view_proj, *lo, *hi)) {
+            if changed.iter().any(|(lo, hi)| crate::view::camera::sees_box(&face.view_proj, *lo, *hi)) {
                 *dirty = true;
             }
         }
@@ -1183,7 +1183,7 @@ impl Renderer {
         let seen = |t: &TileGpu| match view_proj {
             Some(m) if self.cull_tiles => {
                 let (lo, hi) = tile_box(t, self.leaf_size_m);
-                crate::camera::sees_box(m, lo, hi)
+                crate::view::camera::sees_box(m, lo, hi)
             }
             _ => true,
         };

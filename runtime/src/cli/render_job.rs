@@ -9,16 +9,16 @@ use glam::{DVec3, Vec3};
 use grotto_format::Package;
 use serde::Serialize;
 
-use crate::camera::{self, Camera};
+use crate::cli::image_out;
 use crate::error::{Error, Result};
-use crate::framing::Framing;
 use crate::gpu::{Gpu, GpuOptions};
-use crate::image_out;
-use crate::plan::EffectPlan;
-use crate::renderer::{ClipBox, PassStats, Renderer, Settings};
-use crate::residency::{self, Budget, Residency};
-use crate::scene_data::{SceneData, TileMode};
+use crate::light::plan::EffectPlan;
+use crate::render::renderer::{ClipBox, PassStats, Renderer, Settings};
+use crate::scene::data::{SceneData, TileMode};
 use crate::stream::Streaming;
+use crate::stream::residency::{self, Budget, Residency};
+use crate::view::camera::{self, Camera};
+use crate::view::framing::Framing;
 
 /// Whether to light the view with a headlamp at the camera.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -59,7 +59,7 @@ pub struct RenderOptions {
     /// Replace the package's lights by a lamp string of this many 8 W lamps
     /// ([`SceneData::lamp_string`]): how cost and error grow with the number of lights.
     pub lamp_string: Option<u32>,
-    /// A headlamp at the (first) camera ([`crate::framing::headlamp`]).
+    /// A headlamp at the (first) camera ([`crate::view::framing::headlamp`]).
     pub headlamp: Headlamp,
     /// GPU bytes for tiles (`--gpu-memory`); `None`: [`default_gpu_memory`].
     pub gpu_memory: Option<u64>,
@@ -107,7 +107,7 @@ impl RenderOptions {
             width: 800,
             height: 600,
             out,
-            settings: Settings::preset(crate::renderer::Quality::Balanced),
+            settings: Settings::preset(crate::render::renderer::Quality::Balanced),
             exposure: None,
             gpu: GpuOptions::default(),
             lamp_string: None,
@@ -126,8 +126,8 @@ pub const STRING_LAMP_W: f32 = 8.0;
 /// Height of a `--lamps` lamp above its floor, metres.
 pub const STRING_LAMP_LIFT_M: f32 = 0.6;
 
-pub use crate::framing::{CameraChoice, resolve_camera};
 pub use crate::gpu::default_gpu_memory;
+pub use crate::view::framing::{CameraChoice, resolve_camera};
 
 /// `--lamps`: the lights replaced by a lamp string.
 fn apply_lamps(opts: &RenderOptions, scene: &mut SceneData) {
@@ -197,7 +197,7 @@ pub struct FrameReport {
     pub propagated_tiles: usize,
     pub propagated_leaves: u64,
     /// Each of the frame's bounces: which tiles it updated and why (`--explain`).
-    pub bounce_work: Vec<crate::activity::BounceWork>,
+    pub bounce_work: Vec<crate::light::activity::BounceWork>,
     /// GPU bytes of the renderer's tile pools (allocated once, from `--gpu-memory`; what the
     /// budget bounds). `tile_bytes` is the part the frame's tiles use.
     pub pool_bytes: u64,
@@ -205,7 +205,7 @@ pub struct FrameReport {
     /// whether the pools were repacked; None where the tiles did not change. A change the pools
     /// could not take in place (a scene whose lights or bounds differ) makes a new renderer and
     /// reports `made_anew`.
-    pub update: Option<crate::renderer::SceneUpdate>,
+    pub update: Option<crate::render::renderer::SceneUpdate>,
     pub made_anew: bool,
     /// Changes of tile form left for later frames by `--upload-per-frame`.
     pub deferred: usize,
@@ -331,7 +331,7 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
         let first = cameras[0];
         // A framed view was estimated already; a given one is estimated here.
         let seen = framed.as_ref().map(|f| f.estimate);
-        let lamp = crate::framing::scene_headlamp(&scene, &first, aspect, splat, seen);
+        let lamp = crate::view::framing::scene_headlamp(&scene, &first, aspect, splat, seen);
         let distance_m = lamp.sized_for_m;
         let lamp = lamp.light;
         notes.push(format!(
@@ -439,7 +439,7 @@ pub fn frame_path(out: &Path, i: u32, n: u32) -> PathBuf {
     out.with_file_name(format!("{stem}_{i:04}.{ext}"))
 }
 
-pub use crate::renderer::auto_exposure;
+pub use crate::render::renderer::auto_exposure;
 
 /// Opens a package and reads its scene; an empty package is an error (nothing to render).
 pub fn load_scene(package: &Path) -> Result<SceneData> {
@@ -455,8 +455,14 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let load_s = t_load.elapsed().as_secs_f64();
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
-    let (mut r, mut follow) =
-        crate::follow::start(&gpu, &scene, settings.clone(), streaming, residency, opts.upload_per_frame)?;
+    let (mut r, mut follow) = crate::stream::follow::start(
+        &gpu,
+        &scene,
+        settings.clone(),
+        streaming,
+        residency,
+        opts.upload_per_frame,
+    )?;
     r.set_clip(clip);
     let first_plan = r.plan(Some((&cameras[0], opts.width, opts.height)));
     let t0 = Instant::now();
@@ -632,7 +638,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// Times every pass `reps` times on the package's first camera (or a default view).
 pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
-    use crate::plan::Pass;
+    use crate::light::plan::Pass;
     let gpu = Gpu::new(&opts.gpu)?;
     let Prepared { scene, cameras, residency, .. } = prepare(opts, &gpu)?;
     let cam = cameras[0];

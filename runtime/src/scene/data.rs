@@ -15,9 +15,9 @@ use grotto_format::spec::{ShRgb9, Surfel, SvoNode};
 use grotto_format::svo::{morton_decode, morton_encode, nodes_from_leaves};
 use grotto_format::{LightShape, Package, Scope, SectionKind, SvoData};
 
-use crate::coarse::{COARSE_LEVELS, CoarseLevel, FAR_LEVELS, coarse_level, gpu_tile};
 use crate::error::{Error, Result};
-use crate::gpu_types::{LeafGpu, MipRange, NodeGpu, SurfelGpu, TileGpu};
+use crate::gpu::types::{LeafGpu, MipRange, NodeGpu, SurfelGpu, TileBufferBytes, TileGpu};
+use crate::scene::coarse::{COARSE_LEVELS, CoarseLevel, FAR_LEVELS, coarse_level, gpu_tile};
 
 /// A point or spot light in frame coordinates.
 #[derive(Clone, Debug, PartialEq)]
@@ -79,7 +79,7 @@ pub struct SceneData {
     /// scaled by the scene's environment intensity; None without an environment map.
     pub environment_sh: Option<[[f32; 3]; 9]>,
     /// Rock behind the surfaces (rock.rs).
-    pub rock: crate::rock::RockTable,
+    pub rock: crate::scene::rock::RockTable,
     /// Specular materials with a region, in slot order: surfel colour alpha `k` (1..=7) means
     /// `materials[k - 1]`, 0 diffuse. The surfels in a material's region are assigned at load.
     pub materials: Vec<SceneMaterial>,
@@ -326,7 +326,7 @@ fn tile_scans(
     scans: usize,
 ) -> std::result::Result<Vec<u32>, String> {
     let Some(stored) = tile.read::<u16>(SectionKind::SurfelScans).map_err(|e| e.to_string())? else {
-        return Ok(vec![crate::gpu_types::NO_SCAN; surfels]);
+        return Ok(vec![crate::gpu::types::NO_SCAN; surfels]);
     };
     if stored.len() != surfels {
         return Err(format!(
@@ -399,7 +399,7 @@ impl SceneData {
             let c = (p / leaf).floor().as_ivec3();
             let near_leaf = (-1..=1)
                 .any(|z| (-1..=1).any(|y| (-1..=1).any(|x| occupied.contains(&(c + IVec3::new(x, y, z))))));
-            !near_leaf && !crate::rock::in_rock(&self.rock, c)
+            !near_leaf && !crate::scene::rock::in_rock(&self.rock, c)
         };
         let steps = (lift_m / leaf).ceil().max(1.0) as i32;
         let candidates: Vec<Vec3> = self
@@ -480,23 +480,28 @@ impl SceneData {
     /// surfels, rock), as the renderer creates them (`radiance_f16`: the pyramid's precision).
     /// Lights, shadow atlas and image buffers follow the settings and are not counted.
     pub fn buffer_bytes(&self, radiance_f16: bool) -> SceneBytes {
-        use crate::gpu_types::LeafLightGpu;
-        let len = |n: usize, each: usize| (n * each) as u64;
-        let (nodes, leaves) = (self.nodes.len(), self.leaves.len());
+        let len = |n: usize| n as u64;
+        let b = TileBufferBytes::of(
+            len(self.tiles.len()),
+            len(self.nodes.len()),
+            len(self.leaves.len()),
+            len(self.surfels.len()),
+            radiance_f16,
+        );
         SceneBytes {
-            tiles: len(self.tiles.len(), size_of::<TileGpu>()),
-            nodes: len(nodes, size_of::<NodeGpu>()),
-            leaves: len(leaves, size_of::<LeafGpu>()),
-            leaf_light: len(leaves, size_of::<LeafLightGpu>()),
-            faces: len(nodes, 6 * if radiance_f16 { 8 } else { 16 }),
-            mip_order: len(nodes, 4),
-            surfels: len(self.surfels.len(), size_of::<SurfelGpu>()),
-            rock: len(self.rock.words.len(), 4),
-            rock_dense_grid: crate::rock::dense_grid_bytes(&self.tiles),
+            tiles: b.tiles,
+            nodes: b.nodes,
+            leaves: b.leaves,
+            leaf_light: b.leaf_light,
+            faces: b.faces,
+            mip_order: b.mip_order,
+            surfels: b.surfels,
+            rock: len(self.rock.words.len()) * 4,
+            rock_dense_grid: crate::scene::rock::dense_grid_bytes(&self.tiles),
         }
     }
 
-    /// GPU bytes of the tile data ([`crate::residency::tile_bytes`] summed over the tiles): what
+    /// GPU bytes of the tile data ([`TileBufferBytes`] summed over the tiles): what
     /// `--gpu-memory` bounds.
     pub fn tile_bytes(&self, radiance_f16: bool) -> u64 {
         let b = self.buffer_bytes(radiance_f16);
@@ -561,7 +566,7 @@ impl SceneData {
     pub fn from_package_with_rock(
         pkg: &Package,
         mode_of: impl Fn(usize) -> TileMode,
-        rock: crate::rock::RockTable,
+        rock: crate::scene::rock::RockTable,
     ) -> Result<Self> {
         Self::load(pkg, mode_of, Some(rock))
     }
@@ -569,7 +574,7 @@ impl SceneData {
     fn load(
         pkg: &Package,
         mode_of: impl Fn(usize) -> TileMode,
-        rock: Option<crate::rock::RockTable>,
+        rock: Option<crate::scene::rock::RockTable>,
     ) -> Result<Self> {
         let name = pkg.path().display().to_string();
         let bad = |problem: String| Error::Scene { package: name.clone(), problem };
@@ -787,15 +792,15 @@ impl SceneData {
         out.rock = if let Some(rock) = rock {
             rock
         } else if let Some(bricks) = stored_rock {
-            crate::rock::RockTable::from_bricks(bricks)
+            crate::scene::rock::RockTable::from_bricks(bricks)
         } else if hidden_leaves.is_empty() {
-            crate::rock::classify(out.leaf_size_m, &out.leaves)
+            crate::scene::rock::classify(out.leaf_size_m, &out.leaves)
         } else {
             for t in out.tiles.iter().filter(|t| t.leaf_lod == 0) {
                 let range = t.leaf_offset as usize..(t.leaf_offset + t.leaf_count) as usize;
                 hidden_leaves.extend_from_slice(&out.leaves[range]);
             }
-            crate::rock::classify(out.leaf_size_m, &hidden_leaves)
+            crate::scene::rock::classify(out.leaf_size_m, &hidden_leaves)
         };
         Ok(out)
     }
@@ -840,7 +845,7 @@ impl SceneData {
             });
             out.tile_surfels.push(0..0);
         }
-        out.rock = crate::rock::classify(out.leaf_size_m, &out.leaves);
+        out.rock = crate::scene::rock::classify(out.leaf_size_m, &out.leaves);
         out
     }
 }

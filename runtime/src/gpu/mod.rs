@@ -1,0 +1,7 @@
+//! GPU plumbing: the device and its limits, checked buffer and texture creation, error scopes and
+//! read-backs ([`device`]), and the structs shared with WGSL, byte for byte ([`types`]).
+
+mod device;
+pub mod types;
+
+pub use device::*;

@@ -1,0 +1,8 @@
+//! The scene as the GPU will hold it, built on the CPU: a package's tiles, nodes, leaves, surfels,
+//! lights and environment in one f32 frame ([`data`]), the rock behind the walls ([`rock`]), each
+//! tile's coarse and far levels ([`coarse`]) and the constant-time tile lookup ([`tile_index`]).
+
+pub mod coarse;
+pub mod data;
+pub mod rock;
+pub mod tile_index;
