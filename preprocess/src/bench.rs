@@ -24,14 +24,6 @@ pub struct IngestFigure {
     pub points_per_second: f64,
 }
 
-/// Peak resident memory of this process so far (Linux `VmHWM`), in bytes.
-pub fn peak_rss_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
-}
-
 fn stream(path: &Path, format: ScanFormat) -> Result<u64> {
     let mut n = 0u64;
     for i in 0..ingest::scan_count(path, format)? {
@@ -147,9 +139,10 @@ pub fn normals(
 ) -> Result<Vec<NormalFigure>> {
     use rayon::prelude::*;
 
+    use crate::bins::{FLAG_HALO, read_bin};
     use crate::manifest::Manifest;
     use crate::normals::{Orient, TilePoints, estimate};
-    use crate::tiling::{FLAG_HALO, TilingParams, read_bin, tile_scans};
+    use crate::tiling::{TilingParams, tile_scans};
     use crate::voxels::{self, Sample};
 
     /// The bench's leaf edge (the build default), metres.

@@ -30,12 +30,13 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::bc1;
+use crate::bins::{self, FLAG_HALO, TilePlan};
 use crate::ingest::ScanFormat;
 use crate::manifest::{Manifest, ResolvedScan, SeenFrom};
 use crate::normals::{self, NormalStats, Orient, TilePoints};
 use crate::orient::{self, CaveGrid, OrientStats};
 use crate::profile::{Profile, Stage, StageTime};
-use crate::tiling::{self, FLAG_HALO, Progress, TilePlan, TilingParams};
+use crate::tiling::{self, Progress, TilingParams};
 use crate::voxels::{self, Sample, TileSvo};
 use crate::{Error, Result};
 use grotto_format::compact;
@@ -107,7 +108,7 @@ pub struct AutoLeaf {
 /// already draw). Sparse clouds (airborne strips at metres) get leaves that hold their points
 /// together, instead of one isolated point per 6 cm voxel and one per tile.
 pub fn auto_leaf(scans: &[ResolvedScan]) -> Result<AutoLeaf> {
-    let sample = tiling::sample_spacing_m(scans, SPACING_SAMPLE_POINTS)?;
+    let sample = crate::spacing::sample_spacing_m(scans, SPACING_SAMPLE_POINTS)?;
     let leaf_m = match sample {
         Some((s, _)) if s.is_finite() && s > DEFAULT_LEAF_M => 2f64.powi(s.log2().ceil() as i32),
         _ => DEFAULT_LEAF_M,
@@ -413,7 +414,7 @@ fn build_tile(
     let origin = plan.origin_m(tile);
     let extent = plan.extent_m(tile);
     let mut clock = std::time::Instant::now();
-    let points = tiling::read_bin(work_dir, plan, t)?;
+    let points = bins::read_bin(work_dir, plan, t)?;
     let quantum = plan.quantum_m;
     let positions: Vec<[f32; 3]> = points.iter().map(|p| p.pos_tile_m(quantum)).collect();
     let own: Vec<bool> = points.iter().map(|p| p.flags & FLAG_HALO == 0).collect();
@@ -441,7 +442,7 @@ fn build_tile(
         params.k,
     );
     profile.lap(Stage::Normals, &mut clock);
-    let own_points: Vec<&tiling::BinPoint> = points.iter().filter(|p| p.flags & FLAG_HALO == 0).collect();
+    let own_points: Vec<&bins::BinPoint> = points.iter().filter(|p| p.flags & FLAG_HALO == 0).collect();
     let q = f64::from(1u32 << 16) / extent;
     let mut order: Vec<(u64, usize)> = own_points
         .iter()
@@ -938,7 +939,7 @@ pub fn build(
     summary.resumed_tiling = resumed_tiling;
     summary.reused_tiles = stage.reused;
     summary.seconds = start.elapsed().as_secs_f64();
-    summary.peak_rss_bytes = crate::bench::peak_rss_bytes();
+    summary.peak_rss_bytes = crate::profile::peak_rss_bytes();
     Ok(summary)
 }
 
@@ -1131,7 +1132,7 @@ fn assemble_plan(
         scans_seen_from_outside: (0..plan.scanner_known.len())
             .filter(|&s| plan.seen_from(s) == Some(SeenFrom::Outside))
             .count(),
-        peak_rss_bytes: crate::bench::peak_rss_bytes(),
+        peak_rss_bytes: crate::profile::peak_rss_bytes(),
         leaf_m: params.leaf_m,
         lights: scene.lights.len(),
         cameras: scene.cameras.len(),

@@ -6,6 +6,7 @@
 
 pub mod bc1;
 pub mod bench;
+pub mod bins;
 pub mod build;
 pub mod demo;
 pub mod env;
@@ -18,6 +19,8 @@ pub mod orient;
 pub mod pose;
 pub mod profile;
 pub mod scanwrite;
+pub mod spacing;
+pub mod spill;
 pub mod synth;
 pub mod tiling;
 pub mod voxels;

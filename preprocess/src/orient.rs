@@ -24,7 +24,7 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use crate::tiling::{self, FLAG_HALO, TilePlan};
+use crate::bins::{self, FLAG_HALO, TilePlan};
 use crate::{Error, Result};
 
 /// Occupancy cell edge in leaves: coarse enough that a wall sampled at the leaf spacing has no
@@ -139,7 +139,7 @@ impl CaveGrid {
             .into_par_iter()
             .map(|t| {
                 let tile_origin = plan.origin_m(&plan.tiles[t]);
-                let mut keys: Vec<[i32; 3]> = tiling::read_bin(work_dir, plan, t)?
+                let mut keys: Vec<[i32; 3]> = bins::read_bin(work_dir, plan, t)?
                     .iter()
                     .filter(|p| p.flags & FLAG_HALO == 0)
                     .map(|p| {

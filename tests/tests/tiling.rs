@@ -6,9 +6,10 @@
 use std::num::NonZero;
 use std::path::Path;
 
+use grotto_preprocess::bins::{self, FLAG_HALO, TilePlan};
 use grotto_preprocess::manifest::{Manifest, ResolvedScan};
 use grotto_preprocess::profile::{Profile, Stage};
-use grotto_preprocess::tiling::{self, FLAG_HALO, TilePlan, TilingParams};
+use grotto_preprocess::tiling::{self, TilingParams};
 use grotto_tests::shared_data_dir;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 
@@ -27,7 +28,7 @@ fn world_points_by_scan(plan: &TilePlan, work: &Path, scans: usize) -> Vec<Vec<[
     let mut out = vec![Vec::new(); scans];
     for (t, tile) in plan.tiles.iter().enumerate() {
         let o = plan.origin_m(tile);
-        for p in tiling::read_bin(work, plan, t).unwrap() {
+        for p in bins::read_bin(work, plan, t).unwrap() {
             if p.flags & FLAG_HALO == 0 {
                 let local = p.pos_tile_m(plan.quantum_m);
                 out[p.scan as usize].push(std::array::from_fn(|a| o[a] + f64::from(local[a])));
@@ -112,8 +113,7 @@ fn a_cloud_shifted_to_survey_coordinates_tiles_identically() {
     assert_eq!(a.halo_points, b.halo_points);
     let mut worst = 0f64;
     for t in 0..a.tiles.len() {
-        let (pa, pb) =
-            (tiling::read_bin(wa.path(), &a, t).unwrap(), tiling::read_bin(wb.path(), &b, t).unwrap());
+        let (pa, pb) = (bins::read_bin(wa.path(), &a, t).unwrap(), bins::read_bin(wb.path(), &b, t).unwrap());
         assert_eq!(pa.len(), pb.len());
         for (x, y) in pa.iter().zip(&pb) {
             assert_eq!((x.scan, x.flags), (y.scan, y.flags));
@@ -154,10 +154,8 @@ fn bins_read_the_same_whatever_the_number_of_distribute_workers() {
         assert_eq!(many.bin_writers, threads);
         assert_eq!(TilePlan { bin_writers: 1, ..many.clone() }, one);
         for t in 0..one.tiles.len() {
-            let (a, b) = (
-                tiling::read_bin(w1.path(), &one, t).unwrap(),
-                tiling::read_bin(wn.path(), &many, t).unwrap(),
-            );
+            let (a, b) =
+                (bins::read_bin(w1.path(), &one, t).unwrap(), bins::read_bin(wn.path(), &many, t).unwrap());
             assert!(a == b, "tile {t}: {} and {} points, or another order", a.len(), b.len());
         }
     }
@@ -179,8 +177,8 @@ fn distribute_makes_the_same_bins_from_the_spill_as_from_the_scans() {
     assert!(!spilled_dir.path().join("spill").exists());
     for t in 0..spilled.tiles.len() {
         assert!(
-            tiling::read_bin(spilled_dir.path(), &spilled, t).unwrap()
-                == tiling::read_bin(decoded_dir.path(), &decoded, t).unwrap(),
+            bins::read_bin(spilled_dir.path(), &spilled, t).unwrap()
+                == bins::read_bin(decoded_dir.path(), &decoded, t).unwrap(),
             "tile {t}"
         );
     }
@@ -203,7 +201,7 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
     for (i, t) in plan.tiles.iter().enumerate() {
         let e = plan.extent_m(t) as f32;
         let h = params.halo_m as f32 + 1e-6;
-        for p in tiling::read_bin(work.path(), &plan, i).unwrap() {
+        for p in bins::read_bin(work.path(), &plan, i).unwrap() {
             let c = p.pos_tile_m(plan.quantum_m);
             if p.flags & FLAG_HALO == 0 {
                 assert!(
@@ -218,10 +216,10 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
         }
     }
     // A second run with the same inputs reuses the plan and bins.
-    let before = std::fs::metadata(tiling::bin_path(work.path(), 0, 0)).unwrap().modified().unwrap();
+    let before = std::fs::metadata(bins::bin_path(work.path(), 0, 0)).unwrap().modified().unwrap();
     let again = tiling::tile_scans(&scans, work.path(), &params, &|_| {}, &Default::default()).unwrap();
     assert_eq!(again, plan);
-    assert_eq!(std::fs::metadata(tiling::bin_path(work.path(), 0, 0)).unwrap().modified().unwrap(), before);
+    assert_eq!(std::fs::metadata(bins::bin_path(work.path(), 0, 0)).unwrap().modified().unwrap(), before);
     // Interrupted while distributing (plan written, bins incomplete and one damaged): only pass 2
     // runs again, and the bins come back identical.
     let plan_json = work.path().join("plan.json");
@@ -229,8 +227,8 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
         .unwrap()
         .replace("\"bins_complete\": true", "\"bins_complete\": false");
     std::fs::write(&plan_json, text).unwrap();
-    let bin0 = std::fs::read(tiling::bin_path(work.path(), 0, 0)).unwrap();
-    std::fs::write(tiling::bin_path(work.path(), 0, 0), &bin0[..bin0.len() / 2]).unwrap();
+    let bin0 = std::fs::read(bins::bin_path(work.path(), 0, 0)).unwrap();
+    std::fs::write(bins::bin_path(work.path(), 0, 0), &bin0[..bin0.len() / 2]).unwrap();
     let stages = std::sync::Mutex::new(std::collections::BTreeSet::new());
     let profile = Profile::default();
     let resumed = tiling::tile_scans(
@@ -248,13 +246,13 @@ fn tiles_respect_the_budget_halo_reaches_neighbours_and_runs_resume() {
     // The profile says the same: no count pass, a distribute pass that read the scans again.
     assert_eq!(profile.seconds(Stage::CountRead) + profile.seconds(Stage::Count), 0.0);
     assert!(profile.seconds(Stage::DistributeRead) > 0.0 && profile.seconds(Stage::Distribute) > 0.0);
-    assert_eq!(std::fs::read(tiling::bin_path(work.path(), 0, 0)).unwrap(), bin0);
+    assert_eq!(std::fs::read(bins::bin_path(work.path(), 0, 0)).unwrap(), bin0);
     // Changed parameters redo the work.
     let other = TilingParams { max_points_per_tile: 9_000, ..params };
     let redone = tiling::tile_scans(&scans, work.path(), &other, &|_| {}, &Default::default()).unwrap();
     assert_ne!(redone.fingerprint, plan.fingerprint);
     // Neighbour search helper sanity: kd-tree over a tile finds itself.
-    let pts: Vec<[f64; 3]> = tiling::read_bin(work.path(), &plan, 0)
+    let pts: Vec<[f64; 3]> = bins::read_bin(work.path(), &plan, 0)
         .unwrap()
         .iter()
         .map(|p| p.pos_tile_m(plan.quantum_m).map(f64::from))
