@@ -5,7 +5,7 @@
 //! The same PLY file is also parsed with `ply-rs-bw`'s own body reader, which is why the PLY body
 //! is streamed by hand (see `ingest/ply.rs`).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use serde::Serialize;
@@ -122,6 +122,19 @@ pub struct NormalFigure {
     pub svo_points_per_second: f64,
 }
 
+/// One tile of the normals bench, loaded before anything is timed (timed work excludes I/O).
+struct BenchTile {
+    positions: Vec<[f32; 3]>,
+    own: Vec<bool>,
+    scanners: Vec<[f64; 3]>,
+    inputs: Vec<[f32; 3]>,
+    origin: [f64; 3],
+    extent: f64,
+}
+
+/// The normals bench's leaf edge (the build default), metres.
+const BENCH_LEAF_M: f64 = crate::build::DEFAULT_LEAF_M;
+
 /// Synthesises a cave of `points` with `noise_scale`, tiles it, then times normal estimation and
 /// SVO construction over all tiles (`threads` workers) and scores the normals against the
 /// analytic surface. With `export`, also writes the cloud (cave frame, metres) with its true
@@ -137,72 +150,25 @@ pub fn normals(
     export: Option<&Path>,
     bare: bool,
 ) -> Result<Vec<NormalFigure>> {
-    use rayon::prelude::*;
-
-    use crate::bins::{FLAG_HALO, read_bin};
-    use crate::manifest::Manifest;
-    use crate::normals::{Orient, TilePoints, estimate};
-    use crate::tiling::{TilingParams, tile_scans};
-    use crate::voxels::{self, Sample};
-
-    /// The bench's leaf edge (the build default), metres.
-    const LEAF_M: f64 = crate::build::DEFAULT_LEAF_M;
     let params = SynthParams { points, noise_scale, ..SynthParams::default() };
     let scans = dir.join(format!("normals-{points}-{noise_scale}"));
     // Written once per size and noise, then reused.
     if !scans.join("manifest.toml").exists() {
         crate::synth::write_dataset(&scans, &params, &[ScanFormat::Las], &|_, _| {})?;
     }
-    let manifest = Manifest::load(&scans.join("manifest.toml"))?;
-    let resolved = manifest.resolve()?;
-    let tiling = TilingParams {
-        quantum_m: 1.0 / 32_768.0,
-        min_tile_extent_m: 4.0,
-        max_tile_extent_m: 16.0,
-        ..TilingParams::default()
-    };
-    let work = scans.join("work");
-    let plan = tile_scans(&resolved, &work, &tiling, &|_| {}, &Default::default())?;
+    let (plan, work) = tile_bench_scans(&scans)?;
     let cave = SynthCave::new(&params);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.max(1))
         .build()
         .map_err(|e| Error::Parameter { name: "threads", reason: e.to_string() })?;
-    // Load every tile once (timed work excludes I/O).
-    struct Loaded {
-        positions: Vec<[f32; 3]>,
-        own: Vec<bool>,
-        scanners: Vec<[f64; 3]>,
-        inputs: Vec<[f32; 3]>,
-        origin: [f64; 3],
-        extent: f64,
-    }
-    let tiles: Vec<Loaded> = (0..plan.tiles.len())
-        .map(|t| -> Result<Loaded> {
-            let bin = read_bin(&work, &plan, t)?;
-            let origin = plan.origin_m(&plan.tiles[t]);
-            Ok(Loaded {
-                positions: bin.iter().map(|p| p.pos_tile_m(plan.quantum_m)).collect(),
-                own: bin.iter().map(|p| p.flags & FLAG_HALO == 0).collect(),
-                scanners: bin
-                    .iter()
-                    .map(|p| {
-                        let s = plan.scanners_world_m[p.scan as usize];
-                        std::array::from_fn(|a| s[a] - origin[a])
-                    })
-                    .collect(),
-                inputs: vec![[0.0; 3]; bin.len()],
-                origin,
-                extent: plan.extent_m(&plan.tiles[t]),
-            })
-        })
-        .collect::<Result<_>>()?;
+    let tiles = load_bench_tiles(&plan, &work)?;
     let mut out = Vec::new();
     for by_enclosure in [false, true].into_iter().filter(|&b| !b || bare) {
         let start = Instant::now();
         let grid = if by_enclosure {
             Some(pool.install(|| {
-                crate::orient::CaveGrid::from_plan(&plan, &work, crate::orient::CELL_LEAVES * LEAF_M)
+                crate::orient::CaveGrid::from_plan(&plan, &work, crate::orient::CELL_LEAVES * BENCH_LEAF_M)
             })?)
         } else {
             None
@@ -212,85 +178,15 @@ pub fn normals(
         let seen_from: Vec<Vec<_>> = tiles.iter().map(|t| vec![side; t.positions.len()]).collect();
         for &k in ks {
             let start = Instant::now();
-            let normals: Vec<Vec<crate::normals::PointNormal>> = pool.install(|| {
-                tiles
-                    .par_iter()
-                    .zip(&seen_from)
-                    .map(|(t, seen_from)| {
-                        estimate(
-                            &TilePoints {
-                                positions: &t.positions,
-                                own: &t.own,
-                                scanner_tile_m: &t.scanners,
-                                input_normals: &t.inputs,
-                                isolated_radius_m: 0.5 * LEAF_M as f32,
-                                keep_input_normals: true,
-                                orient: grid.as_ref().map(|grid| Orient {
-                                    grid,
-                                    tile_origin_m: t.origin,
-                                    seen_from,
-                                }),
-                            },
-                            k,
-                        )
-                    })
-                    .collect()
-            });
+            let normals = estimate_bench_normals(&pool, &tiles, &seen_from, grid.as_ref(), k);
             let normals_seconds = start.elapsed().as_secs_f64();
             let start = Instant::now();
-            let leaves: usize = pool.install(|| {
-                tiles
-                    .par_iter()
-                    .zip(&normals)
-                    .map(|(t, n)| {
-                        let samples: Vec<Sample> = t
-                            .positions
-                            .iter()
-                            .zip(&t.own)
-                            .filter(|(_, own)| **own)
-                            .zip(n)
-                            .map(|((p, _), n)| Sample {
-                                pos_tile_m: *p,
-                                normal: n.normal,
-                                area_m2: n.radius_m * n.radius_m,
-                                albedo_linear: [0.5; 3],
-                                emission: [0.0; 3],
-                            })
-                            .collect();
-                        voxels::build(&samples, t.extent, (t.extent / LEAF_M).log2() as u32).leaf_count()
-                    })
-                    .sum()
-            });
+            let leaves = build_bench_svos(&pool, &tiles, &normals);
             let svo_seconds = start.elapsed().as_secs_f64();
             // Keeps the timed SVO work observable to the optimiser.
             std::hint::black_box(leaves);
-            let (mut errors, mut flipped) = (Vec::new(), 0usize);
-            let mut export_rows: Vec<([f64; 3], [f64; 3])> = Vec::new();
-            for (t, n) in tiles.iter().zip(&normals) {
-                for (p, est) in t.positions.iter().zip(&t.own).filter(|(_, own)| **own).map(|(p, _)| p).zip(n)
-                {
-                    let local: [f64; 3] =
-                        std::array::from_fn(|a| t.origin[a] + f64::from(p[a]) - params.offset_m[a]);
-                    let truth = cave.normal(local);
-                    let dot: f64 = (0..3).map(|a| truth[a] * f64::from(est.normal[a])).sum();
-                    flipped += usize::from(dot < 0.0);
-                    errors.push(dot.abs().min(1.0).acos().to_degrees());
-                    if export.is_some() && k == ks[0] && !by_enclosure {
-                        export_rows.push((local, truth));
-                    }
-                }
-            }
-            if let (Some(path), false) = (export, export_rows.is_empty()) {
-                let xyz: Vec<[f64; 3]> = export_rows.iter().map(|r| r.0).collect();
-                let nrm: Vec<[f32; 3]> = export_rows.iter().map(|r| r.1.map(|v| v as f32)).collect();
-                let rgb = vec![[128u8; 3]; xyz.len()];
-                write_scan(
-                    path,
-                    ScanFormat::Ply,
-                    &ScanData { xyz: &xyz, rgb: &rgb, intensity: &[], normals: &nrm, pose: None },
-                )?;
-            }
-            errors.sort_by(f64::total_cmp);
+            let export = export.filter(|_| k == ks[0] && !by_enclosure);
+            let (errors, flipped) = score_normals(&tiles, &normals, &cave, params.offset_m, export)?;
             let n = errors.len().max(1);
             out.push(NormalFigure {
                 noise_scale,
@@ -311,6 +207,150 @@ pub fn normals(
         }
     }
     Ok(out)
+}
+
+/// Tiles the bench's scans (their manifest in `scans`) into `scans/work`.
+fn tile_bench_scans(scans: &Path) -> Result<(crate::bins::TilePlan, PathBuf)> {
+    use crate::manifest::Manifest;
+    use crate::tiling::{TilingParams, tile_scans};
+    let manifest = Manifest::load(&scans.join("manifest.toml"))?;
+    let resolved = manifest.resolve()?;
+    let tiling = TilingParams {
+        quantum_m: 1.0 / 32_768.0,
+        min_tile_extent_m: 4.0,
+        max_tile_extent_m: 16.0,
+        ..TilingParams::default()
+    };
+    let work = scans.join("work");
+    let plan = tile_scans(&resolved, &work, &tiling, &|_| {}, &Default::default())?;
+    Ok((plan, work))
+}
+
+/// Every tile of `plan`, read from its bins.
+fn load_bench_tiles(plan: &crate::bins::TilePlan, work: &Path) -> Result<Vec<BenchTile>> {
+    use crate::bins::{FLAG_HALO, read_bin};
+    (0..plan.tiles.len())
+        .map(|t| -> Result<BenchTile> {
+            let bin = read_bin(work, plan, t)?;
+            let origin = plan.origin_m(&plan.tiles[t]);
+            Ok(BenchTile {
+                positions: bin.iter().map(|p| p.pos_tile_m(plan.quantum_m)).collect(),
+                own: bin.iter().map(|p| p.flags & FLAG_HALO == 0).collect(),
+                scanners: bin
+                    .iter()
+                    .map(|p| {
+                        let s = plan.scanners_world_m[p.scan as usize];
+                        std::array::from_fn(|a| s[a] - origin[a])
+                    })
+                    .collect(),
+                inputs: vec![[0.0; 3]; bin.len()],
+                origin,
+                extent: plan.extent_m(&plan.tiles[t]),
+            })
+        })
+        .collect()
+}
+
+/// The normals of every tile's own points with `k` neighbours (the timed work).
+fn estimate_bench_normals(
+    pool: &rayon::ThreadPool,
+    tiles: &[BenchTile],
+    seen_from: &[Vec<Option<crate::manifest::SeenFrom>>],
+    grid: Option<&crate::orient::CaveGrid>,
+    k: usize,
+) -> Vec<Vec<crate::normals::PointNormal>> {
+    use crate::normals::{Orient, TilePoints, estimate};
+    use rayon::prelude::*;
+    pool.install(|| {
+        tiles
+            .par_iter()
+            .zip(seen_from)
+            .map(|(t, seen_from)| {
+                estimate(
+                    &TilePoints {
+                        positions: &t.positions,
+                        own: &t.own,
+                        scanner_tile_m: &t.scanners,
+                        input_normals: &t.inputs,
+                        isolated_radius_m: 0.5 * BENCH_LEAF_M as f32,
+                        keep_input_normals: true,
+                        orient: grid.map(|grid| Orient { grid, tile_origin_m: t.origin, seen_from }),
+                    },
+                    k,
+                )
+            })
+            .collect()
+    })
+}
+
+/// Every tile's SVO from its own points and their normals (the timed work); the leaves built.
+fn build_bench_svos(
+    pool: &rayon::ThreadPool,
+    tiles: &[BenchTile],
+    normals: &[Vec<crate::normals::PointNormal>],
+) -> usize {
+    use crate::voxels::{self, Sample};
+    use rayon::prelude::*;
+    pool.install(|| {
+        tiles
+            .par_iter()
+            .zip(normals)
+            .map(|(t, n)| {
+                let samples: Vec<Sample> = t
+                    .positions
+                    .iter()
+                    .zip(&t.own)
+                    .filter(|(_, own)| **own)
+                    .zip(n)
+                    .map(|((p, _), n)| Sample {
+                        pos_tile_m: *p,
+                        normal: n.normal,
+                        area_m2: n.radius_m * n.radius_m,
+                        albedo_linear: [0.5; 3],
+                        emission: [0.0; 3],
+                    })
+                    .collect();
+                voxels::build(&samples, t.extent, (t.extent / BENCH_LEAF_M).log2() as u32).leaf_count()
+            })
+            .sum()
+    })
+}
+
+/// Each own point's angle to the analytic normal in degrees (sorted) and how many point into the
+/// rock; with `export`, the cloud and its true normals are written there as PLY.
+fn score_normals(
+    tiles: &[BenchTile],
+    normals: &[Vec<crate::normals::PointNormal>],
+    cave: &SynthCave,
+    offset_m: [f64; 3],
+    export: Option<&Path>,
+) -> Result<(Vec<f64>, usize)> {
+    let (mut errors, mut flipped) = (Vec::new(), 0usize);
+    let mut export_rows: Vec<([f64; 3], [f64; 3])> = Vec::new();
+    for (t, n) in tiles.iter().zip(normals) {
+        for (p, est) in t.positions.iter().zip(&t.own).filter(|(_, own)| **own).map(|(p, _)| p).zip(n) {
+            let local: [f64; 3] = std::array::from_fn(|a| t.origin[a] + f64::from(p[a]) - offset_m[a]);
+            let truth = cave.normal(local);
+            let dot: f64 = (0..3).map(|a| truth[a] * f64::from(est.normal[a])).sum();
+            flipped += usize::from(dot < 0.0);
+            errors.push(dot.abs().min(1.0).acos().to_degrees());
+            if export.is_some() {
+                export_rows.push((local, truth));
+            }
+        }
+    }
+    if let (Some(path), false) = (export, export_rows.is_empty()) {
+        let xyz: Vec<[f64; 3]> = export_rows.iter().map(|r| r.0).collect();
+        let nrm: Vec<[f32; 3]> = export_rows.iter().map(|r| r.1.map(|v| v as f32)).collect();
+        let rgb = vec![[128u8; 3]; xyz.len()];
+        write_scan(
+            path,
+            ScanFormat::Ply,
+            &ScanData { xyz: &xyz, rgb: &rgb, intensity: &[], normals: &nrm, pose: None },
+        )?;
+    }
+    errors.sort_by(f64::total_cmp);
+    Ok((errors, flipped))
 }
 
 /// BC1 against raw colours on a package built with `--colors raw`, one row per encoder.

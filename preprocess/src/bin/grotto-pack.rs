@@ -446,46 +446,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let summary = run_build(&inputs, &out, &opts)?;
             print_build(&summary, opts.json)?;
         }
-        Command::Plan { inputs, opts } => {
-            let (manifest, _, params) = setup(&inputs, None, &opts)?;
-            let bars = Bars::new(opts.json);
-            let (plan, reused) = build::plan(&manifest, &params, &|p| bars.update(p))?;
-            bars.finish();
-            let summary = serde_json::json!({
-                "work_dir": params.work_dir, "tiles": plan.tiles.len(), "points": plan.points,
-                "halo_points": plan.halo_points, "invalid_points": plan.invalid_points, "reused": reused,
-            });
-            if opts.json {
-                println!("{}", serde_json::to_string_pretty(&summary)?);
-            } else {
-                println!(
-                    "planned {} tiles for {} points in {}{}",
-                    plan.tiles.len(),
-                    plan.points,
-                    params.work_dir.display(),
-                    if reused { " (reused)" } else { "" }
-                );
-            }
-        }
-        Command::BuildTile { inputs, shard, opts } => {
-            let (manifest, manifest_path, params) = setup(&inputs, None, &opts)?;
-            let shard = match shard.split_once('/').map(|(i, n)| (i.parse::<usize>(), n.parse::<usize>())) {
-                Some((Ok(index), Ok(count))) if index < count => build::Shard { index, count },
-                _ => bail!("--shard '{shard}' is not I/N with I < N"),
-            };
-            let bars = Bars::new(opts.json);
-            let stage = build::build_tiles(&manifest, &manifest_path, &params, shard, &|p| bars.update(p))?;
-            bars.finish();
-            if opts.json {
-                println!("{}", serde_json::to_string_pretty(&stage)?);
-            } else {
-                println!(
-                    "shard {}/{}: built {} tiles, {} already built",
-                    shard.index, shard.count, stage.built, stage.reused
-                );
-                print_stages(&stage.stages);
-            }
-        }
+        Command::Plan { inputs, opts } => run_plan(&inputs, &opts)?,
+        Command::BuildTile { inputs, shard, opts } => run_build_tile(&inputs, &shard, &opts)?,
         Command::Assemble { inputs, out, opts } => {
             let (manifest, manifest_path, params) = setup(&inputs, Some(&out), &opts)?;
             let bars = Bars::new(opts.json);
@@ -511,21 +473,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     eprintln!("{stage}...");
                 }
             })?;
-            if json {
-                println!("{}", serde_json::to_string_pretty(&figures)?);
-            } else {
-                println!("| reader | points | file MB | seconds | points/s |\n|---|---:|---:|---:|---:|");
-                for f in &figures {
-                    println!(
-                        "| {} | {} | {:.1} | {:.2} | {:.2e} |",
-                        f.reader,
-                        f.points,
-                        f.file_bytes as f64 / 1e6,
-                        f.seconds,
-                        f.points_per_second
-                    );
-                }
-            }
+            print_ingest(&figures, json)?;
         }
         Command::BenchNormals { dir, points, noise, k, threads, export, bare, json } => {
             let threads =
@@ -542,110 +490,192 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     bare,
                 )?);
             }
-            if json {
-                println!("{}", serde_json::to_string_pretty(&figures)?);
-            } else {
-                println!(
-                    "| noise | orientation | k | points | mean error deg | p95 deg | flipped % | threads | grid s | grid cells | normals/s | SVO points/s |\n|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
-                );
-                for f in &figures {
-                    println!(
-                        "| {} | {} | {} | {} | {:.2} | {:.2} | {:.3} | {} | {:.2} | {} | {:.3e} | {:.3e} |",
-                        f.noise_scale,
-                        if f.bare { "enclosure (no scanner)" } else { "toward scanner" },
-                        f.k,
-                        f.points,
-                        f.mean_deg,
-                        f.p95_deg,
-                        f.flipped_percent,
-                        f.threads,
-                        f.grid_seconds,
-                        f.grid_cells,
-                        f.normals_per_second,
-                        f.svo_points_per_second
-                    );
-                }
-            }
+            print_normals(&figures, json)?;
         }
         Command::BenchBc1 { packages, json } => {
             let figures =
                 packages.iter().map(|p| grotto_preprocess::bench::bc1(p)).collect::<Result<Vec<_>, _>>()?;
-            if json {
-                println!("{}", serde_json::to_string_pretty(&figures)?);
-            } else {
-                println!(
-                    "| package | points | --colors | PSNR dB | max error | encode s | raw bytes | raw+zstd bytes | BC1 bytes | BC1 / raw |\n|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"
-                );
-                for f in &figures {
-                    for e in &f.encoders {
-                        println!(
-                            "| {} | {} | {} | {:.2} | {} | {:.3} | {} | {} | {} | {:.3} |",
-                            f.package,
-                            f.points,
-                            e.colors,
-                            e.psnr_db,
-                            e.max_error,
-                            e.encode_seconds,
-                            f.raw_bytes,
-                            f.raw_zstd_bytes,
-                            f.bc1_bytes,
-                            f.bc1_bytes as f64 / f.raw_bytes as f64
-                        );
-                    }
-                }
-            }
+            print_bc1(&figures, json)?;
         }
         Command::BenchEncoding { packages, json } => {
             let figures = packages
                 .iter()
                 .map(|p| grotto_preprocess::bench::encoding(p))
                 .collect::<Result<Vec<_>, _>>()?;
-            if json {
-                println!("{}", serde_json::to_string_pretty(&figures)?);
-            } else {
-                for f in &figures {
-                    println!(
-                        "{}: {} points in {} leaf runs, position bits {:?}, {} tiles kept at full precision; position error max {:.3} mm mean {:.3} mm, normal max {:.4} deg mean {:.4} deg, radius max {:.2}%, spread max {:.4}; one thread: encode {:.2} s, zstd {:.2} s, decode {:.2} s",
-                        f.package,
-                        f.points,
-                        f.runs,
-                        f.position_bits,
-                        f.full_precision_tiles,
-                        f.position_error_max_mm,
-                        f.position_error_mean_mm,
-                        f.normal_error_max_deg,
-                        f.normal_error_mean_deg,
-                        100.0 * f.radius_error_max_rel,
-                        f.spread_error_max,
-                        f.encode_seconds,
-                        f.zstd_seconds,
-                        f.decode_seconds
-                    );
-                    println!(
-                        "| encoding | surfel bytes | per point | package per point |\n|---|---:|---:|---:|"
-                    );
-                    for r in &f.rows {
-                        println!(
-                            "| {} | {} | {:.2} | {:.2} |",
-                            r.encoding, r.surfel_bytes, r.surfel_bytes_per_point, r.package_bytes_per_point
-                        );
-                    }
-                }
+            print_encoding(&figures, json)?;
+        }
+        Command::Demo { out, synth, opts } => run_demo(&out, &synth, opts)?,
+    }
+    Ok(())
+}
+
+/// `grotto-pack plan`: the plan step alone.
+fn run_plan(inputs: &[PathBuf], opts: &BuildOpts) -> anyhow::Result<()> {
+    let (manifest, _, params) = setup(inputs, None, opts)?;
+    let bars = Bars::new(opts.json);
+    let (plan, reused) = build::plan(&manifest, &params, &|p| bars.update(p))?;
+    bars.finish();
+    let summary = serde_json::json!({
+        "work_dir": params.work_dir, "tiles": plan.tiles.len(), "points": plan.points,
+        "halo_points": plan.halo_points, "invalid_points": plan.invalid_points, "reused": reused,
+    });
+    if opts.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        println!(
+            "planned {} tiles for {} points in {}{}",
+            plan.tiles.len(),
+            plan.points,
+            params.work_dir.display(),
+            if reused { " (reused)" } else { "" }
+        );
+    }
+    Ok(())
+}
+
+/// `grotto-pack build-tile --shard I/N`: the tiles of one shard.
+fn run_build_tile(inputs: &[PathBuf], shard: &str, opts: &BuildOpts) -> anyhow::Result<()> {
+    let (manifest, manifest_path, params) = setup(inputs, None, opts)?;
+    let shard = match shard.split_once('/').map(|(i, n)| (i.parse::<usize>(), n.parse::<usize>())) {
+        Some((Ok(index), Ok(count))) if index < count => build::Shard { index, count },
+        _ => bail!("--shard '{shard}' is not I/N with I < N"),
+    };
+    let bars = Bars::new(opts.json);
+    let stage = build::build_tiles(&manifest, &manifest_path, &params, shard, &|p| bars.update(p))?;
+    bars.finish();
+    if opts.json {
+        println!("{}", serde_json::to_string_pretty(&stage)?);
+    } else {
+        println!(
+            "shard {}/{}: built {} tiles, {} already built",
+            shard.index, shard.count, stage.built, stage.reused
+        );
+        print_stages(&stage.stages);
+    }
+    Ok(())
+}
+
+/// `grotto-pack demo`: the demo cave's scans, then its package.
+fn run_demo(out: &Path, synth: &SynthOpts, mut opts: BuildOpts) -> anyhow::Result<()> {
+    // The demo keeps the 6.25 cm leaves its figures (README, docs) were measured with:
+    // its simulated scans are spaced about 9 cm, so `auto` would choose 12.5 cm.
+    if opts.leaf_m == "auto" {
+        opts.leaf_m = build::DEFAULT_LEAF_M.to_string();
+    }
+    let scans = out.join("demo-scans");
+    let s = run_synth(&scans, synth, opts.json)?;
+    if !opts.json {
+        println!("wrote {} scans, {} points, manifest {}", s.scans, s.points, s.manifest);
+    }
+    let summary = run_build(&[PathBuf::from(&s.manifest)], &out.join("demo.grotto"), &opts)?;
+    print_build(&summary, opts.json)?;
+    Ok(())
+}
+
+fn print_ingest(figures: &[grotto_preprocess::bench::IngestFigure], json: bool) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(&figures)?);
+    } else {
+        println!("| reader | points | file MB | seconds | points/s |\n|---|---:|---:|---:|---:|");
+        for f in figures {
+            println!(
+                "| {} | {} | {:.1} | {:.2} | {:.2e} |",
+                f.reader,
+                f.points,
+                f.file_bytes as f64 / 1e6,
+                f.seconds,
+                f.points_per_second
+            );
+        }
+    }
+    Ok(())
+}
+
+fn print_normals(figures: &[grotto_preprocess::bench::NormalFigure], json: bool) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(&figures)?);
+    } else {
+        println!(
+            "| noise | orientation | k | points | mean error deg | p95 deg | flipped % | threads | grid s | grid cells | normals/s | SVO points/s |\n|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        );
+        for f in figures {
+            println!(
+                "| {} | {} | {} | {} | {:.2} | {:.2} | {:.3} | {} | {:.2} | {} | {:.3e} | {:.3e} |",
+                f.noise_scale,
+                if f.bare { "enclosure (no scanner)" } else { "toward scanner" },
+                f.k,
+                f.points,
+                f.mean_deg,
+                f.p95_deg,
+                f.flipped_percent,
+                f.threads,
+                f.grid_seconds,
+                f.grid_cells,
+                f.normals_per_second,
+                f.svo_points_per_second
+            );
+        }
+    }
+    Ok(())
+}
+
+fn print_bc1(figures: &[grotto_preprocess::bench::Bc1Figure], json: bool) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(&figures)?);
+    } else {
+        println!(
+            "| package | points | --colors | PSNR dB | max error | encode s | raw bytes | raw+zstd bytes | BC1 bytes | BC1 / raw |\n|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"
+        );
+        for f in figures {
+            for e in &f.encoders {
+                println!(
+                    "| {} | {} | {} | {:.2} | {} | {:.3} | {} | {} | {} | {:.3} |",
+                    f.package,
+                    f.points,
+                    e.colors,
+                    e.psnr_db,
+                    e.max_error,
+                    e.encode_seconds,
+                    f.raw_bytes,
+                    f.raw_zstd_bytes,
+                    f.bc1_bytes,
+                    f.bc1_bytes as f64 / f.raw_bytes as f64
+                );
             }
         }
-        Command::Demo { out, synth, mut opts } => {
-            // The demo keeps the 6.25 cm leaves its figures (README, docs) were measured with:
-            // its simulated scans are spaced about 9 cm, so `auto` would choose 12.5 cm.
-            if opts.leaf_m == "auto" {
-                opts.leaf_m = build::DEFAULT_LEAF_M.to_string();
+    }
+    Ok(())
+}
+
+fn print_encoding(figures: &[grotto_preprocess::bench::EncodingFigure], json: bool) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(&figures)?);
+    } else {
+        for f in figures {
+            println!(
+                "{}: {} points in {} leaf runs, position bits {:?}, {} tiles kept at full precision; position error max {:.3} mm mean {:.3} mm, normal max {:.4} deg mean {:.4} deg, radius max {:.2}%, spread max {:.4}; one thread: encode {:.2} s, zstd {:.2} s, decode {:.2} s",
+                f.package,
+                f.points,
+                f.runs,
+                f.position_bits,
+                f.full_precision_tiles,
+                f.position_error_max_mm,
+                f.position_error_mean_mm,
+                f.normal_error_max_deg,
+                f.normal_error_mean_deg,
+                100.0 * f.radius_error_max_rel,
+                f.spread_error_max,
+                f.encode_seconds,
+                f.zstd_seconds,
+                f.decode_seconds
+            );
+            println!("| encoding | surfel bytes | per point | package per point |\n|---|---:|---:|---:|");
+            for r in &f.rows {
+                println!(
+                    "| {} | {} | {:.2} | {:.2} |",
+                    r.encoding, r.surfel_bytes, r.surfel_bytes_per_point, r.package_bytes_per_point
+                );
             }
-            let scans = out.join("demo-scans");
-            let s = run_synth(&scans, &synth, opts.json)?;
-            if !opts.json {
-                println!("wrote {} scans, {} points, manifest {}", s.scans, s.points, s.manifest);
-            }
-            let summary = run_build(&[PathBuf::from(&s.manifest)], &out.join("demo.grotto"), &opts)?;
-            print_build(&summary, opts.json)?;
         }
     }
     Ok(())

@@ -86,7 +86,6 @@ pub(super) fn header_info(path: &Path, format: ScanFormat) -> Result<SourceInfo>
 /// that ends inside its last record. Returns the raw header and the points dropped (1 for such a
 /// file, else 0).
 fn preflight(path: &Path, format: ScanFormat) -> Result<(las::raw::Header, u64)> {
-    use std::io::{Read, Seek, SeekFrom};
     let err = |reason: String| read_error(path, format, reason);
     let mut file = File::open(path).map_err(|e| err(e.to_string()))?;
     let file_len = file.metadata().map_err(|e| err(e.to_string()))?.len();
@@ -100,55 +99,14 @@ fn preflight(path: &Path, format: ScanFormat) -> Result<(las::raw::Header, u64)>
     }
     let (claimed, _) = claimed_and_color(&raw);
     let compressed = raw.point_data_record_format & 0xC0 != 0;
-    let record = u64::from(raw.point_data_record_length);
-    let mut dropped = 0;
-    if !compressed
-        && claimed.checked_mul(record).and_then(|b| b.checked_add(offset)).is_none_or(|n| n > file_len)
-    {
-        let (complete, partial) = ((file_len - offset) / record.max(1), (file_len - offset) % record.max(1));
-        // A file that ends inside its last record (a copy cut short) keeps its complete records;
-        // any other shortfall (a count that lies, records missing whole) is refused.
-        if claimed >= 1 && complete == claimed - 1 && partial > 0 {
-            dropped = 1;
-        } else {
-            return Err(err(format!(
-                "header claims {claimed} points of {record} bytes, but the {file_len}-byte file holds at most {complete}"
-            )));
-        }
-    }
-    // Record headers: 54 bytes for VLRs (u16 length at 20), 60 for EVLRs (u64 length at 20).
-    // Returns where the LASzip VLR's data is, if there is one.
-    let mut walk =
-        |start: u64, count: u64, header: u64, limit: u64, what: &str| -> Result<Option<(u64, u64)>> {
-            let mut pos = start;
-            let mut laszip = None;
-            for i in 0..count {
-                let end_of_header = pos.checked_add(header).filter(|&e| e <= limit);
-                let Some(end_of_header) = end_of_header else {
-                    return Err(err(format!(
-                        "{what} {i} of {count} starts at byte {pos}, past the end of its area ({limit})"
-                    )));
-                };
-                let mut record = [0u8; 28];
-                file.seek(SeekFrom::Start(pos)).map_err(|e| err(e.to_string()))?;
-                file.read_exact(&mut record).map_err(|e| err(e.to_string()))?;
-                let len = if header == 54 {
-                    u64::from(u16::from_le_bytes([record[20], record[21]]))
-                } else {
-                    u64::from_le_bytes(record[20..28].try_into().expect("8 bytes"))
-                };
-                if record[2..16].starts_with(b"laszip encoded")
-                    && u16::from_le_bytes([record[18], record[19]]) == 22204
-                {
-                    laszip = Some((end_of_header, len));
-                }
-                pos = end_of_header
-                    .checked_add(len)
-                    .filter(|&e| e <= limit)
-                    .ok_or_else(|| err(format!("{what} {i} claims {len} bytes, more than the file holds")))?;
-            }
-            Ok(laszip)
-        };
+    let dropped = if compressed {
+        0
+    } else {
+        records_dropped(claimed, u64::from(raw.point_data_record_length), offset, file_len).map_err(err)?
+    };
+    let mut walk = |start: u64, count: u64, header: u64, limit: u64, what: &str| {
+        walk_records(&mut file, RecordArea { start, count, header, limit, what }).map_err(err)
+    };
     let laszip = walk(
         u64::from(raw.header_size),
         u64::from(raw.number_of_variable_length_records),
@@ -159,82 +117,161 @@ fn preflight(path: &Path, format: ScanFormat) -> Result<(las::raw::Header, u64)>
     if let Some(evlr) = raw.evlr {
         walk(evlr.start_of_first_evlr, u64::from(evlr.number_of_evlrs), 60, file_len, "EVLR")?;
     }
-    // LAZ: the chunk table's entry count sizes an allocation in the laz crate (found by fuzzing:
-    // 58 GB). Every chunk takes at least a byte, so more chunks than bytes is a lie.
     if compressed && offset + 8 <= file_len {
-        let mut read_i64 = |at: u64| -> Option<i64> {
-            let mut b = [0u8; 8];
-            file.seek(SeekFrom::Start(at)).ok()?;
-            file.read_exact(&mut b).ok()?;
-            Some(i64::from_le_bytes(b))
+        check_laz_tables(&mut file, path, format, LazArea { offset, file_len, claimed, laszip })?;
+    }
+    Ok((raw, dropped))
+}
+
+/// Points an uncompressed file of `file_len` bytes drops of the `claimed` records of `record`
+/// bytes from `offset`: 0 when they fit, 1 for a file that ends inside its last record (a copy cut
+/// short keeps its complete records); any other shortfall (a count that lies, records missing
+/// whole) is refused.
+fn records_dropped(
+    claimed: u64,
+    record: u64,
+    offset: u64,
+    file_len: u64,
+) -> std::result::Result<u64, String> {
+    if claimed.checked_mul(record).and_then(|b| b.checked_add(offset)).is_some_and(|n| n <= file_len) {
+        return Ok(0);
+    }
+    let (complete, partial) = ((file_len - offset) / record.max(1), (file_len - offset) % record.max(1));
+    if claimed >= 1 && complete == claimed - 1 && partial > 0 {
+        Ok(1)
+    } else {
+        Err(format!(
+            "header claims {claimed} points of {record} bytes, but the {file_len}-byte file holds at most {complete}"
+        ))
+    }
+}
+
+/// A run of variable-length records: `count` records from byte `start`, each a `header`-byte
+/// header (54 for VLRs, with a u16 length at 20; 60 for EVLRs, with a u64 length at 20) and its
+/// data, all before `limit`.
+struct RecordArea<'a> {
+    start: u64,
+    count: u64,
+    header: u64,
+    limit: u64,
+    what: &'a str,
+}
+
+/// Walks the records of `area` with checked arithmetic; returns where the LASzip VLR's data is
+/// (offset and length), if there is one.
+fn walk_records(file: &mut File, area: RecordArea<'_>) -> std::result::Result<Option<(u64, u64)>, String> {
+    use std::io::{Read, Seek, SeekFrom};
+    let RecordArea { start, count, header, limit, what } = area;
+    let mut pos = start;
+    let mut laszip = None;
+    for i in 0..count {
+        let end_of_header = pos.checked_add(header).filter(|&e| e <= limit);
+        let Some(end_of_header) = end_of_header else {
+            return Err(format!(
+                "{what} {i} of {count} starts at byte {pos}, past the end of its area ({limit})"
+            ));
         };
-        let table = match read_i64(offset) {
-            // Written last by streaming writers: the offset is then in the file's last 8 bytes.
-            Some(-1) if file_len >= 8 => read_i64(file_len - 8),
-            other => other,
+        let mut record = [0u8; 28];
+        file.seek(SeekFrom::Start(pos)).map_err(|e| e.to_string())?;
+        file.read_exact(&mut record).map_err(|e| e.to_string())?;
+        let len = if header == 54 {
+            u64::from(u16::from_le_bytes([record[20], record[21]]))
+        } else {
+            u64::from_le_bytes(record[20..28].try_into().expect("8 bytes"))
         };
-        if let Some(table) = table
-            .and_then(|t| u64::try_from(t).ok())
-            .filter(|&t| t.checked_add(8).is_some_and(|e| e <= file_len))
+        if record[2..16].starts_with(b"laszip encoded")
+            && u16::from_le_bytes([record[18], record[19]]) == 22204
         {
-            let mut b = [0u8; 4];
-            if file.seek(SeekFrom::Start(table + 4)).is_ok() && file.read_exact(&mut b).is_ok() {
-                let chunks = u64::from(u32::from_le_bytes(b));
-                if chunks > file_len {
-                    return Err(err(format!(
-                        "LAZ chunk table claims {chunks} chunks in a {file_len}-byte file"
-                    )));
-                }
-            }
+            laszip = Some((end_of_header, len));
         }
-        // The entries' byte counts size the parallel decoder's buffers (found by fuzzing: a 9 KB
-        // file took 3.7 GB): together they cannot exceed the file.
-        if let Some((at, len)) = laszip.filter(|(_, len)| *len <= 1 << 16) {
-            let mut data = vec![0u8; len as usize];
-            file.seek(SeekFrom::Start(at)).map_err(|e| err(e.to_string()))?;
-            file.read_exact(&mut data).map_err(|e| err(e.to_string()))?;
-            let (vlr, entries) = guard(path, format, || {
-                let vlr = laz::LazVlr::read_from(&data[..]).map_err(|e| err(e.to_string()))?;
-                let mut src = BufReader::new(&file);
-                src.seek(SeekFrom::Start(offset)).map_err(|e| err(e.to_string()))?;
-                // A file without a readable chunk table is left to the decoder to refuse.
-                let table = laz::laszip::ChunkTable::read_from(&mut src, &vlr).ok();
-                Ok((vlr, table))
-            })?;
-            if let Some(entries) = &entries {
-                check_layered_chunks(&mut file, offset + 8, entries.as_ref(), &vlr).map_err(err)?;
-                // Per-chunk point counts size the decoder's output buffers (found by fuzzing: 142
-                // GB). No chunk holds more points than the file claims, nor more than 256 points per
-                // compressed byte (real LASzip stays far below 1 point per byte).
-                // Fixed-size tables list every chunk at the declared chunk size (LASzip's default is
-                // 50 000), even the last; a declared size beyond 5 million points is refused.
-                let fixed = if vlr.uses_variable_size_chunks() { 0 } else { u64::from(vlr.chunk_size()) };
-                if fixed > 5_000_000 {
-                    return Err(err(format!("LAZ chunk size {fixed} points is beyond any LASzip writer's")));
-                }
-                let allowed = claimed.max(fixed).max(1);
-                for (i, c) in entries.as_ref().iter().enumerate() {
-                    if c.point_count > allowed || c.point_count > c.byte_count.saturating_mul(256).max(1) {
-                        return Err(err(format!(
-                            "LAZ chunk {i} claims {} points in {} bytes (the file claims {claimed})",
-                            c.point_count, c.byte_count
-                        )));
-                    }
-                }
-            }
-            if let Some(entries) = entries {
-                let bytes = entries.as_ref().iter().try_fold(0u64, |acc, e| acc.checked_add(e.byte_count));
-                if bytes.is_none_or(|b| b > file_len) {
-                    return Err(err(format!(
-                        "LAZ chunk table's {} chunks claim {} bytes in a {file_len}-byte file",
-                        entries.len(),
-                        bytes.map_or_else(|| "more than 2^64".into(), |b| b.to_string())
-                    )));
-                }
+        pos = end_of_header
+            .checked_add(len)
+            .filter(|&e| e <= limit)
+            .ok_or_else(|| format!("{what} {i} claims {len} bytes, more than the file holds"))?;
+    }
+    Ok(laszip)
+}
+
+/// Where a LAZ file's points and LASzip VLR are, and what its header claims.
+#[derive(Clone, Copy)]
+struct LazArea {
+    offset: u64,
+    file_len: u64,
+    claimed: u64,
+    laszip: Option<(u64, u64)>,
+}
+
+/// LAZ: the chunk table's entry count sizes an allocation in the laz crate (found by fuzzing:
+/// 58 GB). Every chunk takes at least a byte, so more chunks than bytes is a lie.
+fn check_laz_tables(file: &mut File, path: &Path, format: ScanFormat, area: LazArea) -> Result<()> {
+    use std::io::{Read, Seek, SeekFrom};
+    let err = |reason: String| read_error(path, format, reason);
+    let LazArea { offset, file_len, claimed, laszip } = area;
+    let mut read_i64 = |at: u64| -> Option<i64> {
+        let mut b = [0u8; 8];
+        file.seek(SeekFrom::Start(at)).ok()?;
+        file.read_exact(&mut b).ok()?;
+        Some(i64::from_le_bytes(b))
+    };
+    let table = match read_i64(offset) {
+        // Written last by streaming writers: the offset is then in the file's last 8 bytes.
+        Some(-1) if file_len >= 8 => read_i64(file_len - 8),
+        other => other,
+    };
+    if let Some(table) =
+        table.and_then(|t| u64::try_from(t).ok()).filter(|&t| t.checked_add(8).is_some_and(|e| e <= file_len))
+    {
+        let mut b = [0u8; 4];
+        if file.seek(SeekFrom::Start(table + 4)).is_ok() && file.read_exact(&mut b).is_ok() {
+            let chunks = u64::from(u32::from_le_bytes(b));
+            if chunks > file_len {
+                return Err(err(format!("LAZ chunk table claims {chunks} chunks in a {file_len}-byte file")));
             }
         }
     }
-    Ok((raw, dropped))
+    // The entries' byte counts size the parallel decoder's buffers (found by fuzzing: a 9 KB
+    // file took 3.7 GB): together they cannot exceed the file.
+    let Some((at, len)) = laszip.filter(|(_, len)| *len <= 1 << 16) else { return Ok(()) };
+    let mut data = vec![0u8; len as usize];
+    file.seek(SeekFrom::Start(at)).map_err(|e| err(e.to_string()))?;
+    file.read_exact(&mut data).map_err(|e| err(e.to_string()))?;
+    let (vlr, entries) = guard(path, format, || {
+        let vlr = laz::LazVlr::read_from(&data[..]).map_err(|e| err(e.to_string()))?;
+        let mut src = BufReader::new(&*file);
+        src.seek(SeekFrom::Start(offset)).map_err(|e| err(e.to_string()))?;
+        // A file without a readable chunk table is left to the decoder to refuse.
+        let table = laz::laszip::ChunkTable::read_from(&mut src, &vlr).ok();
+        Ok((vlr, table))
+    })?;
+    let Some(entries) = entries else { return Ok(()) };
+    check_layered_chunks(file, offset + 8, entries.as_ref(), &vlr).map_err(err)?;
+    // Per-chunk point counts size the decoder's output buffers (found by fuzzing: 142
+    // GB). No chunk holds more points than the file claims, nor more than 256 points per
+    // compressed byte (real LASzip stays far below 1 point per byte).
+    // Fixed-size tables list every chunk at the declared chunk size (LASzip's default is
+    // 50 000), even the last; a declared size beyond 5 million points is refused.
+    let fixed = if vlr.uses_variable_size_chunks() { 0 } else { u64::from(vlr.chunk_size()) };
+    if fixed > 5_000_000 {
+        return Err(err(format!("LAZ chunk size {fixed} points is beyond any LASzip writer's")));
+    }
+    let allowed = claimed.max(fixed).max(1);
+    for (i, c) in entries.as_ref().iter().enumerate() {
+        if c.point_count > allowed || c.point_count > c.byte_count.saturating_mul(256).max(1) {
+            return Err(err(format!(
+                "LAZ chunk {i} claims {} points in {} bytes (the file claims {claimed})",
+                c.point_count, c.byte_count
+            )));
+        }
+    }
+    let bytes = entries.as_ref().iter().try_fold(0u64, |acc, e| acc.checked_add(e.byte_count));
+    if bytes.is_none_or(|b| b > file_len) {
+        return Err(err(format!(
+            "LAZ chunk table's {} chunks claim {} bytes in a {file_len}-byte file",
+            entries.len(),
+            bytes.map_or_else(|| "more than 2^64".into(), |b| b.to_string())
+        )));
+    }
+    Ok(())
 }
 
 /// LAS 1.4 layered LAZ chunks start with the first point raw, a u32 point count and one u32 byte
