@@ -16,19 +16,22 @@ mod env_chain;
 mod error;
 mod reader;
 mod scene;
+mod section;
 mod source;
 pub mod spec;
 mod summary;
 pub mod svo;
+mod validate;
 #[cfg(not(target_arch = "wasm32"))]
 mod writer;
 
 pub use env_chain::{EnvChain, level_table};
 pub use error::{Error, Problem, Region, Result};
-pub use reader::{CoarseData, Element, Package, SectionInfo, SvoData, Tile, TileInfo};
+pub use reader::{CoarseData, Element, Package, SvoData, Tile};
 pub use scene::{
     Camera, Environment, InputFile, Light, LightShape, Material, MaterialRegion, Provenance, ScanInfo, Scene,
 };
+pub use section::{SectionInfo, TileInfo};
 pub use spec::{Codec, Scope, SectionKind};
 pub use summary::{KindSummary, SectionSummary, Summary, TileSummary, parse_bytes};
 #[cfg(not(target_arch = "wasm32"))]
