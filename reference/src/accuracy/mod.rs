@@ -1,0 +1,20 @@
+//! The accuracy-vs-time sweep: each scene is rendered once by the reference (with its standard
+//! error) and then by the runtime under each quality knob alone and the presets; every run records
+//! its error against the reference, its GPU time per pass and its GPU memory. `report` turns the
+//! rows into docs/accuracy.md (table, Pareto front, preset check).
+
+mod configs;
+mod report;
+mod scenes;
+mod sweep;
+
+pub use configs::{
+    CUT_BOUNCES, Config, MARCH_APERTURES, MARCH_STEPS, ONE_BOUNCE_APERTURE, ONE_BOUNCE_STEP, Row,
+    TRUNCATED_BOUNCES, Variant, configs, slug,
+};
+pub use report::{
+    MONOTONE_KNOBS, MONOTONE_SLACK, NOISE_FLOOR, knob_errors, knob_monotone, knob_series, lights_report,
+    pareto, plot_svg, presets_monotone, report,
+};
+pub use scenes::{SweepScene, bunny, closed_scenes, demo_cave, scenes, scenes_cached, shared_data};
+pub use sweep::{SUPERSAMPLE, SUPERSAMPLE_CHECK, error_map, lights_sweep, sweep};
