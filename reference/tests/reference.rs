@@ -147,7 +147,8 @@ fn presets_trade_time_for_error_on_the_colour_box() {
 fn propagation_gathers_every_cone_on_the_demo_cave_with_every_preset() {
     use grotto_runtime::gpu::types::LeafLightGpu;
     use grotto_runtime::passes::cpu_ref::CpuScene;
-    use grotto_runtime::render::renderer::{Quality, Renderer, Settings};
+    use grotto_runtime::render::Renderer;
+    use grotto_runtime::settings::{Quality, Settings};
     let data = grotto_reference::accuracy::demo_cave(
         grotto_preprocess::build::ColorCodec::Raw,
         grotto_preprocess::build::SurfelCodec::Full,

@@ -7,7 +7,8 @@
 use std::time::Instant;
 
 use grotto_runtime::gpu::{Gpu, GpuOptions};
-use grotto_runtime::render::renderer::{Quality, Renderer, Settings};
+use grotto_runtime::render::Renderer;
+use grotto_runtime::settings::{Quality, Settings};
 
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);

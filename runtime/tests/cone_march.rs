@@ -12,8 +12,9 @@ use grotto_fixtures::testscenes;
 use grotto_runtime::gpu::types::{LeafLightGpu, Params};
 use grotto_runtime::gpu::{Gpu, GpuOptions};
 use grotto_runtime::passes::cpu_ref::CpuScene;
-use grotto_runtime::render::renderer::{Renderer, Settings};
+use grotto_runtime::render::Renderer;
 use grotto_runtime::scene::data::{SceneData, VoxelLeaf};
+use grotto_runtime::settings::Settings;
 
 fn gpu() -> &'static Gpu {
     static GPU: OnceLock<Gpu> = OnceLock::new();

@@ -9,7 +9,8 @@ use grotto_runtime::gpu::types::LeafLightGpu;
 use grotto_runtime::gpu::{Gpu, GpuOptions};
 use grotto_runtime::light::plan::Pass;
 use grotto_runtime::passes::cpu_ref::CpuScene;
-use grotto_runtime::render::renderer::{Renderer, Settings};
+use grotto_runtime::render::Renderer;
+use grotto_runtime::settings::Settings;
 
 fn gpu() -> &'static Gpu {
     static GPU: OnceLock<Gpu> = OnceLock::new();
@@ -368,7 +369,7 @@ fn skipped_passes_are_not_dispatched_and_change_nothing() {
     let (brighter, _) = r.render(&cam, 64, 48).unwrap();
     r.set_exposure(settings.exposure);
     assert_eq!(brighter.hdr, a.hdr);
-    let mean = |f: &grotto_runtime::render::renderer::Frame| {
+    let mean = |f: &grotto_runtime::render::Frame| {
         f.ldr.iter().map(|p| f64::from(p[0])).sum::<f64>() / f.ldr.len() as f64
     };
     assert!(
@@ -413,7 +414,7 @@ fn lights_and_shadows_run_once_for_static_lights() {
     assert!(!plan.runs(Pass::Propagate), "bounce budget of 2 spent: {}", plan.explain());
     assert_eq!(r.stats().dispatches.get(&Pass::Shadow).copied(), Some(1));
     // Shadowed direct light: room A is lit, the hidden chamber is not; bounces add light.
-    let sum = |f: &grotto_runtime::render::renderer::Frame| f.hdr.iter().map(|p| p[1] as f64).sum::<f64>();
+    let sum = |f: &grotto_runtime::render::Frame| f.hdr.iter().map(|p| p[1] as f64).sum::<f64>();
     assert!(sum(&third) > sum(&first));
     r.invalidate_lights();
     let (_, plan) = r.render(&cam, 64, 48).unwrap();
@@ -562,7 +563,7 @@ fn constant_environment_equals_an_equal_ambient_term() {
 
 #[test]
 fn a_closed_cave_stays_dark_under_a_sky_and_an_opening_lets_it_in() {
-    use grotto_runtime::render::renderer::Quality;
+    use grotto_runtime::settings::Quality;
     let sky = {
         let mut sh = [[0.0f32; 3]; 9];
         sh[0] = [1.0 / 0.282_094_8; 3];
@@ -722,7 +723,7 @@ fn mean_of(light: &[LeafLightGpu], set: &[usize], field: fn(&LeafLightGpu) -> [f
 
 #[test]
 fn lights_beyond_the_budget_are_shadowed_by_svo_cones_not_lit_through_rock() {
-    use grotto_runtime::render::renderer::ShadowFallback;
+    use grotto_runtime::settings::ShadowFallback;
     // The dogleg: one lamp in a room, a chamber behind three right-angle corridors in rock.
     let scene = testscenes::dogleg();
     let select = |want: &dyn Fn(glam::IVec3) -> bool| -> Vec<usize> {
@@ -767,8 +768,8 @@ fn lights_beyond_the_budget_are_shadowed_by_svo_cones_not_lit_through_rock() {
 
 #[test]
 fn a_scene_with_256_lights_renders_and_culling_drops_only_light_under_the_cutoff() {
-    use grotto_runtime::render::renderer::ShadowFallback;
     use grotto_runtime::scene::data::SceneLight;
+    use grotto_runtime::settings::ShadowFallback;
     use grotto_runtime::view::camera::Camera;
     // The colour box with 256 lamps of random power on a grid inside it.
     let mut scene = testscenes::colour_box();
@@ -852,8 +853,8 @@ fn a_scene_with_256_lights_renders_and_culling_drops_only_light_under_the_cutoff
 
 #[test]
 fn many_cone_shadowed_lamps_add_up_like_the_same_lamps_one_at_a_time() {
-    use grotto_runtime::render::renderer::ShadowFallback;
     use grotto_runtime::scene::data::SceneLight;
+    use grotto_runtime::settings::ShadowFallback;
     // 48 lamps along the dogleg's air (room, corridors, chamber), all beyond the shadow-map budget:
     // each leaf traces one SVO shadow cone per lamp. Mesa's software drivers end every loop of an
     // invocation once all of them together pass 65535 iterations, which dropped the last lamps of
@@ -925,7 +926,8 @@ fn a_validation_error_names_the_pass_whose_scope_caught_it() {
 
 #[test]
 fn views_without_light_skip_the_light_passes_and_show_albedo_normals_and_level() {
-    use grotto_runtime::render::renderer::{Frame, ViewMode};
+    use grotto_runtime::render::Frame;
+    use grotto_runtime::settings::ViewMode;
     use grotto_runtime::view::camera::Camera;
     let scene = testscenes::dogleg();
     let cam = Camera::from_scene(&scene.cameras[0]);
@@ -990,8 +992,8 @@ fn views_without_light_skip_the_light_passes_and_show_albedo_normals_and_level()
 /// every wall, so the shadow-mapped light must equal the unshadowed sum.
 #[test]
 fn sixty_four_shadowed_lamps_fit_the_uniform_binding_limit_and_shadow_nothing_in_a_convex_box() {
-    use grotto_runtime::render::renderer::ShadowFallback;
     use grotto_runtime::scene::data::SceneLight;
+    use grotto_runtime::settings::ShadowFallback;
     let mut scene = testscenes::colour_box();
     let (lo, hi) = scene.bounds_leaf();
     let (lo, hi) = (lo * scene.leaf_size_m, hi * scene.leaf_size_m);

@@ -25,7 +25,7 @@ use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::synth::{self, SynthParams};
 use grotto_runtime::cli::publish::{self, PublishOptions};
 use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
-use grotto_runtime::render::renderer::{Quality, Settings};
+use grotto_runtime::settings::{Quality, Settings};
 use grotto_tests::{golden, serve};
 use serde_json::{Value, json};
 

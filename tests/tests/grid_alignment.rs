@@ -16,8 +16,9 @@ use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::scanwrite::{ScanData, write_scan};
 use grotto_runtime::gpu::{Gpu, GpuOptions};
-use grotto_runtime::render::renderer::{Renderer, Settings};
+use grotto_runtime::render::Renderer;
 use grotto_runtime::scene::data::SceneData;
+use grotto_runtime::settings::Settings;
 use grotto_runtime::view::camera::Camera;
 use grotto_tests::small_build;
 
@@ -103,7 +104,7 @@ fn moving_the_leaf_grid_under_a_room_changes_its_first_bounce_by_under_one_perce
             let settings = Settings {
                 bounces,
                 exposure: 1.0,
-                ..Settings::preset(grotto_runtime::render::renderer::Quality::High)
+                ..Settings::preset(grotto_runtime::settings::Quality::High)
             };
             let mut r = Renderer::new(&gpu, &scene, settings).unwrap();
             r.settle(|_, _| {}).unwrap();

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
 use grotto_runtime::gpu::GpuOptions;
-use grotto_runtime::render::renderer::Settings;
+use grotto_runtime::settings::Settings;
 use grotto_tests::golden;
 
 /// A 160x120 single frame of `camera` to `out` on the software Vulkan adapter, default settings;
@@ -114,7 +114,8 @@ fn golden_pixels(name: &str, w: u32, h: u32) -> Vec<[u8; 4]> {
 /// GL path is covered by the dry goldens above).
 #[test]
 fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
-    use grotto_runtime::render::renderer::{Renderer, ShadowFallback};
+    use grotto_runtime::render::Renderer;
+    use grotto_runtime::settings::ShadowFallback;
     let Some(data) = grotto_tests::shared_data_dir() else { return };
     let dir = tempfile::tempdir().unwrap();
     let cave = grotto_fixtures::SmallCave {

@@ -7,8 +7,9 @@ use std::sync::OnceLock;
 use glam::Vec3;
 use grotto_format::{Package, SectionKind};
 use grotto_runtime::gpu::{Gpu, GpuOptions};
-use grotto_runtime::render::renderer::{ClipBox, Renderer, Settings, ViewMode, scan_color};
+use grotto_runtime::render::Renderer;
 use grotto_runtime::scene::data::SceneData;
+use grotto_runtime::settings::{ClipBox, Settings, ViewMode, scan_color};
 use grotto_runtime::view::camera::Camera;
 
 fn gpu() -> &'static Gpu {
@@ -184,7 +185,7 @@ fn a_clip_box_cuts_what_is_drawn_but_not_the_light() {
         }
     }
     // The ceiling is gone: the top rows show the background where they showed rock.
-    let covered = |f: &grotto_runtime::render::renderer::Frame, rows: std::ops::Range<u32>| {
+    let covered = |f: &grotto_runtime::render::Frame, rows: std::ops::Range<u32>| {
         rows.flat_map(|y| (0..W).map(move |x| (x, y)))
             .filter(|&(x, y)| f.hdr[(y * W + x) as usize][3] >= 0.5)
             .count()

@@ -3,8 +3,8 @@
 
 use std::collections::BTreeMap;
 
-use grotto_runtime::render::renderer::{IndirectFilter, Quality, Settings};
 use grotto_runtime::scene::data::SceneData;
+use grotto_runtime::settings::{IndirectFilter, Quality, Settings};
 use serde::Serialize;
 
 /// A package variant of a sweep scene.

@@ -3,7 +3,7 @@
 
 use std::fmt::Write as _;
 
-use grotto_runtime::render::renderer::{Quality, Settings};
+use grotto_runtime::settings::{Quality, Settings};
 
 use crate::accuracy::configs::CUT_BOUNCES;
 use crate::accuracy::configs::MARCH_APERTURES;

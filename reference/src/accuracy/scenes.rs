@@ -3,8 +3,8 @@
 use glam::Vec3;
 use grotto_fixtures::testscenes;
 use grotto_preprocess::build::{ColorCodec, SurfelCodec};
-use grotto_runtime::render::renderer::Settings;
 use grotto_runtime::scene::data::SceneData;
+use grotto_runtime::settings::Settings;
 use grotto_runtime::view::camera::Camera;
 
 use crate::accuracy::configs::TRUNCATED_BOUNCES;

@@ -6,8 +6,9 @@ use std::collections::BTreeMap;
 use grotto_preprocess::build::{ColorCodec, SurfelCodec};
 use grotto_runtime::gpu::Gpu;
 use grotto_runtime::light::plan::Pass;
-use grotto_runtime::render::renderer::{Frame, Quality, Renderer, Settings};
+use grotto_runtime::render::{Frame, Renderer};
 use grotto_runtime::scene::data::SceneData;
+use grotto_runtime::settings::{Quality, Settings};
 use grotto_runtime::view::camera::Camera;
 
 use crate::accuracy::configs::Config;
@@ -281,7 +282,7 @@ pub fn lights_sweep(
     mut progress: impl FnMut(&str),
 ) -> Result<(SweepScene, Vec<Row>), String> {
     use grotto_runtime::cli::render_job::{STRING_LAMP_LIFT_M, STRING_LAMP_W};
-    use grotto_runtime::render::renderer::ShadowFallback;
+    use grotto_runtime::settings::ShadowFallback;
     let mut data = demo_cave(ColorCodec::Raw, SurfelCodec::Full, 0.25, None, true)?;
     data.lights = data.lamp_string(lamps, STRING_LAMP_W, STRING_LAMP_LIFT_M);
     let camera = Camera::from_scene(&data.cameras[0]);

@@ -7,7 +7,7 @@ use anyhow::Context;
 use clap::Parser;
 use glam::Vec3;
 use grotto_reference::{PathSettings, SurfelScene};
-use grotto_runtime::render::renderer::Frame;
+use grotto_runtime::render::Frame;
 use grotto_runtime::scene::data::SceneData;
 use grotto_runtime::view::camera::Camera;
 
@@ -180,7 +180,7 @@ fn mitsuba(a: MitsubaArgs) -> anyhow::Result<()> {
     for (name, description, data) in accuracy::closed_scenes() {
         let cam = data.cameras.first().with_context(|| format!("scene {name} has no camera"))?;
         let camera = Camera::from_scene(cam);
-        let splat = grotto_runtime::render::renderer::Settings::default().splat_scale;
+        let splat = grotto_runtime::settings::Settings::default().splat_scale;
         let slug = accuracy::slug(name);
         // The reference's discs, for the path tracer; and, where the surfels are the voxel faces
         // of a hand-built scene (one per open face, axis-aligned), those faces: the exact

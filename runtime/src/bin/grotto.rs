@@ -104,7 +104,7 @@ fn publish(a: PublishArgs) -> anyhow::Result<ExitCode> {
     use grotto_runtime::cli::publish;
     if let Some(q) = &a.quality {
         anyhow::ensure!(
-            grotto_runtime::render::renderer::Quality::parse(q).is_some(),
+            grotto_runtime::settings::Quality::parse(q).is_some(),
             "--quality {q}: expected fast, balanced or high"
         );
     }
@@ -317,7 +317,7 @@ fn parse_box(s: &str) -> Result<[[f64; 3]; 2], String> {
 
 fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::RenderOptions> {
     use grotto_runtime::cli::render_job::{CameraChoice, Headlamp, RenderOptions};
-    use grotto_runtime::render::renderer::{IndirectFilter, Quality, Settings, ShadowFallback};
+    use grotto_runtime::settings::{IndirectFilter, Quality, Settings, ShadowFallback};
     let quality = Quality::parse(&a.quality)
         .ok_or_else(|| anyhow::anyhow!("--quality {:?}: use fast, balanced or high", a.quality))?;
     let mut settings = Settings::preset(quality);
@@ -342,7 +342,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
     settings.shadowed_lights = a.shadowed_lights.unwrap_or(settings.shadowed_lights);
     settings.shadow_fallback = ShadowFallback::parse(&a.shadow_fallback)
         .ok_or_else(|| anyhow::anyhow!("--shadow-fallback {:?}: use cone or none", a.shadow_fallback))?;
-    settings.view = grotto_runtime::render::renderer::ViewMode::parse(&a.view).ok_or_else(|| {
+    settings.view = grotto_runtime::settings::ViewMode::parse(&a.view).ok_or_else(|| {
         anyhow::anyhow!("--view {:?}: use lit, albedo, normals, light, level or scan", a.view)
     })?;
     settings.light_cutoff_w_m2 = a.light_cutoff.unwrap_or(settings.light_cutoff_w_m2);
@@ -415,7 +415,7 @@ fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
         || a.step.is_some()
         || a.shadow_map.is_some()
         || a.indirect.is_some();
-    let quality = grotto_runtime::render::renderer::Quality::parse(&a.quality).filter(|_| !knobs_set);
+    let quality = grotto_runtime::settings::Quality::parse(&a.quality).filter(|_| !knobs_set);
     let summary = grotto_runtime::window::run(grotto_runtime::window::ViewOptions {
         render,
         quality,

@@ -6,8 +6,7 @@ use std::path::Path;
 
 use crate::cli::export::{atomically, output_error};
 use crate::error::{Error, Result};
-use crate::render::renderer::Frame;
-
+use crate::render::Frame;
 /// Output kind chosen from the file extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ImageKind {

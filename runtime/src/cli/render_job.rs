@@ -13,8 +13,9 @@ use crate::cli::image_out;
 use crate::error::{Error, Result};
 use crate::gpu::{Gpu, GpuOptions};
 use crate::light::plan::EffectPlan;
-use crate::render::renderer::{ClipBox, PassStats, Renderer, Settings};
+use crate::render::{PassStats, Renderer};
 use crate::scene::data::{SceneData, TileMode};
+use crate::settings::{ClipBox, Settings};
 use crate::stream::Streaming;
 use crate::stream::residency::{self, Budget, Residency};
 use crate::view::camera::{self, Camera};
@@ -107,7 +108,7 @@ impl RenderOptions {
             width: 800,
             height: 600,
             out,
-            settings: Settings::preset(crate::render::renderer::Quality::Balanced),
+            settings: Settings::preset(crate::settings::Quality::Balanced),
             exposure: None,
             gpu: GpuOptions::default(),
             lamp_string: None,
@@ -205,7 +206,7 @@ pub struct FrameReport {
     /// whether the pools were repacked; None where the tiles did not change. A change the pools
     /// could not take in place (a scene whose lights or bounds differ) makes a new renderer and
     /// reports `made_anew`.
-    pub update: Option<crate::render::renderer::SceneUpdate>,
+    pub update: Option<crate::render::SceneUpdate>,
     pub made_anew: bool,
     /// Changes of tile form left for later frames by `--upload-per-frame`.
     pub deferred: usize,
@@ -439,7 +440,7 @@ pub fn frame_path(out: &Path, i: u32, n: u32) -> PathBuf {
     out.with_file_name(format!("{stem}_{i:04}.{ext}"))
 }
 
-pub use crate::render::renderer::auto_exposure;
+pub use crate::render::auto_exposure;
 
 /// Opens a package and reads its scene; an empty package is an error (nothing to render).
 pub fn load_scene(package: &Path) -> Result<SceneData> {

@@ -1,6 +1,17 @@
 //! The renderer: the state it owns ([`renderer`]), the tile pools it writes tiles into
 //! ([`pool`]), and the blit that shows a frame on a surface ([`present`]).
 
+mod frame;
+mod light;
+mod params;
 pub mod pool;
 pub mod present;
 pub mod renderer;
+mod tiles;
+mod update;
+
+pub use frame::{Frame, LdrOutput};
+pub use light::{CarriedLight, LightProgress};
+pub use params::{auto_exposure, cone_set};
+pub use renderer::{PassStats, Renderer};
+pub use tiles::SceneUpdate;

@@ -5,7 +5,7 @@
 
 use crate::error::Result;
 use crate::gpu::Gpu;
-use crate::render::renderer::{LdrOutput, LightProgress};
+use crate::render::{LdrOutput, LightProgress};
 
 /// The convergence bar's state (its colour in present.wgsl).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -9,8 +9,9 @@ use std::thread::JoinHandle;
 
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
-use crate::render::renderer::{ClipBox, Renderer, Settings};
+use crate::render::Renderer;
 use crate::scene::data::{SceneData, SceneLight};
+use crate::settings::{ClipBox, Settings};
 use crate::stream::residency::{self, Residency};
 use crate::stream::{self, Streaming};
 use crate::view::camera::Camera;

@@ -11,9 +11,10 @@ use grotto_format::{Package, Scope, SectionInfo, SectionKind};
 use crate::error::Result;
 use crate::gpu::Gpu;
 use crate::render::pool::{POOL_HEADROOM, PoolCaps};
-use crate::render::renderer::{ClipBox, Renderer, SceneUpdate, Settings};
+use crate::render::{Renderer, SceneUpdate};
 use crate::scene::data::{SceneData, SceneLight, TileMode};
 use crate::scene::rock::RockTable;
+use crate::settings::{ClipBox, Settings};
 use crate::stream::residency::{self, Budget, Residency, TileFootprint};
 use crate::view::camera::Camera;
 

@@ -39,8 +39,9 @@ use crate::cli::render_job::{self, RenderOptions};
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::render::present::{Bar, Blit, Target};
-use crate::render::renderer::{ClipBox, LightProgress, Quality, Renderer, ViewMode, scan_color};
+use crate::render::{LightProgress, Renderer};
 use crate::scene::data::SceneData;
+use crate::settings::{ClipBox, Quality, ViewMode, scan_color};
 use crate::stream::follow::{self, Follow};
 use crate::view::camera::{self, Camera, Nav};
 

@@ -1,7 +1,7 @@
 //! The viewer's frame budget: how much light work a frame gets. While the camera moves the
 //! bounces wait (the renderer holds them, and the plan says so), so frames stay as fast as the
 //! G-buffer and shading allow; at rest, the light converges in slices of a bounce
-//! ([`crate::render::renderer::Renderer::update_light_slice`]) sized to what the budget leaves beside the
+//! ([`crate::render::Renderer::update_light_slice`]) sized to what the budget leaves beside the
 //! frame. Pure bookkeeping, tested without a window.
 
 use serde::Serialize;

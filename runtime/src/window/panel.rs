@@ -6,7 +6,9 @@
 
 use glam::Vec3;
 
-use crate::render::renderer::{ClipBox, LightProgress, Quality, ViewMode};
+use crate::render::LightProgress;
+
+use crate::settings::{ClipBox, Quality, ViewMode};
 
 /// What the panel shows, gathered by the window each frame.
 #[derive(Clone, Debug, Default)]

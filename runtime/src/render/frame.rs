@@ -1,0 +1,484 @@
+//! The per-frame order of passes: what the plan asks a frame for, the view's targets, recording
+//! each pass in its own command buffer and error scope, and reading the frame back.
+
+use std::ops::Range;
+use web_time::Instant;
+
+use crate::error::{Error, Result};
+use crate::gpu::types::{Params, SplatUniform, flags};
+use crate::light::activity::Why;
+use crate::light::plan::{self, EffectPlan, Pass, PlanInputs};
+use crate::passes::gbuffer;
+use crate::view::camera::Camera;
+
+use crate::render::renderer::Renderer;
+use crate::render::renderer::View;
+use crate::settings::{IndirectFilter, ViewMode};
+
+/// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
+
+impl Renderer {
+    pub(super) fn inputs(&self, frame: Option<(&Camera, u32, u32)>) -> PlanInputs {
+        let gbuffer_valid = match (frame, &self.view) {
+            (Some((c, w, h)), Some(v)) => {
+                !self.gbuffer_stale && v.camera == *c && v.targets.width == w && v.targets.height == h
+            }
+            _ => false,
+        };
+        PlanInputs {
+            headlamp: self.headlamp,
+            point_lights: self.point_lights,
+            spot_lights: self.spot_lights,
+            shadows_enabled: self.settings.shadows,
+            shadowed: self.shadowed,
+            shadow_budget: self.settings.shadowed_lights,
+            fallback: self.settings.shadow_fallback.describe(),
+            lights_in_range: self.lights_in_range,
+            specular_materials: self.specular_materials,
+            specular_surfels: self.specular_surfels,
+            emissive_leaves: self.emissive,
+            environment: self.environment,
+            ambient: self.settings.background.iter().any(|&b| b > 0.0),
+            env_valid: self.env_valid,
+            direct_valid: self.direct_valid,
+            bounces_done: self.stats_now.bounces_done,
+            bounce_budget: self.settings.bounces,
+            last_change: self.stats_now.last_change,
+            convergence_tolerance: self.settings.convergence_tolerance,
+            tiles_pending: self.activity.pending_tiles(),
+            tiles_total: self.activity.tiles(),
+            tiles_why: self.activity.pending_why(),
+            frame: frame.is_some(),
+            gbuffer_valid,
+            plain_view: (!self.settings.view.shows_light()).then(|| self.settings.view.name()),
+            light_held: self.light_held.or_else(|| {
+                self.bounce_readback.is_some().then_some("the last bounce's change is on its way back")
+            }),
+            bounce_part: self.bounce_at.map(|next| (next, self.active_written.unwrap_or(0))),
+        }
+    }
+
+    /// The plan the next [`Renderer::update_light`] (no camera) or [`Renderer::render`] would run.
+    pub fn plan(&self, frame: Option<(&Camera, u32, u32)>) -> EffectPlan {
+        let mut p = plan::plan(&self.inputs(frame));
+        for step in &mut p.steps {
+            if !step.run && self.forced.contains(&step.pass) {
+                // Shade needs a G-buffer and the light passes need nothing: any pass may be forced
+                // except gbuffer/shade without a frame.
+                if frame.is_some() || !matches!(step.pass, Pass::Gbuffer | Pass::Shade) {
+                    step.run = true;
+                    step.reason = format!("forced (plan said: {})", step.reason);
+                }
+            }
+        }
+        p
+    }
+
+    /// Runs these passes even where the plan would skip them (tests prove skipping changes
+    /// nothing; `--force` on the command line does the same for a user who doubts the plan).
+    pub fn set_forced(&mut self, passes: &[Pass]) {
+        self.forced = passes.to_vec();
+    }
+
+    /// Renders one frame (running whatever light work the plan asks for first: progressive, at
+    /// most one bounce per frame).
+    pub fn render(&mut self, camera: &Camera, width: u32, height: u32) -> Result<(Frame, EffectPlan)> {
+        let p = self.draw(camera, width, height)?;
+        Ok((self.read_frame()?, p))
+    }
+
+    /// The buffer the last frame's HDR radiance is in (4 f32 a pixel, rows top to bottom, from
+    /// its start) and its bytes there: what a browser reads back without blocking for its
+    /// exposure.
+    pub fn hdr_output(&self) -> Option<(&wgpu::Buffer, u64)> {
+        self.view.as_ref().map(|v| (&v.outputs.frame, v.outputs.hdr_bytes()))
+    }
+
+    /// The last frame [`Renderer::draw`] (or render) made, read back.
+    pub fn read_frame(&self) -> Result<Frame> {
+        let view = self.view("shade")?;
+        let (width, height) = (view.targets.width, view.targets.height);
+        let pixels = u64::from(width) * u64::from(height);
+        let bytes = self.gpu.read_buffer(&view.outputs.frame, view.outputs.frame.size())?;
+        let (hdr_bytes, ldr_bytes) = bytes.split_at(view.outputs.hdr_bytes() as usize);
+        let hdr: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(hdr_bytes);
+        let ldr: Vec<[u8; 4]> = bytemuck::pod_collect_to_vec(&ldr_bytes[..(pixels * 4) as usize]);
+        Ok(Frame { width, height, hdr, ldr })
+    }
+
+    /// Renders one frame as [`Renderer::render`] does, leaving it on the GPU ([`Renderer::ldr_output`])
+    /// instead of reading it back: what a window presents.
+    pub fn draw(&mut self, camera: &Camera, width: u32, height: u32) -> Result<EffectPlan> {
+        camera.validate()?;
+        if width == 0 || height == 0 || width > 16384 || height > 16384 {
+            return Err(Error::Setting {
+                name: "size",
+                problem: format!("{width}x{height} is outside 1..=16384"),
+            });
+        }
+        self.poll_light()?;
+        let p = self.plan(Some((camera, width, height)));
+        self.execute(&p, Some((camera, width, height)), None)?;
+        Ok(p)
+    }
+
+    /// The distance in metres from the eye to the surface at pixel `(x, y)` of the last frame
+    /// (its own size, rows top to bottom); None where the background shows or outside the frame.
+    pub fn distance_at(&self, x: u32, y: u32) -> Result<Option<f32>> {
+        let view = self.view("pick")?;
+        if x >= view.targets.width || y >= view.targets.height {
+            return Ok(None);
+        }
+        let buf =
+            self.gpu.buffer("pick", 256, wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST)?;
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        enc.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &view.targets.distance,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x, y, z: 0 },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buf,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(256),
+                    rows_per_image: Some(1),
+                },
+            },
+            wgpu::Extent3d { width: 1, height: 1, depth_or_array_layers: 1 },
+        );
+        self.gpu.queue.submit([enc.finish()]);
+        let b = self.gpu.read_buffer(&buf, 4)?;
+        // The G-buffer packs the f32's bits into RGBA8 (packing.wgsl); cleared pixels are 0.
+        let d = f32::from_bits(u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        Ok((d.is_finite() && d > 0.0).then_some(d))
+    }
+
+    /// The last frame's tonemapped pixels (one packed RGBA8 u32 a pixel, rows top to bottom, from
+    /// word `first_word` of `buffer`) and its size; `None` before the first frame.
+    pub fn ldr_output(&self) -> Option<LdrOutput<'_>> {
+        self.view.as_ref().map(|v| LdrOutput {
+            buffer: &v.outputs.frame,
+            first_word: v.outputs.ldr_first_word(),
+            width: v.targets.width,
+            height: v.targets.height,
+        })
+    }
+
+    pub(super) fn frame_params(&self, frame: Option<(&Camera, u32, u32)>) -> Params {
+        let mut p = self.base_params;
+        let s = &self.settings;
+        // Auto exposure sets it after the light has settled (`set_exposure`).
+        p.exposure = s.exposure;
+        let mut f = flags::EMISSION;
+        if !self.direct_valid || (self.environment && !self.env_valid) {
+            f |= flags::NEW_SERIES;
+        }
+        if s.direct && p.light_count > 0 {
+            f |= flags::DIRECT;
+        }
+        if s.direct && s.shadows && self.shadowed < p.light_count as usize {
+            f |= flags::FAR_LIGHTS;
+        }
+        if s.shadows && self.shadow_faces > 0 {
+            f |= flags::SHADOWS;
+        }
+        match s.indirect {
+            IndirectFilter::Trilinear => f |= flags::INDIRECT,
+            IndirectFilter::Tricubic => f |= flags::INDIRECT | flags::TRICUBIC,
+            IndirectFilter::Off => {}
+        }
+        if self.environment {
+            f |= flags::ENV;
+        }
+        if self.specular_surfels > 0 {
+            f |= flags::SPECULAR;
+        }
+        if s.cone_interleave {
+            f |= flags::CONE_INTERLEAVE;
+        }
+        f |= match s.view {
+            ViewMode::Lit => 0,
+            ViewMode::Albedo => flags::VIEW_ALBEDO,
+            ViewMode::Normals => flags::VIEW_NORMALS,
+            ViewMode::Light => flags::VIEW_LIGHT,
+            ViewMode::Level => flags::VIEW_LEVEL,
+            ViewMode::Scan => flags::VIEW_SCAN,
+        };
+        p.flags = f;
+        if let Some((c, w, h)) = frame {
+            p.width = w;
+            p.height = h;
+            let forward = (c.look_at_m - c.eye_m).normalize();
+            let right = forward.cross(c.up).normalize();
+            let up = right.cross(forward);
+            p.camera_eye_m = c.eye_m.extend(0.0).to_array();
+            p.camera_forward = forward.extend((c.fov_y_deg.to_radians() * 0.5).tan()).to_array();
+            p.camera_right = right.extend(w as f32 / h as f32).to_array();
+            p.camera_up = up.extend(0.0).to_array();
+        }
+        p
+    }
+
+    pub(super) fn timestamp_pair(&self, pass: Pass) -> Option<(&wgpu::QuerySet, u32)> {
+        let i = Pass::ALL.iter().position(|p| *p == pass).unwrap_or(0) as u32;
+        self.queries.as_ref().map(|(set, _)| (set, 2 * i))
+    }
+
+    /// Writes the camera's splat uniform and (re)makes the view's targets when the size changed.
+    pub(super) fn prepare_view(&mut self, camera: &Camera, w: u32, h: u32) -> Result<()> {
+        let near = (0.02 * self.leaf_size_m).max(1e-4);
+        let far = (camera.eye_m.length() + self.scene_diag_m) * 2.0 + 1.0;
+        let m = camera.view_proj(w, h, near, far);
+        let u = SplatUniform {
+            view_proj: m.to_cols_array_2d(),
+            eye_m: camera.eye_m.extend(1.0).to_array(),
+            viewport: [
+                w as f32,
+                h as f32,
+                self.settings.min_splat_px,
+                1.0 / (camera.fov_y_deg.to_radians() * 0.5).tan(),
+            ],
+            splat: [
+                self.settings.splat_scale,
+                f32::from(u8::from(self.settings.view == ViewMode::Scan)),
+                0.0,
+                0.0,
+            ],
+            clip_min_m: self.clip.map_or([0.0; 4], |c| c.min_m.extend(1.0).to_array()),
+            clip_max_m: self.clip.map_or([0.0; 4], |c| c.max_m.extend(1.0).to_array()),
+            pad: [[0.0; 4]; 7],
+        };
+        self.gbuffer.set_camera(&self.gpu, &u);
+        self.camera_view_proj = Some(m);
+        let reuse = self.view.as_ref().is_some_and(|v| v.targets.width == w && v.targets.height == h);
+        if !reuse {
+            // The largest per-view buffer first, before any target is allocated.
+            let pixels = u64::from(w) * u64::from(h);
+            self.gpu.check_buffer("shade hdr", pixels * 16, wgpu::BufferUsages::STORAGE)?;
+            let targets = gbuffer::Targets::new(&self.gpu, w, h)?;
+            let outputs = self.shade.outputs(&self.gpu, &targets)?;
+            self.view = Some(View { camera: *camera, targets, outputs });
+        } else if let Some(v) = self.view.as_mut() {
+            v.camera = *camera;
+        }
+        Ok(())
+    }
+
+    pub(super) fn view(&self, pass: &'static str) -> Result<&View> {
+        self.view.as_ref().ok_or(Error::Internal { what: pass, message: "no view was prepared".into() })
+    }
+
+    pub(super) fn encoder(&self) -> wgpu::CommandEncoder {
+        self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") })
+    }
+
+    /// Records one pass into `enc`.
+    pub(super) fn record(&self, enc: &mut wgpu::CommandEncoder, pass: Pass) -> Result<()> {
+        let ts = self.timestamp_pair(pass);
+        let render_ts = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
+            query_set: set,
+            beginning_of_pass_write_index: Some(i),
+            end_of_pass_write_index: Some(i + 1),
+        });
+        match pass {
+            Pass::Shadow => {
+                let draws: Vec<Option<Vec<Range<u32>>>> = self
+                    .shadow
+                    .faces()
+                    .iter()
+                    .zip(&self.shadow_dirty)
+                    .map(|(f, &dirty)| {
+                        dirty.then(|| self.pools.runs_seen(Some(&f.view_proj), self.leaf_size_m))
+                    })
+                    .collect();
+                self.shadow.record(enc, self.pools.surfels(), &draws, render_ts);
+            }
+            Pass::Gbuffer => {
+                let v = self.view("gbuffer")?;
+                let runs = self.pools.runs_seen(self.camera_view_proj.as_ref(), self.leaf_size_m);
+                self.gbuffer.record(enc, &v.targets, self.pools.surfels(), &runs, render_ts);
+            }
+            compute => {
+                let tw = ts.map(|(set, i)| wgpu::ComputePassTimestampWrites {
+                    query_set: set,
+                    beginning_of_pass_write_index: Some(i),
+                    end_of_pass_write_index: Some(i + 1),
+                });
+                let mut cp = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some(compute.name()),
+                    timestamp_writes: tw,
+                });
+                match compute {
+                    Pass::Inject => self.inject.record(&mut cp, self.leaf_count),
+                    Pass::Env => self.env.record(&mut cp, self.leaf_count),
+                    Pass::Mip => self.mip.record(&mut cp),
+                    Pass::Propagate => self.propagate.record(&mut cp, self.slice_run.1 - self.slice_run.0),
+                    Pass::Shade => {
+                        let v = self.view("shade")?;
+                        self.shade.record(&mut cp, &v.outputs, v.targets.width, v.targets.height);
+                    }
+                    Pass::Shadow | Pass::Gbuffer => {}
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Records and submits the plan's passes (one encoder, or one per pass where the adapter has
+    /// no timestamp queries and each is timed on the CPU); `ran` collects the passes recorded.
+    pub(super) fn record_frame(&mut self, plan: &EffectPlan, ran: &mut Vec<Pass>) -> Result<()> {
+        let mut enc = self.encoder();
+        if plan.runs(Pass::Propagate) && self.slice_run.0 == 0 {
+            // A bounce starts: its changes are gathered over all its slices.
+            enc.clear_buffer(&self.changes, 0, None);
+        }
+        for step in plan.steps.iter().filter(|s| s.run) {
+            let recorded = Instant::now();
+            self.record(&mut enc, step.pass)?;
+            *self.stats_now.dispatches.entry(step.pass).or_default() += 1;
+            ran.push(step.pass);
+            if self.queries.is_none() && !cfg!(target_arch = "wasm32") {
+                // No timestamp queries: time each pass on the CPU, recording to completion of its
+                // own blocking submit (not in a browser, which cannot block).
+                let done = std::mem::replace(&mut enc, self.encoder());
+                self.gpu.queue.submit([done.finish()]);
+                self.gpu.wait()?;
+                let ms = recorded.elapsed().as_secs_f64() * 1e3;
+                self.stats_now.last_ms.insert(step.pass, ms);
+            }
+        }
+        if let Some((set, buf)) = &self.queries
+            && !ran.is_empty()
+        {
+            enc.resolve_query_set(set, 0..2 * Pass::ALL.len() as u32, buf, 0);
+        }
+        self.gpu.queue.submit([enc.finish()]);
+        self.gpu.wait()
+    }
+
+    /// Runs `plan`; its propagation runs at most `slice` invocations of the bounce (None: the
+    /// rest of it).
+    pub(super) fn execute(
+        &mut self,
+        plan: &EffectPlan,
+        frame: Option<(&Camera, u32, u32)>,
+        slice: Option<u32>,
+    ) -> Result<()> {
+        let params = self.frame_params(frame);
+        self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        if plan.runs(Pass::Propagate) {
+            if self.bounce_at.is_none() && self.activity.pending_tiles() == 0 {
+                // Forced past convergence: a bounce means every tile.
+                self.set_all_active(Why::Verify);
+            }
+            if self.active_written.is_none() {
+                let (tiles, items) = self.activity.active_tiles();
+                let header = [tiles.len() as u32, items];
+                self.gpu.queue.write_buffer(&self.active, 0, bytemuck::cast_slice(&header));
+                if !tiles.is_empty() {
+                    self.gpu.queue.write_buffer(&self.active, 16, bytemuck::cast_slice(&tiles));
+                }
+                self.active_written = Some(items);
+            }
+            let items = self.active_written.unwrap_or(0);
+            let first = self.bounce_at.unwrap_or(0).min(items);
+            let end = slice.map_or(items, |n| first.saturating_add(n).min(items));
+            self.slice_run = (first, end);
+            self.gpu.queue.write_buffer(&self.active, 8, bytemuck::cast_slice(&[first, end]));
+        }
+        if let Some((camera, w, h)) = frame
+            && plan.runs(Pass::Gbuffer)
+        {
+            self.prepare_view(camera, w, h)?;
+        }
+        // The frame runs inside one validation error scope; when it catches an error, each pass
+        // is recorded again alone in a scope of its own (and not submitted) to name the culprit.
+        // A command buffer per pass would name it directly, but costs lavapipe time on every frame
+        // (tried: frames of the bunny at 64x48 went from 0.1 s to 1.5 s), so the fast path stays
+        // one encoder and only a failing frame pays for the search.
+        let mut ran: Vec<Pass> = Vec::new();
+        let gpu = self.gpu.clone();
+        let (outcome, error) = gpu.capture(|| self.record_frame(plan, &mut ran));
+        if let Some(e) = error {
+            let culprit = ran.iter().copied().find(|&pass| {
+                self.gpu
+                    .scoped(pass.name(), || {
+                        let mut enc = self.encoder();
+                        self.record(&mut enc, pass)?;
+                        enc.finish();
+                        Ok(())
+                    })
+                    .is_err()
+            });
+            return Err(Error::Gpu { pass: culprit.map_or("frame", Pass::name), message: e.to_string() });
+        }
+        outcome?;
+        self.gpu.check("frame")?;
+        if let Some((_, buf)) = &self.queries
+            && !ran.is_empty()
+        {
+            let bytes = self.gpu.read_buffer(buf, 16 * Pass::ALL.len() as u64)?;
+            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
+            let period = f64::from(self.gpu.queue.get_timestamp_period());
+            for pass in &ran {
+                let i = Pass::ALL.iter().position(|p| p == pass).unwrap_or(0);
+                let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period / 1e6;
+                self.stats_now.last_ms.insert(*pass, dt);
+            }
+        }
+        if ran.contains(&Pass::Shadow) {
+            self.shadow_drawn += self.shadow_dirty.iter().filter(|d| **d).count() as u64;
+            self.shadow_dirty.fill(false);
+        }
+        if ran.contains(&Pass::Gbuffer) {
+            self.gbuffer_stale = false;
+        }
+        if ran.contains(&Pass::Inject) || (self.point_lights + self.spot_lights == 0) {
+            self.direct_valid = true;
+        }
+        if ran.contains(&Pass::Env) {
+            self.env_valid = true;
+        }
+        let end = self.slice_run.1;
+        let items = self.active_written.unwrap_or(0);
+        if ran.contains(&Pass::Propagate) && end < items {
+            // Part of a bounce: the rest runs in later calls, from the same pyramid.
+            self.bounce_at = Some(end);
+        } else if ran.contains(&Pass::Propagate) {
+            self.bounce_at = None;
+            let tiles = self.activity.tiles();
+            self.bounce_readback = Some(self.gpu.start_read(&self.changes, 16 + 4 * tiles as u64));
+            // Natively the bounce ends here; a browser collects its change on a later frame
+            // (`poll_light`), and plans no light work until then.
+            if !cfg!(target_arch = "wasm32") {
+                let gpu = self.gpu.clone();
+                gpu.wait_for("propagate", || Ok(self.poll_light()?.then_some(())))?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One rendered image.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    /// Linear radiance, rows top to bottom; alpha is 1 where a surfel covers the pixel, 0 where the
+    /// background shows.
+    pub hdr: Vec<[f32; 4]>,
+    /// Tonemapped sRGB8 RGBA.
+    pub ldr: Vec<[u8; 4]>,
+}
+
+/// A frame on the GPU, for a viewer to present ([`Renderer::ldr_output`]).
+#[derive(Clone, Copy, Debug)]
+pub struct LdrOutput<'a> {
+    pub buffer: &'a wgpu::Buffer,
+    pub first_word: u32,
+    pub width: u32,
+    pub height: u32,
+}

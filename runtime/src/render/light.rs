@@ -1,0 +1,283 @@
+//! The light state the renderer keeps on the GPU between frames: bounces run whole or in
+//! slices, convergence, holding the light while a viewer moves, and light carried across reloads.
+
+use std::collections::HashMap;
+
+use serde::Serialize;
+
+use crate::error::Result;
+use crate::gpu::types::LeafLightGpu;
+use crate::light::activity::{BounceWork, Why};
+use crate::light::plan::{self, EffectPlan, Pass};
+use crate::render::pool::{TileKey, key};
+use crate::scene::data::SceneData;
+
+use crate::render::renderer::Renderer;
+
+/// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
+
+impl Renderer {
+    /// While held, frames run no bounces, and the plan gives `why`: a viewer holds the light while
+    /// its camera moves, so light work is what yields to the frame rate.
+    pub fn hold_light(&mut self, why: Option<&'static str>) {
+        self.light_held = why;
+    }
+
+    /// A light update (as [`Renderer::update_light`]) whose propagation runs at most `max_leaves`
+    /// leaves of the current bounce: a bounce split over several calls ends as the whole one does
+    /// (each leaf gathers from the same pyramid), and counts once it has run every leaf. Returns
+    /// the leaves propagated.
+    pub fn update_light_slice(&mut self, max_leaves: u32) -> Result<u32> {
+        self.poll_light()?;
+        let p = self.plan(None);
+        self.execute(&p, None, Some(max_leaves.max(64)))?;
+        if !p.runs(Pass::Propagate) {
+            return Ok(0);
+        }
+        Ok(self.slice_run.1 - self.slice_run.0)
+    }
+
+    /// Where the light stands: bounces done of the budget, the last change, and whether it has
+    /// converged (no more light work until something changes), held or not.
+    pub fn light_progress(&self) -> LightProgress {
+        // The light's own state: neither a hold nor a view without light is convergence.
+        let mut i = self.inputs(None);
+        i.light_held = None;
+        i.plain_view = None;
+        let p = plan::plan(&i);
+        LightProgress {
+            bounces_done: self.stats_now.bounces_done,
+            bounce_budget: self.settings.bounces,
+            last_change: self.stats_now.last_change,
+            converged: !(p.runs(Pass::Shadow)
+                || p.runs(Pass::Inject)
+                || p.runs(Pass::Env)
+                || p.runs(Pass::Propagate)),
+        }
+    }
+
+    /// The bounce budget from now on (raising it past the bounces done lets the light go on
+    /// converging; the light already propagated stays).
+    pub fn set_bounces(&mut self, bounces: u32) {
+        self.settings.bounces = bounces;
+    }
+
+    /// Turns shadow maps on or off; the direct light is injected again either way.
+    pub fn set_shadows(&mut self, on: bool) {
+        if self.settings.shadows != on {
+            self.settings.shadows = on;
+            self.invalidate_lights();
+        }
+    }
+
+    /// Marks the lights changed: the next update re-renders shadow maps and re-injects, and the
+    /// bounces are counted afresh (the light converges again from the new direct light).
+    pub fn invalidate_lights(&mut self) {
+        self.direct_valid = false;
+        self.shadow_dirty.fill(true);
+        self.stats_now.last_change = None;
+        self.stats_now.bounces_done = 0;
+        self.bounce_at = None;
+        // A bounce under the old lights still on its way back counts for nothing now.
+        self.bounce_readback = None;
+        self.set_all_active(Why::LightsChanged);
+    }
+
+    pub(super) fn set_all_active(&mut self, why: Why) {
+        self.activity.all(why);
+        self.active_written = None;
+    }
+
+    /// What each propagation bounce since the last call updated, and why (drained).
+    pub fn take_bounce_work(&mut self) -> Vec<BounceWork> {
+        std::mem::take(&mut self.bounce_work)
+    }
+
+    /// Runs the light part of the plan (shadow, inject, one bounce); returns the plan it ran.
+    pub fn update_light(&mut self) -> Result<EffectPlan> {
+        self.poll_light()?;
+        let p = self.plan(None);
+        self.execute(&p, None, None)?;
+        Ok(p)
+    }
+
+    /// Runs light updates until the plan stops propagating (converged or budget spent); returns
+    /// the number of bounces run.
+    pub fn settle(&mut self, progress: impl FnMut(u32, Option<f32>)) -> Result<u32> {
+        self.settle_at_most(u32::MAX, progress)
+    }
+
+    /// As [`Renderer::settle`], stopping after at most `max_bounces` bounces; what is left runs
+    /// one bounce per rendered frame ([`Renderer::render`]), so the light converges over frames.
+    pub fn settle_at_most(
+        &mut self,
+        max_bounces: u32,
+        mut progress: impl FnMut(u32, Option<f32>),
+    ) -> Result<u32> {
+        let start = self.stats_now.bounces_done;
+        loop {
+            if self.stats_now.bounces_done - start >= max_bounces && self.direct_valid {
+                return Ok(self.stats_now.bounces_done - start);
+            }
+            let p = self.update_light()?;
+            progress(self.stats_now.bounces_done, self.stats_now.last_change);
+            if !p.runs(Pass::Propagate) {
+                return Ok(self.stats_now.bounces_done - start);
+            }
+        }
+    }
+
+    /// Each tile's light state as this renderer holds it for `scene` (the scene it was made
+    /// for, or last updated to), to carry into the renderer of another scene that holds some of
+    /// the same tiles.
+    pub fn light_by_tile(&self, scene: &SceneData) -> Result<CarriedLight> {
+        self.pools.check_holds(scene, "light_by_tile")?;
+        let state = self.pools.read_light(&self.gpu, self.leaf_count)?;
+        let mut tiles = HashMap::new();
+        for t in self.pools.tiles() {
+            let range = t.leaf_offset as usize..(t.leaf_offset + t.leaf_count) as usize;
+            if let Some(leaves) = state.get(range) {
+                tiles.insert(key(t), leaves.to_vec());
+            }
+        }
+        Ok(CarriedLight { tiles })
+    }
+
+    /// Starts every tile of `scene` (this renderer's scene) that `carried` holds in the same form
+    /// (same place, depth and level) from the light it had there, instead of from none: tiles
+    /// that stay resident keep their converged light across a reload, and only what changed
+    /// needs bounces. Direct light, environment light and `out` are recomputed by the passes as
+    /// usual. Returns the leaves seeded. ([`Renderer::update_scene`] keeps the light in place
+    /// instead, with no read-back; this is for a renderer made anew.)
+    pub fn seed_light(&mut self, scene: &SceneData, carried: &CarriedLight) -> Result<usize> {
+        self.pools.check_holds(scene, "seed_light")?;
+        let mut seeded = 0;
+        let mut kept = vec![false; self.pools.tiles().len()];
+        for (t, k) in self.pools.tiles().iter().zip(&mut kept) {
+            if let Some(from) = carried.tiles.get(&key(t))
+                && from.len() == t.leaf_count as usize
+            {
+                self.pools.write_light(&self.gpu, t.leaf_offset, from);
+                seeded += from.len();
+                *k = true;
+            }
+        }
+        if seeded > 0 {
+            // Only the new tiles and what touches them need bounces (activity.rs).
+            self.activity.seed(&kept);
+            self.active_written = None;
+        }
+        Ok(seeded)
+    }
+
+    /// Finishes the last bounce where its read-back has arrived: its change decides which tiles
+    /// the next bounce updates, and whether the light converged. Returns whether no read-back is
+    /// pending any longer. Every call that plans (`draw`, `update_light`, `update_light_slice`)
+    /// calls it first, so in a browser a bounce that ended on an earlier frame is counted before
+    /// the next plan.
+    pub(super) fn poll_light(&mut self) -> Result<bool> {
+        let Some(read) = &self.bounce_readback else { return Ok(true) };
+        let Some(bytes) = read.take() else { return Ok(false) };
+        self.bounce_readback = None;
+        let bytes = bytes?;
+        let tiles = self.activity.tiles();
+        let bits = u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
+        self.stats_now.last_change = Some(f32::from_bits(bits));
+        self.stats_now.bounces_done += 1;
+        let change: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[16..16 + 4 * tiles]);
+        let work = self.activity.finish(&change, self.settings.convergence_tolerance);
+        self.stats_now.propagated_leaves += work.leaves;
+        self.bounce_work.push(work);
+        self.active_written = None;
+        Ok(true)
+    }
+
+    /// Each leaf's light state (direct, gather, out), for tests and the reference comparison.
+    #[cfg(feature = "test-hooks")]
+    pub fn read_leaf_light(&self) -> Result<Vec<LeafLightGpu>> {
+        self.pools.read_light(&self.gpu, self.leaf_count)
+    }
+
+    /// Overwrites each leaf's light state (tests: a known radiance field before a mip or gather).
+    #[cfg(feature = "test-hooks")]
+    pub fn write_leaf_light(&mut self, state: &[LeafLightGpu]) -> Result<()> {
+        if state.len() != self.leaf_count as usize {
+            return Err(crate::Error::Setting {
+                name: "leaf light",
+                problem: "length differs from the leaf count".into(),
+            });
+        }
+        self.pools.write_light(&self.gpu, 0, state);
+        self.stats_now.last_change = None;
+        self.set_all_active(Why::Start);
+        Ok(())
+    }
+
+    /// The six anisotropic values of every node (after a mip pass).
+    #[cfg(feature = "test-hooks")]
+    pub fn read_faces(&self) -> Result<Vec<[f32; 4]>> {
+        let n = self.node_count as usize * 6;
+        if self.settings.radiance_f16 {
+            let bytes = self.gpu.read_buffer(&self.faces, n as u64 * 8)?;
+            let halves: Vec<half::f16> = bytemuck::pod_collect_to_vec(&bytes[..n * 8]);
+            return Ok(halves.chunks_exact(4).map(|c| [0, 1, 2, 3].map(|k| c[k].to_f32())).collect());
+        }
+        let bytes = self.gpu.read_buffer(&self.faces, n as u64 * 16)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes[..n * 16]))
+    }
+
+    /// Runs only the mip pass (tests).
+    #[cfg(feature = "test-hooks")]
+    pub fn run_mip(&mut self) -> Result<()> {
+        let p =
+            EffectPlan { steps: vec![plan::Step { pass: Pass::Mip, run: true, reason: "requested".into() }] };
+        self.execute(&p, None, None)
+    }
+
+    /// Runs only mip + propagate, i.e. one bounce over every tile regardless of the plan (tests).
+    #[cfg(feature = "test-hooks")]
+    pub fn run_bounce(&mut self) -> Result<()> {
+        self.set_all_active(Why::Verify);
+        let p = EffectPlan {
+            steps: vec![
+                plan::Step { pass: Pass::Mip, run: true, reason: "requested".into() },
+                plan::Step { pass: Pass::Propagate, run: true, reason: "requested".into() },
+            ],
+        };
+        self.execute(&p, None, None)
+    }
+}
+
+/// Where the light stands ([`Renderer::light_progress`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct LightProgress {
+    pub bounces_done: u32,
+    pub bounce_budget: u32,
+    pub last_change: Option<f32>,
+    pub converged: bool,
+}
+
+impl LightProgress {
+    /// 0..=1 for an indicator: 1 when converged, else bounces done of the budget.
+    pub fn fraction(&self) -> f32 {
+        if self.converged {
+            1.0
+        } else {
+            (self.bounces_done as f32 / self.bounce_budget.max(1) as f32).min(0.99)
+        }
+    }
+}
+
+/// Light state per tile, keyed by where the tile is and at which level it is held
+/// ([`Renderer::light_by_tile`], [`Renderer::seed_light`]).
+#[derive(Clone, Debug, Default)]
+pub struct CarriedLight {
+    pub(super) tiles: HashMap<TileKey, Vec<LeafLightGpu>>,
+}
+
+impl CarriedLight {
+    /// Leaves held.
+    pub fn leaves(&self) -> usize {
+        self.tiles.values().map(Vec::len).sum()
+    }
+}

@@ -1,0 +1,426 @@
+//! The tile pools on the GPU and the uploads into them: a scene's tiles written in place of
+//! another's, only the forms new to the pools, the light of those that stay kept.
+
+use std::collections::{HashMap, HashSet};
+use std::ops::Range;
+
+use glam::{Mat4, Vec3};
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::gpu::Gpu;
+use crate::gpu::types::{ActiveTile, LeafGpu, LeafLightGpu, LightGpu, NodeGpu, Params, SurfelGpu, TileGpu};
+use crate::light::setup::LightSetup;
+use crate::passes::{self};
+use crate::render::pool::{PoolCaps, Pools, TileKey, key, merge_runs, surfel_owners};
+use crate::scene::data::SceneData;
+
+use crate::render::params::Lookup;
+use crate::render::params::tile_box;
+use crate::render::pool::Placement;
+
+/// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
+
+/// The tile pools on the GPU (tile records, nodes, leaves, leaf light, surfels, and the tile
+/// index in the lookup buffer) and where each resident tile form lives in them ([`Pools`]).
+#[derive(Debug)]
+pub(super) struct TilePools {
+    slots: Pools,
+    /// The resident tiles as the GPU holds them (offsets into the pools), and each one's surfels.
+    tiles: Vec<TileGpu>,
+    tile_surfels: Vec<Range<u32>>,
+    /// Tiles may be culled by their boxes (their surfels lie in them: false for a scene put
+    /// together by hand, whose surfels all count as its first tile's).
+    cull_tiles: bool,
+    tiles_buf: wgpu::Buffer,
+    nodes_buf: wgpu::Buffer,
+    leaves_buf: wgpu::Buffer,
+    leaf_light: wgpu::Buffer,
+    surfels: wgpu::Buffer,
+    /// The lookup buffer (rock, light grid, tile index: lookup.wgsl), and the byte where the tile
+    /// index starts in it (it runs to the end of the buffer).
+    lookup: wgpu::Buffer,
+    index_offset: u64,
+}
+
+/// What [`TilePools::place`] wrote, for the renderer to follow.
+pub(super) struct PlacedScene {
+    pub(super) update: SceneUpdate,
+    /// Per tile of the new scene: its light was kept (in place or carried through a repack).
+    pub(super) light_kept: Vec<bool>,
+    /// Boxes of the tile forms that came or went (shadow faces that see one are drawn again).
+    pub(super) changed: Vec<(Vec3, Vec3)>,
+}
+
+impl TilePools {
+    /// The pools of a new renderer: `placed` is where fresh pools put its scene, `up` holds the
+    /// buffers with that scene written at their start.
+    pub(super) fn new(
+        slots: Pools,
+        placed: Placement,
+        cull_tiles: bool,
+        up: &Upload,
+        index_offset: u64,
+    ) -> Self {
+        Self {
+            slots,
+            tile_surfels: placed.slots.iter().map(|s| s.surfels.clone()).collect(),
+            tiles: placed.tiles,
+            cull_tiles,
+            tiles_buf: up.tiles.clone(),
+            nodes_buf: up.nodes.clone(),
+            leaves_buf: up.leaves.clone(),
+            leaf_light: up.leaf_light.clone(),
+            surfels: up.surfels.clone(),
+            lookup: up.lookup.clone(),
+            index_offset,
+        }
+    }
+
+    /// The resident tiles, as the GPU holds them.
+    pub(super) fn tiles(&self) -> &[TileGpu] {
+        &self.tiles
+    }
+
+    /// The surfel pool the splat passes draw from.
+    pub(super) fn surfels(&self) -> &wgpu::Buffer {
+        &self.surfels
+    }
+
+    /// The pools' capacities.
+    pub(super) fn caps(&self) -> PoolCaps {
+        self.slots.caps()
+    }
+
+    /// Leaves in use (the end of the last leaf slot).
+    pub(super) fn leaf_end(&self) -> u32 {
+        self.slots.leaf_end()
+    }
+
+    /// Nodes in use (the end of the last node slot).
+    #[cfg(feature = "test-hooks")]
+    pub(super) fn node_end(&self) -> u32 {
+        self.slots.slots().values().map(|s| s.nodes.end).max().unwrap_or(0)
+    }
+
+    /// Makes the next [`TilePools::place`] repack every slot.
+    pub(super) fn repack_next(&mut self) {
+        self.slots.repack_next();
+    }
+
+    /// An error unless `scene` holds these tiles in the same forms, in order.
+    pub(super) fn check_holds(&self, scene: &SceneData, what: &'static str) -> Result<()> {
+        let same = scene.tiles.len() == self.tiles.len()
+            && scene.tiles.iter().zip(&self.tiles).all(|(a, b)| key(a) == key(b));
+        if same {
+            Ok(())
+        } else {
+            Err(Error::Internal { what, message: "not the scene this renderer holds".into() })
+        }
+    }
+
+    /// The light state of leaves `0..n`, read back.
+    pub(super) fn read_light(&self, gpu: &Gpu, n: u32) -> Result<Vec<LeafLightGpu>> {
+        let size = size_of::<LeafLightGpu>();
+        let bytes = gpu.read_buffer(&self.leaf_light, u64::from(n) * size as u64)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes[..n as usize * size]))
+    }
+
+    /// Writes the light state of leaves from `first_leaf` on.
+    pub(super) fn write_light(&self, gpu: &Gpu, first_leaf: u32, light: &[LeafLightGpu]) {
+        let at = u64::from(first_leaf) * size_of::<LeafLightGpu>() as u64;
+        gpu.queue.write_buffer(&self.leaf_light, at, bytemuck::cast_slice(light));
+    }
+
+    /// The surfel ranges of the tiles a view of `view_proj` may see, merged (every resident surfel
+    /// where tiles cannot be culled, or without a view).
+    pub(super) fn runs_seen(&self, view_proj: Option<&Mat4>, leaf_size_m: f32) -> Vec<Range<u32>> {
+        let seen = |t: &TileGpu| match view_proj {
+            Some(m) if self.cull_tiles => {
+                let (lo, hi) = tile_box(t, leaf_size_m);
+                crate::view::camera::sees_box(m, lo, hi)
+            }
+            _ => true,
+        };
+        merge_runs(
+            self.tiles
+                .iter()
+                .zip(&self.tile_surfels)
+                .filter(|(t, _)| seen(t))
+                .map(|(_, r)| r.clone())
+                .collect(),
+        )
+    }
+
+    /// Places `scene`, another residency of the same package, in these pools: the tile forms
+    /// already resident keep their slots and light; only the new forms are written (pool.rs), with
+    /// the tile records and the tile index. `None`, with nothing changed, when the scene cannot
+    /// replace this one in place (over the pools, tiles put together by hand, a tile index that
+    /// outgrows its room).
+    pub(super) fn place(
+        &mut self,
+        gpu: &Gpu,
+        scene: &SceneData,
+        leaf_size_m: f32,
+    ) -> Result<Option<PlacedScene>> {
+        let (owners, exact) = surfel_owners(scene);
+        if !exact || !self.cull_tiles || !self.slots.caps().holds(&PoolCaps::of(scene)) {
+            return Ok(None);
+        }
+        let index = crate::scene::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
+        if 4 * index.words.len() as u64 > self.lookup.size() - self.index_offset {
+            return Ok(None);
+        }
+        let old_slots = self.slots.slots().clone();
+        let old_leaf_end = self.slots.leaf_end();
+        let placed = self.slots.place(scene, &owners)?;
+        // The light of the forms that stayed, where a repack moved them: read back before
+        // anything is written.
+        let moved: HashMap<TileKey, Vec<LeafLightGpu>> = if placed.repacked {
+            let state = self.read_light(gpu, old_leaf_end)?;
+            placed
+                .tiles
+                .iter()
+                .filter_map(|t| {
+                    let s = old_slots.get(&key(t))?;
+                    Some((key(t), state.get(s.leaves.start as usize..s.leaves.end as usize)?.to_vec()))
+                })
+                .collect()
+        } else {
+            HashMap::new()
+        };
+        let (update, light_kept) = self.write_tiles(gpu, scene, &owners, &placed, &moved, &index);
+        // Tile forms that came or went.
+        let new_keys: HashSet<TileKey> = placed.tiles.iter().map(key).collect();
+        let changed: Vec<(Vec3, Vec3)> = self
+            .tiles
+            .iter()
+            .filter(|t| !new_keys.contains(&key(t)))
+            .chain(placed.tiles.iter().filter(|t| !old_slots.contains_key(&key(t))))
+            .map(|t| tile_box(t, leaf_size_m))
+            .collect();
+        self.tile_surfels = placed.slots.iter().map(|s| s.surfels.clone()).collect();
+        self.tiles = placed.tiles;
+        Ok(Some(PlacedScene { update, light_kept, changed }))
+    }
+
+    /// Writes the forms new to the pools (their nodes re-indexed to their slots, leaves, light and
+    /// surfels), then the tile records and the tile index; returns what was written and, per tile,
+    /// whether its light was kept.
+    fn write_tiles(
+        &self,
+        gpu: &Gpu,
+        scene: &SceneData,
+        owners: &[Range<u32>],
+        placed: &Placement,
+        moved: &HashMap<TileKey, Vec<LeafLightGpu>>,
+        index: &crate::scene::tile_index::TileIndex,
+    ) -> (SceneUpdate, Vec<bool>) {
+        let write = |buf: &wgpu::Buffer, at: u64, bytes: &[u8]| {
+            if !bytes.is_empty() {
+                gpu.queue.write_buffer(buf, at, bytes);
+            }
+            bytes.len() as u64
+        };
+        let mut update =
+            SceneUpdate { repacked: placed.repacked, freed_tiles: placed.freed, ..Default::default() };
+        let mut light_kept = placed.kept.clone();
+        for (i, (t, at)) in scene.tiles.iter().zip(&placed.tiles).enumerate() {
+            if placed.kept[i] {
+                update.kept_tiles += 1;
+                update.carried_leaves += t.leaf_count as usize;
+                continue;
+            }
+            update.uploaded_tiles += 1;
+            let (n0, l0) = (t.node_offset as usize, t.leaf_offset as usize);
+            let leaf_level = t.depth - t.leaf_lod;
+            // Indices inside the tile move with it: to its nodes for inner nodes, to its leaves
+            // for the nodes at its leaf level.
+            let nodes: Vec<NodeGpu> = scene.nodes[n0..n0 + t.node_count as usize]
+                .iter()
+                .map(|n| {
+                    let first_child = if n.level() == leaf_level {
+                        n.first_child.wrapping_sub(t.leaf_offset).wrapping_add(at.leaf_offset)
+                    } else {
+                        n.first_child.wrapping_sub(t.node_offset).wrapping_add(at.node_offset)
+                    };
+                    NodeGpu { first_child, ..*n }
+                })
+                .collect();
+            let leaves = &scene.leaves[l0..l0 + t.leaf_count as usize];
+            let light = match moved.get(&key(t)) {
+                Some(l) if l.len() == leaves.len() => {
+                    light_kept[i] = true;
+                    update.carried_leaves += l.len();
+                    l.clone()
+                }
+                _ => initial_light(leaves),
+            };
+            let surfels = &scene.surfels[owners[i].start as usize..owners[i].end as usize];
+            let slot = &placed.slots[i];
+            update.upload_bytes += write(
+                &self.nodes_buf,
+                u64::from(at.node_offset) * size_of::<NodeGpu>() as u64,
+                bytemuck::cast_slice(&nodes),
+            ) + write(
+                &self.leaves_buf,
+                u64::from(at.leaf_offset) * size_of::<LeafGpu>() as u64,
+                bytemuck::cast_slice(leaves),
+            ) + write(
+                &self.leaf_light,
+                u64::from(at.leaf_offset) * size_of::<LeafLightGpu>() as u64,
+                bytemuck::cast_slice(&light),
+            ) + write(
+                &self.surfels,
+                u64::from(slot.surfels.start) * size_of::<SurfelGpu>() as u64,
+                bytemuck::cast_slice(surfels),
+            );
+        }
+        update.upload_bytes += write(&self.tiles_buf, 0, bytemuck::cast_slice(&placed.tiles))
+            + write(&self.lookup, self.index_offset, bytemuck::cast_slice(&index.words));
+        (update, light_kept)
+    }
+}
+
+pub(super) const STORAGE: wgpu::BufferUsages =
+    wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC).union(wgpu::BufferUsages::COPY_DST);
+
+/// The buffers every pass shares, uploaded once: the static scene (bind group 0), the light state
+/// (group 1), and the surfels the splat passes draw.
+pub(super) struct Upload {
+    pub(super) params: wgpu::Buffer,
+    pub(super) tiles: wgpu::Buffer,
+    pub(super) nodes: wgpu::Buffer,
+    pub(super) leaves: wgpu::Buffer,
+    pub(super) lookup: wgpu::Buffer,
+    #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
+    pub(super) leaf_light: wgpu::Buffer,
+    #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
+    pub(super) faces: wgpu::Buffer,
+    pub(super) active: wgpu::Buffer,
+    /// The bounce's largest change (16 bytes: the f32 bits, then padding), then each tile's.
+    pub(super) changes: wgpu::Buffer,
+    pub(super) surfels: wgpu::Buffer,
+    pub(super) shared: passes::Shared,
+    /// GPU bytes of all of them.
+    pub(super) bytes: u64,
+}
+
+impl Upload {
+    /// The buffers, the tile data in pools of `caps` elements with `scene` at their start (as
+    /// fresh pools place it: pool.rs).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn new(
+        gpu: &Gpu,
+        scene: &SceneData,
+        caps: PoolCaps,
+        lights: &LightSetup,
+        lookup: &Lookup,
+        shadow_atlas: &wgpu::TextureView,
+        base_params: &Params,
+        f16: bool,
+    ) -> Result<Self> {
+        let params = gpu.buffer_init(
+            "params",
+            bytemuck::bytes_of(base_params),
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        )?;
+        // A pool: `n` elements of `T`, the first ones written from `data`.
+        fn pool<T: bytemuck::Pod>(
+            gpu: &Gpu,
+            label: &str,
+            n: u64,
+            data: &[T],
+            usage: wgpu::BufferUsages,
+        ) -> Result<wgpu::Buffer> {
+            let b = gpu.buffer(label, n.max(data.len() as u64).max(1) * size_of::<T>() as u64, usage)?;
+            if !data.is_empty() {
+                gpu.queue.write_buffer(&b, 0, bytemuck::cast_slice(data));
+            }
+            Ok(b)
+        }
+        let leaf_light = pool(gpu, "leaf light", caps.leaves, &initial_light(&scene.leaves), STORAGE)?;
+        let face_bytes = if f16 { 8 } else { 16 };
+        let faces = gpu.buffer("faces", caps.nodes.max(1) * 6 * face_bytes, STORAGE)?;
+        // A 16-byte header, then at most every tile.
+        let active =
+            gpu.buffer("active tiles", 16 + size_of::<ActiveTile>() as u64 * caps.tiles.max(1), STORAGE)?;
+        let changes = gpu.buffer("changes", 16 + 4 * caps.tiles.max(1), STORAGE)?;
+        let lookup = gpu.buffer_init("lookup", bytemuck::cast_slice(&lookup.words), STORAGE)?;
+        let surfels = pool(
+            gpu,
+            "surfels",
+            caps.surfels,
+            &scene.surfels,
+            wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let tiles = pool(gpu, "tiles", caps.tiles, &scene.tiles, STORAGE)?;
+        let nodes = pool(gpu, "nodes", caps.nodes, &scene.nodes, STORAGE)?;
+        let leaves = pool(gpu, "leaves", caps.leaves, &scene.leaves, STORAGE)?;
+        // The shadow faces' matrices follow the lights, one 64-byte record each (lights.wgsl).
+        let mut light_records: Vec<LightGpu> = lights.lights.clone();
+        light_records.extend(lights.faces.iter().map(|f| {
+            let [c0, c1, c2, c3] = f.view_proj.to_cols_array_2d();
+            LightGpu { position_kind: c0, intensity_layer: c1, direction_cos_outer: c2, params: c3 }
+        }));
+        let static_buffers = [
+            (0, params.clone()),
+            (1, tiles.clone()),
+            (2, nodes.clone()),
+            (3, leaves.clone()),
+            (4, gpu.buffer_init("lights", bytemuck::cast_slice(&light_records), STORAGE)?),
+            (7, lookup.clone()),
+        ];
+        let mut shared = passes::Shared::default();
+        let mut bytes = surfels.size();
+        for (binding, b) in static_buffers {
+            bytes += b.size();
+            shared.insert(0, binding, passes::Resource::Buffer(b));
+        }
+        shared.insert(0, 6, passes::Resource::Texture(shadow_atlas.clone()));
+        for (binding, b) in [(0, &leaf_light), (1, &faces), (3, &active), (4, &changes)] {
+            bytes += b.size();
+            shared.insert(1, binding, passes::Resource::Buffer(b.clone()));
+        }
+
+        Ok(Upload {
+            params,
+            tiles,
+            nodes,
+            leaves,
+            lookup,
+            leaf_light,
+            faces,
+            active,
+            changes,
+            surfels,
+            shared,
+            bytes,
+        })
+    }
+}
+
+/// The light state leaves start from: out = emission (no direct light, no gather yet).
+pub(super) fn initial_light(leaves: &[LeafGpu]) -> Vec<LeafLightGpu> {
+    leaves.iter().map(|l| LeafLightGpu { out: l.emission, ..Default::default() }).collect()
+}
+
+/// What [`Renderer::update_scene`] did.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SceneUpdate {
+    /// Tiles written to the pools (forms new to them), and tiles that kept their slot and light.
+    pub uploaded_tiles: usize,
+    pub kept_tiles: usize,
+    /// Tile forms that left the pools.
+    pub freed_tiles: usize,
+    /// The free space was too fragmented for the new forms: every tile was written again, the
+    /// light of those that stayed read back and carried to their new slots.
+    pub repacked: bool,
+    /// Bytes written to the GPU: the new forms' nodes, leaves, light and surfels, the tile table,
+    /// tile index and mip order.
+    pub upload_bytes: u64,
+    /// Leaves that kept their light (in place, or carried through a repack).
+    pub carried_leaves: usize,
+    /// Shadow faces that see a changed tile (drawn again by the next shadow pass).
+    pub shadow_faces: usize,
+}
