@@ -141,8 +141,26 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
     } else {
         format!("{} point, {} spot lights", i.point_lights, i.spot_lights)
     };
-    let mut steps = Vec::new();
-    let shadow = if analytic == 0 {
+    let env = env_step(i);
+    let propagate = propagate_step(i, analytic);
+    let mut steps = vec![shadow_step(i, analytic, &lights_text), inject_step(i, analytic, &lights_text)];
+    steps.push(mip_step(i, &propagate, &env));
+    steps.push(env);
+    steps.push(Step { pass: Pass::Propagate, run: propagate.0, reason: propagate.1 });
+    steps.push(gbuffer_step(i));
+    steps.push(shade_step(i));
+    if let Some(view) = i.plain_view {
+        for s in steps.iter_mut().filter(|s| s.run && !matches!(s.pass, Pass::Gbuffer | Pass::Shade)) {
+            s.run = false;
+            s.reason = format!("the {view} view shows no light (else: {})", s.reason);
+        }
+    }
+    EffectPlan { steps }
+}
+
+/// Shadow maps: drawn when lights with maps changed.
+fn shadow_step(i: &PlanInputs, analytic: usize, lights_text: &str) -> Step {
+    if analytic == 0 {
         Step { pass: Pass::Shadow, run: false, reason: "no point or spot lights".into() }
     } else if !i.shadows_enabled {
         Step { pass: Pass::Shadow, run: false, reason: "shadows disabled".into() }
@@ -169,9 +187,12 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
                 i.shadowed, i.shadow_budget
             ),
         }
-    };
-    steps.push(shadow);
-    steps.push(if analytic == 0 {
+    }
+}
+
+/// Injection: direct light into the leaves, when lights changed.
+fn inject_step(i: &PlanInputs, analytic: usize, lights_text: &str) -> Step {
+    if analytic == 0 {
         Step {
             pass: Pass::Inject,
             run: false,
@@ -192,8 +213,12 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
                 i.lights_in_range.0, i.lights_in_range.1
             ),
         }
-    });
-    let env = if !i.environment {
+    }
+}
+
+/// The environment pass: sky light through the openings, when there is an environment map.
+fn env_step(i: &PlanInputs) -> Step {
+    if !i.environment {
         Step { pass: Pass::Env, run: false, reason: "no environment map".into() }
     } else if i.env_valid {
         Step {
@@ -207,7 +232,12 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
             run: true,
             reason: "environment map: SH irradiance through the openings the cones find".into(),
         }
-    };
+    }
+}
+
+/// Whether a bounce runs, and why: the budget, light in the scene, convergence, tiles pending,
+/// a viewer holding the light, a bounce under way in slices.
+fn propagate_step(i: &PlanInputs, analytic: usize) -> (bool, String) {
     let any_light = analytic > 0 || i.emissive_leaves || i.environment || i.ambient;
     let propagate = if i.bounce_budget == 0 {
         (false, "bounce budget is 0 (direct light only)".to_string())
@@ -238,7 +268,7 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
     } else {
         (true, format!("bounce {} of {}", i.bounces_done + 1, i.bounce_budget))
     };
-    let propagate = match (propagate.0, i.light_held, i.bounce_part) {
+    match (propagate.0, i.light_held, i.bounce_part) {
         (true, Some(why), _) => (false, format!("{why}: bounce {} waits", i.bounces_done + 1)),
         (true, None, Some((next, of))) => (
             true,
@@ -249,10 +279,14 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
             ),
         ),
         _ => propagate,
-    };
+    }
+}
+
+/// The mip pass: the radiance pyramid, for a bounce that starts or for the env pass.
+fn mip_step(i: &PlanInputs, propagate: &(bool, String), env: &Step) -> Step {
     // A sliced bounce gathers from the pyramid its mip made.
     let mid_bounce = i.bounce_part.is_some();
-    steps.push(Step {
+    Step {
         pass: Pass::Mip,
         run: (propagate.0 && !mid_bounce) || env.run,
         reason: if propagate.0 && mid_bounce {
@@ -264,17 +298,23 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
         } else {
             propagate.1.clone()
         },
-    });
-    steps.push(env);
-    steps.push(Step { pass: Pass::Propagate, run: propagate.0, reason: propagate.1 });
-    steps.push(if !i.frame {
+    }
+}
+
+/// The G-buffer: drawn when the camera, the size or what is drawn changed.
+fn gbuffer_step(i: &PlanInputs) -> Step {
+    if !i.frame {
         Step { pass: Pass::Gbuffer, run: false, reason: "light update only, no image requested".into() }
     } else if i.gbuffer_valid {
         Step { pass: Pass::Gbuffer, run: false, reason: "camera and size unchanged".into() }
     } else {
         Step { pass: Pass::Gbuffer, run: true, reason: "camera, size or what is drawn changed".into() }
-    });
-    steps.push(if i.frame {
+    }
+}
+
+/// Shading: every frame that asks for an image.
+fn shade_step(i: &PlanInputs) -> Step {
+    if i.frame {
         let reason = if i.specular_materials > 0 {
             format!(
                 "image requested; specular cones for {} specular materials ({} surfels)",
@@ -286,14 +326,7 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
         Step { pass: Pass::Shade, run: true, reason }
     } else {
         Step { pass: Pass::Shade, run: false, reason: "light update only, no image requested".into() }
-    });
-    if let Some(view) = i.plain_view {
-        for s in steps.iter_mut().filter(|s| s.run && !matches!(s.pass, Pass::Gbuffer | Pass::Shade)) {
-            s.run = false;
-            s.reason = format!("the {view} view shows no light (else: {})", s.reason);
-        }
     }
-    EffectPlan { steps }
 }
 
 #[cfg(test)]

@@ -183,16 +183,7 @@ impl Renderer {
         let (lo, hi) = scene.bounds_leaf();
         let leaf = scene.leaf_size_m.max(1e-6);
         let scene_diag_m = ((hi - lo) * leaf).length().max(leaf);
-        // The light grid over the scene with one leaf of slack on every side.
-        let near = (0.05 * leaf).max(1e-4);
-        let lights = LightSetup::new(
-            scene,
-            &settings,
-            near,
-            scene_diag_m * 2.0 + 1.0,
-            (lo - 1.0) * leaf,
-            (hi + 1.0) * leaf,
-        );
+        let lights = light_setup(scene, &settings, scene_diag_m);
         let environment_on = scene.environment_sh.is_some() && settings.environment;
         let chain = scene.env_chain.as_ref().filter(|_| environment_on);
         let (materials, specular_materials, specular_surfels) = material_slots(scene, &settings);
@@ -372,4 +363,12 @@ pub(super) struct View {
     pub(super) camera: Camera,
     pub(super) targets: gbuffer::Targets,
     pub(super) outputs: shade::Outputs,
+}
+
+/// The scene's light setup, its light grid over the scene with one leaf of slack on every side.
+fn light_setup(scene: &SceneData, settings: &Settings, scene_diag_m: f32) -> LightSetup {
+    let (lo, hi) = scene.bounds_leaf();
+    let leaf = scene.leaf_size_m.max(1e-6);
+    let near = (0.05 * leaf).max(1e-4);
+    LightSetup::new(scene, settings, near, scene_diag_m * 2.0 + 1.0, (lo - 1.0) * leaf, (hi + 1.0) * leaf)
 }
