@@ -13,6 +13,7 @@ use crate::cli::image_out;
 use crate::error::{Error, Result};
 use crate::gpu::{Gpu, GpuOptions};
 use crate::light::plan::EffectPlan;
+use crate::render::{Frame, SceneUpdate};
 use crate::render::{PassStats, Renderer};
 use crate::scene::data::{SceneData, TileMode};
 use crate::settings::{ClipBox, Settings};
@@ -206,7 +207,7 @@ pub struct FrameReport {
     /// whether the pools were repacked; None where the tiles did not change. A change the pools
     /// could not take in place (a scene whose lights or bounds differ) makes a new renderer and
     /// reports `made_anew`.
-    pub update: Option<crate::render::SceneUpdate>,
+    pub update: Option<SceneUpdate>,
     pub made_anew: bool,
     /// Changes of tile form left for later frames by `--upload-per-frame`.
     pub deferred: usize,
@@ -478,41 +479,14 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let mut uncovered_pixels = 0;
     let mut black_pixels = 0;
     let mut frames = Vec::new();
-    let f16 = settings.radiance_f16;
-    let full = |r: &Residency| -> std::collections::BTreeSet<usize> {
-        r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect()
-    };
     // The next frame's tiles are chosen and read from the package on a loader thread while
     // this frame renders, so a frame waits only for what the loader has not finished.
     for (i, cam) in cameras.iter().enumerate() {
-        let (mut loaded, mut evicted, mut bounces, mut carried_leaves) = (0, 0, 0, 0);
-        let mut load_wait_ms = 0.0;
-        let (mut update, mut made_anew, mut deferred) = (None, false, 0);
+        let mut change = TileChange::default();
         if i == 0 {
-            bounces = r.stats().bounces_done;
+            change.bounces = r.stats().bounces_done;
         } else if let Some(f) = &mut follow {
-            let t_wait = Instant::now();
-            if let Some(arrived) = f.wait()? {
-                load_wait_ms = t_wait.elapsed().as_secs_f64() * 1e3;
-                deferred = arrived.deferred;
-                // Where the tiles differ, the new scene replaces the old one in the renderer's
-                // pools (only the new tile forms are written; the others keep their place and
-                // light), and its light is settled again from there.
-                if let Some(new_scene) = arrived.scene {
-                    let (before, after) = (full(f.current()), full(&arrived.residency));
-                    loaded = after.difference(&before).count();
-                    evicted = before.difference(&after).count();
-                    let swapped = crate::stream::swap_tiles(&gpu, &mut r, &mut scene, new_scene)?;
-                    (update, made_anew, carried_leaves) =
-                        (swapped.update, swapped.made_anew, swapped.carried_leaves);
-                    let report = |done, change| progress(Progress::Bounce { done, budget, change });
-                    bounces = match opts.frame_bounces {
-                        Some(n) => r.settle_at_most(n, report)?,
-                        None => r.settle(report)?,
-                    };
-                }
-                f.accept(arrived.residency);
-            }
+            change = follow_tiles(f, &gpu, &mut r, &mut scene, opts.frame_bounces, &mut progress)?;
         }
         if let (Some(f), Some(next_cam)) = (&mut follow, cameras.get(i + 1)) {
             f.request(next_cam, clip, scene.lights.clone(), scene.headlamp);
@@ -521,7 +495,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         let before_render = r.stats().bounces_done;
         let (mut frame, plan) = r.render(cam, opts.width, opts.height)?;
         // A progressive bounce run by the frame itself.
-        bounces += r.stats().bounces_done - before_render;
+        change.bounces += r.stats().bounces_done - before_render;
         last_plan = plan;
         // Views without light are not exposed.
         if opts.exposure.is_none() && i == 0 && settings.view.shows_light() {
@@ -530,39 +504,10 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             r.set_exposure(exposure);
             frame = r.render(cam, opts.width, opts.height)?.0;
         }
-        uncovered_pixels = uncovered_pixels.max(frame.hdr.iter().filter(|p| p[3] < 0.5).count());
-        black_pixels = black_pixels.max(
-            frame
-                .hdr
-                .iter()
-                .zip(&frame.ldr)
-                .filter(|(h, l)| h[3] >= 0.5 && l[0].max(l[1]).max(l[2]) <= BLACK_LDR)
-                .count(),
-        );
-        let bounce_work = r.take_bounce_work();
-        frames.push(FrameReport {
-            frame: i as u32,
-            tile_bytes: scene.tile_bytes(f16),
-            full_tiles: current.map_or(scene.tiles.len(), |r| r.totals.full_tiles),
-            coarse_tiles: current.map_or(0, |r| r.totals.coarse_tiles),
-            far_tiles: current.map_or(0, |r| r.totals.far_tiles),
-            loaded,
-            evicted,
-            surfels: scene.surfels.len(),
-            bounces,
-            carried_leaves,
-            propagated_tiles: bounce_work.iter().map(|w| w.tiles).sum(),
-            propagated_leaves: bounce_work.iter().map(|w| w.leaves).sum(),
-            bounce_work,
-            pool_bytes: r.pool_bytes(),
-            update,
-            made_anew,
-            deferred,
-            shadow_faces: r.take_shadow_faces_drawn(),
-            shadow_faces_total: r.shadow_face_count(),
-            load_wait_ms,
-            pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
-        });
+        let (uncovered, black) = uncovered_and_black(&frame);
+        uncovered_pixels = uncovered_pixels.max(uncovered);
+        black_pixels = black_pixels.max(black);
+        frames.push(frame_report(i as u32, &scene, current, change, &mut r));
         let path = frame_path(&opts.out, i as u32, n);
         image_out::write_frame(&frame, &path)?;
         images.push(path.display().to_string());
@@ -705,5 +650,102 @@ mod tests {
             let e = clip_in_frame(bad, frame).unwrap_err();
             assert!(matches!(e, Error::Setting { name: "clip", .. }), "{e}");
         }
+    }
+}
+
+/// What the tiles' loader brought before a frame, and what the renderer did with it.
+#[derive(Debug, Default)]
+struct TileChange {
+    loaded: usize,
+    evicted: usize,
+    bounces: u32,
+    carried_leaves: usize,
+    load_wait_ms: f64,
+    update: Option<SceneUpdate>,
+    made_anew: bool,
+    deferred: usize,
+}
+
+/// Waits for the residency the loader thread was asked for; where its tiles differ, the new scene
+/// replaces the old one in the renderer's pools (only the new tile forms are written; the others
+/// keep their place and light), and its light is settled again from there.
+fn follow_tiles(
+    f: &mut crate::stream::follow::Follow,
+    gpu: &Gpu,
+    r: &mut Renderer,
+    scene: &mut SceneData,
+    frame_bounces: Option<u32>,
+    progress: &mut impl FnMut(Progress),
+) -> Result<TileChange> {
+    let full = |r: &Residency| -> std::collections::BTreeSet<usize> {
+        r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect()
+    };
+    let mut change = TileChange::default();
+    let t_wait = Instant::now();
+    let Some(arrived) = f.wait()? else { return Ok(change) };
+    change.load_wait_ms = t_wait.elapsed().as_secs_f64() * 1e3;
+    change.deferred = arrived.deferred;
+    if let Some(new_scene) = arrived.scene {
+        let (before, after) = (full(f.current()), full(&arrived.residency));
+        change.loaded = after.difference(&before).count();
+        change.evicted = before.difference(&after).count();
+        let swapped = crate::stream::swap_tiles(gpu, r, scene, new_scene)?;
+        (change.update, change.made_anew, change.carried_leaves) =
+            (swapped.update, swapped.made_anew, swapped.carried_leaves);
+        let budget = r.settings().bounces;
+        let report = |done, change| progress(Progress::Bounce { done, budget, change });
+        change.bounces = match frame_bounces {
+            Some(n) => r.settle_at_most(n, report)?,
+            None => r.settle(report)?,
+        };
+    }
+    f.accept(arrived.residency);
+    Ok(change)
+}
+
+/// Pixels no surfel covers, and covered pixels tonemapped to black.
+fn uncovered_and_black(frame: &Frame) -> (usize, usize) {
+    let uncovered = frame.hdr.iter().filter(|p| p[3] < 0.5).count();
+    let black = frame
+        .hdr
+        .iter()
+        .zip(&frame.ldr)
+        .filter(|(h, l)| h[3] >= 0.5 && l[0].max(l[1]).max(l[2]) <= BLACK_LDR)
+        .count();
+    (uncovered, black)
+}
+
+/// What a frame of a path did: the tiles held and loaded, the bounces run, what was uploaded and
+/// drawn, and its passes' times.
+fn frame_report(
+    frame: u32,
+    scene: &SceneData,
+    current: Option<&Residency>,
+    change: TileChange,
+    r: &mut Renderer,
+) -> FrameReport {
+    let bounce_work = r.take_bounce_work();
+    FrameReport {
+        frame,
+        tile_bytes: scene.tile_bytes(r.settings().radiance_f16),
+        full_tiles: current.map_or(scene.tiles.len(), |r| r.totals.full_tiles),
+        coarse_tiles: current.map_or(0, |r| r.totals.coarse_tiles),
+        far_tiles: current.map_or(0, |r| r.totals.far_tiles),
+        loaded: change.loaded,
+        evicted: change.evicted,
+        surfels: scene.surfels.len(),
+        bounces: change.bounces,
+        carried_leaves: change.carried_leaves,
+        propagated_tiles: bounce_work.iter().map(|w| w.tiles).sum(),
+        propagated_leaves: bounce_work.iter().map(|w| w.leaves).sum(),
+        bounce_work,
+        pool_bytes: r.pool_bytes(),
+        update: change.update,
+        made_anew: change.made_anew,
+        deferred: change.deferred,
+        shadow_faces: r.take_shadow_faces_drawn(),
+        shadow_faces_total: r.shadow_face_count(),
+        load_wait_ms: change.load_wait_ms,
+        pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
     }
 }

@@ -11,13 +11,13 @@ use std::collections::BTreeMap;
 use glam::{DVec3, IVec3, Vec3};
 use grotto_format::color::srgb8_to_linear;
 use grotto_format::spec::Rgba8;
-use grotto_format::spec::{ShRgb9, Surfel, SvoNode};
+use grotto_format::spec::{Surfel, SvoNode};
 use grotto_format::svo::{morton_decode, morton_encode, nodes_from_leaves};
-use grotto_format::{LightShape, Package, Scope, SectionKind, SvoData};
+use grotto_format::{Package, SectionKind, SvoData};
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::gpu::types::{LeafGpu, MipRange, NodeGpu, SurfelGpu, TileBufferBytes, TileGpu};
-use crate::scene::coarse::{COARSE_LEVELS, CoarseLevel, FAR_LEVELS, coarse_level, gpu_tile};
+use crate::scene::coarse::{COARSE_LEVELS, FAR_LEVELS};
 
 /// A point or spot light in frame coordinates.
 #[derive(Clone, Debug, PartialEq)]
@@ -180,7 +180,7 @@ pub const MAX_ENV_LEVELS: usize = grotto_format::spec::MAX_ENV_MIP_LEVELS;
 /// Decodes environment `index`'s prefiltered BC6H chain (checked by `Package::env_chain`, whose
 /// rules bound the atlas by the blocks it holds) on the CPU (bcdec_rs: not every adapter samples
 /// BC6H, and the chain is small), scaled by `intensity`. None when the package has no chain.
-fn read_env_chain(pkg: &Package, index: u32, intensity: f32) -> Result<Option<EnvChain>> {
+pub(crate) fn read_env_chain(pkg: &Package, index: u32, intensity: f32) -> Result<Option<EnvChain>> {
     let Some(chain) = pkg.env_chain(index)? else { return Ok(None) };
     let (width, height) = (chain.atlas_width(), chain.atlas_height());
     let table: Vec<(u32, u32, u32, f32)> = chain
@@ -214,7 +214,7 @@ fn read_env_chain(pkg: &Package, index: u32, intensity: f32) -> Result<Option<En
 
 /// A tile's leaves in the frame (`origin_leaf`: the tile's corner in frame leaves of `leaf_m`).
 /// `SvoData` has one attribute per leaf node (checked on read), so indexing cannot fail.
-fn full_leaves(svo: &SvoData<'_>, depth: u32, origin_leaf: IVec3, leaf_m: f32) -> Vec<LeafGpu> {
+pub(crate) fn full_leaves(svo: &SvoData<'_>, depth: u32, origin_leaf: IVec3, leaf_m: f32) -> Vec<LeafGpu> {
     let emission = svo.emission.as_deref();
     let leaf_nodes = svo.nodes.iter().filter(|n| u32::from(n.level) == depth);
     leaf_nodes
@@ -248,7 +248,7 @@ fn full_leaves(svo: &SvoData<'_>, depth: u32, origin_leaf: IVec3, leaf_m: f32) -
 /// its cones started half a leaf nearer to or farther from it than on a wall through the cell's
 /// middle (issue 21: moving a room by a fraction of a leaf changed its first bounce by 4%).
 /// Leaves with no surfel (none in their cell) keep the cell's centre.
-fn move_leaves_to_surfels(
+pub(crate) fn move_leaves_to_surfels(
     leaves: &mut [LeafGpu],
     svo: &SvoData<'_>,
     depth: u32,
@@ -320,7 +320,7 @@ pub fn frame_of(pkg: &Package) -> Result<Option<([f64; 3], f64)>> {
 /// Each surfel's scan index (format 1.2: the tile's surfel-scans section), or [`NO_SCAN`] for
 /// all where the package has none. A section of another length, or an index past the scene's
 /// scan list, is a damaged package.
-fn tile_scans(
+pub(crate) fn tile_scans(
     tile: &grotto_format::Tile<'_>,
     surfels: usize,
     scans: usize,
@@ -346,7 +346,13 @@ impl SceneData {
     /// global node index for inner nodes and a global leaf index for the nodes at `leaf_level`
     /// (the k-th node of that level is the tile's k-th leaf). `nodes` is in the spec's
     /// breadth-first order, so the nodes down to a level are a prefix of it.
-    fn push_nodes(&mut self, nodes: &[SvoNode], leaf_level: u32, node_offset: u32, leaf_offset: u32) {
+    pub(crate) fn push_nodes(
+        &mut self,
+        nodes: &[SvoNode],
+        leaf_level: u32,
+        node_offset: u32,
+        leaf_offset: u32,
+    ) {
         let mut leaf = leaf_offset;
         for n in nodes.iter().take_while(|n| u32::from(n.level) <= leaf_level) {
             let (first_child, mask) = if u32::from(n.level) == leaf_level {
@@ -569,240 +575,6 @@ impl SceneData {
         rock: crate::scene::rock::RockTable,
     ) -> Result<Self> {
         Self::load(pkg, mode_of, Some(rock))
-    }
-
-    fn load(
-        pkg: &Package,
-        mode_of: impl Fn(usize) -> TileMode,
-        rock: Option<crate::scene::rock::RockTable>,
-    ) -> Result<Self> {
-        let name = pkg.path().display().to_string();
-        let bad = |problem: String| Error::Scene { package: name.clone(), problem };
-        let scene = pkg.scene()?;
-        let mut out = SceneData {
-            name: name.clone(),
-            scan_names: scene.scans.iter().map(|s| s.name.clone()).collect(),
-            ..Default::default()
-        };
-        // The frame does not depend on which tiles are loaded: cameras and lights keep their
-        // place whatever residency chose.
-        let leaf_size = frame_of(pkg)?.map(|(origin, leaf)| {
-            out.frame_origin_m = origin;
-            out.leaf_size_m = leaf as f32;
-            leaf
-        });
-        // The rock: as given, else from the package's rock sections where every tile that is
-        // loaded has one and lies on the bricks' grid (format 1.1), else classified from the
-        // full leaves of every loaded tile, coarse ones too (collected below).
-        let brick_leaves = grotto_format::spec::ROCK_BRICK_LEAVES as i32;
-        let mut stored_rock: Option<Vec<(IVec3, u64)>> = if rock.is_some() { None } else { Some(Vec::new()) };
-        let mut hidden_leaves: Vec<LeafGpu> = Vec::new();
-        let mut loaded = Vec::new();
-        for tile in pkg.tiles() {
-            let mode = mode_of(tile.index() as usize);
-            if mode == TileMode::Skip {
-                continue;
-            }
-            let ls = tile.leaf_size_m();
-            let ls0 = leaf_size.unwrap_or(ls);
-            if (ls0 - ls).abs() > ls0 * 1e-9 {
-                return Err(bad(format!(
-                    "tile {} has leaf size {ls} m, the first tile has {ls0} m",
-                    tile.index()
-                )));
-            }
-            let origin_leaf = grotto_levels::origin_leaf(tile.origin_m(), out.frame_origin_m, ls0)
-                .ok_or_else(|| bad(format!("tile {} origin is not on the shared leaf grid", tile.index())))?;
-            if let Some(bricks) = &mut stored_rock {
-                match tile.rock()? {
-                    Some(list) if origin_leaf % brick_leaves == IVec3::ZERO => {
-                        let origin_brick = origin_leaf / brick_leaves;
-                        bricks.extend(list.iter().map(|b| {
-                            (
-                                origin_brick + IVec3::from_array(b.brick),
-                                u64::from(b.bits[0]) | u64::from(b.bits[1]) << 32,
-                            )
-                        }));
-                    }
-                    // A tile without an SVO has no rock to store.
-                    None if tile.find(SectionKind::SvoNodes, 0).is_none() => {}
-                    _ => stored_rock = None,
-                }
-            }
-            loaded.push((tile, mode, origin_leaf));
-        }
-        let classify_rock = rock.is_none() && stored_rock.is_none();
-        for (tile, mode, origin_leaf) in loaded {
-            let depth = tile.depth();
-            let leaf_lod = mode.leaf_lod(depth);
-            let stored_coarse = if leaf_lod > 0 { tile.coarse(leaf_lod)? } else { None };
-            // The full SVO: for a full tile, for a coarse tile whose level is not stored, and for
-            // the rock where it is classified here.
-            let svo =
-                if leaf_lod == 0 || stored_coarse.is_none() || classify_rock { tile.svo()? } else { None };
-            // Its full leaves: for a full tile, and for the rock where it is classified here.
-            let leaves = match &svo {
-                Some(svo) if leaf_lod == 0 || classify_rock => {
-                    full_leaves(svo, depth, origin_leaf, out.leaf_size_m)
-                }
-                _ => Vec::new(),
-            };
-            let node_offset = out.nodes.len() as u32;
-            let leaf_offset = out.leaves.len() as u32;
-            let surfel_offset = out.surfels.len() as u32;
-            if leaf_lod > 0 {
-                let level = match (stored_coarse, &svo) {
-                    (Some(c), _) => {
-                        CoarseLevel { nodes: c.nodes.into_owned(), leaves: c.leaves.into_owned() }
-                    }
-                    (None, Some(svo)) => coarse_level(svo, depth, leaf_lod, tile.leaf_size_m()),
-                    (None, None) => continue,
-                };
-                if level.nodes.is_empty() {
-                    continue;
-                }
-                out.push_nodes(&level.nodes, depth - leaf_lod, node_offset, leaf_offset);
-                let tile_origin_m = origin_leaf.as_vec3() * out.leaf_size_m;
-                let coarse = gpu_tile(&level.leaves, leaf_lod, out.leaf_size_m, tile_origin_m);
-                out.leaves.extend(coarse.leaves);
-                out.surfels.extend(coarse.splats);
-                if classify_rock {
-                    hidden_leaves.extend(leaves);
-                }
-            } else {
-                let Some(svo) = &svo else { continue };
-                if svo.nodes.is_empty() {
-                    continue;
-                }
-                out.push_nodes(svo.nodes.as_ref(), depth, node_offset, leaf_offset);
-                let mut leaves = leaves;
-                // Surfels: tile-local f32 -> frame f32 through the f64 tile offset.
-                let surfels = tile.surfels()?;
-                let shift = DVec3::from_array(tile.origin_m()) - DVec3::from_array(out.frame_origin_m);
-                if let Some(surfels) = &surfels {
-                    // The tile's frame offset as the leaves have it (whole leaves).
-                    let leaf_shift = origin_leaf.as_dvec3() * f64::from(out.leaf_size_m);
-                    move_leaves_to_surfels(&mut leaves, svo, depth, surfels, out.leaf_size_m, leaf_shift);
-                }
-                out.leaves.extend(leaves);
-                if let Some(surfels) = surfels {
-                    let colors = tile_colors(&tile, surfels.len())?;
-                    let scans = tile_scans(&tile, surfels.len(), scene.scans.len()).map_err(&bad)?;
-                    for ((s, c), scan) in surfels.iter().zip(colors).zip(scans) {
-                        let p = (DVec3::from_array(s.position_tile_m.map(f64::from)) + shift).as_vec3();
-                        out.surfels.push(SurfelGpu {
-                            position_radius: p.extend(s.radius_m).to_array(),
-                            normal_spread: [s.normal[0], s.normal[1], s.normal[2], s.spread],
-                            color: [c[0], c[1], c[2], 0],
-                            scan,
-                        });
-                    }
-                }
-            }
-            out.tiles.push(TileGpu {
-                origin_leaf: origin_leaf.to_array(),
-                depth,
-                node_offset,
-                leaf_offset,
-                node_count: out.nodes.len() as u32 - node_offset,
-                leaf_count: out.leaves.len() as u32 - leaf_offset,
-                leaf_lod,
-                pad: [0; 3],
-            });
-            out.tile_surfels.push(surfel_offset..out.surfels.len() as u32);
-        }
-        let frame = DVec3::from_array(out.frame_origin_m);
-        let to_frame = |p: [f64; 3]| (DVec3::from_array(p) - frame).as_vec3();
-        for l in &scene.lights {
-            let intensity = Vec3::from_array(l.color) * (l.power_w / (4.0 * std::f32::consts::PI));
-            let (position_m, spot) = match &l.shape {
-                LightShape::Point { position_m } => (to_frame(*position_m), None),
-                LightShape::Spot { position_m, direction, inner_angle_rad, outer_angle_rad } => (
-                    to_frame(*position_m),
-                    Some(Spot {
-                        direction: Vec3::from_array(*direction).normalize_or(Vec3::NEG_Z),
-                        inner_angle_rad: *inner_angle_rad,
-                        outer_angle_rad: *outer_angle_rad,
-                    }),
-                ),
-                // Area lights are emissive leaves already.
-                LightShape::Area { .. } => continue,
-            };
-            out.lights.push(SceneLight { name: l.name.clone(), position_m, intensity_w_sr: intensity, spot });
-        }
-        if let Some(env) = &scene.environment {
-            let section = pkg.find(SectionKind::EnvSh9, Scope::Global, env.index).ok_or_else(|| {
-                bad(format!("the scene's environment {} has no env-sh9 section", env.index))
-            })?;
-            let sh = pkg.read::<ShRgb9>(&section)?;
-            let first = sh.first().ok_or_else(|| bad("the env-sh9 section is empty".into()))?;
-            if !(env.intensity.is_finite() && env.intensity >= 0.0) {
-                return Err(bad(format!(
-                    "environment intensity {} is not a finite number >= 0",
-                    env.intensity
-                )));
-            }
-            out.environment_sh = Some(first.coeffs.map(|c| c.map(|v| v * env.intensity)));
-            out.env_chain = read_env_chain(pkg, env.index, env.intensity)?;
-        }
-        let mut slot = 0u8;
-        for m in &scene.materials {
-            let Some(region) = &m.region else { continue };
-            if m.specular.is_nan() || m.specular <= 0.0 {
-                continue;
-            }
-            if usize::from(slot) >= MAX_MATERIALS {
-                return Err(bad(format!(
-                    "material '{}': at most {MAX_MATERIALS} specular materials with regions are supported",
-                    m.name
-                )));
-            }
-            slot += 1;
-            let lo = DVec3::from_array(region.min_m) - frame;
-            let hi = DVec3::from_array(region.max_m) - frame;
-            for s in &mut out.surfels {
-                let p = Vec3::from_slice(&s.position_radius[..3]).as_dvec3();
-                if p.cmpge(lo).all() && p.cmple(hi).all() && s.normal_spread[2] >= region.min_normal_z {
-                    s.color[3] = slot;
-                }
-            }
-            out.materials.push(SceneMaterial {
-                name: m.name.clone(),
-                specular: m.specular.clamp(0.0, 1.0),
-                roughness: m.roughness.clamp(0.02, 1.0),
-                ior: m.ior.clamp(1.0, 3.0),
-                surfels: 0,
-            });
-        }
-        // Counted once every region is applied: where regions overlap, the last one listed wins.
-        for s in &out.surfels {
-            if let Some(m) = usize::from(s.color[3]).checked_sub(1).and_then(|k| out.materials.get_mut(k)) {
-                m.surfels += 1;
-            }
-        }
-        for c in &scene.cameras {
-            out.cameras.push(SceneCamera {
-                name: c.name.clone(),
-                eye_m: to_frame(c.eye_m),
-                look_at_m: to_frame(c.look_at_m),
-                up: DVec3::from_array(c.up).as_vec3(),
-                fov_y_deg: c.fov_y_deg as f32,
-            });
-        }
-        out.rock = if let Some(rock) = rock {
-            rock
-        } else if let Some(bricks) = stored_rock {
-            crate::scene::rock::RockTable::from_bricks(bricks)
-        } else if hidden_leaves.is_empty() {
-            crate::scene::rock::classify(out.leaf_size_m, &out.leaves)
-        } else {
-            for t in out.tiles.iter().filter(|t| t.leaf_lod == 0) {
-                let range = t.leaf_offset as usize..(t.leaf_offset + t.leaf_count) as usize;
-                hidden_leaves.extend_from_slice(&out.leaves[range]);
-            }
-            crate::scene::rock::classify(out.leaf_size_m, &hidden_leaves)
-        };
-        Ok(out)
     }
 
     /// Builds tiles of `2^tile_depth` leaves from explicit leaf cells (global leaf coordinates,

@@ -4,5 +4,6 @@
 
 pub mod coarse;
 pub mod data;
+mod load;
 pub mod rock;
 pub mod tile_index;
