@@ -306,21 +306,7 @@ impl Viewer {
         canvas.set_width(width);
         canvas.set_height(height);
 
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = wgpu::Backends::BROWSER_WEBGPU;
-        let instance = wgpu::Instance::new(desc);
-        let surface = instance
-            .create_surface(wgpu::SurfaceTarget::Canvas(canvas))
-            .map_err(|e| Error::Setting(format!("no WebGPU canvas: {e}")))?;
-        let adapter = instance
-            .request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                compatible_surface: Some(&surface),
-                ..Default::default()
-            })
-            .await
-            .map_err(|e| Error::Setting(format!("this browser gives no WebGPU adapter: {e}")))?;
-        let gpu = Gpu::on_adapter(adapter, &GpuOptions::default()).await?;
+        let (surface, gpu) = webgpu(canvas).await?;
 
         let (mut source, mut pkg) = Source::open(&url).await?;
         // The first frame: every tile at its far level.
@@ -341,16 +327,7 @@ impl Viewer {
         // framed on the data); Tab goes through the package's named cameras after it.
         let choice = o.camera.clone().map_or(CameraChoice::Default, CameraChoice::Named);
         let (camera, framed) = resolve_camera(&far, &choice, aspect, settings.splat_scale)?;
-        let first_name = o.camera.clone().or_else(|| far.cameras.first().map(|c| c.name.clone()));
-        let cameras: Vec<(String, Camera)> =
-            std::iter::once((first_name.unwrap_or_else(|| "framed".into()), camera))
-                .chain(
-                    far.cameras
-                        .iter()
-                        .map(|c| (c.name.clone(), Camera::from_scene(c)))
-                        .filter(|(_, c)| *c != camera),
-                )
-                .collect();
+        let cameras = camera_list(&far, o.camera.clone(), camera);
         if !far.has_own_light() {
             let seen = framed.map(|f| f.estimate);
             far.lights.push(scene_headlamp(&far, &camera, aspect, settings.splat_scale, seen).light);
@@ -361,14 +338,7 @@ impl Viewer {
         let renderer = stream::renderer_for(&gpu, &far, settings, Some((&mut streaming, &want)))?;
         let current = streaming.far_residency();
 
-        let caps = surface.get_capabilities(&gpu.adapter);
-        let format = caps.formats.iter().copied().find(|f| !f.is_srgb()).unwrap_or(caps.formats[0]);
-        let mut config = surface
-            .get_default_config(&gpu.adapter, width, height)
-            .ok_or_else(|| Error::Setting(format!("the canvas cannot show {} frames", gpu.describe())))?;
-        config.format = format;
-        config.present_mode = wgpu::PresentMode::Fifo;
-        surface.configure(&gpu.device, &config);
+        let (config, format) = configure_surface(&surface, &gpu, width, height)?;
         let blit = Blit::new(&gpu, format)?;
         let nav = Nav::for_scene(&camera, &far);
         let now = Instant::now();
@@ -731,4 +701,54 @@ impl State {
         };
         serde_json::to_string(&s).map_err(|e| Error::Setting(e.to_string()))
     }
+}
+
+/// A WebGPU surface on `canvas` and a device on the adapter that can show it.
+async fn webgpu(canvas: web_sys::HtmlCanvasElement) -> Result<(wgpu::Surface<'static>, Gpu), Error> {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    desc.backends = wgpu::Backends::BROWSER_WEBGPU;
+    let instance = wgpu::Instance::new(desc);
+    let surface = instance
+        .create_surface(wgpu::SurfaceTarget::Canvas(canvas))
+        .map_err(|e| Error::Setting(format!("no WebGPU canvas: {e}")))?;
+    let adapter = instance
+        .request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            compatible_surface: Some(&surface),
+            ..Default::default()
+        })
+        .await
+        .map_err(|e| Error::Setting(format!("this browser gives no WebGPU adapter: {e}")))?;
+    let gpu = Gpu::on_adapter(adapter, &GpuOptions::default()).await?;
+    Ok((surface, gpu))
+}
+
+/// The viewer's cameras: the first as `grotto render` resolves it (named, the package's first, or
+/// framed on the data), then the package's other named cameras, which Tab goes through.
+fn camera_list(far: &SceneData, named: Option<String>, camera: Camera) -> Vec<(String, Camera)> {
+    let first_name = named.or_else(|| far.cameras.first().map(|c| c.name.clone()));
+    std::iter::once((first_name.unwrap_or_else(|| "framed".into()), camera))
+        .chain(
+            far.cameras.iter().map(|c| (c.name.clone(), Camera::from_scene(c))).filter(|(_, c)| *c != camera),
+        )
+        .collect()
+}
+
+/// The canvas configured for frames of `width` x `height` in a linear (not sRGB) format, shown
+/// at the display's pace; returns the configuration and the format the blit writes.
+fn configure_surface(
+    surface: &wgpu::Surface<'static>,
+    gpu: &Gpu,
+    width: u32,
+    height: u32,
+) -> Result<(wgpu::SurfaceConfiguration, wgpu::TextureFormat), Error> {
+    let caps = surface.get_capabilities(&gpu.adapter);
+    let format = caps.formats.iter().copied().find(|f| !f.is_srgb()).unwrap_or(caps.formats[0]);
+    let mut config = surface
+        .get_default_config(&gpu.adapter, width, height)
+        .ok_or_else(|| Error::Setting(format!("the canvas cannot show {} frames", gpu.describe())))?;
+    config.format = format;
+    config.present_mode = wgpu::PresentMode::Fifo;
+    surface.configure(&gpu.device, &config);
+    Ok((config, format))
 }

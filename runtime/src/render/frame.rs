@@ -15,8 +15,6 @@ use crate::render::renderer::Renderer;
 use crate::render::renderer::View;
 use crate::settings::{IndirectFilter, ViewMode};
 
-/// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
-
 impl Renderer {
     pub(super) fn inputs(&self, frame: Option<(&Camera, u32, u32)>) -> PlanInputs {
         let gbuffer_valid = match (frame, &self.view) {

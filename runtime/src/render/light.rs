@@ -14,8 +14,6 @@ use crate::scene::data::SceneData;
 
 use crate::render::renderer::Renderer;
 
-/// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
-
 impl Renderer {
     /// While held, frames run no bounces, and the plan gives `why`: a viewer holds the light while
     /// its camera moves, so light work is what yields to the frame rate.

@@ -14,8 +14,6 @@ use crate::scene::data::{EnvChain, MAX_ENV_LEVELS, MAX_MATERIALS, SceneData};
 use crate::settings::Settings;
 
 /// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
-
-/// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
 /// to the hemisphere), equal weights summing to 1, and the half-angle tangent that makes the cones
 /// cover the hemisphere's solid angle (2 pi / n each).
 pub fn cone_set(n: u32, aperture_scale: f32) -> (Vec<[f32; 4]>, f32) {

@@ -19,8 +19,6 @@ use crate::render::params::Lookup;
 use crate::render::params::tile_box;
 use crate::render::pool::Placement;
 
-/// Cosine-distributed directions on the +z hemisphere (a Fibonacci spiral on the unit disc lifted
-
 /// The tile pools on the GPU (tile records, nodes, leaves, leaf light, surfels, and the tile
 /// index in the lookup buffer) and where each resident tile form lives in them ([`Pools`]).
 #[derive(Debug)]

@@ -17,6 +17,9 @@ use crate::scene::rock::RockTable;
 /// A tile that residency loads, in the mode it chose, at its leaf offset from the frame origin.
 type LoadedTile<'a> = (Tile<'a>, TileMode, IVec3);
 
+/// Rock bricks at their global brick coordinates, with their 64 bits of rock.
+type RockBricks = Vec<(IVec3, u64)>;
+
 impl SceneData {
     pub(crate) fn load(
         pkg: &Package,
@@ -69,9 +72,9 @@ impl SceneData {
         mode_of: &impl Fn(usize) -> TileMode,
         leaf_size: Option<f64>,
         want_rock: bool,
-    ) -> Result<(Vec<LoadedTile<'a>>, Option<Vec<(IVec3, u64)>>)> {
+    ) -> Result<(Vec<LoadedTile<'a>>, Option<RockBricks>)> {
         let brick_leaves = grotto_format::spec::ROCK_BRICK_LEAVES as i32;
-        let mut stored_rock: Option<Vec<(IVec3, u64)>> = if want_rock { Some(Vec::new()) } else { None };
+        let mut stored_rock: Option<RockBricks> = if want_rock { Some(Vec::new()) } else { None };
         let mut loaded = Vec::new();
         for tile in pkg.tiles() {
             let mode = mode_of(tile.index() as usize);
