@@ -8,9 +8,8 @@ use std::ops::Range;
 use bytemuck::Pod;
 use xxhash_rust::xxh3::Xxh3;
 
-use crate::Provenance;
-use crate::Scene;
 use crate::error::{Problem, Region};
+use crate::scene::{Provenance, Scene};
 use crate::section::SectionInfo;
 use crate::spec::*;
 

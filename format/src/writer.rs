@@ -10,9 +10,9 @@ use std::path::{Path, PathBuf};
 
 use xxhash_rust::xxh3::{Xxh3, xxh3_64};
 
-use crate::TileInfo;
 use crate::error::{Error, Result};
 use crate::scene::{Provenance, Scene};
+use crate::section::TileInfo;
 use crate::spec::*;
 
 /// How to store a section.
@@ -194,8 +194,8 @@ impl PackageWriter {
     /// and content, into `scope` here. This is how per-tile packages are assembled into one.
     pub fn copy_section(
         &mut self,
-        from: &crate::Package,
-        section: &crate::SectionInfo,
+        from: &crate::reader::Package,
+        section: &crate::section::SectionInfo,
         scope: Scope,
     ) -> Result<u32> {
         let kind = section

@@ -14,8 +14,10 @@ use std::thread::JoinHandle;
 
 use e57::{CartesianCoordinate, E57Reader, PointCloud, RecordName};
 
-use super::{NEUTRAL_GREY, PointChunk, PointSource, ScanFormat, SourceInfo, guard, read_error};
 use crate::Result;
+use crate::ingest::source::{
+    NEUTRAL_GREY, PointChunk, PointSource, ScanFormat, SourceInfo, guard, read_error,
+};
 use crate::pose::Pose;
 
 pub(super) fn scan_count(path: &Path) -> Result<usize> {

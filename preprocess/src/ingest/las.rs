@@ -15,8 +15,10 @@ use std::path::Path;
 
 use las::{LazParallelism, PointData, Reader, ReaderOptions};
 
-use super::{NEUTRAL_GREY, PointChunk, PointSource, ScanFormat, SourceInfo, guard, read_error};
 use crate::Result;
+use crate::ingest::source::{
+    NEUTRAL_GREY, PointChunk, PointSource, ScanFormat, SourceInfo, guard, read_error,
+};
 
 const COLOR_PROBE: u64 = 1 << 20;
 

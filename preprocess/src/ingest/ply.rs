@@ -14,7 +14,7 @@ use std::path::Path;
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{DefaultElement, ElementDef, PropertyType as PlyProperty, ScalarType as PlyScalar};
 
-use super::{NEUTRAL_GREY, PointChunk, PointSource, ScanFormat, SourceInfo, read_error};
+use crate::ingest::source::{NEUTRAL_GREY, PointChunk, PointSource, ScanFormat, SourceInfo, read_error};
 use crate::{Error, Result};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
