@@ -129,7 +129,7 @@ pub struct ClipBox {
 
 impl ClipBox {
     /// Whether the box `lo..hi` has a point inside the clip box.
-    pub fn meets(&self, lo: glam::Vec3, hi: glam::Vec3) -> bool {
+    pub(crate) fn meets(&self, lo: glam::Vec3, hi: glam::Vec3) -> bool {
         lo.cmple(self.max_m).all() && hi.cmpge(self.min_m).all()
     }
 }
@@ -188,7 +188,7 @@ impl ShadowFallback {
     }
 
     /// In words, for the effect plan.
-    pub fn describe(self) -> &'static str {
+    pub(crate) fn describe(self) -> &'static str {
         match self {
             ShadowFallback::Cone => "SVO cone shadows",
             ShadowFallback::None => "no shadows",
@@ -257,7 +257,7 @@ impl Quality {
 impl Settings {
     /// The bound on samples per cone the march runs with: `max_steps`, scaled by 0.5 / step for
     /// steps finer than 0.5.
-    pub fn march_steps(&self) -> u32 {
+    pub(crate) fn march_steps(&self) -> u32 {
         let scaled = f64::from(self.max_steps) * (0.5 / f64::from(self.step_scale.max(1e-3))).max(1.0);
         scaled.ceil().clamp(1.0, 1e6) as u32
     }
@@ -354,4 +354,4 @@ impl Settings {
 }
 
 /// Most lights with shadow maps: 6 faces each for point lights in one 2D atlas.
-pub const MAX_SHADOWED_LIGHTS: u32 = 256;
+pub(crate) const MAX_SHADOWED_LIGHTS: u32 = 256;

@@ -7,10 +7,11 @@ use glam::Vec3;
 use grotto_format::Package;
 use grotto_preprocess::build::ColorCodec;
 use grotto_runtime::Error;
-use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
+use grotto_runtime::cli::render_job::{self, RenderOptions};
 use grotto_runtime::passes::cpu_ref::CpuScene;
 use grotto_runtime::scene::data::SceneData;
 use grotto_runtime::settings::Settings;
+use grotto_runtime::view::framing::CameraChoice;
 
 /// A small synthetic cave at UTM-sized coordinates, several tiles.
 fn fixture(dir: &std::path::Path) -> PathBuf {

@@ -24,8 +24,9 @@ use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::synth::{self, SynthParams};
 use grotto_runtime::cli::publish::{self, PublishOptions};
-use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
+use grotto_runtime::cli::render_job::{self, RenderOptions};
 use grotto_runtime::settings::{Quality, Settings};
+use grotto_runtime::view::framing::CameraChoice;
 use grotto_tests::{golden, serve};
 use serde_json::{Value, json};
 

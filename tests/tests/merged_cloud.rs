@@ -12,8 +12,9 @@ use grotto_preprocess::ingest::ScanFormat;
 use grotto_preprocess::manifest::Manifest;
 use grotto_preprocess::scanwrite::{ScanData, write_scan};
 use grotto_preprocess::synth::{self, SynthCave, SynthParams};
-use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
+use grotto_runtime::cli::render_job::{self, RenderOptions};
 use grotto_runtime::settings::Settings;
+use grotto_runtime::view::framing::CameraChoice;
 use grotto_tests::{golden, small_build};
 
 /// Each station's scan in world (survey) coordinates with its station, less the points of the

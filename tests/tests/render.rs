@@ -4,9 +4,10 @@
 
 use std::path::Path;
 
-use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
+use grotto_runtime::cli::render_job::{self, RenderOptions};
 use grotto_runtime::gpu::GpuOptions;
 use grotto_runtime::settings::Settings;
+use grotto_runtime::view::framing::CameraChoice;
 use grotto_tests::golden;
 
 /// A 160x120 single frame of `camera` to `out` on the software Vulkan adapter, default settings;
@@ -175,9 +176,14 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
         let gpu = grotto_runtime::gpu::Gpu::new(&grotto_tests::lavapipe()).unwrap();
         let mut scene = scene;
         scene.lights = scene.lamp_string(64, render_job::STRING_LAMP_W, render_job::STRING_LAMP_LIFT_M);
-        let cam = render_job::resolve_camera(&scene, &CameraChoice::Named("chamber".into()), 4.0 / 3.0, 2.0)
-            .unwrap()
-            .0;
+        let cam = grotto_runtime::view::framing::resolve_camera(
+            &scene,
+            &CameraChoice::Named("chamber".into()),
+            4.0 / 3.0,
+            2.0,
+        )
+        .unwrap()
+        .0;
         let mut r =
             Renderer::new(&gpu, &scene, Settings { specular: false, exposure: 1.0, ..settings }).unwrap();
         r.settle(|_, _| {}).unwrap();

@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 
 use glam::Vec3;
 use grotto_format::Package;
-use grotto_runtime::cli::render_job::{self, CameraChoice, RenderOptions};
+use grotto_runtime::cli::render_job::{self, RenderOptions};
 use grotto_runtime::gpu::Gpu;
 use grotto_runtime::render::Renderer;
 use grotto_runtime::render::pool::PoolCaps;
@@ -17,6 +17,7 @@ use grotto_runtime::scene::data::{SceneData, TileMode};
 use grotto_runtime::settings::Settings;
 use grotto_runtime::stream::residency::{self, Budget, Relevance, View};
 use grotto_runtime::view::camera::Camera;
+use grotto_runtime::view::framing::CameraChoice;
 use grotto_tests::golden;
 
 const W: u32 = 160;

@@ -59,7 +59,7 @@ pub(crate) fn box_downsample(big: &[[f32; 4]], width: u32, height: u32, k: u32) 
 /// reference's auto-exposure; pixels the runtime leaves uncovered take the reference's value.
 pub(crate) fn flip_mean(got: &[[f32; 4]], reference: &[Estimate], width: u32, height: u32) -> f64 {
     let ref_hdr: Vec<[f32; 4]> = reference.iter().map(|e| [e.mean.x, e.mean.y, e.mean.z, 1.0]).collect();
-    let exposure = grotto_runtime::cli::render_job::auto_exposure(&ref_hdr);
+    let exposure = grotto_runtime::render::auto_exposure(&ref_hdr);
     let ldr = |p: &[f32; 4]| [0, 1, 2].map(|c| crate::aces_srgb(p[c] * exposure));
     let r8: Vec<u8> = ref_hdr.iter().flat_map(ldr).collect();
     let t8: Vec<u8> =
@@ -79,7 +79,7 @@ pub(crate) fn flip_mean(got: &[[f32; 4]], reference: &[Estimate], width: u32, he
 pub fn error_map(got: &[[f32; 4]], reference: &[Estimate], width: u32, height: u32) -> Frame {
     let lum = |c: [f32; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
     let ref_hdr: Vec<[f32; 4]> = reference.iter().map(|e| [e.mean.x, e.mean.y, e.mean.z, 1.0]).collect();
-    let exposure = grotto_runtime::cli::render_job::auto_exposure(&ref_hdr);
+    let exposure = grotto_runtime::render::auto_exposure(&ref_hdr);
     let mean_lum = (ref_hdr.iter().map(|p| f64::from(lum([p[0], p[1], p[2]]))).sum::<f64>()
         / ref_hdr.len().max(1) as f64) as f32;
     let full = (0.5 * mean_lum).max(1e-12);

@@ -316,8 +316,9 @@ fn parse_box(s: &str) -> Result<[[f64; 3]; 2], String> {
 }
 
 fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::RenderOptions> {
-    use grotto_runtime::cli::render_job::{CameraChoice, Headlamp, RenderOptions};
+    use grotto_runtime::cli::render_job::{Headlamp, RenderOptions};
     use grotto_runtime::settings::{IndirectFilter, Quality, Settings, ShadowFallback};
+    use grotto_runtime::view::framing::CameraChoice;
     let quality = Quality::parse(&a.quality)
         .ok_or_else(|| anyhow::anyhow!("--quality {:?}: use fast, balanced or high", a.quality))?;
     let mut settings = Settings::preset(quality);

@@ -62,7 +62,7 @@ pub fn write_atomically(out: &Path, bytes: &[u8]) -> Result<(), Error> {
 
 /// Writes `out` by `fill` into a temp file beside it, then renames it into place. Every output
 /// of the runtime and the reference goes through here.
-pub fn atomically(out: &Path, fill: impl FnOnce(File) -> Result<(), Error>) -> Result<(), Error> {
+pub(crate) fn atomically(out: &Path, fill: impl FnOnce(File) -> Result<(), Error>) -> Result<(), Error> {
     let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let mut builder = tempfile::Builder::new();
     builder.suffix(".partial");

@@ -12,19 +12,19 @@ use serde::Serialize;
 #[derive(Debug, Serialize)]
 pub struct Inspection {
     #[serde(flatten)]
-    pub summary: Summary,
+    pub(crate) summary: Summary,
     /// `None` when the scene section is damaged (`verify` says how).
-    pub scene: Option<Scene>,
-    pub provenance: Option<Provenance>,
+    pub(crate) scene: Option<Scene>,
+    pub(crate) provenance: Option<Provenance>,
     /// Each environment map's 9 RGB SH coefficients of radiance (L00, L1-1, L10, L11, L2-2, L2-1,
     /// L20, L21, L22).
-    pub environment_sh: Vec<EnvironmentSh>,
+    pub(crate) environment_sh: Vec<EnvironmentSh>,
 }
 
 #[derive(Debug, Serialize)]
-pub struct EnvironmentSh {
-    pub item: u32,
-    pub coeffs: [[f32; 3]; 9],
+pub(crate) struct EnvironmentSh {
+    pub(crate) item: u32,
+    pub(crate) coeffs: [[f32; 3]; 9],
 }
 
 pub fn inspect(pkg: &Package) -> Inspection {

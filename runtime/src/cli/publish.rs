@@ -42,7 +42,7 @@ pub struct PublishSummary {
 
 /// Where the viewer bundle is looked for: `GROTTO_WEB_BUNDLE`, else `web` beside the folder of
 /// the running binary (`target/release/grotto` finds `target/web`).
-pub fn default_bundle() -> Option<PathBuf> {
+pub(crate) fn default_bundle() -> Option<PathBuf> {
     if let Some(p) = std::env::var_os("GROTTO_WEB_BUNDLE") {
         return Some(PathBuf::from(p));
     }

@@ -79,7 +79,7 @@ pub struct RenderOptions {
 
 /// A box in world metres `[min, max]` in a scene's frame; an error where it is empty or not
 /// finite.
-pub fn clip_in_frame(world_m: [[f64; 3]; 2], frame_origin_m: [f64; 3]) -> Result<ClipBox> {
+pub(crate) fn clip_in_frame(world_m: [[f64; 3]; 2], frame_origin_m: [f64; 3]) -> Result<ClipBox> {
     let [lo, hi] = world_m;
     if !lo.iter().chain(&hi).all(|v| v.is_finite()) || (0..3).any(|a| lo[a] > hi[a]) {
         return Err(Error::Setting {
@@ -128,8 +128,8 @@ pub const STRING_LAMP_W: f32 = 8.0;
 /// Height of a `--lamps` lamp above its floor, metres.
 pub const STRING_LAMP_LIFT_M: f32 = 0.6;
 
-pub use crate::gpu::default_gpu_memory;
-pub use crate::view::framing::{CameraChoice, resolve_camera};
+use crate::gpu::default_gpu_memory;
+use crate::view::framing::{CameraChoice, resolve_camera};
 
 /// `--lamps`: the lights replaced by a lamp string.
 fn apply_lamps(opts: &RenderOptions, scene: &mut SceneData) {
@@ -196,7 +196,7 @@ pub struct FrameReport {
     /// Tiles and leaves the frame's propagation bounces updated, summed over its bounces: a bounce
     /// updates only the tiles whose light may still change (activity.rs), so after a change of
     /// tiles this follows what changed, not the size of the scene.
-    pub propagated_tiles: usize,
+    pub(crate) propagated_tiles: usize,
     pub propagated_leaves: u64,
     /// Each of the frame's bounces: which tiles it updated and why (`--explain`).
     pub bounce_work: Vec<crate::light::activity::BounceWork>,
@@ -217,15 +217,15 @@ pub struct FrameReport {
     pub shadow_faces_total: usize,
     /// Milliseconds this frame waited for the loader thread (which chose and read its tiles while
     /// the previous frame rendered).
-    pub load_wait_ms: f64,
+    pub(crate) load_wait_ms: f64,
     /// Milliseconds of each pass that ran for this frame.
-    pub pass_ms: std::collections::BTreeMap<String, f64>,
+    pub(crate) pass_ms: std::collections::BTreeMap<String, f64>,
 }
 
 /// What a render did, for `--json` and the summary line.
 #[derive(Clone, Debug, Serialize)]
 pub struct RenderSummary {
-    pub package: String,
+    pub(crate) package: String,
     pub device: String,
     pub timestamps: bool,
     pub images: Vec<String>,
@@ -253,13 +253,13 @@ pub struct RenderSummary {
     /// What looks wrong with the image and why: most of it uncovered, or black.
     pub warnings: Vec<String>,
     /// Seconds to open the package and load the scene (residency included), before the GPU work.
-    pub load_s: f64,
+    pub(crate) load_s: f64,
     pub settle_s: f64,
     pub render_s: f64,
     pub first_plan: EffectPlan,
     pub last_plan: EffectPlan,
     pub stats: PassStats,
-    pub settings: Settings,
+    pub(crate) settings: Settings,
 }
 
 /// Progress events for the binary's bars.
@@ -288,7 +288,7 @@ fn framing_note(scene: &SceneData, f: &Framing) -> String {
 /// The scene and cameras a job renders: the package's scene (with `--lamps` applied), the cameras
 /// of the choice or path, and a headlamp at the first camera where the options or a lightless
 /// scene call for one; with notes saying what was chosen.
-pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
+pub(crate) fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
     let (mut scene, streaming) = open_scene(opts, gpu)?;
     let aspect = opts.width as f32 / opts.height.max(1) as f32;
     let splat = opts.settings.splat_scale;
@@ -375,17 +375,17 @@ pub fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
 
 /// What [`prepare`] gives a job.
 #[derive(Debug)]
-pub struct Prepared {
-    pub scene: SceneData,
-    pub cameras: Vec<Camera>,
+pub(crate) struct Prepared {
+    pub(crate) scene: SceneData,
+    pub(crate) cameras: Vec<Camera>,
     /// What was chosen on the user's behalf (framing, headlamp, residency).
-    pub notes: Vec<String>,
+    pub(crate) notes: Vec<String>,
     /// `None` where the whole package fits the budgets.
-    pub residency: Option<Residency>,
+    pub(crate) residency: Option<Residency>,
     /// Where it did not: how to choose again for another camera.
-    pub streaming: Option<Streaming>,
+    pub(crate) streaming: Option<Streaming>,
     /// `--clip` in the scene's frame.
-    pub clip: Option<ClipBox>,
+    pub(crate) clip: Option<ClipBox>,
 }
 
 /// Pixels at most this bright (max of sRGB channels, 0..=255) count as black: no light at all,
@@ -394,7 +394,12 @@ pub struct Prepared {
 const BLACK_LDR: u8 = 1;
 
 /// Warnings for a rendered image: most of it shows no surface, or most of what it shows is black.
-pub fn image_warnings(scene: &SceneData, uncovered: usize, black: usize, pixels: usize) -> Vec<String> {
+pub(crate) fn image_warnings(
+    scene: &SceneData,
+    uncovered: usize,
+    black: usize,
+    pixels: usize,
+) -> Vec<String> {
     let mut w = Vec::new();
     if uncovered * 2 > pixels {
         w.push(format!(
@@ -432,7 +437,7 @@ pub fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
 }
 
 /// `out` for frame `i` of `n`: `name_0007.png` when n > 1.
-pub fn frame_path(out: &Path, i: u32, n: u32) -> PathBuf {
+pub(crate) fn frame_path(out: &Path, i: u32, n: u32) -> PathBuf {
     if n <= 1 {
         return out.to_path_buf();
     }
@@ -441,7 +446,7 @@ pub fn frame_path(out: &Path, i: u32, n: u32) -> PathBuf {
     out.with_file_name(format!("{stem}_{i:04}.{ext}"))
 }
 
-pub use crate::render::auto_exposure;
+use crate::render::auto_exposure;
 
 /// Opens a package and reads its scene; an empty package is an error (nothing to render).
 pub fn load_scene(package: &Path) -> Result<SceneData> {
@@ -564,17 +569,17 @@ pub struct PassBench {
     pub max_depth: u32,
     pub lights: usize,
     /// Lights with shadow maps (the rest are lit per leaf by the shadow fallback).
-    pub shadowed_lights: usize,
+    pub(crate) shadowed_lights: usize,
     /// Lights in range per light-grid cell: mean and largest.
-    pub lights_in_range: (f32, u32),
+    pub(crate) lights_in_range: (f32, u32),
     /// Median milliseconds per pass over the repetitions (shadow and inject run once per light
     /// change, mip and propagate once per bounce, gbuffer and shade once per frame).
     pub median_ms: std::collections::BTreeMap<String, f64>,
-    pub repetitions: u32,
-    pub settings: Settings,
+    pub(crate) repetitions: u32,
+    pub(crate) settings: Settings,
     /// As in [`RenderSummary`].
-    pub residency: Option<residency::ResidencyTotals>,
-    pub tile_bytes: u64,
+    pub(crate) residency: Option<residency::ResidencyTotals>,
+    pub(crate) tile_bytes: u64,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {

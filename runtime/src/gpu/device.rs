@@ -87,10 +87,10 @@ pub struct Gpu {
     pub adapter: wgpu::Adapter,
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
-    pub info: wgpu::AdapterInfo,
+    pub(crate) info: wgpu::AdapterInfo,
     /// Timestamp queries are used (per-pass GPU times); otherwise, and always on software
     /// adapters, passes are timed on the CPU around a blocking submit each.
-    pub timestamps: bool,
+    pub(crate) timestamps: bool,
     errors: Arc<Mutex<Vec<String>>>,
 }
 
@@ -129,7 +129,7 @@ impl Gpu {
     /// As [`Gpu::new`], for a window: the instance knows the window's display, and only adapters
     /// that can present to its surface are considered. Returns the surface too.
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn for_window<W>(opts: &GpuOptions, window: W) -> Result<(Self, wgpu::Surface<'static>)>
+    pub(crate) fn for_window<W>(opts: &GpuOptions, window: W) -> Result<(Self, wgpu::Surface<'static>)>
     where
         W: wgpu::WindowHandle + wgpu::wgt::WgpuHasDisplayHandle + Clone + 'static,
     {
@@ -264,7 +264,7 @@ impl Gpu {
     /// `f`'s result and the first validation error what it did caused, where the platform can
     /// wait for it (native). A browser cannot block on the error scope's promise: there errors
     /// reach the uncaptured-error sink a little later and [`Gpu::check`] reports them.
-    pub fn capture<T>(&self, f: impl FnOnce() -> T) -> (T, Option<String>) {
+    pub(crate) fn capture<T>(&self, f: impl FnOnce() -> T) -> (T, Option<String>) {
         #[cfg(not(target_arch = "wasm32"))]
         {
             let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -282,7 +282,7 @@ impl Gpu {
     /// created: wgpu reports an over-limit buffer only as a validation error, and
     /// `create_buffer_init` then panics while mapping the invalid buffer. The error names the
     /// buffer, its size, the limit and what to change.
-    pub fn check_buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> Result<()> {
+    pub(crate) fn check_buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> Result<()> {
         let limits = self.device.limits();
         let mut checks = vec![("largest buffer", limits.max_buffer_size)];
         if usage.contains(wgpu::BufferUsages::STORAGE) {
@@ -300,7 +300,7 @@ impl Gpu {
     }
 
     /// Checks a 2D texture's size against the device's largest texture side.
-    pub fn check_texture(&self, label: &str, width: u32, height: u32) -> Result<()> {
+    pub(crate) fn check_texture(&self, label: &str, width: u32, height: u32) -> Result<()> {
         let limit = self.device.limits().max_texture_dimension_2d;
         if width.max(height) > limit {
             return Err(Error::TooLarge {
@@ -337,7 +337,7 @@ impl Gpu {
     }
 
     /// An uninitialised buffer of `size` bytes (at least 16), checked first.
-    pub fn buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> Result<wgpu::Buffer> {
+    pub(crate) fn buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> Result<wgpu::Buffer> {
         let size = size.max(16);
         self.check_buffer(label, size, usage)?;
         Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
@@ -350,7 +350,7 @@ impl Gpu {
 
     /// A buffer of `count` slots of `slot_size` bytes where each draw binds one slot (a uniform
     /// per shadow face): the binding limits apply to a slot, the buffer limit to the whole.
-    pub fn slotted_buffer(
+    pub(crate) fn slotted_buffer(
         &self,
         label: &str,
         slot_size: u64,
@@ -369,7 +369,7 @@ impl Gpu {
     }
 
     /// A single-level 2D texture, checked first.
-    pub fn texture_2d(
+    pub(crate) fn texture_2d(
         &self,
         label: &str,
         width: u32,
@@ -433,7 +433,7 @@ impl Gpu {
     /// result. The map's callback runs in whichever thread polls the device: where threads share
     /// one device (the tests do), another thread's poll can take our callback and run it just
     /// after our own wait returned, so the wait alone does not promise it has run.
-    pub fn wait_for<T>(
+    pub(crate) fn wait_for<T>(
         &self,
         pass: &'static str,
         mut arrived: impl FnMut() -> Result<Option<T>>,
@@ -459,7 +459,7 @@ impl Gpu {
     }
 
     /// Blocks until all submitted work is done.
-    pub fn wait(&self) -> Result<()> {
+    pub(crate) fn wait(&self) -> Result<()> {
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| Error::Gpu { pass: "wait", message: e.to_string() })?;

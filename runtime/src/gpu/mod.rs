@@ -4,4 +4,4 @@
 mod device;
 pub mod types;
 
-pub use device::*;
+pub use device::{Gpu, GpuOptions, PendingRead, STORAGE_BUFFERS_NEEDED, default_gpu_memory, human_bytes};

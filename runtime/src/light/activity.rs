@@ -37,7 +37,7 @@ pub enum Why {
 }
 
 impl Why {
-    pub fn describe(self) -> &'static str {
+    pub(crate) fn describe(self) -> &'static str {
         match self {
             Why::Start => "no light yet",
             Why::LightsChanged => "lights changed",
@@ -70,11 +70,11 @@ pub struct BounceWork {
 }
 
 /// Tiles listed by index in a [`BounceWork`] (more are only counted).
-pub const LISTED_TILES: usize = 24;
+pub(crate) const LISTED_TILES: usize = 24;
 
 /// Per-tile propagation state of one scene (the renderer's tiles, in their order).
 #[derive(Clone, Debug)]
-pub struct TileActivity {
+pub(crate) struct TileActivity {
     /// `leaf_offset`, `leaf_count` of each tile.
     leaves: Vec<(u32, u32)>,
     /// Tiles whose boxes touch (share a face, edge or corner) or overlap, by tile.
@@ -85,19 +85,19 @@ pub struct TileActivity {
 
 impl TileActivity {
     /// Every tile active (`Why::Start`).
-    pub fn new(tiles: &[TileGpu]) -> Self {
+    pub(crate) fn new(tiles: &[TileGpu]) -> Self {
         let leaves = tiles.iter().map(|t| (t.leaf_offset, t.leaf_count)).collect();
         Self { leaves, neighbours: touching(tiles), next: vec![Some(Why::Start); tiles.len()] }
     }
 
     /// Every tile active for `why`.
-    pub fn all(&mut self, why: Why) {
+    pub(crate) fn all(&mut self, why: Why) {
         self.next.fill(Some(why));
     }
 
     /// After a reload: `carried[t]` says tile `t` kept its light. The others are new, and the
     /// tiles touching them follow; a tile that kept its light and touches nothing new waits.
-    pub fn seed(&mut self, carried: &[bool]) {
+    pub(crate) fn seed(&mut self, carried: &[bool]) {
         self.next.fill(None);
         for (t, &kept) in carried.iter().enumerate().take(self.next.len()) {
             if !kept {
@@ -117,23 +117,23 @@ impl TileActivity {
     }
 
     /// Tiles the next bounce updates.
-    pub fn pending_tiles(&self) -> usize {
+    pub(crate) fn pending_tiles(&self) -> usize {
         self.next.iter().filter(|w| w.is_some()).count()
     }
 
-    pub fn tiles(&self) -> usize {
+    pub(crate) fn tiles(&self) -> usize {
         self.next.len()
     }
 
     /// Counts by reason of the tiles the next bounce updates, in words ("5 new, 9 beside a new
     /// tile").
-    pub fn pending_why(&self) -> String {
+    pub(crate) fn pending_why(&self) -> String {
         describe_counts(&count_why(self.next.iter().flatten()))
     }
 
     /// The next bounce's tiles as propagate reads them (shaders/activity.wgsl), tiles without
     /// leaves left out, and the number of its invocations (their leaves).
-    pub fn active_tiles(&self) -> (Vec<ActiveTile>, u32) {
+    pub(crate) fn active_tiles(&self) -> (Vec<ActiveTile>, u32) {
         let mut items = 0;
         let mut out = Vec::new();
         for (t, w) in self.next.iter().enumerate() {
@@ -149,7 +149,7 @@ impl TileActivity {
     /// Ends a bounce that updated the pending tiles, given each tile's largest relative change
     /// (`change[t]`, meaningful for the tiles it updated): chooses the next bounce's tiles and
     /// returns what this one did. A change that is not a number counts as a change.
-    pub fn finish(&mut self, change: &[f32], tolerance: f32) -> BounceWork {
+    pub(crate) fn finish(&mut self, change: &[f32], tolerance: f32) -> BounceWork {
         let ran: Vec<usize> = (0..self.next.len()).filter(|&t| self.next[t].is_some()).collect();
         let why = count_why(self.next.iter().flatten());
         let every_tile = ran.len() == self.next.len();

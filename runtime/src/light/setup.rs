@@ -24,20 +24,20 @@ use crate::settings::{Settings, ShadowFallback};
 /// then lists them before the rest, and shade, which evaluates only those per pixel, stops at the
 /// first one without), their shadow-atlas faces, and the light grid.
 #[derive(Clone, Debug)]
-pub struct LightSetup {
-    pub lights: Vec<LightGpu>,
-    pub faces: Vec<Face>,
+pub(crate) struct LightSetup {
+    pub(crate) lights: Vec<LightGpu>,
+    pub(crate) faces: Vec<Face>,
     /// Lights with shadow maps; the others are lit per leaf by inject.
-    pub shadowed: usize,
-    pub point_lights: usize,
-    pub spot_lights: usize,
-    pub grid: LightGrid,
+    pub(crate) shadowed: usize,
+    pub(crate) point_lights: usize,
+    pub(crate) spot_lights: usize,
+    pub(crate) grid: LightGrid,
 }
 
 impl LightSetup {
     /// `near_m` / `far_m`: the shadow projections' depth range; the grid covers `grid_lo_m ..
     /// grid_hi_m`.
-    pub fn new(
+    pub(crate) fn new(
         scene: &SceneData,
         settings: &Settings,
         near_m: f32,
@@ -130,13 +130,13 @@ impl LightSetup {
 }
 
 /// Most cells per grid axis.
-pub const GRID_MAX_DIM: u32 = 32;
+pub(crate) const GRID_MAX_DIM: u32 = 32;
 /// Most light indices over all cells before the grid is made coarser.
-pub const GRID_MAX_ENTRIES: usize = 1 << 22;
+pub(crate) const GRID_MAX_ENTRIES: usize = 1 << 22;
 
 /// Distance past which a light of radiant intensity `intensity_w_sr` gives less than
 /// `cutoff_w_m2` of irradiance; infinite for a zero cutoff.
-pub fn range_m(intensity_w_sr: Vec3, cutoff_w_m2: f32) -> f32 {
+pub(crate) fn range_m(intensity_w_sr: Vec3, cutoff_w_m2: f32) -> f32 {
     if cutoff_w_m2 > 0.0 {
         (intensity_w_sr.max_element().max(0.0) / cutoff_w_m2).sqrt()
     } else {
@@ -146,7 +146,7 @@ pub fn range_m(intensity_w_sr: Vec3, cutoff_w_m2: f32) -> f32 {
 
 /// Light indices, brightest first (largest channel of the radiant intensity; ties keep the
 /// package order, so the choice is deterministic).
-pub fn brightest_first(lights: &[SceneLight]) -> Vec<usize> {
+pub(crate) fn brightest_first(lights: &[SceneLight]) -> Vec<usize> {
     let mut order: Vec<usize> = (0..lights.len()).collect();
     order.sort_by(|&a, &b| {
         let (ia, ib) = (lights[a].intensity_w_sr.max_element(), lights[b].intensity_w_sr.max_element());
@@ -158,16 +158,16 @@ pub fn brightest_first(lights: &[SceneLight]) -> Vec<usize> {
 /// Per-cell light lists over a uniform grid. `words` is what the GPU binds: `cells + 1` offsets
 /// (absolute word indices, cell c's lights are `words[words[c]..words[c + 1]]`), then the lists.
 #[derive(Clone, Debug, PartialEq)]
-pub struct LightGrid {
-    pub min_m: Vec3,
-    pub cell_m: f32,
-    pub dims: UVec3,
-    pub words: Vec<u32>,
+pub(crate) struct LightGrid {
+    pub(crate) min_m: Vec3,
+    pub(crate) cell_m: f32,
+    pub(crate) dims: UVec3,
+    pub(crate) words: Vec<u32>,
 }
 
 impl LightGrid {
     /// The grid over the box `lo_m..hi_m` for lights at `position_m` reaching `range_m`.
-    pub fn build(lo_m: Vec3, hi_m: Vec3, lights: &[(Vec3, f32)]) -> Self {
+    pub(crate) fn build(lo_m: Vec3, hi_m: Vec3, lights: &[(Vec3, f32)]) -> Self {
         let extent = (hi_m - lo_m).max(Vec3::splat(1e-3));
         let mut max_dim = GRID_MAX_DIM;
         loop {
@@ -227,12 +227,13 @@ impl LightGrid {
         }
     }
 
-    pub fn cells(&self) -> usize {
+    pub(crate) fn cells(&self) -> usize {
         (self.dims.x * self.dims.y * self.dims.z) as usize
     }
 
     /// The lights listed for the cell holding `p_m` (clamped into the grid), as the GPU reads it.
-    pub fn lights_at(&self, p_m: Vec3) -> &[u32] {
+    #[cfg(test)]
+    fn lights_at(&self, p_m: Vec3) -> &[u32] {
         let c = ((p_m - self.min_m) / self.cell_m)
             .floor()
             .clamp(Vec3::ZERO, (self.dims - 1).as_vec3())
@@ -242,7 +243,7 @@ impl LightGrid {
     }
 
     /// Mean and largest number of lights per cell.
-    pub fn occupancy(&self) -> (f32, u32) {
+    pub(crate) fn occupancy(&self) -> (f32, u32) {
         let cells = self.cells();
         let counts = (0..cells).map(|i| self.words[i + 1] - self.words[i]);
         let max = counts.clone().max().unwrap_or(0);

@@ -9,7 +9,7 @@ use crate::scene::data::SceneData;
 
 /// Closure of a cone that left the scene nearly opaque (`close_cone` in shaders/cone.wgsl): its
 /// missing share filled with `last`, the colour of the matter it was crossing.
-pub fn close_cone(acc: [f64; 4], last: [f64; 3]) -> [f64; 4] {
+pub(crate) fn close_cone(acc: [f64; 4], last: [f64; 3]) -> [f64; 4] {
     const CLOSE_LO: f64 = 0.8;
     const CLOSE_HI: f64 = 0.95;
     if acc[3] <= 1e-6 {
@@ -24,7 +24,7 @@ pub fn close_cone(acc: [f64; 4], last: [f64; 3]) -> [f64; 4] {
 /// A cone whose axis entered rock (`enter_rock` in shaders/cone.wgsl): it ends opaque; what is hidden
 /// looks like `last`, the colour of the wall it was crossing (or, having met nothing, like the
 /// rock cell's own filtered radiance `s`).
-pub fn enter_rock(acc: [f64; 4], s: [f64; 4], last: [f64; 3]) -> [f64; 4] {
+pub(crate) fn enter_rock(acc: [f64; 4], s: [f64; 4], last: [f64; 3]) -> [f64; 4] {
     let behind = if acc[3] <= 1e-6 && s[3] > 1e-6 { [s[0] / s[3], s[1] / s[3], s[2] / s[3]] } else { last };
     let rest = 1.0 - acc[3];
     [acc[0] + rest * behind[0], acc[1] + rest * behind[1], acc[2] + rest * behind[2], 1.0]
@@ -128,7 +128,7 @@ impl<'a> CpuScene<'a> {
     }
 
     /// Trilinear sample of level `lod` at `p_leaf` along `dir`.
-    pub fn sample_level(&self, p_leaf: DVec3, lod: u32, dir: DVec3) -> [f64; 4] {
+    pub(crate) fn sample_level(&self, p_leaf: DVec3, lod: u32, dir: DVec3) -> [f64; 4] {
         let u = p_leaf / f64::from(1u32 << lod) - DVec3::splat(0.5);
         let base = u.floor();
         let f = u - base;
@@ -150,7 +150,7 @@ impl<'a> CpuScene<'a> {
     }
 
     /// Quadrilinear sample at fractional `lod`.
-    pub fn sample_lod(&self, p_leaf: DVec3, lod: f64, max_lod: u32, dir: DVec3) -> [f64; 4] {
+    pub(crate) fn sample_lod(&self, p_leaf: DVec3, lod: f64, max_lod: u32, dir: DVec3) -> [f64; 4] {
         let l = lod.clamp(0.0, f64::from(max_lod));
         let l0 = l.floor() as u32;
         let t = l - f64::from(l0);
@@ -216,7 +216,7 @@ impl<'a> CpuScene<'a> {
     }
 
     /// The gathered radiance of leaf `i` (irradiance / pi), as propagate.wgsl.
-    pub fn gather(&self, p: &Params, i: usize) -> DVec3 {
+    pub(crate) fn gather(&self, p: &Params, i: usize) -> DVec3 {
         let leaf = &self.scene.leaves[i];
         let mean = Vec3::from_slice(&leaf.normal_mean[..3]).as_dvec3();
         let r = mean.length();

@@ -5,6 +5,11 @@ use crate::error::Result;
 use crate::gpu::Gpu;
 
 /// The env pass over the settings' `cones`.
-pub fn new(gpu: &Gpu, shared: &super::Shared, radiance_f16: bool, cones: u32) -> Result<super::Batched> {
+pub(crate) fn new(
+    gpu: &Gpu,
+    shared: &super::Shared,
+    radiance_f16: bool,
+    cones: u32,
+) -> Result<super::Batched> {
     super::cone_batched(gpu, "env", crate::shaders::ENV, shared, radiance_f16, cones)
 }

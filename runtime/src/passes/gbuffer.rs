@@ -8,23 +8,23 @@ use crate::gpu::Gpu;
 use crate::gpu::types::SplatUniform;
 
 /// Packed f32 distance and octahedral normal (splat.wgsl): 8-bit unorm targets render everywhere.
-pub const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
-pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
-pub const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+pub(crate) const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+pub(crate) const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+pub(crate) const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 
 /// The targets of one image size.
 #[derive(Debug)]
-pub struct Targets {
-    pub width: u32,
-    pub height: u32,
-    pub distance: wgpu::Texture,
-    pub normal: wgpu::Texture,
-    pub albedo: wgpu::Texture,
-    pub depth: wgpu::Texture,
+pub(crate) struct Targets {
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+    pub(crate) distance: wgpu::Texture,
+    pub(crate) normal: wgpu::Texture,
+    pub(crate) albedo: wgpu::Texture,
+    pub(crate) depth: wgpu::Texture,
 }
 
 impl Targets {
-    pub fn new(gpu: &Gpu, width: u32, height: u32) -> Result<Self> {
+    pub(crate) fn new(gpu: &Gpu, width: u32, height: u32) -> Result<Self> {
         let make = |label, format| {
             gpu.texture_2d(
                 label,
@@ -50,13 +50,13 @@ impl Targets {
 
 /// The G-buffer pass and the camera's splat uniform.
 #[derive(Debug)]
-pub struct Gbuffer {
+pub(crate) struct Gbuffer {
     pipeline: wgpu::RenderPipeline,
     camera: splat::Uniforms,
 }
 
 impl Gbuffer {
-    pub fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout) -> Result<Self> {
+    pub(crate) fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout) -> Result<Self> {
         let t =
             |format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL });
         let targets = [t(DISTANCE_FORMAT), t(NORMAL_FORMAT), t(ALBEDO_FORMAT)];
@@ -67,11 +67,11 @@ impl Gbuffer {
     }
 
     /// The camera the next recording draws from.
-    pub fn set_camera(&self, gpu: &Gpu, u: &SplatUniform) {
+    pub(crate) fn set_camera(&self, gpu: &Gpu, u: &SplatUniform) {
         self.camera.write(gpu, 0, u);
     }
 
-    pub fn record(
+    pub(crate) fn record(
         &self,
         enc: &mut wgpu::CommandEncoder,
         targets: &Targets,

@@ -15,12 +15,12 @@ use crate::gpu::Gpu;
 use crate::gpu::types::InjectBatch;
 
 /// Lights of a cell handled by one inject dispatch.
-pub const LIGHTS_PER_BATCH: u32 = 4;
+pub(crate) const LIGHTS_PER_BATCH: u32 = 4;
 
 /// The inject pass for a light grid whose longest cell list holds `max_lights_per_cell` lights
 /// (at least one batch runs, so that a scene whose lights reach no leaf still resets the direct
 /// light).
-pub fn new(
+pub(crate) fn new(
     gpu: &Gpu,
     shared: &super::Shared,
     radiance_f16: bool,

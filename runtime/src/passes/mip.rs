@@ -8,13 +8,13 @@ use crate::gpu::Gpu;
 use crate::gpu::types::MipRange;
 
 /// Most node heights a scene may have (a tile's SVO is at most 21 levels deep: morton codes).
-pub const MAX_HEIGHTS: usize = 32;
+pub(crate) const MAX_HEIGHTS: usize = 32;
 
 /// Stride of the level ranges in their uniform buffer (wgpu's largest uniform offset alignment).
 const RANGE_STRIDE: u64 = 256;
 
 #[derive(Debug)]
-pub struct Mip {
+pub(crate) struct Mip {
     pipeline: super::ComputePipeline,
     order: wgpu::Buffer,
     ranges: wgpu::Buffer,
@@ -25,7 +25,7 @@ pub struct Mip {
 
 impl Mip {
     /// The pass, with room for `node_capacity` nodes, ordered as `by_height` and `ranges` say.
-    pub fn new(
+    pub(crate) fn new(
         gpu: &Gpu,
         shared: &super::Shared,
         node_capacity: u64,
@@ -66,13 +66,8 @@ impl Mip {
         Ok(mip)
     }
 
-    /// Bytes of the node order (4 a node of the pool) and the level ranges.
-    pub fn bytes(&self) -> u64 {
-        self.order.size() + self.ranges.size()
-    }
-
     /// The nodes to filter, by height (`SceneData::nodes_by_height` or the pools' equivalent).
-    pub fn set_order(&mut self, gpu: &Gpu, by_height: &[u32], ranges: &[MipRange]) -> Result<()> {
+    pub(crate) fn set_order(&mut self, gpu: &Gpu, by_height: &[u32], ranges: &[MipRange]) -> Result<()> {
         if ranges.len() > MAX_HEIGHTS || 4 * by_height.len() as u64 > self.order.size() {
             return Err(Error::Internal {
                 what: "mip",
@@ -94,7 +89,7 @@ impl Mip {
         Ok(())
     }
 
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
+    pub(crate) fn record(&self, pass: &mut wgpu::ComputePass<'_>) {
         self.pipeline.bind(pass);
         for (bg, count) in self.levels.iter().zip(&self.counts) {
             pass.set_bind_group(super::OWN_GROUP, bg, &[]);

@@ -25,7 +25,7 @@ use crate::gpu::Gpu;
 
 /// A resource of a shared bind group.
 #[derive(Clone, Debug)]
-pub enum Resource {
+pub(crate) enum Resource {
     Buffer(wgpu::Buffer),
     Texture(wgpu::TextureView),
 }
@@ -41,18 +41,18 @@ impl Resource {
 
 /// The resources of the shared bind groups, by group then binding (the numbers in the WGSL).
 #[derive(Clone, Debug, Default)]
-pub struct Shared {
-    pub groups: BTreeMap<u32, BTreeMap<u32, Resource>>,
+pub(crate) struct Shared {
+    pub(crate) groups: BTreeMap<u32, BTreeMap<u32, Resource>>,
 }
 
 impl Shared {
-    pub fn insert(&mut self, group: u32, binding: u32, resource: Resource) {
+    pub(crate) fn insert(&mut self, group: u32, binding: u32, resource: Resource) {
         self.groups.entry(group).or_default().insert(binding, resource);
     }
 }
 
 /// Group of a pass's own resources.
-pub const OWN_GROUP: u32 = 2;
+pub(crate) const OWN_GROUP: u32 = 2;
 
 /// The bind group layout entries a composed WGSL module declares, by group (naga reflection of
 /// its resource variables): uniforms, storage buffers (read-only unless written) and
@@ -108,16 +108,16 @@ pub fn reflect_layouts(
 
 /// A compute pipeline with its reflected layouts and its shared bind groups made.
 #[derive(Debug)]
-pub struct ComputePipeline {
-    pub pipeline: wgpu::ComputePipeline,
+pub(crate) struct ComputePipeline {
+    pub(crate) pipeline: wgpu::ComputePipeline,
     /// Layout of the pass's own group ([`OWN_GROUP`]), when its WGSL declares one.
-    pub own_layout: Option<wgpu::BindGroupLayout>,
+    pub(crate) own_layout: Option<wgpu::BindGroupLayout>,
     shared: Vec<(u32, wgpu::BindGroup)>,
 }
 
 impl ComputePipeline {
     /// Sets the pipeline and the shared bind groups.
-    pub fn bind(&self, pass: &mut wgpu::ComputePass<'_>) {
+    pub(crate) fn bind(&self, pass: &mut wgpu::ComputePass<'_>) {
         pass.set_pipeline(&self.pipeline);
         for (group, bg) in &self.shared {
             pass.set_bind_group(*group, bg, &[]);
@@ -128,7 +128,7 @@ impl ComputePipeline {
 /// Pipeline `label` from `pass_src` (composed with its imports), entry point `entry`;
 /// `radiance_f16` sets the pipeline constant of that name (the radiance pyramid's precision).
 /// Groups other than [`OWN_GROUP`] are bound from `shared`.
-pub fn compute_pipeline(
+pub(crate) fn compute_pipeline(
     gpu: &Gpu,
     label: &'static str,
     pass_src: &str,
@@ -196,14 +196,14 @@ pub fn compute_pipeline(
 /// (binding 0 of the pass's own group) in a bind group made once: inject's lights and the cone
 /// passes' cones (`cone_batched`). Results accumulate in the leaf state between dispatches.
 #[derive(Debug)]
-pub struct Batched {
+pub(crate) struct Batched {
     pipeline: ComputePipeline,
     batches: Vec<wgpu::BindGroup>,
 }
 
 impl Batched {
     /// The pass `name` (its WGSL entry point has the pass's name) with one batch per value.
-    pub fn new<T: bytemuck::Pod>(
+    pub(crate) fn new<T: bytemuck::Pod>(
         gpu: &Gpu,
         name: &'static str,
         pass_src: &str,
@@ -227,7 +227,7 @@ impl Batched {
         Ok(Self { pipeline, batches })
     }
 
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, leaf_count: u32) {
+    pub(crate) fn record(&self, pass: &mut wgpu::ComputePass<'_>, leaf_count: u32) {
         self.pipeline.bind(pass);
         for bg in &self.batches {
             pass.set_bind_group(OWN_GROUP, bg, &[]);
@@ -237,7 +237,7 @@ impl Batched {
 }
 
 /// Cones traced by one dispatch of a cone pass ([`cone_batched`]).
-pub const CONES_PER_BATCH: u32 = 1;
+pub(crate) const CONES_PER_BATCH: u32 = 1;
 
 /// A pass that traces the cone set (env, propagate) in batches of [`CONES_PER_BATCH`] cones per
 /// dispatch.
@@ -250,7 +250,7 @@ pub const CONES_PER_BATCH: u32 = 1;
 /// 0.999 from the CPU reference (which is step-invariant there); 9 cones, or step >= 0.35, matched
 /// (issue 21). With one cone per dispatch the budget is per cone. Results are the same to the bit:
 /// the running sums are kept in the leaf state and added to in the same order (the WGSL).
-pub fn cone_batched(
+pub(crate) fn cone_batched(
     gpu: &Gpu,
     name: &'static str,
     pass_src: &str,
@@ -268,7 +268,10 @@ pub fn cone_batched(
 }
 
 /// The own group's layout of `p`, which its WGSL must declare.
-pub fn own_layout<'a>(p: &'a ComputePipeline, label: &'static str) -> Result<&'a wgpu::BindGroupLayout> {
+pub(crate) fn own_layout<'a>(
+    p: &'a ComputePipeline,
+    label: &'static str,
+) -> Result<&'a wgpu::BindGroupLayout> {
     p.own_layout
         .as_ref()
         .ok_or(Error::Internal { what: label, message: format!("the WGSL declares no group {OWN_GROUP}") })
@@ -276,7 +279,7 @@ pub fn own_layout<'a>(p: &'a ComputePipeline, label: &'static str) -> Result<&'a
 
 /// Dispatches 64-wide groups covering `n` items as a 2D grid (at most 65535 groups per
 /// dimension); shaders recover the item with `linear_index` (shaders/dispatch.wgsl).
-pub fn dispatch_linear(pass: &mut wgpu::ComputePass<'_>, n: u32) {
+pub(crate) fn dispatch_linear(pass: &mut wgpu::ComputePass<'_>, n: u32) {
     let groups = n.div_ceil(64).max(1);
     let x = groups.min(65535);
     pass.dispatch_workgroups(x, groups.div_ceil(x), 1);

@@ -5,6 +5,11 @@ use crate::error::Result;
 use crate::gpu::Gpu;
 
 /// The propagate pass over the settings' `cones`.
-pub fn new(gpu: &Gpu, shared: &super::Shared, radiance_f16: bool, cones: u32) -> Result<super::Batched> {
+pub(crate) fn new(
+    gpu: &Gpu,
+    shared: &super::Shared,
+    radiance_f16: bool,
+    cones: u32,
+) -> Result<super::Batched> {
     super::cone_batched(gpu, "propagate", crate::shaders::PROPAGATE, shared, radiance_f16, cones)
 }

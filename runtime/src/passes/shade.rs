@@ -8,7 +8,7 @@ use crate::gpu::Gpu;
 use crate::scene::data::EnvChain;
 
 #[derive(Debug)]
-pub struct Shade {
+pub(crate) struct Shade {
     pipeline: super::ComputePipeline,
     env_atlas: wgpu::TextureView,
     env_atlas_bytes: u64,
@@ -17,20 +17,20 @@ pub struct Shade {
 /// Shade's outputs and bind group for one G-buffer: one buffer (WebGPU allows 8 storage buffers
 /// per stage by default), HDR and coverage as 4 f32 a pixel, then sRGB8 as one u32 a pixel.
 #[derive(Debug)]
-pub struct Outputs {
-    pub frame: wgpu::Buffer,
-    pub pixels: u64,
-    pub bind_group: wgpu::BindGroup,
+pub(crate) struct Outputs {
+    pub(crate) frame: wgpu::Buffer,
+    pub(crate) pixels: u64,
+    pub(crate) bind_group: wgpu::BindGroup,
 }
 
 impl Outputs {
     /// Bytes of the HDR part, which starts the buffer.
-    pub fn hdr_bytes(&self) -> u64 {
+    pub(crate) fn hdr_bytes(&self) -> u64 {
         self.pixels * 16
     }
 
     /// Word offset of the sRGB8 part.
-    pub fn ldr_first_word(&self) -> u32 {
+    pub(crate) fn ldr_first_word(&self) -> u32 {
         (self.pixels * 4) as u32
     }
 }
@@ -38,7 +38,7 @@ impl Outputs {
 impl Shade {
     /// `env_chain`: the prefiltered environment levels, when the scene is lit by one (a 1x1
     /// placeholder atlas without).
-    pub fn new(
+    pub(crate) fn new(
         gpu: &Gpu,
         shared: &super::Shared,
         radiance_f16: bool,
@@ -74,11 +74,11 @@ impl Shade {
     }
 
     /// GPU bytes of the environment atlas.
-    pub fn env_atlas_bytes(&self) -> u64 {
+    pub(crate) fn env_atlas_bytes(&self) -> u64 {
         self.env_atlas_bytes
     }
 
-    pub fn outputs(&self, gpu: &Gpu, targets: &Targets) -> Result<Outputs> {
+    pub(crate) fn outputs(&self, gpu: &Gpu, targets: &Targets) -> Result<Outputs> {
         let layout = super::own_layout(&self.pipeline, "shade")?;
         let pixels = u64::from(targets.width) * u64::from(targets.height);
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
@@ -100,7 +100,7 @@ impl Shade {
         Ok(Outputs { frame, pixels, bind_group })
     }
 
-    pub fn record(&self, pass: &mut wgpu::ComputePass<'_>, out: &Outputs, w: u32, h: u32) {
+    pub(crate) fn record(&self, pass: &mut wgpu::ComputePass<'_>, out: &Outputs, w: u32, h: u32) {
         self.pipeline.bind(pass);
         pass.set_bind_group(super::OWN_GROUP, &out.bind_group, &[]);
         pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);

@@ -18,10 +18,10 @@ use crate::gpu::Gpu;
 use crate::gpu::types::SplatUniform;
 
 /// Distance to the light as a packed f32 (packing.wgsl `pack_f32`): float targets do not render on GL.
-pub const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+pub(crate) const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
 /// Clear colour whose packed bytes read back as `f32` `v`.
-pub fn packed_clear(v: f32) -> wgpu::Color {
+pub(crate) fn packed_clear(v: f32) -> wgpu::Color {
     let b = v.to_bits().to_le_bytes();
     let c = |i: usize| f64::from(b[i]) / 255.0;
     wgpu::Color { r: c(0), g: c(1), b: c(2), a: c(3) }
@@ -30,14 +30,14 @@ pub fn packed_clear(v: f32) -> wgpu::Color {
 /// One face of the atlas: light-space view-projection, the light's position, and the projection
 /// scale (1 / tan(fov / 2)).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Face {
-    pub view_proj: Mat4,
-    pub eye_m: Vec3,
-    pub proj_scale: f32,
+pub(crate) struct Face {
+    pub(crate) view_proj: Mat4,
+    pub(crate) eye_m: Vec3,
+    pub(crate) proj_scale: f32,
 }
 
 #[derive(Debug)]
-pub struct Shadow {
+pub(crate) struct Shadow {
     pipeline: wgpu::RenderPipeline,
     face_size: u32,
     cols: u32,
@@ -55,7 +55,7 @@ impl Shadow {
     /// The atlas for `faces` at `face_size` texels each, in a near-square grid; faces shrink if
     /// the grid would pass the adapter's largest 2D texture. The faces' uniforms are written once
     /// (lights are static).
-    pub fn new(
+    pub(crate) fn new(
         gpu: &Gpu,
         layout: &wgpu::BindGroupLayout,
         faces: &[Face],
@@ -153,25 +153,25 @@ impl Shadow {
     }
 
     /// The distance atlas, as inject and shade bind it.
-    pub fn atlas(&self) -> &wgpu::TextureView {
+    pub(crate) fn atlas(&self) -> &wgpu::TextureView {
         &self.atlas
     }
 
-    pub fn face_size(&self) -> u32 {
+    pub(crate) fn face_size(&self) -> u32 {
         self.face_size
     }
 
-    pub fn cols(&self) -> u32 {
+    pub(crate) fn cols(&self) -> u32 {
         self.cols
     }
 
     /// The faces, as [`Shadow::new`] was given them.
-    pub fn faces(&self) -> &[Face] {
+    pub(crate) fn faces(&self) -> &[Face] {
         &self.faces
     }
 
     /// GPU bytes of the atlas, its depth buffer (4 bytes a texel each) and the blank face.
-    pub fn bytes(&self) -> u64 {
+    pub(crate) fn bytes(&self) -> u64 {
         self.atlas_bytes
     }
 
@@ -179,7 +179,7 @@ impl Shadow {
     /// sees) into their squares of the atlas in one pass (one viewport per face). With every face
     /// named the atlas is cleared; else the other faces keep their texels and each named one is
     /// cleared first (the blank face copied over it).
-    pub fn record(
+    pub(crate) fn record(
         &self,
         enc: &mut wgpu::CommandEncoder,
         surfels: &wgpu::Buffer,

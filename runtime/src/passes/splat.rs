@@ -5,10 +5,10 @@ use crate::error::Result;
 use crate::gpu::Gpu;
 use crate::gpu::types::{SplatUniform, SurfelGpu};
 
-pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+pub(crate) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// The depth attachment both splat passes use: cleared to the far plane, not kept after the pass.
-pub fn depth_cleared(view: &wgpu::TextureView) -> wgpu::RenderPassDepthStencilAttachment<'_> {
+pub(crate) fn depth_cleared(view: &wgpu::TextureView) -> wgpu::RenderPassDepthStencilAttachment<'_> {
     wgpu::RenderPassDepthStencilAttachment {
         view,
         depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
@@ -17,7 +17,7 @@ pub fn depth_cleared(view: &wgpu::TextureView) -> wgpu::RenderPassDepthStencilAt
 }
 
 /// The splat uniform's layout (group 0 of splat.wgsl).
-pub fn layout(gpu: &Gpu) -> wgpu::BindGroupLayout {
+pub(crate) fn layout(gpu: &Gpu) -> wgpu::BindGroupLayout {
     gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("splat"),
         entries: &[wgpu::BindGroupLayoutEntry {
@@ -35,13 +35,13 @@ pub fn layout(gpu: &Gpu) -> wgpu::BindGroupLayout {
 
 /// `count` splat uniforms in one buffer, with one bind group per slot (bound at its offset).
 #[derive(Debug)]
-pub struct Uniforms {
+pub(crate) struct Uniforms {
     buffer: wgpu::Buffer,
-    pub groups: Vec<wgpu::BindGroup>,
+    pub(crate) groups: Vec<wgpu::BindGroup>,
 }
 
 impl Uniforms {
-    pub fn new(gpu: &Gpu, label: &str, layout: &wgpu::BindGroupLayout, count: usize) -> Result<Self> {
+    pub(crate) fn new(gpu: &Gpu, label: &str, layout: &wgpu::BindGroupLayout, count: usize) -> Result<Self> {
         let size = size_of::<SplatUniform>() as u64;
         // Each draw binds one slot, so 64 KiB uniform bindings (WebGPU's default, lavapipe)
         // still hold hundreds of shadow faces.
@@ -70,16 +70,12 @@ impl Uniforms {
         Ok(Self { buffer, groups })
     }
 
-    pub fn write(&self, gpu: &Gpu, slot: usize, u: &SplatUniform) {
+    pub(crate) fn write(&self, gpu: &Gpu, slot: usize, u: &SplatUniform) {
         gpu.queue.write_buffer(
             &self.buffer,
             (slot * size_of::<SplatUniform>()) as u64,
             bytemuck::bytes_of(u),
         );
-    }
-
-    pub fn bytes(&self) -> u64 {
-        self.buffer.size()
     }
 }
 
@@ -91,7 +87,7 @@ const SURFEL_ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
 ];
 
 /// A render pipeline drawing every surfel as an oriented disc into `targets`.
-pub fn pipeline(
+pub(crate) fn pipeline(
     gpu: &Gpu,
     label: &str,
     layout: &wgpu::BindGroupLayout,

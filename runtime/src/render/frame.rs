@@ -93,7 +93,7 @@ impl Renderer {
     }
 
     /// The last frame [`Renderer::draw`] (or render) made, read back.
-    pub fn read_frame(&self) -> Result<Frame> {
+    pub(crate) fn read_frame(&self) -> Result<Frame> {
         let view = self.view("shade")?;
         let (width, height) = (view.targets.width, view.targets.height);
         let pixels = u64::from(width) * u64::from(height);
@@ -475,8 +475,8 @@ pub struct Frame {
 /// A frame on the GPU, for a viewer to present ([`Renderer::ldr_output`]).
 #[derive(Clone, Copy, Debug)]
 pub struct LdrOutput<'a> {
-    pub buffer: &'a wgpu::Buffer,
-    pub first_word: u32,
-    pub width: u32,
-    pub height: u32,
+    pub(crate) buffer: &'a wgpu::Buffer,
+    pub(crate) first_word: u32,
+    pub(crate) width: u32,
+    pub(crate) height: u32,
 }

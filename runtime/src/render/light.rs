@@ -251,7 +251,7 @@ impl Renderer {
 pub struct LightProgress {
     pub bounces_done: u32,
     pub bounce_budget: u32,
-    pub last_change: Option<f32>,
+    pub(crate) last_change: Option<f32>,
     pub converged: bool,
 }
 
@@ -271,11 +271,4 @@ impl LightProgress {
 #[derive(Clone, Debug, Default)]
 pub struct CarriedLight {
     pub(super) tiles: HashMap<TileKey, Vec<LeafLightGpu>>,
-}
-
-impl CarriedLight {
-    /// Leaves held.
-    pub fn leaves(&self) -> usize {
-        self.tiles.values().map(Vec::len).sum()
-    }
 }

@@ -27,14 +27,14 @@ use crate::scene::data::SceneData;
 /// hole or the tail and the pools rarely need a repack: with none, residency fills every pool and
 /// any fragmentation forces one (repacks per frame are in the fly-through tables of
 /// docs/benchmarks.md).
-pub const POOL_HEADROOM: f64 = 0.1;
+pub(crate) const POOL_HEADROOM: f64 = 0.1;
 
 /// A tile form: where the tile is (its corner in frame leaves), its SVO depth, and the level it is
 /// held at. Two scenes holding the same key hold the same nodes, leaves and surfels.
-pub type TileKey = ([i32; 3], u32, u32);
+pub(crate) type TileKey = ([i32; 3], u32, u32);
 
 /// The key of a placed or loaded tile.
-pub fn key(t: &TileGpu) -> TileKey {
+pub(crate) fn key(t: &TileGpu) -> TileKey {
     (t.origin_leaf, t.depth, t.leaf_lod)
 }
 
@@ -43,10 +43,10 @@ pub fn key(t: &TileGpu) -> TileKey {
 pub struct PoolCaps {
     /// Tile records (every tile of a package is held in some form, so this is the package's
     /// tile count when streaming).
-    pub tiles: u64,
-    pub nodes: u64,
-    pub leaves: u64,
-    pub surfels: u64,
+    pub(crate) tiles: u64,
+    pub(crate) nodes: u64,
+    pub(crate) leaves: u64,
+    pub(crate) surfels: u64,
 }
 
 impl PoolCaps {
@@ -68,7 +68,7 @@ impl PoolCaps {
 
     /// These pools less `share` of each (nodes, leaves, surfels; tile records kept): what
     /// residency may fill when `share` is kept free ([`POOL_HEADROOM`]).
-    pub fn less(&self, share: f64) -> Self {
+    pub(crate) fn less(&self, share: f64) -> Self {
         let keep = |n: u64| (n as f64 * (1.0 - share.clamp(0.0, 1.0))).floor() as u64;
         Self {
             tiles: self.tiles,
@@ -79,7 +79,7 @@ impl PoolCaps {
     }
 
     /// These pools, each grown to at least `need`'s.
-    pub fn at_least(self, need: PoolCaps) -> Self {
+    pub(crate) fn at_least(self, need: PoolCaps) -> Self {
         Self {
             tiles: self.tiles.max(need.tiles),
             nodes: self.nodes.max(need.nodes),
@@ -119,31 +119,31 @@ impl PoolCaps {
 
 /// Where one tile form lives in the pools.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct Slot {
-    pub nodes: Range<u32>,
-    pub leaves: Range<u32>,
-    pub surfels: Range<u32>,
+pub(crate) struct Slot {
+    pub(crate) nodes: Range<u32>,
+    pub(crate) leaves: Range<u32>,
+    pub(crate) surfels: Range<u32>,
 }
 
 /// What [`Pools::place`] decided for a scene.
 #[derive(Clone, Debug, Default)]
-pub struct Placement {
+pub(crate) struct Placement {
     /// The scene's tiles in scene order, their offsets moved to their slots.
-    pub tiles: Vec<TileGpu>,
+    pub(crate) tiles: Vec<TileGpu>,
     /// Each scene tile's slot.
-    pub slots: Vec<Slot>,
+    pub(crate) slots: Vec<Slot>,
     /// Each scene tile: it was resident before in this form and kept its slot (nothing to upload).
-    pub kept: Vec<bool>,
+    pub(crate) kept: Vec<bool>,
     /// Every slot was reallocated (the free space was fragmented): everything is uploaded again,
     /// and the forms resident before lost their place (their light is carried by the caller).
-    pub repacked: bool,
+    pub(crate) repacked: bool,
     /// Slots freed (forms that left).
-    pub freed: usize,
+    pub(crate) freed: usize,
 }
 
 /// The three pools' allocators and the slot of every resident tile form.
 #[derive(Debug)]
-pub struct Pools {
+pub(crate) struct Pools {
     caps: PoolCaps,
     nodes: RangeAllocator<u32>,
     leaves: RangeAllocator<u32>,
@@ -154,7 +154,7 @@ pub struct Pools {
 }
 
 /// Ranges sorted and merged where they touch, empty ones dropped: one draw call a run.
-pub fn merge_runs(mut r: Vec<Range<u32>>) -> Vec<Range<u32>> {
+pub(crate) fn merge_runs(mut r: Vec<Range<u32>>) -> Vec<Range<u32>> {
     r.retain(|r| !r.is_empty());
     r.sort_by_key(|r| r.start);
     let mut out: Vec<Range<u32>> = Vec::with_capacity(r.len());
@@ -171,7 +171,7 @@ pub fn merge_runs(mut r: Vec<Range<u32>>) -> Vec<Range<u32>> {
 /// else (a scene put together by hand) every surfel counted as the first tile's. Either way each
 /// surfel has one owner, so a slot holds whole tiles. The flag: the ranges were the scene's own
 /// (each tile's surfels lie in its box).
-pub fn surfel_owners(scene: &SceneData) -> (Vec<Range<u32>>, bool) {
+pub(crate) fn surfel_owners(scene: &SceneData) -> (Vec<Range<u32>>, bool) {
     let n = scene.surfels.len() as u32;
     let mut next = 0;
     let exact = scene.tile_surfels.len() == scene.tiles.len()
@@ -195,7 +195,7 @@ fn tile_counts(scene: &SceneData, owners: &[Range<u32>], t: usize) -> (u32, u32,
 
 impl Pools {
     /// Empty pools of `caps` elements (each at most `u32::MAX`: GPU indices are u32).
-    pub fn new(caps: PoolCaps) -> Result<Self> {
+    pub(crate) fn new(caps: PoolCaps) -> Result<Self> {
         let cap = |what: &str, n: u64| {
             u32::try_from(n).map_err(|_| Error::Budget {
                 what: format!("a pool of {n} {what} is over the 2^32 a GPU index can address"),
@@ -214,27 +214,28 @@ impl Pools {
 
     /// Makes the next [`Pools::place`] repack (compact every slot) even where the new forms fit
     /// the holes: to defragment on purpose, and for tests of the repack path.
-    pub fn repack_next(&mut self) {
+    pub(crate) fn repack_next(&mut self) {
         self.repack_next = true;
     }
 
-    pub fn caps(&self) -> PoolCaps {
+    pub(crate) fn caps(&self) -> PoolCaps {
         self.caps
     }
 
     /// The slot of every resident form.
-    pub fn slots(&self) -> &HashMap<TileKey, Slot> {
+    pub(crate) fn slots(&self) -> &HashMap<TileKey, Slot> {
         &self.slots
     }
 
     /// One past the highest leaf in use: the leaf passes dispatch over `0..leaf_end` (holes
     /// included; their results are never read).
-    pub fn leaf_end(&self) -> u32 {
+    pub(crate) fn leaf_end(&self) -> u32 {
         self.slots.values().map(|s| s.leaves.end).max().unwrap_or(0)
     }
 
     /// The surfel ranges in use, merged where they touch, in order: what the splat passes draw.
-    pub fn surfel_runs(&self) -> Vec<Range<u32>> {
+    #[cfg(test)]
+    fn surfel_runs(&self) -> Vec<Range<u32>> {
         merge_runs(self.slots.values().map(|s| s.surfels.clone()).collect())
     }
 
@@ -275,7 +276,7 @@ impl Pools {
     /// hold nothing yet are filled in scene order, so a scene placed once lies as it was loaded.
     /// An error when the scene needs more than the pools hold (residency keeps within them, so
     /// that is a bug, not a user's mistake).
-    pub fn place(&mut self, scene: &SceneData, owners: &[Range<u32>]) -> Result<Placement> {
+    pub(crate) fn place(&mut self, scene: &SceneData, owners: &[Range<u32>]) -> Result<Placement> {
         let need = PoolCaps::of(scene);
         if !self.caps.holds(&need) {
             return Err(Error::Budget {

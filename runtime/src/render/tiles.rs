@@ -420,5 +420,5 @@ pub struct SceneUpdate {
     /// Leaves that kept their light (in place, or carried through a repack).
     pub carried_leaves: usize,
     /// Shadow faces that see a changed tile (drawn again by the next shadow pass).
-    pub shadow_faces: usize,
+    pub(crate) shadow_faces: usize,
 }

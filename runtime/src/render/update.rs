@@ -76,7 +76,7 @@ impl Renderer {
     }
 
     /// The pools' capacities.
-    pub fn pool_caps(&self) -> PoolCaps {
+    pub(crate) fn pool_caps(&self) -> PoolCaps {
         self.pools.caps()
     }
 

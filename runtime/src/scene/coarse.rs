@@ -8,20 +8,20 @@ use grotto_format::spec::CoarseLeaf;
 
 use crate::gpu::types::{LeafGpu, SurfelGpu};
 
-pub use grotto_levels::coarse::{COARSE_LEVELS, CoarseLevel, FAR_LEVELS, coarse_level};
+pub(crate) use grotto_levels::coarse::{COARSE_LEVELS, CoarseLevel, FAR_LEVELS, coarse_level};
 
 /// A tile at its coarse level, as the passes read it.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct CoarseTile {
+pub(crate) struct CoarseTile {
     /// One per coarse leaf, in the order of the coarse SVO's leaves.
-    pub leaves: Vec<LeafGpu>,
+    pub(crate) leaves: Vec<LeafGpu>,
     /// One disc per coarse leaf that covers anything.
-    pub splats: Vec<SurfelGpu>,
+    pub(crate) splats: Vec<SurfelGpu>,
 }
 
 /// The GPU form of coarse `leaves` `k` levels above package leaves of `leaf_m`, in a tile whose
 /// origin is `tile_origin_m` in the frame.
-pub fn gpu_tile(leaves: &[CoarseLeaf], k: u32, leaf_m: f32, tile_origin_m: Vec3) -> CoarseTile {
+pub(crate) fn gpu_tile(leaves: &[CoarseLeaf], k: u32, leaf_m: f32, tile_origin_m: Vec3) -> CoarseTile {
     let edge_m = leaf_m * (1u32 << k) as f32;
     let mut out = CoarseTile { leaves: Vec::with_capacity(leaves.len()), splats: Vec::new() };
     for l in leaves {

@@ -139,7 +139,7 @@ pub enum TileMode {
 
 impl TileMode {
     /// Levels above its leaves a tile of SVO depth `depth` is held at in this mode.
-    pub fn leaf_lod(self, depth: u32) -> u32 {
+    pub(crate) fn leaf_lod(self, depth: u32) -> u32 {
         match self {
             Self::Full | Self::Skip => 0,
             Self::Coarse => COARSE_LEVELS.min(depth),
@@ -149,17 +149,17 @@ impl TileMode {
 }
 
 /// Most specular materials a scene may assign (slots 1..=7 of the surfel colour's alpha).
-pub const MAX_MATERIALS: usize = 7;
+pub(crate) const MAX_MATERIALS: usize = 7;
 
 /// A specular material as shade uses it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SceneMaterial {
-    pub name: String,
+    pub(crate) name: String,
     /// Weight of the specular layer, 0..=1 (Liu et al.'s Ks); the diffuse layer keeps 1 - Ks F.
-    pub specular: f32,
+    pub(crate) specular: f32,
     /// GGX roughness (alpha = roughness^2).
-    pub roughness: f32,
-    pub ior: f32,
+    pub(crate) roughness: f32,
+    pub(crate) ior: f32,
     /// Surfels assigned to it.
     pub surfels: usize,
 }
@@ -168,14 +168,14 @@ pub struct SceneMaterial {
 /// level's width); `levels[k]` = (first row, width, height, roughness).
 #[derive(Clone, Debug, PartialEq)]
 pub struct EnvChain {
-    pub width: u32,
-    pub height: u32,
-    pub rgba: Vec<[f32; 4]>,
-    pub levels: Vec<(u32, u32, u32, f32)>,
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+    pub(crate) rgba: Vec<[f32; 4]>,
+    pub(crate) levels: Vec<(u32, u32, u32, f32)>,
 }
 
 /// Most levels of an environment chain shade reads.
-pub const MAX_ENV_LEVELS: usize = grotto_format::spec::MAX_ENV_MIP_LEVELS;
+pub(crate) const MAX_ENV_LEVELS: usize = grotto_format::spec::MAX_ENV_MIP_LEVELS;
 
 /// Decodes environment `index`'s prefiltered BC6H chain (checked by `Package::env_chain`, whose
 /// rules bound the atlas by the blocks it holds) on the CPU (bcdec_rs: not every adapter samples
@@ -310,7 +310,7 @@ pub(crate) fn move_leaves_to_surfels(
 /// The frame every loaded scene of `pkg` shares: the corner of its first tile with an SVO (f64
 /// world metres) and that tile's leaf edge; None when no tile has one.
 /// From the section table alone: no tile data is read.
-pub fn frame_of(pkg: &Package) -> Result<Option<([f64; 3], f64)>> {
+pub(crate) fn frame_of(pkg: &Package) -> Result<Option<([f64; 3], f64)>> {
     Ok(pkg
         .tiles()
         .find(|t| t.find(SectionKind::SvoNodes, 0).is_some_and(|s| s.raw_len > 0))
@@ -367,7 +367,7 @@ impl SceneData {
 
     /// The tile whose cube holds leaf cell `v_leaf` (global leaf units), by a scan: the CPU
     /// reference's lookup, which the GPU's tile index (tile_index.rs) is tested against.
-    pub fn tile_of(&self, v_leaf: IVec3) -> Option<usize> {
+    pub(crate) fn tile_of(&self, v_leaf: IVec3) -> Option<usize> {
         self.tiles.iter().position(|t| {
             let rel = v_leaf - IVec3::from_array(t.origin_leaf);
             let size = 1i32 << t.depth;
@@ -388,7 +388,7 @@ impl SceneData {
     }
 
     /// Deepest level every tile has: cones sample no coarser than this.
-    pub fn max_lod(&self) -> u32 {
+    pub(crate) fn max_lod(&self) -> u32 {
         self.tiles.iter().map(|t| t.depth).min().unwrap_or(0)
     }
 
@@ -515,18 +515,18 @@ impl SceneData {
     }
 
     /// True when any leaf emits.
-    pub fn has_emission(&self) -> bool {
+    pub(crate) fn has_emission(&self) -> bool {
         self.leaves.iter().any(|l| l.emission[..3].iter().any(|&e| e > 0.0))
     }
 
     /// Node indices ordered by height (0 = leaves) and the range of each height, for the mip pass.
-    pub fn nodes_by_height(&self) -> (Vec<u32>, Vec<MipRange>) {
+    pub(crate) fn nodes_by_height(&self) -> (Vec<u32>, Vec<MipRange>) {
         self.nodes_by_height_at(&self.tiles)
     }
 
     /// As [`SceneData::nodes_by_height`], with the scene's tiles (in order) held at `placed`'s
     /// node offsets (the renderer's pools, pool.rs).
-    pub fn nodes_by_height_at(&self, placed: &[TileGpu]) -> (Vec<u32>, Vec<MipRange>) {
+    pub(crate) fn nodes_by_height_at(&self, placed: &[TileGpu]) -> (Vec<u32>, Vec<MipRange>) {
         let mut buckets: Vec<Vec<u32>> = Vec::new();
         for (t, at) in self.tiles.iter().zip(placed) {
             for i in 0..t.node_count {

@@ -19,7 +19,7 @@ use crate::gpu::types::{LeafGpu, TileGpu};
 
 /// Classifies rock around `leaves` (frame metres, leaves of `leaf_m`) into a [`RockTable`]
 /// (`grotto_levels::rock::classify`, for scenes whose package stores no rock).
-pub fn classify(leaf_m: f32, leaves: &[LeafGpu]) -> RockTable {
+pub(crate) fn classify(leaf_m: f32, leaves: &[LeafGpu]) -> RockTable {
     let surface: Vec<SurfaceLeaf> = leaves
         .iter()
         .map(|l| SurfaceLeaf {
@@ -33,17 +33,17 @@ pub fn classify(leaf_m: f32, leaves: &[LeafGpu]) -> RockTable {
 
 /// Words before the first entry: capacity - 1 (capacity a power of two), the longest probe
 /// sequence any stored brick needs, the number of bricks, 0.
-pub const HEADER_WORDS: usize = 4;
+pub(crate) const HEADER_WORDS: usize = 4;
 /// Words per entry: brick x, y, z (global brick units, i32 bits), then the 64 rock bits (cell
 /// `x + 4 (y + 4 z)` within the brick, low word first).
-pub const ENTRY_WORDS: usize = 5;
+pub(crate) const ENTRY_WORDS: usize = 5;
 /// Brick x of an empty slot; no brick reaches it (leaf coordinates stay within +-2^28).
-pub const EMPTY_KEY: i32 = i32::MIN;
+pub(crate) const EMPTY_KEY: i32 = i32::MIN;
 
 /// The hash of a brick coordinate, identical in shaders/hash.wgsl (`cell_hash`): each axis times a large
 /// odd constant (Teschner et al. 2003), xor-ed, then murmur3's finaliser so neighbouring bricks
 /// spread over the table.
-pub fn brick_hash(b: IVec3) -> u32 {
+pub(crate) fn brick_hash(b: IVec3) -> u32 {
     let mut h = (b.x as u32).wrapping_mul(0x8da6_b343)
         ^ (b.y as u32).wrapping_mul(0xd816_3841)
         ^ (b.z as u32).wrapping_mul(0xcb1a_b31f);
@@ -92,13 +92,13 @@ pub struct RockTable {
 
 impl RockTable {
     /// The table of `cells` (global rock-cell units; repeats are fine).
-    pub fn build(cells: &[IVec3]) -> Self {
+    pub(crate) fn build(cells: &[IVec3]) -> Self {
         Self::from_bricks(grotto_levels::rock::bricks(cells))
     }
 
     /// The table of `bricks` (global brick units, 64 cell bits each); a brick listed more than
     /// once (stored by two tiles) holds the union of its bits.
-    pub fn from_bricks(bricks: impl IntoIterator<Item = (IVec3, u64)>) -> Self {
+    pub(crate) fn from_bricks(bricks: impl IntoIterator<Item = (IVec3, u64)>) -> Self {
         let mut merged: std::collections::BTreeMap<(i32, i32, i32), u64> = Default::default();
         for (b, bits) in bricks {
             *merged.entry((b.z, b.y, b.x)).or_insert(0) |= bits;
@@ -134,7 +134,7 @@ impl RockTable {
     }
 
     /// Whether rock cell `cell` (global cell units) is rock: `in_rock` in shaders/rock.wgsl.
-    pub fn contains(&self, cell: IVec3) -> bool {
+    pub(crate) fn contains(&self, cell: IVec3) -> bool {
         let words = &self.words;
         let (Some(&mask), Some(&longest)) = (words.first(), words.get(1)) else { return false };
         let b = cell >> BRICK_SHIFT as i32;
@@ -164,7 +164,7 @@ impl RockTable {
 /// Bytes the rock took as the dense per-tile bit grids it replaced (one bit per cell over each
 /// tile and a margin of `ROCK_REACH_CELLS` cells): kept to report the saving (`grotto inspect
 /// --gpu-memory`), not used to render.
-pub fn dense_grid_bytes(tiles: &[TileGpu]) -> u64 {
+pub(crate) fn dense_grid_bytes(tiles: &[TileGpu]) -> u64 {
     tiles
         .iter()
         .filter(|t| t.depth >= ROCK_LEVEL)

@@ -24,31 +24,31 @@ use crate::scene::rock::{brick_hash, free_slot};
 /// Words before the first entry: capacity - 1 (capacity a power of two), the longest probe
 /// sequence any entry needs, the mask of depths entries are keyed at, the entry count, the anchor
 /// (x, y, z as i32 bits, global leaf units), 0.
-pub const HEADER_WORDS: usize = 8;
+pub(crate) const HEADER_WORDS: usize = 8;
 /// Words per entry: cell x, y, z (at the entry's depth, counted from the anchor, i32 bits), the
 /// depth, the tile's index.
-pub const ENTRY_WORDS: usize = 5;
+pub(crate) const ENTRY_WORDS: usize = 5;
 /// Cell x of an empty slot (no cell reaches it: leaf coordinates stay within +-2^28).
-pub const EMPTY_KEY: i32 = i32::MIN;
+pub(crate) const EMPTY_KEY: i32 = i32::MIN;
 /// Most entries an index may hold (tiles not aligned to the anchor take several): 2^22 entries is
 /// 160 MiB of table at load 1/2, far beyond any package the packer writes (one entry per tile).
-pub const MAX_ENTRIES: usize = 1 << 22;
+pub(crate) const MAX_ENTRIES: usize = 1 << 22;
 
 /// Hash of a cell at `depth`, identical in shaders/svo.wgsl (`tile_hash`).
-pub fn tile_hash(cell: IVec3, depth: u32) -> u32 {
+pub(crate) fn tile_hash(cell: IVec3, depth: u32) -> u32 {
     brick_hash(cell) ^ depth.wrapping_mul(0x9e37_79b9)
 }
 
 /// The lookup table the GPU reads (`words`), built from the tile list.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct TileIndex {
-    pub words: Vec<u32>,
+pub(crate) struct TileIndex {
+    pub(crate) words: Vec<u32>,
 }
 
 impl TileIndex {
     /// The index of `tiles`, whose cubes must not overlap (two tiles at the same place and depth
     /// are refused; other overlaps find one of them). `scene` names the package in errors.
-    pub fn build(scene: &str, tiles: &[TileGpu]) -> Result<Self> {
+    pub(crate) fn build(scene: &str, tiles: &[TileGpu]) -> Result<Self> {
         let anchor =
             tiles.iter().max_by_key(|t| t.depth).map_or(IVec3::ZERO, |t| IVec3::from_array(t.origin_leaf));
         let mut entries: Vec<(IVec3, u32, u32)> = Vec::with_capacity(tiles.len());
@@ -124,8 +124,9 @@ impl TileIndex {
     }
 
     /// The tile whose cube holds leaf cell `v_leaf` (global leaf units): `find_tile` in
-    /// shaders/svo.wgsl.
-    pub fn find(&self, v_leaf: IVec3) -> Option<u32> {
+    /// shaders/svo.wgsl, as the tests check it.
+    #[cfg(test)]
+    fn find(&self, v_leaf: IVec3) -> Option<u32> {
         let w = &self.words;
         let header = w.get(..HEADER_WORDS)?;
         let (mask, longest, mut depths) = (header[0], header[1], header[2]);
@@ -152,13 +153,9 @@ impl TileIndex {
     }
 
     /// Distinct depths a lookup probes.
-    pub fn depths_probed(&self) -> u32 {
+    #[cfg(test)]
+    fn depths_probed(&self) -> u32 {
         self.words.get(2).map_or(0, |d| d.count_ones())
-    }
-
-    /// The longest probe sequence of any entry.
-    pub fn longest_probe(&self) -> u32 {
-        self.words.get(1).copied().unwrap_or(0)
     }
 }
 

@@ -10,7 +10,7 @@
 use crate::error::{Error, Result};
 
 /// The shared library: (import name, source).
-pub const LIBRARY: &[(&str, &str)] = &[
+pub(crate) const LIBRARY: &[(&str, &str)] = &[
     ("activity", include_str!("activity.wgsl")),
     ("brdf", include_str!("brdf.wgsl")),
     ("color", include_str!("color.wgsl")),
@@ -30,17 +30,17 @@ pub const LIBRARY: &[(&str, &str)] = &[
     ("svo", include_str!("svo.wgsl")),
 ];
 
-pub const ENV: &str = include_str!("../passes/env.wgsl");
-pub const INJECT: &str = include_str!("../passes/inject.wgsl");
-pub const MIP: &str = include_str!("../passes/mip.wgsl");
-pub const PROPAGATE: &str = include_str!("../passes/propagate.wgsl");
-pub const SPLAT: &str = include_str!("../passes/splat.wgsl");
+pub(crate) const ENV: &str = include_str!("../passes/env.wgsl");
+pub(crate) const INJECT: &str = include_str!("../passes/inject.wgsl");
+pub(crate) const MIP: &str = include_str!("../passes/mip.wgsl");
+pub(crate) const PROPAGATE: &str = include_str!("../passes/propagate.wgsl");
+pub(crate) const SPLAT: &str = include_str!("../passes/splat.wgsl");
 /// Presents a frame in a window or a browser's canvas (present.rs).
-pub const PRESENT: &str = include_str!("../render/present.wgsl");
-pub const SHADE: &str = include_str!("../passes/shade.wgsl");
+pub(crate) const PRESENT: &str = include_str!("../render/present.wgsl");
+pub(crate) const SHADE: &str = include_str!("../passes/shade.wgsl");
 
 /// Constants shared with the Rust side, generated from it so the two cannot drift.
-pub fn constants() -> String {
+pub(crate) fn constants() -> String {
     use crate::gpu::types::{LightShadow, flags};
     use crate::scene::{rock, tile_index};
     let mut out = format!(
@@ -124,7 +124,7 @@ pub fn compose(src: &str) -> Result<String> {
 }
 
 /// (name, source) of every shader module the runtime creates, before composing.
-pub const PASSES: [(&str, &str); 6] = [
+pub(crate) const PASSES: [(&str, &str); 6] = [
     ("env", ENV),
     ("inject", INJECT),
     ("mip", MIP),

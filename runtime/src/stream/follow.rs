@@ -19,7 +19,7 @@ use crate::view::camera::Camera;
 /// The renderer for a job's first scene ([`stream::renderer_for`]), and the loader that keeps its
 /// tiles following the camera where the package is over budget (`streaming` and the `first`
 /// residency it was chosen with, from [`crate::cli::render_job::prepare`]).
-pub fn start(
+pub(crate) fn start(
     gpu: &Gpu,
     scene: &SceneData,
     settings: Settings,
@@ -39,15 +39,15 @@ pub fn start(
 /// A residency chosen on the loader thread: the scene to swap in where the tiles' forms changed,
 /// and the changes `--upload-per-frame` left for later.
 #[derive(Debug)]
-pub struct Arrived {
-    pub residency: Residency,
-    pub scene: Option<SceneData>,
-    pub deferred: usize,
+pub(crate) struct Arrived {
+    pub(crate) residency: Residency,
+    pub(crate) scene: Option<SceneData>,
+    pub(crate) deferred: usize,
 }
 
 /// The loader thread and the residency the renderer holds.
 #[derive(Debug)]
-pub struct Follow {
+pub(crate) struct Follow {
     streaming: Arc<Streaming>,
     current: Residency,
     loading: Option<JoinHandle<Result<Arrived>>>,
@@ -56,22 +56,28 @@ pub struct Follow {
 
 impl Follow {
     /// `current`: the residency the renderer was made with.
-    pub fn new(streaming: Streaming, current: Residency, upload_per_frame: Option<u64>) -> Self {
+    pub(crate) fn new(streaming: Streaming, current: Residency, upload_per_frame: Option<u64>) -> Self {
         Self { streaming: Arc::new(streaming), current, loading: None, upload_per_frame }
     }
 
-    pub fn current(&self) -> &Residency {
+    pub(crate) fn current(&self) -> &Residency {
         &self.current
     }
 
     /// Whether a residency is being chosen and read.
-    pub fn busy(&self) -> bool {
+    pub(crate) fn busy(&self) -> bool {
         self.loading.is_some()
     }
 
     /// Starts choosing and reading the tiles of `cam` (lit by `lights`, which every load keeps),
     /// unless a load is under way already.
-    pub fn request(&mut self, cam: &Camera, clip: Option<ClipBox>, lights: Vec<SceneLight>, headlamp: bool) {
+    pub(crate) fn request(
+        &mut self,
+        cam: &Camera,
+        clip: Option<ClipBox>,
+        lights: Vec<SceneLight>,
+        headlamp: bool,
+    ) {
         if self.loading.is_some() {
             return;
         }
@@ -90,7 +96,7 @@ impl Follow {
     }
 
     /// The requested residency where the loader has finished, without waiting.
-    pub fn poll(&mut self) -> Result<Option<Arrived>> {
+    pub(crate) fn poll(&mut self) -> Result<Option<Arrived>> {
         match &self.loading {
             Some(h) if h.is_finished() => self.wait(),
             _ => Ok(None),
@@ -98,7 +104,7 @@ impl Follow {
     }
 
     /// The requested residency, waiting for the loader; None where none was requested.
-    pub fn wait(&mut self) -> Result<Option<Arrived>> {
+    pub(crate) fn wait(&mut self) -> Result<Option<Arrived>> {
         let Some(h) = self.loading.take() else { return Ok(None) };
         let arrived = h.join().map_err(|_| Error::Internal {
             what: "tile loader",
@@ -108,7 +114,7 @@ impl Follow {
     }
 
     /// The renderer now holds `r` (its scene swapped in, or unchanged).
-    pub fn accept(&mut self, r: Residency) {
+    pub(crate) fn accept(&mut self, r: Residency) {
         self.current = r;
     }
 }

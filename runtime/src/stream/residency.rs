@@ -23,14 +23,14 @@ use crate::scene::data::TileMode;
 /// What one representation of a tile costs on the GPU.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct TileCost {
-    pub nodes: u64,
-    pub leaves: u64,
-    pub surfels: u64,
+    pub(crate) nodes: u64,
+    pub(crate) leaves: u64,
+    pub(crate) surfels: u64,
     pub bytes: u64,
 }
 
 impl TileCost {
-    pub fn new(nodes: u64, leaves: u64, surfels: u64, radiance_f16: bool) -> Self {
+    pub(crate) fn new(nodes: u64, leaves: u64, surfels: u64, radiance_f16: bool) -> Self {
         Self {
             nodes,
             leaves,
@@ -54,7 +54,7 @@ pub struct TileFootprint {
 
 impl TileFootprint {
     /// What the tile costs held in `mode`.
-    pub fn cost(&self, mode: TileMode) -> TileCost {
+    pub(crate) fn cost(&self, mode: TileMode) -> TileCost {
         match mode {
             TileMode::Full => self.full,
             TileMode::Coarse => self.coarse,
@@ -107,7 +107,7 @@ pub enum Relevance {
 pub struct Decision {
     pub tile: usize,
     pub relevance: Relevance,
-    pub distance_m: f32,
+    pub(crate) distance_m: f32,
     pub mode: TileMode,
 }
 
@@ -123,18 +123,18 @@ pub struct Residency {
 /// The totals of a [`Residency`] (what summaries report).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ResidencyTotals {
-    pub budget: Budget,
+    pub(crate) budget: Budget,
     /// Tile bytes held: every far level plus the finer tiles' extra.
     pub resident_bytes: u64,
     /// Of them, the reserve: every tile at its far level.
-    pub coarse_bytes: u64,
+    pub(crate) coarse_bytes: u64,
     /// Surfels drawn.
-    pub surfels: u64,
+    pub(crate) surfels: u64,
     pub full_tiles: usize,
     pub coarse_tiles: usize,
     pub far_tiles: usize,
     /// Visible tiles left coarse or far for lack of budget.
-    pub visible_coarse: usize,
+    pub(crate) visible_coarse: usize,
 }
 
 impl Residency {
@@ -180,7 +180,8 @@ impl Residency {
     }
 
     /// Every tile full (nothing was cut).
-    pub fn all_full(&self) -> bool {
+    #[cfg(test)]
+    fn all_full(&self) -> bool {
         self.totals.coarse_tiles == 0 && self.totals.far_tiles == 0
     }
 }

@@ -71,7 +71,7 @@ impl Streaming {
         &self.tiles
     }
 
-    pub fn tile_count(&self) -> usize {
+    pub(crate) fn tile_count(&self) -> usize {
         self.tiles.len()
     }
 
@@ -86,12 +86,12 @@ impl Streaming {
     }
 
     /// `--gpu-memory`: what the renderer's tile pools take.
-    pub fn pool_bytes(&self) -> u64 {
+    pub(crate) fn pool_bytes(&self) -> u64 {
         self.pool_bytes
     }
 
     /// Residency keeps within these pools from now on (with their headroom taken off already).
-    pub fn set_pool_limits(&mut self, caps: PoolCaps) {
+    pub(crate) fn set_pool_limits(&mut self, caps: PoolCaps) {
         self.budget.pools = Some(caps);
     }
 

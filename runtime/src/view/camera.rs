@@ -62,12 +62,12 @@ impl Camera {
 /// circles `pivot_m` at `distance_m`. The window's and the browser's controls move it.
 #[derive(Clone, Copy, Debug)]
 pub struct Nav {
-    pub eye_m: Vec3,
-    pub yaw_rad: f32,
-    pub pitch_rad: f32,
+    pub(crate) eye_m: Vec3,
+    pub(crate) yaw_rad: f32,
+    pub(crate) pitch_rad: f32,
     pub speed_m_s: f32,
-    pub fov_y_deg: f32,
-    pub orbit: Option<(Vec3, f32)>,
+    pub(crate) fov_y_deg: f32,
+    pub(crate) orbit: Option<(Vec3, f32)>,
 }
 
 impl Nav {
@@ -90,7 +90,7 @@ impl Nav {
         Self::from_camera(c, (size_m / 20.0).max(0.5))
     }
 
-    pub fn forward(&self) -> Vec3 {
+    pub(crate) fn forward(&self) -> Vec3 {
         let (sy, cy) = self.yaw_rad.sin_cos();
         let (sp, cp) = self.pitch_rad.sin_cos();
         Vec3::new(cy * cp, sy * cp, sp)
@@ -117,7 +117,7 @@ impl Nav {
     }
 
     /// Flies on from where the orbit put the eye.
-    pub fn fly(&mut self) {
+    pub(crate) fn fly(&mut self) {
         self.eye_m = self.camera().eye_m;
         self.orbit = None;
     }
@@ -179,7 +179,7 @@ pub fn path(keys: &[Camera], frames: u32) -> Vec<Camera> {
 /// in 0..=w): false only where all eight corners lie outside one clip plane, so it never culls
 /// what shows. Shadow faces and the G-buffer cull tiles with it; residency's `in_frustum` is the
 /// same test from view parameters, with no far plane.
-pub fn sees_box(view_proj: &Mat4, lo: Vec3, hi: Vec3) -> bool {
+pub(crate) fn sees_box(view_proj: &Mat4, lo: Vec3, hi: Vec3) -> bool {
     let corners: [Vec4; 8] = std::array::from_fn(|i| {
         let c = Vec3::new(
             if i & 1 == 0 { lo.x } else { hi.x },
@@ -218,7 +218,7 @@ mod tests {
 /// runtime does not depend on the build crate, and here a keyframe's name is optional. `grotto view` records one (K, or `--record-path`); `grotto render --path FILE.toml`
 /// flies along it; its tables can be pasted into a manifest as named cameras.
 #[cfg(not(target_arch = "wasm32"))]
-pub mod path_file {
+pub(crate) mod path_file {
     use std::path::Path;
 
     use glam::{DVec3, Vec3};
@@ -255,12 +255,12 @@ pub mod path_file {
     }
 
     /// Whether `--path` names a file rather than cameras: one value ending in `.toml`.
-    pub fn is_file(path: &[String]) -> bool {
+    pub(crate) fn is_file(path: &[String]) -> bool {
         matches!(path, [one] if one.ends_with(".toml"))
     }
 
     /// The cameras of a path file, in the frame whose origin is `frame_origin_m` (world metres).
-    pub fn read(file: &Path, frame_origin_m: [f64; 3]) -> Result<Vec<Camera>> {
+    pub(crate) fn read(file: &Path, frame_origin_m: [f64; 3]) -> Result<Vec<Camera>> {
         let err = |problem: String| Error::CameraPath { path: file.display().to_string(), problem };
         let text = std::fs::read_to_string(file).map_err(|e| err(e.to_string()))?;
         let parsed: File = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
@@ -287,7 +287,7 @@ pub mod path_file {
 
     /// The text of a path file for `cameras` (frame coordinates; `frame_origin_m` makes them
     /// world coordinates again).
-    pub fn to_text(cameras: &[Camera], frame_origin_m: [f64; 3]) -> String {
+    pub(crate) fn to_text(cameras: &[Camera], frame_origin_m: [f64; 3]) -> String {
         let origin = DVec3::from(frame_origin_m);
         let world = |v: Vec3| (origin + v.as_dvec3()).to_array();
         let file = File {
@@ -311,7 +311,7 @@ pub mod path_file {
     }
 
     /// Writes a path file atomically (a temporary file renamed into place).
-    pub fn write(file: &Path, cameras: &[Camera], frame_origin_m: [f64; 3]) -> Result<()> {
+    pub(crate) fn write(file: &Path, cameras: &[Camera], frame_origin_m: [f64; 3]) -> Result<()> {
         let err = |problem: String| Error::CameraPath { path: file.display().to_string(), problem };
         let dir = file.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
         let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| err(e.to_string()))?;

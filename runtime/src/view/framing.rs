@@ -32,18 +32,18 @@ const GRID_CELLS: i32 = 128;
 /// Rows of the depth buffer a view is estimated in (columns follow the aspect).
 const ESTIMATE_ROWS: usize = 48;
 /// Vertical field of view of a framed camera, degrees.
-pub const FRAMED_FOV_Y_DEG: f32 = 60.0;
+pub(crate) const FRAMED_FOV_Y_DEG: f32 = 60.0;
 /// Irradiance the headlamp gives a surface at the median distance the view sees, W/m^2 (an 8 W
 /// lamp at about 0.8 m): auto exposure takes the absolute level out, but culling (`--light-cutoff`)
 /// and EXR output see a lamp bright enough for the whole view.
-pub const HEADLAMP_IRRADIANCE_W_M2: f32 = 1.0;
+pub(crate) const HEADLAMP_IRRADIANCE_W_M2: f32 = 1.0;
 /// Colour of the headlamp (a neutral white LED).
-pub const HEADLAMP_COLOR: [f32; 3] = [1.0, 0.95, 0.9];
+pub(crate) const HEADLAMP_COLOR: [f32; 3] = [1.0, 0.95, 0.9];
 
 /// A sample of the scene's surfels (at most `FIT_POINTS`, inside their robust bounds): what view
 /// estimates and fits need.
 #[derive(Clone, Debug)]
-pub struct SurfelSample {
+pub(crate) struct SurfelSample {
     /// Bounds of the surfels (1st to 99th percentile per axis when there are many) widened by
     /// `splat_radius_m`, frame metres.
     min_m: Vec3,
@@ -82,22 +82,22 @@ const FIT_POINTS: usize = 20_000;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewEstimate {
     /// Share of the image's pixels a surface covers, 0..=1.
-    pub coverage: f32,
+    pub(crate) coverage: f32,
     /// Median distance of those hits, metres (0 when nothing is hit).
-    pub median_distance_m: f32,
+    pub(crate) median_distance_m: f32,
     /// Mean over the image of |cos| between the visible surface's normal and the view ray (0
     /// where nothing is seen): how much of the image a lamp at the eye lights. A strip seen
     /// end-on or a wall at grazing angles covers the image but shows it dark.
-    pub lit: f32,
+    pub(crate) lit: f32,
 }
 
 /// A chosen view and how it was found.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Framing {
-    pub camera: Camera,
+    pub(crate) camera: Camera,
     pub estimate: ViewEstimate,
     /// "inside" (from an open space among the surfaces) or "outside" (the data fitted to the image).
-    pub kind: &'static str,
+    pub(crate) kind: &'static str,
 }
 
 fn percentile(v: &mut [f32], q: f32) -> f32 {
@@ -108,7 +108,7 @@ fn percentile(v: &mut [f32], q: f32) -> f32 {
 impl SurfelSample {
     /// The sample of `scene`'s surfels (robust bounds: a few stray returns do not shrink the rest
     /// to a dot), or None without surfels.
-    pub fn from_scene(scene: &SceneData, splat_scale: f32) -> Option<Self> {
+    pub(crate) fn from_scene(scene: &SceneData, splat_scale: f32) -> Option<Self> {
         let centres: Vec<Vec3> = scene
             .surfels
             .iter()
@@ -169,7 +169,7 @@ impl SurfelSample {
     /// are seen: the circle of an ellipse's area): the share of pixels covered and the median
     /// depth of what is visible. A coarse grid of rays overestimated thin data (a flight strip
     /// seen end-on fills 4 m cells, not the image).
-    pub fn estimate(&self, camera: &Camera, aspect: f32) -> ViewEstimate {
+    pub(crate) fn estimate(&self, camera: &Camera, aspect: f32) -> ViewEstimate {
         let (forward, right, up) = basis(camera);
         let tan_y = (camera.fov_y_deg.to_radians() * 0.5).tan();
         let h = ESTIMATE_ROWS;
@@ -463,7 +463,7 @@ fn basis(camera: &Camera) -> (Vec3, Vec3, Vec3) {
 
 /// The best view of `scene` for an image of `aspect` (width / height), or None when it has no
 /// surfels.
-pub fn frame(scene: &SceneData, aspect: f32, splat_scale: f32) -> Option<Framing> {
+pub(crate) fn frame(scene: &SceneData, aspect: f32, splat_scale: f32) -> Option<Framing> {
     let sample = SurfelSample::from_scene(scene, splat_scale)?;
     let mut candidates: Vec<(Camera, &'static str)> = Vec::new();
     let centroid = sample.points.iter().copied().sum::<Vec3>() / sample.points.len().max(1) as f32;
@@ -526,7 +526,7 @@ pub fn frame(scene: &SceneData, aspect: f32, splat_scale: f32) -> Option<Framing
 /// Outside views are tried at these fractions of the distance that fits all the data.
 const ZOOMS: [f32; 6] = [1.0, 0.8, 0.65, 0.5, 0.35, 0.25];
 /// "Most of the image": the share of pixels a chosen view should see a surface in.
-pub const MOST: f32 = 0.6;
+pub(crate) const MOST: f32 = 0.6;
 
 /// The choice among scored candidates (index, view; outside views from `first_outside` on, in
 /// groups of `ZOOMS.len()` per direction): an inside view that sees a surface almost everywhere
@@ -564,13 +564,18 @@ fn choose(scored: Vec<(usize, Framing)>, first_outside: usize) -> Option<Framing
 }
 
 /// What a view of `scene` sees (for a camera the user chose), or None without surfels.
-pub fn estimate(scene: &SceneData, camera: &Camera, aspect: f32, splat_scale: f32) -> Option<ViewEstimate> {
+pub(crate) fn estimate(
+    scene: &SceneData,
+    camera: &Camera,
+    aspect: f32,
+    splat_scale: f32,
+) -> Option<ViewEstimate> {
     SurfelSample::from_scene(scene, splat_scale).map(|s| s.estimate(camera, aspect))
 }
 
 /// A headlamp for `camera`: a spot at the eye along the view whose cone covers the image, bright
 /// enough to give [`HEADLAMP_IRRADIANCE_W_M2`] at `distance_m` (the median distance the view sees).
-pub fn headlamp(camera: &Camera, aspect: f32, distance_m: f32) -> SceneLight {
+pub(crate) fn headlamp(camera: &Camera, aspect: f32, distance_m: f32) -> SceneLight {
     let (forward, _, _) = basis(camera);
     let tan_y = (camera.fov_y_deg.to_radians() * 0.5).tan();
     let half_diagonal = (tan_y * (1.0 + aspect * aspect).sqrt()).atan();

@@ -78,7 +78,7 @@ pub struct ViewSummary {
     /// Camera path files written, with their keyframes.
     pub paths: Vec<(String, usize)>,
     /// Changes of resident tiles swapped in while flying.
-    pub tile_swaps: u32,
+    pub(crate) tile_swaps: u32,
     /// Frame times while moving and at rest, and how long the light took to converge at rest.
     pub log: FrameLog,
 }
@@ -370,7 +370,7 @@ impl App {
             _ => None,
         };
         if let Some(next) = expose {
-            let e = render_job::auto_exposure(&s.renderer.read_frame()?.hdr);
+            let e = crate::render::auto_exposure(&s.renderer.read_frame()?.hdr);
             s.renderer.set_exposure(e);
             s.ui.knobs.exposure = e;
             s.auto_exposure = next;

@@ -11,10 +11,10 @@ use serde::Serialize;
 /// the light's share of the time: held to a 33 ms frame on lavapipe, the demo cave's light got
 /// about half of each frame and took 306 s to converge; at 100 ms it gets about two thirds and
 /// took 169 s, where its four bounces alone take about 110 s (docs/benchmarks.md).
-pub const REST_FRAME_MS: f64 = 100.0;
+pub(crate) const REST_FRAME_MS: f64 = 100.0;
 
 /// Leaves in the first slice, before a slice has been timed.
-pub const FIRST_SLICE_LEAVES: u32 = 4096;
+pub(crate) const FIRST_SLICE_LEAVES: u32 = 4096;
 
 /// Moving averages of what a frame's draw and a leaf's propagation cost.
 #[derive(Clone, Debug)]
@@ -29,7 +29,7 @@ fn average(old: Option<f64>, new: f64) -> f64 {
 }
 
 impl Pacer {
-    pub fn new(budget_ms: f64) -> Self {
+    pub(crate) fn new(budget_ms: f64) -> Self {
         Self { budget_ms, draw_ms: None, leaf_ms: None }
     }
 
@@ -37,7 +37,7 @@ impl Pacer {
     /// rest budget (the frame budget, at least [`REST_FRAME_MS`]) leaves beside the draw, and at
     /// least as long as the draw itself where the draw alone overruns it (a software adapter), so
     /// a frame at rest stays within twice a moving one.
-    pub fn light_ms(&self, moving: bool) -> f64 {
+    pub(crate) fn light_ms(&self, moving: bool) -> f64 {
         if moving {
             return 0.0;
         }
@@ -46,7 +46,7 @@ impl Pacer {
     }
 
     /// Leaves a slice may propagate in `ms`.
-    pub fn slice_leaves(&self, ms: f64) -> u32 {
+    pub(crate) fn slice_leaves(&self, ms: f64) -> u32 {
         match self.leaf_ms {
             Some(per_leaf) if per_leaf > 0.0 => (ms / per_leaf).clamp(64.0, u32::MAX as f64) as u32,
             _ => FIRST_SLICE_LEAVES,
@@ -54,12 +54,12 @@ impl Pacer {
     }
 
     /// A frame's draw (G-buffer and shading, no bounce) took `ms`.
-    pub fn record_draw(&mut self, ms: f64) {
+    pub(crate) fn record_draw(&mut self, ms: f64) {
         self.draw_ms = Some(average(self.draw_ms, ms));
     }
 
     /// A light update that propagated `leaves` leaves took `ms`.
-    pub fn record_slice(&mut self, ms: f64, leaves: u32) {
+    pub(crate) fn record_slice(&mut self, ms: f64, leaves: u32) {
         if leaves > 0 {
             self.leaf_ms = Some(average(self.leaf_ms, ms / f64::from(leaves)));
         }
@@ -77,7 +77,7 @@ pub struct FrameLog {
     pub converge_frames: Vec<u32>,
     pub converge_s: Vec<f64>,
     /// Bounces run at rest, over all frames.
-    pub rest_bounces: u64,
+    pub(crate) rest_bounces: u64,
     /// Frames and time since the camera came to rest, and whether this rest's convergence was
     /// counted.
     #[serde(skip)]
@@ -86,7 +86,7 @@ pub struct FrameLog {
 
 impl FrameLog {
     /// Records a frame that took `ms`; `converged`: the light after it.
-    pub fn frame(&mut self, ms: f64, moving: bool, converged: bool, bounces: u32) {
+    pub(crate) fn frame(&mut self, ms: f64, moving: bool, converged: bool, bounces: u32) {
         if moving {
             self.moving_ms.push(ms);
             self.resting = None;

@@ -12,52 +12,52 @@ use crate::settings::{ClipBox, Quality, ViewMode};
 
 /// What the panel shows, gathered by the window each frame.
 #[derive(Clone, Debug, Default)]
-pub struct PanelModel {
-    pub adapter: String,
-    pub fps: f64,
-    pub frame_ms: f64,
-    pub light: Option<LightProgress>,
+pub(crate) struct PanelModel {
+    pub(crate) adapter: String,
+    pub(crate) fps: f64,
+    pub(crate) frame_ms: f64,
+    pub(crate) light: Option<LightProgress>,
     /// The bounces wait for the camera to rest.
-    pub held: bool,
-    pub plan: String,
-    pub pass_ms: Vec<(&'static str, f64)>,
+    pub(crate) held: bool,
+    pub(crate) plan: String,
+    pub(crate) pass_ms: Vec<(&'static str, f64)>,
     /// Tiles held in full, coarse and far (None: the whole package is resident).
-    pub tiles: Option<(usize, usize, usize)>,
-    pub tile_count: usize,
-    pub tile_bytes: u64,
+    pub(crate) tiles: Option<(usize, usize, usize)>,
+    pub(crate) tile_count: usize,
+    pub(crate) tile_bytes: u64,
     /// GPU bytes of the tile pools (what `--gpu-memory` bounds), and of the renderer in all.
-    pub pool_bytes: u64,
-    pub gpu_bytes: u64,
-    pub surfels: usize,
+    pub(crate) pool_bytes: u64,
+    pub(crate) gpu_bytes: u64,
+    pub(crate) surfels: usize,
     /// Keyframes recorded so far, while recording.
-    pub recording: Option<usize>,
-    pub orbit: bool,
-    pub speed_m_s: f32,
+    pub(crate) recording: Option<usize>,
+    pub(crate) orbit: bool,
+    pub(crate) speed_m_s: f32,
     /// The scene's box (frame metres): the clip box's range.
-    pub bounds_m: (Vec3, Vec3),
-    pub eye_m: Vec3,
+    pub(crate) bounds_m: (Vec3, Vec3),
+    pub(crate) eye_m: Vec3,
     /// The scan view's legend: each scan's name and colour (linear RGB).
-    pub scans: Vec<(String, [f32; 3])>,
+    pub(crate) scans: Vec<(String, [f32; 3])>,
 }
 
 /// The clip box the section tool starts with: the whole scene with everything above the eye cut
 /// away (a passage seen from above once the camera rises).
-pub fn section_at_eye(bounds_m: (Vec3, Vec3), eye_m: Vec3) -> ClipBox {
+pub(crate) fn section_at_eye(bounds_m: (Vec3, Vec3), eye_m: Vec3) -> ClipBox {
     let (lo, hi) = bounds_m;
     ClipBox { min_m: lo, max_m: Vec3::new(hi.x, hi.y, eye_m.z.clamp(lo.z, hi.z)) }
 }
 
 /// What the panel can change.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PanelKnobs {
+pub(crate) struct PanelKnobs {
     /// None: the settings came from the command line's knobs, not a preset as it is.
-    pub quality: Option<Quality>,
-    pub bounces: u32,
-    pub exposure: f32,
-    pub shadows: bool,
-    pub view: ViewMode,
+    pub(crate) quality: Option<Quality>,
+    pub(crate) bounces: u32,
+    pub(crate) exposure: f32,
+    pub(crate) shadows: bool,
+    pub(crate) view: ViewMode,
     /// The section tool's box (None: the whole cave shows).
-    pub clip: Option<ClipBox>,
+    pub(crate) clip: Option<ClipBox>,
 }
 
 fn bytes(b: u64) -> String {
@@ -65,7 +65,7 @@ fn bytes(b: u64) -> String {
 }
 
 /// Draws the panel.
-pub fn show(ctx: &egui::Context, m: &PanelModel, k: &mut PanelKnobs) {
+pub(crate) fn show(ctx: &egui::Context, m: &PanelModel, k: &mut PanelKnobs) {
     egui::Window::new("grotto").default_pos([8.0, 8.0]).default_width(260.0).resizable(true).show(
         ctx,
         |ui| {
