@@ -31,7 +31,7 @@ pub const COARSE_LEVELS: u32 = 3;
 pub const FAR_LEVELS: u32 = 6;
 
 /// The levels the packer stores, finest first.
-pub const STORED_LEVELS: [u32; 2] = [COARSE_LEVELS, FAR_LEVELS];
+pub(crate) const STORED_LEVELS: [u32; 2] = [COARSE_LEVELS, FAR_LEVELS];
 
 /// A tile at a coarse level: an SVO of depth `D - k` and one leaf per node at that depth.
 #[derive(Clone, Debug, Default, PartialEq)]

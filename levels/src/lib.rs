@@ -30,8 +30,8 @@ pub struct TileLevels {
 /// (`None` off the grid, or with another leaf size) and its side in leaves.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TileGrid {
-    pub origin_leaf: Vec<Option<IVec3>>,
-    pub side_leaves: Vec<i64>,
+    pub(crate) origin_leaf: Vec<Option<IVec3>>,
+    pub(crate) side_leaves: Vec<i64>,
 }
 
 impl TileGrid {

@@ -44,7 +44,7 @@ pub const BEHIND_SLOPE: f32 = 0.5;
 /// Cells around a tile's rock whose surface decides it: a cell is claimed by a seed within the
 /// reach, through frontier cells within the reach of their own seeds, and a seed is an edge or
 /// not by its neighbours (one more cell); four to spare.
-pub const CONTEXT_CELLS: i32 = 3 * ROCK_REACH_CELLS + 4;
+pub(crate) const CONTEXT_CELLS: i32 = 3 * ROCK_REACH_CELLS + 4;
 
 /// What the classification reads of a leaf: its centre in leaf units of one frame (any origin on
 /// the leaf grid) and its Toksvig mean normal.
@@ -200,7 +200,7 @@ pub fn bricks(cells: &[IVec3]) -> Vec<(IVec3, u64)> {
 /// neighbours' within [`CONTEXT_CELLS`] of it, leaf units of one frame), the cells within
 /// `ROCK_REACH_CELLS` of the tile's cube (`origin_leaf`, `side_leaves` leaves on a side, both
 /// multiples of a brick's 8 leaves), as bricks relative to the tile's origin.
-pub fn tile_rock(origin_leaf: IVec3, side_leaves: i32, context: &[SurfaceLeaf]) -> Vec<RockBrick> {
+pub(crate) fn tile_rock(origin_leaf: IVec3, side_leaves: i32, context: &[SurfaceLeaf]) -> Vec<RockBrick> {
     let brick_leaves = 1 << (ROCK_LEVEL + BRICK_SHIFT);
     debug_assert!(origin_leaf % brick_leaves == IVec3::ZERO && side_leaves % brick_leaves == 0);
     let lo = (origin_leaf >> ROCK_LEVEL as i32) - IVec3::splat(ROCK_REACH_CELLS);
@@ -221,7 +221,7 @@ pub fn tile_rock(origin_leaf: IVec3, side_leaves: i32, context: &[SurfaceLeaf]) 
 
 /// Whether point `p_leaf` (leaf units) lies within [`CONTEXT_CELLS`] of the tile at
 /// `origin_leaf` with `side_leaves` leaves: the neighbours' leaves [`tile_rock`] needs.
-pub fn in_context(origin_leaf: IVec3, side_leaves: i32, p_leaf: Vec3) -> bool {
+pub(crate) fn in_context(origin_leaf: IVec3, side_leaves: i32, p_leaf: Vec3) -> bool {
     let margin = (CONTEXT_CELLS << ROCK_LEVEL) as f32;
     let lo = origin_leaf.as_vec3() - Vec3::splat(margin);
     let hi = (origin_leaf + IVec3::splat(side_leaves)).as_vec3() + Vec3::splat(margin);

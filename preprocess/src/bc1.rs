@@ -18,11 +18,11 @@ const BLOCKS_PER_CALL: usize = 256;
 /// [`Bc1Fit::Refined`] tries the cluster fit: an RMS error of 1.6 levels a channel. Below it the
 /// cluster fit's gain is mostly under the RGB565 quantisation floor (about 190 for a block); the
 /// blocks above it hold most of the visible error (edges, mixed materials).
-pub const REFINE_ABOVE_SQUARED_ERROR: u32 = 384;
+pub(crate) const REFINE_ABOVE_SQUARED_ERROR: u32 = 384;
 
 /// Which BC1 encoder.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Bc1Fit {
+pub(crate) enum Bc1Fit {
     /// Intel's ISPC BC1 kernel: about 4 ns a surfel.
     Fast,
     /// texpresso's cluster fit: the best endpoints it can find, about 150 ns a surfel.
@@ -32,7 +32,7 @@ pub enum Bc1Fit {
     Refined,
 }
 
-pub fn encode(colors: &[[u8; 3]], fit: Bc1Fit) -> Vec<Bc1Block> {
+pub(crate) fn encode(colors: &[[u8; 3]], fit: Bc1Fit) -> Vec<Bc1Block> {
     match fit {
         Bc1Fit::Fast => encode_fast(colors),
         Bc1Fit::Cluster => encode_cluster(colors),
@@ -112,10 +112,10 @@ fn encode_fast(colors: &[[u8; 3]]) -> Vec<Bc1Block> {
         .collect()
 }
 
-pub use grotto_format::color::decode_bc1 as decode;
+pub(crate) use grotto_format::color::decode_bc1 as decode;
 
 /// Peak signal-to-noise ratio (dB, 8-bit RGB) and the largest channel error of `b` against `a`.
-pub fn psnr(a: &[[u8; 3]], b: &[[u8; 3]]) -> (f64, u8) {
+pub(crate) fn psnr(a: &[[u8; 3]], b: &[[u8; 3]]) -> (f64, u8) {
     let (mut se, mut worst) = (0f64, 0u8);
     for (x, y) in a.iter().zip(b) {
         for k in 0..3 {

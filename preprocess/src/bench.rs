@@ -116,9 +116,9 @@ pub struct NormalFigure {
     /// Its occupied cells (12 bytes each on disk; about twice that in memory with the column maps).
     pub grid_cells: usize,
     /// Normals over all tiles, the enclosure votes included when bare.
-    pub normals_seconds: f64,
+    pub(crate) normals_seconds: f64,
     pub normals_per_second: f64,
-    pub svo_seconds: f64,
+    pub(crate) svo_seconds: f64,
     pub svo_points_per_second: f64,
 }
 
@@ -443,7 +443,7 @@ pub struct EncodingRow {
 pub struct EncodingFigure {
     pub package: String,
     pub points: u64,
-    pub package_bytes: u64,
+    pub(crate) package_bytes: u64,
     /// Leaf sizes in the package, and the position bits each gets for a 1 mm bound.
     pub position_bits: Vec<(f64, u32)>,
     /// Runs of surfels sharing a leaf (one per leaf when they come grouped, as in Morton order).

@@ -16,11 +16,11 @@ use crate::{Error, Result};
 pub struct BinPoint {
     /// Position relative to the tile origin, in quanta (`TilePlan::quantum_m`); negative or past
     /// the extent only for halo copies.
-    pub pos_q: [i32; 3],
+    pub(crate) pos_q: [i32; 3],
     /// Input normal in the world frame as snorm16, or zero when the scan had none.
-    pub normal_snorm: [i16; 3],
+    pub(crate) normal_snorm: [i16; 3],
     /// sRGB colour.
-    pub rgb: [u8; 3],
+    pub(crate) rgb: [u8; 3],
     /// Bit 0: halo copy (belongs to a neighbour tile).
     pub flags: u8,
     /// Index of the scan the point came from (for its scanner position).
@@ -43,7 +43,7 @@ pub struct PlannedTile {
     /// Extent = min_extent * 2^level.
     pub level: u32,
     /// Cell index at that level, relative to the grid anchor.
-    pub key: [i64; 3],
+    pub(crate) key: [i64; 3],
     /// Points owned by the tile (halo excluded).
     pub points: u64,
 }
@@ -81,13 +81,13 @@ pub struct TilePlan {
 
 impl TilePlan {
     /// Whether any scan lacks a scanner position (its normals need the orientation grid).
-    pub fn needs_orientation(&self) -> bool {
+    pub(crate) fn needs_orientation(&self) -> bool {
         self.scanner_known.iter().any(|k| !k)
     }
 
     /// How scan `scan`'s normals are oriented: `None` toward its scanner (known, or a scan index
     /// from before `scanner_known` was stored), else by enclosure, from the side it was seen from.
-    pub fn seen_from(&self, scan: usize) -> Option<SeenFrom> {
+    pub(crate) fn seen_from(&self, scan: usize) -> Option<SeenFrom> {
         let known = self.scanner_known.get(scan).copied().unwrap_or(true);
         let outside = self.seen_from_outside.get(scan).copied().unwrap_or(false);
         (!known).then_some(if outside { SeenFrom::Outside } else { SeenFrom::Inside })

@@ -45,14 +45,14 @@ impl Default for DemoParams {
 /// What was built.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct DemoSummary {
-    pub path: String,
-    pub points: u64,
+    pub(crate) path: String,
+    pub(crate) points: u64,
     pub tiles: u32,
-    pub bytes: u64,
+    pub(crate) bytes: u64,
 }
 
 /// The exact surface point `i` of `n`, its inward unit normal, and its sRGB colour.
-pub fn sample(params: &DemoParams, i: u64, n: u64) -> ([f64; 3], [f64; 3], [u8; 4]) {
+pub(crate) fn sample(params: &DemoParams, i: u64, n: u64) -> ([f64; 3], [f64; 3], [u8; 4]) {
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
     let r = (1.0 - z * z).sqrt();

@@ -52,7 +52,7 @@ pub fn sh_basis(d: [f64; 3]) -> [f64; 9] {
 }
 
 /// Convolution weights of the clamped cosine per band (Ramamoorthi & Hanrahan).
-pub const A_HAT: [f64; 3] =
+pub(crate) const A_HAT: [f64; 3] =
     [std::f64::consts::PI, 2.0 * std::f64::consts::PI / 3.0, std::f64::consts::PI / 4.0];
 
 fn band(i: usize) -> usize {
@@ -137,7 +137,7 @@ impl LatLong {
     }
 
     /// Direction at the centre of pixel (i, j).
-    pub fn direction(&self, i: usize, j: usize) -> [f64; 3] {
+    pub(crate) fn direction(&self, i: usize, j: usize) -> [f64; 3] {
         let phi = std::f64::consts::TAU * (i as f64 + 0.5) / self.width as f64;
         let theta = std::f64::consts::PI * (j as f64 + 0.5) / self.height as f64;
         [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()]
@@ -198,7 +198,7 @@ impl LatLong {
     }
 
     /// Radiance at a direction, bilinear.
-    pub fn sample(&self, d: [f64; 3]) -> [f32; 3] {
+    pub(crate) fn sample(&self, d: [f64; 3]) -> [f32; 3] {
         let theta = d[2].clamp(-1.0, 1.0).acos();
         let phi = d[1].atan2(d[0]).rem_euclid(std::f64::consts::TAU);
         let x = phi / std::f64::consts::TAU * self.width as f64 - 0.5;
@@ -216,7 +216,7 @@ impl LatLong {
     }
 
     /// Half resolution (2x2 box, solid-angle weighted rows).
-    pub fn downsample(&self) -> LatLong {
+    pub(crate) fn downsample(&self) -> LatLong {
         let (w, h) = ((self.width / 2).max(1), (self.height / 2).max(1));
         let mut rgb = vec![[0f32; 3]; w * h];
         for j in 0..h {
@@ -241,7 +241,7 @@ impl LatLong {
 
 /// Damps bands 1 and 2 just enough that irradiance is non-negative on a dense sphere of
 /// directions. Returns the window strength `s` used (0 when none was needed).
-pub fn window(sh: &mut ShRgb9) -> f64 {
+pub(crate) fn window(sh: &mut ShRgb9) -> f64 {
     let dirs = fibonacci_sphere(4096);
     let min_e = |sh: &ShRgb9| {
         dirs.iter().map(|d| irradiance(sh, *d)).fold(f64::INFINITY, |m, e| m.min(e[0]).min(e[1]).min(e[2]))
@@ -275,7 +275,7 @@ pub fn window(sh: &mut ShRgb9) -> f64 {
 }
 
 /// `n` well-spread unit directions.
-pub fn fibonacci_sphere(n: usize) -> Vec<[f64; 3]> {
+pub(crate) fn fibonacci_sphere(n: usize) -> Vec<[f64; 3]> {
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     (0..n)
         .map(|i| {
@@ -290,7 +290,7 @@ pub fn fibonacci_sphere(n: usize) -> Vec<[f64; 3]> {
 /// A prefiltered level before compression.
 #[derive(Clone, Debug)]
 pub struct GlossLevel {
-    pub roughness: f32,
+    pub(crate) roughness: f32,
     pub map: LatLong,
 }
 
@@ -387,7 +387,7 @@ fn resample(map: &LatLong, width: usize) -> LatLong {
 }
 
 /// BC6H (unsigned half) blocks of a level, by `intel_tex_2` (ISPC texture compressor).
-pub fn encode_bc6h(map: &LatLong) -> Vec<Bc6hBlock> {
+pub(crate) fn encode_bc6h(map: &LatLong) -> Vec<Bc6hBlock> {
     let rgba: Vec<half::f16> = map
         .rgb
         .iter()

@@ -43,7 +43,7 @@ const MAX_LEVEL: u32 = 10;
 /// Exact k nearest neighbours of a point set, in Morton order: the grid where it can prove them,
 /// else kiddo's kd-tree (built on the first such query).
 #[derive(Debug)]
-pub struct Knn {
+pub(crate) struct Knn {
     grid: MortonGrid,
     // u32 items (a tile's points are bounded by the memory budget) and 64-point leaves: measured
     // 10-15% faster than kiddo's default (u64, 32) for k = 16 on scan data.
@@ -53,13 +53,13 @@ pub struct Knn {
 impl Knn {
     /// Sorts `positions` by Morton code; the returned `order[j]` is the input index of sorted
     /// point `j`.
-    pub fn new(positions: &[[f32; 3]]) -> (Vec<u32>, Knn) {
+    pub(crate) fn new(positions: &[[f32; 3]]) -> (Vec<u32>, Knn) {
         let (order, grid) = MortonGrid::new(positions);
         (order, Knn { grid, tree: OnceLock::new() })
     }
 
     /// The sorted points.
-    pub fn points(&self) -> &[[f32; 3]] {
+    pub(crate) fn points(&self) -> &[[f32; 3]] {
         &self.grid.points
     }
 
@@ -67,7 +67,7 @@ impl Knn {
     /// (squared distance, sorted index), in no particular order. `guess_d2` is the caller's
     /// guess of the k-th squared distance (the previous query's, widened): any value gives the
     /// same answer, a good one gives it faster. Queries in sorted order reuse `cache` best.
-    pub fn nearest(
+    pub(crate) fn nearest(
         &self,
         j: usize,
         k: usize,
@@ -120,7 +120,7 @@ struct Level {
 /// The candidates of one cell's block, kept while consecutive queries fall in the cell: runs of
 /// the grid's sorted points, read in place.
 #[derive(Debug, Default)]
-pub struct CellCache {
+pub(crate) struct CellCache {
     key: Option<(u32, u64)>,
     /// Candidates in all the block's cells.
     candidates: usize,

@@ -19,33 +19,33 @@ pub struct Manifest {
     #[serde(default, rename = "scan")]
     pub scans: Vec<ScanSpec>,
     #[serde(default, rename = "light")]
-    pub lights: Vec<LightSpec>,
+    pub(crate) lights: Vec<LightSpec>,
     #[serde(default, rename = "material")]
     pub materials: Vec<MaterialSpec>,
     pub environment: Option<EnvironmentSpec>,
     #[serde(default, rename = "camera")]
-    pub cameras: Vec<CameraSpec>,
+    pub(crate) cameras: Vec<CameraSpec>,
     /// Directory relative paths are resolved against (the manifest's own directory).
     #[serde(skip)]
-    pub base_dir: PathBuf,
+    pub(crate) base_dir: PathBuf,
 }
 
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ScanSpec {
-    pub path: PathBuf,
-    pub format: Option<ScanFormat>,
+    pub(crate) path: PathBuf,
+    pub(crate) format: Option<ScanFormat>,
     /// Scan frame -> world translation, metres.
     pub translation: Option<[f64; 3]>,
     /// Unit quaternion w, x, y, z.
     pub rotation: Option<[f64; 4]>,
     /// Row-major 4x4 scan frame -> world matrix (instead of translation + rotation).
-    pub matrix: Option<[f64; 16]>,
+    pub(crate) matrix: Option<[f64; 16]>,
     /// Scanner position in the scan frame (default: the frame's origin when the scan has a pose;
     /// with neither, the file is taken as a merged cloud without scanner positions).
     pub origin: Option<[f64; 3]>,
     /// For files with several scans (E57): which one; all when absent.
-    pub scan: Option<usize>,
+    pub(crate) scan: Option<usize>,
     /// Which side of its surface a scan without a scanner position was taken from: `inside` (a
     /// cave: normals face the space its walls enclose) or `outside` (an object or a building
     /// scanned from around it: normals face away from what it encloses). Absent: what the
@@ -66,20 +66,20 @@ pub enum SeenFrom {
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct LightSpec {
+pub(crate) struct LightSpec {
     #[serde(default)]
-    pub name: String,
-    pub kind: String,
-    pub position: Option<[f64; 3]>,
-    pub direction: Option<[f32; 3]>,
-    pub inner_angle_deg: Option<f32>,
-    pub outer_angle_deg: Option<f32>,
-    pub center: Option<[f64; 3]>,
-    pub normal: Option<[f32; 3]>,
-    pub size: Option<[f32; 2]>,
+    pub(crate) name: String,
+    pub(crate) kind: String,
+    pub(crate) position: Option<[f64; 3]>,
+    pub(crate) direction: Option<[f32; 3]>,
+    pub(crate) inner_angle_deg: Option<f32>,
+    pub(crate) outer_angle_deg: Option<f32>,
+    pub(crate) center: Option<[f64; 3]>,
+    pub(crate) normal: Option<[f32; 3]>,
+    pub(crate) size: Option<[f32; 2]>,
     #[serde(default = "white")]
-    pub color: [f32; 3],
-    pub power_w: f32,
+    pub(crate) color: [f32; 3],
+    pub(crate) power_w: f32,
 }
 
 fn white() -> [f32; 3] {
@@ -137,14 +137,14 @@ fn one() -> f32 {
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct CameraSpec {
-    pub name: String,
-    pub eye: [f64; 3],
-    pub look_at: [f64; 3],
+pub(crate) struct CameraSpec {
+    pub(crate) name: String,
+    pub(crate) eye: [f64; 3],
+    pub(crate) look_at: [f64; 3],
     #[serde(default = "z_up")]
-    pub up: [f64; 3],
+    pub(crate) up: [f64; 3],
     #[serde(default = "sixty")]
-    pub fov_deg: f64,
+    pub(crate) fov_deg: f64,
 }
 
 fn z_up() -> [f64; 3] {
@@ -160,9 +160,9 @@ fn sixty() -> f64 {
 pub struct ResolvedScan {
     pub path: PathBuf,
     pub format: ScanFormat,
-    pub index: usize,
-    pub world_from_scan: Pose,
-    pub scanner_world_m: [f64; 3],
+    pub(crate) index: usize,
+    pub(crate) world_from_scan: Pose,
+    pub(crate) scanner_world_m: [f64; 3],
     /// Whether the pose came from the file (E57) rather than the manifest or identity.
     pub pose_from_file: bool,
     /// Whether `scanner_world_m` is a scanner: the manifest gives an `origin`, or a pose (from the
@@ -171,7 +171,7 @@ pub struct ResolvedScan {
     /// not a scanner, and its normals are oriented by enclosure instead (orient.rs).
     pub scanner_known: bool,
     /// For a scan without a scanner: which side of its surface it was seen from.
-    pub seen_from: SeenFrom,
+    pub(crate) seen_from: SeenFrom,
 }
 
 fn manifest_error(path: &Path, reason: impl std::fmt::Display) -> Error {
@@ -179,7 +179,7 @@ fn manifest_error(path: &Path, reason: impl std::fmt::Display) -> Error {
 }
 
 impl Manifest {
-    pub fn from_toml_file(path: &Path) -> Result<Self> {
+    pub(crate) fn from_toml_file(path: &Path) -> Result<Self> {
         let text =
             std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
         let mut m: Manifest = toml::from_str(&text).map_err(|e| manifest_error(path, e))?;
@@ -213,7 +213,7 @@ impl Manifest {
     /// rotation in this crate's (Hamilton, active) convention is its conjugate. Measured on the
     /// ten bunny scans: conjugated, each scan lies a median 0.23-0.33 mm from the others; taken as
     /// written, 8-108 mm (the `bunny_scans_merge...` test keeps both facts).
-    pub fn from_stanford_conf(path: &Path) -> Result<Self> {
+    pub(crate) fn from_stanford_conf(path: &Path) -> Result<Self> {
         let text =
             std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
         let mut scans = Vec::new();
@@ -256,7 +256,7 @@ impl Manifest {
     }
 
     /// A path from the manifest, relative to its directory.
-    pub fn resolve_path(&self, p: &Path) -> PathBuf {
+    pub(crate) fn resolve_path(&self, p: &Path) -> PathBuf {
         if p.is_absolute() { p.to_path_buf() } else { self.base_dir.join(p) }
     }
 
@@ -317,7 +317,7 @@ impl Manifest {
     }
 
     /// The scene the package carries.
-    pub fn scene(&self, manifest_path: &Path) -> Result<Scene> {
+    pub(crate) fn scene(&self, manifest_path: &Path) -> Result<Scene> {
         let mut lights = Vec::new();
         for l in &self.lights {
             let missing = |what: &str| {

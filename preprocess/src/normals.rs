@@ -31,14 +31,14 @@ pub(crate) const KNN_BOUND_FACTOR: f32 = 1.3;
 
 /// Surfel radii are widened by this over the disc that covers the area per point, so neighbouring
 /// discs overlap without holes.
-pub const RADIUS_COVER_FACTOR: f64 = 1.25;
+pub(crate) const RADIUS_COVER_FACTOR: f64 = 1.25;
 
 /// The result for one point.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PointNormal {
-    pub normal: [f32; 3],
-    pub spread: f32,
-    pub radius_m: f32,
+pub(crate) struct PointNormal {
+    pub(crate) normal: [f32; 3],
+    pub(crate) spread: f32,
+    pub(crate) radius_m: f32,
 }
 
 /// Eigen-decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations. Returns eigenvalues
@@ -48,7 +48,7 @@ pub struct PointNormal {
 /// times for a large cave), on a fixed 3x3 size where Jacobi is branch-light and exact to a few
 /// ulps, and it stays accurate when eigenvalues nearly coincide (rotations only ever shrink the
 /// off-diagonal part; no characteristic polynomial is solved).
-pub fn sym_eigen3(m: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
+pub(crate) fn sym_eigen3(m: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
     let mut a = m;
     let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     let scale = a.iter().flatten().map(|x| x.abs()).fold(0.0, f64::max);
@@ -99,7 +99,7 @@ pub fn sym_eigen3(m: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
 /// the vector as the longest cross product of two rows of `m - smallest * I`. `None` where the
 /// two smallest eigenvalues lie closer than a tenth of the spectrum's spread, where the vector
 /// would lose digits (lines, blobs, duplicates): [`sym_eigen3`] is exact there.
-pub fn smallest_eigenvector(m: [[f64; 3]; 3]) -> Option<([f64; 3], [f64; 3])> {
+pub(crate) fn smallest_eigenvector(m: [[f64; 3]; 3]) -> Option<([f64; 3], [f64; 3])> {
     let p1 = m[0][1] * m[0][1] + m[0][2] * m[0][2] + m[1][2] * m[1][2];
     let q = (m[0][0] + m[1][1] + m[2][2]) / 3.0;
     let (d0, d1, d2) = (m[0][0] - q, m[1][1] - q, m[2][2] - q);
@@ -165,11 +165,12 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 
 /// Normal of one neighbourhood, oriented toward `view` (unit vector from the point to its
 /// scanner).
-pub fn normal_from_neighbourhood(neighbours: &[[f64; 3]], view: [f64; 3]) -> [f64; 3] {
+#[cfg(test)]
+fn normal_from_neighbourhood(neighbours: &[[f64; 3]], view: [f64; 3]) -> [f64; 3] {
     normal_from_points(neighbours.len(), || neighbours.iter().copied(), view)
 }
 
-/// [`normal_from_neighbourhood`] over points read twice from `points` (the mean, then the
+/// The normal of a neighbourhood, oriented toward `view`, over points read twice from `points` (the mean, then the
 /// covariance about it), so the estimator reads the tile's f32 points in place.
 fn normal_from_points<I: Iterator<Item = [f64; 3]>>(
     count: usize,
@@ -229,35 +230,35 @@ fn normal_from_points<I: Iterator<Item = [f64; 3]>>(
 /// frame per point, optional input normals (zero vector = none), and the radius of a point with
 /// no distinct neighbour.
 #[derive(Debug)]
-pub struct TilePoints<'a> {
-    pub positions: &'a [[f32; 3]],
-    pub own: &'a [bool],
-    pub scanner_tile_m: &'a [[f64; 3]],
-    pub input_normals: &'a [[f32; 3]],
+pub(crate) struct TilePoints<'a> {
+    pub(crate) positions: &'a [[f32; 3]],
+    pub(crate) own: &'a [bool],
+    pub(crate) scanner_tile_m: &'a [[f64; 3]],
+    pub(crate) input_normals: &'a [[f32; 3]],
     /// A point alone in its tile and halo, or among exact duplicates, has no spacing to take a
     /// radius from: it gets this one (the builder gives half a leaf: it stands for the leaf it
     /// falls in, drawn and voxelised rather than a zero-area disc nothing sees).
-    pub isolated_radius_m: f32,
+    pub(crate) isolated_radius_m: f32,
     /// Keep a plausible input normal (`--normals keep`) rather than estimating every normal.
-    pub keep_input_normals: bool,
+    pub(crate) keep_input_normals: bool,
     /// Orientation for points whose scan has no scanner position (none: every point faces its
     /// scanner).
-    pub orient: Option<Orient<'a>>,
+    pub(crate) orient: Option<Orient<'a>>,
 }
 
 /// What estimation did with a tile's own points: normals their files carried, those kept, and
 /// orientation without a scanner.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct NormalStats {
+pub(crate) struct NormalStats {
     /// Own points whose file carried a normal (counted under `--normals estimate` too).
-    pub input_normals: u64,
+    pub(crate) input_normals: u64,
     /// Of those, kept rather than re-estimated.
-    pub input_kept: u64,
-    pub orientation: OrientStats,
+    pub(crate) input_kept: u64,
+    pub(crate) orientation: OrientStats,
 }
 
 impl NormalStats {
-    pub fn add(&mut self, o: &NormalStats) {
+    pub(crate) fn add(&mut self, o: &NormalStats) {
         self.input_normals += o.input_normals;
         self.input_kept += o.input_kept;
         self.orientation.add(&o.orientation);
@@ -266,23 +267,23 @@ impl NormalStats {
 
 /// How points without a scanner are oriented: by the enclosure votes of `grid` (see orient.rs).
 #[derive(Clone, Copy, Debug)]
-pub struct Orient<'a> {
-    pub grid: &'a CaveGrid,
+pub(crate) struct Orient<'a> {
+    pub(crate) grid: &'a CaveGrid,
     /// World position of the tile's frame.
-    pub tile_origin_m: [f64; 3],
+    pub(crate) tile_origin_m: [f64; 3],
     /// Per point: `None` where its scan has a scanner position (its normal faces the scanner),
     /// else the side its scan saw the walls from (inside: the normal faces what the walls
     /// enclose; outside: away from it).
-    pub seen_from: &'a [Option<SeenFrom>],
+    pub(crate) seen_from: &'a [Option<SeenFrom>],
 }
 
 /// Normals for the own points of a tile, in order. `k` neighbours (the point itself included).
-pub fn estimate(tile: &TilePoints<'_>, k: usize) -> Vec<PointNormal> {
+pub(crate) fn estimate(tile: &TilePoints<'_>, k: usize) -> Vec<PointNormal> {
     estimate_with_stats(tile, k).0
 }
 
 /// [`estimate`], with what it did with file normals and orientation without a scanner.
-pub fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>, NormalStats) {
+pub(crate) fn estimate_with_stats(tile: &TilePoints<'_>, k: usize) -> (Vec<PointNormal>, NormalStats) {
     let n = tile.positions.len();
     if n == 0 {
         return (Vec::new(), NormalStats::default());

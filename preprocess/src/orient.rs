@@ -29,23 +29,23 @@ use crate::{Error, Result};
 
 /// Occupancy cell edge in leaves: coarse enough that a wall sampled at the leaf spacing has no
 /// holes a ray slips through.
-pub const CELL_LEAVES: f64 = 2.0;
+pub(crate) const CELL_LEAVES: f64 = 2.0;
 /// How far in front of / behind the wall the votes are taken, in cells: clear of the wall's own
 /// cells on a rough wall, inside all but the narrowest squeezes.
-pub const VOTE_OFFSET_CELLS: f64 = 1.5;
+pub(crate) const VOTE_OFFSET_CELLS: f64 = 1.5;
 /// The largest score one point's votes can give (6 rays from each side).
-pub const MAX_SCORE: i32 = 12;
+pub(crate) const MAX_SCORE: i32 = 12;
 
 type Columns = HashMap<(i32, i32), Vec<[i32; 2]>, foldhash::fast::FixedState>;
 
 /// The walls of the whole build as occupied cells, indexed for ray parity along the three axes.
 #[derive(Debug)]
-pub struct CaveGrid {
-    pub cell_m: f64,
+pub(crate) struct CaveGrid {
+    pub(crate) cell_m: f64,
     /// World position of cell (0, 0, 0)'s lower corner.
-    pub origin_m: [f64; 3],
+    pub(crate) origin_m: [f64; 3],
     /// Occupied cells.
-    pub cells: usize,
+    pub(crate) cells: usize,
     /// For axis a: the column keyed by the two other coordinates (in axis order), holding the
     /// runs of occupied cells along a as [first, last], ascending and disjoint.
     columns: [Columns; 3],
@@ -53,7 +53,7 @@ pub struct CaveGrid {
 
 impl CaveGrid {
     /// From occupied cells (any order, duplicates allowed).
-    pub fn from_cells(cell_m: f64, origin_m: [f64; 3], mut cells: Vec<[i32; 3]>) -> Self {
+    pub(crate) fn from_cells(cell_m: f64, origin_m: [f64; 3], mut cells: Vec<[i32; 3]>) -> Self {
         cells.par_sort_unstable();
         cells.dedup();
         let count = cells.len();
@@ -102,7 +102,8 @@ impl CaveGrid {
     }
 
     /// Whether the cell holding `p_world_m` holds a wall point.
-    pub fn occupied(&self, p_world_m: [f64; 3]) -> bool {
+    #[cfg(test)]
+    fn occupied(&self, p_world_m: [f64; 3]) -> bool {
         self.key(p_world_m).is_some_and(|k| self.runs_below(2, k).is_none())
     }
 
@@ -124,7 +125,7 @@ impl CaveGrid {
     /// -`MAX_SCORE`..=`MAX_SCORE`: the inside votes in front of the wall minus those behind it.
     /// Positive: the normal faces the passage; negative: the rock; zero: no evidence (open
     /// terrain, or both sides wall cells).
-    pub fn score(&self, p_world_m: [f64; 3], normal: [f64; 3]) -> i32 {
+    pub(crate) fn score(&self, p_world_m: [f64; 3], normal: [f64; 3]) -> i32 {
         let off = VOTE_OFFSET_CELLS * self.cell_m;
         let side = |s: f64| {
             self.inside_votes(std::array::from_fn(|a| p_world_m[a] + s * off * normal[a])).unwrap_or(0)
@@ -133,7 +134,7 @@ impl CaveGrid {
     }
 
     /// Builds the grid from every point the plan tiled (own points of each tile bin).
-    pub fn from_plan(plan: &TilePlan, work_dir: &Path, cell_m: f64) -> Result<Self> {
+    pub(crate) fn from_plan(plan: &TilePlan, work_dir: &Path, cell_m: f64) -> Result<Self> {
         let origin_m = plan.grid_origin_m();
         let per_tile: Vec<Vec<[i32; 3]>> = (0..plan.tiles.len())
             .into_par_iter()
@@ -168,7 +169,7 @@ impl CaveGrid {
     }
 
     /// Writes the grid to `path` atomically.
-    pub fn save(&self, path: &Path) -> Result<()> {
+    pub(crate) fn save(&self, path: &Path) -> Result<()> {
         let io = |source| Error::Io { path: path.to_path_buf(), source };
         let dir = path.parent().unwrap_or(Path::new("."));
         let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
@@ -191,7 +192,7 @@ impl CaveGrid {
     }
 
     /// Reads a grid [`CaveGrid::save`] wrote; a damaged or foreign file is an error naming it.
-    pub fn load(path: &Path) -> Result<Self> {
+    pub(crate) fn load(path: &Path) -> Result<Self> {
         let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
         let bad = |reason: &str| Error::Read {
             path: path.to_path_buf(),
@@ -225,13 +226,13 @@ const GRID_MAGIC: &[u8; 8] = b"GRTORNT1";
 
 /// Where the plan step keeps the orientation grid for a plan (named by its fingerprint, so a
 /// re-plan never reads a stale one).
-pub fn grid_path(work_dir: &Path, plan: &TilePlan) -> PathBuf {
+pub(crate) fn grid_path(work_dir: &Path, plan: &TilePlan) -> PathBuf {
     work_dir.join(format!("orient-{}.grid", plan.fingerprint))
 }
 
 /// The orientation grid of `plan`: read from the work directory, or built from the tile bins and
 /// saved there when it is missing or unreadable.
-pub fn load_or_build(plan: &TilePlan, work_dir: &Path, leaf_m: f64) -> Result<CaveGrid> {
+pub(crate) fn load_or_build(plan: &TilePlan, work_dir: &Path, leaf_m: f64) -> Result<CaveGrid> {
     let path = grid_path(work_dir, plan);
     let cell_m = CELL_LEAVES * leaf_m;
     if let Ok(g) = CaveGrid::load(&path)
@@ -251,20 +252,20 @@ pub struct OrientStats {
     pub points: u64,
     /// Of those, the normals that face away from where the old rule (toward the scan frame's
     /// origin) would have turned them.
-    pub flipped: u64,
+    pub(crate) flipped: u64,
     /// Points whose own votes disagreed with their neighbourhood's (the neighbourhood won).
-    pub corrected: u64,
+    pub(crate) corrected: u64,
     /// Points with no evidence either way (their neighbourhood's votes sum to zero): turned up (+z).
-    pub undecided: u64,
+    pub(crate) undecided: u64,
     /// Points whose neighbourhood's votes sum to less than one point's full vote: the sign is a
     /// weak choice.
-    pub weak: u64,
+    pub(crate) weak: u64,
     /// Sum over points of |neighbourhood score| / (k * MAX_SCORE), for the mean confidence.
-    pub confidence_sum: f64,
+    pub(crate) confidence_sum: f64,
 }
 
 impl OrientStats {
-    pub fn add(&mut self, o: &OrientStats) {
+    pub(crate) fn add(&mut self, o: &OrientStats) {
         self.points += o.points;
         self.flipped += o.flipped;
         self.corrected += o.corrected;

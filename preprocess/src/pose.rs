@@ -9,8 +9,8 @@ use serde::Serialize;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Pose {
     /// Row-major 3x3 rotation.
-    pub rotation: [[f64; 3]; 3],
-    pub translation: [f64; 3],
+    pub(crate) rotation: [[f64; 3]; 3],
+    pub(crate) translation: [f64; 3],
 }
 
 impl Default for Pose {
@@ -20,12 +20,12 @@ impl Default for Pose {
 }
 
 impl Pose {
-    pub const IDENTITY: Pose =
+    pub(crate) const IDENTITY: Pose =
         Pose { rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], translation: [0.0; 3] };
 
     /// From a unit quaternion `[w, x, y, z]` (Hamilton convention, rotating scan-frame vectors into
     /// the world) and a translation. Quaternions within 1e-3 of unit length are normalised.
-    pub fn from_quaternion(wxyz: [f64; 4], translation: [f64; 3]) -> Result<Self, String> {
+    pub(crate) fn from_quaternion(wxyz: [f64; 4], translation: [f64; 3]) -> Result<Self, String> {
         if !wxyz.iter().chain(&translation).all(|v| v.is_finite()) {
             return Err(format!(
                 "pose has a non-finite value: rotation {wxyz:?}, translation {translation:?}"
@@ -48,7 +48,7 @@ impl Pose {
 
     /// From a row-major 4x4 matrix whose upper 3x3 is a rotation (orthonormal within 1e-4,
     /// determinant +1) and whose last row is `0 0 0 1`.
-    pub fn from_matrix(m: [f64; 16]) -> Result<Self, String> {
+    pub(crate) fn from_matrix(m: [f64; 16]) -> Result<Self, String> {
         if !m.iter().all(|v| v.is_finite()) {
             return Err("pose matrix has a non-finite value".into());
         }
@@ -76,7 +76,7 @@ impl Pose {
         Ok(Self { rotation: r, translation: [m[3], m[7], m[11]] })
     }
 
-    pub fn rotate(&self, v: [f64; 3]) -> [f64; 3] {
+    pub(crate) fn rotate(&self, v: [f64; 3]) -> [f64; 3] {
         let r = &self.rotation;
         std::array::from_fn(|i| r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2])
     }
@@ -87,7 +87,8 @@ impl Pose {
     }
 
     /// `self` after `inner`: first `inner`, then `self`.
-    pub fn then_after(&self, inner: &Pose) -> Pose {
+    #[cfg(test)]
+    fn then_after(&self, inner: &Pose) -> Pose {
         let r = std::array::from_fn(|i| {
             std::array::from_fn(|j| (0..3).map(|k| self.rotation[i][k] * inner.rotation[k][j]).sum())
         });

@@ -56,7 +56,7 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub const ALL: [Stage; 18] = [
+    pub(crate) const ALL: [Stage; 18] = [
         Stage::Setup,
         Stage::CountRead,
         Stage::Count,
@@ -77,7 +77,7 @@ impl Stage {
         Stage::HashInputs,
     ];
 
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Stage::Setup => "setup: scans and leaf size",
             Stage::CountRead => "count: read scans",
@@ -101,7 +101,7 @@ impl Stage {
     }
 
     /// Whether the stage is timed per tile and summed over tiles built at once.
-    pub fn summed_over_tiles(self) -> bool {
+    pub(crate) fn summed_over_tiles(self) -> bool {
         matches!(
             self,
             Stage::ReadBins
@@ -137,13 +137,13 @@ impl StageTime {
 }
 
 impl Profile {
-    pub fn add(&self, stage: Stage, elapsed: Duration) {
+    pub(crate) fn add(&self, stage: Stage, elapsed: Duration) {
         let nanos = u64::try_from(elapsed.as_nanos()).unwrap_or(u64::MAX);
         self.nanos[stage as usize].fetch_add(nanos, Ordering::Relaxed);
     }
 
     /// Runs `f`, adding its time to `stage`.
-    pub fn time<T>(&self, stage: Stage, f: impl FnOnce() -> T) -> T {
+    pub(crate) fn time<T>(&self, stage: Stage, f: impl FnOnce() -> T) -> T {
         let start = Instant::now();
         let out = f();
         self.add(stage, start.elapsed());
@@ -152,7 +152,7 @@ impl Profile {
 
     /// Adds the time since `since` to `stage` and restarts `since`: consecutive stages of one
     /// piece of code, timed by one clock.
-    pub fn lap(&self, stage: Stage, since: &mut Instant) {
+    pub(crate) fn lap(&self, stage: Stage, since: &mut Instant) {
         let now = Instant::now();
         self.add(stage, now - *since);
         *since = now;
@@ -173,7 +173,7 @@ impl Profile {
 }
 
 /// Peak resident memory of this process so far (Linux `VmHWM`), in bytes.
-pub fn peak_rss_bytes() -> Option<u64> {
+pub(crate) fn peak_rss_bytes() -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;

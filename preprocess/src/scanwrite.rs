@@ -164,7 +164,7 @@ fn write_e57(path: &Path, data: &ScanData<'_>) -> Result<()> {
 
 /// Unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (Shepperd's method: the largest
 /// diagonal term picks the stable branch).
-pub fn rotation_to_quaternion(r: &[[f64; 3]; 3]) -> [f64; 4] {
+pub(crate) fn rotation_to_quaternion(r: &[[f64; 3]; 3]) -> [f64; 4] {
     let tr = r[0][0] + r[1][1] + r[2][2];
     let q = if tr > 0.0 {
         let s = (tr + 1.0).sqrt() * 2.0;

@@ -12,7 +12,7 @@ use crate::manifest::ResolvedScan;
 /// over; None with fewer than two distinct points. Consecutive points of a scan lie together (a
 /// scan line, a flight strip), so a scan's first points measure its spacing where a random sample
 /// of a large survey would be too sparse to.
-pub fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Option<(f64, usize)>> {
+pub(crate) fn sample_spacing_m(scans: &[ResolvedScan], per_scan: usize) -> Result<Option<(f64, usize)>> {
     // Scans in parallel (each decoder is one thread's work), in order for the same median.
     let per_scan_spacings: Vec<(Vec<f64>, usize)> = scans
         .par_iter()

@@ -320,7 +320,7 @@ impl SynthCave {
     }
 
     /// First wall hit from `o` along unit `d` within `max_t`, refined to ~1e-6 m.
-    pub fn trace(&self, o: [f64; 3], d: [f64; 3], max_t: f64) -> Option<f64> {
+    pub(crate) fn trace(&self, o: [f64; 3], d: [f64; 3], max_t: f64) -> Option<f64> {
         // Noise gradients make f a little steeper than a distance; 0.7 keeps steps safe.
         let mut t = 0.0;
         let mut prev_t = 0.0;
@@ -350,7 +350,7 @@ impl SynthCave {
     }
 
     /// sRGB colour of the wall at `p` with normal `n`.
-    pub fn color(&self, p: [f64; 3], n: [f64; 3]) -> [u8; 3] {
+    pub(crate) fn color(&self, p: [f64; 3], n: [f64; 3]) -> [u8; 3] {
         let band = 0.5 + 0.5 * (p[2] * 2.3 + 0.8 * value_noise(self.seed ^ 0xba5e, p.map(|v| v * 0.4))).sin();
         let streak = value_noise(self.seed ^ 0x5eed, [p[0] * 0.3, p[1] * 0.3, p[2] * 3.0]).max(0.0);
         let floor = n[2].max(0.0).powi(2);
@@ -374,7 +374,7 @@ pub struct SynthScan {
     pub xyz: Vec<[f64; 3]>,
     pub rgb: Vec<[u8; 3]>,
     /// Return intensity, 0..=65535 (falls with range and incidence).
-    pub intensity: Vec<u16>,
+    pub(crate) intensity: Vec<u16>,
 }
 
 /// Scans the cave from station `s`, casting about `rays` rays. Rays are processed in parallel;
@@ -479,11 +479,11 @@ mod tests {
 /// What `write_dataset` wrote.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct SynthSummary {
-    pub dir: String,
+    pub(crate) dir: String,
     pub manifest: String,
     pub scans: usize,
     pub points: u64,
-    pub files: Vec<String>,
+    pub(crate) files: Vec<String>,
 }
 
 /// Writes the scans (formats assigned round-robin from `formats`), `manifest.toml` and

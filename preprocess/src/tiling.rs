@@ -268,7 +268,7 @@ fn fine_key(q: [i64; 3], shift: u32) -> [i64; 3] {
 }
 
 /// The complete plan in `work_dir` if it was made from exactly these scans and parameters.
-pub fn existing_plan(
+pub(crate) fn existing_plan(
     scans: &[ResolvedScan],
     work_dir: &Path,
     params: &TilingParams,

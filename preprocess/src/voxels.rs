@@ -19,30 +19,30 @@ use rayon::prelude::*;
 
 /// One scene sample in tile coordinates.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Sample {
-    pub pos_tile_m: [f32; 3],
-    pub normal: [f32; 3],
-    pub area_m2: f32,
-    pub albedo_linear: [f32; 3],
-    pub emission: [f32; 3],
+pub(crate) struct Sample {
+    pub(crate) pos_tile_m: [f32; 3],
+    pub(crate) normal: [f32; 3],
+    pub(crate) area_m2: f32,
+    pub(crate) albedo_linear: [f32; 3],
+    pub(crate) emission: [f32; 3],
 }
 
 /// The octree and its leaf attribute arrays (one entry per leaf, in node order).
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct TileSvo {
-    pub nodes: Vec<SvoNode>,
-    pub opacity: Vec<f32>,
-    pub albedo: Vec<Rgba8>,
-    pub ndf: Vec<LeafNdf>,
-    pub emission: Vec<LeafEmission>,
+pub(crate) struct TileSvo {
+    pub(crate) nodes: Vec<SvoNode>,
+    pub(crate) opacity: Vec<f32>,
+    pub(crate) albedo: Vec<Rgba8>,
+    pub(crate) ndf: Vec<LeafNdf>,
+    pub(crate) emission: Vec<LeafEmission>,
 }
 
 impl TileSvo {
-    pub fn leaf_count(&self) -> usize {
+    pub(crate) fn leaf_count(&self) -> usize {
         self.opacity.len()
     }
 
-    pub fn has_emission(&self) -> bool {
+    pub(crate) fn has_emission(&self) -> bool {
         self.emission.iter().any(|e| e.radiance.iter().any(|&c| c > 0.0))
     }
 }
@@ -53,7 +53,7 @@ fn cell(p: f32, inv_leaf: f64, cells: u32) -> u32 {
     ((f64::from(p) * inv_leaf).floor().max(0.0) as u32).min(cells - 1)
 }
 
-pub fn build(samples: &[Sample], extent_m: f64, depth: u32) -> TileSvo {
+pub(crate) fn build(samples: &[Sample], extent_m: f64, depth: u32) -> TileSvo {
     if samples.is_empty() {
         return TileSvo::default();
     }

@@ -41,13 +41,13 @@ pub enum Error {
 /// One surfel as the reference sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Disc {
-    pub center_m: Vec3,
+    pub(crate) center_m: Vec3,
     pub normal: Vec3,
-    pub radius_m: f32,
+    pub(crate) radius_m: f32,
     /// Linear albedo.
-    pub albedo: Vec3,
+    pub(crate) albedo: Vec3,
     /// Emitted radiance, W / (sr m^2).
-    pub emission: Vec3,
+    pub(crate) emission: Vec3,
     node_index: usize,
 }
 
@@ -113,14 +113,14 @@ impl IntersectsAabb<f32, 3> for Segment {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathSettings {
     /// Bounces before Russian roulette starts.
-    pub min_bounces: u32,
+    pub(crate) min_bounces: u32,
     /// Hard cap (a path this long has throughput below any displayable level at albedo <= 0.99).
-    pub max_bounces: u32,
+    pub(crate) max_bounces: u32,
     /// Radiance of rays that leave the scene (the runtime's background).
-    pub background: Vec3,
+    pub(crate) background: Vec3,
     /// Environment radiance as 9 SH coefficients (the package's env-sh9 times its intensity):
     /// rays that leave the scene add its radiance in their direction, clamped at 0.
-    pub env_sh: Option<[[f32; 3]; 9]>,
+    pub(crate) env_sh: Option<[[f32; 3]; 9]>,
 }
 
 impl PathSettings {
@@ -130,7 +130,7 @@ impl PathSettings {
     }
 
     /// Radiance arriving from outside the scene along unit `d`.
-    pub fn sky(&self, d: Vec3) -> Vec3 {
+    pub(crate) fn sky(&self, d: Vec3) -> Vec3 {
         let Some(sh) = &self.env_sh else { return self.background };
         let y = grotto_preprocess::env::sh_basis(d.as_dvec3().to_array());
         let mut l = [0.0f64; 3];
@@ -296,12 +296,12 @@ impl SurfelScene {
         self
     }
 
-    pub fn lights(&self) -> &[SceneLight] {
+    pub(crate) fn lights(&self) -> &[SceneLight] {
         &self.lights
     }
 
     /// Closest disc hit by the ray (unit `d`), within `t_max`.
-    pub fn intersect(&self, o: Vec3, d: Vec3, t_max: f32) -> Option<(f32, usize)> {
+    pub(crate) fn intersect(&self, o: Vec3, d: Vec3, t_max: f32) -> Option<(f32, usize)> {
         let mut t_lo = 0.0f32;
         let mut seg = self.step_m;
         let inv_d = Vec3::ONE / d;
@@ -333,7 +333,7 @@ impl SurfelScene {
     }
 
     /// Whether anything lies between `a` and `b`.
-    pub fn occluded(&self, a: Vec3, b: Vec3) -> bool {
+    pub(crate) fn occluded(&self, a: Vec3, b: Vec3) -> bool {
         let v = b - a;
         let len = v.length();
         if len <= 2.0 * self.epsilon_m {
@@ -403,7 +403,7 @@ impl SurfelScene {
     }
 
     /// Radiance arriving at `o` from direction `-d` (one path sample).
-    pub fn trace(&self, o: Vec3, d: Vec3, settings: &PathSettings, rng: &mut SmallRng) -> Vec3 {
+    pub(crate) fn trace(&self, o: Vec3, d: Vec3, settings: &PathSettings, rng: &mut SmallRng) -> Vec3 {
         let mut radiance = Vec3::ZERO;
         let mut throughput = Vec3::ONE;
         let (mut o, mut d) = (o, d);

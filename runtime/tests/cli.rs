@@ -158,7 +158,8 @@ fn negative_vectors_parse_as_written_and_gpu_memory_is_reported() {
 }
 
 /// The one tolerance every image comparison uses (the end-to-end tests' helper, shared by path).
-#[allow(dead_code)]
+// Its items are public where the tests crate exports them; here they are this file's.
+#[allow(dead_code, unreachable_pub)]
 #[path = "../../tests/src/golden.rs"]
 mod golden;
 

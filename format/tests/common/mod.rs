@@ -11,7 +11,7 @@ use grotto_format::*;
 use xxhash_rust::xxh3::{Xxh3, xxh3_64};
 
 /// The `item` a kind's sample section has: coarse levels are numbered from 1.
-pub fn item_of(kind: SectionKind) -> u32 {
+pub(crate) fn item_of(kind: SectionKind) -> u32 {
     match kind {
         SectionKind::CoarseNodes | SectionKind::CoarseLeaves => 1,
         _ => 0,
@@ -30,12 +30,12 @@ fn coarse_codes(seed: u32) -> Vec<u64> {
 
 /// Whether sample tile `t` holds a section of `kind`: tile 0 keeps full surfels, tile 1 compact
 /// ones (a tile holds one or the other).
-pub fn holds(kind: SectionKind, t: u32) -> bool {
+pub(crate) fn holds(kind: SectionKind, t: u32) -> bool {
     !matches!((kind, t), (SectionKind::Surfels, 1) | (SectionKind::SurfelsCompact, 0))
 }
 
 /// Valid content for every known kind (JSON kinds get real documents).
-pub fn content(kind: SectionKind, seed: u32) -> Vec<u8> {
+pub(crate) fn content(kind: SectionKind, seed: u32) -> Vec<u8> {
     let n = 40 + seed as usize % 7;
     let f = |i: usize| ((i as u32).wrapping_mul(2_654_435_761).wrapping_add(seed) % 1000) as f32 / 1000.0;
     match kind {
@@ -128,7 +128,7 @@ pub fn content(kind: SectionKind, seed: u32) -> Vec<u8> {
     }
 }
 
-pub fn sample_scene() -> Scene {
+pub(crate) fn sample_scene() -> Scene {
     Scene {
         lights: vec![Light {
             name: "lamp".into(),
@@ -166,7 +166,7 @@ pub fn sample_scene() -> Scene {
 
 /// Writes a package with two tiles, every per-tile kind in each, every global kind, and one
 /// unknown kind; codecs alternate. Returns its path.
-pub fn sample_package(dir: &Path, codec_for: impl Fn(SectionKind, u32) -> Compression) -> PathBuf {
+pub(crate) fn sample_package(dir: &Path, codec_for: impl Fn(SectionKind, u32) -> Compression) -> PathBuf {
     let path = dir.join("sample.grotto");
     let mut w = PackageWriter::create(&path).unwrap();
     for t in 0..2u32 {
@@ -193,16 +193,16 @@ pub fn sample_package(dir: &Path, codec_for: impl Fn(SectionKind, u32) -> Compre
     w.finish().unwrap()
 }
 
-pub fn alternating(kind: SectionKind, t: u32) -> Compression {
+pub(crate) fn alternating(kind: SectionKind, t: u32) -> Compression {
     if (kind as u32 + t).is_multiple_of(2) { Compression::Zstd(3) } else { Compression::Raw }
 }
 
-pub fn header(bytes: &[u8]) -> RawHeader {
+pub(crate) fn header(bytes: &[u8]) -> RawHeader {
     bytemuck::pod_read_unaligned(&bytes[..size_of::<RawHeader>()])
 }
 
 /// Recomputes the header checksum in place.
-pub fn reseal_header(bytes: &mut [u8]) {
+pub(crate) fn reseal_header(bytes: &mut [u8]) {
     let mut h = header(bytes);
     let hs = (h.header_size as usize).min(bytes.len());
     h.header_checksum = 0;
@@ -213,7 +213,7 @@ pub fn reseal_header(bytes: &mut [u8]) {
 
 /// Lets `edit` change the header, the section table and the tile directory (same counts), then
 /// rewrites them and recomputes both checksums.
-pub fn patch(
+pub(crate) fn patch(
     bytes: &mut [u8],
     edit: impl FnOnce(&mut RawHeader, &mut [RawSectionEntry], &mut [RawTileEntry]),
 ) {
@@ -236,7 +236,7 @@ pub fn patch(
 }
 
 /// Opens `bytes` and returns the structural problem, panicking if it opened.
-pub fn open_problem(bytes: &[u8]) -> Problem {
+pub(crate) fn open_problem(bytes: &[u8]) -> Problem {
     match Package::from_bytes("test.grotto", bytes) {
         Ok(_) => panic!("package opened but should not have"),
         Err(e) => {

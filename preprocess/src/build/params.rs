@@ -121,7 +121,7 @@ impl BuildParams {
         ((budget * 3 / 4 / per_tile) as usize).clamp(1, self.threads.max(1))
     }
 
-    pub fn tiling(&self) -> TilingParams {
+    pub(crate) fn tiling(&self) -> TilingParams {
         let budget = self.memory_budget_bytes.max(64 << 20);
         TilingParams {
             min_tile_extent_m: self.min_tile_extent_m,

@@ -25,16 +25,16 @@ pub struct BuildSummary {
     /// Peak resident memory of the process (Linux), bytes.
     pub peak_rss_bytes: Option<u64>,
     /// Leaf voxel edge the package was built with, metres.
-    pub leaf_m: f64,
+    pub(crate) leaf_m: f64,
     /// What the package's scene holds: lights, cameras, an environment map.
-    pub lights: usize,
-    pub cameras: usize,
-    pub environment: bool,
+    pub(crate) lights: usize,
+    pub(crate) cameras: usize,
+    pub(crate) environment: bool,
     /// Scan files that end inside their last point record, read without it:
     /// "path: N points dropped" (`--strict` refuses them instead).
     pub cut_short: Vec<String>,
     /// Scans with no scanner position (no `origin`, no pose): a merged cloud.
-    pub scans_without_scanner: usize,
+    pub(crate) scans_without_scanner: usize,
     /// Of those, the scans seen from outside their surface (`seen_from = "outside"`,
     /// `--seen-from outside`): their normals face away from what the walls enclose.
     pub scans_seen_from_outside: usize,
@@ -42,7 +42,7 @@ pub struct BuildSummary {
     /// keeps those within 60 degrees of the local plane's normal; the rest are estimated).
     pub input_normals: u64,
     pub input_normals_kept: u64,
-    pub keep_input_normals: bool,
+    pub(crate) keep_input_normals: bool,
     /// What orienting their normals by enclosure did (docs/manifest.md, "Scans without scanner
     /// positions").
     pub orientation: Option<OrientStats>,

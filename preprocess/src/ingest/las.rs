@@ -526,7 +526,7 @@ impl PointSource for LasSource {
 }
 
 /// Requests' worth of points decoded at once from LAZ.
-pub(crate) const LAZ_BATCH: usize = 8;
+pub const LAZ_BATCH: usize = 8;
 
 impl LasSource {
     fn decode_batch(&mut self, batch: usize) -> Result<()> {

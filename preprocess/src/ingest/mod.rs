@@ -7,7 +7,7 @@
 
 mod e57;
 mod las;
-pub(crate) use las::LAZ_BATCH;
+pub use las::LAZ_BATCH;
 mod ply;
 mod source;
 
@@ -52,7 +52,7 @@ fn open_with(
 
 /// What scan `index` of `path` says about itself (point count, attributes, stored pose), read from
 /// its header alone: no points are decoded and no decoder is started.
-pub fn header(path: &Path, format: ScanFormat, index: usize) -> Result<SourceInfo> {
+pub(crate) fn header(path: &Path, format: ScanFormat, index: usize) -> Result<SourceInfo> {
     match format {
         ScanFormat::Las | ScanFormat::Laz => las::header_info(path, format),
         // Opening a PLY source parses only the header (and skips elements before the vertices).

@@ -31,7 +31,7 @@ impl PointChunk {
     }
 
     /// Most points one fill may put in.
-    pub fn limit(&self) -> usize {
+    pub(crate) fn limit(&self) -> usize {
         self.limit
     }
 
@@ -39,11 +39,11 @@ impl PointChunk {
         self.xyz.len()
     }
 
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.xyz.is_empty()
     }
 
-    pub fn clear(&mut self) {
+    pub(crate) fn clear(&mut self) {
         self.xyz.clear();
         self.rgb.clear();
         self.normal.clear();
@@ -96,8 +96,8 @@ impl ScanFormat {
 /// What a source knows about itself before reading points.
 #[derive(Clone, Debug)]
 pub struct SourceInfo {
-    pub path: PathBuf,
-    pub format: ScanFormat,
+    pub(crate) path: PathBuf,
+    pub(crate) format: ScanFormat,
     /// Scan name (E57 point cloud name, or the file stem).
     pub name: String,
     /// Points the header claims (already checked against what the file can hold where possible),
@@ -106,7 +106,7 @@ pub struct SourceInfo {
     /// Points the header claims that the file cuts short: an uncompressed LAS file that ends
     /// inside its last point record has that record dropped (the complete ones are read; the
     /// build warns, and `--strict` refuses the file). Zero for every other file.
-    pub dropped_points: u64,
+    pub(crate) dropped_points: u64,
     pub has_color: bool,
     pub has_normals: bool,
     /// Pose stored in the file (E57), scan frame -> world.

@@ -12,8 +12,8 @@ use serde::Serialize;
 pub struct Variant {
     /// Config name in the report.
     pub name: String,
-    pub knob: String,
-    pub data: SceneData,
+    pub(crate) knob: String,
+    pub(crate) data: SceneData,
 }
 
 /// Bounce counts with a truncated reference.
@@ -25,39 +25,39 @@ pub struct Config {
     pub name: String,
     /// Which knob it varies ("preset" for the presets, "baseline").
     pub knob: String,
-    pub settings: Settings,
+    pub(crate) settings: Settings,
 }
 
 /// One measured run.
 #[derive(Clone, Debug, Serialize)]
 pub struct Row {
-    pub scene: String,
-    pub config: String,
-    pub knob: String,
+    pub(crate) scene: String,
+    pub(crate) config: String,
+    pub(crate) knob: String,
     /// sqrt(sum |runtime - reference|^2 / sum |reference|^2) over the pixels both see.
     pub rel_rmse: f64,
     /// The reference's own noise on the same scale: sqrt(sum se^2 / sum |reference|^2).
     pub reference_noise: f64,
     /// Signed error of the mean: sum(runtime) / sum(reference) - 1 over the same pixels and channels
     /// (positive: the runtime is too bright).
-    pub bias: f64,
+    pub(crate) bias: f64,
     /// Mean FLIP (NVIDIA's perceptual difference, 0 = identical, 1 = maximal; `nv-flip`, default
     /// 67 pixels per degree) between the tonemapped runtime and reference images, both at the
     /// exposure that auto-exposure picks for the reference.
-    pub flip: f64,
+    pub(crate) flip: f64,
     /// For "bounces k" runs with a truncated reference: (relative RMSE, bias) against the reference
     /// cut after the same k bounces.
-    pub truncated: Option<(f64, f64)>,
+    pub(crate) truncated: Option<(f64, f64)>,
     /// GPU milliseconds to converge the light (shadow + inject + every bounce) and to draw a
     /// frame (gbuffer + shade).
-    pub light_ms: f64,
-    pub frame_ms: f64,
-    pub bounces: u32,
-    pub gpu_bytes: u64,
-    pub pass_ms: BTreeMap<String, f64>,
+    pub(crate) light_ms: f64,
+    pub(crate) frame_ms: f64,
+    pub(crate) bounces: u32,
+    pub(crate) gpu_bytes: u64,
+    pub(crate) pass_ms: BTreeMap<String, f64>,
     /// For the balanced preset: (k, relative RMSE with the runtime at k x k samples per pixel) for
     /// k in [`SUPERSAMPLE_CHECK`]; empty for the other rows.
-    pub supersample_errors: Vec<(u32, f64)>,
+    pub(crate) supersample_errors: Vec<(u32, f64)>,
 }
 
 /// Knob of the one-bounce step runs (judged against the reference cut after one bounce).

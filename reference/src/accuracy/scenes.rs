@@ -16,15 +16,15 @@ use crate::{Estimate, PathSettings, SurfelScene};
 #[derive(Debug)]
 pub struct SweepScene {
     pub name: String,
-    pub description: String,
-    pub data: SceneData,
-    pub camera: Camera,
-    pub reference: Vec<Estimate>,
-    pub reference_s: f64,
-    pub spp: u32,
+    pub(crate) description: String,
+    pub(crate) data: SceneData,
+    pub(crate) camera: Camera,
+    pub(crate) reference: Vec<Estimate>,
+    pub(crate) reference_s: f64,
+    pub(crate) spp: u32,
     /// References cut after k indirect bounces, for k in `TRUNCATED_BOUNCES`: the runtime with k
     /// bounces is compared with these to judge propagation alone, without the missing bounces.
-    pub truncated: Vec<(u32, Vec<Estimate>)>,
+    pub(crate) truncated: Vec<(u32, Vec<Estimate>)>,
     /// The same surfels built into other packages (SVO depth, colour codec, surfel encoding, SH
     /// window), each rendered with the balanced preset and judged against this scene's reference.
     pub variants: Vec<Variant>,

@@ -79,59 +79,59 @@ impl EffectPlan {
 
 /// What the plan is decided from.
 #[derive(Clone, Debug, PartialEq)]
-pub(crate) struct PlanInputs {
+pub struct PlanInputs {
     /// One of the spot lights is a headlamp at the camera, added because the scene has no light.
-    pub(crate) headlamp: bool,
-    pub(crate) point_lights: usize,
-    pub(crate) spot_lights: usize,
-    pub(crate) shadows_enabled: bool,
+    pub headlamp: bool,
+    pub point_lights: usize,
+    pub spot_lights: usize,
+    pub shadows_enabled: bool,
     /// Lights with shadow maps (the brightest within the budget), and the budget.
-    pub(crate) shadowed: usize,
-    pub(crate) shadow_budget: u32,
+    pub shadowed: usize,
+    pub shadow_budget: u32,
     /// How the lights beyond the budget are shadowed, in words.
-    pub(crate) fallback: &'static str,
+    pub fallback: &'static str,
     /// Lights in range per light-grid cell: mean and largest.
-    pub(crate) lights_in_range: (f32, u32),
+    pub lights_in_range: (f32, u32),
     /// Specular materials with surfels, and their surfels (0: shade reflects nothing).
-    pub(crate) specular_materials: usize,
-    pub(crate) specular_surfels: usize,
-    pub(crate) emissive_leaves: bool,
+    pub specular_materials: usize,
+    pub specular_surfels: usize,
+    pub emissive_leaves: bool,
     /// The scene has an environment map (SH coefficients) and it is enabled.
-    pub(crate) environment: bool,
+    pub environment: bool,
     /// A non-zero constant background radiance lights what the cones see escape.
-    pub(crate) ambient: bool,
+    pub ambient: bool,
     /// The env pass has run for the current environment.
-    pub(crate) env_valid: bool,
+    pub env_valid: bool,
     /// Shadow maps and injected direct light match the current lights.
-    pub(crate) direct_valid: bool,
-    pub(crate) bounces_done: u32,
-    pub(crate) bounce_budget: u32,
+    pub direct_valid: bool,
+    pub bounces_done: u32,
+    pub bounce_budget: u32,
     /// Largest relative change of the last bounce, if one ran since the last change.
-    pub(crate) last_change: Option<f32>,
-    pub(crate) convergence_tolerance: f32,
+    pub last_change: Option<f32>,
+    pub convergence_tolerance: f32,
     /// Tiles the next bounce would update (those whose light may still change: activity.rs), of
     /// all tiles, and why in words. Converged means the last bounce changed nothing by more than
     /// the tolerance and no tile is left to update.
-    pub(crate) tiles_pending: usize,
-    pub(crate) tiles_total: usize,
-    pub(crate) tiles_why: String,
+    pub tiles_pending: usize,
+    pub tiles_total: usize,
+    pub tiles_why: String,
     /// A frame (G-buffer + shade) is requested, not only a light update.
-    pub(crate) frame: bool,
+    pub frame: bool,
     /// The G-buffer matches the requested camera and size.
-    pub(crate) gbuffer_valid: bool,
+    pub gbuffer_valid: bool,
     /// The image shows no light (a view mode: albedo, normals, level), by name: the light passes
     /// wait until a view shows light.
-    pub(crate) plain_view: Option<&'static str>,
+    pub plain_view: Option<&'static str>,
     /// Why a viewer holds the bounces (its camera moves: frames stay responsive, the direct light
     /// and the image still update; or it ran this frame's light already, within its budget).
-    pub(crate) light_held: Option<&'static str>,
+    pub light_held: Option<&'static str>,
     /// A bounce under way in slices: the next leaf and the bounce's leaves (the pyramid is kept
     /// until it ends).
-    pub(crate) bounce_part: Option<(u32, u32)>,
+    pub bounce_part: Option<(u32, u32)>,
 }
 
 /// Decides the passes for one frame or light update.
-pub(crate) fn plan(i: &PlanInputs) -> EffectPlan {
+pub fn plan(i: &PlanInputs) -> EffectPlan {
     let analytic = i.point_lights + i.spot_lights;
     let lights_text = if i.headlamp {
         format!(

@@ -520,7 +520,7 @@ impl SceneData {
     }
 
     /// Node indices ordered by height (0 = leaves) and the range of each height, for the mip pass.
-    pub(crate) fn nodes_by_height(&self) -> (Vec<u32>, Vec<MipRange>) {
+    pub fn nodes_by_height(&self) -> (Vec<u32>, Vec<MipRange>) {
         self.nodes_by_height_at(&self.tiles)
     }
 

@@ -41,14 +41,14 @@ pub(crate) fn tile_hash(cell: IVec3, depth: u32) -> u32 {
 
 /// The lookup table the GPU reads (`words`), built from the tile list.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub(crate) struct TileIndex {
+pub struct TileIndex {
     pub(crate) words: Vec<u32>,
 }
 
 impl TileIndex {
     /// The index of `tiles`, whose cubes must not overlap (two tiles at the same place and depth
     /// are refused; other overlaps find one of them). `scene` names the package in errors.
-    pub(crate) fn build(scene: &str, tiles: &[TileGpu]) -> Result<Self> {
+    pub fn build(scene: &str, tiles: &[TileGpu]) -> Result<Self> {
         let anchor =
             tiles.iter().max_by_key(|t| t.depth).map_or(IVec3::ZERO, |t| IVec3::from_array(t.origin_leaf));
         let mut entries: Vec<(IVec3, u32, u32)> = Vec::with_capacity(tiles.len());
