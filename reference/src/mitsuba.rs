@@ -14,7 +14,8 @@ use std::fmt::Write as _;
 use glam::Vec3;
 use grotto_runtime::view::camera::Camera;
 
-use crate::{Error, SurfelScene};
+use crate::error::Error;
+use crate::tracer::SurfelScene;
 
 /// What each surfel becomes in Mitsuba.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -140,7 +141,7 @@ fn face_normal(center_m: Vec3, normal: Vec3, side_m: f32) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Disc;
+    use crate::tracer::Disc;
     use grotto_runtime::scene::data::{SceneLight, Spot};
 
     fn camera() -> Camera {

@@ -14,18 +14,30 @@
 //! The modules, lowest layer first; each imports only from those above it in this list
 //! (`tests/tests/layering.rs` checks it):
 
+/// The crate's one error type, each variant naming what failed and where.
+pub mod error;
+/// Quality knobs, the fast/balanced/high presets, view modes, the clip box.
+pub mod settings;
+/// The device, its limits, checked buffers and textures, read-backs; structs shared with WGSL.
+pub mod gpu;
+/// A package loaded into one f32 frame; rock, coarse levels and the tile index.
+pub mod scene;
+/// Cameras and camera paths; default views and the headlamp for a bare package.
+pub mod view;
+/// Shared WGSL by subsystem and the `#import` composer.
+pub mod shaders;
+/// One module per pass, its WGSL beside it; the CPU reference of mip and the gather.
+pub mod passes;
+/// The light setup, the effect plan and which tiles' light may still change.
+pub mod light;
+/// The renderer: its state, the per-frame order of passes, light state, tile pools, present.
+pub mod render;
+/// Residency, streaming for every shell, and the loader thread.
+pub mod stream;
+/// The command line's jobs: render and bench, inspect and verify, export, images, publish.
 #[cfg(not(target_arch = "wasm32"))]
 pub mod cli;
-pub mod error;
-pub mod gpu;
-pub mod light;
-pub mod passes;
-pub mod render;
-pub mod scene;
-pub mod settings;
-pub mod shaders;
-pub mod stream;
-pub mod view;
+/// `grotto view`: the window, its panel and frame pacing.
 #[cfg(not(target_arch = "wasm32"))]
 pub mod window;
 

@@ -11,7 +11,7 @@ use crate::Error;
 
 /// What one request gave.
 #[derive(Debug)]
-pub struct Fetched {
+pub(crate) struct Fetched {
     /// Where `bytes` start in the file.
     pub offset: u64,
     pub bytes: Vec<u8>,
@@ -27,7 +27,7 @@ fn js(url: &str, what: &str, e: wasm_bindgen::JsValue) -> Error {
 
 /// `GET url` with `Range: bytes=start-(end-1)`; `exact`: the answer must hold all of it (the
 /// head's request may get less, from a file shorter than it).
-pub async fn range(url: &str, r: Range<u64>, exact: bool) -> Result<Fetched, Error> {
+pub(crate) async fn range(url: &str, r: Range<u64>, exact: bool) -> Result<Fetched, Error> {
     let init = web_sys::RequestInit::new();
     init.set_method("GET");
     let headers = web_sys::Headers::new().map_err(|e| js(url, "headers", e))?;

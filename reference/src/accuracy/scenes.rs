@@ -10,7 +10,7 @@ use grotto_runtime::view::camera::Camera;
 use crate::accuracy::configs::TRUNCATED_BOUNCES;
 use crate::accuracy::configs::Variant;
 use crate::accuracy::configs::slug;
-use crate::{Estimate, PathSettings, SurfelScene};
+use crate::tracer::{Estimate, PathSettings, SurfelScene};
 
 /// A scene of the sweep and its reference image.
 #[derive(Debug)]

@@ -17,7 +17,7 @@ use crate::accuracy::configs::judged_cut;
 use crate::accuracy::configs::slug;
 use crate::accuracy::scenes::SweepScene;
 use crate::accuracy::scenes::demo_cave;
-use crate::{Estimate, PathSettings, SurfelScene};
+use crate::tracer::{Estimate, PathSettings, SurfelScene};
 
 /// Runtime samples per pixel side when it is compared with the reference. A regular grid aliases
 /// on thin bright features: at 4x4 the demo cave's lamp-lit pillar edge, one pixel wide, made the
