@@ -108,14 +108,17 @@ pub fn radius_code(radius_m: f32) -> u8 {
     c.round().clamp(1.0, 255.0) as u8
 }
 
+/// The surfel radius in metres a log-radius byte stands for.
 pub fn radius_m(code: u8) -> f32 {
     if code == 0 { 0.0 } else { ((f32::from(code) - 1.0) / RADIUS_CODES_PER_OCTAVE + RADIUS_MIN_LOG2).exp2() }
 }
 
+/// The byte that codes an NDF spread (0..=1).
 pub fn spread_code(spread: f32) -> u8 {
     (spread.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
+/// The NDF spread a spread byte stands for.
 pub fn spread(code: u8) -> f32 {
     f32::from(code) / 255.0
 }

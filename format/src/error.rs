@@ -119,4 +119,5 @@ impl Error {
     }
 }
 
+/// The format crate's result: [`Error`] names the package and what is wrong with it.
 pub type Result<T, E = Error> = std::result::Result<T, E>;

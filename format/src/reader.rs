@@ -25,6 +25,7 @@ use crate::validate::{
 
 /// A typed element of a section: ties a Rust type to the [`ElementType`] the spec gives it.
 pub trait Element: Pod {
+    /// The spec's element type of `Self`.
     const TYPE: ElementType;
 }
 
@@ -178,6 +179,7 @@ impl Package {
         self.backing.held_bytes()
     }
 
+    /// The file (or, in a browser, the URL) the package was opened from.
     pub fn path(&self) -> &Path {
         &self.path
     }
@@ -187,6 +189,7 @@ impl Package {
         (self.header.version_major, self.header.version_minor)
     }
 
+    /// Bytes of the whole package file.
     pub fn file_size(&self) -> u64 {
         self.header.file_size
     }
@@ -199,6 +202,7 @@ impl Package {
         &self.tile_entries
     }
 
+    /// Entries in the section table.
     pub fn section_count(&self) -> u32 {
         self.raw_sections().len() as u32
     }
@@ -208,6 +212,7 @@ impl Package {
         self.raw_sections().iter().enumerate().map(|(i, e)| SectionInfo::from_raw(i as u32, e))
     }
 
+    /// Section `index` of the table, or `None` past its end.
     pub fn section(&self, index: u32) -> Option<SectionInfo> {
         self.raw_sections().get(index as usize).map(|e| SectionInfo::from_raw(index, e))
     }
@@ -222,14 +227,17 @@ impl Package {
         }
     }
 
+    /// Entries in the tile directory.
     pub fn tile_count(&self) -> u32 {
         self.raw_tiles().len() as u32
     }
 
+    /// Tile `index` of the directory, or `None` past its end.
     pub fn tile(&self, index: u32) -> Option<Tile<'_>> {
         self.raw_tiles().get(index as usize).map(|raw| Tile { package: self, index, raw })
     }
 
+    /// Every tile, in directory order.
     pub fn tiles(&self) -> impl ExactSizeIterator<Item = Tile<'_>> + '_ {
         self.raw_tiles().iter().enumerate().map(|(i, raw)| Tile { package: self, index: i as u32, raw })
     }
@@ -415,6 +423,7 @@ pub struct SvoData<'a> {
 }
 
 impl SvoData<'_> {
+    /// Leaves of the SVO (its leaf-NDF elements).
     pub fn leaf_count(&self) -> usize {
         self.opacity.len()
     }
@@ -488,6 +497,7 @@ impl<'a> Tile<'a> {
         Ok(Some(SvoData { nodes, opacity, albedo, ndf, emission }))
     }
 
+    /// The tile's index in the directory.
     pub fn index(&self) -> u32 {
         self.index
     }
@@ -508,18 +518,22 @@ impl<'a> Tile<'a> {
         self.raw.origin_m
     }
 
+    /// Edge of the tile's cube, metres.
     pub fn extent_m(&self) -> f64 {
         self.raw.extent_m
     }
 
+    /// The tile's cell on the package's tile grid.
     pub fn grid(&self) -> [i32; 3] {
         self.raw.grid
     }
 
+    /// Levels of the tile's SVO (its cube is 2^depth leaves on a side).
     pub fn depth(&self) -> u32 {
         self.raw.depth
     }
 
+    /// Input points the tile was built from (its own, halo excluded).
     pub fn point_count(&self) -> u64 {
         self.raw.point_count
     }
@@ -536,6 +550,7 @@ impl<'a> Tile<'a> {
         (first..first + self.raw.section_count).map(move |i| package.section(i).expect("validated at open"))
     }
 
+    /// The tile's section of `kind` and `item`, if it has one.
     pub fn find(&self, kind: SectionKind, item: u32) -> Option<SectionInfo> {
         self.sections().find(|s| s.kind == Some(kind) && s.item == item)
     }

@@ -42,6 +42,7 @@ pub struct Light {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
+/// Where a light is and how it spreads its power.
 pub enum LightShape {
     Point {
         position_m: [f64; 3],

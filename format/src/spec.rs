@@ -34,6 +34,7 @@ pub const MAX_ZSTD_RATIO: u64 = 32_768;
 pub const MAX_ENV_MIP_LEVELS: usize = 8;
 /// Largest environment chain level, texels: a lat-long map is twice as wide as it is high.
 pub const MAX_ENV_MIP_WIDTH: u32 = 8192;
+/// Tallest environment mip level a reader accepts, texels (bounds its atlas).
 pub const MAX_ENV_MIP_HEIGHT: u32 = 4096;
 /// A reader stacks a chain's levels in one atlas as wide as level 0; the atlas may hold at most
 /// this many times the texels the levels have (1.5 for a chain that halves each level), so
@@ -122,6 +123,7 @@ pub enum Codec {
 }
 
 impl Codec {
+    /// The codec stored as `v`, or `None` for a value the spec does not define.
     pub fn from_u32(v: u32) -> Option<Self> {
         match v {
             0 => Some(Self::Raw),
@@ -130,6 +132,7 @@ impl Codec {
         }
     }
 
+    /// The codec's name as `grotto inspect` prints it.
     pub fn name(self) -> &'static str {
         match self {
             Self::Raw => "raw",
@@ -212,6 +215,7 @@ pub enum ElementType {
 }
 
 impl ElementType {
+    /// Bytes of one element.
     pub const fn size(self) -> usize {
         match self {
             Self::SvoNode => size_of::<SvoNode>(),
@@ -233,6 +237,7 @@ impl ElementType {
 }
 
 impl SectionKind {
+    /// Every section kind the spec defines, in numbering order.
     pub const ALL: [SectionKind; 18] = [
         Self::SvoNodes,
         Self::LeafOpacity,
@@ -254,10 +259,12 @@ impl SectionKind {
         Self::SurfelsCompact,
     ];
 
+    /// The kind stored as `v`, or `None` for a value the spec does not define.
     pub fn from_u32(v: u32) -> Option<Self> {
         Self::ALL.into_iter().find(|k| *k as u32 == v)
     }
 
+    /// The kind's name as `grotto inspect` prints it (`svo-nodes`, `leaf-ndf`, ...).
     pub fn name(self) -> &'static str {
         match self {
             Self::SvoNodes => "svo-nodes",
@@ -281,6 +288,7 @@ impl SectionKind {
         }
     }
 
+    /// The element type the kind's sections hold.
     pub fn element(self) -> ElementType {
         match self {
             Self::SvoNodes | Self::CoarseNodes => ElementType::SvoNode,

@@ -10,6 +10,7 @@ use crate::reader::Package;
 use crate::spec::{Codec, Scope};
 
 #[derive(Clone, Debug, Serialize)]
+/// What `grotto inspect` prints of a package: version, size, tiles, sections by kind.
 pub struct Summary {
     pub path: String,
     pub version: String,
@@ -23,6 +24,7 @@ pub struct Summary {
 }
 
 #[derive(Clone, Debug, Serialize)]
+/// One tile of a [`Summary`].
 pub struct TileSummary {
     pub count: u32,
     pub points: u64,
@@ -34,6 +36,7 @@ pub struct TileSummary {
 }
 
 #[derive(Clone, Debug, Serialize)]
+/// The sections of one kind, added up.
 pub struct KindSummary {
     pub kind: String,
     pub sections: u32,
@@ -44,6 +47,7 @@ pub struct KindSummary {
 }
 
 #[derive(Clone, Debug, Serialize)]
+/// One section of a [`Summary`], as `grotto inspect --sections` lists it.
 pub struct SectionSummary {
     pub index: u32,
     pub kind: String,
@@ -61,6 +65,7 @@ fn ratio(raw: u64, stored: u64) -> f64 {
 }
 
 impl Package {
+    /// The package described from its tables, without reading any payload.
     pub fn summary(&self) -> Summary {
         let mut kinds: BTreeMap<(u32, String), KindSummary> = BTreeMap::new();
         let mut sections = Vec::with_capacity(self.section_count() as usize);

@@ -269,12 +269,14 @@ impl PackageWriter {
         self.add_section(kind, scope, item, bytemuck::cast_slice(elements), compression)
     }
 
+    /// Adds the scene (JSON); returns its section index.
     pub fn add_scene(&mut self, scene: &Scene) -> Result<u32> {
         scene.check_finite().map_err(|r| self.refuse(format!("scene: {r}")))?;
         let json = serde_json::to_vec(scene).map_err(|e| self.refuse(format!("scene: {e}")))?;
         self.add_section(SectionKind::Scene, Scope::Global, 0, &json, Compression::Auto(3))
     }
 
+    /// Adds the provenance (JSON); returns its section index.
     pub fn add_provenance(&mut self, provenance: &Provenance) -> Result<u32> {
         let json = serde_json::to_vec(provenance).map_err(|e| self.refuse(format!("provenance: {e}")))?;
         self.add_section(SectionKind::Provenance, Scope::Global, 0, &json, Compression::Auto(3))

@@ -29,6 +29,7 @@ pub struct TileGrid {
 }
 
 impl TileGrid {
+    /// Where `tiles` sit on the first tile's leaf grid.
     pub fn of(tiles: &[Tile<'_>]) -> Self {
         let first = tiles.first().map(|t| (t.origin_m(), t.leaf_size_m()));
         let origin_leaf = tiles

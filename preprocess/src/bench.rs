@@ -16,6 +16,7 @@ use crate::synth::{SynthCave, SynthParams, scan};
 use crate::{Error, Result};
 
 #[derive(Clone, Debug, Serialize)]
+/// Read throughput of one scan reader.
 pub struct IngestFigure {
     pub reader: String,
     pub points: u64,
@@ -376,6 +377,7 @@ pub struct Bc1EncoderFigure {
     pub encode_seconds: f64,
 }
 
+/// BC1 against raw colours for the package at `package` (built with `--colors raw`), one row per encoder.
 pub fn bc1(package: &Path) -> Result<Bc1Figure> {
     use crate::bc1::Bc1Fit;
     use grotto_format::spec::Rgba8;
@@ -466,6 +468,8 @@ pub struct EncodingFigure {
     pub zstd_seconds: f64,
 }
 
+/// Surfel encodings of the package at `package`: sizes per point and the compact encoding's errors and
+/// times.
 pub fn encoding(package: &Path) -> Result<EncodingFigure> {
     use grotto_format::compact::{self, Header};
     use grotto_format::{Package, SectionKind};

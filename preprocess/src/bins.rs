@@ -29,6 +29,7 @@ pub struct BinPoint {
 
 const _: () = assert!(size_of::<BinPoint>() == 24);
 
+/// [`BinPoint::flags`] bit of a halo copy (a neighbour tile's point).
 pub const FLAG_HALO: u8 = 1;
 
 impl BinPoint {
@@ -39,6 +40,7 @@ impl BinPoint {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// One tile of the plan.
 pub struct PlannedTile {
     /// Extent = min_extent * 2^level.
     pub level: u32,
@@ -93,6 +95,7 @@ impl TilePlan {
         (!known).then_some(if outside { SeenFrom::Outside } else { SeenFrom::Inside })
     }
 
+    /// Edge of `tile`'s cube, metres.
     pub fn extent_m(&self, tile: &PlannedTile) -> f64 {
         self.min_extent_m * f64::from(1u32 << tile.level)
     }
@@ -102,6 +105,7 @@ impl TilePlan {
         self.anchor.map(|a| a as f64 * self.min_extent_m)
     }
 
+    /// The world position (f64, metres) of `tile`'s origin.
     pub fn origin_m(&self, tile: &PlannedTile) -> [f64; 3] {
         let g = self.grid_origin_m();
         let e = self.extent_m(tile);

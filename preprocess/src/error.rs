@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
+/// What can go wrong while packing, each naming the file or parameter at fault.
 pub enum Error {
     #[error(transparent)]
     Package(#[from] grotto_format::Error),
@@ -19,4 +20,5 @@ pub enum Error {
     Io { path: PathBuf, source: std::io::Error },
 }
 
+/// The preprocessing result: [`Error`] names the file or parameter and what is wrong.
 pub type Result<T, E = Error> = std::result::Result<T, E>;

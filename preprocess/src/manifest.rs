@@ -15,6 +15,7 @@ use crate::{Error, Result};
 
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
+/// A build's inputs: scans with their poses, and the scene (lights, cameras, materials, environment).
 pub struct Manifest {
     #[serde(default, rename = "scan")]
     pub scans: Vec<ScanSpec>,
@@ -32,6 +33,7 @@ pub struct Manifest {
 
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
+/// One scan file and its pose (docs/manifest.md).
 pub struct ScanSpec {
     pub(crate) path: PathBuf,
     pub(crate) format: Option<ScanFormat>,
@@ -88,6 +90,7 @@ fn white() -> [f32; 3] {
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+/// A wet-wall material: specular strength, roughness and index of refraction in a region.
 pub struct MaterialSpec {
     pub name: String,
     #[serde(default)]
@@ -104,6 +107,7 @@ pub struct MaterialSpec {
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+/// A box in world coordinates where a material applies (to surfels facing up at least `min_normal_z`).
 pub struct RegionSpec {
     pub min: [f64; 3],
     pub max: [f64; 3],
@@ -125,6 +129,7 @@ fn half() -> f32 {
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+/// The environment map lighting the openings, and its intensity.
 pub struct EnvironmentSpec {
     pub map: PathBuf,
     #[serde(default = "one")]

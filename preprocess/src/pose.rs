@@ -81,6 +81,7 @@ impl Pose {
         std::array::from_fn(|i| r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2])
     }
 
+    /// `p` in the scan's frame, moved into the world.
     pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
         let v = self.rotate(p);
         std::array::from_fn(|i| v[i] + self.translation[i])

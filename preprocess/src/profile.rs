@@ -131,6 +131,7 @@ pub struct StageTime {
 }
 
 impl StageTime {
+    /// `seconds` spent in `stage`.
     pub fn of(stage: Stage, seconds: f64) -> Self {
         StageTime { stage: stage.name(), seconds, summed_over_tiles: stage.summed_over_tiles() }
     }
@@ -158,6 +159,7 @@ impl Profile {
         *since = now;
     }
 
+    /// Seconds spent in `stage` (0 where it did not run).
     pub fn seconds(&self, stage: Stage) -> f64 {
         self.nanos[stage as usize].load(Ordering::Relaxed) as f64 * 1e-9
     }

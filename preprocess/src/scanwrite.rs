@@ -42,6 +42,7 @@ fn atomically(path: &Path, fill: impl FnOnce(File) -> Result<()>) -> Result<()> 
     Ok(())
 }
 
+/// Writes `data` as one scan in `format` at `path`.
 pub fn write_scan(path: &Path, format: ScanFormat, data: &ScanData<'_>) -> Result<()> {
     match format {
         ScanFormat::Las | ScanFormat::Laz => write_las(path, format, data),

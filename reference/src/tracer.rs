@@ -30,6 +30,7 @@ pub struct Disc {
 }
 
 impl Disc {
+    /// A disc at `center_m` facing `normal`, of `radius_m`, with its albedo and emitted radiance.
     pub fn new(center_m: Vec3, normal: Vec3, radius_m: f32, albedo: Vec3, emission: Vec3) -> Self {
         Self { center_m, normal: normal.normalize_or(Vec3::Z), radius_m, albedo, emission, node_index: 0 }
     }
@@ -262,6 +263,7 @@ impl SurfelScene {
         }
     }
 
+    /// The scene's discs, as the BVH holds them.
     pub fn discs(&self) -> &[Disc] {
         &self.discs
     }

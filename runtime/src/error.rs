@@ -50,4 +50,5 @@ pub enum Error {
     NoDisplay(String),
 }
 
+/// The runtime's result: [`Error`] names the pass, file or setting at fault.
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -135,6 +135,7 @@ impl ClipBox {
 }
 
 impl ViewMode {
+    /// Every view mode, in the panel's order.
     pub const ALL: [ViewMode; 6] = [
         ViewMode::Lit,
         ViewMode::Albedo,
@@ -144,6 +145,7 @@ impl ViewMode {
         ViewMode::Scan,
     ];
 
+    /// The mode's name, as `--view` takes it.
     pub fn name(self) -> &'static str {
         match self {
             ViewMode::Lit => "lit",
@@ -155,6 +157,7 @@ impl ViewMode {
         }
     }
 
+    /// The mode `--view` names, if it names one.
     pub fn parse(s: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|v| v.name() == s)
     }
@@ -176,6 +179,7 @@ pub enum ShadowFallback {
 }
 
 impl ShadowFallback {
+    /// The filter's name, as `--indirect-filter` takes it.
     pub fn name(self) -> &'static str {
         match self {
             ShadowFallback::Cone => "cone",
@@ -183,6 +187,7 @@ impl ShadowFallback {
         }
     }
 
+    /// The filter `--indirect-filter` names, if it names one.
     pub fn parse(s: &str) -> Option<Self> {
         [ShadowFallback::Cone, ShadowFallback::None].into_iter().find(|f| f.name() == s)
     }
@@ -239,8 +244,10 @@ pub enum Quality {
 }
 
 impl Quality {
+    /// The presets, fastest first.
     pub const ALL: [Quality; 3] = [Quality::Fast, Quality::Balanced, Quality::High];
 
+    /// The preset's name, as `--quality` takes it.
     pub fn name(self) -> &'static str {
         match self {
             Quality::Fast => "fast",
@@ -249,6 +256,7 @@ impl Quality {
         }
     }
 
+    /// The preset `--quality` names, if it names one.
     pub fn parse(s: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|q| q.name() == s)
     }
@@ -309,6 +317,7 @@ impl Settings {
         }
     }
 
+    /// An error naming the first setting out of its range.
     pub fn validate(&self) -> Result<()> {
         if !(1..=MAX_CONES as u32).contains(&self.cones) {
             return Err(Error::Setting {

@@ -20,6 +20,7 @@ pub const BUILD_BYTES_PER_POINT: u64 = 256;
 pub const DEFAULT_MAX_TILE_POINTS: u64 = 1 << 21;
 
 #[derive(Clone, Debug, Serialize)]
+/// What a build makes and how: content options (leaf, tiles, codecs) and resources (threads, memory).
 pub struct BuildParams {
     pub work_dir: PathBuf,
     pub memory_budget_bytes: u64,
@@ -54,8 +55,11 @@ pub struct BuildParams {
 /// Leaf edge of the cave default, metres; tile extents and halo below are in its leaves (1 m and
 /// 64 m tiles, a 0.25 m halo at 6.25 cm leaves).
 pub const DEFAULT_LEAF_M: f64 = 0.0625;
+/// Smallest tile edge, in leaves (the default `--min-tile-m` is this many leaves).
 pub const MIN_TILE_LEAVES: f64 = 16.0;
+/// Largest tile edge, in leaves (the default `--max-tile-m`).
 pub const MAX_TILE_LEAVES: f64 = 1024.0;
+/// Halo around a tile, in leaves (the default `--halo-m`).
 pub const HALO_LEAVES: f64 = 4.0;
 /// Points per scan the automatic leaf size samples.
 pub const SPACING_SAMPLE_POINTS: usize = 100_000;

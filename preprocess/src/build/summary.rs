@@ -6,6 +6,7 @@ use crate::orient::OrientStats;
 use crate::profile::StageTime;
 
 #[derive(Clone, Debug, Serialize)]
+/// What a build made and what it cost, printed by `grotto-pack build` (`--json` for scripts).
 pub struct BuildSummary {
     pub package: String,
     pub scans: usize,

@@ -228,6 +228,7 @@ pub(crate) fn tile_of_package(package: &Package, t: usize) -> Result<grotto_form
         .ok_or_else(|| Error::Parameter { name: "tiles", reason: format!("tile package {t} has no tile") })
 }
 
+/// Where the one-tile package of `tile` lives in the work directory.
 pub fn tile_package_path(work_dir: &Path, tile: usize) -> PathBuf {
     work_dir.join("tiles").join(format!("{tile:07}.grotto"))
 }

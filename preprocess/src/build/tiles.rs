@@ -28,6 +28,7 @@ pub struct Shard {
 }
 
 impl Shard {
+    /// Every tile: one job.
     pub const ALL: Shard = Shard { index: 0, count: 1 };
 
     fn takes(&self, tile: usize) -> bool {

@@ -25,6 +25,7 @@ pub struct PointChunk {
 }
 
 impl PointChunk {
+    /// An empty chunk that holds up to `limit` points.
     pub fn new(limit: usize) -> Self {
         let limit = limit.max(1);
         Self { xyz: Vec::with_capacity(limit), rgb: Vec::with_capacity(limit), normal: Vec::new(), limit }
@@ -35,6 +36,7 @@ impl PointChunk {
         self.limit
     }
 
+    /// Points in the chunk.
     pub fn len(&self) -> usize {
         self.xyz.len()
     }
@@ -83,6 +85,7 @@ impl ScanFormat {
         }
     }
 
+    /// The format's name (`las`, `laz`, `ply`, `e57`).
     pub fn name(self) -> &'static str {
         match self {
             Self::Las => "LAS",
@@ -115,6 +118,7 @@ pub struct SourceInfo {
 
 /// A stream of points from one scan.
 pub trait PointSource {
+    /// What the source is (format, points, colours, normals, pose).
     fn info(&self) -> &SourceInfo;
 
     /// Clears `chunk` and fills it with up to `chunk.limit()` points. Returns how many; 0 means

@@ -51,6 +51,7 @@ fn points(pkg: &Package) -> Result<Vec<Point>, Error> {
     Ok(out)
 }
 
+/// The typed error for an output file that could not be written.
 pub fn output_error(path: &Path, e: impl std::fmt::Display) -> Error {
     Error::Output { path: path.display().to_string(), reason: e.to_string() }
 }
@@ -74,6 +75,7 @@ pub(crate) fn atomically(out: &Path, fill: impl FnOnce(File) -> Result<(), Error
     Ok(())
 }
 
+/// Writes every surfel of `pkg` to `out` (PLY or LAS by extension) in world coordinates.
 pub fn export_points(pkg: &Package, out: &Path) -> Result<ExportSummary, Error> {
     let ext = out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     if !matches!(ext.as_deref(), Some("ply" | "las")) {

@@ -14,6 +14,7 @@ pub enum ImageKind {
     Exr,
 }
 
+/// The image kind `path`'s extension asks for; an error naming the extensions known.
 pub fn kind_of(path: &Path) -> Result<ImageKind> {
     match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
         Some("png") => Ok(ImageKind::Png),

@@ -27,6 +27,7 @@ pub(crate) struct EnvironmentSh {
     pub(crate) coeffs: [[f32; 3]; 9],
 }
 
+/// What `grotto inspect` prints of `pkg`.
 pub fn inspect(pkg: &Package) -> Inspection {
     let environment_sh = pkg
         .sections()
@@ -144,6 +145,7 @@ pub struct Verification {
     pub problems: Vec<String>,
 }
 
+/// Checks every section of `pkg` (checksums, decoding, content); what `grotto verify` prints.
 pub fn verify(pkg: &Package) -> Verification {
     let problems: Vec<Problem> = pkg.verify();
     Verification {

@@ -33,6 +33,7 @@ pub enum Headlamp {
 }
 
 impl Headlamp {
+    /// The headlamp setting `--headlamp` names, if it names one.
     pub fn parse(s: &str) -> Option<Self> {
         match s {
             "auto" => Some(Headlamp::Auto),

@@ -30,6 +30,7 @@ impl Pass {
     pub(crate) const ALL: [Pass; 7] =
         [Pass::Shadow, Pass::Inject, Pass::Mip, Pass::Env, Pass::Propagate, Pass::Gbuffer, Pass::Shade];
 
+    /// The pass's name as the plan and the panel print it.
     pub fn name(self) -> &'static str {
         match self {
             Pass::Shadow => "shadow",
@@ -58,6 +59,7 @@ pub struct EffectPlan {
 }
 
 impl EffectPlan {
+    /// Whether the plan runs `pass`.
     pub fn runs(&self, pass: Pass) -> bool {
         self.steps.iter().any(|s| s.pass == pass && s.run)
     }

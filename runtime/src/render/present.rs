@@ -19,6 +19,7 @@ pub enum Bar {
 }
 
 impl Bar {
+    /// The bar's colour for the light's `progress`: held while the camera `moving`.
     pub fn of(progress: &LightProgress, moving: bool) -> Self {
         if progress.converged {
             Self::Converged

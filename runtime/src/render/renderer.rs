@@ -164,6 +164,7 @@ impl Compat {
 }
 
 impl Renderer {
+    /// A renderer whose tile pools hold just `scene`.
     pub fn new(gpu: &Gpu, scene: &SceneData, settings: Settings) -> Result<Self> {
         Self::with_pools(gpu, scene, settings, PoolCaps::of(scene))
     }
@@ -311,10 +312,12 @@ impl Renderer {
         self.lights_in_range
     }
 
+    /// The settings it renders with.
     pub fn settings(&self) -> &Settings {
         &self.settings
     }
 
+    /// Pass counters and times so far.
     pub fn stats(&self) -> &PassStats {
         &self.stats_now
     }
@@ -342,6 +345,7 @@ impl Renderer {
         self.clip = clip;
     }
 
+    /// The view's clip box, if it has one.
     pub fn clip(&self) -> Option<ClipBox> {
         self.clip
     }

@@ -31,6 +31,7 @@ pub struct SceneLight {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
+/// A spot light's cone: its axis and the angles where it starts and ends falling off.
 pub struct Spot {
     pub direction: Vec3,
     pub inner_angle_rad: f32,

@@ -67,6 +67,7 @@ impl Streaming {
         Ok((far, streaming))
     }
 
+    /// Every tile of the package with its box and its costs full, coarse and far.
     pub fn tiles(&self) -> &[TileFootprint] {
         &self.tiles
     }

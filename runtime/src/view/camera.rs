@@ -15,6 +15,7 @@ pub struct Camera {
 }
 
 impl Camera {
+    /// The camera of a named package view.
     pub fn from_scene(c: &SceneCamera) -> Self {
         Self { eye_m: c.eye_m, look_at_m: c.look_at_m, up: c.up, fov_y_deg: c.fov_y_deg }
     }
@@ -71,6 +72,7 @@ pub struct Nav {
 }
 
 impl Nav {
+    /// Fly controls starting at `c`, moving at `speed_m_s`.
     pub fn from_camera(c: &Camera, speed_m_s: f32) -> Self {
         let d = (c.look_at_m - c.eye_m).normalize_or(Vec3::X);
         Self {
@@ -96,6 +98,7 @@ impl Nav {
         Vec3::new(cy * cp, sy * cp, sp)
     }
 
+    /// The camera the controls are at.
     pub fn camera(&self) -> Camera {
         let f = self.forward();
         let (eye_m, look_at_m) = match self.orbit {
