@@ -659,13 +659,13 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     scene.surfels.len()
                 );
                 for (name, b) in [
-                    ("tiles", bytes.tiles),
-                    ("nodes", bytes.nodes),
-                    ("leaves", bytes.leaves),
-                    ("leaf light", bytes.leaf_light),
-                    ("radiance pyramid", bytes.faces),
-                    ("mip order", bytes.mip_order),
-                    ("surfels", bytes.surfels),
+                    ("tiles", bytes.tile_buffers.tiles),
+                    ("nodes", bytes.tile_buffers.nodes),
+                    ("leaves", bytes.tile_buffers.leaves),
+                    ("leaf light", bytes.tile_buffers.leaf_light),
+                    ("radiance pyramid", bytes.tile_buffers.faces),
+                    ("mip order", bytes.tile_buffers.mip_order),
+                    ("surfels", bytes.tile_buffers.surfels),
                     ("rock", bytes.rock),
                 ] {
                     println!("  {name:18} {:10.2} MiB", mib(b));

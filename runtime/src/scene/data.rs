@@ -96,14 +96,9 @@ pub struct SceneData {
 /// GPU bytes of the scene-sized buffers ([`SceneData::buffer_bytes`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct SceneBytes {
-    pub tiles: u64,
-    pub nodes: u64,
-    pub leaves: u64,
-    pub leaf_light: u64,
-    /// The anisotropic radiance pyramid (six values per node).
-    pub faces: u64,
-    pub mip_order: u64,
-    pub surfels: u64,
+    /// The buffers that hold tiles.
+    #[serde(flatten)]
+    pub tile_buffers: TileBufferBytes,
     /// The rock hash table (rock.rs).
     pub rock: u64,
     /// What the rock took as dense per-tile bit grids before (not allocated; for comparison).
@@ -113,14 +108,7 @@ pub struct SceneBytes {
 impl SceneBytes {
     /// Everything allocated (the dense grid is not).
     pub fn total(&self) -> u64 {
-        self.tiles
-            + self.nodes
-            + self.leaves
-            + self.leaf_light
-            + self.faces
-            + self.mip_order
-            + self.surfels
-            + self.rock
+        self.tile_buffers.total() + self.rock
     }
 }
 
@@ -488,21 +476,14 @@ impl SceneData {
     /// Lights, shadow atlas and image buffers follow the settings and are not counted.
     pub fn buffer_bytes(&self, radiance_f16: bool) -> SceneBytes {
         let len = |n: usize| n as u64;
-        let b = TileBufferBytes::of(
-            len(self.tiles.len()),
-            len(self.nodes.len()),
-            len(self.leaves.len()),
-            len(self.surfels.len()),
-            radiance_f16,
-        );
         SceneBytes {
-            tiles: b.tiles,
-            nodes: b.nodes,
-            leaves: b.leaves,
-            leaf_light: b.leaf_light,
-            faces: b.faces,
-            mip_order: b.mip_order,
-            surfels: b.surfels,
+            tile_buffers: TileBufferBytes::of(
+                len(self.tiles.len()),
+                len(self.nodes.len()),
+                len(self.leaves.len()),
+                len(self.surfels.len()),
+                radiance_f16,
+            ),
             rock: len(self.rock.words.len()) * 4,
             rock_dense_grid: crate::scene::rock::dense_grid_bytes(&self.tiles),
         }
@@ -511,8 +492,7 @@ impl SceneData {
     /// GPU bytes of the tile data ([`TileBufferBytes`] summed over the tiles): what
     /// `--gpu-memory` bounds.
     pub fn tile_bytes(&self, radiance_f16: bool) -> u64 {
-        let b = self.buffer_bytes(radiance_f16);
-        b.total() - b.rock
+        self.buffer_bytes(radiance_f16).tile_buffers.total()
     }
 
     /// True when any leaf emits.
