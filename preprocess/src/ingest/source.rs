@@ -41,7 +41,8 @@ impl PointChunk {
         self.xyz.len()
     }
 
-    pub(crate) fn is_empty(&self) -> bool {
+    /// Whether the chunk holds no points.
+    pub fn is_empty(&self) -> bool {
         self.xyz.is_empty()
     }
 
