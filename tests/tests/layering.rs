@@ -4,7 +4,9 @@
 //! - no module circles: a module never names (by `crate::`, `super::`, `self::` or a child's name
 //!   in a `use`) a module that names it back, directly or through others; the same for the
 //!   top-level modules (a folder and its files count as one), so the folders stack in layers;
-//! - no file over 900 lines and no function over 120 lines outside tests.
+//! - no file over 900 lines and no function over 120 lines outside tests;
+//! - the runtime's folder map in docs/architecture.md and the README's layout name exactly the
+//!   folders of `runtime/src`.
 //!
 //! The scan is lexical: comments, strings and `#[cfg(test)]` modules are blanked first, then
 //! paths are read from the code. Written by hand because the rule is the project's own; a parser
@@ -487,4 +489,41 @@ fn a_long_function_is_found() {
     );
     let found = long_functions(&without_tests(&blank_comments_and_strings(&src)));
     assert_eq!(found, vec![("long".to_string(), 1, MAX_FN_LINES + 2)]);
+}
+
+/// The folders of `runtime/src`.
+fn runtime_folders() -> BTreeSet<String> {
+    let src = workspace().join("runtime/src");
+    std::fs::read_dir(&src)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.path().is_dir() && e.path().join("mod.rs").is_file())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect()
+}
+
+/// The folders a map names: the first word of each line of the code block after `heading`, where
+/// it ends in `/` (indented by `indent` spaces).
+fn mapped_folders(doc: &str, heading: &str, indent: usize) -> BTreeSet<String> {
+    let after = &doc[doc.find(heading).unwrap_or_else(|| panic!("no {heading:?}"))..];
+    let block = after.split("```").nth(1).unwrap_or("");
+    block
+        .lines()
+        .filter(|l| l.len() > indent && l[..indent].trim().is_empty() && !l[indent..].starts_with(' '))
+        .filter_map(|l| l[indent..].split_whitespace().next())
+        .filter_map(|w| w.strip_suffix('/'))
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn the_folder_maps_agree_with_the_tree() {
+    let folders = runtime_folders();
+    assert!(folders.contains("render") && folders.contains("passes"), "{folders:?}");
+    let architecture = std::fs::read_to_string(workspace().join("docs/architecture.md")).unwrap();
+    let readme = std::fs::read_to_string(workspace().join("README.md")).unwrap();
+    let in_architecture = mapped_folders(&architecture, "## Runtime (renderer library)", 0);
+    assert_eq!(in_architecture, folders, "docs/architecture.md's runtime map against runtime/src");
+    let in_readme = mapped_folders(&readme, "## Layout", 2);
+    assert_eq!(in_readme, folders, "the README's layout (the runtime's folders) against runtime/src");
 }
