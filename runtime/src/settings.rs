@@ -67,7 +67,7 @@ pub struct Settings {
     /// Reflection on specular materials (wet walls, water) where the scene assigns them.
     pub specular: bool,
     /// Shadow-map budget: this many of the brightest point and spot lights get shadow maps and
-    /// are shaded per pixel; the others follow `shadow_fallback` (lights.rs).
+    /// are shaded per pixel; the others follow `shadow_fallback` (light/setup.rs).
     pub shadowed_lights: u32,
     /// How lights beyond the shadow-map budget are shadowed.
     pub shadow_fallback: ShadowFallback,
@@ -168,7 +168,7 @@ impl ViewMode {
     }
 }
 
-/// What lights beyond the shadow-map budget do (lights.rs).
+/// What lights beyond the shadow-map budget do (light/setup.rs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ShadowFallback {

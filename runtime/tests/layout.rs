@@ -1,6 +1,6 @@
-//! CPU/GPU struct layouts agree: every struct the WGSL shares with `gpu_types.rs` has the same
+//! CPU/GPU struct layouts agree: every struct the WGSL shares with `gpu/types.rs` has the same
 //! size and every member the same offset on both sides (naga reflection of the composed modules,
-//! no GPU). Sizes alone (asserted in gpu_types.rs) would miss two swapped members.
+//! no GPU). Sizes alone (asserted in gpu/types.rs) would miss two swapped members.
 
 use std::collections::BTreeMap;
 use std::mem::offset_of;

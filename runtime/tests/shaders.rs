@@ -14,7 +14,7 @@ fn every_wgsl_module_validates() {
         let module = naga::front::wgsl::parse_str(&src)
             .unwrap_or_else(|e| panic!("{name}.wgsl does not parse:\n{}", e.emit_to_string(&src)));
         // f16 packing in f32 shaders: wgpu grants it where the downlevel flag is set, which
-        // gpu.rs requires of every adapter.
+        // gpu/device.rs requires of every adapter.
         naga::valid::Validator::new(
             naga::valid::ValidationFlags::all(),
             naga::valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32,
@@ -49,7 +49,7 @@ fn unknown_imports_are_internal_errors() {
 
 #[test]
 fn the_storage_buffer_requirement_is_what_the_passes_declare() {
-    // gpu.rs refuses adapters with fewer storage buffers per stage than the hungriest pass binds.
+    // gpu/device.rs refuses adapters with fewer storage buffers per stage than the hungriest pass binds.
     let mut most = 0;
     for (name, src) in shaders::all().unwrap() {
         let groups = grotto_runtime::passes::reflect_layouts(&src, wgpu::ShaderStages::COMPUTE).unwrap();

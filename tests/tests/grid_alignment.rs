@@ -5,7 +5,7 @@
 //! The move chosen (0.3-0.5 leaf) keeps every wall's points in the same leaves, so what changes
 //! is where the surface sits inside its leaves. With leaf light evaluated, and cones started, at
 //! the cell's centre, the first bounce moved by 4.03%; with the leaf at its surfels' centroid
-//! (scene_data.rs, `move_leaves_to_surfels`) it moves by 0.17%.
+//! (scene/data.rs, `move_leaves_to_surfels`) it moves by 0.17%.
 
 use std::path::Path;
 

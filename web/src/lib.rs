@@ -487,7 +487,7 @@ impl State {
         self.tiles(&camera, moving)?;
         self.exposure_step()?;
         // Light first, one slice of a bounce at rest sized by `pace` (as the window viewer does,
-        // window.rs); then the frame with the light held, so the draw does not run the rest of
+        // window/mod.rs); then the frame with the light held, so the draw does not run the rest of
         // the bounce.
         let submitted = Instant::now();
         *self.frame_done.lock().map_err(|_| Error::Setting("frame timing poisoned".into()))? = None;

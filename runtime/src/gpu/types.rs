@@ -21,7 +21,7 @@ pub struct TileGpu {
     pub node_count: u32,
     pub leaf_count: u32,
     /// Level (counted up from the package's leaves) of the tile's leaves here: 0 for the tile as
-    /// built, k for its coarse level (scene_data.rs `coarse_tile`), whose leaves are the nodes
+    /// built, k for its coarse level (scene/data.rs `coarse_tile`), whose leaves are the nodes
     /// 2^k package leaves wide and whose SVO ends there.
     pub leaf_lod: u32,
     pub pad: [u32; 3],

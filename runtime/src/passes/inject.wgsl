@@ -8,7 +8,7 @@
 #import dispatch
 #import brdf
 
-// Mirrors gpu_types.rs InjectBatch (runtime/tests/layout.rs).
+// Mirrors gpu/types.rs InjectBatch (runtime/tests/layout.rs).
 struct InjectBatch {
     first: u32,
     count: u32,

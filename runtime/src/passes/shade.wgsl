@@ -292,7 +292,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             for (var j = light_grid_word(cell); j < last; j++) {
                 let light = lights[light_grid_word(j)];
                 if light_shadow_kind(light) != LIGHT_MAP {
-                    // Lists hold the lights with shadow maps first (lights.rs): the rest are
+                    // Lists hold the lights with shadow maps first (light/setup.rs): the rest are
                     // per leaf.
                     break;
                 }

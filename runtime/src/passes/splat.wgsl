@@ -1,7 +1,7 @@
 // Surfel splatting, shared by the shadow and gbuffer passes: each surfel is an oriented disc (a
 // quad in its tangent plane, fragments outside the unit circle discarded), so depth is the disc's
 // true depth. A disc smaller than `viewport.z` pixels is grown to it so sparse samples leave no
-// holes. `Splat` mirrors SplatUniform in runtime/src/gpu_types.rs (runtime/tests/layout.rs).
+// holes. `Splat` mirrors SplatUniform in runtime/src/gpu/types.rs (runtime/tests/layout.rs).
 #import geometry
 #import packing
 #import color

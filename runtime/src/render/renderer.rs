@@ -61,7 +61,7 @@ pub struct Renderer {
     pub(super) spot_lights: usize,
     /// The scene's last light is a headlamp added for a lightless scene (the plan says so).
     pub(super) headlamp: bool,
-    /// Lights with shadow maps; the others are lit per leaf (lights.rs).
+    /// Lights with shadow maps; the others are lit per leaf (light/setup.rs).
     pub(super) shadowed: usize,
     /// Shadow-atlas faces (six per point light with a map, one per spot light).
     pub(super) shadow_faces: usize,
@@ -302,7 +302,7 @@ impl Renderer {
         self.static_bytes + view
     }
 
-    /// Lights with shadow maps; the others are lit per leaf (lights.rs).
+    /// Lights with shadow maps; the others are lit per leaf (light/setup.rs).
     pub fn shadowed_lights(&self) -> usize {
         self.shadowed
     }

@@ -3,7 +3,7 @@
 // in bind group 1; only propagate imports it.
 #import light_state
 
-// Mirrors gpu_types.rs ActiveTile (runtime/tests/layout.rs): the tile's leaves are the bounce's
+// Mirrors gpu/types.rs ActiveTile (runtime/tests/layout.rs): the tile's leaves are the bounce's
 // invocations first_item .. first_item + leaf_count.
 struct ActiveTile {
     tile: u32,

@@ -1,7 +1,7 @@
 // The cones one dispatch of a cone-batched pass (env, propagate) traces: `first .. first + count`
 // of the cone set (passes/mod.rs `cone_batched` says why). The pass's own group.
 
-// Mirrors gpu_types.rs ConeBatch (runtime/tests/layout.rs).
+// Mirrors gpu/types.rs ConeBatch (runtime/tests/layout.rs).
 struct ConeBatch {
     first: u32,
     count: u32,

@@ -1,5 +1,5 @@
 // Point and spot lights: the light list, the light grid of the lights in range, and the shadow
-// maps' atlas (runtime/src/lights.rs, passes/shadow.rs).
+// maps' atlas (runtime/src/light/setup.rs, passes/shadow.rs).
 #import scene
 #import packing
 #import lookup
@@ -21,7 +21,7 @@ struct Light {
 // cube face of a point light or per spot light, `shadow_cols` faces per row. A 2D atlas rather
 // than an array texture: wgpu's GL backend neither renders nor copies into array layers.
 @group(0) @binding(6) var shadow_dist: texture_2d<f32>;
-// The light grid, per-cell lists of the lights in range (runtime/src/lights.rs), lives in the
+// The light grid, per-cell lists of the lights in range (runtime/src/light/setup.rs), lives in the
 // lookup buffer (light_grid_word): cells + 1 offsets (word indices into the grid), then the light
 // indices.
 

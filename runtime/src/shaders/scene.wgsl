@@ -1,7 +1,7 @@
 // The static scene every compute pass reads: per-dispatch parameters and the leaves (bind group 0,
 // read-only). The other parts of the static scene are declared by the subsystems that read them
 // (svo, rock, lights), so a pass binds only what its imports declare (passes/mod.rs reflects each
-// pass's layout from its module). Structs mirror runtime/src/gpu_types.rs (runtime/tests/layout.rs
+// pass's layout from its module). Structs mirror runtime/src/gpu/types.rs (runtime/tests/layout.rs
 // checks every member's offset); the constants come from Rust (shaders::constants).
 
 struct Leaf {
