@@ -216,6 +216,10 @@ pub struct FrameReport {
     /// tiles, only the faces that see a changed tile, of `shadow_faces_total`.
     pub shadow_faces: u64,
     pub shadow_faces_total: usize,
+    /// Wall milliseconds of the frame's work before its image is read back: waiting for its tiles,
+    /// swapping them in and settling their light, then drawing (which waits for the GPU where the
+    /// adapter has timestamps): what a viewer's frame would take.
+    pub frame_ms: f64,
     /// Milliseconds this frame waited for the loader thread (which chose and read its tiles while
     /// the previous frame rendered).
     pub(crate) load_wait_ms: f64,
@@ -488,6 +492,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     // The next frame's tiles are chosen and read from the package on a loader thread while
     // this frame renders, so a frame waits only for what the loader has not finished.
     for (i, cam) in cameras.iter().enumerate() {
+        let t_frame = Instant::now();
         let mut change = TileChange::default();
         if i == 0 {
             change.bounces = r.stats().bounces_done;
@@ -499,7 +504,9 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         }
         let current = follow.as_ref().map(|f| f.current());
         let before_render = r.stats().bounces_done;
-        let (mut frame, plan) = r.render(cam, opts.width, opts.height)?;
+        let plan = r.draw(cam, opts.width, opts.height)?;
+        let frame_ms = t_frame.elapsed().as_secs_f64() * 1e3;
+        let mut frame = r.read_frame()?;
         // A progressive bounce run by the frame itself.
         change.bounces += r.stats().bounces_done - before_render;
         last_plan = plan;
@@ -513,7 +520,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         let (uncovered, black) = uncovered_and_black(&frame);
         uncovered_pixels = uncovered_pixels.max(uncovered);
         black_pixels = black_pixels.max(black);
-        frames.push(frame_report(i as u32, &scene, current, change, &mut r));
+        frames.push(frame_report(i as u32, &scene, current, change, frame_ms, &mut r));
         let path = frame_path(&opts.out, i as u32, n);
         image_out::write_frame(&frame, &path)?;
         images.push(path.display().to_string());
@@ -728,6 +735,7 @@ fn frame_report(
     scene: &SceneData,
     current: Option<&Residency>,
     change: TileChange,
+    frame_ms: f64,
     r: &mut Renderer,
 ) -> FrameReport {
     let bounce_work = r.take_bounce_work();
@@ -751,6 +759,7 @@ fn frame_report(
         deferred: change.deferred,
         shadow_faces: r.take_shadow_faces_drawn(),
         shadow_faces_total: r.shadow_face_count(),
+        frame_ms,
         load_wait_ms: change.load_wait_ms,
         pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
     }
