@@ -43,7 +43,8 @@ import json, sys
 passes = ["shadow", "inject", "mip", "propagate", "gbuffer", "shade"]
 title, files = sys.argv[1], sys.argv[2:]
 first = json.load(open(files[0]))
-print(f"\n{title} ({first['device']}, timestamps: {first['timestamps']}, median of {first['repetitions']}, ms)\n")
+splats = "pulled" if first.get("splats_pulled") else "instanced"
+print(f"\n{title} ({first['device']}, timestamps: {first['timestamps']}, splats {splats}, median of {first['repetitions']}, ms)\n")
 print("| package | preset | size | leaves | surfels | " + " | ".join(passes) + " | frame (gbuffer + shade) |")
 print("|---|---|---|---:|---:|" + "---:|" * (len(passes) + 1))
 for f in files:

@@ -584,6 +584,8 @@ pub struct PassBench {
     /// change, mip and propagate once per bounce, gbuffer and shade once per frame).
     pub median_ms: std::collections::BTreeMap<String, f64>,
     pub(crate) repetitions: u32,
+    /// The splat passes pulled their surfels from a storage buffer (else instanced quads).
+    pub splats_pulled: bool,
     pub(crate) settings: Settings,
     /// As in [`RenderSummary`].
     pub(crate) residency: Option<residency::ResidencyTotals>,
@@ -640,6 +642,7 @@ pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
         lights_in_range: r.lights_in_range(),
         median_ms,
         repetitions: reps,
+        splats_pulled: r.splats_pulled(),
         tile_bytes: scene.tile_bytes(r.settings().radiance_f16),
         settings: r.settings().clone(),
         residency: residency.as_ref().map(|r| r.totals),

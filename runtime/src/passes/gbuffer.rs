@@ -53,16 +53,20 @@ impl Targets {
 pub(crate) struct Gbuffer {
     pipeline: wgpu::RenderPipeline,
     camera: splat::Uniforms,
+    pub(crate) fetch: splat::Fetch,
 }
 
 impl Gbuffer {
-    pub(crate) fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout) -> Result<Self> {
+    /// The pass, pulling surfels from their pool where `pull` ([`splat::can_pull`]).
+    pub(crate) fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout, pull: bool) -> Result<Self> {
         let t =
             |format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL });
         let targets = [t(DISTANCE_FORMAT), t(NORMAL_FORMAT), t(ALBEDO_FORMAT)];
+        let fetch = splat::Fetch::new(gpu, pull);
         Ok(Self {
-            pipeline: splat::pipeline(gpu, "gbuffer", layout, "fs_gbuffer", &targets)?,
+            pipeline: splat::pipeline(gpu, "gbuffer", layout, &fetch, "fs_gbuffer", &targets)?,
             camera: splat::Uniforms::new(gpu, "camera splat", layout, 1)?,
+            fetch,
         })
     }
 
@@ -103,10 +107,10 @@ impl Gbuffer {
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.camera.groups[0], &[]);
-        pass.set_vertex_buffer(0, surfels.slice(..));
-        // The surfel ranges of the tiles in view (renderer.rs culls by tile box).
+        self.fetch.bind(&mut pass, surfels);
+        // The surfel ranges of the tiles in view (the renderer culls by tile box).
         for r in runs {
-            pass.draw(0..6, r.clone());
+            self.fetch.draw(&mut pass, r);
         }
     }
 }

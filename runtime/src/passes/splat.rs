@@ -1,5 +1,11 @@
 //! Surfel splatting (splat.wgsl), shared by the shadow and G-buffer passes: the render pipeline
 //! that draws every surfel as an oriented disc, its uniform layout, and the uniforms themselves.
+//!
+//! Surfels are pulled: one non-instanced draw of six vertices a surfel, the vertex shader reading
+//! its surfel from the pool as a storage buffer by `vertex_index / 6`. GPUs run such draws far
+//! faster than one instance of a six-vertex quad a surfel. Where an adapter has no storage
+//! buffers in vertex shaders, or the pool is larger than one storage binding, the surfels are
+//! drawn as instances instead, the portable path; both draw the same discs in the same order.
 
 use crate::error::Result;
 use crate::gpu::Gpu;
@@ -79,6 +85,78 @@ impl Uniforms {
     }
 }
 
+/// Whether the splat passes can pull `surfels` surfels from a storage buffer on this adapter.
+pub(crate) fn can_pull(gpu: &Gpu, surfels: u64) -> bool {
+    let bytes = surfels.max(1) * size_of::<SurfelGpu>() as u64;
+    gpu.adapter.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::VERTEX_STORAGE)
+        && gpu.device.limits().max_storage_buffers_per_shader_stage >= 1
+        && bytes <= gpu.device.limits().max_storage_buffer_binding_size
+}
+
+/// How a splat pipeline fetches its surfels, and the layout of the surfel binding (group 1) where
+/// it pulls them.
+#[derive(Debug)]
+pub(crate) struct Fetch {
+    surfels_layout: Option<wgpu::BindGroupLayout>,
+    /// The pool bound to `surfels_layout` ([`Fetch::set_surfels`]; the pool is allocated once).
+    surfels_group: Option<wgpu::BindGroup>,
+}
+
+impl Fetch {
+    /// Pulled from a storage buffer where `pull`, else instanced.
+    pub(crate) fn new(gpu: &Gpu, pull: bool) -> Self {
+        let surfels_layout = pull.then(|| {
+            gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("splat surfels"),
+                entries: &[wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                }],
+            })
+        });
+        Self { surfels_layout, surfels_group: None }
+    }
+
+    /// The surfel pool the pulled draws read.
+    pub(crate) fn set_surfels(&mut self, gpu: &Gpu, surfels: &wgpu::Buffer) {
+        self.surfels_group = self.surfels_layout.as_ref().map(|layout| {
+            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("splat surfels"),
+                layout,
+                entries: &[wgpu::BindGroupEntry { binding: 0, resource: surfels.as_entire_binding() }],
+            })
+        });
+    }
+
+    /// Binds `surfels` (the pool [`Fetch::set_surfels`] was given) for the draws that follow.
+    pub(crate) fn bind(&self, pass: &mut wgpu::RenderPass<'_>, surfels: &wgpu::Buffer) {
+        match &self.surfels_group {
+            Some(group) => pass.set_bind_group(1, group, &[]),
+            None => pass.set_vertex_buffer(0, surfels.slice(..)),
+        }
+    }
+
+    /// Whether the draws pull their surfels (else they are instanced).
+    pub(crate) fn pulls(&self) -> bool {
+        self.surfels_layout.is_some()
+    }
+
+    /// Draws the surfels of `run` (indices into the pool).
+    pub(crate) fn draw(&self, pass: &mut wgpu::RenderPass<'_>, run: &std::ops::Range<u32>) {
+        if self.surfels_group.is_some() {
+            pass.draw(run.start * 6..run.end * 6, 0..1);
+        } else {
+            pass.draw(0..6, run.clone());
+        }
+    }
+}
+
 const SURFEL_ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
     0 => Float32x4,
     1 => Float32x4,
@@ -86,11 +164,13 @@ const SURFEL_ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
     3 => Uint32,
 ];
 
-/// A render pipeline drawing every surfel as an oriented disc into `targets`.
+/// A render pipeline drawing every surfel as an oriented disc into `targets`, fetching surfels
+/// as `fetch` says.
 pub(crate) fn pipeline(
     gpu: &Gpu,
     label: &str,
     layout: &wgpu::BindGroupLayout,
+    fetch: &Fetch,
     fragment_entry: &str,
     targets: &[Option<wgpu::ColorTargetState>],
 ) -> Result<wgpu::RenderPipeline> {
@@ -98,9 +178,16 @@ pub(crate) fn pipeline(
         label: Some("splat"),
         source: wgpu::ShaderSource::Wgsl(crate::shaders::compose(crate::shaders::SPLAT)?.into()),
     });
+    let instanced = [Some(wgpu::VertexBufferLayout {
+        array_stride: size_of::<SurfelGpu>() as u64,
+        step_mode: wgpu::VertexStepMode::Instance,
+        attributes: &SURFEL_ATTRIBUTES,
+    })];
+    let groups: Vec<Option<&wgpu::BindGroupLayout>> =
+        std::iter::once(Some(layout)).chain(fetch.surfels_layout.as_ref().map(Some)).collect();
     let pl = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(label),
-        bind_group_layouts: &[Some(layout)],
+        bind_group_layouts: &groups,
         immediate_size: 0,
     });
     Ok(gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
@@ -108,13 +195,9 @@ pub(crate) fn pipeline(
         layout: Some(&pl),
         vertex: wgpu::VertexState {
             module: &module,
-            entry_point: Some("vs"),
+            entry_point: Some(if fetch.surfels_layout.is_some() { "vs_pulled" } else { "vs" }),
             compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: size_of::<SurfelGpu>() as u64,
-                step_mode: wgpu::VertexStepMode::Instance,
-                attributes: &SURFEL_ATTRIBUTES,
-            })],
+            buffers: if fetch.surfels_layout.is_some() { &[] } else { &instanced },
         },
         primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
         depth_stencil: Some(wgpu::DepthStencilState {

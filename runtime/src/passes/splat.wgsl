@@ -30,6 +30,11 @@ struct VsOut {
 }
 
 
+// The surfel pool as words, for the pulled path (SurfelGpu: 10 words; a WGSL struct of vec4s
+// would be 48 bytes apart, not 40).
+@group(1) @binding(0) var<storage, read> surfel_words: array<u32>;
+
+// Instanced: one instance a surfel, its six vertices the quad's corners.
 @vertex
 fn vs(
     @builtin(vertex_index) vi: u32,
@@ -38,6 +43,21 @@ fn vs(
     @location(2) color: vec4<f32>,
     @location(3) scan: u32,
 ) -> VsOut {
+    return splat_corner(vi, position_radius, normal_spread, color, scan);
+}
+
+// Pulled: six vertices a surfel in one draw, the surfel read from the pool.
+@vertex
+fn vs_pulled(@builtin(vertex_index) vi: u32) -> VsOut {
+    let b = (vi / 6u) * 10u;
+    let w = &surfel_words;
+    let position_radius = bitcast<vec4<f32>>(vec4<u32>((*w)[b], (*w)[b + 1u], (*w)[b + 2u], (*w)[b + 3u]));
+    let normal_spread = bitcast<vec4<f32>>(vec4<u32>((*w)[b + 4u], (*w)[b + 5u], (*w)[b + 6u], (*w)[b + 7u]));
+    return splat_corner(vi % 6u, position_radius, normal_spread, unpack4x8unorm((*w)[b + 8u]), (*w)[b + 9u]);
+}
+
+// Corner `vi` (0..6) of a surfel's disc.
+fn splat_corner(vi: u32, position_radius: vec4<f32>, normal_spread: vec4<f32>, color: vec4<f32>, scan: u32) -> VsOut {
     var out: VsOut;
     let p = position_radius.xyz;
     if splat.clip_min_m.w > 0.0 && (any(p < splat.clip_min_m.xyz) || any(p > splat.clip_max_m.xyz)) {

@@ -190,7 +190,8 @@ impl Renderer {
         let (materials, specular_materials, specular_surfels) = material_slots(scene, &settings);
 
         let splat_layout = passes::splat::layout(gpu);
-        let shadow = gpu.scoped("shadow", || {
+        let pull = passes::splat::can_pull(gpu, caps.surfels);
+        let mut shadow = gpu.scoped("shadow", || {
             shadow::Shadow::new(
                 gpu,
                 &splat_layout,
@@ -198,6 +199,7 @@ impl Renderer {
                 settings.shadow_map_size,
                 settings.min_splat_px,
                 settings.splat_scale,
+                pull,
             )
         })?;
         let lookup = Lookup::new(scene, &lights)?;
@@ -214,7 +216,7 @@ impl Renderer {
         );
 
         let index_offset = 4 * u64::from(base_params.lookup_base[2]);
-        let up = Upload::new(gpu, scene, caps, &lights, &lookup, shadow.atlas(), &base_params, f16)?;
+        let up = Upload::new(gpu, scene, caps, &lights, &lookup, shadow.atlas(), &base_params, f16, pull)?;
         let tile_pools = TilePools::new(pools, placed, cull_tiles, &up, index_offset);
         let shared = &up.shared;
 
@@ -226,7 +228,9 @@ impl Renderer {
             gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, caps.nodes, &by_height, &ranges, f16))?;
         let propagate =
             gpu.scoped("propagate", || passes::propagate::new(gpu, shared, f16, settings.cones))?;
-        let gbuffer = gpu.scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout))?;
+        let mut gbuffer = gpu.scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout, pull))?;
+        shadow.fetch.set_surfels(gpu, &up.surfels);
+        gbuffer.fetch.set_surfels(gpu, &up.surfels);
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
         let static_bytes = up.bytes + shadow.bytes() + shade.env_atlas_bytes();
         let shadow_faces = lights.faces.len();
@@ -310,6 +314,12 @@ impl Renderer {
     /// Lights in range per light-grid cell: mean and largest.
     pub fn lights_in_range(&self) -> (f32, u32) {
         self.lights_in_range
+    }
+
+    /// Whether the splat passes pull their surfels from the pool (one non-instanced draw of six
+    /// vertices a surfel) rather than draw them as instances (passes/splat.rs).
+    pub fn splats_pulled(&self) -> bool {
+        self.gbuffer.fetch.pulls()
     }
 
     /// The settings it renders with.

@@ -317,6 +317,7 @@ impl Upload {
         shadow_atlas: &wgpu::TextureView,
         base_params: &Params,
         f16: bool,
+        pull_surfels: bool,
     ) -> Result<Self> {
         let params = gpu.buffer_init(
             "params",
@@ -350,7 +351,12 @@ impl Upload {
             "surfels",
             caps.surfels,
             &scene.surfels,
-            wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+            // A vertex buffer for instanced splats, a storage buffer for pulled ones (splat.rs).
+            if pull_surfels {
+                wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST
+            } else {
+                wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST
+            },
         )?;
         let tiles = pool(gpu, "tiles", caps.tiles, &scene.tiles, STORAGE)?;
         let nodes = pool(gpu, "nodes", caps.nodes, &scene.nodes, STORAGE)?;
