@@ -4,8 +4,11 @@
 //! large package reads only what it shows; the runtime derives them with the same functions for
 //! packages that lack them (format 1.0, hand-built scenes).
 
+/// A tile's SVO cut a few levels above its leaves.
 pub mod coarse;
+/// The rock behind a tile's scanned walls, as bricks of rock bits.
 pub mod rock;
+/// What the packer stores with each tile, worked out over all tiles at once.
 mod tiles;
 
 pub use tiles::{TileGrid, TileLevels, origin_leaf, tile_levels};

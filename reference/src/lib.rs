@@ -11,10 +11,14 @@
 //! disc whose box meets the query, so a short segment keeps the candidate set small in caves,
 //! where most rays end on a nearby wall.
 
-pub mod accuracy;
-mod error;
-pub mod mitsuba;
+/// The path tracer: surfels as discs in a BVH, next-event estimation, Russian roulette.
 mod tracer;
+/// What the reference refuses.
+mod error;
+/// The scenes written for Mitsuba 3, to check the reference against an independent renderer.
+pub mod mitsuba;
+/// The accuracy-vs-time sweep behind docs/accuracy.md.
+pub mod accuracy;
 
 pub use error::Error;
 pub use tracer::{Disc, Estimate, PathSettings, SurfelScene, aces_srgb};
