@@ -183,9 +183,26 @@ fn without_tests(code: &str) -> String {
     String::from_utf8_lossy(&b).into_owned()
 }
 
+/// `tree` without its `as alias` renames and whitespace.
+fn without_aliases(tree: &str) -> String {
+    let mut out = String::new();
+    let mut words = tree.split_whitespace();
+    while let Some(w) = words.next() {
+        if w == "as" {
+            // The alias goes; what follows it (`,`, `}`) stays.
+            if let Some(alias) = words.next() {
+                out.extend(alias.chars().skip_while(|c| c.is_alphanumeric() || *c == '_'));
+            }
+        } else {
+            out.push_str(w);
+        }
+    }
+    out
+}
+
 /// The paths a `use` tree names, from the text after `use` up to its `;` (groups expanded).
 fn use_paths(tree: &str) -> Vec<String> {
-    let tree: String = tree.chars().filter(|c| !c.is_whitespace()).collect();
+    let tree = without_aliases(tree);
     let mut out = Vec::new();
     fn walk(prefix: &str, t: &str, out: &mut Vec<String>) {
         // Split the top level of a group at commas.
@@ -210,8 +227,6 @@ fn use_paths(tree: &str) -> Vec<String> {
                 walk(&format!("{prefix}{head}"), p, out);
             }
         } else {
-            let t = t.split(" as ").next().unwrap_or(t);
-            let t = t.split("as").next().filter(|_| !t.contains("::")).unwrap_or(t);
             out.push(format!("{prefix}{t}").trim_end_matches("::*").trim_end_matches("::self").to_string());
         }
     }
@@ -221,12 +236,7 @@ fn use_paths(tree: &str) -> Vec<String> {
 
 /// The crate modules a file module names: `crate::`/`super::`/`self::` paths anywhere, and
 /// `use` paths that start at a child module.
-fn named_modules(
-    module: &str,
-    is_dir_module: bool,
-    code: &str,
-    modules: &BTreeSet<String>,
-) -> BTreeSet<String> {
+fn named_modules(module: &str, code: &str, modules: &BTreeSet<String>) -> BTreeSet<String> {
     let parent = |m: &str| m.rsplit_once("::").map_or(String::new(), |(p, _)| p.to_string());
     // `super` of `a::b` (a/b.rs) is `a`; of a folder's mod.rs `a` too, its parent.
     let super_of = parent(module);
@@ -255,7 +265,6 @@ fn named_modules(
             .map(|k| rest[..k].iter().fold(base.clone(), |b, s| join(&b, s)))
             .find(|m| modules.contains(m))
     };
-    let _ = is_dir_module;
     let mut out = BTreeSet::new();
     let bytes = code.as_bytes();
     // Paths anywhere in the code.
@@ -305,8 +314,7 @@ fn module_graph(krate: &str) -> BTreeMap<String, BTreeSet<String>> {
         .iter()
         .map(|(m, f)| {
             let code = without_tests(&blank_comments_and_strings(&std::fs::read_to_string(f).unwrap()));
-            let is_dir = f.file_name().is_some_and(|n| n == "mod.rs" || n == "lib.rs");
-            (m.clone(), named_modules(m, is_dir, &code, &modules))
+            (m.clone(), named_modules(m, &code, &modules))
         })
         .collect()
 }
@@ -408,7 +416,7 @@ fn a_circle_is_found() {
         ("c::d", "use super::super::{a::{self, Z}, b};\n"),
     ]
     .into_iter()
-    .map(|(m, src)| (m.to_string(), named_modules(m, false, &code(src), &modules)))
+    .map(|(m, src)| (m.to_string(), named_modules(m, &code(src), &modules)))
     .collect();
     assert_eq!(graph["a"], BTreeSet::from(["b".to_string()]));
     assert_eq!(graph["b"], BTreeSet::from(["c::d".to_string()]), "tests and strings are not read");
@@ -416,6 +424,15 @@ fn a_circle_is_found() {
     assert_eq!(graph["c::d"], BTreeSet::from(["a".to_string(), "b".to_string()]));
     assert_eq!(circles(&graph), vec![vec!["a".to_string(), "b".to_string(), "c::d".to_string()]]);
     assert_eq!(circles(&top_level(&graph)), vec![vec!["a".to_string(), "b".to_string(), "c".to_string()]]);
+}
+
+/// Use trees expand to one path a name; renames keep the name renamed, also where it holds "as".
+#[test]
+fn use_trees_name_their_paths() {
+    assert_eq!(
+        use_paths("crate::{passes, a::b as c, d::{self, e}, f::*}"),
+        ["crate::passes", "crate::a::b", "crate::d", "crate::d::e", "crate::f"]
+    );
 }
 
 /// Functions (`fn name`) with their first line and length in lines, outside tests.

@@ -53,20 +53,17 @@ impl Targets {
 pub(crate) struct Gbuffer {
     pipeline: wgpu::RenderPipeline,
     camera: splat::Uniforms,
-    pub(crate) fetch: splat::Fetch,
 }
 
 impl Gbuffer {
-    /// The pass, pulling surfels from their pool where `pull` ([`splat::can_pull`]).
-    pub(crate) fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout, pull: bool) -> Result<Self> {
+    /// The pass, fetching surfels as `fetch` does.
+    pub(crate) fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout, fetch: &splat::Fetch) -> Result<Self> {
         let t =
             |format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL });
         let targets = [t(DISTANCE_FORMAT), t(NORMAL_FORMAT), t(ALBEDO_FORMAT)];
-        let fetch = splat::Fetch::new(gpu, pull);
         Ok(Self {
-            pipeline: splat::pipeline(gpu, "gbuffer", layout, &fetch, "fs_gbuffer", &targets)?,
+            pipeline: splat::pipeline(gpu, "gbuffer", layout, fetch, "fs_gbuffer", &targets)?,
             camera: splat::Uniforms::new(gpu, "camera splat", layout, 1)?,
-            fetch,
         })
     }
 
@@ -79,7 +76,7 @@ impl Gbuffer {
         &self,
         enc: &mut wgpu::CommandEncoder,
         targets: &Targets,
-        surfels: &wgpu::Buffer,
+        fetch: &splat::Fetch,
         runs: &[std::ops::Range<u32>],
         timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
     ) {
@@ -107,10 +104,10 @@ impl Gbuffer {
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.camera.groups[0], &[]);
-        self.fetch.bind(&mut pass, surfels);
+        fetch.bind(&mut pass);
         // The surfel ranges of the tiles in view (the renderer culls by tile box).
         for r in runs {
-            self.fetch.draw(&mut pass, r);
+            fetch.draw(&mut pass, r);
         }
     }
 }

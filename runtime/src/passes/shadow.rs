@@ -39,7 +39,6 @@ pub(crate) struct Face {
 #[derive(Debug)]
 pub(crate) struct Shadow {
     pipeline: wgpu::RenderPipeline,
-    pub(crate) fetch: splat::Fetch,
     face_size: u32,
     cols: u32,
     atlas: wgpu::TextureView,
@@ -63,15 +62,14 @@ impl Shadow {
         face_size: u32,
         min_splat_px: f32,
         splat_scale: f32,
-        pull: bool,
+        fetch: &splat::Fetch,
     ) -> Result<Self> {
         let targets = [Some(wgpu::ColorTargetState {
             format: DISTANCE_FORMAT,
             blend: None,
             write_mask: wgpu::ColorWrites::ALL,
         })];
-        let fetch = splat::Fetch::new(gpu, pull);
-        let pipeline = splat::pipeline(gpu, "shadow", layout, &fetch, "fs_shadow", &targets)?;
+        let pipeline = splat::pipeline(gpu, "shadow", layout, fetch, "fs_shadow", &targets)?;
         let layers = faces.len().max(1) as u32;
         let cols = (f64::from(layers).sqrt().ceil() as u32).max(1);
         let rows = layers.div_ceil(cols);
@@ -143,7 +141,6 @@ impl Shadow {
         let atlas_bytes = (u64::from(width) * u64::from(height) + u64::from(face_size * face_size)) * 8;
         Ok(Self {
             pipeline,
-            fetch,
             face_size,
             cols,
             atlas,
@@ -186,7 +183,7 @@ impl Shadow {
     pub(crate) fn record(
         &self,
         enc: &mut wgpu::CommandEncoder,
-        surfels: &wgpu::Buffer,
+        fetch: &splat::Fetch,
         draws: &[Option<Vec<Range<u32>>>],
         timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
     ) {
@@ -227,7 +224,7 @@ impl Shadow {
             multiview_mask: None,
         });
         pass.set_pipeline(&self.pipeline);
-        self.fetch.bind(&mut pass, surfels);
+        fetch.bind(&mut pass);
         let s = self.face_size as f32;
         // One uniform group per face.
         for (i, (group, runs)) in self.uniforms.groups.iter().zip(draws).enumerate() {
@@ -236,7 +233,7 @@ impl Shadow {
             pass.set_viewport(x as f32, y as f32, s, s, 0.0, 1.0);
             pass.set_bind_group(0, group, &[]);
             for r in runs {
-                self.fetch.draw(&mut pass, r);
+                fetch.draw(&mut pass, r);
             }
         }
     }

@@ -85,26 +85,24 @@ impl Uniforms {
     }
 }
 
-/// Whether the splat passes can pull `surfels` surfels from a storage buffer on this adapter.
-pub(crate) fn can_pull(gpu: &Gpu, surfels: u64) -> bool {
-    let bytes = surfels.max(1) * size_of::<SurfelGpu>() as u64;
-    gpu.adapter.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::VERTEX_STORAGE)
-        && gpu.device.limits().max_storage_buffers_per_shader_stage >= 1
-        && bytes <= gpu.device.limits().max_storage_buffer_binding_size
-}
-
-/// How a splat pipeline fetches its surfels, and the layout of the surfel binding (group 1) where
-/// it pulls them.
+/// How the splat passes fetch their surfels: pulled from the pool as a storage buffer, or drawn
+/// as instances. One for both passes: the pool and its binding are the renderer's.
 #[derive(Debug)]
 pub(crate) struct Fetch {
+    /// The layout of the surfel binding (group 1) where surfels are pulled; `None`: instanced.
     surfels_layout: Option<wgpu::BindGroupLayout>,
-    /// The pool bound to `surfels_layout` ([`Fetch::set_surfels`]; the pool is allocated once).
-    surfels_group: Option<wgpu::BindGroup>,
+    /// The pool ([`Fetch::set_surfels`]; allocated once), and its binding where pulled.
+    surfels: Option<(wgpu::Buffer, Option<wgpu::BindGroup>)>,
 }
 
 impl Fetch {
-    /// Pulled from a storage buffer where `pull`, else instanced.
-    pub(crate) fn new(gpu: &Gpu, pull: bool) -> Self {
+    /// Pulled where the adapter has storage buffers in vertex shaders and a pool of
+    /// `surfel_capacity` surfels fits one storage binding, else instanced.
+    pub(crate) fn new(gpu: &Gpu, surfel_capacity: u64) -> Self {
+        let bytes = surfel_capacity.max(1) * size_of::<SurfelGpu>() as u64;
+        let pull =
+            gpu.adapter.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::VERTEX_STORAGE)
+                && bytes <= gpu.device.limits().max_storage_buffer_binding_size;
         let surfels_layout = pull.then(|| {
             gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("splat surfels"),
@@ -120,26 +118,7 @@ impl Fetch {
                 }],
             })
         });
-        Self { surfels_layout, surfels_group: None }
-    }
-
-    /// The surfel pool the pulled draws read.
-    pub(crate) fn set_surfels(&mut self, gpu: &Gpu, surfels: &wgpu::Buffer) {
-        self.surfels_group = self.surfels_layout.as_ref().map(|layout| {
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("splat surfels"),
-                layout,
-                entries: &[wgpu::BindGroupEntry { binding: 0, resource: surfels.as_entire_binding() }],
-            })
-        });
-    }
-
-    /// Binds `surfels` (the pool [`Fetch::set_surfels`] was given) for the draws that follow.
-    pub(crate) fn bind(&self, pass: &mut wgpu::RenderPass<'_>, surfels: &wgpu::Buffer) {
-        match &self.surfels_group {
-            Some(group) => pass.set_bind_group(1, group, &[]),
-            None => pass.set_vertex_buffer(0, surfels.slice(..)),
-        }
+        Self { surfels_layout, surfels: None }
     }
 
     /// Whether the draws pull their surfels (else they are instanced).
@@ -147,9 +126,30 @@ impl Fetch {
         self.surfels_layout.is_some()
     }
 
+    /// The surfel pool the draws read.
+    pub(crate) fn set_surfels(&mut self, gpu: &Gpu, surfels: &wgpu::Buffer) {
+        let group = self.surfels_layout.as_ref().map(|layout| {
+            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("splat surfels"),
+                layout,
+                entries: &[wgpu::BindGroupEntry { binding: 0, resource: surfels.as_entire_binding() }],
+            })
+        });
+        self.surfels = Some((surfels.clone(), group));
+    }
+
+    /// Binds the pool for the draws that follow.
+    pub(crate) fn bind(&self, pass: &mut wgpu::RenderPass<'_>) {
+        match &self.surfels {
+            Some((_, Some(group))) => pass.set_bind_group(1, group, &[]),
+            Some((buffer, None)) => pass.set_vertex_buffer(0, buffer.slice(..)),
+            None => {}
+        }
+    }
+
     /// Draws the surfels of `run` (indices into the pool).
     pub(crate) fn draw(&self, pass: &mut wgpu::RenderPass<'_>, run: &std::ops::Range<u32>) {
-        if self.surfels_group.is_some() {
+        if self.pulls() {
             pass.draw(run.start * 6..run.end * 6, 0..1);
         } else {
             pass.draw(0..6, run.clone());

@@ -292,12 +292,12 @@ impl Renderer {
                         dirty.then(|| self.pools.runs_seen(Some(&f.view_proj), self.leaf_size_m))
                     })
                     .collect();
-                self.shadow.record(enc, self.pools.surfels(), &draws, render_ts);
+                self.shadow.record(enc, &self.splats, &draws, render_ts);
             }
             Pass::Gbuffer => {
                 let v = self.view("gbuffer")?;
                 let runs = self.pools.runs_seen(self.camera_view_proj.as_ref(), self.leaf_size_m);
-                self.gbuffer.record(enc, &v.targets, self.pools.surfels(), &runs, render_ts);
+                self.gbuffer.record(enc, &v.targets, &self.splats, &runs, render_ts);
             }
             compute => {
                 let tw = ts.map(|(set, i)| wgpu::ComputePassTimestampWrites {

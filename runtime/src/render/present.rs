@@ -5,7 +5,8 @@
 
 use crate::error::Result;
 use crate::gpu::Gpu;
-use crate::render::{LdrOutput, LightProgress};
+use crate::render::frame::LdrOutput;
+use crate::render::light::LightProgress;
 
 /// The convergence bar's state (its colour in present.wgsl).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -19,7 +19,7 @@ use crate::light::activity::{BounceWork, TileActivity};
 use crate::light::plan::Pass;
 use crate::light::setup::LightSetup;
 use crate::passes::{self, gbuffer, shade, shadow};
-use crate::render::pool::{PoolCaps, Pools, surfel_owners};
+use crate::render::pool::{Placement, PoolCaps, Pools, surfel_owners};
 use crate::scene::data::{SceneData, SceneLight};
 use crate::view::camera::Camera;
 
@@ -108,6 +108,8 @@ pub struct Renderer {
     pub(super) propagate: passes::Batched,
     pub(super) shadow: shadow::Shadow,
     pub(super) gbuffer: gbuffer::Gbuffer,
+    /// How both splat passes fetch the surfel pool (passes/splat.rs).
+    pub(super) splats: passes::splat::Fetch,
     pub(super) shade: shade::Shade,
     pub(super) view: Option<View>,
     pub(super) direct_valid: bool,
@@ -174,12 +176,7 @@ impl Renderer {
     pub fn with_pools(gpu: &Gpu, scene: &SceneData, settings: Settings, caps: PoolCaps) -> Result<Self> {
         settings.validate()?;
         let caps = caps.at_least(PoolCaps::of(scene));
-        let mut pools = Pools::new(caps)?;
-        let (owners, cull_tiles) = surfel_owners(scene);
-        let placed = pools.place(scene, &owners)?;
-        if placed.tiles != scene.tiles {
-            return Err(Error::Internal { what: "pools", message: "fresh pools moved a tile".into() });
-        }
+        let (pools, placed, cull_tiles) = fresh_pools(scene, caps)?;
         let f16 = settings.radiance_f16;
         let (lo, hi) = scene.bounds_leaf();
         let leaf = scene.leaf_size_m.max(1e-6);
@@ -190,18 +187,8 @@ impl Renderer {
         let (materials, specular_materials, specular_surfels) = material_slots(scene, &settings);
 
         let splat_layout = passes::splat::layout(gpu);
-        let pull = passes::splat::can_pull(gpu, caps.surfels);
-        let mut shadow = gpu.scoped("shadow", || {
-            shadow::Shadow::new(
-                gpu,
-                &splat_layout,
-                &lights.faces,
-                settings.shadow_map_size,
-                settings.min_splat_px,
-                settings.splat_scale,
-                pull,
-            )
-        })?;
+        let mut splats = passes::splat::Fetch::new(gpu, caps.surfels);
+        let shadow = shadow_pass(gpu, &splat_layout, &lights, &settings, &splats)?;
         let lookup = Lookup::new(scene, &lights)?;
         let base_params = base_params(
             scene,
@@ -216,7 +203,17 @@ impl Renderer {
         );
 
         let index_offset = 4 * u64::from(base_params.lookup_base[2]);
-        let up = Upload::new(gpu, scene, caps, &lights, &lookup, shadow.atlas(), &base_params, f16, pull)?;
+        let up = Upload::new(
+            gpu,
+            scene,
+            caps,
+            &lights,
+            &lookup,
+            shadow.atlas(),
+            &base_params,
+            f16,
+            splats.pulls(),
+        )?;
         let tile_pools = TilePools::new(pools, placed, cull_tiles, &up, index_offset);
         let shared = &up.shared;
 
@@ -228,9 +225,8 @@ impl Renderer {
             gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, caps.nodes, &by_height, &ranges, f16))?;
         let propagate =
             gpu.scoped("propagate", || passes::propagate::new(gpu, shared, f16, settings.cones))?;
-        let mut gbuffer = gpu.scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout, pull))?;
-        shadow.fetch.set_surfels(gpu, &up.surfels);
-        gbuffer.fetch.set_surfels(gpu, &up.surfels);
+        let gbuffer = gpu.scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout, &splats))?;
+        splats.set_surfels(gpu, &up.surfels);
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
         let static_bytes = up.bytes + shadow.bytes() + shade.env_atlas_bytes();
         let shadow_faces = lights.faces.len();
@@ -241,6 +237,7 @@ impl Renderer {
             propagate,
             shadow,
             gbuffer,
+            splats,
             shade,
             gpu: gpu.clone(),
             settings,
@@ -319,7 +316,7 @@ impl Renderer {
     /// Whether the splat passes pull their surfels from the pool (one non-instanced draw of six
     /// vertices a surfel) rather than draw them as instances (passes/splat.rs).
     pub fn splats_pulled(&self) -> bool {
-        self.gbuffer.fetch.pulls()
+        self.splats.pulls()
     }
 
     /// The settings it renders with.
@@ -385,4 +382,37 @@ fn light_setup(scene: &SceneData, settings: &Settings, scene_diag_m: f32) -> Lig
     let leaf = scene.leaf_size_m.max(1e-6);
     let near = (0.05 * leaf).max(1e-4);
     LightSetup::new(scene, settings, near, scene_diag_m * 2.0 + 1.0, (lo - 1.0) * leaf, (hi + 1.0) * leaf)
+}
+
+/// Pools of `caps` with `scene` placed at their start (as the tiles already are), and whether its
+/// tiles may be culled by their boxes.
+fn fresh_pools(scene: &SceneData, caps: PoolCaps) -> Result<(Pools, Placement, bool)> {
+    let mut pools = Pools::new(caps)?;
+    let (owners, cull_tiles) = surfel_owners(scene);
+    let placed = pools.place(scene, &owners)?;
+    if placed.tiles != scene.tiles {
+        return Err(Error::Internal { what: "pools", message: "fresh pools moved a tile".into() });
+    }
+    Ok((pools, placed, cull_tiles))
+}
+
+/// The shadow pass for `lights`' faces.
+fn shadow_pass(
+    gpu: &Gpu,
+    splat_layout: &wgpu::BindGroupLayout,
+    lights: &LightSetup,
+    settings: &Settings,
+    splats: &passes::splat::Fetch,
+) -> Result<shadow::Shadow> {
+    gpu.scoped("shadow", || {
+        shadow::Shadow::new(
+            gpu,
+            splat_layout,
+            &lights.faces,
+            settings.shadow_map_size,
+            settings.min_splat_px,
+            settings.splat_scale,
+            splats,
+        )
+    })
 }

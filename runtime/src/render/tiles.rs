@@ -80,11 +80,6 @@ impl TilePools {
         &self.tiles
     }
 
-    /// The surfel pool the splat passes draw from.
-    pub(super) fn surfels(&self) -> &wgpu::Buffer {
-        &self.surfels
-    }
-
     /// The pools' capacities.
     pub(super) fn caps(&self) -> PoolCaps {
         self.slots.caps()

@@ -1,6 +1,6 @@
 //! Tiles that follow a moving camera, for a package over its GPU budget: the next residency is
 //! chosen and its tiles read from the package on a loader thread while frames render
-//! ([`Follow`]), then swapped into the renderer's pools in place ([`stream::swap_tiles`]). `grotto render
+//! ([`Follow`]), then swapped into the renderer's pools in place ([`streaming::swap_tiles`]). `grotto render
 //! --path` waits for each frame's tiles; `grotto view` takes them when they are ready, so flying
 //! never waits for the disk.
 
@@ -13,10 +13,10 @@ use crate::render::Renderer;
 use crate::scene::data::{SceneData, SceneLight};
 use crate::settings::{ClipBox, Settings};
 use crate::stream::residency::{self, Residency};
-use crate::stream::{self, Streaming};
+use crate::stream::streaming::{self, Streaming};
 use crate::view::camera::Camera;
 
-/// The renderer for a job's first scene ([`stream::renderer_for`]), and the loader that keeps its
+/// The renderer for a job's first scene ([`streaming::renderer_for`]), and the loader that keeps its
 /// tiles following the camera where the package is over budget (`streaming` and the `first`
 /// residency it was chosen with, from [`crate::cli::render_job::prepare`]).
 pub(crate) fn start(
@@ -29,10 +29,10 @@ pub(crate) fn start(
 ) -> Result<(Renderer, Option<Follow>)> {
     match (streaming, first) {
         (Some(mut st), Some(first)) => {
-            let r = stream::renderer_for(gpu, scene, settings, Some((&mut st, &first)))?;
+            let r = streaming::renderer_for(gpu, scene, settings, Some((&mut st, &first)))?;
             Ok((r, Some(Follow::new(st, first, upload_per_frame))))
         }
-        _ => Ok((stream::renderer_for(gpu, scene, settings, None)?, None)),
+        _ => Ok((streaming::renderer_for(gpu, scene, settings, None)?, None)),
     }
 }
 
