@@ -74,6 +74,10 @@ pub struct Settings {
     /// Irradiance, W/m^2, under which a light's contribution is dropped: it bounds each light's
     /// range for culling (0: every light reaches everywhere).
     pub light_cutoff_w_m2: f32,
+    /// Draw only the surfel chunks a shadow face or the camera may see (render/chunks.rs); off,
+    /// whole tiles by their boxes, as before issue 43 (the same image, more work: for measuring
+    /// the difference, `--cull tiles`).
+    pub cull_chunks: bool,
     /// What the image shows (`--view`): the lit scene, or one of the views survey users judge
     /// their data with. Views that show no light skip the light passes (plan.rs).
     pub view: ViewMode,
@@ -227,6 +231,7 @@ impl Default for Settings {
             shadowed_lights: 16,
             shadow_fallback: ShadowFallback::Cone,
             light_cutoff_w_m2: 2e-4,
+            cull_chunks: true,
             view: ViewMode::Lit,
         }
     }

@@ -239,6 +239,11 @@ struct RenderArgs {
     /// Irradiance (W/m^2) under which a light is culled: bounds each light's range (0: no culling).
     #[arg(long)]
     light_cutoff: Option<f32>,
+    /// What the splat passes cull by: "chunks" (default: runs of 1,024 surfels each shadow face
+    /// or the camera may see) or "tiles" (whole tiles by their boxes, the draws before issue 43;
+    /// the same image, for measuring the difference).
+    #[arg(long, default_value = "chunks")]
+    cull: String,
     /// Replace the package's lights by a lamp string of N 8 W lamps spread over the cave's floors
     /// (to measure how cost grows with the number of lights).
     #[arg(long)]
@@ -348,6 +353,11 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
     })?;
     settings.light_cutoff_w_m2 = a.light_cutoff.unwrap_or(settings.light_cutoff_w_m2);
     settings.radiance_f16 = a.radiance_f16;
+    settings.cull_chunks = match a.cull.as_str() {
+        "chunks" => true,
+        "tiles" => false,
+        other => anyhow::bail!("--cull {other:?}: use chunks or tiles"),
+    };
     settings.splat_scale = a.splat_scale;
     let camera = match (a.camera.clone(), a.eye, a.look_at) {
         (Some(name), _, _) => CameraChoice::Named(name),
@@ -480,9 +490,27 @@ fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
             report.width,
             report.height
         );
+        let count = |v: Option<u64>| v.map_or_else(|| "-".to_string(), |n| n.to_string());
+        println!(
+            "  {:10} {:>10}  {:>6} {:>10} {:>12} {:>12} {:>12} {:>12}",
+            "pass", "ms", "draws", "surfels", "vertices", "primitives", "fragments", "invocations"
+        );
         for (pass, ms) in &report.median_ms {
-            println!("  {pass:10} {ms:10.2} ms");
+            let w = report.work.get(pass).copied().unwrap_or_default();
+            println!(
+                "  {pass:10} {ms:10.2}  {:>6} {:>10} {:>12} {:>12} {:>12} {:>12}",
+                w.draws,
+                w.surfels,
+                count(w.vertex_invocations),
+                count(w.primitives_out),
+                count(w.fragment_invocations),
+                count(w.compute_invocations)
+            );
         }
+        println!(
+            "  a repetition: {} submits, {} bytes written to GPU buffers",
+            report.submits, report.upload_bytes
+        );
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -583,6 +583,12 @@ pub struct PassBench {
     /// Median milliseconds per pass over the repetitions (shadow and inject run once per light
     /// change, mip and propagate once per bounce, gbuffer and shade once per frame).
     pub median_ms: std::collections::BTreeMap<String, f64>,
+    /// What each pass did in the last repetition: draws and surfels, and shader invocations
+    /// where the adapter has pipeline statistics (render/counters.rs).
+    pub work: std::collections::BTreeMap<String, crate::render::PassWork>,
+    /// Command buffers submitted and bytes written to GPU buffers by one repetition's frame.
+    pub submits: u64,
+    pub upload_bytes: u64,
     pub(crate) repetitions: u32,
     /// The splat passes pulled their surfels from a storage buffer (else instanced quads).
     pub splats_pulled: bool,
@@ -600,7 +606,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Times every pass `reps` times on the package's first camera (or a default view).
 pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
     use crate::light::plan::Pass;
-    let gpu = Gpu::new(&opts.gpu)?;
+    let gpu = Gpu::new(&GpuOptions { work_counters: true, ..opts.gpu.clone() })?;
     let Prepared { scene, cameras, residency, .. } = prepare(opts, &gpu)?;
     let cam = cameras[0];
     let mut settings = opts.settings.clone();
@@ -626,6 +632,8 @@ pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
         }
     }
     let median_ms = samples.into_iter().map(|(p, v)| (p.name().to_string(), median(v))).collect();
+    let stats = r.stats();
+    let work = stats.work.iter().map(|(p, w)| (p.name().to_string(), *w)).collect();
     Ok(PassBench {
         package: opts.package.display().to_string(),
         device: gpu.describe(),
@@ -641,6 +649,9 @@ pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
         shadowed_lights: r.shadowed_lights(),
         lights_in_range: r.lights_in_range(),
         median_ms,
+        work,
+        submits: stats.last_submits,
+        upload_bytes: stats.last_upload_bytes,
         repetitions: reps,
         splats_pulled: r.splats_pulled(),
         tile_bytes: scene.tile_bytes(r.settings().radiance_f16),

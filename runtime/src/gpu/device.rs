@@ -78,6 +78,9 @@ pub struct GpuOptions {
     /// Ask the device for WebGPU's default limits only (what every browser grants without being
     /// asked for more), to check on a native adapter that the passes fit in a browser.
     pub webgpu_limits: bool,
+    /// Ask for pipeline statistics queries where the adapter has them, so the renderer counts
+    /// each pass's shader invocations (`grotto bench`; render/counters.rs).
+    pub work_counters: bool,
 }
 
 /// A device and queue ready for grotto's passes.
@@ -91,6 +94,8 @@ pub struct Gpu {
     /// Timestamp queries are used (per-pass GPU times); otherwise, and always on software
     /// adapters, passes are timed on the CPU around a blocking submit each.
     pub(crate) timestamps: bool,
+    /// Pipeline statistics queries are on (asked for, and the adapter has them).
+    pub(crate) pipeline_statistics: bool,
     errors: Arc<Mutex<Vec<String>>>,
 }
 
@@ -215,6 +220,12 @@ impl Gpu {
         if timestamps {
             features |= wgpu::Features::TIMESTAMP_QUERY;
         }
+        let pipeline_statistics = opts.work_counters
+            && adapter.features().contains(wgpu::Features::PIPELINE_STATISTICS_QUERY)
+            && !cfg!(target_arch = "wasm32");
+        if pipeline_statistics {
+            features |= wgpu::Features::PIPELINE_STATISTICS_QUERY;
+        }
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("grotto"),
@@ -231,7 +242,7 @@ impl Gpu {
                 v.push(e.to_string());
             }
         }));
-        Ok(Self { adapter, device, queue, info, timestamps, errors })
+        Ok(Self { adapter, device, queue, info, timestamps, pipeline_statistics, errors })
     }
 
     /// "name (backend, type)" for logs and reports.

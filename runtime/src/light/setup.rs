@@ -81,7 +81,7 @@ impl LightSetup {
                         ] {
                             let proj = Mat4::perspective_rh(std::f32::consts::FRAC_PI_2, 1.0, near_m, far_m);
                             let view_proj = proj * Mat4::look_at_rh(p, p + fwd, up);
-                            faces.push(Face { view_proj, eye_m: p, proj_scale: 1.0 });
+                            faces.push(Face { view_proj, eye_m: p, proj_scale: 1.0, range_m: range });
                         }
                     }
                     lights.push(LightGpu {
@@ -98,7 +98,12 @@ impl LightSetup {
                         let up = if s.direction.cross(Vec3::Z).length() < 1e-3 { Vec3::Y } else { Vec3::Z };
                         let proj = Mat4::perspective_rh(2.0 * outer, 1.0, near_m, far_m);
                         let view_proj = proj * Mat4::look_at_rh(p, p + s.direction, up);
-                        faces.push(Face { view_proj, eye_m: p, proj_scale: 1.0 / outer.tan() });
+                        faces.push(Face {
+                            view_proj,
+                            eye_m: p,
+                            proj_scale: 1.0 / outer.tan(),
+                            range_m: range,
+                        });
                     }
                     lights.push(LightGpu {
                         position_kind: p.extend(1.0).to_array(),

@@ -78,7 +78,7 @@ impl Gbuffer {
         targets: &Targets,
         fetch: &splat::Fetch,
         runs: &[std::ops::Range<u32>],
-        timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
+        (timestamps, stats): (Option<wgpu::RenderPassTimestampWrites<'_>>, Option<(&wgpu::QuerySet, u32)>),
     ) {
         let views =
             [&targets.distance, &targets.normal, &targets.albedo].map(|t| t.create_view(&Default::default()));
@@ -102,12 +102,18 @@ impl Gbuffer {
             occlusion_query_set: None,
             multiview_mask: None,
         });
+        if let Some((set, i)) = stats {
+            pass.begin_pipeline_statistics_query(set, i);
+        }
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.camera.groups[0], &[]);
         fetch.bind(&mut pass);
-        // The surfel ranges of the tiles in view (the renderer culls by tile box).
+        // The surfel runs in view (the renderer culls by chunk box).
         for r in runs {
             fetch.draw(&mut pass, r);
+        }
+        if stats.is_some() {
+            pass.end_pipeline_statistics_query();
         }
     }
 }

@@ -4,7 +4,8 @@
 //! the atlas and the faces' splat uniforms; inject and shade read the atlas with a 3x3
 //! percentage-closer filter (shaders/lights.wgsl).
 //!
-//! A face draws only the tiles its frustum meets (`camera::sees_box`), and after a change of
+//! A face draws only the surfel chunks its frustum and its light's range meet (render/chunks.rs),
+//! and after a change of
 //! resident tiles only the faces that see a changed tile are drawn again (the others keep their
 //! texels: the pass loads the atlas and clears a redrawn face by copying a blank one over it).
 
@@ -27,13 +28,15 @@ pub(crate) fn packed_clear(v: f32) -> wgpu::Color {
     wgpu::Color { r: c(0), g: c(1), b: c(2), a: c(3) }
 }
 
-/// One face of the atlas: light-space view-projection, the light's position, and the projection
-/// scale (1 / tan(fov / 2)).
+/// One face of the atlas: light-space view-projection, the light's position, the projection
+/// scale (1 / tan(fov / 2)), and the light's range (nothing beyond it is lit: infinite without a
+/// cutoff).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Face {
     pub(crate) view_proj: Mat4,
     pub(crate) eye_m: Vec3,
     pub(crate) proj_scale: f32,
+    pub(crate) range_m: f32,
 }
 
 #[derive(Debug)]
@@ -176,8 +179,8 @@ impl Shadow {
         self.atlas_bytes
     }
 
-    /// Renders the faces `draws` names (`Some(surfel ranges)`: the surfels of the tiles the face
-    /// sees) into their squares of the atlas in one pass (one viewport per face). With every face
+    /// Renders the faces `draws` names (`Some(surfel ranges)`: the surfel chunks the face may
+    /// see) into their squares of the atlas in one pass (one viewport per face). With every face
     /// named the atlas is cleared; else the other faces keep their texels and each named one is
     /// cleared first (the blank face copied over it).
     pub(crate) fn record(
@@ -185,7 +188,7 @@ impl Shadow {
         enc: &mut wgpu::CommandEncoder,
         fetch: &splat::Fetch,
         draws: &[Option<Vec<Range<u32>>>],
-        timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
+        (timestamps, stats): (Option<wgpu::RenderPassTimestampWrites<'_>>, Option<(&wgpu::QuerySet, u32)>),
     ) {
         let every = draws.iter().all(Option::is_some);
         let corner =
@@ -223,6 +226,9 @@ impl Shadow {
             occlusion_query_set: None,
             multiview_mask: None,
         });
+        if let Some((set, i)) = stats {
+            pass.begin_pipeline_statistics_query(set, i);
+        }
         pass.set_pipeline(&self.pipeline);
         fetch.bind(&mut pass);
         let s = self.face_size as f32;
@@ -235,6 +241,9 @@ impl Shadow {
             for r in runs {
                 fetch.draw(&mut pass, r);
             }
+        }
+        if stats.is_some() {
+            pass.end_pipeline_statistics_query();
         }
     }
 }

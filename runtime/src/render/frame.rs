@@ -5,12 +5,14 @@ use std::ops::Range;
 use web_time::Instant;
 
 use crate::error::{Error, Result};
-use crate::gpu::types::{Params, SplatUniform, flags};
+use crate::gpu::types::{ActiveTile, Params, SplatUniform, flags};
 use crate::light::activity::Why;
 use crate::light::plan::{self, EffectPlan, Pass, PlanInputs};
 use crate::passes::gbuffer;
 use crate::view::camera::Camera;
 
+use crate::render::chunks::Viewer;
+use crate::render::counters::PassWork;
 use crate::render::renderer::Renderer;
 use crate::render::renderer::View;
 use crate::settings::{IndirectFilter, ViewMode};
@@ -273,9 +275,21 @@ impl Renderer {
         self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") })
     }
 
-    /// Records one pass into `enc`.
-    pub(super) fn record(&self, enc: &mut wgpu::CommandEncoder, pass: Pass) -> Result<()> {
+    /// The pool runs `viewer` may see, culled as the settings say.
+    fn runs_seen(&self, viewer: Option<&Viewer<'_>>) -> Vec<Range<u32>> {
+        let sizes = (self.leaf_size_m, self.settings.splat_scale);
+        self.pools.runs_seen(viewer, sizes, self.settings.cull_chunks)
+    }
+
+    /// Records one pass into `enc`; returns its draw calls and surfels drawn (splat passes).
+    pub(super) fn record(&self, enc: &mut wgpu::CommandEncoder, pass: Pass) -> Result<PassWork> {
         let ts = self.timestamp_pair(pass);
+        let stats = self.stat_queries.as_ref().map(|q| q.slot(pass));
+        let mut work = PassWork::default();
+        let mut count = |runs: &[Range<u32>]| {
+            work.draws += runs.len() as u64;
+            work.surfels += runs.iter().map(|r| u64::from(r.end - r.start)).sum::<u64>();
+        };
         let render_ts = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
             query_set: set,
             beginning_of_pass_write_index: Some(i),
@@ -283,21 +297,33 @@ impl Renderer {
         });
         match pass {
             Pass::Shadow => {
+                let size = self.shadow.face_size();
+                let grow_ndc = Viewer::grow_for(size, size, self.settings.min_splat_px);
                 let draws: Vec<Option<Vec<Range<u32>>>> = self
                     .shadow
                     .faces()
                     .iter()
                     .zip(&self.shadow_dirty)
                     .map(|(f, &dirty)| {
-                        dirty.then(|| self.pools.runs_seen(Some(&f.view_proj), self.leaf_size_m))
+                        let viewer =
+                            Viewer { view_proj: &f.view_proj, grow_ndc, light: Some((f.eye_m, f.range_m)) };
+                        dirty.then(|| self.runs_seen(Some(&viewer)))
                     })
                     .collect();
-                self.shadow.record(enc, &self.splats, &draws, render_ts);
+                draws.iter().flatten().for_each(|r| count(r));
+                self.shadow.record(enc, &self.splats, &draws, (render_ts, stats));
             }
             Pass::Gbuffer => {
                 let v = self.view("gbuffer")?;
-                let runs = self.pools.runs_seen(self.camera_view_proj.as_ref(), self.leaf_size_m);
-                self.gbuffer.record(enc, &v.targets, &self.splats, &runs, render_ts);
+                let (w, h) = (v.targets.width, v.targets.height);
+                let viewer = self.camera_view_proj.as_ref().map(|m| Viewer {
+                    view_proj: m,
+                    grow_ndc: Viewer::grow_for(w, h, self.settings.min_splat_px),
+                    light: None,
+                });
+                let runs = self.runs_seen(viewer.as_ref());
+                count(&runs);
+                self.gbuffer.record(enc, &v.targets, &self.splats, &runs, (render_ts, stats));
             }
             compute => {
                 let tw = ts.map(|(set, i)| wgpu::ComputePassTimestampWrites {
@@ -309,6 +335,9 @@ impl Renderer {
                     label: Some(compute.name()),
                     timestamp_writes: tw,
                 });
+                if let Some((set, i)) = stats {
+                    cp.begin_pipeline_statistics_query(set, i);
+                }
                 match compute {
                     Pass::Inject => self.inject.record(&mut cp, self.leaf_count),
                     Pass::Env => self.env.record(&mut cp, self.leaf_count),
@@ -320,9 +349,12 @@ impl Renderer {
                     }
                     Pass::Shadow | Pass::Gbuffer => {}
                 }
+                if stats.is_some() {
+                    cp.end_pipeline_statistics_query();
+                }
             }
         }
-        Ok(())
+        Ok(work)
     }
 
     /// Records and submits the plan's passes (one encoder, or one per pass where the adapter has
@@ -335,7 +367,8 @@ impl Renderer {
         }
         for step in plan.steps.iter().filter(|s| s.run) {
             let recorded = Instant::now();
-            self.record(&mut enc, step.pass)?;
+            let work = self.record(&mut enc, step.pass)?;
+            self.stats_now.work.insert(step.pass, work);
             *self.stats_now.dispatches.entry(step.pass).or_default() += 1;
             ran.push(step.pass);
             if self.queries.is_none() && !cfg!(target_arch = "wasm32") {
@@ -343,6 +376,7 @@ impl Renderer {
                 // own blocking submit (not in a browser, which cannot block).
                 let done = std::mem::replace(&mut enc, self.encoder());
                 self.gpu.queue.submit([done.finish()]);
+                self.stats_now.last_submits += 1;
                 self.gpu.wait()?;
                 let ms = recorded.elapsed().as_secs_f64() * 1e3;
                 self.stats_now.last_ms.insert(step.pass, ms);
@@ -353,7 +387,11 @@ impl Renderer {
         {
             enc.resolve_query_set(set, 0..2 * Pass::ALL.len() as u32, buf, 0);
         }
+        if let Some(q) = &self.stat_queries {
+            q.resolve(&mut enc, ran);
+        }
         self.gpu.queue.submit([enc.finish()]);
+        self.stats_now.last_submits += 1;
         self.gpu.wait()
     }
 
@@ -367,6 +405,8 @@ impl Renderer {
     ) -> Result<()> {
         let params = self.frame_params(frame);
         self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        self.stats_now.last_submits = 0;
+        self.stats_now.last_upload_bytes = size_of::<Params>() as u64;
         if plan.runs(Pass::Propagate) {
             if self.bounce_at.is_none() && self.activity.pending_tiles() == 0 {
                 // Forced past convergence: a bounce means every tile.
@@ -379,6 +419,7 @@ impl Renderer {
                 if !tiles.is_empty() {
                     self.gpu.queue.write_buffer(&self.active, 16, bytemuck::cast_slice(&tiles));
                 }
+                self.stats_now.last_upload_bytes += 8 + (tiles.len() * size_of::<ActiveTile>()) as u64;
                 self.active_written = Some(items);
             }
             let items = self.active_written.unwrap_or(0);
@@ -386,11 +427,13 @@ impl Renderer {
             let end = slice.map_or(items, |n| first.saturating_add(n).min(items));
             self.slice_run = (first, end);
             self.gpu.queue.write_buffer(&self.active, 8, bytemuck::cast_slice(&[first, end]));
+            self.stats_now.last_upload_bytes += 8;
         }
         if let Some((camera, w, h)) = frame
             && plan.runs(Pass::Gbuffer)
         {
             self.prepare_view(camera, w, h)?;
+            self.stats_now.last_upload_bytes += size_of::<SplatUniform>() as u64;
         }
         // The frame runs inside one validation error scope; when it catches an error, each pass
         // is recorded again alone in a scope of its own (and not submitted) to name the culprit.
@@ -426,6 +469,11 @@ impl Renderer {
                 let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period / 1e6;
                 self.stats_now.last_ms.insert(*pass, dt);
             }
+        }
+        if let Some(q) = &self.stat_queries
+            && !ran.is_empty()
+        {
+            q.read(&self.gpu, &ran, &mut self.stats_now.work)?;
         }
         if ran.contains(&Pass::Shadow) {
             self.shadow_drawn += self.shadow_dirty.iter().filter(|d| **d).count() as u64;

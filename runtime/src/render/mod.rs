@@ -1,6 +1,8 @@
 //! The renderer: the state it owns ([`renderer`]), the tile pools it writes tiles into
 //! ([`pool`]), and the blit that shows a frame on a surface ([`present`]).
 
+mod chunks;
+mod counters;
 mod frame;
 mod light;
 mod params;
@@ -10,6 +12,7 @@ pub mod renderer;
 mod tiles;
 mod update;
 
+pub use counters::PassWork;
 pub use frame::{Frame, LdrOutput};
 pub use light::{CarriedLight, LightProgress};
 pub use params::{auto_exposure, cone_set};

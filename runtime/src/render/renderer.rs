@@ -23,6 +23,7 @@ use crate::render::pool::{Placement, PoolCaps, Pools, surfel_owners};
 use crate::scene::data::{SceneData, SceneLight};
 use crate::view::camera::Camera;
 
+use crate::render::counters::{PassWork, StatQueries};
 use crate::render::params::Lookup;
 use crate::render::params::base_params;
 use crate::render::params::material_slots;
@@ -44,6 +45,12 @@ pub struct PassStats {
     /// Leaves updated by all propagation bounces so far (a bounce updates only the tiles whose
     /// light may still change: activity.rs).
     pub propagated_leaves: u64,
+    /// What each pass's last run did (render/counters.rs).
+    pub work: BTreeMap<Pass, PassWork>,
+    /// Command buffers submitted and bytes written to GPU buffers by the last frame (a call of
+    /// `render` or a light update; scene updates count their own bytes).
+    pub last_submits: u64,
+    pub last_upload_bytes: u64,
 }
 
 /// Uploaded scene, passes and light state.
@@ -127,6 +134,7 @@ pub struct Renderer {
     pub(super) slice_run: (u32, u32),
     pub(super) stats_now: PassStats,
     pub(super) queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+    pub(super) stat_queries: Option<StatQueries>,
 }
 
 /// What two scenes must share for one to replace the other in a renderer's pools: the same lights,
@@ -214,7 +222,7 @@ impl Renderer {
             f16,
             splats.pulls(),
         )?;
-        let tile_pools = TilePools::new(pools, placed, cull_tiles, &up, index_offset);
+        let tile_pools = TilePools::new(pools, placed, (scene, cull_tiles), &up, index_offset);
         let shared = &up.shared;
 
         let (by_height, ranges) = scene.nodes_by_height();
@@ -283,6 +291,7 @@ impl Renderer {
             slice_run: (0, 0),
             stats_now: PassStats::default(),
             queries: pass_queries(gpu),
+            stat_queries: StatQueries::new(gpu),
         };
         gpu.check("upload")?;
         Ok(r)

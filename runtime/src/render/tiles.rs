@@ -3,8 +3,9 @@
 
 use std::collections::{HashMap, HashSet};
 use std::ops::Range;
+use std::sync::Arc;
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
@@ -15,6 +16,7 @@ use crate::passes::{self};
 use crate::render::pool::{PoolCaps, Pools, TileKey, key, merge_runs, surfel_owners};
 use crate::scene::data::SceneData;
 
+use crate::render::chunks::{Chunk, ChunkCache, Viewer};
 use crate::render::params::Lookup;
 use crate::render::params::tile_box;
 use crate::render::pool::Placement;
@@ -27,6 +29,9 @@ pub(super) struct TilePools {
     /// The resident tiles as the GPU holds them (offsets into the pools), and each one's surfels.
     tiles: Vec<TileGpu>,
     tile_surfels: Vec<Range<u32>>,
+    /// Each resident tile's surfel chunks (chunks.rs), and those of every resident form.
+    tile_chunks: Vec<Arc<Vec<Chunk>>>,
+    chunk_cache: ChunkCache,
     /// Tiles may be culled by their boxes (their surfels lie in them: false for a scene put
     /// together by hand, whose surfels all count as its first tile's).
     cull_tiles: bool,
@@ -56,13 +61,23 @@ impl TilePools {
     pub(super) fn new(
         slots: Pools,
         placed: Placement,
-        cull_tiles: bool,
+        (scene, cull_tiles): (&SceneData, bool),
         up: &Upload,
         index_offset: u64,
     ) -> Self {
+        let (owners, _) = surfel_owners(scene);
+        let mut chunk_cache = ChunkCache::default();
+        let tile_chunks = placed
+            .tiles
+            .iter()
+            .zip(&owners)
+            .map(|(t, r)| chunk_cache.get_or_build(key(t), &scene.surfels[r.start as usize..r.end as usize]))
+            .collect();
         Self {
             slots,
             tile_surfels: placed.slots.iter().map(|s| s.surfels.clone()).collect(),
+            tile_chunks,
+            chunk_cache,
             tiles: placed.tiles,
             cull_tiles,
             tiles_buf: up.tiles.clone(),
@@ -125,13 +140,24 @@ impl TilePools {
         gpu.queue.write_buffer(&self.leaf_light, at, bytemuck::cast_slice(light));
     }
 
-    /// The surfel ranges of the tiles a view of `view_proj` may see, merged (every resident surfel
-    /// where tiles cannot be culled, or without a view).
-    pub(super) fn runs_seen(&self, view_proj: Option<&Mat4>, leaf_size_m: f32) -> Vec<Range<u32>> {
-        let seen = |t: &TileGpu| match view_proj {
-            Some(m) if self.cull_tiles => {
+    /// The surfel ranges `viewer` may see, merged: by surfel chunks (chunks.rs), or with
+    /// `by_chunks` off by tile boxes only (where tiles can be culled: the draws before issue 43,
+    /// kept to measure against); every resident surfel without a viewer.
+    pub(super) fn runs_seen(
+        &self,
+        viewer: Option<&Viewer<'_>>,
+        (leaf_size_m, splat_scale): (f32, f32),
+        by_chunks: bool,
+    ) -> Vec<Range<u32>> {
+        if by_chunks && let Some(v) = viewer {
+            let tiles: Vec<(Range<u32>, Arc<Vec<Chunk>>)> =
+                self.tile_surfels.iter().cloned().zip(self.tile_chunks.iter().cloned()).collect();
+            return super::chunks::runs_seen(&tiles, v, splat_scale);
+        }
+        let seen = |t: &TileGpu| match viewer {
+            Some(v) if self.cull_tiles => {
                 let (lo, hi) = tile_box(t, leaf_size_m);
-                crate::view::camera::sees_box(m, lo, hi)
+                crate::view::camera::sees_box(v.view_proj, lo, hi)
             }
             _ => true,
         };
@@ -193,6 +219,15 @@ impl TilePools {
             .map(|t| tile_box(t, leaf_size_m))
             .collect();
         self.tile_surfels = placed.slots.iter().map(|s| s.surfels.clone()).collect();
+        self.chunk_cache.retain(&new_keys);
+        self.tile_chunks = placed
+            .tiles
+            .iter()
+            .zip(&owners)
+            .map(|(t, r)| {
+                self.chunk_cache.get_or_build(key(t), &scene.surfels[r.start as usize..r.end as usize])
+            })
+            .collect();
         self.tiles = placed.tiles;
         Ok(Some(PlacedScene { update, light_kept, changed }))
     }

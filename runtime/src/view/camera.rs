@@ -1,6 +1,6 @@
 //! Pinhole cameras in frame coordinates and camera paths between named viewpoints.
 
-use glam::{Mat4, Vec3, Vec4};
+use glam::{Mat4, Vec2, Vec3, Vec4};
 
 use crate::error::{Error, Result};
 use crate::scene::data::SceneCamera;
@@ -183,6 +183,13 @@ pub fn path(keys: &[Camera], frames: u32) -> Vec<Camera> {
 /// what shows. Shadow faces and the G-buffer cull tiles with it; residency's `in_frustum` is the
 /// same test from view parameters, with no far plane.
 pub(crate) fn sees_box(view_proj: &Mat4, lo: Vec3, hi: Vec3) -> bool {
+    sees_box_grown(view_proj, lo, hi, Vec2::ZERO)
+}
+
+/// [`sees_box`] with the side planes moved out by `grow_ndc` (NDC units in x and y): for what
+/// may reach past the viewport's edges by a margin the box does not hold (discs grown to a pixel
+/// floor).
+pub(crate) fn sees_box_grown(view_proj: &Mat4, lo: Vec3, hi: Vec3, grow_ndc: Vec2) -> bool {
     let corners: [Vec4; 8] = std::array::from_fn(|i| {
         let c = Vec3::new(
             if i & 1 == 0 { lo.x } else { hi.x },
@@ -191,10 +198,14 @@ pub(crate) fn sees_box(view_proj: &Mat4, lo: Vec3, hi: Vec3) -> bool {
         );
         *view_proj * c.extend(1.0)
     });
-    let outside = |plane: fn(Vec4) -> f32| corners.iter().all(|&c| plane(c) < 0.0);
-    let planes: [fn(Vec4) -> f32; 6] =
-        [|c| c.w + c.x, |c| c.w - c.x, |c| c.w + c.y, |c| c.w - c.y, |c| c.z, |c| c.w - c.z];
-    !planes.into_iter().any(outside)
+    let (gx, gy) = (1.0 + grow_ndc.x.max(0.0), 1.0 + grow_ndc.y.max(0.0));
+    let outside = |plane: &dyn Fn(Vec4) -> f32| corners.iter().all(|&c| plane(c) < 0.0);
+    !(outside(&|c| gx * c.w + c.x)
+        || outside(&|c| gx * c.w - c.x)
+        || outside(&|c| gy * c.w + c.y)
+        || outside(&|c| gy * c.w - c.y)
+        || outside(&|c| c.z)
+        || outside(&|c| c.w - c.z))
 }
 
 #[cfg(test)]

@@ -1,0 +1,229 @@
+//! Surfel chunks: each tile's surfels in runs of [`CHUNK_SURFELS`] with the box their centres
+//! fill and their largest radius, so a shadow face or the camera draws only the runs its frustum
+//! (and, for a light, its range) meets. A tile box is too coarse for that: the demo cave has three
+//! tiles and fourteen lamps, and every cube face of a lamp met every tile, so each face drew all
+//! 402k discs to keep about a sixth of them. A package stores a tile's surfels in Morton order, so
+//! a run is a compact patch of wall; the boxes are taken from the surfels themselves, so a scene
+//! in another order is still drawn whole, only culled less.
+
+use std::collections::HashMap;
+use std::ops::Range;
+use std::sync::Arc;
+
+use glam::{Mat4, Vec2, Vec3};
+
+use crate::gpu::types::SurfelGpu;
+use crate::render::pool::TileKey;
+
+/// Surfels a chunk holds (the last one of a tile may hold fewer). A draw call per visible run of
+/// chunks (adjacent ones merge), so smaller chunks cull tighter and cost more draws:
+/// `grotto bench --json` counts both (docs/benchmarks.md "Surfel chunks").
+pub(crate) const CHUNK_SURFELS: u32 = 1024;
+
+/// One chunk: surfels `first..first + len` of its tile (offsets into the tile's own surfels), the
+/// box of their centres, and their largest stored radius.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Chunk {
+    pub(crate) first: u32,
+    pub(crate) len: u32,
+    pub(crate) lo_m: Vec3,
+    pub(crate) hi_m: Vec3,
+    pub(crate) radius_m: f32,
+}
+
+impl Chunk {
+    /// The box the chunk's discs fill at `splat_scale` (before the pixel floor grows them).
+    pub(crate) fn disc_box(&self, splat_scale: f32) -> (Vec3, Vec3) {
+        let r = Vec3::splat(self.radius_m * splat_scale.max(0.0));
+        (self.lo_m - r, self.hi_m + r)
+    }
+}
+
+/// The chunks of one tile's surfels. A surfel with a non-finite centre draws nothing, so it
+/// widens no box; a chunk of only such surfels gets an empty box (lo > hi) that no view meets.
+pub(crate) fn chunks_of(surfels: &[SurfelGpu]) -> Vec<Chunk> {
+    surfels
+        .chunks(CHUNK_SURFELS as usize)
+        .enumerate()
+        .map(|(i, run)| {
+            let (mut lo, mut hi, mut radius) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN), 0.0f32);
+            for s in run {
+                let p = Vec3::from_slice(&s.position_radius[..3]);
+                if p.is_finite() {
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                    let r = s.position_radius[3];
+                    if r.is_finite() {
+                        radius = radius.max(r.abs());
+                    }
+                }
+            }
+            Chunk {
+                first: i as u32 * CHUNK_SURFELS,
+                len: run.len() as u32,
+                lo_m: lo,
+                hi_m: hi,
+                radius_m: radius,
+            }
+        })
+        .collect()
+}
+
+/// What a view may see: its view-projection, how far past the viewport's edges a disc's centre
+/// may lie and still show (in NDC units per axis: the pixel floor grows far discs beyond their
+/// world radius), and, for a light's face, the light's position and range (nothing beyond it is
+/// lit, so nothing there casts a shadow that shows).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Viewer<'a> {
+    pub(crate) view_proj: &'a Mat4,
+    pub(crate) grow_ndc: Vec2,
+    pub(crate) light: Option<(Vec3, f32)>,
+}
+
+impl Viewer<'_> {
+    /// How far (NDC) past the edges of a `width` x `height` viewport a disc grown to
+    /// `min_splat_px` pixels of radius may reach: its radius, half again for the quad's slant
+    /// and one pixel of rasterisation.
+    pub(crate) fn grow_for(width: u32, height: u32, min_splat_px: f32) -> Vec2 {
+        let px = 1.5 * min_splat_px.max(0.0) + 1.0;
+        Vec2::new(2.0 * px / width.max(1) as f32, 2.0 * px / height.max(1) as f32)
+    }
+
+    /// Whether the box `lo..hi` may show.
+    pub(crate) fn sees(&self, lo: Vec3, hi: Vec3) -> bool {
+        if lo.cmpgt(hi).any() {
+            return false;
+        }
+        if let Some((eye, range)) = self.light
+            && eye.clamp(lo, hi).distance_squared(eye) > range * range
+        {
+            return false;
+        }
+        crate::view::camera::sees_box_grown(self.view_proj, lo, hi, self.grow_ndc)
+    }
+}
+
+/// Each resident tile form's chunks, kept while the form stays resident so a change of tiles
+/// reads only the surfels of the forms that came.
+#[derive(Debug, Default)]
+pub(crate) struct ChunkCache {
+    by_key: HashMap<TileKey, Arc<Vec<Chunk>>>,
+}
+
+impl ChunkCache {
+    /// The chunks of the tile form `key`, whose surfels are `surfels`, from the cache when it has
+    /// them.
+    pub(crate) fn get_or_build(&mut self, key: TileKey, surfels: &[SurfelGpu]) -> Arc<Vec<Chunk>> {
+        self.by_key.entry(key).or_insert_with(|| Arc::new(chunks_of(surfels))).clone()
+    }
+
+    /// Forgets the forms not in `keep`.
+    pub(crate) fn retain(&mut self, keep: &std::collections::HashSet<TileKey>) {
+        self.by_key.retain(|k, _| keep.contains(k));
+    }
+}
+
+/// The pool runs of the chunks `viewer` may see, for tiles whose surfels sit at `tile_surfels`
+/// in the pool, merged where adjacent. Chunk offsets past a tile's range (a cache built from
+/// other surfels) are cut to it.
+pub(crate) fn runs_seen(
+    tiles: &[(Range<u32>, Arc<Vec<Chunk>>)],
+    viewer: &Viewer<'_>,
+    splat_scale: f32,
+) -> Vec<Range<u32>> {
+    let mut runs: Vec<Range<u32>> = Vec::new();
+    for (at, chunks) in tiles {
+        for c in chunks.iter() {
+            let (lo, hi) = c.disc_box(splat_scale);
+            if !viewer.sees(lo, hi) {
+                continue;
+            }
+            let start = at.start.saturating_add(c.first).min(at.end);
+            let end = start.saturating_add(c.len).min(at.end);
+            match runs.last_mut() {
+                Some(last) if last.end == start => last.end = end,
+                _ if start < end => runs.push(start..end),
+                _ => {}
+            }
+        }
+    }
+    crate::render::pool::merge_runs(runs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn surfel(p: [f32; 3], r: f32) -> SurfelGpu {
+        SurfelGpu {
+            position_radius: [p[0], p[1], p[2], r],
+            normal_spread: [0.0, 0.0, 1.0, 0.0],
+            color: [255; 4],
+            scan: 0,
+        }
+    }
+
+    #[test]
+    fn chunks_cover_every_surfel_and_box_their_discs() {
+        let n = CHUNK_SURFELS as usize * 2 + 7;
+        let surfels: Vec<SurfelGpu> = (0..n).map(|i| surfel([i as f32, 0.0, -(i as f32)], 0.5)).collect();
+        let chunks = chunks_of(&surfels);
+        assert_eq!(chunks.len(), 3);
+        assert_eq!(chunks.iter().map(|c| c.len as usize).sum::<usize>(), n);
+        assert_eq!(chunks[2].first, 2 * CHUNK_SURFELS);
+        let (lo, hi) = chunks[1].disc_box(2.0);
+        assert_eq!(lo, Vec3::new(1024.0 - 1.0, -1.0, -2047.0 - 1.0));
+        assert_eq!(hi, Vec3::new(2047.0 + 1.0, 1.0, -1024.0 + 1.0));
+    }
+
+    #[test]
+    fn non_finite_surfels_widen_no_box_and_a_chunk_of_them_is_never_seen() {
+        let mut surfels = vec![surfel([f32::NAN, 0.0, 0.0], 1.0); CHUNK_SURFELS as usize];
+        surfels.push(surfel([1.0, 2.0, 3.0], f32::INFINITY));
+        surfels.push(surfel([f32::INFINITY, 0.0, 0.0], 1.0));
+        let chunks = chunks_of(&surfels);
+        let m = Mat4::IDENTITY;
+        let viewer = Viewer { view_proj: &m, grow_ndc: Vec2::ZERO, light: None };
+        let (lo, hi) = chunks[0].disc_box(1.0);
+        assert!(!viewer.sees(lo, hi), "a chunk of NaN centres has no box");
+        assert_eq!(
+            (chunks[1].lo_m, chunks[1].hi_m, chunks[1].radius_m),
+            (Vec3::new(1.0, 2.0, 3.0), Vec3::new(1.0, 2.0, 3.0), 0.0)
+        );
+    }
+
+    /// Runs are the seen chunks at the tile's place in the pool, merged across tiles, and a
+    /// light's range cuts what lies wholly beyond it.
+    #[test]
+    fn runs_follow_the_seen_chunks_and_the_light_range() {
+        let proj = Mat4::perspective_rh(std::f32::consts::FRAC_PI_2, 1.0, 0.1, 1000.0);
+        let view_proj = proj * Mat4::look_at_rh(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y);
+        // Tile A: a chunk ahead (z = -5), a chunk behind (z = +5), a chunk ahead far away (z = -50).
+        let k = CHUNK_SURFELS as usize;
+        let mut a = vec![surfel([0.0, 0.0, -5.0], 0.1); k];
+        a.extend(vec![surfel([0.0, 0.0, 5.0], 0.1); k]);
+        a.extend(vec![surfel([0.0, 0.0, -50.0], 0.1); 10]);
+        let b = vec![surfel([0.0, 0.0, -6.0], 0.1); 5];
+        let n_a = a.len() as u32;
+        let tiles =
+            vec![(100..100 + n_a, Arc::new(chunks_of(&a))), (100 + n_a..105 + n_a, Arc::new(chunks_of(&b)))];
+        let all = Viewer { view_proj: &view_proj, grow_ndc: Vec2::ZERO, light: None };
+        let k = k as u32;
+        assert_eq!(runs_seen(&tiles, &all, 1.0), vec![100..100 + k, 100 + 2 * k..105 + n_a]);
+        let lamp = Viewer { light: Some((Vec3::ZERO, 10.0)), ..all };
+        assert_eq!(runs_seen(&tiles, &lamp, 1.0), vec![100..100 + k, 100 + n_a..105 + n_a]);
+    }
+
+    #[test]
+    fn a_disc_grown_to_the_pixel_floor_keeps_its_chunk_past_the_edge() {
+        let proj = Mat4::perspective_rh(std::f32::consts::FRAC_PI_2, 1.0, 0.1, 1000.0);
+        let view_proj = proj * Mat4::look_at_rh(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y);
+        // A tiny disc 100 m ahead, its centre half a pixel (of 512) right of the edge.
+        let x = 100.0 * (1.0 + 1.0 / 512.0);
+        let (lo, hi) = (Vec3::new(x, 0.0, -100.0), Vec3::new(x, 0.0, -100.0));
+        let tight = Viewer { view_proj: &view_proj, grow_ndc: Vec2::ZERO, light: None };
+        assert!(!tight.sees(lo, hi));
+        let grown = Viewer { grow_ndc: Viewer::grow_for(512, 512, 0.75), ..tight };
+        assert!(grown.sees(lo, hi));
+    }
+}
