@@ -78,6 +78,11 @@ pub struct Settings {
     /// whole tiles by their boxes, as before issue 43 (the same image, more work: for measuring
     /// the difference, `--cull tiles`).
     pub cull_chunks: bool,
+    /// Thin far surfel chunks to every k-th surfel, grown to close the surface, where their discs
+    /// are under the pixel floor (`min_splat_px`) anyway (render/chunks.rs `Lod`): distant walls
+    /// cost in proportion to their pixels, not their points. Off: every surfel drawn
+    /// (`--no-splat-lod`). Only where surfels are pulled (passes/splat.rs).
+    pub splat_lod: bool,
     /// What the image shows (`--view`): the lit scene, or one of the views survey users judge
     /// their data with. Views that show no light skip the light passes (plan.rs).
     pub view: ViewMode,
@@ -232,6 +237,7 @@ impl Default for Settings {
             shadow_fallback: ShadowFallback::Cone,
             light_cutoff_w_m2: 2e-4,
             cull_chunks: true,
+            splat_lod: true,
             view: ViewMode::Lit,
         }
     }

@@ -244,6 +244,10 @@ struct RenderArgs {
     /// the same image, for measuring the difference).
     #[arg(long, default_value = "chunks")]
     cull: String,
+    /// Draw every surfel of far chunks, not every k-th grown to close the surface where their
+    /// discs are under the pixel floor anyway (the level of detail by size on screen).
+    #[arg(long)]
+    no_splat_lod: bool,
     /// Replace the package's lights by a lamp string of N 8 W lamps spread over the cave's floors
     /// (to measure how cost grows with the number of lights).
     #[arg(long)]
@@ -359,6 +363,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
         other => anyhow::bail!("--cull {other:?}: use chunks or tiles"),
     };
     settings.splat_scale = a.splat_scale;
+    settings.splat_lod = !a.no_splat_lod;
     let camera = match (a.camera.clone(), a.eye, a.look_at) {
         (Some(name), _, _) => CameraChoice::Named(name),
         (None, Some(eye_m), Some(look_at_m)) => {

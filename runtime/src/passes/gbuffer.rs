@@ -77,7 +77,7 @@ impl Gbuffer {
         enc: &mut wgpu::CommandEncoder,
         targets: &Targets,
         fetch: &splat::Fetch,
-        runs: &[std::ops::Range<u32>],
+        runs: &[splat::SplatRun],
         (timestamps, stats): (Option<wgpu::RenderPassTimestampWrites<'_>>, Option<(&wgpu::QuerySet, u32)>),
     ) {
         let views =

@@ -9,8 +9,6 @@
 //! resident tiles only the faces that see a changed tile are drawn again (the others keep their
 //! texels: the pass loads the atlas and clears a redrawn face by copying a blank one over it).
 
-use std::ops::Range;
-
 use glam::{Mat4, Vec3};
 
 use super::splat;
@@ -187,7 +185,7 @@ impl Shadow {
         &self,
         enc: &mut wgpu::CommandEncoder,
         fetch: &splat::Fetch,
-        draws: &[Option<Vec<Range<u32>>>],
+        draws: &[Option<Vec<splat::SplatRun>>],
         (timestamps, stats): (Option<wgpu::RenderPassTimestampWrites<'_>>, Option<(&wgpu::QuerySet, u32)>),
     ) {
         let every = draws.iter().all(Option::is_some);

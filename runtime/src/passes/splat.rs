@@ -147,13 +147,40 @@ impl Fetch {
         }
     }
 
-    /// Draws the surfels of `run` (indices into the pool).
-    pub(crate) fn draw(&self, pass: &mut wgpu::RenderPass<'_>, run: &std::ops::Range<u32>) {
+    /// Draws the surfels of `run` (pulled: every `stride`-th; instanced: all of them).
+    pub(crate) fn draw(&self, pass: &mut wgpu::RenderPass<'_>, run: &SplatRun) {
         if self.pulls() {
-            pass.draw(run.start * 6..run.end * 6, 0..1);
+            // The stride rides in the instance index (one instance), which the vertex shader
+            // reads back; the vertex index counts the surfels drawn, so surfel = (vertex / 6) x
+            // stride.
+            let k = run.stride.max(1);
+            let (first, end) = (run.surfels.start.div_ceil(k), run.surfels.end.div_ceil(k));
+            pass.draw(first * 6..end * 6, k..k + 1);
         } else {
-            pass.draw(0..6, run.clone());
+            pass.draw(0..6, run.surfels.clone());
         }
+    }
+}
+
+/// Surfels of the pool a splat draw covers: every `stride`-th of `surfels` (those whose pool
+/// index is a multiple of it), each grown by sqrt(stride) so that a sparser set still closes the
+/// surface (a level of detail: render/chunks.rs chooses it from the discs' size in pixels).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct SplatRun {
+    pub(crate) surfels: std::ops::Range<u32>,
+    pub(crate) stride: u32,
+}
+
+impl SplatRun {
+    /// Every surfel of `surfels`.
+    pub(crate) fn all(surfels: std::ops::Range<u32>) -> Self {
+        Self { surfels, stride: 1 }
+    }
+
+    /// Surfels the draw covers.
+    pub(crate) fn drawn(&self) -> u64 {
+        let k = self.stride.max(1);
+        u64::from(self.surfels.end.div_ceil(k) - self.surfels.start.div_ceil(k).min(self.surfels.end.div_ceil(k)))
     }
 }
 

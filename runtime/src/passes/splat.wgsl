@@ -43,21 +43,23 @@ fn vs(
     @location(2) color: vec4<f32>,
     @location(3) scan: u32,
 ) -> VsOut {
-    return splat_corner(vi, position_radius, normal_spread, color, scan);
+    return splat_corner(vi, position_radius, normal_spread, color, scan, 1.0);
 }
 
-// Pulled: six vertices a surfel in one draw, the surfel read from the pool.
+// Pulled: six vertices a surfel in one draw, the surfel read from the pool. The instance index
+// is the draw's stride (passes/splat.rs `SplatRun`): every stride-th surfel, grown by its root.
 @vertex
-fn vs_pulled(@builtin(vertex_index) vi: u32) -> VsOut {
-    let b = (vi / 6u) * 10u;
+fn vs_pulled(@builtin(vertex_index) vi: u32, @builtin(instance_index) stride: u32) -> VsOut {
+    let k = max(stride, 1u);
+    let b = (vi / 6u) * k * 10u;
     let w = &surfel_words;
     let position_radius = bitcast<vec4<f32>>(vec4<u32>((*w)[b], (*w)[b + 1u], (*w)[b + 2u], (*w)[b + 3u]));
     let normal_spread = bitcast<vec4<f32>>(vec4<u32>((*w)[b + 4u], (*w)[b + 5u], (*w)[b + 6u], (*w)[b + 7u]));
-    return splat_corner(vi % 6u, position_radius, normal_spread, unpack4x8unorm((*w)[b + 8u]), (*w)[b + 9u]);
+    return splat_corner(vi % 6u, position_radius, normal_spread, unpack4x8unorm((*w)[b + 8u]), (*w)[b + 9u], sqrt(f32(k)));
 }
 
-// Corner `vi` (0..6) of a surfel's disc.
-fn splat_corner(vi: u32, position_radius: vec4<f32>, normal_spread: vec4<f32>, color: vec4<f32>, scan: u32) -> VsOut {
+// Corner `vi` (0..6) of a surfel's disc, its radius times `grow`.
+fn splat_corner(vi: u32, position_radius: vec4<f32>, normal_spread: vec4<f32>, color: vec4<f32>, scan: u32, grow: f32) -> VsOut {
     var out: VsOut;
     let p = position_radius.xyz;
     if splat.clip_min_m.w > 0.0 && (any(p < splat.clip_min_m.xyz) || any(p > splat.clip_max_m.xyz)) {
@@ -75,7 +77,7 @@ fn splat_corner(vi: u32, position_radius: vec4<f32>, normal_spread: vec4<f32>, c
     let t1 = frame[0];
     let t2 = frame[1];
     let center_clip = splat.view_proj * vec4<f32>(position_radius.xyz, 1.0);
-    var r = position_radius.w * splat.splat.x;
+    var r = position_radius.w * splat.splat.x * grow;
     if center_clip.w > 0.0 {
         let px = r * splat.viewport.w * splat.viewport.y * 0.5 / center_clip.w;
         if px < splat.viewport.z {

@@ -13,6 +13,7 @@ use std::sync::Arc;
 use glam::{Mat4, Vec2, Vec3};
 
 use crate::gpu::types::SurfelGpu;
+use crate::passes::splat::SplatRun;
 use crate::render::pool::TileKey;
 
 /// Surfels a chunk holds (the last one of a tile may hold fewer). A draw call per visible run of
@@ -78,6 +79,40 @@ pub(crate) struct Viewer<'a> {
     pub(crate) view_proj: &'a Mat4,
     pub(crate) grow_ndc: Vec2,
     pub(crate) light: Option<(Vec3, f32)>,
+    /// Thin far chunks to every k-th surfel (`None`: every surfel).
+    pub(crate) lod: Option<Lod>,
+}
+
+/// Level of detail by size on screen: a chunk whose discs cover under `floor_px` pixels of
+/// radius (the pixel floor every disc is grown to) draws every k-th surfel, k the largest power
+/// of two up to [`MAX_STRIDE`] with sqrt(k) times its largest disc still within the floor.
+/// Past the floor, discs already overlap many times over (each grown to the floor while their
+/// spacing shrinks with distance), so thinning them changes which disc wins a pixel, not
+/// whether the surface is closed: the thinned ones are grown by sqrt(k), and where that
+/// reaches the floor they are as large as before.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Lod {
+    pub(crate) eye_m: Vec3,
+    /// Pixels per unit of (radius / distance): half the viewport height times the projection's
+    /// y scale.
+    pub(crate) focal_px: f32,
+    pub(crate) floor_px: f32,
+}
+
+/// The sparsest thinning a chunk gets: 1 in 16 surfels.
+pub(crate) const MAX_STRIDE: u32 = 16;
+
+impl Lod {
+    /// The stride for a chunk whose discs (of radius up to `radius_m`) fill `lo..hi`.
+    pub(crate) fn stride(&self, lo: Vec3, hi: Vec3, radius_m: f32) -> u32 {
+        let d = self.eye_m.clamp(lo, hi).distance(self.eye_m);
+        let px = radius_m * self.focal_px / d;
+        if px.is_nan() || px <= 0.0 || px.is_infinite() || self.floor_px <= px {
+            return 1;
+        }
+        let k = ((self.floor_px / px).powi(2).min(MAX_STRIDE as f32) as u32).max(1);
+        1 << k.ilog2()
+    }
 }
 
 impl Viewer<'_> {
@@ -130,24 +165,39 @@ pub(crate) fn runs_seen(
     tiles: &[(Range<u32>, Arc<Vec<Chunk>>)],
     viewer: &Viewer<'_>,
     splat_scale: f32,
-) -> Vec<Range<u32>> {
-    let mut runs: Vec<Range<u32>> = Vec::new();
+) -> Vec<SplatRun> {
+    let mut runs: Vec<SplatRun> = Vec::new();
     for (at, chunks) in tiles {
         for c in chunks.iter() {
             let (lo, hi) = c.disc_box(splat_scale);
             if !viewer.sees(lo, hi) {
                 continue;
             }
+            let stride = viewer.lod.map_or(1, |l| l.stride(lo, hi, c.radius_m * splat_scale));
             let start = at.start.saturating_add(c.first).min(at.end);
             let end = start.saturating_add(c.len).min(at.end);
-            match runs.last_mut() {
-                Some(last) if last.end == start => last.end = end,
-                _ if start < end => runs.push(start..end),
-                _ => {}
+            if start < end {
+                runs.push(SplatRun { surfels: start..end, stride });
             }
         }
     }
-    crate::render::pool::merge_runs(runs)
+    merge(runs)
+}
+
+/// `runs` in pool order, adjacent ones of one stride joined.
+pub(crate) fn merge(mut runs: Vec<SplatRun>) -> Vec<SplatRun> {
+    runs.retain(|r| !r.surfels.is_empty());
+    runs.sort_by_key(|r| r.surfels.start);
+    let mut out: Vec<SplatRun> = Vec::with_capacity(runs.len());
+    for r in runs {
+        match out.last_mut() {
+            Some(last) if last.surfels.end == r.surfels.start && last.stride == r.stride => {
+                last.surfels.end = r.surfels.end;
+            }
+            _ => out.push(r),
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -183,7 +233,7 @@ mod tests {
         surfels.push(surfel([f32::INFINITY, 0.0, 0.0], 1.0));
         let chunks = chunks_of(&surfels);
         let m = Mat4::IDENTITY;
-        let viewer = Viewer { view_proj: &m, grow_ndc: Vec2::ZERO, light: None };
+        let viewer = Viewer { view_proj: &m, grow_ndc: Vec2::ZERO, light: None, lod: None };
         let (lo, hi) = chunks[0].disc_box(1.0);
         assert!(!viewer.sees(lo, hi), "a chunk of NaN centres has no box");
         assert_eq!(
@@ -207,11 +257,12 @@ mod tests {
         let n_a = a.len() as u32;
         let tiles =
             vec![(100..100 + n_a, Arc::new(chunks_of(&a))), (100 + n_a..105 + n_a, Arc::new(chunks_of(&b)))];
-        let all = Viewer { view_proj: &view_proj, grow_ndc: Vec2::ZERO, light: None };
+        let all = Viewer { view_proj: &view_proj, grow_ndc: Vec2::ZERO, light: None, lod: None };
         let k = k as u32;
-        assert_eq!(runs_seen(&tiles, &all, 1.0), vec![100..100 + k, 100 + 2 * k..105 + n_a]);
+        let runs = |v: &Viewer<'_>| -> Vec<Range<u32>> { runs_seen(&tiles, v, 1.0).into_iter().map(|r| r.surfels).collect() };
+        assert_eq!(runs(&all), vec![100..100 + k, 100 + 2 * k..105 + n_a]);
         let lamp = Viewer { light: Some((Vec3::ZERO, 10.0)), ..all };
-        assert_eq!(runs_seen(&tiles, &lamp, 1.0), vec![100..100 + k, 100 + n_a..105 + n_a]);
+        assert_eq!(runs(&lamp), vec![100..100 + k, 100 + n_a..105 + n_a]);
     }
 
     #[test]
@@ -221,9 +272,29 @@ mod tests {
         // A tiny disc 100 m ahead, its centre half a pixel (of 512) right of the edge.
         let x = 100.0 * (1.0 + 1.0 / 512.0);
         let (lo, hi) = (Vec3::new(x, 0.0, -100.0), Vec3::new(x, 0.0, -100.0));
-        let tight = Viewer { view_proj: &view_proj, grow_ndc: Vec2::ZERO, light: None };
+        let tight = Viewer { view_proj: &view_proj, grow_ndc: Vec2::ZERO, light: None, lod: None };
         assert!(!tight.sees(lo, hi));
         let grown = Viewer { grow_ndc: Viewer::grow_for(512, 512, 0.75), ..tight };
         assert!(grown.sees(lo, hi));
+    }
+
+    /// Near chunks draw every surfel; a chunk's stride grows with the square of its distance
+    /// once its discs shrink under the pixel floor, in powers of two up to MAX_STRIDE; a run
+    /// of stride k covers the surfels at multiples of k.
+    #[test]
+    fn far_chunks_thin_by_the_square_of_their_distance() {
+        let lod = Lod { eye_m: Vec3::ZERO, focal_px: 500.0, floor_px: 0.75 };
+        let at = |d: f32| lod.stride(Vec3::new(0.0, 0.0, -d), Vec3::new(0.1, 0.1, -d), 0.01);
+        // 0.01 m at 500 px: 5 px at 1 m, the floor (0.75 px) at 6.67 m.
+        assert_eq!(at(1.0), 1);
+        assert_eq!(at(6.0), 1);
+        assert_eq!(at(10.0), 2); // (0.75 / 0.5)^2 = 2.25
+        assert_eq!(at(20.0), 8); // 9
+        assert_eq!(at(1000.0), MAX_STRIDE);
+        assert_eq!(lod.stride(Vec3::splat(-1.0), Vec3::splat(1.0), 0.01), 1, "the eye inside the box");
+        let run = SplatRun { surfels: 5..21, stride: 4 };
+        assert_eq!(run.drawn(), 4, "8, 12, 16, 20");
+        assert_eq!(merge(vec![SplatRun { surfels: 21..30, stride: 4 }, run.clone(), SplatRun { surfels: 0..5, stride: 1 }]),
+            vec![SplatRun { surfels: 0..5, stride: 1 }, SplatRun { surfels: 5..30, stride: 4 }]);
     }
 }

@@ -1,7 +1,6 @@
 //! The per-frame order of passes: what the plan asks a frame for, the view's targets, recording
 //! each pass in its own command buffer and error scope, and reading the frame back.
 
-use std::ops::Range;
 use web_time::Instant;
 
 use crate::error::{Error, Result};
@@ -11,7 +10,8 @@ use crate::light::plan::{self, EffectPlan, Pass, PlanInputs};
 use crate::passes::gbuffer;
 use crate::view::camera::Camera;
 
-use crate::render::chunks::Viewer;
+use crate::passes::splat::SplatRun;
+use crate::render::chunks::{Lod, Viewer};
 use crate::render::counters::PassWork;
 use crate::render::renderer::Renderer;
 use crate::render::renderer::View;
@@ -276,7 +276,7 @@ impl Renderer {
     }
 
     /// The pool runs `viewer` may see, culled as the settings say.
-    fn runs_seen(&self, viewer: Option<&Viewer<'_>>) -> Vec<Range<u32>> {
+    fn runs_seen(&self, viewer: Option<&Viewer<'_>>) -> Vec<SplatRun> {
         let sizes = (self.leaf_size_m, self.settings.splat_scale);
         self.pools.runs_seen(viewer, sizes, self.settings.cull_chunks)
     }
@@ -286,9 +286,13 @@ impl Renderer {
         let ts = self.timestamp_pair(pass);
         let stats = self.stat_queries.as_ref().map(|q| q.slot(pass));
         let mut work = PassWork::default();
-        let mut count = |runs: &[Range<u32>]| {
+        let mut count = |runs: &[SplatRun]| {
             work.draws += runs.len() as u64;
-            work.surfels += runs.iter().map(|r| u64::from(r.end - r.start)).sum::<u64>();
+            work.surfels += runs.iter().map(SplatRun::drawn).sum::<u64>();
+        };
+        let lod = |eye_m, focal_px| {
+            (self.settings.splat_lod && self.splats.pulls())
+                .then_some(Lod { eye_m, focal_px, floor_px: self.settings.min_splat_px })
         };
         let render_ts = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
             query_set: set,
@@ -299,14 +303,18 @@ impl Renderer {
             Pass::Shadow => {
                 let size = self.shadow.face_size();
                 let grow_ndc = Viewer::grow_for(size, size, self.settings.min_splat_px);
-                let draws: Vec<Option<Vec<Range<u32>>>> = self
+                let draws: Vec<Option<Vec<SplatRun>>> = self
                     .shadow
                     .faces()
                     .iter()
                     .zip(&self.shadow_dirty)
                     .map(|(f, &dirty)| {
-                        let viewer =
-                            Viewer { view_proj: &f.view_proj, grow_ndc, light: Some((f.eye_m, f.range_m)) };
+                        let viewer = Viewer {
+                            view_proj: &f.view_proj,
+                            grow_ndc,
+                            light: Some((f.eye_m, f.range_m)),
+                            lod: lod(f.eye_m, f.proj_scale * size as f32 * 0.5),
+                        };
                         dirty.then(|| self.runs_seen(Some(&viewer)))
                     })
                     .collect();
@@ -316,10 +324,12 @@ impl Renderer {
             Pass::Gbuffer => {
                 let v = self.view("gbuffer")?;
                 let (w, h) = (v.targets.width, v.targets.height);
+                let focal_px = h as f32 * 0.5 / (v.camera.fov_y_deg.to_radians() * 0.5).tan();
                 let viewer = self.camera_view_proj.as_ref().map(|m| Viewer {
                     view_proj: m,
                     grow_ndc: Viewer::grow_for(w, h, self.settings.min_splat_px),
                     light: None,
+                    lod: lod(v.camera.eye_m, focal_px),
                 });
                 let runs = self.runs_seen(viewer.as_ref());
                 count(&runs);

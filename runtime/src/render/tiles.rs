@@ -12,6 +12,7 @@ use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::gpu::types::{ActiveTile, LeafGpu, LeafLightGpu, LightGpu, NodeGpu, Params, SurfelGpu, TileGpu};
 use crate::light::setup::LightSetup;
+use crate::passes::splat::SplatRun;
 use crate::passes::{self};
 use crate::render::pool::{PoolCaps, Pools, TileKey, key, merge_runs, surfel_owners};
 use crate::scene::data::SceneData;
@@ -148,7 +149,7 @@ impl TilePools {
         viewer: Option<&Viewer<'_>>,
         (leaf_size_m, splat_scale): (f32, f32),
         by_chunks: bool,
-    ) -> Vec<Range<u32>> {
+    ) -> Vec<SplatRun> {
         if by_chunks && let Some(v) = viewer {
             let tiles: Vec<(Range<u32>, Arc<Vec<Chunk>>)> =
                 self.tile_surfels.iter().cloned().zip(self.tile_chunks.iter().cloned()).collect();
@@ -169,6 +170,9 @@ impl TilePools {
                 .map(|(_, r)| r.clone())
                 .collect(),
         )
+        .into_iter()
+        .map(SplatRun::all)
+        .collect()
     }
 
     /// Places `scene`, another residency of the same package, in these pools: the tile forms
