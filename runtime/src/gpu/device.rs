@@ -359,6 +359,25 @@ impl Gpu {
         }))
     }
 
+    /// An uninitialised buffer of `size` bytes that shaders bind a window at a time (the surfel
+    /// pool: passes/splat.rs), so only the buffer limit applies to the whole.
+    pub(crate) fn windowed_buffer(
+        &self,
+        label: &str,
+        size: u64,
+        usage: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer> {
+        let size = size.max(16);
+        let whole = usage - wgpu::BufferUsages::STORAGE - wgpu::BufferUsages::UNIFORM;
+        self.check_buffer(label, size, whole)?;
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size,
+            usage,
+            mapped_at_creation: false,
+        }))
+    }
+
     /// A buffer of `count` slots of `slot_size` bytes where each draw binds one slot (a uniform
     /// per shadow face): the binding limits apply to a slot, the buffer limit to the whole.
     pub(crate) fn slotted_buffer(

@@ -107,11 +107,8 @@ impl Gbuffer {
         }
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.camera.groups[0], &[]);
-        fetch.bind(&mut pass);
         // The surfel runs in view (the renderer culls by chunk box).
-        for r in runs {
-            fetch.draw(&mut pass, r);
-        }
+        fetch.draw(&mut pass, runs);
         if stats.is_some() {
             pass.end_pipeline_statistics_query();
         }

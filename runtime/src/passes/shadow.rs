@@ -228,7 +228,6 @@ impl Shadow {
             pass.begin_pipeline_statistics_query(set, i);
         }
         pass.set_pipeline(&self.pipeline);
-        fetch.bind(&mut pass);
         let s = self.face_size as f32;
         // One uniform group per face.
         for (i, (group, runs)) in self.uniforms.groups.iter().zip(draws).enumerate() {
@@ -236,9 +235,7 @@ impl Shadow {
             let (x, y) = corner(i);
             pass.set_viewport(x as f32, y as f32, s, s, 0.0, 1.0);
             pass.set_bind_group(0, group, &[]);
-            for r in runs {
-                fetch.draw(&mut pass, r);
-            }
+            fetch.draw(&mut pass, runs);
         }
         if stats.is_some() {
             pass.end_pipeline_statistics_query();

@@ -3,9 +3,10 @@
 //!
 //! Surfels are pulled: one non-instanced draw of six vertices a surfel, the vertex shader reading
 //! its surfel from the pool as a storage buffer by `vertex_index / 6`. GPUs run such draws far
-//! faster than one instance of a six-vertex quad a surfel. Where an adapter has no storage
-//! buffers in vertex shaders, or the pool is larger than one storage binding, the surfels are
-//! drawn as instances instead, the portable path; both draw the same discs in the same order.
+//! faster than one instance of a six-vertex quad a surfel. A pool larger than one storage binding
+//! is bound a window at a time. Where an adapter has no storage buffers in vertex shaders, the
+//! surfels are drawn as instances instead, the portable path; both draw the same discs in the
+//! same order (instanced draws take no level of detail: render/chunks.rs).
 
 use crate::error::Result;
 use crate::gpu::Gpu;
@@ -91,18 +92,28 @@ impl Uniforms {
 pub(crate) struct Fetch {
     /// The layout of the surfel binding (group 1) where surfels are pulled; `None`: instanced.
     surfels_layout: Option<wgpu::BindGroupLayout>,
-    /// The pool ([`Fetch::set_surfels`]; allocated once), and its binding where pulled.
-    surfels: Option<(wgpu::Buffer, Option<wgpu::BindGroup>)>,
+    /// Surfels a window of the pool holds: a pool larger than one storage binding is bound a
+    /// window at a time (each starting at a multiple of this, which is a multiple of 32 so a
+    /// window starts on a 256-byte offset and at a multiple of every stride).
+    window: u32,
+    /// The pool ([`Fetch::set_surfels`]; allocated once), and its windows' bindings where pulled.
+    surfels: Option<(wgpu::Buffer, Vec<wgpu::BindGroup>)>,
 }
 
 impl Fetch {
-    /// Pulled where the adapter has storage buffers in vertex shaders and a pool of
-    /// `surfel_capacity` surfels fits one storage binding, else instanced.
+    /// Pulled where the adapter has storage buffers in vertex shaders, else instanced.
     pub(crate) fn new(gpu: &Gpu, surfel_capacity: u64) -> Self {
-        let bytes = surfel_capacity.max(1) * size_of::<SurfelGpu>() as u64;
+        let size = size_of::<SurfelGpu>() as u64;
+        let limits = gpu.device.limits();
+        let align = u64::from(limits.min_storage_buffer_offset_alignment.max(1));
+        // Windows start at multiples of 32 surfels (1,280 bytes: a multiple of every alignment
+        // up to 256) or of the alignment's own multiple where it is larger.
+        let unit = 32 * align.div_ceil(256).next_power_of_two();
+        let fit = limits.max_storage_buffer_binding_size / size / unit * unit;
         let pull =
             gpu.adapter.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::VERTEX_STORAGE)
-                && bytes <= gpu.device.limits().max_storage_buffer_binding_size;
+                && fit > 0;
+        let window = fit.min(surfel_capacity.max(1).div_ceil(unit) * unit).min(u64::from(u32::MAX)) as u32;
         let surfels_layout = pull.then(|| {
             gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("splat surfels"),
@@ -118,7 +129,7 @@ impl Fetch {
                 }],
             })
         });
-        Self { surfels_layout, surfels: None }
+        Self { surfels_layout, window: window.max(1), surfels: None }
     }
 
     /// Whether the draws pull their surfels (else they are instanced).
@@ -128,36 +139,64 @@ impl Fetch {
 
     /// The surfel pool the draws read.
     pub(crate) fn set_surfels(&mut self, gpu: &Gpu, surfels: &wgpu::Buffer) {
-        let group = self.surfels_layout.as_ref().map(|layout| {
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("splat surfels"),
-                layout,
-                entries: &[wgpu::BindGroupEntry { binding: 0, resource: surfels.as_entire_binding() }],
-            })
+        let size = size_of::<SurfelGpu>() as u64;
+        let pool = surfels.size() / size;
+        let groups = self.surfels_layout.as_ref().map_or_else(Vec::new, |layout| {
+            (0..pool.div_ceil(u64::from(self.window)))
+                .map(|w| {
+                    let first = w * u64::from(self.window);
+                    let n = u64::from(self.window).min(pool - first);
+                    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some("splat surfels"),
+                        layout,
+                        entries: &[wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                                buffer: surfels,
+                                offset: first * size,
+                                size: std::num::NonZeroU64::new(n * size),
+                            }),
+                        }],
+                    })
+                })
+                .collect()
         });
-        self.surfels = Some((surfels.clone(), group));
+        self.surfels = Some((surfels.clone(), groups));
     }
 
-    /// Binds the pool for the draws that follow.
-    pub(crate) fn bind(&self, pass: &mut wgpu::RenderPass<'_>) {
-        match &self.surfels {
-            Some((_, Some(group))) => pass.set_bind_group(1, group, &[]),
-            Some((buffer, None)) => pass.set_vertex_buffer(0, buffer.slice(..)),
-            None => {}
+    /// Draws `runs` into `pass` (its pipeline and group 0 set), binding what they read.
+    pub(crate) fn draw(&self, pass: &mut wgpu::RenderPass<'_>, runs: &[SplatRun]) {
+        let Some((buffer, groups)) = &self.surfels else { return };
+        if !self.pulls() {
+            pass.set_vertex_buffer(0, buffer.slice(..));
+            for run in runs {
+                pass.draw(0..6, run.surfels.clone());
+            }
+            return;
         }
-    }
-
-    /// Draws the surfels of `run` (pulled: every `stride`-th; instanced: all of them).
-    pub(crate) fn draw(&self, pass: &mut wgpu::RenderPass<'_>, run: &SplatRun) {
-        if self.pulls() {
+        let mut bound: Option<u32> = None;
+        for run in runs {
             // The stride rides in the instance index (one instance), which the vertex shader
-            // reads back; the vertex index counts the surfels drawn, so surfel = (vertex / 6) x
-            // stride.
+            // reads back; the vertex index counts the surfels drawn in the bound window, so
+            // surfel = window start + (vertex / 6) x stride.
             let k = run.stride.max(1);
-            let (first, end) = (run.surfels.start.div_ceil(k), run.surfels.end.div_ceil(k));
-            pass.draw(first * 6..end * 6, k..k + 1);
-        } else {
-            pass.draw(0..6, run.surfels.clone());
+            let mut start = run.surfels.start;
+            while start < run.surfels.end {
+                let w = start / self.window;
+                let base = w * self.window;
+                let end = run.surfels.end.min(base.saturating_add(self.window));
+                if bound != Some(w)
+                    && let Some(g) = groups.get(w as usize)
+                {
+                    pass.set_bind_group(1, g, &[]);
+                    bound = Some(w);
+                }
+                let (first, last) = ((start - base).div_ceil(k), (end - base).div_ceil(k));
+                if first < last {
+                    pass.draw(first * 6..last * 6, k..k + 1);
+                }
+                start = end;
+            }
         }
     }
 }
@@ -180,7 +219,9 @@ impl SplatRun {
     /// Surfels the draw covers.
     pub(crate) fn drawn(&self) -> u64 {
         let k = self.stride.max(1);
-        u64::from(self.surfels.end.div_ceil(k) - self.surfels.start.div_ceil(k).min(self.surfels.end.div_ceil(k)))
+        u64::from(
+            self.surfels.end.div_ceil(k) - self.surfels.start.div_ceil(k).min(self.surfels.end.div_ceil(k)),
+        )
     }
 }
 

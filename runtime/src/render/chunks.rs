@@ -22,7 +22,7 @@ use crate::render::pool::TileKey;
 pub(crate) const CHUNK_SURFELS: u32 = 1024;
 
 /// One chunk: surfels `first..first + len` of its tile (offsets into the tile's own surfels), the
-/// box of their centres, and their largest stored radius.
+/// box of their centres, and their largest and mean stored radius.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Chunk {
     pub(crate) first: u32,
@@ -30,6 +30,7 @@ pub(crate) struct Chunk {
     pub(crate) lo_m: Vec3,
     pub(crate) hi_m: Vec3,
     pub(crate) radius_m: f32,
+    pub(crate) mean_radius_m: f32,
 }
 
 impl Chunk {
@@ -48,6 +49,7 @@ pub(crate) fn chunks_of(surfels: &[SurfelGpu]) -> Vec<Chunk> {
         .enumerate()
         .map(|(i, run)| {
             let (mut lo, mut hi, mut radius) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN), 0.0f32);
+            let (mut sum, mut n) = (0.0f64, 0u32);
             for s in run {
                 let p = Vec3::from_slice(&s.position_radius[..3]);
                 if p.is_finite() {
@@ -56,16 +58,14 @@ pub(crate) fn chunks_of(surfels: &[SurfelGpu]) -> Vec<Chunk> {
                     let r = s.position_radius[3];
                     if r.is_finite() {
                         radius = radius.max(r.abs());
+                        sum += f64::from(r.abs());
+                        n += 1;
                     }
                 }
             }
-            Chunk {
-                first: i as u32 * CHUNK_SURFELS,
-                len: run.len() as u32,
-                lo_m: lo,
-                hi_m: hi,
-                radius_m: radius,
-            }
+            let mean_radius_m = if n > 0 { (sum / f64::from(n)) as f32 } else { 0.0 };
+            let first = i as u32 * CHUNK_SURFELS;
+            Chunk { first, len: run.len() as u32, lo_m: lo, hi_m: hi, radius_m: radius, mean_radius_m }
         })
         .collect()
 }
@@ -85,7 +85,7 @@ pub(crate) struct Viewer<'a> {
 
 /// Level of detail by size on screen: a chunk whose discs cover under `floor_px` pixels of
 /// radius (the pixel floor every disc is grown to) draws every k-th surfel, k the largest power
-/// of two up to [`MAX_STRIDE`] with sqrt(k) times its largest disc still within the floor.
+/// of two up to [`MAX_STRIDE`] with sqrt(k) times its mean disc still within the floor.
 /// Past the floor, discs already overlap many times over (each grown to the floor while their
 /// spacing shrinks with distance), so thinning them changes which disc wins a pixel, not
 /// whether the surface is closed: the thinned ones are grown by sqrt(k), and where that
@@ -173,7 +173,10 @@ pub(crate) fn runs_seen(
             if !viewer.sees(lo, hi) {
                 continue;
             }
-            let stride = viewer.lod.map_or(1, |l| l.stride(lo, hi, c.radius_m * splat_scale));
+            // The typical disc, not the largest: a few large discs where the scan thins out
+            // would hold a whole chunk at full detail, and each thinned disc grows by sqrt(k)
+            // from its own radius, so a large one stays as closed as before.
+            let stride = viewer.lod.map_or(1, |l| l.stride(lo, hi, c.mean_radius_m * splat_scale));
             let start = at.start.saturating_add(c.first).min(at.end);
             let end = start.saturating_add(c.len).min(at.end);
             if start < end {
@@ -237,8 +240,8 @@ mod tests {
         let (lo, hi) = chunks[0].disc_box(1.0);
         assert!(!viewer.sees(lo, hi), "a chunk of NaN centres has no box");
         assert_eq!(
-            (chunks[1].lo_m, chunks[1].hi_m, chunks[1].radius_m),
-            (Vec3::new(1.0, 2.0, 3.0), Vec3::new(1.0, 2.0, 3.0), 0.0)
+            (chunks[1].lo_m, chunks[1].hi_m, chunks[1].radius_m, chunks[1].mean_radius_m),
+            (Vec3::new(1.0, 2.0, 3.0), Vec3::new(1.0, 2.0, 3.0), 0.0, 0.0)
         );
     }
 
@@ -259,7 +262,9 @@ mod tests {
             vec![(100..100 + n_a, Arc::new(chunks_of(&a))), (100 + n_a..105 + n_a, Arc::new(chunks_of(&b)))];
         let all = Viewer { view_proj: &view_proj, grow_ndc: Vec2::ZERO, light: None, lod: None };
         let k = k as u32;
-        let runs = |v: &Viewer<'_>| -> Vec<Range<u32>> { runs_seen(&tiles, v, 1.0).into_iter().map(|r| r.surfels).collect() };
+        let runs = |v: &Viewer<'_>| -> Vec<Range<u32>> {
+            runs_seen(&tiles, v, 1.0).into_iter().map(|r| r.surfels).collect()
+        };
         assert_eq!(runs(&all), vec![100..100 + k, 100 + 2 * k..105 + n_a]);
         let lamp = Viewer { light: Some((Vec3::ZERO, 10.0)), ..all };
         assert_eq!(runs(&lamp), vec![100..100 + k, 100 + n_a..105 + n_a]);
@@ -294,7 +299,13 @@ mod tests {
         assert_eq!(lod.stride(Vec3::splat(-1.0), Vec3::splat(1.0), 0.01), 1, "the eye inside the box");
         let run = SplatRun { surfels: 5..21, stride: 4 };
         assert_eq!(run.drawn(), 4, "8, 12, 16, 20");
-        assert_eq!(merge(vec![SplatRun { surfels: 21..30, stride: 4 }, run.clone(), SplatRun { surfels: 0..5, stride: 1 }]),
-            vec![SplatRun { surfels: 0..5, stride: 1 }, SplatRun { surfels: 5..30, stride: 4 }]);
+        assert_eq!(
+            merge(vec![
+                SplatRun { surfels: 21..30, stride: 4 },
+                run.clone(),
+                SplatRun { surfels: 0..5, stride: 1 }
+            ]),
+            vec![SplatRun { surfels: 0..5, stride: 1 }, SplatRun { surfels: 5..30, stride: 4 }]
+        );
     }
 }

@@ -291,8 +291,11 @@ impl Renderer {
             work.surfels += runs.iter().map(SplatRun::drawn).sum::<u64>();
         };
         let lod = |eye_m, focal_px| {
-            (self.settings.splat_lod && self.splats.pulls())
-                .then_some(Lod { eye_m, focal_px, floor_px: self.settings.min_splat_px })
+            (self.settings.splat_lod && self.splats.pulls()).then_some(Lod {
+                eye_m,
+                focal_px,
+                floor_px: self.settings.min_splat_px,
+            })
         };
         let render_ts = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
             query_set: set,

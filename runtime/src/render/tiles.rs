@@ -380,18 +380,19 @@ impl Upload {
             gpu.buffer("active tiles", 16 + size_of::<ActiveTile>() as u64 * caps.tiles.max(1), STORAGE)?;
         let changes = gpu.buffer("changes", 16 + 4 * caps.tiles.max(1), STORAGE)?;
         let lookup = gpu.buffer_init("lookup", bytemuck::cast_slice(&lookup.words), STORAGE)?;
-        let surfels = pool(
-            gpu,
-            "surfels",
-            caps.surfels,
-            &scene.surfels,
-            // A vertex buffer for instanced splats, a storage buffer for pulled ones (splat.rs).
-            if pull_surfels {
-                wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST
-            } else {
-                wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST
-            },
-        )?;
+        // A vertex buffer for instanced splats, a storage buffer for pulled ones, bound a window
+        // at a time where it is larger than one binding (splat.rs).
+        let surfel_usage = if pull_surfels {
+            wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST
+        } else {
+            wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST
+        };
+        let n_surfels = caps.surfels.max(scene.surfels.len() as u64).max(1);
+        let surfels =
+            gpu.windowed_buffer("surfels", n_surfels * size_of::<SurfelGpu>() as u64, surfel_usage)?;
+        if !scene.surfels.is_empty() {
+            gpu.queue.write_buffer(&surfels, 0, bytemuck::cast_slice(&scene.surfels));
+        }
         let tiles = pool(gpu, "tiles", caps.tiles, &scene.tiles, STORAGE)?;
         let nodes = pool(gpu, "nodes", caps.nodes, &scene.nodes, STORAGE)?;
         let leaves = pool(gpu, "leaves", caps.leaves, &scene.leaves, STORAGE)?;
