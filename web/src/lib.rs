@@ -27,6 +27,7 @@ use grotto_runtime::settings::{Quality, Settings, ViewMode};
 use grotto_runtime::stream::residency::{self, Budget, Residency};
 use grotto_runtime::stream::{self, Streaming};
 use grotto_runtime::view::camera::{Camera, Nav};
+use grotto_runtime::view::frame_target::{FrameTarget, Traded};
 use grotto_runtime::view::framing::{CameraChoice, resolve_camera, scene_headlamp};
 use serde::{Deserialize, Serialize};
 use wasm_bindgen::prelude::*;
@@ -76,6 +77,9 @@ pub struct Options {
     /// Draw the convergence bar along the bottom (default true; a screenshot compared with
     /// `grotto render` turns it off).
     pub bar: Option<bool>,
+    /// Frames a second to hold while the camera moves, by drawing at a smaller scale and then
+    /// thinning far surfels harder (view/frame_target.rs; default 60, 0: none).
+    pub target_fps: Option<f64>,
 }
 
 /// The status of a frame, for the page's panel and the ready marker (JSON).
@@ -110,6 +114,10 @@ pub struct Status {
     pub ready_ms: Option<f64>,
     /// What the effect plan says of propagation.
     pub light_plan: String,
+    /// GPU milliseconds of the last plain frame (no shadow maps or injection), and what the
+    /// frame-time target trades while moving (None: no target).
+    pub frame_ms: Option<f64>,
+    pub traded: Option<Traded>,
 }
 
 /// The package as fetched so far, and what was fetched.
@@ -217,6 +225,8 @@ struct State {
     /// GPU milliseconds of recent frames, and the leaves of the next light slice.
     recent_ms: Vec<f64>,
     slice_leaves: u32,
+    /// The frame-time target while moving.
+    target: Option<FrameTarget>,
     /// What the plan said of propagation at the last frame (the panel shows it).
     light_plan: String,
     auto_exposure: bool,
@@ -237,6 +247,7 @@ struct LastFrame {
     submitted: Instant,
     leaves: u32,
     plain: bool,
+    moving: bool,
 }
 
 /// The viewer the page drives.
@@ -375,6 +386,10 @@ impl Viewer {
                 last: None,
                 recent_ms: Vec::new(),
                 slice_leaves: 4096,
+                target: match o.target_fps {
+                    Some(f) if !(f.is_finite() && f > 0.0) => None,
+                    f => Some(FrameTarget::new(1000.0 / f.unwrap_or(60.0))),
+                },
                 light_plan: String::new(),
                 auto_exposure: o.exposure.is_none(),
                 bar: o.bar.unwrap_or(true),
@@ -511,7 +526,12 @@ impl State {
         } else {
             "this frame's light ran before it, within the frame budget"
         }));
-        let plan = self.renderer.draw(&camera, self.width, self.height)?;
+        // Moving, the frame-time target trades scale and detail; at rest they come back.
+        let (scale, detail) = self.target.as_ref().map_or((1.0, 1.0), |t| t.for_frame(moving));
+        self.renderer.set_lod_detail(detail);
+        let (w, h) =
+            (((self.width as f32 * scale) as u32).max(1), ((self.height as f32 * scale) as u32).max(1));
+        let plan = self.renderer.draw(&camera, w, h)?;
         self.present(moving)?;
         self.frames += 1;
         if self.frames == 1 {
@@ -521,7 +541,7 @@ impl State {
         let direct =
             |p: &grotto_runtime::light::plan::EffectPlan| p.runs(Pass::Shadow) || p.runs(Pass::Inject);
         let plain = !(direct(&plan) || light && direct(&light_plan));
-        self.last = Some(LastFrame { submitted, leaves, plain });
+        self.last = Some(LastFrame { submitted, leaves, plain, moving });
         let frame_done = self.frame_done.clone();
         self.gpu.queue.on_submitted_work_done(move || {
             if let Ok(mut t) = frame_done.lock() {
@@ -541,6 +561,11 @@ impl State {
         let ms = done.saturating_duration_since(last.submitted).as_secs_f64() * 1e3;
         if !last.plain {
             return;
+        }
+        if last.moving
+            && let Some(t) = &mut self.target
+        {
+            t.record_moving(ms);
         }
         self.recent_ms.push(ms);
         if self.recent_ms.len() > 32 {
@@ -698,6 +723,8 @@ impl State {
             first_frame_ms: self.first_frame_ms,
             ready_ms: self.ready_ms,
             light_plan: self.light_plan.clone(),
+            frame_ms: self.recent_ms.last().copied(),
+            traded: self.target.as_ref().map(FrameTarget::traded),
         };
         serde_json::to_string(&s).map_err(|e| Error::Setting(e.to_string()))
     }

@@ -416,6 +416,11 @@ struct ViewArgs {
     /// frame (while the camera moves, bounces wait).
     #[arg(long, default_value_t = 33.0)]
     frame_budget_ms: f64,
+    /// Frames a second to hold while the camera moves, by drawing at a smaller render scale and
+    /// then thinning far surfels harder (the panel shows what was traded; at rest the frame is
+    /// drawn in full). 0: no target, moving frames draw at --render-scale whatever they cost.
+    #[arg(long, default_value_t = 60.0)]
+    target_fps: f64,
     /// Start with the panel hidden (H toggles it).
     #[arg(long)]
     no_panel: bool,
@@ -440,6 +445,7 @@ fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
         after_frames: v.after_frames,
         record_path: v.record_path,
         frame_budget_ms: v.frame_budget_ms,
+        frame_target_ms: (v.target_fps.is_finite() && v.target_fps > 0.0).then(|| 1000.0 / v.target_fps),
         panel: !v.no_panel,
     })?;
     // --json: frames, frame times moving and at rest, frames the light took to converge.

@@ -290,11 +290,11 @@ impl Renderer {
             work.draws += runs.len() as u64;
             work.surfels += runs.iter().map(SplatRun::drawn).sum::<u64>();
         };
-        let lod = |eye_m, focal_px| {
+        let lod = |eye_m, focal_px, detail: f32| {
             (self.settings.splat_lod && self.splats.pulls()).then_some(Lod {
                 eye_m,
                 focal_px,
-                floor_px: self.settings.min_splat_px,
+                floor_px: self.settings.min_splat_px * detail,
             })
         };
         let render_ts = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
@@ -316,7 +316,7 @@ impl Renderer {
                             view_proj: &f.view_proj,
                             grow_ndc,
                             light: Some((f.eye_m, f.range_m)),
-                            lod: lod(f.eye_m, f.proj_scale * size as f32 * 0.5),
+                            lod: lod(f.eye_m, f.proj_scale * size as f32 * 0.5, 1.0),
                         };
                         dirty.then(|| self.runs_seen(Some(&viewer)))
                     })
@@ -332,7 +332,7 @@ impl Renderer {
                     view_proj: m,
                     grow_ndc: Viewer::grow_for(w, h, self.settings.min_splat_px),
                     light: None,
-                    lod: lod(v.camera.eye_m, focal_px),
+                    lod: lod(v.camera.eye_m, focal_px, self.lod_detail),
                 });
                 let runs = self.runs_seen(viewer.as_ref());
                 count(&runs);

@@ -105,6 +105,9 @@ pub struct Renderer {
     /// the tiles changed since it was drawn.
     pub(super) camera_view_proj: Option<Mat4>,
     pub(super) gbuffer_stale: bool,
+    /// Multiplies the level of detail's pixel floor for the camera's view (a viewer trading
+    /// detail for time while moving: view/frame_target.rs).
+    pub(super) lod_detail: f32,
     /// What a scene must share with this one to be swapped in place ([`Renderer::update_scene`]).
     pub(super) compat: Compat,
     /// The tile pools and where each resident tile form lives in them (tiles.rs).
@@ -279,6 +282,7 @@ impl Renderer {
             shadow_drawn: 0,
             camera_view_proj: None,
             gbuffer_stale: false,
+            lod_detail: 1.0,
             compat: Compat::of(scene),
             pools: tile_pools,
             view: None,
@@ -336,6 +340,16 @@ impl Renderer {
     /// Pass counters and times so far.
     pub fn stats(&self) -> &PassStats {
         &self.stats_now
+    }
+
+    /// Thins far surfels for the camera's view as if the pixel floor were `detail` times larger
+    /// (at least 1; 1: the level of detail the settings give). Shadow maps keep theirs.
+    pub fn set_lod_detail(&mut self, detail: f32) {
+        let detail = if detail.is_finite() { detail.max(1.0) } else { 1.0 };
+        if detail != self.lod_detail {
+            self.lod_detail = detail;
+            self.gbuffer_stale = true;
+        }
     }
 
     /// Exposure of the next shade (the light state and G-buffer are kept).

@@ -44,6 +44,7 @@ use crate::scene::data::SceneData;
 use crate::settings::{ClipBox, Quality, ViewMode, scan_color};
 use crate::stream::follow::{self, Follow};
 use crate::view::camera::{self, Camera, Nav};
+use crate::view::frame_target::FrameTarget;
 
 /// What `grotto view` is asked.
 #[derive(Clone, Debug)]
@@ -64,6 +65,9 @@ pub struct ViewOptions {
     pub record_path: Option<PathBuf>,
     /// Milliseconds a frame at rest may spend, bounces included.
     pub frame_budget_ms: f64,
+    /// Milliseconds a moving frame aims at (render scale, then detail, traded for it:
+    /// view/frame_target.rs); `None`: moving frames draw at `render_scale` whatever they cost.
+    pub frame_target_ms: Option<f64>,
     /// Show the panel (H toggles it).
     pub panel: bool,
 }
@@ -158,6 +162,7 @@ struct State {
     last_frame: Instant,
     last_camera: Option<Camera>,
     pacer: Pacer,
+    target: Option<FrameTarget>,
     log: FrameLog,
     /// Keyframes of the camera path being recorded.
     recording: Option<Vec<Camera>>,
@@ -289,6 +294,7 @@ impl App {
             last_frame: Instant::now(),
             last_camera: None,
             pacer: Pacer::new(self.opts.frame_budget_ms),
+            target: self.opts.frame_target_ms.map(FrameTarget::new),
             log: FrameLog::default(),
             recording: self.opts.record_path.as_ref().map(|_| Vec::new()),
             auto_exposure: if o.exposure.is_none() && settings.view.shows_light() {
@@ -329,7 +335,10 @@ impl App {
             }
         }
 
-        let scale = self.opts.render_scale.clamp(0.05, 1.0);
+        // Moving, the frame-time target trades scale and detail; at rest they come back.
+        let (t_scale, detail) = s.target.as_ref().map_or((1.0, 1.0), |t| t.for_frame(moving));
+        let scale = (self.opts.render_scale * t_scale).clamp(0.05, 1.0);
+        s.renderer.set_lod_detail(detail);
         let (w, h) = (
             ((s.config.width as f32 * scale) as u32).max(1),
             ((s.config.height as f32 * scale) as u32).max(1),
@@ -360,7 +369,11 @@ impl App {
         let plan = s.renderer.draw(&cam, w, h)?;
         if !(plan.runs(crate::light::plan::Pass::Shadow) || plan.runs(crate::light::plan::Pass::Inject)) {
             // Direct light (after a change of lights or tiles) is not what a frame costs.
-            s.pacer.record_draw(t.elapsed().as_secs_f64() * 1e3);
+            let draw_ms = t.elapsed().as_secs_f64() * 1e3;
+            s.pacer.record_draw(draw_ms);
+            if moving && let Some(target) = &mut s.target {
+                target.record_moving(draw_ms);
+            }
         }
         let bounces = s.renderer.stats().bounces_done.saturating_sub(bounces_before);
         let progress = s.renderer.light_progress();
@@ -382,6 +395,9 @@ impl App {
         let frame_ms = now.elapsed().as_secs_f64() * 1e3;
         s.frame_ms = if s.frame_ms == 0.0 { frame_ms } else { 0.9 * s.frame_ms + 0.1 * frame_ms };
         s.log.frame(frame_ms, moving, progress.converged, bounces);
+        if moving {
+            s.log.moving_traded.push((scale, detail));
+        }
         if std::env::var_os("GROTTO_VIEW_TRACE").is_some() {
             eprintln!(
                 "frame {} {frame_ms:.1} ms moving {moving} bounces {bounces} {progress:?}",
@@ -588,6 +604,7 @@ fn model(
         adapter: s.gpu.describe(),
         fps: if s.frame_ms > 0.0 { 1e3 / s.frame_ms } else { 0.0 },
         frame_ms: s.frame_ms,
+        traded: s.target.as_ref().map(FrameTarget::traded),
         light: Some(progress),
         held,
         plan: plan.explain(),

@@ -76,6 +76,8 @@ pub struct FrameLog {
     /// it converged (a rest cut short by moving again is not counted).
     pub converge_frames: Vec<u32>,
     pub converge_s: Vec<f64>,
+    /// Render scale and detail factor of each moving frame (what the frame-time target traded).
+    pub moving_traded: Vec<(f32, f32)>,
     /// Bounces run at rest, over all frames.
     pub(crate) rest_bounces: u64,
     /// Frames and time since the camera came to rest, and whether this rest's convergence was

@@ -9,6 +9,7 @@ use glam::Vec3;
 use crate::render::LightProgress;
 
 use crate::settings::{ClipBox, Quality, ViewMode};
+use crate::view::frame_target::Traded;
 
 /// What the panel shows, gathered by the window each frame.
 #[derive(Clone, Debug, Default)]
@@ -16,6 +17,8 @@ pub(crate) struct PanelModel {
     pub(crate) adapter: String,
     pub(crate) fps: f64,
     pub(crate) frame_ms: f64,
+    /// What the frame-time target trades while moving (None: no target).
+    pub(crate) traded: Option<Traded>,
     pub(crate) light: Option<LightProgress>,
     /// The bounces wait for the camera to rest.
     pub(crate) held: bool,
@@ -70,6 +73,15 @@ pub(crate) fn show(ctx: &egui::Context, m: &PanelModel, k: &mut PanelKnobs) {
         ctx,
         |ui| {
             ui.label(format!("{:.1} fps ({:.1} ms a frame)", m.fps, m.frame_ms));
+            if let Some(t) = m.traded {
+                ui.label(format!(
+                    "target {:.1} ms moving{}: scale {:.2}, detail {:.1}x",
+                    t.target_ms,
+                    t.draw_ms.map(|d| format!(" (last draw {d:.1} ms)")).unwrap_or_default(),
+                    t.scale,
+                    t.detail
+                ));
+            }
             let light = match m.light {
                 Some(l) if l.converged => format!("light converged ({} bounces)", l.bounces_done),
                 Some(l) => format!(
