@@ -203,3 +203,47 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
         );
     }
 }
+
+/// Issue 43's culling draws the same image as drawing whole tiles, with less work: surfel chunks
+/// culled per shadow face (frustum and the light's range) and per view give the same bytes; the
+/// level of detail (far chunks thinned) stays within the golden tolerance and draws fewer
+/// surfels. The counts come from the renderer's own counters (render/counters.rs).
+#[test]
+fn culled_and_thinned_draws_match_whole_tiles_with_less_work() {
+    use grotto_runtime::light::plan::Pass;
+    let dir = tempfile::tempdir().unwrap();
+    let package = build_small_cave(dir.path());
+    let run = |name: &str, cull_chunks: bool, splat_lod: bool| {
+        let out = dir.path().join(format!("{name}.png"));
+        let settings =
+            Settings { bounces: 0, shadow_map_size: 128, cull_chunks, splat_lod, ..Settings::default() };
+        let opts = RenderOptions {
+            settings,
+            exposure: Some(8.0),
+            width: 96,
+            height: 72,
+            ..view(&package, "entrance", out.clone())
+        };
+        let summary = render_job::run(&opts, |_| {}).unwrap();
+        let (_, _, pixels) = grotto_runtime::cli::image_out::read_png(&out).unwrap();
+        let drawn = |p: Pass| summary.stats.work.get(&p).map_or(0, |w| w.surfels);
+        (pixels, drawn(Pass::Shadow), drawn(Pass::Gbuffer), summary.surfels as u64)
+    };
+    let (tiles, tiles_shadow, tiles_gbuffer, surfels) = run("tiles", false, false);
+    let (chunks, chunks_shadow, chunks_gbuffer, _) = run("chunks", true, false);
+    let (thin, thin_shadow, thin_gbuffer, _) = run("thin", true, true);
+    eprintln!(
+        "{surfels} surfels; shadow maps drew {tiles_shadow} / {chunks_shadow} / {thin_shadow}, \
+         the G-buffer {tiles_gbuffer} / {chunks_gbuffer} / {thin_gbuffer} (tiles / chunks / thinned)"
+    );
+    assert!(tiles == chunks, "culling by chunks changed the image");
+    // A cube face sees about a sixth of the directions around its lamp; chunks straddle faces
+    // and the small cave's lamps see most of it (measured: half the surfels of whole tiles).
+    assert!(chunks_shadow * 3 < tiles_shadow * 2, "chunks must cut the shadow maps' draws");
+    assert!(chunks_gbuffer <= tiles_gbuffer && chunks_gbuffer > 0);
+    let d = golden::diff(&thin, &chunks);
+    eprintln!("thinned against every surfel: {d:?}");
+    assert!(golden::within_tolerance(&d), "the level of detail left the tolerance: {d:?}");
+    assert!(thin_gbuffer < chunks_gbuffer, "at 96x72 far chunks must thin");
+    assert!(thin_shadow <= chunks_shadow);
+}
