@@ -4,7 +4,9 @@
 # configurations (SVO depth 7 and 8) at 800x600 and 1600x900; a 10^7-point package at 1920x1080;
 # and a 10^8-point package streamed along its entrance -> chamber path at 1920x1080 under a GPU
 # memory budget, with per-frame times (median, p99, worst) and stalls (frames over 50 ms), as it
-# is and with --point-budget 1M and 5M. Prints one markdown table per part (also written to
+# is and with --point-budget 1M and 5M; and, for the demo cave and the 10^7 package, the splat
+# passes' work counts (draws, surfels, vertex and fragment invocations) drawn as before issue 43
+# (--cull tiles --no-splat-lod) and as now. Prints one markdown table per part (also written to
 # OUT/tables.md, part by part, so a run cut short keeps what it measured) and keeps the raw JSON
 # reports in OUT/json/.
 #
@@ -57,6 +59,38 @@ for f in files:
 PY
 }
 
+# A markdown table of per-pass work counts and times from `grotto bench --json` reports (issue 43:
+# draws, surfels drawn, vertex and fragment shader invocations from pipeline statistics queries).
+work_table() {
+    python3 - "$@" <<'PY'
+import json, sys
+title, files = sys.argv[1], sys.argv[2:]
+first = json.load(open(files[0]))
+print(f"\n{title} ({first['device']}, median of {first['repetitions']})\n")
+print("| package | draws as | size | pass | ms | draws | surfels drawn | vertices | fragments | submits | bytes written |")
+print("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|")
+n = lambda v: "-" if v is None else f"{v:,}"
+for f in files:
+    r = json.load(open(f))
+    name, how = f.rsplit("/", 1)[-1].removesuffix(".json").split("__")[:2]
+    for p in ("shadow", "gbuffer"):
+        w = r["work"].get(p, {})
+        print(f"| {name} | {how} | {r['width']}x{r['height']} | {p} | {r['median_ms'].get(p, 0):.2f} | "
+              f"{n(w.get('draws'))} | {n(w.get('surfels'))} | {n(w.get('vertex_invocations'))} | "
+              f"{n(w.get('fragment_invocations'))} | {r['submits']} | {r['upload_bytes']:,} |")
+PY
+}
+
+# The same package drawn as before issue 43 (whole tiles, every surfel) and as now.
+work_pair() {
+    local name=$1 pkg=$2 size=$3
+    "$bin/grotto" bench "$pkg" --camera chamber --size "$size" --reps "$reps" --bounces 0 \
+        --cull tiles --no-splat-lod --json > "$out/json/work-$name__tiles__$size.json"
+    "$bin/grotto" bench "$pkg" --camera chamber --size "$size" --reps "$reps" --bounces 0 \
+        --json > "$out/json/work-$name__chunks+lod__$size.json"
+    echo "$out/json/work-$name__tiles__$size.json" "$out/json/work-$name__chunks+lod__$size.json"
+}
+
 # One line of per-frame statistics from a `grotto render --path --json` report.
 fly_row() {
     python3 - "$@" <<'PY'
@@ -88,6 +122,9 @@ if [[ " $parts " == *" demo "* ]]; then
         done
     done
     bench_table "The demo cave (grotto-pack demo), chamber camera" "${files[@]}" | tee -a "$tables"
+    # shellcheck disable=SC2046
+    work_table "The demo cave's splat passes: whole tiles and every surfel (before issue 43) against chunks and level of detail" \
+        $(work_pair demo "$work/demo/demo.grotto" 1920x1080) | tee -a "$tables"
 fi
 
 if [[ " $parts " == *" paper "* ]]; then
@@ -126,6 +163,9 @@ if [[ " $parts " == *" 1e7 "* ]]; then
     f=$out/json/survey-1e7__balanced__1920x1080.json
     "$bin/grotto" bench "$work/survey-10000000.grotto" --camera chamber --size 1920x1080 --reps "$reps" --json > "$f"
     bench_table "A 10^7-point survey (grotto-pack synth --points 10000000), every tile held" "$f" | tee -a "$tables"
+    # shellcheck disable=SC2046
+    work_table "The 10^7 survey's splat passes: whole tiles and every surfel (before issue 43) against chunks and level of detail" \
+        $(work_pair survey-1e7 "$work/survey-10000000.grotto" 1920x1080) | tee -a "$tables"
 fi
 
 if [[ " $parts " == *" 1e8 "* ]]; then

@@ -392,3 +392,79 @@ fn bytes_before_the_first_frame() {
     );
     assert!(first * 10 < total, "the first frame waited for {first} of {total} bytes");
 }
+
+/// Frame times of the viewer while the camera moves (issue 43): PACKAGE (GROTTO_WEB_BENCH_PACKAGE)
+/// published and opened at 800x600 (GROTTO_WEB_BENCH_SIZE) on SwiftShader; after its first frames
+/// W is held for GROTTO_WEB_BENCH_MOVE_S seconds (default 20) while the page's frames are timed
+/// (a timestamp each time the status counts a new frame). GROTTO_WEB_BENCH_QUERY adds to the
+/// page's query (e.g. `&target_fps=0`; a viewer older than issue 43 refuses that option). Prints
+/// a row: frames, median, p95 and worst milliseconds between frames, and what the frame-time
+/// target traded at the end.
+#[test]
+#[ignore = "a measurement: scripts/bench-web-frames.sh PACKAGE"]
+fn frame_times_while_moving() {
+    let Some((chromium, driver, bundle)) = tools() else { return };
+    let package =
+        PathBuf::from(std::env::var_os("GROTTO_WEB_BENCH_PACKAGE").expect("GROTTO_WEB_BENCH_PACKAGE"));
+    let size = std::env::var("GROTTO_WEB_BENCH_SIZE").unwrap_or_else(|_| "800x600".into());
+    let (w, h) = size.split_once('x').expect("SIZE as WxH");
+    let move_s: f64 = std::env::var("GROTTO_WEB_BENCH_MOVE_S").ok().and_then(|s| s.parse().ok()).unwrap_or(20.0);
+    let query = std::env::var("GROTTO_WEB_BENCH_QUERY").unwrap_or_default();
+    let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let (_, server) = published(dir.path(), &package, bundle, json!({}));
+    let browser = Browser::start(&chromium, &driver, true);
+    let url =
+        format!("http://127.0.0.1:{}/index.html?width={w}&height={h}&quality=fast{query}", server.port);
+    browser.call("POST", "/url", Some(&json!({"url": url})));
+    let t0 = Instant::now();
+    let frames = || {
+        let v = browser.eval("return JSON.stringify(window.grottoStatus || null)");
+        let s: Value = serde_json::from_str(v.as_str().unwrap_or("null")).unwrap_or(Value::Null);
+        (s["frames"].as_u64().unwrap_or(0), s)
+    };
+    while frames().0 < 3 {
+        assert!(t0.elapsed() < Duration::from_secs(900), "no frames after 15 minutes");
+        std::thread::sleep(Duration::from_millis(250));
+    }
+    browser.eval(
+        "window.grottoTimes = []; let last = -1; const tick = () => { const s = window.grottoStatus; \
+         if (s && s.frames !== last) { last = s.frames; window.grottoTimes.push(performance.now()); \
+         (window.grottoSeen = window.grottoSeen || []).push([s.frames, s.fetching, s.bounces_done, s.light_fraction, s.tiles, s.frame_ms]); } \
+         requestAnimationFrame(tick); }; requestAnimationFrame(tick); \
+         document.getElementById('canvas').dispatchEvent(new KeyboardEvent('keydown', {code: 'KeyW'})); \
+         return 0",
+    );
+    std::thread::sleep(Duration::from_secs_f64(move_s));
+    let v = browser.eval(
+        "document.getElementById('canvas').dispatchEvent(new KeyboardEvent('keyup', {code: 'KeyW'})); \
+         return JSON.stringify(window.grottoTimes)",
+    );
+    let (_, status) = frames();
+    let times: Vec<f64> = serde_json::from_str(v.as_str().unwrap_or("[]")).unwrap_or_default();
+    if std::env::var_os("GROTTO_WEB_BENCH_TRACE").is_some() {
+        // What the page said at each frame: frames, fetching, bounces, light fraction, tiles, ms.
+        let seen = browser.eval("return JSON.stringify(window.grottoSeen || [])");
+        let seen: Vec<Value> = serde_json::from_str(seen.as_str().unwrap_or("[]")).unwrap_or_default();
+        for (i, (t, s)) in times.iter().zip(&seen).enumerate() {
+            let gap = if i > 0 { t - times[i - 1] } else { 0.0 };
+            if gap > 500.0 || i < 3 {
+                eprintln!("frame at {t:.0} ms after {gap:.0} ms: {s}");
+            }
+        }
+    }
+    let mut gaps: Vec<f64> = times.windows(2).map(|p| p[1] - p[0]).collect();
+    gaps.sort_by(f64::total_cmp);
+    let at = |q: f64| gaps.get(((gaps.len().max(1) - 1) as f64 * q).round() as usize).copied().unwrap_or(0.0);
+    let name = package.file_name().unwrap().to_string_lossy().into_owned();
+    println!("| package | size | query | frames in {move_s} s | median ms | p95 ms | worst ms | traded at the end |");
+    println!(
+        "| {name} | {size} | {query} | {} | {:.0} | {:.0} | {:.0} | {} |",
+        times.len(),
+        at(0.5),
+        at(0.95),
+        gaps.last().copied().unwrap_or(0.0),
+        status.get("traded").map_or_else(|| "-".into(), Value::to_string)
+    );
+    assert!(times.len() >= 2, "no frames while moving");
+}

@@ -24,7 +24,7 @@ pub const MAX_DETAIL: f32 = 8.0;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Traded {
     pub target_ms: f64,
-    /// The last moving frame's draw, milliseconds (smoothed).
+    /// The last moving frame's draw, milliseconds.
     pub draw_ms: Option<f64>,
     /// Render scale while moving (1: the viewer's own).
     pub scale: f32,
@@ -54,21 +54,30 @@ impl FrameTarget {
     }
 
     /// A moving frame's draw took `ms`: choose what the next one trades. Steps are bounded (a
-    /// single slow frame, a tile swap or a hiccup of the OS, moves the scale by at most 30%), and
-    /// a band of 20% under the target holds still so the image does not flicker between sizes.
+    /// frame up to four times over the target, a tile swap or a hiccup of the OS, moves the scale
+    /// by at most 30%; one further over takes the whole step, so a weak adapter is not frozen for
+    /// several full-size frames), and a band of 20% under the target holds still so the image
+    /// does not flicker between sizes.
     pub fn record_moving(&mut self, ms: f64) {
         if !ms.is_finite() || ms < 0.0 {
             return;
         }
-        let avg = self.draw_ms.map_or(ms, |o| 0.5 * o + 0.5 * ms);
-        self.draw_ms = Some(avg);
-        let ratio = (self.target_ms / avg.max(1e-3)) as f32;
+        // The last frame alone: each step changes what a frame costs, so an average over
+        // frames would answer for sizes no longer drawn (the bounded steps keep one odd frame
+        // from moving much).
+        self.draw_ms = Some(ms);
+        let ratio = (self.target_ms / ms.max(1e-3)) as f32;
         if ratio < 1.0 {
+            // Far over the target (four times and more: a weak adapter, or the first moving
+            // frame after a full-size one), the whole step at once; else bounded steps.
+            let far = ratio < 0.25;
             if self.scale > MIN_SCALE {
                 // Pixels go with the square of the scale.
-                self.scale = (self.scale * ratio.sqrt().clamp(0.7, 1.0)).max(MIN_SCALE);
+                let step = if far { ratio.sqrt() } else { ratio.sqrt().clamp(0.7, 1.0) };
+                self.scale = (self.scale * step).max(MIN_SCALE);
             } else {
-                self.detail = (self.detail / ratio.clamp(0.5, 1.0)).min(MAX_DETAIL);
+                let step = if far { 4.0 } else { 1.0 / ratio.clamp(0.5, 1.0) };
+                self.detail = (self.detail * step).min(MAX_DETAIL);
             }
         } else if ratio > 1.25 {
             if self.detail > 1.0 {
@@ -116,6 +125,13 @@ mod tests {
         let tr = slow.traded();
         assert_eq!(tr.scale, MIN_SCALE);
         assert!(tr.detail > 1.0 && cost(400.0, &slow) <= 16.7 * 1.05, "{tr:?}");
+
+        // A frame far over the target (SwiftShader: 7 s at full size) reaches the floors at once.
+        let mut weak = FrameTarget::new(16.7);
+        weak.record_moving(7000.0);
+        assert_eq!(weak.traded().scale, MIN_SCALE);
+        weak.record_moving(7000.0 * 0.0625);
+        assert_eq!(weak.traded().detail, 4.0);
     }
 
     #[test]
