@@ -408,14 +408,14 @@ fn frame_times_while_moving() {
         PathBuf::from(std::env::var_os("GROTTO_WEB_BENCH_PACKAGE").expect("GROTTO_WEB_BENCH_PACKAGE"));
     let size = std::env::var("GROTTO_WEB_BENCH_SIZE").unwrap_or_else(|_| "800x600".into());
     let (w, h) = size.split_once('x').expect("SIZE as WxH");
-    let move_s: f64 = std::env::var("GROTTO_WEB_BENCH_MOVE_S").ok().and_then(|s| s.parse().ok()).unwrap_or(20.0);
+    let move_s: f64 =
+        std::env::var("GROTTO_WEB_BENCH_MOVE_S").ok().and_then(|s| s.parse().ok()).unwrap_or(20.0);
     let query = std::env::var("GROTTO_WEB_BENCH_QUERY").unwrap_or_default();
     let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let (_, server) = published(dir.path(), &package, bundle, json!({}));
     let browser = Browser::start(&chromium, &driver, true);
-    let url =
-        format!("http://127.0.0.1:{}/index.html?width={w}&height={h}&quality=fast{query}", server.port);
+    let url = format!("http://127.0.0.1:{}/index.html?width={w}&height={h}&quality=fast{query}", server.port);
     browser.call("POST", "/url", Some(&json!({"url": url})));
     let t0 = Instant::now();
     let frames = || {
@@ -457,7 +457,9 @@ fn frame_times_while_moving() {
     gaps.sort_by(f64::total_cmp);
     let at = |q: f64| gaps.get(((gaps.len().max(1) - 1) as f64 * q).round() as usize).copied().unwrap_or(0.0);
     let name = package.file_name().unwrap().to_string_lossy().into_owned();
-    println!("| package | size | query | frames in {move_s} s | median ms | p95 ms | worst ms | traded at the end |");
+    println!(
+        "| package | size | query | frames in {move_s} s | median ms | p95 ms | worst ms | traded at the end |"
+    );
     println!(
         "| {name} | {size} | {query} | {} | {:.0} | {:.0} | {:.0} | {} |",
         times.len(),

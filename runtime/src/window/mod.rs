@@ -344,27 +344,7 @@ impl App {
             ((s.config.height as f32 * scale) as u32).max(1),
         );
         let bounces_before = s.renderer.stats().bounces_done;
-        // Light first, in slices of a bounce, for as long as the pacer gives it; then the frame,
-        // with the light held so it adds none.
-        let light_ms = s.pacer.light_ms(moving);
-        // Views without light (albedo, normals, level) leave the light as it is.
-        let shows_light = s.renderer.settings().view.shows_light();
-        let t_light = Instant::now();
-        s.renderer.hold_light(None);
-        for _ in 0..64 {
-            let left_ms = light_ms - t_light.elapsed().as_secs_f64() * 1e3;
-            if moving || left_ms <= 0.0 || s.renderer.light_progress().converged || !shows_light {
-                break;
-            }
-            let t = Instant::now();
-            let leaves = s.renderer.update_light_slice(s.pacer.slice_leaves(left_ms))?;
-            s.pacer.record_slice(t.elapsed().as_secs_f64() * 1e3, leaves);
-        }
-        s.renderer.hold_light(Some(if moving {
-            "the camera is moving"
-        } else {
-            "this frame's light ran before it, within the frame budget"
-        }));
+        light_first(s, moving)?;
         let t = Instant::now();
         let plan = s.renderer.draw(&cam, w, h)?;
         if !(plan.runs(crate::light::plan::Pass::Shadow) || plan.runs(crate::light::plan::Pass::Inject)) {
@@ -411,8 +391,9 @@ impl App {
             keys.push(cam);
         }
 
-        let at_rest =
-            !moving && (progress.converged || !shows_light) && s.follow.as_ref().is_none_or(|f| !f.busy());
+        let at_rest = !moving
+            && (progress.converged || !s.renderer.settings().view.shows_light())
+            && s.follow.as_ref().is_none_or(|f| !f.busy());
         if self.summary.frames >= self.opts.after_frames.unwrap_or(u32::MAX) && at_rest && s.shot.is_none() {
             s.shot = Some(shot_path(&self.opts));
             s.quit_after_shot = true;
@@ -631,6 +612,31 @@ fn model(
             _ => Vec::new(),
         },
     }
+}
+
+/// Light first, in slices of a bounce, for as long as the pacer gives it (none while `moving`);
+/// then the light is held so that the frame drawn after it adds none.
+fn light_first(s: &mut State, moving: bool) -> Result<()> {
+    let light_ms = s.pacer.light_ms(moving);
+    // Views without light (albedo, normals, level) leave the light as it is.
+    let shows_light = s.renderer.settings().view.shows_light();
+    let t_light = Instant::now();
+    s.renderer.hold_light(None);
+    for _ in 0..64 {
+        let left_ms = light_ms - t_light.elapsed().as_secs_f64() * 1e3;
+        if moving || left_ms <= 0.0 || s.renderer.light_progress().converged || !shows_light {
+            break;
+        }
+        let t = Instant::now();
+        let leaves = s.renderer.update_light_slice(s.pacer.slice_leaves(left_ms))?;
+        s.pacer.record_slice(t.elapsed().as_secs_f64() * 1e3, leaves);
+    }
+    s.renderer.hold_light(Some(if moving {
+        "the camera is moving"
+    } else {
+        "this frame's light ran before it, within the frame budget"
+    }));
+    Ok(())
 }
 
 /// Applies what the panel changed.
