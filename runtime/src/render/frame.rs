@@ -330,7 +330,8 @@ impl Renderer {
                 let focal_px = h as f32 * 0.5 / (v.camera.fov_y_deg.to_radians() * 0.5).tan();
                 let viewer = self.camera_view_proj.as_ref().map(|m| Viewer {
                     view_proj: m,
-                    grow_ndc: Viewer::grow_for(w, h, self.settings.min_splat_px),
+                    // Thinned discs grow up to the detail's floor, past the viewport's edge too.
+                    grow_ndc: Viewer::grow_for(w, h, self.settings.min_splat_px * self.lod_detail),
                     light: None,
                     lod: lod(v.camera.eye_m, focal_px, self.lod_detail),
                 });
