@@ -349,14 +349,18 @@ impl Gpu {
 
     /// An uninitialised buffer of `size` bytes (at least 16), checked first.
     pub(crate) fn buffer(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> Result<wgpu::Buffer> {
-        let size = size.max(16);
-        self.check_buffer(label, size, usage)?;
-        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+        self.check_buffer(label, size.max(16), usage)?;
+        Ok(self.create_buffer_unchecked(label, size, usage))
+    }
+
+    /// An uninitialised buffer of `size` bytes (at least 16), its limits checked by the caller.
+    fn create_buffer_unchecked(&self, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
-            size,
+            size: size.max(16),
             usage,
             mapped_at_creation: false,
-        }))
+        })
     }
 
     /// An uninitialised buffer of `size` bytes that shaders bind a window at a time (the surfel
@@ -367,15 +371,9 @@ impl Gpu {
         size: u64,
         usage: wgpu::BufferUsages,
     ) -> Result<wgpu::Buffer> {
-        let size = size.max(16);
         let whole = usage - wgpu::BufferUsages::STORAGE - wgpu::BufferUsages::UNIFORM;
-        self.check_buffer(label, size, whole)?;
-        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size,
-            usage,
-            mapped_at_creation: false,
-        }))
+        self.check_buffer(label, size.max(16), whole)?;
+        Ok(self.create_buffer_unchecked(label, size, usage))
     }
 
     /// A buffer of `count` slots of `slot_size` bytes where each draw binds one slot (a uniform

@@ -219,9 +219,7 @@ impl SplatRun {
     /// Surfels the draw covers.
     pub(crate) fn drawn(&self) -> u64 {
         let k = self.stride.max(1);
-        u64::from(
-            self.surfels.end.div_ceil(k) - self.surfels.start.div_ceil(k).min(self.surfels.end.div_ceil(k)),
-        )
+        u64::from(self.surfels.end.div_ceil(k).saturating_sub(self.surfels.start.div_ceil(k)))
     }
 }
 

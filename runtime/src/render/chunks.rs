@@ -161,14 +161,14 @@ impl ChunkCache {
 /// The pool runs of the chunks `viewer` may see, for tiles whose surfels sit at `tile_surfels`
 /// in the pool, merged where adjacent. Chunk offsets past a tile's range (a cache built from
 /// other surfels) are cut to it.
-pub(crate) fn runs_seen(
-    tiles: &[(Range<u32>, Arc<Vec<Chunk>>)],
+pub(crate) fn runs_seen<'c>(
+    tiles: impl IntoIterator<Item = (&'c Range<u32>, &'c [Chunk])>,
     viewer: &Viewer<'_>,
     splat_scale: f32,
 ) -> Vec<SplatRun> {
     let mut runs: Vec<SplatRun> = Vec::new();
     for (at, chunks) in tiles {
-        for c in chunks.iter() {
+        for c in chunks {
             let (lo, hi) = c.disc_box(splat_scale);
             if !viewer.sees(lo, hi) {
                 continue;
@@ -258,12 +258,14 @@ mod tests {
         a.extend(vec![surfel([0.0, 0.0, -50.0], 0.1); 10]);
         let b = vec![surfel([0.0, 0.0, -6.0], 0.1); 5];
         let n_a = a.len() as u32;
-        let tiles =
-            vec![(100..100 + n_a, Arc::new(chunks_of(&a))), (100 + n_a..105 + n_a, Arc::new(chunks_of(&b)))];
+        let tiles = [(100..100 + n_a, chunks_of(&a)), (100 + n_a..105 + n_a, chunks_of(&b))];
         let all = Viewer { view_proj: &view_proj, grow_ndc: Vec2::ZERO, light: None, lod: None };
         let k = k as u32;
         let runs = |v: &Viewer<'_>| -> Vec<Range<u32>> {
-            runs_seen(&tiles, v, 1.0).into_iter().map(|r| r.surfels).collect()
+            runs_seen(tiles.iter().map(|(at, c)| (at, c.as_slice())), v, 1.0)
+                .into_iter()
+                .map(|r| r.surfels)
+                .collect()
         };
         assert_eq!(runs(&all), vec![100..100 + k, 100 + 2 * k..105 + n_a]);
         let lamp = Viewer { light: Some((Vec3::ZERO, 10.0)), ..all };

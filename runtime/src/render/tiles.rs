@@ -151,9 +151,8 @@ impl TilePools {
         by_chunks: bool,
     ) -> Vec<SplatRun> {
         if by_chunks && let Some(v) = viewer {
-            let tiles: Vec<(Range<u32>, Arc<Vec<Chunk>>)> =
-                self.tile_surfels.iter().cloned().zip(self.tile_chunks.iter().cloned()).collect();
-            return super::chunks::runs_seen(&tiles, v, splat_scale);
+            let tiles = self.tile_surfels.iter().zip(self.tile_chunks.iter().map(|c| c.as_slice()));
+            return super::chunks::runs_seen(tiles, v, splat_scale);
         }
         let seen = |t: &TileGpu| match viewer {
             Some(v) if self.cull_tiles => {
