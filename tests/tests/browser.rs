@@ -151,6 +151,25 @@ impl Browser {
         self.call("POST", "/execute/sync", Some(&json!({"script": script, "args": []})))
     }
 
+    /// The page's status (`window.grottoStatus`), null before the viewer's first frame.
+    fn status(&self) -> Value {
+        let v = self.eval("return JSON.stringify(window.grottoStatus || null)");
+        serde_json::from_str(v.as_str().unwrap_or("null")).unwrap_or(Value::Null)
+    }
+
+    /// Waits until the page has drawn `n` frames; returns its status then.
+    fn wait_for_frames(&self, n: u64, limit: Duration) -> Value {
+        let t0 = Instant::now();
+        loop {
+            let s = self.status();
+            if s["frames"].as_u64().unwrap_or(0) >= n {
+                return s;
+            }
+            assert!(t0.elapsed() < limit, "fewer than {n} frames after {limit:?}");
+            std::thread::sleep(Duration::from_millis(200));
+        }
+    }
+
     /// Waits for the page's marker to leave loading/converging; returns it and the status.
     fn wait_for_marker(&self, limit: Duration) -> (String, Value) {
         let t0 = Instant::now();
@@ -365,16 +384,7 @@ fn bytes_before_the_first_frame() {
     let browser = Browser::start(&chromium, &driver, true);
     let url = format!("http://127.0.0.1:{}/index.html?width={W}&height={H}&quality=fast", server.port);
     browser.call("POST", "/url", Some(&json!({"url": url})));
-    let t0 = Instant::now();
-    let status = loop {
-        let v = browser.eval("return JSON.stringify(window.grottoStatus || null)");
-        let s: Value = serde_json::from_str(v.as_str().unwrap_or("null")).unwrap_or(Value::Null);
-        if s["frames"].as_u64().unwrap_or(0) >= 1 {
-            break s;
-        }
-        assert!(t0.elapsed() < Duration::from_secs(600), "no first frame");
-        std::thread::sleep(Duration::from_millis(200));
-    };
+    let status = browser.wait_for_frames(1, Duration::from_secs(600));
     let name = package.file_name().unwrap().to_string_lossy().into_owned();
     let served: Vec<_> = server.log.lock().unwrap().clone();
     let site_bytes: u64 = served.iter().filter(|s| s.path != name).map(|s| s.bytes).sum();
@@ -395,7 +405,7 @@ fn bytes_before_the_first_frame() {
 
 /// Frame times of the viewer while the camera moves (issue 43): PACKAGE (GROTTO_WEB_BENCH_PACKAGE)
 /// published and opened at 800x600 (GROTTO_WEB_BENCH_SIZE) on SwiftShader; after its first frames
-/// W is held for GROTTO_WEB_BENCH_MOVE_S seconds (default 20) while the page's frames are timed
+/// W is held for GROTTO_WEB_BENCH_MOVE_S seconds (default 60) while the page's frames are timed
 /// (a timestamp each time the status counts a new frame). GROTTO_WEB_BENCH_QUERY adds to the
 /// page's query (e.g. `&target_fps=0`; a viewer older than issue 43 refuses that option). Prints
 /// a row: frames, median, p95 and worst milliseconds between frames, and what the frame-time
@@ -409,7 +419,7 @@ fn frame_times_while_moving() {
     let size = std::env::var("GROTTO_WEB_BENCH_SIZE").unwrap_or_else(|_| "800x600".into());
     let (w, h) = size.split_once('x').expect("SIZE as WxH");
     let move_s: f64 =
-        std::env::var("GROTTO_WEB_BENCH_MOVE_S").ok().and_then(|s| s.parse().ok()).unwrap_or(20.0);
+        std::env::var("GROTTO_WEB_BENCH_MOVE_S").ok().and_then(|s| s.parse().ok()).unwrap_or(60.0);
     let query = std::env::var("GROTTO_WEB_BENCH_QUERY").unwrap_or_default();
     let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
@@ -417,16 +427,7 @@ fn frame_times_while_moving() {
     let browser = Browser::start(&chromium, &driver, true);
     let url = format!("http://127.0.0.1:{}/index.html?width={w}&height={h}&quality=fast{query}", server.port);
     browser.call("POST", "/url", Some(&json!({"url": url})));
-    let t0 = Instant::now();
-    let frames = || {
-        let v = browser.eval("return JSON.stringify(window.grottoStatus || null)");
-        let s: Value = serde_json::from_str(v.as_str().unwrap_or("null")).unwrap_or(Value::Null);
-        (s["frames"].as_u64().unwrap_or(0), s)
-    };
-    while frames().0 < 3 {
-        assert!(t0.elapsed() < Duration::from_secs(900), "no frames after 15 minutes");
-        std::thread::sleep(Duration::from_millis(250));
-    }
+    browser.wait_for_frames(3, Duration::from_secs(900));
     browser.eval(
         "window.grottoTimes = []; let last = -1; const tick = () => { const s = window.grottoStatus; \
          if (s && s.frames !== last) { last = s.frames; window.grottoTimes.push(performance.now()); \
@@ -440,7 +441,7 @@ fn frame_times_while_moving() {
         "document.getElementById('canvas').dispatchEvent(new KeyboardEvent('keyup', {code: 'KeyW'})); \
          return JSON.stringify(window.grottoTimes)",
     );
-    let (_, status) = frames();
+    let status = browser.status();
     let times: Vec<f64> = serde_json::from_str(v.as_str().unwrap_or("[]")).unwrap_or_default();
     if std::env::var_os("GROTTO_WEB_BENCH_TRACE").is_some() {
         // What the page said at each frame: frames, fetching, bounces, light fraction, tiles, ms.
