@@ -46,6 +46,11 @@ pub struct Settings {
     pub cone_interleave: bool,
     pub shadows: bool,
     pub shadow_map_size: u32,
+    /// Milliseconds a frame may spend on shadow maps out of date (after a change of tiles or
+    /// lights), at the pass's measured surfels per millisecond; the other faces follow over the
+    /// next frames, shown together when the last is drawn (render/shadow_queue.rs). 0: every
+    /// face at once (images and batch work); the viewers set it (`--shadow-ms`).
+    pub shadow_frame_ms: f32,
     pub indirect: IndirectFilter,
     /// Direct light at pixels (off: only indirect and emission, for tests).
     pub direct: bool,
@@ -224,6 +229,7 @@ impl Default for Settings {
             cone_interleave: true,
             shadows: true,
             shadow_map_size: 512,
+            shadow_frame_ms: 0.0,
             indirect: IndirectFilter::Trilinear,
             direct: true,
             exposure: 1.0,
@@ -350,6 +356,12 @@ impl Settings {
         }
         if !(16..=8192).contains(&self.shadow_map_size) {
             return Err(Error::Setting { name: "shadow_map_size", problem: "must be in 16..=8192".into() });
+        }
+        if !(self.shadow_frame_ms.is_finite() && (0.0..=10_000.0).contains(&self.shadow_frame_ms)) {
+            return Err(Error::Setting {
+                name: "shadow_frame_ms",
+                problem: format!("{} is outside 0..=10000 (0: every face at once)", self.shadow_frame_ms),
+            });
         }
         if !(self.light_cutoff_w_m2.is_finite() && self.light_cutoff_w_m2 >= 0.0) {
             return Err(Error::Setting {

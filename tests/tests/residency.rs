@@ -358,6 +358,59 @@ fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer()
     }
 }
 
+/// Issue 43: under a per-frame shadow budget the faces a change of tiles leaves out of date are
+/// drawn over several frames, one pass each; while they catch up the frames show the shadow maps
+/// as they were (no face of the new scene mixed in, the direct light not injected, the bounces
+/// held), and once the last is drawn the light settles to what a renderer made for the new scene
+/// renders, as without a budget.
+#[test]
+fn a_shadow_budget_spreads_the_redraw_over_frames_and_shows_it_whole() {
+    use grotto_runtime::light::plan::Pass;
+    let pkg = Package::open(small_tiles_cave()).unwrap();
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
+    let n = pkg.tile_count() as usize;
+    let scene = |full: usize| {
+        SceneData::from_package_with(&pkg, |i| if i < full { TileMode::Full } else { TileMode::Coarse })
+            .unwrap()
+    };
+    let (half, most) = (scene(n / 2), scene(3 * n / 4));
+    let cam = Camera::from_scene(most.cameras.iter().find(|c| c.name == "chamber").unwrap());
+    let whole = Settings { bounces: 40, shadow_map_size: 128, exposure: 8.0, ..Settings::default() };
+    let mut batch = Renderer::new(&gpu, &most, whole.clone()).unwrap();
+    batch.settle(|_, _| {}).unwrap();
+    let batch_most = batch.render(&cam, W, H).unwrap().0.ldr;
+
+    // A budget far under one face's time: each pass draws the one face it must.
+    let budgeted = Settings { shadow_frame_ms: 1e-3, ..whole };
+    let caps = PoolCaps::filling(PoolCaps::of(&most), PoolCaps::of(&most).bytes(false) * 5 / 4, false);
+    let mut r = Renderer::with_pools(&gpu, &half, budgeted, caps).unwrap();
+    r.settle(|_, _| {}).unwrap();
+    assert_eq!(r.take_shadow_faces_drawn(), r.shadow_face_count() as u64, "the first fill draws every face");
+    let u = r.update_scene(&most).unwrap().expect("in place");
+    assert!(u.shadow_faces >= 2, "the change must leave several faces out of date: {u:?}");
+    let mut shown = Vec::new();
+    let mut passes = 0;
+    loop {
+        let (frame, plan) = r.render(&cam, W, H).unwrap();
+        let drawn = r.take_shadow_faces_drawn();
+        assert!(plan.runs(Pass::Shadow), "{}", plan.explain());
+        assert_eq!(drawn, 1, "one face a pass under this budget");
+        passes += 1;
+        if plan.runs(Pass::Inject) {
+            break;
+        }
+        assert!(!plan.runs(Pass::Propagate), "bounces wait for the whole atlas: {}", plan.explain());
+        shown.push(frame.ldr);
+    }
+    eprintln!("{} faces out of date drawn in {passes} passes", u.shadow_faces);
+    assert_eq!(passes, u.shadow_faces);
+    assert!(shown.windows(2).all(|w| w[0] == w[1]), "frames while the maps catch up must not change");
+    r.settle(|_, _| {}).unwrap();
+    let d = golden::diff(&batch_most, &r.render(&cam, W, H).unwrap().0.ldr);
+    eprintln!("after catching up against a renderer made for the scene: {d:?}");
+    assert!(golden::within_tolerance(&d), "{d:?}");
+}
+
 /// A copy of `package` without the sections format 1.1 added (coarse levels, rock), as a 1.0
 /// packer wrote it: the runtime then derives them itself.
 fn without_levels(package: &Path, out: &Path) -> PathBuf {

@@ -80,6 +80,9 @@ pub struct Options {
     /// Frames a second to hold while the camera moves, by drawing at a smaller scale and then
     /// thinning far surfels harder (view/frame_target.rs; default 60, 0: none).
     pub target_fps: Option<f64>,
+    /// Milliseconds a frame may spend on shadow faces out of date after tiles arrive (default 8;
+    /// 0: every face at once): the rest follow over the next frames (render/shadow_queue.rs).
+    pub shadow_ms: Option<f32>,
 }
 
 /// The status of a frame, for the page's panel and the ready marker (JSON).
@@ -248,6 +251,9 @@ struct LastFrame {
     leaves: u32,
     plain: bool,
     moving: bool,
+    /// The frame ran the shadow pass (its time, which only overstates the pass's, sizes the
+    /// next shadow budget: the browser does not time passes).
+    shadow: bool,
 }
 
 /// The viewer the page drives.
@@ -286,6 +292,7 @@ fn settings_of(o: &Options) -> Result<Settings, Error> {
         s.view = ViewMode::parse(v).ok_or_else(|| Error::Setting(format!("unknown view {v:?}")))?;
     }
     s.exposure = o.exposure.unwrap_or(1.0);
+    s.shadow_frame_ms = o.shadow_ms.unwrap_or(8.0);
     s.validate()?;
     Ok(s)
 }
@@ -541,7 +548,8 @@ impl State {
         let direct =
             |p: &grotto_runtime::light::plan::EffectPlan| p.runs(Pass::Shadow) || p.runs(Pass::Inject);
         let plain = !(direct(&plan) || light && direct(&light_plan));
-        self.last = Some(LastFrame { submitted, leaves, plain, moving });
+        let shadow = plan.runs(Pass::Shadow) || light && light_plan.runs(Pass::Shadow);
+        self.last = Some(LastFrame { submitted, leaves, plain, moving, shadow });
         let frame_done = self.frame_done.clone();
         self.gpu.queue.on_submitted_work_done(move || {
             if let Ok(mut t) = frame_done.lock() {
@@ -559,6 +567,9 @@ impl State {
     /// the quickest recent frame.
     fn pace(&mut self, last: LastFrame, done: Instant) {
         let ms = done.saturating_duration_since(last.submitted).as_secs_f64() * 1e3;
+        if last.shadow {
+            self.renderer.note_shadow_frame_ms(ms);
+        }
         if !last.plain {
             return;
         }

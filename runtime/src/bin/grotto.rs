@@ -218,6 +218,12 @@ struct RenderArgs {
     /// (one of eight by cell parity), which averages the directions the cones miss.
     #[arg(long)]
     no_cone_interleave: bool,
+    /// Milliseconds a frame may spend redrawing shadow faces out of date (after a change of tiles
+    /// or lights), at the measured surfels per millisecond; the rest follow over the next frames
+    /// and show together when the last is drawn, so no frame stalls on the whole atlas. 0: every
+    /// face at once (default for render and bench; the viewer's default is 8).
+    #[arg(long)]
+    shadow_ms: Option<f32>,
     /// Shadow-map budget: the N brightest point and spot lights get shadow maps and per-pixel
     /// light; the others are lit per leaf with --shadow-fallback (default 16).
     #[arg(long)]
@@ -347,6 +353,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
     settings.max_distance_m = a.max_distance;
     settings.convergence_tolerance = a.tolerance;
     settings.shadows = !a.no_shadows;
+    settings.shadow_frame_ms = a.shadow_ms.unwrap_or(0.0);
     settings.bounce_tail = !a.no_bounce_tail;
     settings.cone_interleave = !a.no_cone_interleave;
     settings.shadowed_lights = a.shadowed_lights.unwrap_or(settings.shadowed_lights);
@@ -426,8 +433,12 @@ struct ViewArgs {
     no_panel: bool,
 }
 
+/// The viewer's shadow budget unless `--shadow-ms` says otherwise: half a 60 fps frame.
+const VIEW_SHADOW_MS: f32 = 8.0;
+
 fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
-    let render = options(&v.render)?;
+    let mut render = options(&v.render)?;
+    render.settings.shadow_frame_ms = v.render.shadow_ms.unwrap_or(VIEW_SHADOW_MS);
     let a = &v.render;
     // The panel names the preset only where no knob changed it.
     let knobs_set = a.bounces.is_some()

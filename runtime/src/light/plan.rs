@@ -106,6 +106,10 @@ pub struct PlanInputs {
     pub env_valid: bool,
     /// Shadow maps and injected direct light match the current lights.
     pub direct_valid: bool,
+    /// Shadow maps catching up under a per-frame budget: faces the next pass draws, of those
+    /// out of date, and the budget in milliseconds (render/shadow_queue.rs). None: the next pass
+    /// draws every face out of date, or none is.
+    pub shadow_catch_up: Option<(usize, usize, f32)>,
     pub bounces_done: u32,
     pub bounce_budget: u32,
     /// Largest relative change of the last bounce, if one ran since the last change.
@@ -181,11 +185,17 @@ fn shadow_step(i: &PlanInputs, analytic: usize, lights_text: &str) -> Step {
         let rest = analytic - i.shadowed;
         let beyond =
             if rest > 0 { format!("; {rest} more lit per leaf with {}", i.fallback) } else { String::new() };
+        let faces = match i.shadow_catch_up {
+            Some((now, of, ms)) => format!(
+                "; {now} of {of} faces out of date drawn this frame ({ms} ms budget), the rest over the next frames"
+            ),
+            None => String::new(),
+        };
         Step {
             pass: Pass::Shadow,
             run: true,
             reason: format!(
-                "{} of {lights_text} get shadow maps (brightest first, budget {}){beyond}; lights changed",
+                "{} of {lights_text} get shadow maps (brightest first, budget {}){beyond}; lights or tiles changed{faces}",
                 i.shadowed, i.shadow_budget
             ),
         }
@@ -205,6 +215,14 @@ fn inject_step(i: &PlanInputs, analytic: usize, lights_text: &str) -> Step {
             pass: Pass::Inject,
             run: false,
             reason: "lights unchanged: injected direct light still valid".into(),
+        }
+    } else if let Some((now, of, _)) = i.shadow_catch_up.filter(|_| i.shadows_enabled && i.shadowed > 0) {
+        Step {
+            pass: Pass::Inject,
+            run: false,
+            reason: format!(
+                "shadow maps catching up ({now} of {of} faces this frame): direct light waits for the whole atlas"
+            ),
         }
     } else {
         Step {
@@ -270,7 +288,9 @@ fn propagate_step(i: &PlanInputs, analytic: usize) -> (bool, String) {
     } else {
         (true, format!("bounce {} of {}", i.bounces_done + 1, i.bounce_budget))
     };
-    match (propagate.0, i.light_held, i.bounce_part) {
+    let catching_up = i.shadow_catch_up.is_some() && !i.direct_valid && i.shadows_enabled && i.shadowed > 0;
+    let held = i.light_held.or(catching_up.then_some("the shadow maps are catching up"));
+    match (propagate.0, held, i.bounce_part) {
         (true, Some(why), _) => (false, format!("{why}: bounce {} waits", i.bounces_done + 1)),
         (true, None, Some((next, of))) => (
             true,
@@ -352,6 +372,7 @@ mod tests {
             ambient: false,
             env_valid: false,
             direct_valid: false,
+            shadow_catch_up: None,
             bounces_done: 0,
             bounce_budget: 4,
             last_change: None,
@@ -470,5 +491,24 @@ mod tests {
             assert!(!step.run && step.reason.contains("albedo view shows no light"), "{step:?}");
         }
         assert!(p.runs(Pass::Gbuffer) && p.runs(Pass::Shade));
+    }
+
+    #[test]
+    fn shadow_maps_catching_up_hold_inject_and_the_bounces_until_the_last_face() {
+        let p = plan(&PlanInputs { shadow_catch_up: Some((3, 40, 8.0)), ..base() });
+        assert!(p.runs(Pass::Shadow), "{}", p.explain());
+        assert!(
+            p.explain().contains("3 of 40 faces out of date drawn this frame (8 ms budget)"),
+            "{}",
+            p.explain()
+        );
+        assert!(!p.runs(Pass::Inject) && !p.runs(Pass::Propagate) && !p.runs(Pass::Mip), "{}", p.explain());
+        assert!(p.explain().contains("direct light waits for the whole atlas"), "{}", p.explain());
+        // The pass that draws the last faces injects and bounces in the same frame.
+        let last = plan(&base());
+        assert!(last.runs(Pass::Shadow) && last.runs(Pass::Inject) && last.runs(Pass::Propagate));
+        // Shadows off: nothing waits for them.
+        let off = plan(&PlanInputs { shadows_enabled: false, shadow_catch_up: Some((3, 40, 8.0)), ..base() });
+        assert!(off.runs(Pass::Inject) && off.runs(Pass::Propagate), "{}", off.explain());
     }
 }

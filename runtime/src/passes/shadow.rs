@@ -5,9 +5,11 @@
 //! percentage-closer filter (shaders/lights.wgsl).
 //!
 //! A face draws only the surfel chunks its frustum and its light's range meet (render/chunks.rs),
-//! and after a change of
-//! resident tiles only the faces that see a changed tile are drawn again (the others keep their
-//! texels: the pass loads the atlas and clears a redrawn face by copying a blank one over it).
+//! and after a change of resident tiles only the faces that see a changed tile are drawn again
+//! (the others keep their texels: the pass loads the atlas and clears a redrawn face by copying a
+//! blank one over it). Under a per-frame budget the faces are drawn over several frames into a
+//! staging atlas, made when first needed, and copied over the shown one together when the last
+//! is drawn (render/shadow_queue.rs).
 
 use glam::{Mat4, Vec3};
 
@@ -15,6 +17,7 @@ use super::splat;
 use crate::error::Result;
 use crate::gpu::Gpu;
 use crate::gpu::types::SplatUniform;
+use crate::render::shadow_queue::Batch;
 
 /// Distance to the light as a packed f32 (packing.wgsl `pack_f32`): float targets do not render on GL.
 pub(crate) const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -47,6 +50,8 @@ pub(crate) struct Shadow {
     /// One face cleared to "nothing within 1e30 m", copied over a face before it is redrawn.
     blank: wgpu::Texture,
     depth: wgpu::TextureView,
+    /// Faces drawn over several frames wait here until the last is drawn (made when first used).
+    staging: Option<(wgpu::Texture, wgpu::TextureView)>,
     uniforms: splat::Uniforms,
     faces: Vec<Face>,
     atlas_bytes: u64,
@@ -148,6 +153,7 @@ impl Shadow {
             atlas_texture,
             blank,
             depth,
+            staging: None,
             uniforms,
             faces: faces.to_vec(),
             atlas_bytes,
@@ -172,73 +178,107 @@ impl Shadow {
         &self.faces
     }
 
-    /// GPU bytes of the atlas, its depth buffer (4 bytes a texel each) and the blank face.
+    /// GPU bytes of the atlas, its depth buffer (4 bytes a texel each) and the blank face (the
+    /// staging atlas, when made, adds half the first two).
     pub(crate) fn bytes(&self) -> u64 {
         self.atlas_bytes
     }
 
-    /// Renders the faces `draws` names (`Some(surfel ranges)`: the surfel chunks the face may
-    /// see) into their squares of the atlas in one pass (one viewport per face). With every face
-    /// named the atlas is cleared; else the other faces keep their texels and each named one is
-    /// cleared first (the blank face copied over it).
-    pub(crate) fn record(
+    /// Makes the staging atlas if it is not made yet; returns the bytes it added (0 if it was).
+    pub(crate) fn ensure_staging(&mut self, gpu: &Gpu) -> Result<u64> {
+        if self.staging.is_some() {
+            return Ok(0);
+        }
+        let size = self.atlas_texture.size();
+        let texture = gpu.texture_2d(
+            "shadow staging atlas",
+            size.width,
+            size.height,
+            DISTANCE_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::COPY_SRC
+                | wgpu::TextureUsages::COPY_DST,
+        )?;
+        let view = texture.create_view(&Default::default());
+        self.staging = Some((texture, view));
+        Ok(u64::from(size.width) * u64::from(size.height) * 4)
+    }
+
+    /// Face `i`'s square of an atlas, as a copy source or target.
+    fn face_copy<'t>(&self, texture: &'t wgpu::Texture, i: usize) -> wgpu::TexelCopyTextureInfo<'t> {
+        let (x, y) = ((i as u32 % self.cols) * self.face_size, (i as u32 / self.cols) * self.face_size);
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d { x, y, z: 0 },
+            aspect: wgpu::TextureAspect::All,
+        }
+    }
+
+    /// Renders `batch`'s faces (each drawing the surfel chunks `runs` gives it) into their squares
+    /// of the atlas in one pass (one viewport per face): the shown atlas, cleared whole where
+    /// every face is drawn, else the named faces cleared first (the blank face copied over each);
+    /// or the staging atlas, whose faces `batch.commit` names are copied to the shown one after.
+    pub(crate) fn record<'r>(
         &self,
         enc: &mut wgpu::CommandEncoder,
         fetch: &splat::Fetch,
-        draws: &[Option<Vec<splat::SplatRun>>],
+        batch: &Batch,
+        runs: impl Fn(usize) -> &'r [splat::SplatRun],
         (timestamps, stats): (Option<wgpu::RenderPassTimestampWrites<'_>>, Option<(&wgpu::QuerySet, u32)>),
     ) {
-        let every = draws.iter().all(Option::is_some);
-        let corner =
-            |i: usize| ((i as u32 % self.cols) * self.face_size, (i as u32 / self.cols) * self.face_size);
-        if !every {
-            for (i, _) in draws.iter().enumerate().filter(|(_, d)| d.is_some()) {
-                let (x, y) = corner(i);
-                enc.copy_texture_to_texture(
-                    self.blank.as_image_copy(),
-                    wgpu::TexelCopyTextureInfo {
-                        texture: &self.atlas_texture,
-                        mip_level: 0,
-                        origin: wgpu::Origin3d { x, y, z: 0 },
-                        aspect: wgpu::TextureAspect::All,
-                    },
-                    wgpu::Extent3d {
-                        width: self.face_size,
-                        height: self.face_size,
-                        depth_or_array_layers: 1,
-                    },
-                );
+        let (target, view) = match (&self.staging, batch.staged) {
+            (Some((t, v)), true) => (t, v),
+            // The renderer makes the staging atlas before a staged batch; without it, draw shown.
+            _ => (&self.atlas_texture, &self.atlas),
+        };
+        let extent =
+            wgpu::Extent3d { width: self.face_size, height: self.face_size, depth_or_array_layers: 1 };
+        if !batch.whole {
+            for &i in &batch.faces {
+                enc.copy_texture_to_texture(self.blank.as_image_copy(), self.face_copy(target, i), extent);
             }
         }
-        let load = if every { wgpu::LoadOp::Clear(packed_clear(1e30)) } else { wgpu::LoadOp::Load };
-        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("shadow"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &self.atlas,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
-            })],
-            depth_stencil_attachment: Some(splat::depth_cleared(&self.depth)),
-            timestamp_writes: timestamps,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        if let Some((set, i)) = stats {
-            pass.begin_pipeline_statistics_query(set, i);
+        let load = if batch.whole { wgpu::LoadOp::Clear(packed_clear(1e30)) } else { wgpu::LoadOp::Load };
+        {
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("shadow"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
+                })],
+                depth_stencil_attachment: Some(splat::depth_cleared(&self.depth)),
+                timestamp_writes: timestamps,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            if let Some((set, i)) = stats {
+                pass.begin_pipeline_statistics_query(set, i);
+            }
+            pass.set_pipeline(&self.pipeline);
+            let s = self.face_size as f32;
+            for &i in &batch.faces {
+                let Some(group) = self.uniforms.groups.get(i) else { continue };
+                let (x, y) =
+                    ((i as u32 % self.cols) * self.face_size, (i as u32 / self.cols) * self.face_size);
+                pass.set_viewport(x as f32, y as f32, s, s, 0.0, 1.0);
+                pass.set_bind_group(0, group, &[]);
+                fetch.draw(&mut pass, runs(i));
+            }
+            if stats.is_some() {
+                pass.end_pipeline_statistics_query();
+            }
         }
-        pass.set_pipeline(&self.pipeline);
-        let s = self.face_size as f32;
-        // One uniform group per face.
-        for (i, (group, runs)) in self.uniforms.groups.iter().zip(draws).enumerate() {
-            let Some(runs) = runs else { continue };
-            let (x, y) = corner(i);
-            pass.set_viewport(x as f32, y as f32, s, s, 0.0, 1.0);
-            pass.set_bind_group(0, group, &[]);
-            fetch.draw(&mut pass, runs);
-        }
-        if stats.is_some() {
-            pass.end_pipeline_statistics_query();
+        if !std::ptr::eq(target, &self.atlas_texture) {
+            for &i in &batch.commit {
+                enc.copy_texture_to_texture(
+                    self.face_copy(target, i),
+                    self.face_copy(&self.atlas_texture, i),
+                    extent,
+                );
+            }
         }
     }
 }

@@ -41,6 +41,7 @@ impl Renderer {
             ambient: self.settings.background.iter().any(|&b| b > 0.0),
             env_valid: self.env_valid,
             direct_valid: self.direct_valid,
+            shadow_catch_up: self.shadow_catch_up(),
             bounces_done: self.stats_now.bounces_done,
             bounce_budget: self.settings.bounces,
             last_change: self.stats_now.last_change,
@@ -276,9 +277,20 @@ impl Renderer {
     }
 
     /// The pool runs `viewer` may see, culled as the settings say.
-    fn runs_seen(&self, viewer: Option<&Viewer<'_>>) -> Vec<SplatRun> {
+    pub(super) fn runs_seen(&self, viewer: Option<&Viewer<'_>>) -> Vec<SplatRun> {
         let sizes = (self.leaf_size_m, self.settings.splat_scale);
         self.pools.runs_seen(viewer, sizes, self.settings.cull_chunks)
+    }
+
+    /// The level of detail for an eye at `eye_m` whose pixels are `focal_px` per unit of tangent,
+    /// with its pixel floor times `detail`; None where the settings or the adapter draw every
+    /// surfel.
+    pub(super) fn lod(&self, eye_m: glam::Vec3, focal_px: f32, detail: f32) -> Option<Lod> {
+        (self.settings.splat_lod && self.splats.pulls()).then_some(Lod {
+            eye_m,
+            focal_px,
+            floor_px: self.settings.min_splat_px * detail,
+        })
     }
 
     /// Records one pass into `enc`; returns its draw calls and surfels drawn (splat passes).
@@ -286,17 +298,6 @@ impl Renderer {
         let ts = self.timestamp_pair(pass);
         let stats = self.stat_queries.as_ref().map(|q| q.slot(pass));
         let mut work = PassWork::default();
-        let mut count = |runs: &[SplatRun]| {
-            work.draws += runs.len() as u64;
-            work.surfels += runs.iter().map(SplatRun::drawn).sum::<u64>();
-        };
-        let lod = |eye_m, focal_px, detail: f32| {
-            (self.settings.splat_lod && self.splats.pulls()).then_some(Lod {
-                eye_m,
-                focal_px,
-                floor_px: self.settings.min_splat_px * detail,
-            })
-        };
         let render_ts = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
             query_set: set,
             beginning_of_pass_write_index: Some(i),
@@ -304,25 +305,10 @@ impl Renderer {
         });
         match pass {
             Pass::Shadow => {
-                let size = self.shadow.face_size();
-                let grow_ndc = Viewer::grow_for(size, size, self.settings.min_splat_px);
-                let draws: Vec<Option<Vec<SplatRun>>> = self
-                    .shadow
-                    .faces()
-                    .iter()
-                    .zip(&self.shadow_dirty)
-                    .map(|(f, &dirty)| {
-                        let viewer = Viewer {
-                            view_proj: &f.view_proj,
-                            grow_ndc,
-                            light: Some((f.eye_m, f.range_m)),
-                            lod: lod(f.eye_m, f.proj_scale * size as f32 * 0.5, 1.0),
-                        };
-                        dirty.then(|| self.runs_seen(Some(&viewer)))
-                    })
-                    .collect();
-                draws.iter().flatten().for_each(|r| count(r));
-                self.shadow.record(enc, &self.splats, &draws, (render_ts, stats));
+                let b = &self.shadow_batch;
+                work.draws = b.faces.iter().map(|&i| self.shadow_queue.runs(i).len() as u64).sum();
+                work.surfels = b.surfels;
+                self.shadow.record(enc, &self.splats, b, |i| self.shadow_queue.runs(i), (render_ts, stats));
             }
             Pass::Gbuffer => {
                 let v = self.view("gbuffer")?;
@@ -333,10 +319,11 @@ impl Renderer {
                     // Thinned discs grow up to the detail's floor, past the viewport's edge too.
                     grow_ndc: Viewer::grow_for(w, h, self.settings.min_splat_px * self.lod_detail),
                     light: None,
-                    lod: lod(v.camera.eye_m, focal_px, self.lod_detail),
+                    lod: self.lod(v.camera.eye_m, focal_px, self.lod_detail),
                 });
                 let runs = self.runs_seen(viewer.as_ref());
-                count(&runs);
+                work.draws = runs.len() as u64;
+                work.surfels = runs.iter().map(SplatRun::drawn).sum();
                 self.gbuffer.record(enc, &v.targets, &self.splats, &runs, (render_ts, stats));
             }
             compute => {
@@ -443,6 +430,12 @@ impl Renderer {
             self.gpu.queue.write_buffer(&self.active, 8, bytemuck::cast_slice(&[first, end]));
             self.stats_now.last_upload_bytes += 8;
         }
+        if plan.runs(Pass::Shadow) {
+            self.shadow_batch = self.shadow_queue.batch(self.settings.shadow_frame_ms);
+            if self.shadow_batch.staged {
+                self.static_bytes += self.shadow.ensure_staging(&self.gpu)?;
+            }
+        }
         if let Some((camera, w, h)) = frame
             && plan.runs(Pass::Gbuffer)
         {
@@ -490,8 +483,12 @@ impl Renderer {
             q.read(&self.gpu, &ran, &mut self.stats_now.work)?;
         }
         if ran.contains(&Pass::Shadow) {
-            self.shadow_drawn += self.shadow_dirty.iter().filter(|d| **d).count() as u64;
-            self.shadow_dirty.fill(false);
+            let batch = std::mem::take(&mut self.shadow_batch);
+            self.shadow_drawn += batch.faces.len() as u64;
+            self.shadow_queue.drawn(&batch);
+            if let Some(&ms) = self.stats_now.last_ms.get(&Pass::Shadow) {
+                self.shadow_queue.timed(ms);
+            }
         }
         if ran.contains(&Pass::Gbuffer) {
             self.gbuffer_stale = false;

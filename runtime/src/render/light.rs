@@ -9,6 +9,9 @@ use crate::error::Result;
 use crate::gpu::types::LeafLightGpu;
 use crate::light::activity::{BounceWork, Why};
 use crate::light::plan::{self, EffectPlan, Pass};
+use crate::passes::shadow::Face;
+use crate::passes::splat::SplatRun;
+use crate::render::chunks::Viewer;
 use crate::render::pool::{TileKey, key};
 use crate::scene::data::SceneData;
 
@@ -72,13 +75,51 @@ impl Renderer {
     /// bounces are counted afresh (the light converges again from the new direct light).
     pub fn invalidate_lights(&mut self) {
         self.direct_valid = false;
-        self.shadow_dirty.fill(true);
+        self.mark_shadow_faces(|_| true);
         self.stats_now.last_change = None;
         self.stats_now.bounces_done = 0;
         self.bounce_at = None;
         // A bounce under the old lights still on its way back counts for nothing now.
         self.bounce_readback = None;
         self.set_all_active(Why::LightsChanged);
+    }
+
+    /// Marks the shadow faces `which` picks out of date, each with the surfel chunks it draws
+    /// now; faces already out of date are marked again (the pools may have moved under them).
+    pub(super) fn mark_shadow_faces(&mut self, which: impl Fn(&Face) -> bool) {
+        let size = self.shadow.face_size();
+        let grow_ndc = Viewer::grow_for(size, size, self.settings.min_splat_px);
+        let marks: Vec<(usize, Vec<SplatRun>)> = (self.shadow.faces().iter().enumerate())
+            .filter(|(i, f)| which(f) || self.shadow_queue.is_dirty(*i))
+            .map(|(i, f)| {
+                let viewer = Viewer {
+                    view_proj: &f.view_proj,
+                    grow_ndc,
+                    light: Some((f.eye_m, f.range_m)),
+                    lod: self.lod(f.eye_m, f.proj_scale * size as f32 * 0.5, 1.0),
+                };
+                (i, self.runs_seen(Some(&viewer)))
+            })
+            .collect();
+        for (i, runs) in marks {
+            self.shadow_queue.mark(i, runs);
+        }
+    }
+
+    /// Shadow faces the next pass draws of those out of date, and the budget, where the budget
+    /// leaves some for later frames (the plan's `shadow_catch_up`).
+    pub(super) fn shadow_catch_up(&self) -> Option<(usize, usize, f32)> {
+        if self.direct_valid || !self.settings.shadows || self.settings.shadow_frame_ms <= 0.0 {
+            return None;
+        }
+        let b = self.shadow_queue.batch(self.settings.shadow_frame_ms);
+        (!b.finishes).then(|| (b.faces.len(), self.shadow_queue.dirty_count(), self.settings.shadow_frame_ms))
+    }
+
+    /// The last shadow pass took `ms` by a viewer's clock (a browser, where passes are not
+    /// timed: the frame's time, which only overstates it): the next budgets use its rate.
+    pub fn note_shadow_frame_ms(&mut self, ms: f64) {
+        self.shadow_queue.timed(ms);
     }
 
     pub(super) fn set_all_active(&mut self, why: Why) {
@@ -106,7 +147,8 @@ impl Renderer {
     }
 
     /// As [`Renderer::settle`], stopping after at most `max_bounces` bounces; what is left runs
-    /// one bounce per rendered frame ([`Renderer::render`]), so the light converges over frames.
+    /// one bounce per rendered frame ([`Renderer::render`]), so the light converges over frames,
+    /// as do shadow faces under a frame budget (`Settings::shadow_frame_ms`).
     pub fn settle_at_most(
         &mut self,
         max_bounces: u32,
@@ -114,12 +156,15 @@ impl Renderer {
     ) -> Result<u32> {
         let start = self.stats_now.bounces_done;
         loop {
-            if self.stats_now.bounces_done - start >= max_bounces && self.direct_valid {
+            // Shadow faces under a frame budget catch up over the frames, as the bounces left do.
+            let direct_done = self.direct_valid || self.shadow_catch_up().is_some();
+            if self.stats_now.bounces_done - start >= max_bounces && direct_done {
                 return Ok(self.stats_now.bounces_done - start);
             }
             let p = self.update_light()?;
             progress(self.stats_now.bounces_done, self.stats_now.last_change);
-            if !p.runs(Pass::Propagate) {
+            // A shadow pass catching up holds the bounces; the loop goes on until they run.
+            if !(p.runs(Pass::Propagate) || p.runs(Pass::Shadow) && !self.direct_valid) {
                 return Ok(self.stats_now.bounces_done - start);
             }
         }

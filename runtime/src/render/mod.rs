@@ -9,6 +9,7 @@ mod params;
 pub mod pool;
 pub mod present;
 pub mod renderer;
+pub(crate) mod shadow_queue;
 mod tiles;
 mod update;
 

@@ -28,6 +28,7 @@ use crate::render::params::Lookup;
 use crate::render::params::base_params;
 use crate::render::params::material_slots;
 use crate::render::params::pass_queries;
+use crate::render::shadow_queue::{Batch, ShadowQueue};
 use crate::render::tiles::TilePools;
 use crate::render::tiles::Upload;
 use crate::settings::{ClipBox, Settings, ViewMode};
@@ -96,10 +97,11 @@ pub struct Renderer {
     pub(super) active_written: Option<u32>,
     /// Bounces since the last [`Renderer::take_bounce_work`], with what each updated.
     pub(super) bounce_work: Vec<BounceWork>,
-    /// Shadow faces the next shadow pass draws (every face after a change of lights; after a
-    /// change of tiles, the faces that see one), and how many were drawn since the last
-    /// [`Renderer::take_shadow_faces_drawn`].
-    pub(super) shadow_dirty: Vec<bool>,
+    /// Shadow faces out of date (every face after a change of lights; after a change of tiles,
+    /// the faces that see one), the batch the pass under way draws, and how many were drawn
+    /// since the last [`Renderer::take_shadow_faces_drawn`].
+    pub(super) shadow_queue: ShadowQueue,
+    pub(super) shadow_batch: Batch,
     pub(super) shadow_drawn: u64,
     /// The camera's view-projection of the G-buffer (tiles outside it are not drawn), and whether
     /// the tiles changed since it was drawn.
@@ -241,7 +243,7 @@ impl Renderer {
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
         let static_bytes = up.bytes + shadow.bytes() + shade.env_atlas_bytes();
         let shadow_faces = lights.faces.len();
-        let r = Self {
+        let mut r = Self {
             inject,
             env,
             mip,
@@ -278,7 +280,8 @@ impl Renderer {
             activity: TileActivity::new(&scene.tiles),
             active_written: None,
             bounce_work: Vec::new(),
-            shadow_dirty: vec![true; shadow_faces],
+            shadow_queue: ShadowQueue::new(shadow_faces),
+            shadow_batch: Batch::default(),
             shadow_drawn: 0,
             camera_view_proj: None,
             gbuffer_stale: false,
@@ -297,6 +300,7 @@ impl Renderer {
             queries: pass_queries(gpu),
             stat_queries: StatQueries::new(gpu),
         };
+        r.mark_shadow_faces(|_| true);
         gpu.check("upload")?;
         Ok(r)
     }

@@ -459,6 +459,7 @@ pub struct SceneUpdate {
     pub upload_bytes: u64,
     /// Leaves that kept their light (in place, or carried through a repack).
     pub carried_leaves: usize,
-    /// Shadow faces that see a changed tile (drawn again by the next shadow pass).
-    pub(crate) shadow_faces: usize,
+    /// Shadow faces out of date after the change (those that see a changed tile, and any still
+    /// catching up from an earlier one): drawn again by the next shadow passes.
+    pub shadow_faces: usize,
 }

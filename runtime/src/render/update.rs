@@ -28,13 +28,10 @@ impl Renderer {
         self.mip.set_order(&self.gpu, &by_height, &ranges)?;
         update.upload_bytes += 4 * by_height.len() as u64;
         // Shadow faces that see a tile form that came or went.
-        for (face, dirty) in self.shadow.faces().iter().zip(&mut self.shadow_dirty) {
-            if placed.changed.iter().any(|(lo, hi)| crate::view::camera::sees_box(&face.view_proj, *lo, *hi))
-            {
-                *dirty = true;
-            }
-        }
-        update.shadow_faces = self.shadow_dirty.iter().filter(|d| **d).count();
+        self.mark_shadow_faces(|face| {
+            placed.changed.iter().any(|(lo, hi)| crate::view::camera::sees_box(&face.view_proj, *lo, *hi))
+        });
+        update.shadow_faces = self.shadow_queue.dirty_count();
         self.follow_scene(scene, &placed.light_kept);
         Ok(Some(update))
     }
