@@ -4,7 +4,8 @@
 # configurations (SVO depth 7 and 8) at 800x600 and 1600x900; a 10^7-point package at 1920x1080;
 # and a 10^8-point package streamed along its entrance -> chamber path at 1920x1080 under a GPU
 # memory budget, with per-frame times (median, p99, worst) and stalls (frames over 50 ms), as it
-# is and with --point-budget 1M and 5M; and, for the demo cave and the 10^7 package, the splat
+# is and with --point-budget 1M and 5M, settled before each frame and as a viewer runs it (a
+# bounce a frame, shadow faces within 8 ms a frame); and, for the demo cave and the 10^7 package, the splat
 # passes' work counts (draws, surfels, vertex and fragment invocations) drawn as before issue 43
 # (--cull tiles --no-splat-lod) and as now. Prints one markdown table per part (also written to
 # OUT/tables.md, part by part, so a run cut short keeps what it measured) and keeps the raw JSON
@@ -104,8 +105,9 @@ stalls = sum(1 for x in ms if x > 50.0)
 surfels = max(x["surfels"] for x in f)
 uploaded = sum((x.get("update") or {}).get("upload_bytes", 0) for x in f) / 2**20
 faces = sum(x["shadow_faces"] for x in f)
+most = max(x["shadow_faces"] for x in f[1:]) if len(f) > 1 else f[0]["shadow_faces"]
 print(f"| {label} | {len(f)} | {f[0]['frame_ms']:.1f} | {pick(0.5):.1f} | {pick(0.99):.1f} | {ms[-1]:.1f} | "
-      f"{stalls} | {surfels:,} | {uploaded:.0f} | {faces} | {r['settle_s']:.2f} |")
+      f"{stalls} | {surfels:,} | {uploaded:.0f} | {faces} | {most} | {r['settle_s']:.2f} |")
 PY
 }
 
@@ -177,17 +179,26 @@ if [[ " $parts " == *" 1e8 "* ]]; then
         echo "(frame ms: waiting for tiles, swapping them in, settling light, drawing; frame 0 after the first settle;"
         echo "median, p99 and worst over the frames after it; stalls: frames over 50 ms)"
         echo
-        echo "| run | frames | frame 0 ms | median ms | p99 ms | worst ms | stalls | surfels drawn (most) | uploaded MiB | shadow faces drawn | first settle s |"
-        echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        echo "| run | frames | frame 0 ms | median ms | p99 ms | worst ms | stalls | surfels drawn (most) | uploaded MiB | shadow faces drawn | most faces in a frame | first settle s |"
+        echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     } | tee -a "$tables"
-    for budget in none 5000000 1000000; do
+    # Batch rows settle the light before each frame (what `grotto render --path` does for
+    # images); viewer rows run as the viewers do (issue 43): no bounce before a frame whose tiles
+    # changed (one a frame after), shadow faces out of date drawn within 8 ms a frame.
+    for run in none:batch 5000000:batch 1000000:batch 5000000:viewer 1000000:viewer; do
+        budget=${run%%:*}; how=${run##*:}
         label=$([ "$budget" = none ] && echo "no point budget" || echo "--point-budget $budget")
-        f=$out/json/fly-1e8__$budget.json
+        extra=()
+        if [ "$how" = viewer ]; then
+            label="$label, viewer-like (--frame-bounces 0 --shadow-ms 8)"
+            extra=(--frame-bounces 0 --shadow-ms 8)
+        fi
+        f=$out/json/fly-1e8__${budget}__$how.json
         log "fly-through, $label"
         "$bin/grotto" render "$work/survey-100000000.grotto" --path entrance,chamber --frames "$frames" \
             --size 1920x1080 --gpu-memory "$fly_memory" \
-            $([ "$budget" = none ] || echo --point-budget "$budget") \
-            -o "$work/fly-$budget.png" --json > "$f"
+            $([ "$budget" = none ] || echo --point-budget "$budget") "${extra[@]}" \
+            -o "$work/fly-$budget-$how.png" --json > "$f"
         fly_row "$label" "$f" | tee -a "$tables"
     done
 fi

@@ -157,7 +157,7 @@ impl Renderer {
         let start = self.stats_now.bounces_done;
         loop {
             // Shadow faces under a frame budget catch up over the frames, as the bounces left do.
-            let direct_done = self.direct_valid || self.shadow_catch_up().is_some();
+            let direct_done = self.direct_valid || self.settings.shadow_frame_ms > 0.0;
             if self.stats_now.bounces_done - start >= max_bounces && direct_done {
                 return Ok(self.stats_now.bounces_done - start);
             }

@@ -7,7 +7,9 @@
 //! While faces are drawn over several frames the image stays consistent: they go into a staging
 //! atlas (passes/shadow.rs) and are copied over the shown one together when the last is drawn,
 //! so shading never mixes faces of two scenes, and direct light is injected once, from the whole
-//! new atlas (the plan holds inject and the bounces until then: light/plan.rs). The first fill
+//! new atlas (the plan holds inject and the bounces until then: light/plan.rs). A staged face
+//! that a later change leaves out of date waits for the next round, so rounds end (and inject)
+//! while the tiles change every frame. The first fill
 //! of a new renderer has nothing to keep: its faces go straight to the shown atlas, whose faces
 //! not drawn yet read as all in shadow, so each light appears as its faces are drawn instead of
 //! the image staying dark until the last. Bookkeeping only, tested here; the renderer computes
@@ -44,6 +46,9 @@ pub(crate) struct ShadowQueue {
     dirty: Vec<Option<(Vec<SplatRun>, u64)>>,
     /// Faces drawn into the staging atlas and not shown yet.
     staged: Vec<bool>,
+    /// Staged faces out of date again (tiles changed under them while the others caught up):
+    /// drawn in the next round, so a change every frame cannot keep a round from ending.
+    deferred: Vec<bool>,
     /// Surfels a millisecond the budgeted passes drew (a running mean), once one was timed.
     rate_per_ms: Option<f64>,
     /// Surfels of the last pass, until its time is known.
@@ -58,6 +63,7 @@ impl ShadowQueue {
         Self {
             dirty: vec![None; faces],
             staged: vec![false; faces],
+            deferred: vec![false; faces],
             rate_per_ms: None,
             untimed_surfels: 0,
             filled: false,
@@ -65,11 +71,12 @@ impl ShadowQueue {
     }
 
     /// Face `face` is out of date and draws `runs` (replacing what it drew before: the pools may
-    /// have moved since).
+    /// have moved since). A face already staged in the round under way waits for the next.
     pub(crate) fn mark(&mut self, face: usize, runs: Vec<SplatRun>) {
         if let Some(slot) = self.dirty.get_mut(face) {
             let surfels = runs.iter().map(SplatRun::drawn).sum();
             *slot = Some((runs, surfels));
+            self.deferred[face] = self.staged[face];
         }
     }
 
@@ -98,19 +105,24 @@ impl ShadowQueue {
 
     /// The faces the next pass draws within `frame_ms` (0 or less: all out of date). Faces go
     /// first-fit in atlas order: each one that fits what is left of the allowance is taken, and
-    /// the first face out of date is taken whatever its size, so the queue always moves on.
+    /// the first face out of date is taken whatever its size, so the queue always moves on. The
+    /// pass finishes the round when it draws every face out of date but those deferred to the
+    /// next round.
     pub(crate) fn batch(&self, frame_ms: f32) -> Batch {
         let budget = (frame_ms > 0.0).then(|| self.allowance(frame_ms));
         let mut b = Batch::default();
-        for (i, (_, surfels)) in self.dirty.iter().enumerate().filter_map(|(i, d)| d.as_ref().map(|d| (i, d)))
-        {
+        let due: Vec<(usize, u64)> = (self.dirty.iter().enumerate())
+            .filter(|(i, _)| !self.deferred[*i])
+            .filter_map(|(i, d)| d.as_ref().map(|(_, n)| (i, *n)))
+            .collect();
+        for &(i, surfels) in &due {
             let fits = budget.is_none_or(|cap| b.faces.is_empty() || b.surfels + surfels <= cap);
             if fits {
                 b.faces.push(i);
                 b.surfels += surfels;
             }
         }
-        b.finishes = b.faces.len() == self.dirty_count();
+        b.finishes = b.faces.len() == due.len();
         let waiting = self.staged.iter().any(|&s| s);
         b.staged = self.filled && (!b.finishes || waiting);
         if b.staged && b.finishes {
@@ -128,6 +140,8 @@ impl ShadowQueue {
         }
         if batch.finishes {
             self.staged.fill(false);
+            // The faces deferred are out of date still, and start the next round.
+            self.deferred.fill(false);
             self.filled = true;
         }
         self.untimed_surfels = batch.surfels;
@@ -238,7 +252,7 @@ mod tests {
     }
 
     #[test]
-    fn a_face_marked_again_while_staged_is_drawn_again_and_small_faces_fill_the_gaps() {
+    fn a_face_marked_again_while_staged_waits_for_the_next_round_and_small_faces_fill_the_gaps() {
         let mut q = filled(3);
         q.mark(0, runs(50_000));
         q.mark(1, runs(50_000));
@@ -248,18 +262,45 @@ mod tests {
         // 65,536 allowed: face 0, face 1 does not fit, face 2 does.
         assert_eq!(b.faces, vec![0, 2]);
         q.drawn(&b);
-        // Tiles changed again under face 0, staged but not shown: it is drawn again.
+        // Tiles changed again under face 0, staged but not shown: this round ends without it
+        // (showing what it staged), and the next round draws it.
         q.mark(0, runs(50_000));
         let b = q.batch(8.0);
-        assert_eq!(b.faces, vec![0]);
-        q.drawn(&b);
-        let b = q.batch(8.0);
         assert_eq!((b.faces.clone(), b.finishes, b.commit.clone()), (vec![1], true, vec![0, 1, 2]));
+        q.drawn(&b);
+        assert_eq!(q.dirty_count(), 1);
+        let b = q.batch(8.0);
+        assert_eq!((b.faces.clone(), b.finishes, b.staged), (vec![0], true, false));
+        q.drawn(&b);
         // Bad times change nothing.
         for bad in [f64::NAN, 0.0, -3.0] {
             q.drawn(&b);
             q.timed(bad);
         }
         assert_eq!(q.allowance(8.0), START_SURFELS);
+    }
+
+    #[test]
+    fn a_change_every_frame_cannot_keep_a_round_from_ending() {
+        let mut q = filled(4);
+        for i in 0..4 {
+            q.mark(i, runs(60_000));
+        }
+        // One face a pass; after each pass the tiles change under every face again.
+        let mut rounds_ended = 0;
+        for _ in 0..12 {
+            let b = q.batch(8.0);
+            assert!(!b.faces.is_empty(), "{b:?}");
+            q.drawn(&b);
+            if b.finishes {
+                rounds_ended += 1;
+                assert!(!b.commit.is_empty());
+            }
+            for i in 0..4 {
+                q.mark(i, runs(60_000));
+            }
+        }
+        assert!(rounds_ended >= 2, "rounds ended: {rounds_ended}");
+        assert_eq!(q.dirty_count(), 4, "and the faces stay out of date while the tiles change");
     }
 }
