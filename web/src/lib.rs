@@ -219,6 +219,9 @@ struct State {
     opened: Instant,
     first_frame_ms: f64,
     ready_ms: Option<f64>,
+    /// What the frame shown was drawn for, when it was drawn ready and at rest: a frame for the
+    /// same (camera, size, view, exposure) would draw the same image, so none is drawn.
+    shown_at_rest: Option<(Camera, u32, u32, ViewMode, u32)>,
     frames: u32,
     first_frame_bytes: u64,
     /// When the GPU finished the last frame's work (None: not yet).
@@ -401,6 +404,7 @@ impl Viewer {
                 auto_exposure: o.exposure.is_none(),
                 bar: o.bar.unwrap_or(true),
                 exposure,
+                shown_at_rest: None,
                 exposure_read: None,
                 exposure_final: o.exposure.is_some(),
             },
@@ -508,6 +512,14 @@ impl State {
         }
         self.tiles(&camera, moving)?;
         self.exposure_step()?;
+        // Ready and at rest, the image shown is the one this frame would draw: draw nothing, so a
+        // weak adapter leaves the page (and a laptop its GPU) alone until something changes.
+        let rest_key =
+            (camera, self.width, self.height, self.renderer.settings().view, self.exposure.to_bits());
+        if self.ready(moving) && self.shown_at_rest == Some(rest_key) {
+            return self.status(moving);
+        }
+        self.shown_at_rest = None;
         // Light first, one slice of a bounce at rest sized by `pace` (as the window viewer does,
         // window/mod.rs); then the frame with the light held, so the draw does not run the rest of
         // the bounce.
@@ -541,6 +553,9 @@ impl State {
         let plan = self.renderer.draw(&camera, w, h)?;
         self.present(moving)?;
         self.frames += 1;
+        if self.ready(moving) {
+            self.shown_at_rest = Some(rest_key);
+        }
         if self.frames == 1 {
             self.first_frame_ms = self.opened.elapsed().as_secs_f64() * 1e3;
         }
@@ -690,6 +705,18 @@ impl State {
         Ok(())
     }
 
+    /// The light has converged, the tiles the view wants are resident, the exposure is final
+    /// and the camera rests.
+    fn ready(&self, moving: bool) -> bool {
+        self.renderer.light_progress().converged
+            && !moving
+            && self.step.is_none()
+            && self.settled
+            && self.exposure_final
+            && self.exposure_read.is_none()
+            && self.frames > 0
+    }
+
     fn status(&mut self, moving: bool) -> Result<String, Error> {
         let progress = self.renderer.light_progress();
         let mut tiles = [0usize; 4];
@@ -701,13 +728,7 @@ impl State {
                 TileMode::Skip => 3,
             }] += 1;
         }
-        let ready = progress.converged
-            && !moving
-            && self.step.is_none()
-            && self.settled
-            && self.exposure_final
-            && self.exposure_read.is_none()
-            && self.frames > 0;
+        let ready = self.ready(moving);
         if ready && self.ready_ms.is_none() {
             self.ready_ms = Some(self.opened.elapsed().as_secs_f64() * 1e3);
         }
