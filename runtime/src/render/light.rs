@@ -46,7 +46,9 @@ impl Renderer {
         i.light_held = None;
         i.plain_view = None;
         let p = plan::plan(&i);
+        let maps_in_use = self.settings.shadows && self.shadowed > 0;
         LightProgress {
+            shadow_faces_left: if maps_in_use { self.shadow_queue.dirty_count() } else { 0 },
             bounces_done: self.stats_now.bounces_done,
             bounce_budget: self.settings.bounces,
             last_change: self.stats_now.last_change,
@@ -294,6 +296,9 @@ impl Renderer {
 /// Where the light stands ([`Renderer::light_progress`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct LightProgress {
+    /// Shadow faces out of date, still to be drawn (a viewer's frame budget spreads them over
+    /// frames: render/shadow_queue.rs).
+    pub shadow_faces_left: usize,
     pub bounces_done: u32,
     pub bounce_budget: u32,
     pub(crate) last_change: Option<f32>,

@@ -84,6 +84,9 @@ pub(crate) fn show(ctx: &egui::Context, m: &PanelModel, k: &mut PanelKnobs) {
             }
             let light = match m.light {
                 Some(l) if l.converged => format!("light converged ({} bounces)", l.bounces_done),
+                Some(l) if l.shadow_faces_left > 0 => {
+                    format!("shadow maps catching up: {} faces to draw", l.shadow_faces_left)
+                }
                 Some(l) => format!(
                     "light converging: bounce {} of {}{}{}",
                     l.bounces_done,
