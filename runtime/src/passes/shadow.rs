@@ -17,7 +17,6 @@ use super::splat;
 use crate::error::Result;
 use crate::gpu::Gpu;
 use crate::gpu::types::SplatUniform;
-use crate::render::shadow_queue::Batch;
 
 /// Distance to the light as a packed f32 (packing.wgsl `pack_f32`): float targets do not render on GL.
 pub(crate) const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -281,4 +280,21 @@ impl Shadow {
             }
         }
     }
+}
+
+/// The faces one shadow pass draws (chosen by render/shadow_queue.rs).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct Batch {
+    /// Faces drawn, in atlas order.
+    pub(crate) faces: Vec<usize>,
+    /// Surfels the faces draw.
+    pub(crate) surfels: u64,
+    /// No face is left out of date after this pass.
+    pub(crate) finishes: bool,
+    /// The faces go to the staging atlas (the pass does not finish, or earlier faces already
+    /// wait there); `commit` then lists the staged faces copied to the shown atlas at its end.
+    pub(crate) staged: bool,
+    pub(crate) commit: Vec<usize>,
+    /// Every face of the atlas is drawn, into the shown atlas: the pass clears it whole.
+    pub(crate) whole: bool,
 }

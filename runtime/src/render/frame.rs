@@ -396,6 +396,15 @@ impl Renderer {
         self.gpu.wait()
     }
 
+    /// The shadow faces the pass about to run draws, and the staging atlas if they need it.
+    fn choose_shadow_batch(&mut self) -> Result<()> {
+        self.shadow_batch = self.shadow_queue.batch(self.settings.shadow_frame_ms);
+        if self.shadow_batch.staged {
+            self.static_bytes += self.shadow.ensure_staging(&self.gpu)?;
+        }
+        Ok(())
+    }
+
     /// Runs `plan`; its propagation runs at most `slice` invocations of the bounce (None: the
     /// rest of it).
     pub(super) fn execute(
@@ -431,10 +440,7 @@ impl Renderer {
             self.stats_now.last_upload_bytes += 8;
         }
         if plan.runs(Pass::Shadow) {
-            self.shadow_batch = self.shadow_queue.batch(self.settings.shadow_frame_ms);
-            if self.shadow_batch.staged {
-                self.static_bytes += self.shadow.ensure_staging(&self.gpu)?;
-            }
+            self.choose_shadow_batch()?;
         }
         if let Some((camera, w, h)) = frame
             && plan.runs(Pass::Gbuffer)

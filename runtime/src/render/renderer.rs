@@ -23,12 +23,13 @@ use crate::render::pool::{Placement, PoolCaps, Pools, surfel_owners};
 use crate::scene::data::{SceneData, SceneLight};
 use crate::view::camera::Camera;
 
+use crate::passes::shadow::Batch;
 use crate::render::counters::{PassWork, StatQueries};
 use crate::render::params::Lookup;
 use crate::render::params::base_params;
 use crate::render::params::material_slots;
 use crate::render::params::pass_queries;
-use crate::render::shadow_queue::{Batch, ShadowQueue};
+use crate::render::shadow_queue::ShadowQueue;
 use crate::render::tiles::TilePools;
 use crate::render::tiles::Upload;
 use crate::settings::{ClipBox, Settings, ViewMode};

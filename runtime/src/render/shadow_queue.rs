@@ -15,29 +15,13 @@
 //! the image staying dark until the last. Bookkeeping only, tested here; the renderer computes
 //! each face's surfel chunks when it marks the face.
 
+use crate::passes::shadow::Batch;
 use crate::passes::splat::SplatRun;
 
 /// Surfels the first budgeted pass may draw before any pass was timed: a few milliseconds on
 /// the slowest adapter measured (SwiftShader), a fraction of one on a discrete GPU, whose rate
 /// the next frame then uses.
 pub(crate) const START_SURFELS: u64 = 65_536;
-
-/// The faces one shadow pass draws.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub(crate) struct Batch {
-    /// Faces drawn, in atlas order.
-    pub(crate) faces: Vec<usize>,
-    /// Surfels the faces draw.
-    pub(crate) surfels: u64,
-    /// No face is left out of date after this pass.
-    pub(crate) finishes: bool,
-    /// The faces go to the staging atlas (the pass does not finish, or earlier faces already
-    /// wait there); `commit` then lists the staged faces copied to the shown atlas at its end.
-    pub(crate) staged: bool,
-    pub(crate) commit: Vec<usize>,
-    /// Every face of the atlas is drawn, into the shown atlas: the pass clears it whole.
-    pub(crate) whole: bool,
-}
 
 /// Shadow faces out of date, those drawn to the staging atlas, and the measured rate.
 #[derive(Clone, Debug)]
