@@ -139,7 +139,7 @@ fn coarse_neighbours_keep_the_image_and_dropping_them_does_not() {
     let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
     let full = SceneData::from_package(&pkg).unwrap();
     assert!(full.tiles.len() >= 20, "{} tiles: the test needs many", full.tiles.len());
-    let cam = Camera::from_scene(full.cameras.iter().find(|c| c.name == "chamber").unwrap());
+    let cam = chamber(&full);
     let tiles = residency::footprints(&pkg, false).unwrap();
     let held = |coarse_ids: &[usize]| -> u64 {
         tiles.iter().map(|t| if coarse_ids.contains(&t.index) { t.coarse.bytes } else { t.full.bytes }).sum()
@@ -302,6 +302,16 @@ fn a_fly_through_under_a_tiny_budget_loads_and_evicts_and_never_exceeds_it() {
     }
 }
 
+/// `pkg` with its first `full` tiles in full and the rest at their coarse level.
+fn full_first(pkg: &Package, full: usize) -> SceneData {
+    SceneData::from_package_with(pkg, |i| if i < full { TileMode::Full } else { TileMode::Coarse }).unwrap()
+}
+
+/// The small cave's chamber camera.
+fn chamber(scene: &SceneData) -> Camera {
+    Camera::from_scene(scene.cameras.iter().find(|c| c.name == "chamber").unwrap())
+}
+
 #[test]
 fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer() {
     // The tiles the view wants change: the renderer keeps the forms that stay in their pool slots
@@ -311,12 +321,9 @@ fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer()
     let pkg = Package::open(small_tiles_cave()).unwrap();
     let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
     let n = pkg.tile_count() as usize;
-    let scene = |full: usize| {
-        SceneData::from_package_with(&pkg, |i| if i < full { TileMode::Full } else { TileMode::Coarse })
-            .unwrap()
-    };
+    let scene = |full: usize| full_first(&pkg, full);
     let (half, most) = (scene(n / 2), scene(3 * n / 4));
-    let cam = Camera::from_scene(most.cameras.iter().find(|c| c.name == "chamber").unwrap());
+    let cam = chamber(&most);
     let settings = Settings { bounces: 40, shadow_map_size: 128, exposure: 8.0, ..Settings::default() };
     let batch = |s: &SceneData| {
         let mut r = Renderer::new(&gpu, s, settings.clone()).unwrap();
@@ -369,12 +376,8 @@ fn a_shadow_budget_spreads_the_redraw_over_frames_and_shows_it_whole() {
     let pkg = Package::open(small_tiles_cave()).unwrap();
     let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
     let n = pkg.tile_count() as usize;
-    let scene = |full: usize| {
-        SceneData::from_package_with(&pkg, |i| if i < full { TileMode::Full } else { TileMode::Coarse })
-            .unwrap()
-    };
-    let (half, most) = (scene(n / 2), scene(3 * n / 4));
-    let cam = Camera::from_scene(most.cameras.iter().find(|c| c.name == "chamber").unwrap());
+    let (half, most) = (full_first(&pkg, n / 2), full_first(&pkg, 3 * n / 4));
+    let cam = chamber(&most);
     let whole = Settings { bounces: 40, shadow_map_size: 128, exposure: 8.0, ..Settings::default() };
     let mut batch = Renderer::new(&gpu, &most, whole.clone()).unwrap();
     batch.settle(|_, _| {}).unwrap();
@@ -493,7 +496,7 @@ fn light_carried_across_a_reload_starts_closer_and_converges_over_frames_to_the_
     let after =
         SceneData::from_package_with(&pkg, |i| if i < 3 * n / 4 { TileMode::Full } else { TileMode::Coarse })
             .unwrap();
-    let cam = Camera::from_scene(after.cameras.iter().find(|c| c.name == "chamber").unwrap());
+    let cam = chamber(&after);
     // Plain propagation: the head start carried light gives is measured against light from
     // darkness under the same bounces. With the bounce tail both first frames are close (mean
     // |diff| 0.505 carried against 0.49 from darkness, where plain propagation gives 0.586 against

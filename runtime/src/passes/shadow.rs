@@ -203,9 +203,14 @@ impl Shadow {
         Ok(u64::from(size.width) * u64::from(size.height) * 4)
     }
 
+    /// The texel where face `i`'s square starts in the atlas.
+    fn corner(&self, i: usize) -> (u32, u32) {
+        ((i as u32 % self.cols) * self.face_size, (i as u32 / self.cols) * self.face_size)
+    }
+
     /// Face `i`'s square of an atlas, as a copy source or target.
     fn face_copy<'t>(&self, texture: &'t wgpu::Texture, i: usize) -> wgpu::TexelCopyTextureInfo<'t> {
-        let (x, y) = ((i as u32 % self.cols) * self.face_size, (i as u32 / self.cols) * self.face_size);
+        let (x, y) = self.corner(i);
         wgpu::TexelCopyTextureInfo {
             texture,
             mip_level: 0,
@@ -260,8 +265,7 @@ impl Shadow {
             let s = self.face_size as f32;
             for &i in &batch.faces {
                 let Some(group) = self.uniforms.groups.get(i) else { continue };
-                let (x, y) =
-                    ((i as u32 % self.cols) * self.face_size, (i as u32 / self.cols) * self.face_size);
+                let (x, y) = self.corner(i);
                 pass.set_viewport(x as f32, y as f32, s, s, 0.0, 1.0);
                 pass.set_bind_group(0, group, &[]);
                 fetch.draw(&mut pass, runs(i));

@@ -502,8 +502,7 @@ impl Renderer {
         if ran.contains(&Pass::Inject) || (self.point_lights + self.spot_lights == 0) {
             // Faces deferred to the next round of a budgeted catch-up keep the shadow pass going
             // (and the next round ends in an inject of its own).
-            let maps_in_use = self.settings.shadows && self.shadowed > 0;
-            self.direct_valid = !(maps_in_use && self.shadow_queue.dirty_count() > 0);
+            self.direct_valid = self.shadow_faces_left() == 0;
         }
         if ran.contains(&Pass::Env) {
             self.env_valid = true;

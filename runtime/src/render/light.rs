@@ -46,9 +46,8 @@ impl Renderer {
         i.light_held = None;
         i.plain_view = None;
         let p = plan::plan(&i);
-        let maps_in_use = self.settings.shadows && self.shadowed > 0;
         LightProgress {
-            shadow_faces_left: if maps_in_use { self.shadow_queue.dirty_count() } else { 0 },
+            shadow_faces_left: self.shadow_faces_left(),
             bounces_done: self.stats_now.bounces_done,
             bounce_budget: self.settings.bounces,
             last_change: self.stats_now.last_change,
@@ -106,6 +105,12 @@ impl Renderer {
         for (i, runs) in marks {
             self.shadow_queue.mark(i, runs);
         }
+    }
+
+    /// Shadow faces out of date where shadow maps are in use (with shadows off, or no light
+    /// given a map, faces stay marked but nothing waits for them).
+    pub(super) fn shadow_faces_left(&self) -> usize {
+        if self.settings.shadows && self.shadowed > 0 { self.shadow_queue.dirty_count() } else { 0 }
     }
 
     /// Shadow faces the next pass draws of those out of date, and the budget, where the budget
