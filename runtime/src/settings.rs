@@ -88,6 +88,11 @@ pub struct Settings {
     /// cost in proportion to their pixels, not their points. Off: every surfel drawn
     /// (`--no-splat-lod`). Only where surfels are pulled (passes/splat.rs).
     pub splat_lod: bool,
+    /// Blend every disc of the front surface at a pixel (normal, albedo, distance; weighted
+    /// smoothly to each disc's rim), not the front-most disc alone, whose own normal and light
+    /// break a wall seen at a grazing angle into scales (passes/gbuffer.rs). Where the adapter
+    /// cannot blend f16 targets (GL), the front-most disc is shown either way.
+    pub splat_blend: bool,
     /// What the image shows (`--view`): the lit scene, or one of the views survey users judge
     /// their data with. Views that show no light skip the light passes (plan.rs).
     pub view: ViewMode,
@@ -244,6 +249,7 @@ impl Default for Settings {
             light_cutoff_w_m2: 2e-4,
             cull_chunks: true,
             splat_lod: true,
+            splat_blend: true,
             view: ViewMode::Lit,
         }
     }

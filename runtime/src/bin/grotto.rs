@@ -254,6 +254,11 @@ struct RenderArgs {
     /// discs are under the pixel floor anyway (the level of detail by size on screen).
     #[arg(long)]
     no_splat_lod: bool,
+    /// Show each pixel's front-most disc alone (each with its own normal and light: scales at
+    /// grazing angles), not the blend of every disc of the front surface (the default where the
+    /// adapter can blend f16 targets; the image before issue 44, for comparing).
+    #[arg(long)]
+    no_splat_blend: bool,
     /// Replace the package's lights by a lamp string of N 8 W lamps spread over the cave's floors
     /// (to measure how cost grows with the number of lights).
     #[arg(long)]
@@ -371,6 +376,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
     };
     settings.splat_scale = a.splat_scale;
     settings.splat_lod = !a.no_splat_lod;
+    settings.splat_blend = !a.no_splat_blend;
     let camera = match (a.camera.clone(), a.eye, a.look_at) {
         (Some(name), _, _) => CameraChoice::Named(name),
         (None, Some(eye_m), Some(look_at_m)) => {

@@ -273,11 +273,14 @@ pub mod flags {
     pub const NEW_SERIES: u32 = 8192;
     /// Each leaf turns its cone set by its interleave angle (`Settings::cone_interleave`).
     pub const CONE_INTERLEAVE: u32 = 16384;
+    /// The G-buffer holds blended splats' sums (passes/gbuffer.rs): shade takes the normal,
+    /// albedo and distance from them.
+    pub const BLEND: u32 = 32768;
     /// The views shade writes without light (settings.rs `ViewMode::shows_light`).
     pub const VIEWS_WITHOUT_LIGHT: u32 = VIEW_ALBEDO | VIEW_NORMALS | VIEW_LEVEL | VIEW_SCAN;
 
     /// Every flag with its WGSL name.
-    pub const ALL: [(&str, u32); 15] = [
+    pub const ALL: [(&str, u32); 16] = [
         ("FLAG_VIEW_ALBEDO", VIEW_ALBEDO),
         ("FLAG_VIEW_SCAN", VIEW_SCAN),
         ("FLAG_VIEW_NORMALS", VIEW_NORMALS),
@@ -293,6 +296,7 @@ pub mod flags {
         ("FLAG_SPECULAR", SPECULAR),
         ("FLAG_NEW_SERIES", NEW_SERIES),
         ("FLAG_CONE_INTERLEAVE", CONE_INTERLEAVE),
+        ("FLAG_BLEND", BLEND),
     ];
 }
 

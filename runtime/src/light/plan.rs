@@ -125,6 +125,8 @@ pub struct PlanInputs {
     pub frame: bool,
     /// The G-buffer matches the requested camera and size.
     pub gbuffer_valid: bool,
+    /// How the G-buffer draws the discs, in words (blended, or front-most and why).
+    pub splats: &'static str,
     /// The image shows no light (a view mode: albedo, normals, level), by name: the light passes
     /// wait until a view shows light.
     pub plain_view: Option<&'static str>,
@@ -330,7 +332,11 @@ fn gbuffer_step(i: &PlanInputs) -> Step {
     } else if i.gbuffer_valid {
         Step { pass: Pass::Gbuffer, run: false, reason: "camera and size unchanged".into() }
     } else {
-        Step { pass: Pass::Gbuffer, run: true, reason: "camera, size or what is drawn changed".into() }
+        Step {
+            pass: Pass::Gbuffer,
+            run: true,
+            reason: format!("camera, size or what is drawn changed; {}", i.splats),
+        }
     }
 }
 
@@ -382,6 +388,7 @@ mod tests {
             tiles_why: "1 no light yet".into(),
             frame: true,
             gbuffer_valid: false,
+            splats: "blended splats",
             plain_view: None,
             light_held: None,
             bounce_part: None,

@@ -1,6 +1,18 @@
-//! G-buffer (splat.wgsl, `fs_gbuffer`): surfels as oriented discs with true depth into distance,
-//! normal and albedo targets. Discs are grown to a minimum pixel radius so the demo's sampling
-//! leaves no holes.
+//! G-buffer (splat.wgsl): surfels as oriented discs with true depth into distance, normal and
+//! albedo targets. Discs are grown to a minimum pixel radius so the demo's sampling leaves no
+//! holes.
+//!
+//! Blended splatting (`Settings::splat_blend`, where the adapter can blend `Rgba16Float`): the
+//! front-most disc alone gives every pixel its own disc's normal, depth and light, so a wall seen
+//! at a grazing angle breaks into scales. Instead the discs are drawn twice. The depth pass
+//! (`fs_gbuffer`) pushes each disc back by a tolerance along the eye ray, so its depth buffer
+//! holds the front surface plus that tolerance (and its distance target the front disc, for
+//! picking, holes and the material). The accumulation pass (`fs_blend`) draws them unpushed,
+//! depth-tested against it, adding every fragment of the front surface with a smooth radial
+//! weight: normal, albedo and distance. Shade divides by the weights, so each pixel is shaded
+//! once with the surface's blended attributes (and its light, gathered at the blended point,
+//! is blended with them). Discs of a surface behind a depth gap fail the test: silhouettes stay
+//! crisp. Where float targets cannot blend (GL), the front-most disc is kept, as before.
 
 use super::splat;
 use crate::error::Result;
@@ -11,6 +23,21 @@ use crate::gpu::types::SplatUniform;
 pub(crate) const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 pub(crate) const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 pub(crate) const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+/// Blended splatting's sums (weights up to thousands, offsets of centimetres: f16 holds both).
+pub(crate) const BLEND_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// The depth pass pushes each disc back by this many of its radii (up to 4x more at grazing
+/// angles, splat.wgsl): the depth tolerance within which discs count as one surface. A disc's
+/// neighbours on a surface scanned with normals a few degrees apart lie well within one radius;
+/// the far side of a pillar or a fold lies beyond it.
+pub(crate) const BLEND_DEPTH_RADII: f32 = 1.0;
+
+/// Whether `gpu` can render and blend the accumulation targets.
+pub(crate) fn can_blend(gpu: &Gpu) -> bool {
+    let f = gpu.adapter.get_texture_format_features(BLEND_FORMAT);
+    f.allowed_usages.contains(wgpu::TextureUsages::RENDER_ATTACHMENT)
+        && f.flags.contains(wgpu::TextureFormatFeatureFlags::BLENDABLE)
+}
 
 /// The targets of one image size.
 #[derive(Debug)]
@@ -21,55 +48,121 @@ pub(crate) struct Targets {
     pub(crate) normal: wgpu::Texture,
     pub(crate) albedo: wgpu::Texture,
     pub(crate) depth: wgpu::Texture,
+    /// Blended splatting's sums (w n, w) and (w albedo, w offset); 1x1 and unused without it.
+    pub(crate) normal_weight: wgpu::Texture,
+    pub(crate) albedo_offset: wgpu::Texture,
+    /// The accumulation pass's binding of `distance` (its reference), where blending.
+    reference: Option<wgpu::BindGroup>,
 }
 
-impl Targets {
-    pub(crate) fn new(gpu: &Gpu, width: u32, height: u32) -> Result<Self> {
-        let make = |label, format| {
-            gpu.texture_2d(
-                label,
-                width,
-                height,
-                format,
-                // Copy source: a viewer reads a pixel's distance back to pick a point.
-                wgpu::TextureUsages::RENDER_ATTACHMENT
-                    | wgpu::TextureUsages::TEXTURE_BINDING
-                    | wgpu::TextureUsages::COPY_SRC,
-            )
-        };
-        Ok(Self {
-            width,
-            height,
-            distance: make("gbuffer distance", DISTANCE_FORMAT)?,
-            normal: make("gbuffer normal", NORMAL_FORMAT)?,
-            albedo: make("gbuffer albedo", ALBEDO_FORMAT)?,
-            depth: make("gbuffer depth", splat::DEPTH_FORMAT)?,
-        })
-    }
-}
-
-/// The G-buffer pass and the camera's splat uniform.
+/// The G-buffer pass and the camera's splat uniforms (slot 0 the depth pass, 1 the accumulation).
 #[derive(Debug)]
 pub(crate) struct Gbuffer {
     pipeline: wgpu::RenderPipeline,
     camera: splat::Uniforms,
+    /// The accumulation pass and its reference layout, where blending.
+    blend: Option<(wgpu::RenderPipeline, wgpu::BindGroupLayout)>,
 }
 
 impl Gbuffer {
-    /// The pass, fetching surfels as `fetch` does.
-    pub(crate) fn new(gpu: &Gpu, layout: &wgpu::BindGroupLayout, fetch: &splat::Fetch) -> Result<Self> {
-        let t =
-            |format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL });
-        let targets = [t(DISTANCE_FORMAT), t(NORMAL_FORMAT), t(ALBEDO_FORMAT)];
-        Ok(Self {
-            pipeline: splat::pipeline(gpu, "gbuffer", layout, fetch, "fs_gbuffer", &targets)?,
-            camera: splat::Uniforms::new(gpu, "camera splat", layout, 1)?,
+    /// The pass, fetching surfels as `fetch` does; blended where `blend` and the adapter can.
+    pub(crate) fn new(
+        gpu: &Gpu,
+        layout: &wgpu::BindGroupLayout,
+        fetch: &splat::Fetch,
+        blend: bool,
+    ) -> Result<Self> {
+        let t = |format, blend| {
+            Some(wgpu::ColorTargetState { format, blend, write_mask: wgpu::ColorWrites::ALL })
+        };
+        let targets = [t(DISTANCE_FORMAT, None), t(NORMAL_FORMAT, None), t(ALBEDO_FORMAT, None)];
+        let pipeline = splat::pipeline(gpu, "gbuffer", layout, fetch, ("fs_gbuffer", &targets), None)?;
+        let blend = if blend && can_blend(gpu) {
+            let reference = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("blend reference"),
+                entries: &[wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                }],
+            });
+            let add = wgpu::BlendComponent {
+                src_factor: wgpu::BlendFactor::One,
+                dst_factor: wgpu::BlendFactor::One,
+                operation: wgpu::BlendOperation::Add,
+            };
+            let sum = Some(wgpu::BlendState { color: add, alpha: add });
+            let targets = [t(BLEND_FORMAT, sum), t(BLEND_FORMAT, sum)];
+            let p = splat::pipeline(
+                gpu,
+                "gbuffer blend",
+                layout,
+                fetch,
+                ("fs_blend", &targets),
+                Some(&reference),
+            )?;
+            Some((p, reference))
+        } else {
+            None
+        };
+        Ok(Self { pipeline, camera: splat::Uniforms::new(gpu, "camera splat", layout, 2)?, blend })
+    }
+
+    /// Whether the pass blends splats (else the front-most disc is shown).
+    pub(crate) fn blends(&self) -> bool {
+        self.blend.is_some()
+    }
+
+    /// The targets of a `width` x `height` image.
+    pub(crate) fn targets(&self, gpu: &Gpu, width: u32, height: u32) -> Result<Targets> {
+        let sampled = wgpu::TextureUsages::TEXTURE_BINDING;
+        let make = |label, format, usage| gpu.texture_2d(label, width, height, format, usage);
+        // Copy source: a viewer reads a pixel's distance back to pick a point.
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | sampled | wgpu::TextureUsages::COPY_SRC;
+        let distance = make("gbuffer distance", DISTANCE_FORMAT, usage)?;
+        let (sums, side) = match self.blend {
+            Some(_) => (wgpu::TextureUsages::RENDER_ATTACHMENT | sampled, (width, height)),
+            None => (sampled, (1, 1)),
+        };
+        let sum = |label| gpu.texture_2d(label, side.0, side.1, BLEND_FORMAT, sums);
+        let reference = self.blend.as_ref().map(|(_, layout)| {
+            let view = distance.create_view(&Default::default());
+            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("blend reference"),
+                layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&view),
+                }],
+            })
+        });
+        Ok(Targets {
+            width,
+            height,
+            normal: make("gbuffer normal", NORMAL_FORMAT, usage)?,
+            albedo: make("gbuffer albedo", ALBEDO_FORMAT, usage)?,
+            depth: make("gbuffer depth", splat::DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT)?,
+            distance,
+            normal_weight: sum("gbuffer blend normal")?,
+            albedo_offset: sum("gbuffer blend albedo")?,
+            reference,
         })
     }
 
     /// The camera the next recording draws from.
     pub(crate) fn set_camera(&self, gpu: &Gpu, u: &SplatUniform) {
-        self.camera.write(gpu, 0, u);
+        let push = if self.blends() { BLEND_DEPTH_RADII } else { 0.0 };
+        let mut depth_pass = *u;
+        depth_pass.splat[2] = push;
+        self.camera.write(gpu, 0, &depth_pass);
+        let mut unpushed = *u;
+        unpushed.splat[2] = 0.0;
+        self.camera.write(gpu, 1, &unpushed);
     }
 
     pub(crate) fn record(
@@ -94,23 +187,59 @@ impl Gbuffer {
                 },
             })
         };
+        let blend = self.blend.as_ref().zip(targets.reference.as_ref());
+        // With an accumulation pass the timestamps span both: the depth pass starts them, the
+        // accumulation ends them.
+        let (first_ts, second_ts) = match (timestamps, blend.is_some()) {
+            (Some(t), true) => (
+                Some(wgpu::RenderPassTimestampWrites { end_of_pass_write_index: None, ..t.clone() }),
+                Some(wgpu::RenderPassTimestampWrites { beginning_of_pass_write_index: None, ..t }),
+            ),
+            (t, _) => (t, None),
+        };
+        let mut depth_ops = splat::depth_cleared(&depth);
+        if blend.is_some() {
+            depth_ops.depth_ops =
+                Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store });
+        }
+        {
+            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("gbuffer"),
+                color_attachments: &[attach(&views[0]), attach(&views[1]), attach(&views[2])],
+                depth_stencil_attachment: Some(depth_ops),
+                timestamp_writes: first_ts,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            if let Some((set, i)) = stats {
+                pass.begin_pipeline_statistics_query(set, i);
+            }
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.camera.groups[0], &[]);
+            // The surfel runs in view (the renderer culls by chunk box).
+            fetch.draw(&mut pass, runs);
+            if stats.is_some() {
+                pass.end_pipeline_statistics_query();
+            }
+        }
+        let Some(((pipeline, _), reference)) = blend else { return };
+        let sums =
+            [&targets.normal_weight, &targets.albedo_offset].map(|t| t.create_view(&Default::default()));
         let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("gbuffer"),
-            color_attachments: &[attach(&views[0]), attach(&views[1]), attach(&views[2])],
-            depth_stencil_attachment: Some(splat::depth_cleared(&depth)),
-            timestamp_writes: timestamps,
+            label: Some("gbuffer blend"),
+            color_attachments: &[attach(&sums[0]), attach(&sums[1])],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &depth,
+                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Load, store: wgpu::StoreOp::Discard }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: second_ts,
             occlusion_query_set: None,
             multiview_mask: None,
         });
-        if let Some((set, i)) = stats {
-            pass.begin_pipeline_statistics_query(set, i);
-        }
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.camera.groups[0], &[]);
-        // The surfel runs in view (the renderer culls by chunk box).
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &self.camera.groups[1], &[]);
+        pass.set_bind_group(2, reference, &[]);
         fetch.draw(&mut pass, runs);
-        if stats.is_some() {
-            pass.end_pipeline_statistics_query();
-        }
     }
 }

@@ -83,8 +83,14 @@ impl Shade {
         let pixels = u64::from(targets.width) * u64::from(targets.height);
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         let frame = gpu.buffer("shade frame", pixels * 20, usage)?;
-        let views =
-            [&targets.distance, &targets.normal, &targets.albedo].map(|t| t.create_view(&Default::default()));
+        let views = [
+            &targets.distance,
+            &targets.normal,
+            &targets.albedo,
+            &targets.normal_weight,
+            &targets.albedo_offset,
+        ]
+        .map(|t| t.create_view(&Default::default()));
         let view = |v| wgpu::BindingResource::TextureView(v);
         let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("shade"),
@@ -95,6 +101,8 @@ impl Shade {
                 wgpu::BindGroupEntry { binding: 2, resource: view(&views[2]) },
                 wgpu::BindGroupEntry { binding: 3, resource: frame.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: view(&self.env_atlas) },
+                wgpu::BindGroupEntry { binding: 6, resource: view(&views[3]) },
+                wgpu::BindGroupEntry { binding: 7, resource: view(&views[4]) },
             ],
         });
         Ok(Outputs { frame, pixels, bind_group })

@@ -27,6 +27,10 @@ fn write_pixel(idx: u32, hdr: vec4<f32>, ldr: vec3<f32>) {
 // The environment's GGX-prefiltered lat-long levels stacked top to bottom (Params::env_levels);
 // a 1x1 placeholder without a chain.
 @group(2) @binding(5) var env_atlas: texture_2d<f32>;
+// Blended splats' sums (passes/gbuffer.rs, FLAG_BLEND): (w n, w) and (w albedo, w distance offset
+// from the front disc's).
+@group(2) @binding(6) var gb_normal_weight: texture_2d<f32>;
+@group(2) @binding(7) var gb_albedo_offset: texture_2d<f32>;
 
 // Level k of the env atlas along unit `d`, bilinear (lat-long as preprocess/src/env.rs: theta
 // from +z, phi = atan2(y, x), wrapping in phi).
@@ -248,9 +252,22 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     var coverage = 0.0;
     if d > 0.0 {
         coverage = 1.0;
+        var n = unpack_normal(textureLoad(gb_normal, src, 0));
+        var albedo_slot = textureLoad(gb_albedo, src, 0);
+        if (params.flags & FLAG_BLEND) != 0u {
+            // The surface's blended attributes; the material stays the front disc's. The scan
+            // view keeps each disc's own colour: its stripes are what it is for.
+            let nw = textureLoad(gb_normal_weight, src, 0);
+            let ao = textureLoad(gb_albedo_offset, src, 0);
+            if nw.w > 0.0 && dot(nw.xyz, nw.xyz) > 1e-12 {
+                n = normalize(nw.xyz);
+                d += ao.w / nw.w;
+                if (params.flags & FLAG_VIEW_SCAN) == 0u {
+                    albedo_slot = vec4<f32>(ao.rgb / nw.w, albedo_slot.a);
+                }
+            }
+        }
         let p = params.camera_eye_m.xyz + ray * d;
-        let n = unpack_normal(textureLoad(gb_normal, src, 0));
-        let albedo_slot = textureLoad(gb_albedo, src, 0);
         // The light view lights every surface as if it were white.
         let albedo = select(albedo_slot.rgb, vec3<f32>(1.0), (params.flags & FLAG_VIEW_LIGHT) != 0u);
         let plain = params.flags & FLAG_VIEWS_WITHOUT_LIGHT;

@@ -2,6 +2,11 @@
 // quad in its tangent plane, fragments outside the unit circle discarded), so depth is the disc's
 // true depth. A disc smaller than `viewport.z` pixels is grown to it so sparse samples leave no
 // holes. `Splat` mirrors SplatUniform in runtime/src/gpu/types.rs (runtime/tests/layout.rs).
+//
+// Blended splatting (passes/gbuffer.rs) draws the discs twice: `fs_gbuffer` with each disc pushed
+// back along the eye ray by `splat.z` disc radii (more at grazing angles), which leaves in the
+// depth buffer the front surface plus a tolerance; then `fs_blend`, unpushed, adds every fragment
+// within that tolerance with a smooth radial weight into float targets, normalised by shade.
 #import geometry
 #import packing
 #import color
@@ -11,7 +16,8 @@ struct Splat {
     eye_m: vec4<f32>,
     // x, y: viewport size in pixels; z: smallest radius in pixels; w: proj[1][1].
     viewport: vec4<f32>,
-    // x: surfel radius scale; y: 1 to colour by scan.
+    // x: surfel radius scale; y: 1 to colour by scan; z: depth push in disc radii (blended
+    // splatting's depth pass; 0 elsewhere).
     splat: vec4<f32>,
     // The clip box, frame metres; w: 1 where it clips.
     clip_min_m: vec4<f32>,
@@ -85,7 +91,19 @@ fn splat_corner(vi: u32, position_radius: vec4<f32>, normal_spread: vec4<f32>, c
         }
     }
     let world = position_radius.xyz + (t1 * c.x + t2 * c.y) * r;
-    out.clip = splat.view_proj * vec4<f32>(world, 1.0);
+    var pushed = world;
+    if splat.splat.z > 0.0 {
+        // The whole disc scaled about the eye (one factor for its corners), so the pushed disc
+        // covers exactly the same pixels with the same interpolation (pushing each corner by the
+        // same length would not: it changes the ratio of their depths). A disc seen at a grazing
+        // angle spans more depth across a pixel's neighbours: the tolerance grows with 1 / |cos|
+        // (up to 4x) so its neighbours on the same surface still fall inside.
+        let to = p - splat.eye_m.xyz;
+        let dist = max(length(to), 1e-6);
+        let facing = max(abs(dot(to / dist, n)), 0.25);
+        pushed = splat.eye_m.xyz + (world - splat.eye_m.xyz) * (1.0 + splat.splat.z * r / facing / dist);
+    }
+    out.clip = splat.view_proj * vec4<f32>(pushed, 1.0);
     out.disc = c;
     out.world = world;
     out.normal_spread = vec4<f32>(n, normal_spread.w);
@@ -128,5 +146,39 @@ fn fs_gbuffer(in: VsOut) -> GbufferOut {
     out.distance = pack_f32(distance(in.world, splat.eye_m.xyz));
     out.normal = pack_normal(n);
     out.albedo = in.color;
+    return out;
+}
+
+// Blended splatting's second pass: the reference distance per pixel (fs_gbuffer's packed
+// distance of the front disc), against which distances are accumulated as small offsets (f16
+// keeps an offset of centimetres exactly, not a distance of tens of metres).
+@group(2) @binding(0) var blend_reference: texture_2d<f32>;
+
+struct BlendOut {
+    // Sum of w * normal (facing the eye), and of w.
+    @location(0) normal_weight: vec4<f32>,
+    // Sum of w * linear albedo, and of w * (distance - reference).
+    @location(1) albedo_offset: vec4<f32>,
+}
+
+@fragment
+fn fs_blend(in: VsOut) -> BlendOut {
+    let r2 = dot(in.disc, in.disc);
+    if r2 > 1.0 {
+        discard;
+    }
+    // Smooth to zero at the rim, so a disc's edge never shows as a step; never exactly zero, so
+    // a pixel only rims cover still has a surface.
+    let k = 1.0 - r2;
+    let w = max(k * k, 1e-3);
+    var n = in.normal_spread.xyz;
+    if dot(n, splat.eye_m.xyz - in.world) < 0.0 {
+        n = -n;
+    }
+    let reference = unpack_f32(textureLoad(blend_reference, vec2<i32>(in.clip.xy), 0));
+    let d = distance(in.world, splat.eye_m.xyz);
+    var out: BlendOut;
+    out.normal_weight = vec4<f32>(n * w, w);
+    out.albedo_offset = vec4<f32>(in.color.rgb * w, (d - reference) * w);
     return out;
 }

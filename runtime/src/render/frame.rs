@@ -7,7 +7,6 @@ use crate::error::{Error, Result};
 use crate::gpu::types::{ActiveTile, Params, SplatUniform, flags};
 use crate::light::activity::Why;
 use crate::light::plan::{self, EffectPlan, Pass, PlanInputs};
-use crate::passes::gbuffer;
 use crate::view::camera::Camera;
 
 use crate::passes::splat::SplatRun;
@@ -51,6 +50,13 @@ impl Renderer {
             tiles_why: self.activity.pending_why(),
             frame: frame.is_some(),
             gbuffer_valid,
+            splats: if self.gbuffer.blends() {
+                "blended splats: a depth pass, then every disc within a radius of the front surface"
+            } else if self.settings.splat_blend {
+                "front-most discs: the adapter cannot blend f16 targets"
+            } else {
+                "front-most discs (splat blending off)"
+            },
             plain_view: (!self.settings.view.shows_light()).then(|| self.settings.view.name()),
             light_held: self.light_held.or_else(|| {
                 self.bounce_readback.is_some().then_some("the last bounce's change is on its way back")
@@ -200,6 +206,9 @@ impl Renderer {
         if s.cone_interleave {
             f |= flags::CONE_INTERLEAVE;
         }
+        if self.gbuffer.blends() {
+            f |= flags::BLEND;
+        }
         f |= match s.view {
             ViewMode::Lit => 0,
             ViewMode::Albedo => flags::VIEW_ALBEDO,
@@ -259,7 +268,7 @@ impl Renderer {
             // The largest per-view buffer first, before any target is allocated.
             let pixels = u64::from(w) * u64::from(h);
             self.gpu.check_buffer("shade hdr", pixels * 16, wgpu::BufferUsages::STORAGE)?;
-            let targets = gbuffer::Targets::new(&self.gpu, w, h)?;
+            let targets = self.gbuffer.targets(&self.gpu, w, h)?;
             let outputs = self.shade.outputs(&self.gpu, &targets)?;
             self.view = Some(View { camera: *camera, targets, outputs });
         } else if let Some(v) = self.view.as_mut() {

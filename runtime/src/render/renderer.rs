@@ -239,7 +239,8 @@ impl Renderer {
             gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, caps.nodes, &by_height, &ranges, f16))?;
         let propagate =
             gpu.scoped("propagate", || passes::propagate::new(gpu, shared, f16, settings.cones))?;
-        let gbuffer = gpu.scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout, &splats))?;
+        let gbuffer = gpu
+            .scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout, &splats, settings.splat_blend))?;
         splats.set_surfels(gpu, &up.surfels);
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
         let static_bytes = up.bytes + shadow.bytes() + shade.env_atlas_bytes();
