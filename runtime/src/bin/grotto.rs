@@ -259,6 +259,10 @@ struct RenderArgs {
     /// adapter can blend f16 targets; the image before issue 44, for comparing).
     #[arg(long)]
     no_splat_blend: bool,
+    /// Anti-aliasing for `grotto render`: draw at N times the width and height (1..=4) and
+    /// average each N x N block; costs N^2 in G-buffer and shade work.
+    #[arg(long, default_value_t = 1)]
+    supersample: u32,
     /// Replace the package's lights by a lamp string of N 8 W lamps spread over the cave's floors
     /// (to measure how cost grows with the number of lights).
     #[arg(long)]
@@ -403,6 +407,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
         frame_bounces: a.frame_bounces,
         upload_per_frame: a.upload_per_frame,
         clip_world_m: a.clip,
+        supersample: a.supersample,
     })
 }
 
@@ -443,6 +448,10 @@ struct ViewArgs {
 const VIEW_SHADOW_MS: f32 = 8.0;
 
 fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
+    anyhow::ensure!(
+        v.render.supersample == 1,
+        "--supersample is for grotto render (the viewer draws at --render-scale)"
+    );
     let mut render = options(&v.render)?;
     render.settings.shadow_frame_ms = v.render.shadow_ms.unwrap_or(VIEW_SHADOW_MS);
     let a = &v.render;
@@ -499,6 +508,10 @@ fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
 }
 
 fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
+    anyhow::ensure!(
+        b.render.supersample == 1,
+        "--supersample is for grotto render (bench the larger --size instead)"
+    );
     let opts = options(&b.render)?;
     let report = grotto_runtime::cli::render_job::bench(&opts, b.reps)?;
     if b.render.json {

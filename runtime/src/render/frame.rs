@@ -556,3 +556,72 @@ pub struct LdrOutput<'a> {
     pub(crate) width: u32,
     pub(crate) height: u32,
 }
+
+impl Frame {
+    /// The frame at 1/`factor` of its size, each pixel the mean of a `factor` x `factor` block:
+    /// supersampling's resolve (`grotto render --supersample`). Radiance and coverage average
+    /// linearly; the tonemapped colour averages in linear light after the tonemap, as a display
+    /// would blend the sub-pixels (a bright lamp's edge does not dominate the pixel). Edges that
+    /// do not fill a block are dropped.
+    pub fn downsampled(&self, factor: u32) -> Frame {
+        use grotto_format::color::{linear_to_srgb8, srgb8_to_linear};
+        let f = factor.max(1) as usize;
+        let (w, h) = (self.width as usize / f, self.height as usize / f);
+        let mut hdr = Vec::with_capacity(w * h);
+        let mut ldr = Vec::with_capacity(w * h);
+        let n = (f * f) as f32;
+        for by in 0..h {
+            for bx in 0..w {
+                let (mut sum_hdr, mut sum_ldr) = ([0f32; 4], [0f32; 4]);
+                for y in by * f..(by + 1) * f {
+                    for x in bx * f..(bx + 1) * f {
+                        let i = y * self.width as usize + x;
+                        for k in 0..4 {
+                            sum_hdr[k] += self.hdr[i][k];
+                        }
+                        for k in 0..3 {
+                            sum_ldr[k] += srgb8_to_linear(self.ldr[i][k]);
+                        }
+                        sum_ldr[3] += f32::from(self.ldr[i][3]);
+                    }
+                }
+                hdr.push(sum_hdr.map(|v| v / n));
+                let l = sum_ldr.map(|v| v / n);
+                ldr.push([
+                    linear_to_srgb8(l[0]),
+                    linear_to_srgb8(l[1]),
+                    linear_to_srgb8(l[2]),
+                    l[3].round() as u8,
+                ]);
+            }
+        }
+        Frame { width: w as u32, height: h as u32, hdr, ldr }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Frame;
+
+    #[test]
+    fn a_downsampled_frame_averages_its_blocks_in_linear_light() {
+        // A 4x2 frame: left block half black, half white; right block all mid grey.
+        let white = ([1.0, 1.0, 1.0, 1.0], [255, 255, 255, 255]);
+        let black = ([0.0, 0.0, 0.0, 0.0], [0, 0, 0, 255]);
+        let grey = ([0.5, 0.5, 0.5, 1.0], [188, 188, 188, 255]);
+        let px = [white, black, grey, grey, black, white, grey, grey];
+        let frame = Frame {
+            width: 4,
+            height: 2,
+            hdr: px.iter().map(|p| p.0).collect(),
+            ldr: px.iter().map(|p| p.1).collect(),
+        };
+        let half = frame.downsampled(2);
+        assert_eq!((half.width, half.height), (2, 1));
+        assert_eq!(half.hdr[0], [0.5, 0.5, 0.5, 0.5]);
+        // Half white and half black light is linear 0.5: sRGB 188, not 128.
+        assert_eq!(half.ldr[0], [188, 188, 188, 255]);
+        assert_eq!(half.ldr[1], [188, 188, 188, 255]);
+        assert_eq!(frame.downsampled(1).ldr, frame.ldr);
+    }
+}
