@@ -576,13 +576,14 @@ impl Frame {
                 for y in by * f..(by + 1) * f {
                     for x in bx * f..(bx + 1) * f {
                         let i = y * self.width as usize + x;
-                        for k in 0..4 {
-                            sum_hdr[k] += self.hdr[i][k];
+                        for (s, v) in sum_hdr.iter_mut().zip(self.hdr[i]) {
+                            *s += v;
                         }
-                        for k in 0..3 {
-                            sum_ldr[k] += srgb8_to_linear(self.ldr[i][k]);
+                        let [r, g, b, a] = self.ldr[i];
+                        for (s, v) in sum_ldr.iter_mut().zip([r, g, b].map(srgb8_to_linear)) {
+                            *s += v;
                         }
-                        sum_ldr[3] += f32::from(self.ldr[i][3]);
+                        sum_ldr[3] += f32::from(a);
                     }
                 }
                 hdr.push(sum_hdr.map(|v| v / n));
