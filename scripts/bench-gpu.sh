@@ -7,7 +7,8 @@
 # is and with --point-budget 1M and 5M, settled before each frame and as a viewer runs it (a
 # bounce a frame, shadow faces within 8 ms a frame); and, for the demo cave and the 10^7 package, the splat
 # passes' work counts (draws, surfels, vertex and fragment invocations) drawn as before issue 43
-# (--cull tiles --no-splat-lod) and as now. Prints one markdown table per part (also written to
+# (--cull tiles --no-splat-lod) and as now; and the G-buffer with the front-most disc against
+# blended splats (issue 44). Prints one markdown table per part (also written to
 # OUT/tables.md, part by part, so a run cut short keeps what it measured) and keeps the raw JSON
 # reports in OUT/json/.
 #
@@ -127,6 +128,17 @@ if [[ " $parts " == *" demo "* ]]; then
     # shellcheck disable=SC2046
     work_table "The demo cave's splat passes: whole tiles and every surfel (before issue 43) against chunks and level of detail" \
         $(work_pair demo "$work/demo/demo.grotto" 1920x1080) | tee -a "$tables"
+    # Issue 44: the front-most disc (before) against blended splats (the default), one run each.
+    files=()
+    for mode in front blend; do
+        f=$out/json/demo__splats-$mode__1920x1080.json
+        extra=()
+        [ "$mode" = front ] && extra=(--no-splat-blend)
+        "$bin/grotto" bench "$work/demo/demo.grotto" --camera chamber --size 1920x1080 --bounces 0 \
+            --reps "$reps" "${extra[@]}" --json > "$f"
+        files+=("$f")
+    done
+    bench_table "The demo cave at 1920x1080: front-most disc against blended splats (issue 44)" "${files[@]}" | tee -a "$tables"
 fi
 
 if [[ " $parts " == *" paper "* ]]; then

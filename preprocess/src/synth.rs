@@ -84,6 +84,8 @@ pub struct SynthCave {
 }
 
 const CELL_M: f64 = 4.0;
+/// Side of the cubes [`SynthCave::occupied_cells`] lists, metres.
+pub const GRID_CELL_M: f64 = CELL_M;
 const BLEND_M: f64 = 0.6;
 const NOISE: [(f64, f64); 2] = [(0.05, 1.0 / 1.3), (0.015, 1.0 / 0.35)];
 
@@ -349,8 +351,16 @@ impl SynthCave {
         None
     }
 
+    /// Lower corners (local frame) of the cubes of side [`GRID_CELL_M`] where a wall may lie:
+    /// outside their union `eval` is rock. For meshing the true surface (grotto-reference truth).
+    pub fn occupied_cells(&self) -> Vec<[f64; 3]> {
+        let mut keys: Vec<[i32; 3]> = self.grid.keys().copied().collect();
+        keys.sort_unstable();
+        keys.into_iter().map(|k| k.map(|v| f64::from(v) * CELL_M)).collect()
+    }
+
     /// sRGB colour of the wall at `p` with normal `n`.
-    pub(crate) fn color(&self, p: [f64; 3], n: [f64; 3]) -> [u8; 3] {
+    pub fn color(&self, p: [f64; 3], n: [f64; 3]) -> [u8; 3] {
         let band = 0.5 + 0.5 * (p[2] * 2.3 + 0.8 * value_noise(self.seed ^ 0xba5e, p.map(|v| v * 0.4))).sin();
         let streak = value_noise(self.seed ^ 0x5eed, [p[0] * 0.3, p[1] * 0.3, p[2] * 3.0]).max(0.0);
         let floor = n[2].max(0.0).powi(2);

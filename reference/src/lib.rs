@@ -19,6 +19,8 @@ mod error;
 pub mod mitsuba;
 /// The accuracy-vs-time sweep behind docs/accuracy.md.
 pub mod accuracy;
+/// The true-surface benchmark: the synthetic cave's exact surface as a mesh for Mitsuba 3.
+pub mod truth;
 
 pub use error::Error;
 pub use tracer::{Disc, Estimate, PathSettings, SurfelScene, aces_srgb};

@@ -83,6 +83,9 @@ pub struct Options {
     /// Milliseconds a frame may spend on shadow faces out of date after tiles arrive (default 8;
     /// 0: every face at once): the rest follow over the next frames (render/shadow_queue.rs).
     pub shadow_ms: Option<f32>,
+    /// Blend the discs of the front surface at each pixel (default true, as natively; false:
+    /// the front-most disc alone, the picture before issue 44).
+    pub splat_blend: Option<bool>,
 }
 
 /// The status of a frame, for the page's panel and the ready marker (JSON).
@@ -296,6 +299,7 @@ fn settings_of(o: &Options) -> Result<Settings, Error> {
     }
     s.exposure = o.exposure.unwrap_or(1.0);
     s.shadow_frame_ms = o.shadow_ms.unwrap_or(8.0);
+    s.splat_blend = o.splat_blend.unwrap_or(true);
     s.validate()?;
     Ok(s)
 }

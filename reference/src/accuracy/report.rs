@@ -127,6 +127,47 @@ pub fn report(
     s
 }
 
+/// `report` with the true-surface benchmark's headline after its introduction: the light judged
+/// on grotto's own discs (this report) beside the picture judged against the cave itself
+/// (accuracy-truth.md, from `truth`: scripts/truth-check.py's JSON rows).
+pub fn with_truth(report: &str, truth: &serde_json::Value) -> String {
+    let mut t = String::from(
+        "## The picture against the cave\n\nEverything below compares grotto with a path tracer on the same discs: how right the light is on \
+         grotto's model of the surface. [accuracy-truth.md](accuracy-truth.md) compares grotto's picture of the scanned \
+         points with Mitsuba 3 rendering the synthetic cave's exact surface (a mesh far finer than a leaf) with the same \
+         lamps and cameras, over every pixel at 640x480: how close the picture is to the cave. Mean FLIP, before \
+         (front-most disc) and after blended splats (issue 44), and the truth's own noise:\n\n\
+         | camera | light | FLIP before | FLIP after | rel. RMSE before | rel. RMSE after | truth noise (FLIP) |\n\
+         |---|---|---:|---:|---:|---:|---:|\n",
+    );
+    let rows = truth["rows"].as_array().map(Vec::as_slice).unwrap_or_default();
+    let find = |cam: &serde_json::Value, light: &serde_json::Value, mode: &str| {
+        rows.iter().find(|r| &r["camera"] == cam && &r["transport"] == light && r["mode"] == mode)
+    };
+    for r in rows.iter().filter(|r| r["mode"] == "after") {
+        if let Some(b) = find(&r["camera"], &r["transport"], "before") {
+            let f = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+            let _ = writeln!(
+                t,
+                "| {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
+                r["camera"].as_str().unwrap_or("?"),
+                r["transport"].as_str().unwrap_or("?"),
+                f(&b["flip"]),
+                f(&r["flip"]),
+                f(&b["rel_rmse"]),
+                f(&r["rel_rmse"]),
+                f(&r["noise_flip"])
+            );
+        }
+    }
+    t.push('\n');
+    // After the introduction: the first section heading.
+    match report.find("\n## ") {
+        Some(i) => format!("{}\n{t}{}", &report[..i], &report[i + 1..]),
+        None => format!("{report}\n{t}"),
+    }
+}
+
 /// The report's title and how it was measured.
 fn report_intro(s: &mut String, device: &str, width: u32, height: u32, command: &str) {
     let _ = writeln!(s, "# Accuracy against time\n");
@@ -512,5 +553,20 @@ mod tests {
         assert_eq!(presets_monotone(&presets([0.2, 0.2, 0.1], [1.0, 2.0, 3.0])), Some(false));
         assert_eq!(presets_monotone(&presets([0.3, 0.2, 0.1], [1.0, 3.0, 2.0])), Some(false));
         assert_eq!(presets_monotone(&presets([0.3, 0.2, 0.1], [1.0, 2.0, 3.0])[..2]), None);
+    }
+
+    #[test]
+    fn the_truth_table_goes_after_the_introduction() {
+        let report = "# Accuracy\n\nintro\n\n## Presets\n\nrows\n";
+        let row = |mode: &str, flip: f64| {
+            serde_json::json!({"camera": "chamber", "transport": "direct", "mode": mode, "flip": flip,
+                "rel_rmse": 0.5, "noise_flip": 0.01})
+        };
+        let truth = serde_json::json!({"rows": [row("before", 0.3), row("after", 0.2)]});
+        let out = with_truth(report, &truth);
+        let (truth_at, presets_at) =
+            (out.find("## The picture against the cave").unwrap(), out.find("## Presets").unwrap());
+        assert!(out.find("intro").unwrap() < truth_at && truth_at < presets_at, "{out}");
+        assert!(out.contains("| chamber | direct | 0.3000 | 0.2000 | 0.5000 | 0.5000 | 0.0100 |"), "{out}");
     }
 }

@@ -19,6 +19,36 @@ enum Cli {
     Accuracy(AccuracyArgs),
     Lights(LightsArgs),
     Mitsuba(MitsubaArgs),
+    Truth(TruthArgs),
+}
+
+/// The true-surface benchmark's scenes (issue 44): mesh the synthetic cave's exact surface
+/// (OUT/mesh.ply, linear vertex albedo) and write a Mitsuba 3 scene of it per camera and
+/// transport (OUT/CAMERA-direct.xml, OUT/CAMERA-full.xml) with the package's lights, plus
+/// OUT/cameras.json (each camera in world coordinates, for `grotto render --eye`).
+/// `scripts/truth-check.py OUT` renders them and compares grotto's pictures with them.
+#[derive(clap::Args, Debug)]
+struct TruthArgs {
+    /// The synthetic dataset the package was built from (its synth.json).
+    #[arg(long, default_value = "out/demo-scans")]
+    synth: PathBuf,
+    /// The package built from it.
+    #[arg(long, default_value = "out/demo.grotto")]
+    package: PathBuf,
+    /// Folder to write into.
+    #[arg(long, default_value = "target/truth")]
+    out: PathBuf,
+    /// Mesh cell, metres (the surface nets' grid; a leaf is 0.25 m).
+    #[arg(long, default_value_t = 0.04)]
+    cell: f64,
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "640x480")]
+    size: String,
+    /// Mitsuba samples per pixel for the direct light and for full transport.
+    #[arg(long, default_value_t = 2048)]
+    spp_direct: u32,
+    #[arg(long, default_value_t = 256)]
+    spp_full: u32,
 }
 
 /// Write the furnace, the colour box and the dogleg for Mitsuba 3 (SLUG.xml) beside this
@@ -134,6 +164,7 @@ fn main() -> anyhow::Result<()> {
         Cli::Accuracy(a) => accuracy(a),
         Cli::Lights(a) => lights(a),
         Cli::Mitsuba(a) => mitsuba(a),
+        Cli::Truth(a) => truth(a),
     }
 }
 
@@ -290,7 +321,14 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
     {
         command.push_str(&format!(" {flag} {value:?}"));
     }
-    let md = accuracy::report(&scenes, &rows, &gpu.describe(), w, h, &command);
+    let mut md = accuracy::report(&scenes, &rows, &gpu.describe(), w, h, &command);
+    // The true-surface benchmark beside it (scripts/truth-check.py writes accuracy-truth.json).
+    let truth_json = a.out.with_file_name("accuracy-truth.json");
+    if let Ok(text) = std::fs::read_to_string(&truth_json) {
+        let truth: serde_json::Value =
+            serde_json::from_str(&text).with_context(|| truth_json.display().to_string())?;
+        md = accuracy::with_truth(&md, &truth);
+    }
     let json = a.out.with_extension("json");
     grotto_runtime::cli::export::write_atomically(&a.out, md.as_bytes())?;
     let plots = a.out.with_extension("");
@@ -377,5 +415,80 @@ fn render(cli: RenderArgs) -> anyhow::Result<()> {
             100.0 * se.y / mean.y.max(1e-12)
         );
     }
+    Ok(())
+}
+
+fn truth(a: TruthArgs) -> anyhow::Result<()> {
+    use grotto_reference::truth::{self, Transport};
+    let (w, h) = grotto_runtime::cli::render_job::parse_size(&a.size).map_err(anyhow::Error::msg)?;
+    let json = std::fs::read_to_string(a.synth.join("synth.json"))
+        .with_context(|| format!("{}: no synth.json (build it with grotto-pack synth)", a.synth.display()))?;
+    let params: grotto_preprocess::synth::SynthParams =
+        serde_json::from_str(&json).with_context(|| format!("{}/synth.json", a.synth.display()))?;
+    let pkg = grotto_format::Package::open(&a.package).with_context(|| a.package.display().to_string())?;
+    let scene = SceneData::from_package(&pkg)?;
+    let frame = glam::DVec3::from_array(scene.frame_origin_m);
+    let frame_from_local = glam::DVec3::from_array(params.offset_m) - frame;
+    let cave = grotto_preprocess::synth::SynthCave::new(&params);
+    std::fs::create_dir_all(&a.out)?;
+    let bar = indicatif::ProgressBar::new(0).with_message("meshing the true surface");
+    let t0 = std::time::Instant::now();
+    let mesh = truth::mesh_cave(&cave, a.cell, frame_from_local, |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    });
+    bar.finish_and_clear();
+    truth::write_ply(&mesh, &a.out.join("mesh.ply"))?;
+    eprintln!(
+        "mesh: {} triangles at {} m cells in {:.1} s",
+        mesh.triangles.len(),
+        a.cell,
+        t0.elapsed().as_secs_f64()
+    );
+    // The package's cameras, and a close-up of a wall seen at a grazing angle: from the second
+    // scanner station, along the passage turned 25 degrees toward a wall.
+    let mut cameras: Vec<(String, Camera)> =
+        scene.cameras.iter().map(|c| (c.name.clone(), Camera::from_scene(c))).collect();
+    let station = cave.stations.get(1).copied().unwrap_or([0.0, 0.0, 1.0]);
+    let along = cave.path.windows(2).min_by(|p, q| {
+        let d = |s: &[[f64; 3]]| glam::DVec3::from_array(s[0]).distance(glam::DVec3::from_array(station));
+        d(p).total_cmp(&d(q))
+    });
+    let dir = along.map_or(glam::DVec3::X, |s| {
+        (glam::DVec3::from_array(s[1]) - glam::DVec3::from_array(s[0])).normalize()
+    });
+    let turned =
+        glam::DQuat::from_rotation_z(25f64.to_radians()) * glam::DVec3::new(dir.x, dir.y, 0.0).normalize();
+    let eye = glam::DVec3::from_array(station) + frame_from_local;
+    cameras.push((
+        "glancing wall".into(),
+        Camera {
+            eye_m: eye.as_vec3(),
+            look_at_m: (eye + turned * 3.0 - glam::DVec3::Z * 0.4).as_vec3(),
+            up: Vec3::Z,
+            fov_y_deg: 50.0,
+        },
+    ));
+    let mut listed = Vec::new();
+    for (name, cam) in &cameras {
+        let slug = name.replace(' ', "-");
+        for (transport, spp) in [(Transport::Direct, a.spp_direct), (Transport::Full, a.spp_full)] {
+            let xml = truth::scene_xml("mesh.ply", &scene.lights, cam, (w, h, spp), transport)?;
+            std::fs::write(a.out.join(format!("{slug}-{}.xml", transport.name())), xml)?;
+        }
+        let world = |v: Vec3| (v.as_dvec3() + frame).to_array();
+        listed.push(serde_json::json!({
+            "name": name, "slug": slug,
+            "eye_world_m": world(cam.eye_m), "look_at_world_m": world(cam.look_at_m),
+            "up": cam.up.to_array(), "fov_y_deg": cam.fov_y_deg,
+        }));
+    }
+    let summary = serde_json::json!({
+        "package": a.package.display().to_string(), "width": w, "height": h, "cell_m": a.cell,
+        "triangles": mesh.triangles.len(), "lights": scene.lights.len(),
+        "spp_direct": a.spp_direct, "spp_full": a.spp_full, "cameras": listed,
+    });
+    std::fs::write(a.out.join("cameras.json"), serde_json::to_string_pretty(&summary)?)?;
+    eprintln!("wrote {} cameras x 2 Mitsuba scenes to {}", cameras.len(), a.out.display());
     Ok(())
 }
