@@ -6,13 +6,15 @@
 //! front-most disc alone gives every pixel its own disc's normal, depth and light, so a wall seen
 //! at a grazing angle breaks into scales. Instead the discs are drawn twice. The depth pass
 //! (`fs_gbuffer`) pushes each disc back by a tolerance along the eye ray, so its depth buffer
-//! holds the front surface plus that tolerance (and its distance target the front disc, for
-//! picking, holes and the material). The accumulation pass (`fs_blend`) draws them unpushed,
-//! depth-tested against it, adding every fragment of the front surface with a smooth radial
-//! weight: normal, albedo and distance. Shade divides by the weights, so each pixel is shaded
-//! once with the surface's blended attributes (and its light, gathered at the blended point,
-//! is blended with them). Discs of a surface behind a depth gap fail the test: silhouettes stay
-//! crisp. Where float targets cannot blend (GL), the front-most disc is kept, as before.
+//! holds the front surface plus that tolerance (and its targets the front disc: the distance, for
+//! the point shaded, picking and holes, and the material). The accumulation pass (`fs_blend`)
+//! draws them unpushed, depth-tested against it, adding every fragment of the front surface with
+//! a smooth radial weight: normal and albedo. Shade divides by the weights, so each pixel is
+//! shaded once with the surface's blended normal and albedo at the front disc's point. (Blending
+//! the distance too was tried: where the tolerance reaches far, on sparse clouds and at
+//! silhouettes, it pulls the point behind the surface, which then reads as shadowed: a 1,000-point
+//! LAS file went 79% black.) Discs of a surface behind a depth gap fail the test: silhouettes stay
+//! crisp. Where float targets cannot blend, the front-most disc is kept, as before.
 
 use super::splat;
 use crate::error::Result;
@@ -23,7 +25,7 @@ use crate::gpu::types::SplatUniform;
 pub(crate) const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 pub(crate) const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 pub(crate) const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
-/// Blended splatting's sums (weights up to thousands, offsets of centimetres: f16 holds both).
+/// Blended splatting's sums (weights up to thousands: f16 holds them).
 pub(crate) const BLEND_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
 /// The depth pass pushes each disc back by this many of its radii (up to 4x more at grazing
@@ -48,11 +50,9 @@ pub(crate) struct Targets {
     pub(crate) normal: wgpu::Texture,
     pub(crate) albedo: wgpu::Texture,
     pub(crate) depth: wgpu::Texture,
-    /// Blended splatting's sums (w n, w) and (w albedo, w offset); 1x1 and unused without it.
+    /// Blended splatting's sums (w n, w) and (w albedo, unused); 1x1 and unused without it.
     pub(crate) normal_weight: wgpu::Texture,
-    pub(crate) albedo_offset: wgpu::Texture,
-    /// The accumulation pass's binding of `distance` (its reference), where blending.
-    reference: Option<wgpu::BindGroup>,
+    pub(crate) albedo_sum: wgpu::Texture,
 }
 
 /// The G-buffer pass and the camera's splat uniforms (slot 0 the depth pass, 1 the accumulation).
@@ -60,8 +60,8 @@ pub(crate) struct Targets {
 pub(crate) struct Gbuffer {
     pipeline: wgpu::RenderPipeline,
     camera: splat::Uniforms,
-    /// The accumulation pass and its reference layout, where blending.
-    blend: Option<(wgpu::RenderPipeline, wgpu::BindGroupLayout)>,
+    /// The accumulation pass, where blending.
+    blend: Option<wgpu::RenderPipeline>,
 }
 
 impl Gbuffer {
@@ -76,21 +76,8 @@ impl Gbuffer {
             Some(wgpu::ColorTargetState { format, blend, write_mask: wgpu::ColorWrites::ALL })
         };
         let targets = [t(DISTANCE_FORMAT, None), t(NORMAL_FORMAT, None), t(ALBEDO_FORMAT, None)];
-        let pipeline = splat::pipeline(gpu, "gbuffer", layout, fetch, ("fs_gbuffer", &targets), None)?;
+        let pipeline = splat::pipeline(gpu, "gbuffer", layout, fetch, ("fs_gbuffer", &targets), false)?;
         let blend = if blend && can_blend(gpu) {
-            let reference = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("blend reference"),
-                entries: &[wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                }],
-            });
             let add = wgpu::BlendComponent {
                 src_factor: wgpu::BlendFactor::One,
                 dst_factor: wgpu::BlendFactor::One,
@@ -98,15 +85,7 @@ impl Gbuffer {
             };
             let sum = Some(wgpu::BlendState { color: add, alpha: add });
             let targets = [t(BLEND_FORMAT, sum), t(BLEND_FORMAT, sum)];
-            let p = splat::pipeline(
-                gpu,
-                "gbuffer blend",
-                layout,
-                fetch,
-                ("fs_blend", &targets),
-                Some(&reference),
-            )?;
-            Some((p, reference))
+            Some(splat::pipeline(gpu, "gbuffer blend", layout, fetch, ("fs_blend", &targets), true)?)
         } else {
             None
         };
@@ -130,17 +109,6 @@ impl Gbuffer {
             None => (sampled, (1, 1)),
         };
         let sum = |label| gpu.texture_2d(label, side.0, side.1, BLEND_FORMAT, sums);
-        let reference = self.blend.as_ref().map(|(_, layout)| {
-            let view = distance.create_view(&Default::default());
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("blend reference"),
-                layout,
-                entries: &[wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&view),
-                }],
-            })
-        });
         Ok(Targets {
             width,
             height,
@@ -149,8 +117,7 @@ impl Gbuffer {
             depth: make("gbuffer depth", splat::DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT)?,
             distance,
             normal_weight: sum("gbuffer blend normal")?,
-            albedo_offset: sum("gbuffer blend albedo")?,
-            reference,
+            albedo_sum: sum("gbuffer blend albedo")?,
         })
     }
 
@@ -187,7 +154,7 @@ impl Gbuffer {
                 },
             })
         };
-        let blend = self.blend.as_ref().zip(targets.reference.as_ref());
+        let blend = self.blend.as_ref();
         // With an accumulation pass the timestamps span both: the depth pass starts them, the
         // accumulation ends them.
         let (first_ts, second_ts) = match (timestamps, blend.is_some()) {
@@ -222,9 +189,8 @@ impl Gbuffer {
                 pass.end_pipeline_statistics_query();
             }
         }
-        let Some(((pipeline, _), reference)) = blend else { return };
-        let sums =
-            [&targets.normal_weight, &targets.albedo_offset].map(|t| t.create_view(&Default::default()));
+        let Some(pipeline) = blend else { return };
+        let sums = [&targets.normal_weight, &targets.albedo_sum].map(|t| t.create_view(&Default::default()));
         let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("gbuffer blend"),
             color_attachments: &[attach(&sums[0]), attach(&sums[1])],
@@ -239,7 +205,6 @@ impl Gbuffer {
         });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &self.camera.groups[1], &[]);
-        pass.set_bind_group(2, reference, &[]);
         fetch.draw(&mut pass, runs);
     }
 }

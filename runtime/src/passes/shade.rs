@@ -88,7 +88,7 @@ impl Shade {
             &targets.normal,
             &targets.albedo,
             &targets.normal_weight,
-            &targets.albedo_offset,
+            &targets.albedo_sum,
         ]
         .map(|t| t.create_view(&Default::default()));
         let view = |v| wgpu::BindingResource::TextureView(v);

@@ -27,10 +27,9 @@ fn write_pixel(idx: u32, hdr: vec4<f32>, ldr: vec3<f32>) {
 // The environment's GGX-prefiltered lat-long levels stacked top to bottom (Params::env_levels);
 // a 1x1 placeholder without a chain.
 @group(2) @binding(5) var env_atlas: texture_2d<f32>;
-// Blended splats' sums (passes/gbuffer.rs, FLAG_BLEND): (w n, w) and (w albedo, w distance offset
-// from the front disc's).
+// Blended splats' sums (passes/gbuffer.rs, FLAG_BLEND): (w n, w) and (w albedo, unused).
 @group(2) @binding(6) var gb_normal_weight: texture_2d<f32>;
-@group(2) @binding(7) var gb_albedo_offset: texture_2d<f32>;
+@group(2) @binding(7) var gb_albedo_sum: texture_2d<f32>;
 
 // Level k of the env atlas along unit `d`, bilinear (lat-long as preprocess/src/env.rs: theta
 // from +z, phi = atan2(y, x), wrapping in phi).
@@ -255,15 +254,15 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         var n = unpack_normal(textureLoad(gb_normal, src, 0));
         var albedo_slot = textureLoad(gb_albedo, src, 0);
         if (params.flags & FLAG_BLEND) != 0u {
-            // The surface's blended attributes; the material stays the front disc's. The scan
-            // view keeps each disc's own colour: its stripes are what it is for.
+            // The surface's blended normal and albedo, at the front disc's point (the material
+            // stays the front disc's too). The scan view keeps each disc's own colour: its
+            // stripes are what it is for.
             let nw = textureLoad(gb_normal_weight, src, 0);
-            let ao = textureLoad(gb_albedo_offset, src, 0);
+            let albedo_sum = textureLoad(gb_albedo_sum, src, 0);
             if nw.w > 0.0 && dot(nw.xyz, nw.xyz) > 1e-12 {
                 n = normalize(nw.xyz);
-                d += ao.w / nw.w;
                 if (params.flags & FLAG_VIEW_SCAN) == 0u {
-                    albedo_slot = vec4<f32>(ao.rgb / nw.w, albedo_slot.a);
+                    albedo_slot = vec4<f32>(albedo_sum.rgb / nw.w, albedo_slot.a);
                 }
             }
         }

@@ -231,15 +231,15 @@ const SURFEL_ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
 ];
 
 /// A render pipeline drawing every surfel as an oriented disc into `targets`, fetching surfels
-/// as `fetch` says. `blend_reference`: blended splatting's accumulation pass (group 2 the
-/// reference distance; depth tested against the depth pass, not written).
+/// as `fetch` says. `accumulate`: blended splatting's accumulation pass (depth tested against the
+/// depth pass, not written).
 pub(crate) fn pipeline(
     gpu: &Gpu,
     label: &str,
     layout: &wgpu::BindGroupLayout,
     fetch: &Fetch,
     (fragment_entry, targets): (&str, &[Option<wgpu::ColorTargetState>]),
-    blend_reference: Option<&wgpu::BindGroupLayout>,
+    accumulate: bool,
 ) -> Result<wgpu::RenderPipeline> {
     let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("splat"),
@@ -250,12 +250,8 @@ pub(crate) fn pipeline(
         step_mode: wgpu::VertexStepMode::Instance,
         attributes: &SURFEL_ATTRIBUTES,
     })];
-    let mut groups: Vec<Option<&wgpu::BindGroupLayout>> = vec![Some(layout), fetch.surfels_layout.as_ref()];
-    if blend_reference.is_some() {
-        groups.push(blend_reference);
-    } else if groups[1].is_none() {
-        groups.pop();
-    }
+    let groups: Vec<Option<&wgpu::BindGroupLayout>> =
+        std::iter::once(Some(layout)).chain(fetch.surfels_layout.as_ref().map(Some)).collect();
     let pl = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(label),
         bind_group_layouts: &groups,
@@ -273,8 +269,8 @@ pub(crate) fn pipeline(
         primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
         depth_stencil: Some(wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
-            depth_write_enabled: Some(blend_reference.is_none()),
-            depth_compare: Some(if blend_reference.is_some() {
+            depth_write_enabled: Some(!accumulate),
+            depth_compare: Some(if accumulate {
                 wgpu::CompareFunction::LessEqual
             } else {
                 wgpu::CompareFunction::Less

@@ -6,7 +6,9 @@
 // Blended splatting (passes/gbuffer.rs) draws the discs twice: `fs_gbuffer` with each disc pushed
 // back along the eye ray by `splat.z` disc radii (more at grazing angles), which leaves in the
 // depth buffer the front surface plus a tolerance; then `fs_blend`, unpushed, adds every fragment
-// within that tolerance with a smooth radial weight into float targets, normalised by shade.
+// within that tolerance with a smooth radial weight into float targets, normalised by shade. The
+// point shaded stays the front disc's (a blended distance pulls it behind the surface where the
+// tolerance reaches far: sparse clouds, silhouettes), so only normal and albedo are blended.
 #import geometry
 #import packing
 #import color
@@ -149,16 +151,11 @@ fn fs_gbuffer(in: VsOut) -> GbufferOut {
     return out;
 }
 
-// Blended splatting's second pass: the reference distance per pixel (fs_gbuffer's packed
-// distance of the front disc), against which distances are accumulated as small offsets (f16
-// keeps an offset of centimetres exactly, not a distance of tens of metres).
-@group(2) @binding(0) var blend_reference: texture_2d<f32>;
-
 struct BlendOut {
     // Sum of w * normal (facing the eye), and of w.
     @location(0) normal_weight: vec4<f32>,
-    // Sum of w * linear albedo, and of w * (distance - reference).
-    @location(1) albedo_offset: vec4<f32>,
+    // Sum of w * linear albedo (alpha unused).
+    @location(1) albedo: vec4<f32>,
 }
 
 @fragment
@@ -175,10 +172,8 @@ fn fs_blend(in: VsOut) -> BlendOut {
     if dot(n, splat.eye_m.xyz - in.world) < 0.0 {
         n = -n;
     }
-    let reference = unpack_f32(textureLoad(blend_reference, vec2<i32>(in.clip.xy), 0));
-    let d = distance(in.world, splat.eye_m.xyz);
     var out: BlendOut;
     out.normal_weight = vec4<f32>(n * w, w);
-    out.albedo_offset = vec4<f32>(in.color.rgb * w, (d - reference) * w);
+    out.albedo = vec4<f32>(in.color.rgb * w, 0.0);
     return out;
 }
