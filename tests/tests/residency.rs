@@ -24,7 +24,10 @@ const W: u32 = 160;
 const H: u32 = 120;
 
 fn settings() -> Settings {
-    Settings { bounces: 3, shadow_map_size: 256, exposure: 8.0, ..Settings::default() }
+    // The front-most disc: this file's "dropping shows" checks were measured with it, and blended
+    // splats (issue 44) remove the draw-order noise part of that difference came from (dropped
+    // tiles: mean 0.43 -> 0.09); those checks need re-deriving before they run blended.
+    Settings { bounces: 3, shadow_map_size: 256, exposure: 8.0, splat_blend: false, ..Settings::default() }
 }
 
 /// The small cave cut into 4 m tiles, built once for the tests of this file.

@@ -253,17 +253,15 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         coverage = 1.0;
         var n = unpack_normal(textureLoad(gb_normal, src, 0));
         var albedo_slot = textureLoad(gb_albedo, src, 0);
-        if (params.flags & FLAG_BLEND) != 0u {
+        if (params.flags & FLAG_BLEND) != 0u && (params.flags & FLAG_VIEWS_WITHOUT_LIGHT) == 0u {
             // The surface's blended normal and albedo, at the front disc's point (the material
-            // stays the front disc's too). The scan view keeps each disc's own colour: its
-            // stripes are what it is for.
+            // stays the front disc's too). The views without light show each disc's own data
+            // (albedo, normals, level, scan): they are for judging the data, disc by disc.
             let nw = textureLoad(gb_normal_weight, src, 0);
             let albedo_sum = textureLoad(gb_albedo_sum, src, 0);
             if nw.w > 0.0 && dot(nw.xyz, nw.xyz) > 1e-12 {
                 n = normalize(nw.xyz);
-                if (params.flags & FLAG_VIEW_SCAN) == 0u {
-                    albedo_slot = vec4<f32>(albedo_sum.rgb / nw.w, albedo_slot.a);
-                }
+                albedo_slot = vec4<f32>(albedo_sum.rgb / nw.w, albedo_slot.a);
             }
         }
         let p = params.camera_eye_m.xyz + ray * d;
