@@ -46,26 +46,8 @@ pub fn scene_xml(
     let _ = writeln!(s, "<scene version=\"3.0.0\">");
     let _ =
         writeln!(s, "  <integrator type=\"path\"><integer name=\"max_depth\" value=\"-1\"/></integrator>");
+    sensor_and_lights(&mut s, camera, (width, height, spp), scene.lights())?;
     let v = |v: Vec3| format!("{:.9}, {:.9}, {:.9}", v.x, v.y, v.z);
-    let _ = writeln!(
-        s,
-        "  <sensor type=\"perspective\">\n    <string name=\"fov_axis\" value=\"y\"/>\n    <float name=\"fov\" value=\"{:.9}\"/>\n    <transform name=\"to_world\"><lookat origin=\"{}\" target=\"{}\" up=\"{}\"/></transform>\n    <sampler type=\"independent\"><integer name=\"sample_count\" value=\"{spp}\"/></sampler>\n    <film type=\"hdrfilm\">\n      <integer name=\"width\" value=\"{width}\"/>\n      <integer name=\"height\" value=\"{height}\"/>\n      <string name=\"pixel_format\" value=\"rgb\"/>\n      <rfilter type=\"box\"/>\n    </film>\n  </sensor>",
-        camera.fov_y_deg,
-        v(camera.eye_m),
-        v(camera.look_at_m),
-        v(camera.up)
-    );
-    for l in scene.lights() {
-        if l.spot.is_some() {
-            return Err(Error::SpotForMitsuba(l.name.clone()));
-        }
-        let _ = writeln!(
-            s,
-            "  <emitter type=\"point\"><point name=\"position\" value=\"{}\"/><rgb name=\"intensity\" value=\"{}\"/></emitter>",
-            v(l.position_m),
-            v(l.intensity_w_sr)
-        );
-    }
     // One BSDF per distinct albedo, referenced by the discs (`albedo_of`: each disc's).
     let mut albedos: Vec<Vec3> = Vec::new();
     let albedo_of: Vec<usize> = scene
@@ -125,6 +107,39 @@ pub fn scene_xml(
     }
     let _ = writeln!(s, "</scene>");
     Ok(s)
+}
+
+/// Appends the perspective sensor of `camera` (vertical field of view, `spp` samples a pixel,
+/// box filter, linear RGB film of `width` x `height`) and `lights` as point emitters with the
+/// same intensity; spot lights are refused by name. Shared by the reference's scenes and the
+/// true-surface benchmark's (truth.rs).
+pub(crate) fn sensor_and_lights(
+    s: &mut String,
+    camera: &Camera,
+    (width, height, spp): (u32, u32, u32),
+    lights: &[grotto_runtime::scene::data::SceneLight],
+) -> Result<(), Error> {
+    let v = |v: Vec3| format!("{:.9}, {:.9}, {:.9}", v.x, v.y, v.z);
+    let _ = writeln!(
+        s,
+        "  <sensor type=\"perspective\">\n    <string name=\"fov_axis\" value=\"y\"/>\n    <float name=\"fov\" value=\"{:.9}\"/>\n    <transform name=\"to_world\"><lookat origin=\"{}\" target=\"{}\" up=\"{}\"/></transform>\n    <sampler type=\"independent\"><integer name=\"sample_count\" value=\"{spp}\"/></sampler>\n    <film type=\"hdrfilm\">\n      <integer name=\"width\" value=\"{width}\"/>\n      <integer name=\"height\" value=\"{height}\"/>\n      <string name=\"pixel_format\" value=\"rgb\"/>\n      <rfilter type=\"box\"/>\n    </film>\n  </sensor>",
+        camera.fov_y_deg,
+        v(camera.eye_m),
+        v(camera.look_at_m),
+        v(camera.up)
+    );
+    for l in lights {
+        if l.spot.is_some() {
+            return Err(Error::SpotForMitsuba(l.name.clone()));
+        }
+        let _ = writeln!(
+            s,
+            "  <emitter type=\"point\"><point name=\"position\" value=\"{}\"/><rgb name=\"intensity\" value=\"{}\"/></emitter>",
+            v(l.position_m),
+            v(l.intensity_w_sr)
+        );
+    }
+    Ok(())
 }
 
 /// The normal of the voxel face centred at `center_m` on a grid of `side_m` cells: along the one

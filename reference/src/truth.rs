@@ -18,7 +18,7 @@ use std::path::Path;
 
 use fast_surface_nets::ndshape::{ConstShape, ConstShape3u32};
 use fast_surface_nets::{SurfaceNetsBuffer, surface_nets};
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use grotto_preprocess::synth::{GRID_CELL_M, SynthCave};
 use grotto_runtime::scene::data::SceneLight;
 use grotto_runtime::view::camera::Camera;
@@ -176,7 +176,6 @@ pub fn scene_xml(
     (width, height, spp): (u32, u32, u32),
     transport: Transport,
 ) -> Result<String, crate::error::Error> {
-    let v = |v: Vec3| format!("{:.9}, {:.9}, {:.9}", v.x, v.y, v.z);
     let mut s = String::from("<scene version=\"3.0.0\">\n");
     let _ = writeln!(
         s,
@@ -189,25 +188,7 @@ pub fn scene_xml(
                 "<integrator type=\"path\"><integer name=\"max_depth\" value=\"-1\"/></integrator>",
         }
     );
-    let _ = writeln!(
-        s,
-        "  <sensor type=\"perspective\">\n    <string name=\"fov_axis\" value=\"y\"/>\n    <float name=\"fov\" value=\"{:.9}\"/>\n    <transform name=\"to_world\"><lookat origin=\"{}\" target=\"{}\" up=\"{}\"/></transform>\n    <sampler type=\"independent\"><integer name=\"sample_count\" value=\"{spp}\"/></sampler>\n    <film type=\"hdrfilm\">\n      <integer name=\"width\" value=\"{width}\"/>\n      <integer name=\"height\" value=\"{height}\"/>\n      <string name=\"pixel_format\" value=\"rgb\"/>\n      <rfilter type=\"box\"/>\n    </film>\n  </sensor>",
-        camera.fov_y_deg,
-        v(camera.eye_m),
-        v(camera.look_at_m),
-        v(camera.up)
-    );
-    for l in lights {
-        if l.spot.is_some() {
-            return Err(crate::error::Error::SpotForMitsuba(l.name.clone()));
-        }
-        let _ = writeln!(
-            s,
-            "  <emitter type=\"point\"><point name=\"position\" value=\"{}\"/><rgb name=\"intensity\" value=\"{}\"/></emitter>",
-            v(l.position_m),
-            v(l.intensity_w_sr)
-        );
-    }
+    crate::mitsuba::sensor_and_lights(&mut s, camera, (width, height, spp), lights)?;
     let _ = writeln!(
         s,
         "  <shape type=\"ply\"><string name=\"filename\" value=\"{ply_name}\"/><bsdf type=\"twosided\"><bsdf type=\"diffuse\"><texture type=\"mesh_attribute\" name=\"reflectance\"><string name=\"name\" value=\"vertex_color\"/></texture></bsdf></bsdf></shape>"
