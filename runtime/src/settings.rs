@@ -88,11 +88,16 @@ pub struct Settings {
     /// cost in proportion to their pixels, not their points. Off: every surfel drawn
     /// (`--no-splat-lod`). Only where surfels are pulled (passes/splat.rs).
     pub splat_lod: bool,
-    /// Blend every disc of the front surface at a pixel (normal, albedo, distance; weighted
-    /// smoothly to each disc's rim), not the front-most disc alone, whose own normal and light
+    /// Blend every disc of the front surface at a pixel (normal and albedo, weighted smoothly to
+    /// each disc's rim; shaded at the front disc's point), not the front-most disc alone, whose own normal and light
     /// break a wall seen at a grazing angle into scales (passes/gbuffer.rs). Where the adapter
     /// cannot blend f16 targets (GL), the front-most disc is shown either way.
     pub splat_blend: bool,
+    /// Samples a pixel a still frame gathers (anti-aliasing at rest, passes/resolve.rs): while
+    /// camera, light and settings stay unchanged, each `Renderer::draw_still` adds one sample
+    /// jittered within the pixel and shows the mean. 1: no anti-aliasing. `grotto render
+    /// --samples`, `grotto view --still-samples`.
+    pub still_samples: u32,
     /// What the image shows (`--view`): the lit scene, or one of the views survey users judge
     /// their data with. Views that show no light skip the light passes (plan.rs).
     pub view: ViewMode,
@@ -250,6 +255,7 @@ impl Default for Settings {
             cull_chunks: true,
             splat_lod: true,
             splat_blend: true,
+            still_samples: crate::passes::resolve::DEFAULT_STILL_SAMPLES,
             view: ViewMode::Lit,
         }
     }
@@ -342,6 +348,13 @@ impl Settings {
 
     /// An error naming the first setting out of its range.
     pub fn validate(&self) -> Result<()> {
+        let most = crate::passes::resolve::MAX_STILL_SAMPLES;
+        if !(1..=most).contains(&self.still_samples) {
+            return Err(Error::Setting {
+                name: "still_samples",
+                problem: format!("{} is outside 1..={most} (1: no anti-aliasing)", self.still_samples),
+            });
+        }
         if !(1..=MAX_CONES as u32).contains(&self.cones) {
             return Err(Error::Setting {
                 name: "cones",

@@ -320,6 +320,8 @@ fn a_published_site_streams_the_package_by_ranges_and_shows_what_grotto_render_s
         height: H,
         settings: settings(),
         gpu: grotto_tests::lavapipe(),
+        // The page anti-aliases at rest with its default samples a pixel: the same here.
+        samples: grotto_runtime::passes::resolve::DEFAULT_STILL_SAMPLES,
         ..RenderOptions::defaults(package.clone(), native.clone())
     };
     let rendered = render_job::run(&opts, |_| {}).unwrap();

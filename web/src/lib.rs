@@ -86,13 +86,17 @@ pub struct Options {
     /// Blend the discs of the front surface at each pixel (default true, as natively; false:
     /// the front-most disc alone, the picture before issue 44).
     pub splat_blend: Option<bool>,
+    /// Samples a pixel gathered at rest, one a frame, each jittered within the pixel and
+    /// averaged (anti-aliasing; default 8 as natively, 1: none).
+    pub samples: Option<u32>,
 }
 
 /// The status of a frame, for the page's panel and the ready marker (JSON).
 #[derive(Clone, Debug, Serialize)]
 pub struct Status {
-    /// "converging", or "ready": the light has converged, the tiles the view wants are resident
-    /// and no fetch is under way (what a test waits for).
+    /// "converging", or "ready": the light has converged, the tiles the view wants are resident,
+    /// no fetch is under way and the still frame's anti-aliasing samples are all in (what a test
+    /// waits for).
     pub state: &'static str,
     pub adapter: String,
     pub package_bytes: u64,
@@ -300,6 +304,7 @@ fn settings_of(o: &Options) -> Result<Settings, Error> {
     s.exposure = o.exposure.unwrap_or(1.0);
     s.shadow_frame_ms = o.shadow_ms.unwrap_or(8.0);
     s.splat_blend = o.splat_blend.unwrap_or(true);
+    s.still_samples = o.samples.unwrap_or(grotto_runtime::passes::resolve::DEFAULT_STILL_SAMPLES);
     s.validate()?;
     Ok(s)
 }
@@ -554,10 +559,19 @@ impl State {
         self.renderer.set_lod_detail(detail);
         let (w, h) =
             (((self.width as f32 * scale) as u32).max(1), ((self.height as f32 * scale) as u32).max(1));
-        let plan = self.renderer.draw(&camera, w, h)?;
+        // Ready, each frame adds a sample a pixel jittered within it (anti-aliasing at rest,
+        // passes/resolve.rs); the page rests once the still frame is complete.
+        let plan = if self.ready(moving) {
+            match self.renderer.draw_still(&camera, w, h)? {
+                (Some(plan), _) => plan,
+                (None, _) => self.renderer.plan(Some((&camera, w, h))),
+            }
+        } else {
+            self.renderer.draw(&camera, w, h)?
+        };
         self.present(moving)?;
         self.frames += 1;
-        if self.ready(moving) {
+        if self.ready(moving) && self.renderer.still_progress().is_some_and(|p| p.complete()) {
             self.shown_at_rest = Some(rest_key);
         }
         if self.frames == 1 {
@@ -732,7 +746,8 @@ impl State {
                 TileMode::Skip => 3,
             }] += 1;
         }
-        let ready = self.ready(moving);
+        // Ready: the image is final, its anti-aliasing samples all in.
+        let ready = self.ready(moving) && self.renderer.still_progress().is_some_and(|p| p.complete());
         if ready && self.ready_ms.is_none() {
             self.ready_ms = Some(self.opened.elapsed().as_secs_f64() * 1e3);
         }

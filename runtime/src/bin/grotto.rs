@@ -263,6 +263,12 @@ struct RenderArgs {
     /// average each N x N block; costs N^2 in G-buffer and shade work.
     #[arg(long, default_value_t = 1)]
     supersample: u32,
+    /// Anti-aliasing by samples a pixel, each jittered within it, averaged (1..=64; costs that
+    /// many frames' G-buffer and shade work, no more memory). grotto render: default 1 (the pixel
+    /// centres). grotto view: gathered at rest, one a frame, default 8. grotto bench: times the
+    /// resolve pass that adds a sample.
+    #[arg(long)]
+    samples: Option<u32>,
     /// Replace the package's lights by a lamp string of N 8 W lamps spread over the cave's floors
     /// (to measure how cost grows with the number of lights).
     #[arg(long)]
@@ -408,6 +414,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
         upload_per_frame: a.upload_per_frame,
         clip_world_m: a.clip,
         supersample: a.supersample,
+        samples: a.samples.unwrap_or(1),
     })
 }
 
@@ -453,6 +460,9 @@ fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
         "--supersample is for grotto render (the viewer draws at --render-scale)"
     );
     let mut render = options(&v.render)?;
+    render.settings.still_samples =
+        v.render.samples.unwrap_or(grotto_runtime::passes::resolve::DEFAULT_STILL_SAMPLES);
+    render.settings.validate()?;
     render.settings.shadow_frame_ms = v.render.shadow_ms.unwrap_or(VIEW_SHADOW_MS);
     let a = &v.render;
     // The panel names the preset only where no knob changed it.

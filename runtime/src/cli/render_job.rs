@@ -79,6 +79,10 @@ pub struct RenderOptions {
     /// Render at this many times the width and height and average each block (`--supersample`,
     /// 1..=4): anti-aliased edges and silhouettes at its square in G-buffer and shade work.
     pub supersample: u32,
+    /// Samples a pixel, each jittered within it, averaged (`--samples`, anti-aliasing as the
+    /// viewers do at rest: passes/resolve.rs): anti-aliased at that many frames' G-buffer and
+    /// shade work, no more memory. 1: the pixel centres.
+    pub samples: u32,
 }
 
 /// A box in world metres `[min, max]` in a scene's frame; an error where it is empty or not
@@ -124,6 +128,7 @@ impl RenderOptions {
             upload_per_frame: None,
             clip_world_m: None,
             supersample: 1,
+            samples: 1,
         }
     }
 }
@@ -482,6 +487,11 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let load_s = t_load.elapsed().as_secs_f64();
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
+    settings.still_samples = opts.samples;
+    settings.validate().map_err(|e| match e {
+        Error::Setting { name: "still_samples", problem } => Error::Setting { name: "samples", problem },
+        e => e,
+    })?;
     let (mut r, mut follow) = crate::stream::follow::start(
         &gpu,
         &scene,
@@ -531,6 +541,11 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             exposure = auto_exposure(&frame.hdr);
             r.set_exposure(exposure);
             frame = r.render(cam, w_px, h_px)?.0;
+        }
+        if opts.samples > 1 {
+            let (still, plan) = r.render_still(cam, w_px, h_px)?;
+            frame = still;
+            last_plan = plan;
         }
         if opts.supersample > 1 {
             frame = frame.downsampled(opts.supersample);
@@ -629,6 +644,7 @@ pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
     let cam = cameras[0];
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
+    settings.still_samples = opts.samples;
     // Every repetition runs a bounce, unless the caller asked for none (`--bounces 0`: light
     // benchmarks that do not need propagation timed again).
     if settings.bounces > 0 {
@@ -647,6 +663,15 @@ pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
         r.render(&cam, opts.width, opts.height)?;
         for (p, ms) in &r.stats().last_ms {
             samples.entry(*p).or_default().push(*ms);
+        }
+        if opts.samples > 1 {
+            // Anti-aliasing at rest: the pixel centres start the sums, the second sample (jittered:
+            // a G-buffer and shade of its own, as above) adds to them. The resolve is timed.
+            r.draw_still(&cam, opts.width, opts.height)?;
+            r.draw_still(&cam, opts.width, opts.height)?;
+            if let Some(ms) = r.stats().last_ms.get(&Pass::Resolve) {
+                samples.entry(Pass::Resolve).or_default().push(*ms);
+            }
         }
     }
     let median_ms = samples.into_iter().map(|(p, v)| (p.name().to_string(), median(v))).collect();

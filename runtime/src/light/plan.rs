@@ -24,11 +24,20 @@ pub enum Pass {
     Propagate,
     Gbuffer,
     Shade,
+    Resolve,
 }
 
 impl Pass {
-    pub(crate) const ALL: [Pass; 7] =
-        [Pass::Shadow, Pass::Inject, Pass::Mip, Pass::Env, Pass::Propagate, Pass::Gbuffer, Pass::Shade];
+    pub(crate) const ALL: [Pass; 8] = [
+        Pass::Shadow,
+        Pass::Inject,
+        Pass::Mip,
+        Pass::Env,
+        Pass::Propagate,
+        Pass::Gbuffer,
+        Pass::Shade,
+        Pass::Resolve,
+    ];
 
     /// The pass's name as the plan and the panel print it.
     pub fn name(self) -> &'static str {
@@ -40,6 +49,7 @@ impl Pass {
             Pass::Propagate => "propagate",
             Pass::Gbuffer => "gbuffer",
             Pass::Shade => "shade",
+            Pass::Resolve => "resolve",
         }
     }
 }
@@ -136,6 +146,10 @@ pub struct PlanInputs {
     /// A bounce under way in slices: the next leaf and the bounce's leaves (the pyramid is kept
     /// until it ends).
     pub bounce_part: Option<(u32, u32)>,
+    /// Anti-aliasing at rest (passes/resolve.rs): this frame's sample and the samples a pixel a
+    /// still frame gathers; None where the frame is not drawn as a still (a moving camera, or
+    /// `grotto render` without `--samples`).
+    pub still: Option<(u32, u32)>,
 }
 
 /// Decides the passes for one frame or light update.
@@ -157,8 +171,10 @@ pub fn plan(i: &PlanInputs) -> EffectPlan {
     steps.push(Step { pass: Pass::Propagate, run: propagate.0, reason: propagate.1 });
     steps.push(gbuffer_step(i));
     steps.push(shade_step(i));
+    steps.push(resolve_step(i));
     if let Some(view) = i.plain_view {
-        for s in steps.iter_mut().filter(|s| s.run && !matches!(s.pass, Pass::Gbuffer | Pass::Shade)) {
+        let image = |p: Pass| matches!(p, Pass::Gbuffer | Pass::Shade | Pass::Resolve);
+        for s in steps.iter_mut().filter(|s| s.run && !image(s.pass)) {
             s.run = false;
             s.reason = format!("the {view} view shows no light (else: {})", s.reason);
         }
@@ -357,6 +373,21 @@ fn shade_step(i: &PlanInputs) -> Step {
     }
 }
 
+/// Anti-aliasing at rest: a still frame's samples after the first add to the mean.
+fn resolve_step(i: &PlanInputs) -> Step {
+    let (run, reason) = match i.still {
+        _ if !i.frame => (false, "light update only, no image requested".into()),
+        None => (false, "not a still frame: one sample a pixel (the camera moves, or no --samples)".into()),
+        Some((_, 1)) => (false, "one sample a pixel (still samples 1: no anti-aliasing)".into()),
+        Some((0, of)) => (true, format!("still frame: sample 1 of {of} (the pixel centres) starts the mean")),
+        Some((k, of)) => (
+            true,
+            format!("still frame: sample {} of {of}, jittered within the pixel, added to the mean", k + 1),
+        ),
+    };
+    Step { pass: Pass::Resolve, run, reason }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -392,7 +423,29 @@ mod tests {
             plain_view: None,
             light_held: None,
             bounce_part: None,
+            still: None,
         }
+    }
+
+    #[test]
+    fn only_a_still_frame_resolves_samples() {
+        let moving = plan(&base());
+        assert!(!moving.runs(Pass::Resolve), "{}", moving.explain());
+        let first = plan(&PlanInputs { still: Some((0, 8)), ..base() });
+        assert!(
+            first.runs(Pass::Resolve) && first.explain().contains("sample 1 of 8"),
+            "{}",
+            first.explain()
+        );
+        let fourth = plan(&PlanInputs { still: Some((3, 8)), gbuffer_valid: false, ..base() });
+        assert!(fourth.runs(Pass::Resolve) && fourth.explain().contains("sample 4 of 8"));
+        let one = plan(&PlanInputs { still: Some((0, 1)), ..base() });
+        assert!(!one.runs(Pass::Resolve), "one sample a pixel needs no resolve");
+        let light_only = plan(&PlanInputs { still: Some((2, 8)), frame: false, ..base() });
+        assert!(!light_only.runs(Pass::Resolve));
+        // A view without light still anti-aliases.
+        let plain = plan(&PlanInputs { still: Some((2, 8)), plain_view: Some("normals"), ..base() });
+        assert!(plain.runs(Pass::Resolve) && !plain.runs(Pass::Inject), "{}", plain.explain());
     }
 
     #[test]

@@ -14,6 +14,7 @@ pub mod gbuffer;
 pub mod inject;
 pub mod mip;
 pub mod propagate;
+pub mod resolve;
 pub mod shade;
 pub mod shadow;
 pub mod splat;

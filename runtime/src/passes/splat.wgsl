@@ -167,10 +167,11 @@ fn fs_blend(in: VsOut) -> BlendOut {
     // Smooth to zero at the rim, so a disc's edge never shows as a step; never exactly zero, so
     // a pixel only rims cover still has a surface.
     let k = 1.0 - r2;
-    let w = max(k * k, 1e-3);
+    var w = max(k * k, 1e-3);
     var n = in.normal_spread.xyz;
     if dot(n, splat.eye_m.xyz - in.world) < 0.0 {
         n = -n;
+        w *= 1e-3;
     }
     var out: BlendOut;
     out.normal_weight = vec4<f32>(n * w, w);

@@ -20,7 +20,11 @@ impl Renderer {
     pub(super) fn inputs(&self, frame: Option<(&Camera, u32, u32)>) -> PlanInputs {
         let gbuffer_valid = match (frame, &self.view) {
             (Some((c, w, h)), Some(v)) => {
-                !self.gbuffer_stale && v.camera == *c && v.targets.width == w && v.targets.height == h
+                !self.gbuffer_stale
+                    && v.camera == *c
+                    && v.jitter_px == self.jitter_px
+                    && v.targets.width == w
+                    && v.targets.height == h
             }
             _ => false,
         };
@@ -62,6 +66,7 @@ impl Renderer {
                 self.bounce_readback.is_some().then_some("the last bounce's change is on its way back")
             }),
             bounce_part: self.bounce_at.map(|next| (next, self.active_written.unwrap_or(0))),
+            still: self.still_next.filter(|_| frame.is_some()),
         }
     }
 
@@ -117,16 +122,26 @@ impl Renderer {
     /// instead of reading it back: what a window presents.
     pub fn draw(&mut self, camera: &Camera, width: u32, height: u32) -> Result<EffectPlan> {
         camera.validate()?;
+        Self::check_size(width, height)?;
+        self.poll_light()?;
+        // One sample a pixel at the centres: any still frame gathered so far is over.
+        self.still = None;
+        self.still_next = None;
+        self.jitter_px = [0.0; 2];
+        let p = self.plan(Some((camera, width, height)));
+        self.execute(&p, Some((camera, width, height)), None)?;
+        Ok(p)
+    }
+
+    /// Checks a frame's size (what every draw asks).
+    pub(super) fn check_size(width: u32, height: u32) -> Result<()> {
         if width == 0 || height == 0 || width > 16384 || height > 16384 {
             return Err(Error::Setting {
                 name: "size",
                 problem: format!("{width}x{height} is outside 1..=16384"),
             });
         }
-        self.poll_light()?;
-        let p = self.plan(Some((camera, width, height)));
-        self.execute(&p, Some((camera, width, height)), None)?;
-        Ok(p)
+        Ok(())
     }
 
     /// The distance in metres from the eye to the surface at pixel `(x, y)` of the last frame
@@ -224,8 +239,11 @@ impl Renderer {
             let forward = (c.look_at_m - c.eye_m).normalize();
             let right = forward.cross(c.up).normalize();
             let up = right.cross(forward);
+            let tan = (c.fov_y_deg.to_radians() * 0.5).tan();
+            let forward =
+                crate::passes::resolve::jittered_forward(forward, (right, up), tan, self.jitter_px, (w, h));
             p.camera_eye_m = c.eye_m.extend(0.0).to_array();
-            p.camera_forward = forward.extend((c.fov_y_deg.to_radians() * 0.5).tan()).to_array();
+            p.camera_forward = forward.extend(tan).to_array();
             p.camera_right = right.extend(w as f32 / h as f32).to_array();
             p.camera_up = up.extend(0.0).to_array();
         }
@@ -243,7 +261,7 @@ impl Renderer {
         let far = (camera.eye_m.length() + self.scene_diag_m) * 2.0 + 1.0;
         let m = camera.view_proj(w, h, near, far);
         let u = SplatUniform {
-            view_proj: m.to_cols_array_2d(),
+            view_proj: crate::passes::resolve::jittered_view_proj(m, self.jitter_px, w, h).to_cols_array_2d(),
             eye_m: camera.eye_m.extend(1.0).to_array(),
             viewport: [
                 w as f32,
@@ -270,9 +288,11 @@ impl Renderer {
             self.gpu.check_buffer("shade hdr", pixels * 16, wgpu::BufferUsages::STORAGE)?;
             let targets = self.gbuffer.targets(&self.gpu, w, h)?;
             let outputs = self.shade.outputs(&self.gpu, &targets)?;
-            self.view = Some(View { camera: *camera, targets, outputs });
+            self.view =
+                Some(View { camera: *camera, jitter_px: self.jitter_px, targets, outputs, sums: None });
         } else if let Some(v) = self.view.as_mut() {
             v.camera = *camera;
+            v.jitter_px = self.jitter_px;
         }
         Ok(())
     }
@@ -356,6 +376,15 @@ impl Renderer {
                     Pass::Shade => {
                         let v = self.view("shade")?;
                         self.shade.record(&mut cp, &v.outputs, v.targets.width, v.targets.height);
+                    }
+                    Pass::Resolve => {
+                        let v = self.view("resolve")?;
+                        let sums = v.sums.as_ref().ok_or(Error::Internal {
+                            what: "resolve",
+                            message: "no sums were made for the view".into(),
+                        })?;
+                        let (sample, _) = self.still_next.unwrap_or((0, 1));
+                        self.resolve.record(&self.gpu, &mut cp, sums, sample);
                     }
                     Pass::Shadow | Pass::Gbuffer => {}
                 }
@@ -456,6 +485,20 @@ impl Renderer {
         {
             self.prepare_view(camera, w, h)?;
             self.stats_now.last_upload_bytes += size_of::<SplatUniform>() as u64;
+        }
+        if plan.runs(Pass::Resolve) {
+            let resolve = &self.resolve;
+            let gpu = &self.gpu;
+            if let Some(v) = self.view.as_mut()
+                && v.sums.is_none()
+            {
+                v.sums = Some(resolve.sums(gpu, &v.outputs.frame, v.targets.width, v.targets.height)?);
+            }
+            self.stats_now.last_upload_bytes += 16;
+        }
+        if [Pass::Shadow, Pass::Inject, Pass::Mip, Pass::Env, Pass::Propagate].iter().any(|&p| plan.runs(p)) {
+            // The light changes: a still frame gathered so far shows the old light.
+            self.still = None;
         }
         // The frame runs inside one validation error scope; when it catches an error, each pass
         // is recorded again alone in a scope of its own (and not submitted) to name the culprit.

@@ -10,6 +10,7 @@ pub mod pool;
 pub mod present;
 pub mod renderer;
 pub(crate) mod shadow_queue;
+mod still;
 mod tiles;
 mod update;
 
@@ -18,4 +19,5 @@ pub use frame::{Frame, LdrOutput};
 pub use light::{CarriedLight, LightProgress};
 pub use params::{auto_exposure, cone_set};
 pub use renderer::{PassStats, Renderer};
+pub use still::StillProgress;
 pub use tiles::SceneUpdate;

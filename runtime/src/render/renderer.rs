@@ -141,6 +141,13 @@ pub struct Renderer {
     pub(super) stats_now: PassStats,
     pub(super) queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
     pub(super) stat_queries: Option<StatQueries>,
+    /// Anti-aliasing at rest (passes/resolve.rs, render/still.rs): the pass, the sub-pixel
+    /// offset the next frame draws at, the still frame gathered so far, and the next frame's
+    /// place in it (sample, of) for the plan.
+    pub(super) resolve: passes::resolve::Resolve,
+    pub(super) jitter_px: [f32; 2],
+    pub(super) still: Option<super::still::Still>,
+    pub(super) still_next: Option<(u32, u32)>,
 }
 
 /// What two scenes must share for one to replace the other in a renderer's pools: the same lights,
@@ -301,6 +308,10 @@ impl Renderer {
             stats_now: PassStats::default(),
             queries: pass_queries(gpu),
             stat_queries: StatQueries::new(gpu),
+            resolve: gpu.scoped("resolve", || passes::resolve::Resolve::new(gpu))?,
+            jitter_px: [0.0; 2],
+            still: None,
+            still_next: None,
         };
         r.mark_shadow_faces(|_| true);
         gpu.check("upload")?;
@@ -317,7 +328,7 @@ impl Renderer {
     pub fn gpu_bytes(&self) -> u64 {
         let view = self.view.as_ref().map_or(0, |v| {
             let px = u64::from(v.targets.width) * u64::from(v.targets.height);
-            px * 4 * 4 + v.outputs.frame.size()
+            px * 4 * 4 + v.outputs.frame.size() + v.sums.as_ref().map_or(0, |s| s.bytes())
         });
         self.static_bytes + view
     }
@@ -401,8 +412,12 @@ impl Renderer {
 #[derive(Debug)]
 pub(super) struct View {
     pub(super) camera: Camera,
+    /// The sub-pixel offset the G-buffer was drawn at (anti-aliasing at rest).
+    pub(super) jitter_px: [f32; 2],
     pub(super) targets: gbuffer::Targets,
     pub(super) outputs: shade::Outputs,
+    /// Anti-aliasing's sums, from the first still frame of this size.
+    pub(super) sums: Option<passes::resolve::Sums>,
 }
 
 /// The scene's light setup, its light grid over the scene with one leaf of slack on every side.

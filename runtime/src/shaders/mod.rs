@@ -38,6 +38,7 @@ pub(crate) const SPLAT: &str = include_str!("../passes/splat.wgsl");
 /// Presents a frame in a window or a browser's canvas (present.rs).
 pub(crate) const PRESENT: &str = include_str!("../render/present.wgsl");
 pub(crate) const SHADE: &str = include_str!("../passes/shade.wgsl");
+pub(crate) const RESOLVE: &str = include_str!("../passes/resolve.wgsl");
 
 /// Constants shared with the Rust side, generated from it so the two cannot drift.
 pub(crate) fn constants() -> String {
@@ -124,11 +125,12 @@ pub fn compose(src: &str) -> Result<String> {
 }
 
 /// (name, source) of every shader module the runtime creates, before composing.
-pub(crate) const PASSES: [(&str, &str); 6] = [
+pub(crate) const PASSES: [(&str, &str); 7] = [
     ("env", ENV),
     ("inject", INJECT),
     ("mip", MIP),
     ("propagate", PROPAGATE),
+    ("resolve", RESOLVE),
     ("shade", SHADE),
     ("splat", SPLAT),
 ];

@@ -1,7 +1,8 @@
 //! `grotto view`: a window (winit) on the same renderer `grotto render` uses. A thin shell: it
 //! opens the package as a render job does ([`render_job::prepare`]), keeps the resident tiles
 //! following the camera on a loader thread ([`Follow`]: flying never waits for the disk), renders
-//! each frame with [`Renderer::draw`] and presents the tonemapped output through a small blit
+//! each frame with [`Renderer::draw`] (at rest, once the light is in, [`Renderer::draw_still`]:
+//! a sample a pixel more each frame, anti-aliasing the still image) and presents the tonemapped output through a small blit
 //! (present.rs) with the panel (egui, [`panel`]) over it.
 //!
 //! Light yields to the frame rate ([`pace`]): while the camera moves the renderer holds its
@@ -346,7 +347,18 @@ impl App {
         let bounces_before = s.renderer.stats().bounces_done;
         light_first(s, moving)?;
         let t = Instant::now();
-        let plan = s.renderer.draw(&cam, w, h)?;
+        // At rest with the light in, each frame adds a sample a pixel jittered within it
+        // (anti-aliasing at rest, passes/resolve.rs) until the still frame is complete.
+        let settled = s.renderer.light_progress().converged || !s.renderer.settings().view.shows_light();
+        let still = !moving && settled && s.follow.as_ref().is_none_or(|f| !f.busy());
+        let plan = if still {
+            match s.renderer.draw_still(&cam, w, h)? {
+                (Some(plan), _) => plan,
+                (None, _) => s.renderer.plan(Some((&cam, w, h))),
+            }
+        } else {
+            s.renderer.draw(&cam, w, h)?
+        };
         if !(plan.runs(crate::light::plan::Pass::Shadow) || plan.runs(crate::light::plan::Pass::Inject)) {
             // Direct light (after a change of lights or tiles) is not what a frame costs.
             let draw_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -393,7 +405,8 @@ impl App {
 
         let at_rest = !moving
             && (progress.converged || !s.renderer.settings().view.shows_light())
-            && s.follow.as_ref().is_none_or(|f| !f.busy());
+            && s.follow.as_ref().is_none_or(|f| !f.busy())
+            && s.renderer.still_progress().is_some_and(|p| p.complete());
         if self.summary.frames >= self.opts.after_frames.unwrap_or(u32::MAX) && at_rest && s.shot.is_none() {
             s.shot = Some(shot_path(&self.opts));
             s.quit_after_shot = true;
