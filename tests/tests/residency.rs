@@ -24,10 +24,7 @@ const W: u32 = 160;
 const H: u32 = 120;
 
 fn settings() -> Settings {
-    // The front-most disc: this file's "dropping shows" checks were measured with it, and blended
-    // splats (issue 44) remove the draw-order noise part of that difference came from (dropped
-    // tiles: mean 0.43 -> 0.09); those checks need re-deriving before they run blended.
-    Settings { bounces: 3, shadow_map_size: 256, exposure: 8.0, splat_blend: false, ..Settings::default() }
+    Settings { bounces: 3, shadow_map_size: 256, exposure: 8.0, ..Settings::default() }
 }
 
 /// The small cave cut into 4 m tiles, built once for the tests of this file.
@@ -64,13 +61,21 @@ fn job(package: &Path, out: PathBuf, gpu_memory: u64) -> RenderOptions {
     }
 }
 
-/// The tone-mapped pixels and how many of them show a surface.
-fn render(gpu: &Gpu, scene: &SceneData, cam: &Camera) -> (Vec<[u8; 4]>, usize) {
+/// The tone-mapped pixels, how many of them show a surface, and each pixel's linear luminance.
+fn render(gpu: &Gpu, scene: &SceneData, cam: &Camera) -> (Vec<[u8; 4]>, usize, Vec<f32>) {
     let mut r = Renderer::new(gpu, scene, settings()).unwrap();
     r.settle(|_, _| {}).unwrap();
     let frame = r.render(cam, W, H).unwrap().0;
     let covered = frame.hdr.iter().filter(|p| p[3] >= 0.5).count();
-    (frame.ldr, covered)
+    let lum = frame.hdr.iter().map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]).collect();
+    (frame.ldr, covered, lum)
+}
+
+/// How far `got`'s light is from `full`'s: summed |difference| of linear luminance over the
+/// summed luminance of `full` (the 8-bit picture hides what a dim region loses).
+fn light_error(full: &[f32], got: &[f32]) -> f64 {
+    let diff: f64 = full.iter().zip(got).map(|(a, b)| f64::from((a - b).abs())).sum();
+    diff / full.iter().map(|&a| f64::from(a)).sum::<f64>().max(1e-30)
 }
 
 fn view_of(cam: &Camera, scene: &SceneData, reach_m: f32) -> View {
@@ -89,10 +94,10 @@ fn view_of(cam: &Camera, scene: &SceneData, reach_m: f32) -> View {
 /// The full, coarse and dropped renders of one split of the tiles (`coarse_ids` coarse, or
 /// skipped), with the bytes each held; written to $GROTTO_DUMP_DIR when set.
 struct Split {
-    full: (Vec<[u8; 4]>, usize),
-    coarse: (Vec<[u8; 4]>, usize),
-    far: (Vec<[u8; 4]>, usize),
-    dropped: (Vec<[u8; 4]>, usize),
+    full: (Vec<[u8; 4]>, usize, Vec<f32>),
+    coarse: (Vec<[u8; 4]>, usize, Vec<f32>),
+    far: (Vec<[u8; 4]>, usize, Vec<f32>),
+    dropped: (Vec<[u8; 4]>, usize, Vec<f32>),
 }
 
 fn split(
@@ -150,8 +155,11 @@ fn coarse_neighbours_keep_the_image_and_dropping_them_does_not() {
 
     // Light: every tile in view in full, the others (those that light them included) coarse,
     // under the budget that takes; the policy must choose exactly that split. The coarse level
-    // must keep the image within the golden tolerance, and clearly closer than no tiles there
-    // (measured: mean 0.07 / p99 1 with coarse neighbours, 0.43 / 8 without).
+    // must keep the image within the golden tolerance and the light within 1%. (Dropping those
+    // tiles does not show from this camera: the chamber's own lamps light what it sees, and the
+    // tiles out of view carry 0.12% of its light, blended. The front-most disc's 8-bit
+    // difference of 0.43 was draw-order noise between two tile sets; holes are what dropping
+    // shows, checked below.)
     let unlimited = Budget { gpu_bytes: u64::MAX, points: u64::MAX, pools: None };
     let ranked = residency::choose(&tiles, &view_of(&cam, &full, 1.0), unlimited).unwrap();
     let out_of_view: Vec<usize> =
@@ -175,19 +183,20 @@ fn coarse_neighbours_keep_the_image_and_dropping_them_does_not() {
     let with_far = golden::diff(&light.full.0, &light.far.0);
     let without = golden::diff(&light.full.0, &light.dropped.0);
     eprintln!(
+        "light error (of the full tiles' light): coarse {:.4}, far {:.4}, dropped {:.4}",
+        light_error(&light.full.2, &light.coarse.2),
+        light_error(&light.full.2, &light.far.2),
+        light_error(&light.full.2, &light.dropped.2)
+    );
+    eprintln!(
         "light: {} of {} tiles coarse; with coarse {with_coarse:?}, far {with_far:?}, dropped {without:?}",
         coarse_ids.len(),
         tiles.len()
     );
-    assert!(
-        with_far.mean_abs < without.mean_abs,
-        "even the far level does better than nothing: {with_far:?}"
-    );
+    let (coarse_light, far_light) =
+        (light_error(&light.full.2, &light.coarse.2), light_error(&light.full.2, &light.far.2));
     assert!(golden::within_tolerance(&with_coarse), "coarse neighbours change the light: {with_coarse:?}");
-    assert!(
-        without.mean_abs > 2.0 * with_coarse.mean_abs,
-        "dropping the coarse level should show (black holes or leaks): {without:?} against {with_coarse:?}"
-    );
+    assert!(coarse_light < 0.01 && far_light < 0.01, "coarse {coarse_light}, far {far_light} of the light");
 
     // Geometry: only the tiles within 2 m of the eye in full, visible ones beyond drawn from
     // their coarse splats. Dropped, they leave holes (18% of the pixels covered); coarse, the

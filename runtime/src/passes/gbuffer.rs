@@ -53,6 +53,8 @@ pub(crate) struct Targets {
     /// Blended splatting's sums (w n, w) and (w albedo, unused); 1x1 and unused without it.
     pub(crate) normal_weight: wgpu::Texture,
     pub(crate) albedo_sum: wgpu::Texture,
+    /// The accumulation pass's view of the depth pass's normal target (blending only).
+    front_normal: Option<wgpu::BindGroup>,
 }
 
 /// The G-buffer pass and the camera's splat uniforms (slot 0 the depth pass, 1 the accumulation).
@@ -60,8 +62,8 @@ pub(crate) struct Targets {
 pub(crate) struct Gbuffer {
     pipeline: wgpu::RenderPipeline,
     camera: splat::Uniforms,
-    /// The accumulation pass, where blending.
-    blend: Option<wgpu::RenderPipeline>,
+    /// The accumulation pass and the layout of the front normal it reads, where blending.
+    blend: Option<(wgpu::RenderPipeline, wgpu::BindGroupLayout)>,
 }
 
 impl Gbuffer {
@@ -76,7 +78,7 @@ impl Gbuffer {
             Some(wgpu::ColorTargetState { format, blend, write_mask: wgpu::ColorWrites::ALL })
         };
         let targets = [t(DISTANCE_FORMAT, None), t(NORMAL_FORMAT, None), t(ALBEDO_FORMAT, None)];
-        let pipeline = splat::pipeline(gpu, "gbuffer", layout, fetch, ("fs_gbuffer", &targets), false)?;
+        let pipeline = splat::pipeline(gpu, "gbuffer", layout, fetch, ("fs_gbuffer", &targets), None)?;
         let blend = if blend && can_blend(gpu) {
             let add = wgpu::BlendComponent {
                 src_factor: wgpu::BlendFactor::One,
@@ -85,7 +87,21 @@ impl Gbuffer {
             };
             let sum = Some(wgpu::BlendState { color: add, alpha: add });
             let targets = [t(BLEND_FORMAT, sum), t(BLEND_FORMAT, sum)];
-            Some(splat::pipeline(gpu, "gbuffer blend", layout, fetch, ("fs_blend", &targets), true)?)
+            let front = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("gbuffer front normal"),
+                entries: &[wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                }],
+            });
+            let stage = ("fs_blend", &targets[..]);
+            Some((splat::pipeline(gpu, "gbuffer blend", layout, fetch, stage, Some(&front))?, front))
         } else {
             None
         };
@@ -109,10 +125,22 @@ impl Gbuffer {
             None => (sampled, (1, 1)),
         };
         let sum = |label| gpu.texture_2d(label, side.0, side.1, BLEND_FORMAT, sums);
+        let normal = make("gbuffer normal", NORMAL_FORMAT, usage)?;
+        let front_normal = self.blend.as_ref().map(|(_, layout)| {
+            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("gbuffer front normal"),
+                layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&normal.create_view(&Default::default())),
+                }],
+            })
+        });
         Ok(Targets {
             width,
             height,
-            normal: make("gbuffer normal", NORMAL_FORMAT, usage)?,
+            normal,
+            front_normal,
             albedo: make("gbuffer albedo", ALBEDO_FORMAT, usage)?,
             depth: make("gbuffer depth", splat::DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT)?,
             distance,
@@ -189,7 +217,7 @@ impl Gbuffer {
                 pass.end_pipeline_statistics_query();
             }
         }
-        let Some(pipeline) = blend else { return };
+        let (Some((pipeline, _)), Some(front)) = (blend, &targets.front_normal) else { return };
         let sums = [&targets.normal_weight, &targets.albedo_sum].map(|t| t.create_view(&Default::default()));
         let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("gbuffer blend"),
@@ -205,6 +233,7 @@ impl Gbuffer {
         });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &self.camera.groups[1], &[]);
+        pass.set_bind_group(2, front, &[]);
         fetch.draw(&mut pass, runs);
     }
 }

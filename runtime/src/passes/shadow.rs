@@ -74,7 +74,7 @@ impl Shadow {
             blend: None,
             write_mask: wgpu::ColorWrites::ALL,
         })];
-        let pipeline = splat::pipeline(gpu, "shadow", layout, fetch, ("fs_shadow", &targets), false)?;
+        let pipeline = splat::pipeline(gpu, "shadow", layout, fetch, ("fs_shadow", &targets), None)?;
         let layers = faces.len().max(1) as u32;
         let cols = (f64::from(layers).sqrt().ceil() as u32).max(1);
         let rows = layers.div_ceil(cols);

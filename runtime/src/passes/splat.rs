@@ -232,14 +232,14 @@ const SURFEL_ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
 
 /// A render pipeline drawing every surfel as an oriented disc into `targets`, fetching surfels
 /// as `fetch` says. `accumulate`: blended splatting's accumulation pass (depth tested against the
-/// depth pass, not written).
+/// depth pass, not written), with the layout of the front normal it reads (group 2).
 pub(crate) fn pipeline(
     gpu: &Gpu,
     label: &str,
     layout: &wgpu::BindGroupLayout,
     fetch: &Fetch,
     (fragment_entry, targets): (&str, &[Option<wgpu::ColorTargetState>]),
-    accumulate: bool,
+    accumulate: Option<&wgpu::BindGroupLayout>,
 ) -> Result<wgpu::RenderPipeline> {
     let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("splat"),
@@ -250,8 +250,16 @@ pub(crate) fn pipeline(
         step_mode: wgpu::VertexStepMode::Instance,
         attributes: &SURFEL_ATTRIBUTES,
     })];
-    let groups: Vec<Option<&wgpu::BindGroupLayout>> =
-        std::iter::once(Some(layout)).chain(fetch.surfels_layout.as_ref().map(Some)).collect();
+    // Group 1 the surfel pool where pulled; group 2 the depth pass's front normal, read by the
+    // accumulation pass (blended splatting, gbuffer.rs).
+    let mut groups: Vec<Option<&wgpu::BindGroupLayout>> = vec![Some(layout), fetch.surfels_layout.as_ref()];
+    match accumulate {
+        Some(front) => groups.push(Some(front)),
+        None if groups[1].is_none() => {
+            groups.pop();
+        }
+        None => {}
+    }
     let pl = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(label),
         bind_group_layouts: &groups,
@@ -269,8 +277,8 @@ pub(crate) fn pipeline(
         primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
         depth_stencil: Some(wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
-            depth_write_enabled: Some(!accumulate),
-            depth_compare: Some(if accumulate {
+            depth_write_enabled: Some(accumulate.is_none()),
+            depth_compare: Some(if accumulate.is_some() {
                 wgpu::CompareFunction::LessEqual
             } else {
                 wgpu::CompareFunction::Less
