@@ -5,16 +5,21 @@
 //! Blended splatting (`Settings::splat_blend`, where the adapter can blend `Rgba16Float`): the
 //! front-most disc alone gives every pixel its own disc's normal, depth and light, so a wall seen
 //! at a grazing angle breaks into scales. Instead the discs are drawn twice. The depth pass
-//! (`fs_gbuffer`) pushes each disc back by a tolerance along the eye ray, so its depth buffer
-//! holds the front surface plus that tolerance (and its targets the front disc: the distance, for
-//! the point shaded, picking and holes, and the material). The accumulation pass (`fs_blend`)
-//! draws them unpushed, depth-tested against it, adding every fragment of the front surface with
-//! a smooth radial weight: normal and albedo. Shade divides by the weights, so each pixel is
-//! shaded once with the surface's blended normal and albedo at the front disc's point. (Blending
-//! the distance too was tried: where the tolerance reaches far, on sparse clouds and at
-//! silhouettes, it pulls the point behind the surface, which then reads as shadowed: a 1,000-point
-//! LAS file went 79% black.) Discs of a surface behind a depth gap fail the test: silhouettes stay
-//! crisp. Where float targets cannot blend, the front-most disc is kept, as before.
+//! (`fs_gbuffer`) is the plain one: the front-most disc's distance (the point shaded, picking,
+//! holes), normal and material in the targets, its depth in the depth buffer. The accumulation
+//! pass (`fs_blend`) draws every disc pulled toward the eye by its depth tolerance and tests it
+//! against that depth (not written): a disc within its tolerance behind the front passes. It adds
+//! the fragment's normal and albedo with a smooth radial weight, times how well its normal agrees
+//! with the front disc's (the other face of a crease, the far side of a pillar's outline lie
+//! within the tolerance too). Shade divides by the weights, so each pixel is shaded once with the
+//! surface's blended normal and albedo at the front disc's point. (Pushing the depth pass back
+//! instead, by a tolerance that grows at grazing angles, was the first version: its depth test
+//! then chose the disc with the nearest pushed depth, at a crease the steep wall's disc over the
+//! grazing floor's, and shaded the floor as wall. Blending the distance too was tried: where the
+//! tolerance reaches far, on sparse clouds and at silhouettes, it pulls the point behind the
+//! surface, which then reads as shadowed: a 1,000-point LAS file went 79% black.) Discs of a
+//! surface behind a depth gap fail the test: silhouettes stay crisp. Where float targets cannot
+//! blend, the front-most disc is kept, as before.
 
 use super::splat;
 use crate::error::Result;
@@ -28,8 +33,8 @@ pub(crate) const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8
 /// Blended splatting's sums (weights up to thousands: f16 holds them).
 pub(crate) const BLEND_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
-/// The depth pass pushes each disc back by this many of its radii (up to 4x more at grazing
-/// angles, splat.wgsl): the depth tolerance within which discs count as one surface. A disc's
+/// The accumulation pass pulls each disc toward the eye by this many of its radii (up to 4x more
+/// at grazing angles, splat.wgsl): the depth tolerance within which discs count as one surface. A disc's
 /// neighbours on a surface scanned with normals a few degrees apart lie well within one radius;
 /// the far side of a pillar or a fold lies beyond it.
 pub(crate) const BLEND_DEPTH_RADII: f32 = 1.0;
@@ -151,13 +156,12 @@ impl Gbuffer {
 
     /// The camera the next recording draws from.
     pub(crate) fn set_camera(&self, gpu: &Gpu, u: &SplatUniform) {
-        let push = if self.blends() { BLEND_DEPTH_RADII } else { 0.0 };
         let mut depth_pass = *u;
-        depth_pass.splat[2] = push;
+        depth_pass.splat[2] = 0.0;
         self.camera.write(gpu, 0, &depth_pass);
-        let mut unpushed = *u;
-        unpushed.splat[2] = 0.0;
-        self.camera.write(gpu, 1, &unpushed);
+        let mut pulled = *u;
+        pulled.splat[2] = -BLEND_DEPTH_RADII;
+        self.camera.write(gpu, 1, &pulled);
     }
 
     pub(crate) fn record(
@@ -194,6 +198,7 @@ impl Gbuffer {
         };
         let mut depth_ops = splat::depth_cleared(&depth);
         if blend.is_some() {
+            // The accumulation pass tests against it.
             depth_ops.depth_ops =
                 Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store });
         }

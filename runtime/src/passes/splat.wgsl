@@ -3,12 +3,13 @@
 // true depth. A disc smaller than `viewport.z` pixels is grown to it so sparse samples leave no
 // holes. `Splat` mirrors SplatUniform in runtime/src/gpu/types.rs (runtime/tests/layout.rs).
 //
-// Blended splatting (passes/gbuffer.rs) draws the discs twice: `fs_gbuffer` with each disc pushed
-// back along the eye ray by `splat.z` disc radii (more at grazing angles), which leaves in the
-// depth buffer the front surface plus a tolerance; then `fs_blend`, unpushed, adds every fragment
-// within that tolerance with a smooth radial weight into float targets, normalised by shade. The
-// point shaded stays the front disc's (a blended distance pulls it behind the surface where the
-// tolerance reaches far: sparse clouds, silhouettes), so only normal and albedo are blended.
+// Blended splatting (passes/gbuffer.rs) draws the discs twice: `fs_gbuffer` as they are, which
+// leaves the front-most disc in the targets and its depth in the depth buffer; then `fs_blend`,
+// each disc pulled toward the eye by `-splat.z` disc radii (more at grazing angles), adds every
+// fragment within that tolerance behind the front, of a surface facing as the front disc does,
+// with a smooth radial weight into float targets, normalised by shade. The point shaded stays the
+// front disc's (a blended distance pulls it behind the surface where the tolerance reaches far:
+// sparse clouds, silhouettes), so only normal and albedo are blended.
 #import geometry
 #import packing
 #import color
@@ -18,8 +19,8 @@ struct Splat {
     eye_m: vec4<f32>,
     // x, y: viewport size in pixels; z: smallest radius in pixels; w: proj[1][1].
     viewport: vec4<f32>,
-    // x: surfel radius scale; y: 1 to colour by scan; z: depth push in disc radii (blended
-    // splatting's depth pass; 0 elsewhere).
+    // x: surfel radius scale; y: 1 to colour by scan; z: depth offset in disc radii, negative
+    // toward the eye (blended splatting's accumulation pass; 0 elsewhere).
     splat: vec4<f32>,
     // The clip box, frame metres; w: 1 where it clips.
     clip_min_m: vec4<f32>,
@@ -93,19 +94,23 @@ fn splat_corner(vi: u32, position_radius: vec4<f32>, normal_spread: vec4<f32>, c
         }
     }
     let world = position_radius.xyz + (t1 * c.x + t2 * c.y) * r;
-    var pushed = world;
-    if splat.splat.z > 0.0 {
-        // The whole disc scaled about the eye (one factor for its corners), so the pushed disc
-        // covers exactly the same pixels with the same interpolation (pushing each corner by the
-        // same length would not: it changes the ratio of their depths). A disc seen at a grazing
-        // angle spans more depth across a pixel's neighbours: the tolerance grows with 1 / |cos|
-        // (up to 4x) so its neighbours on the same surface still fall inside.
+    var moved = world;
+    if splat.splat.z != 0.0 {
+        // Blended splatting's accumulation pass: the disc pulled toward the eye by its depth
+        // tolerance, so it passes the depth pass's test (the true front-most disc) wherever it
+        // lies within that tolerance behind the front. The whole disc is scaled about the eye
+        // (one factor for its corners), so it covers exactly the same pixels with the same
+        // interpolation (moving each corner by the same length would not). A disc seen at a
+        // grazing angle spans more depth across a pixel's neighbours: the tolerance grows with
+        // 1 / |cos| (up to 4x) so its neighbours on the same surface still fall inside. At most
+        // three quarters of the way to the eye (the near plane).
         let to = p - splat.eye_m.xyz;
         let dist = max(length(to), 1e-6);
         let facing = max(abs(dot(to / dist, n)), 0.25);
-        pushed = splat.eye_m.xyz + (world - splat.eye_m.xyz) * (1.0 + splat.splat.z * r / facing / dist);
+        let scale = max(1.0 + splat.splat.z * r / facing / dist, 0.25);
+        moved = splat.eye_m.xyz + (world - splat.eye_m.xyz) * scale;
     }
-    out.clip = splat.view_proj * vec4<f32>(pushed, 1.0);
+    out.clip = splat.view_proj * vec4<f32>(moved, 1.0);
     out.disc = c;
     out.world = world;
     out.normal_spread = vec4<f32>(n, normal_spread.w);
