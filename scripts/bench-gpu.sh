@@ -44,7 +44,7 @@ log() { echo "[$(date +%T)] $*" >&2; }
 bench_table() {
     python3 - "$@" <<'PY'
 import json, sys
-passes = ["shadow", "inject", "mip", "propagate", "gbuffer", "shade"]
+passes = ["shadow", "inject", "mip", "propagate", "gbuffer", "shade", "resolve"]
 title, files = sys.argv[1], sys.argv[2:]
 first = json.load(open(files[0]))
 splats = "pulled" if first.get("splats_pulled") else "instanced"
@@ -128,17 +128,19 @@ if [[ " $parts " == *" demo "* ]]; then
     # shellcheck disable=SC2046
     work_table "The demo cave's splat passes: whole tiles and every surfel (before issue 43) against chunks and level of detail" \
         $(work_pair demo "$work/demo/demo.grotto" 1920x1080) | tee -a "$tables"
-    # Issue 44: the front-most disc (before) against blended splats (the default), one run each.
+    # Issue 44: the front-most disc (before) against blended splats (the default), and the resolve
+    # pass a still frame's sample adds (anti-aliasing at rest), one run each.
     files=()
-    for mode in front blend; do
+    for mode in front blend blend-aa; do
         f=$out/json/demo__splats-$mode__1920x1080.json
         extra=()
         [ "$mode" = front ] && extra=(--no-splat-blend)
+        [ "$mode" = blend-aa ] && extra=(--samples 8)
         "$bin/grotto" bench "$work/demo/demo.grotto" --camera chamber --size 1920x1080 --bounces 0 \
             --reps "$reps" "${extra[@]}" --json > "$f"
         files+=("$f")
     done
-    bench_table "The demo cave at 1920x1080: front-most disc against blended splats (issue 44)" "${files[@]}" | tee -a "$tables"
+    bench_table "The demo cave at 1920x1080: front-most disc against blended splats, and a still frame's resolve (issue 44)" "${files[@]}" | tee -a "$tables"
 fi
 
 if [[ " $parts " == *" paper "* ]]; then

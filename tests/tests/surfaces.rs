@@ -460,6 +460,9 @@ fn a_still_frame_anti_aliases_the_pillar_outline_towards_supersampling() {
     let (still, plan) = r.render_still(&cam, W, H).unwrap();
     assert!(plan.runs(Pass::Resolve), "{}", plan.explain());
     assert_eq!(r.still_progress().map(|p| (p.samples, p.of)), Some((16, 16)));
+    // Complete and nothing changed: the next still frame draws nothing, and its plan says so.
+    let (rest, p) = r.draw_still(&cam, W, H).unwrap();
+    assert!(p.complete() && !rest.runs(Pass::Gbuffer) && !rest.runs(Pass::Shade), "{}", rest.explain());
     let still = lum(&still);
     let grid = lum(&r.render(&cam, 4 * W, 4 * H).unwrap().0.downsampled(4));
     // Where the samples disagree with the grid: the outline; elsewhere all three agree.

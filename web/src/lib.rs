@@ -562,10 +562,7 @@ impl State {
         // Ready, each frame adds a sample a pixel jittered within it (anti-aliasing at rest,
         // passes/resolve.rs); the page rests once the still frame is complete.
         let plan = if self.ready(moving) {
-            match self.renderer.draw_still(&camera, w, h)? {
-                (Some(plan), _) => plan,
-                (None, _) => self.renderer.plan(Some((&camera, w, h))),
-            }
+            self.renderer.draw_still(&camera, w, h)?.0
         } else {
             self.renderer.draw(&camera, w, h)?
         };

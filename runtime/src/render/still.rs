@@ -47,14 +47,14 @@ impl StillProgress {
 impl Renderer {
     /// Draws the next sample of a still frame of `camera` at `width` x `height` (the first, at
     /// the pixel centres, when anything changed since the last call), leaving the mean on the GPU
-    /// as [`Renderer::draw`] does. Returns the plan it ran, None where the frame was already
-    /// complete and nothing was drawn (what the last frame shows is still right).
+    /// as [`Renderer::draw`] does. Returns the plan it ran; where the frame was already complete
+    /// nothing is drawn (what the last frame shows is still right) and the plan says so.
     pub fn draw_still(
         &mut self,
         camera: &Camera,
         width: u32,
         height: u32,
-    ) -> Result<(Option<EffectPlan>, StillProgress)> {
+    ) -> Result<(EffectPlan, StillProgress)> {
         camera.validate()?;
         Self::check_size(width, height)?;
         self.poll_light()?;
@@ -74,7 +74,17 @@ impl Renderer {
             _ => 0,
         };
         if sample >= of {
-            return Ok((None, StillProgress { samples: of, of }));
+            let mut plan = self.plan(None);
+            for step in plan
+                .steps
+                .iter_mut()
+                .filter(|s| matches!(s.pass, Pass::Gbuffer | Pass::Shade | Pass::Resolve))
+            {
+                step.run = false;
+                step.reason =
+                    format!("the still frame is complete ({of} samples a pixel) and nothing changed");
+            }
+            return Ok((plan, StillProgress { samples: of, of }));
         }
         let frame = Some((camera, width, height));
         let mut plan = self.still_plan(sample, of, frame);
@@ -88,7 +98,7 @@ impl Renderer {
         self.still = Some(Still { key, samples: sample + 1 });
         self.still_next = None;
         self.jitter_px = [0.0; 2];
-        Ok((Some(plan), StillProgress { samples: sample + 1, of }))
+        Ok((plan, StillProgress { samples: sample + 1, of }))
     }
 
     /// Where the still frame the last [`Renderer::draw_still`] drew stands; None after a
@@ -107,26 +117,20 @@ impl Renderer {
         height: u32,
     ) -> Result<(crate::render::Frame, EffectPlan)> {
         self.still = None;
-        let (first, mut progress) = self.draw_still(camera, width, height)?;
-        let mut last = first;
+        let (mut plan, mut progress) = self.draw_still(camera, width, height)?;
         // The rest of the samples see the light the first one ran (a frame runs at most one
         // bounce; more would start the samples again).
         let held = self.light_held.replace("the first sample of this still frame ran the light");
         while !progress.complete() {
-            let (plan, now) = match self.draw_still(camera, width, height) {
-                Ok(v) => v,
+            match self.draw_still(camera, width, height) {
+                Ok(next) => (plan, progress) = next,
                 Err(e) => {
                     self.light_held = held;
                     return Err(e);
                 }
-            };
-            progress = now;
-            if plan.is_some() {
-                last = plan;
             }
         }
         self.light_held = held;
-        let plan = last.unwrap_or_else(|| self.plan(Some((camera, width, height))));
         Ok((self.read_frame()?, plan))
     }
 

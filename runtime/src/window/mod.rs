@@ -351,14 +351,7 @@ impl App {
         // (anti-aliasing at rest, passes/resolve.rs) until the still frame is complete.
         let settled = s.renderer.light_progress().converged || !s.renderer.settings().view.shows_light();
         let still = !moving && settled && s.follow.as_ref().is_none_or(|f| !f.busy());
-        let plan = if still {
-            match s.renderer.draw_still(&cam, w, h)? {
-                (Some(plan), _) => plan,
-                (None, _) => s.renderer.plan(Some((&cam, w, h))),
-            }
-        } else {
-            s.renderer.draw(&cam, w, h)?
-        };
+        let plan = if still { s.renderer.draw_still(&cam, w, h)?.0 } else { s.renderer.draw(&cam, w, h)? };
         if !(plan.runs(crate::light::plan::Pass::Shadow) || plan.runs(crate::light::plan::Pass::Inject)) {
             // Direct light (after a change of lights or tiles) is not what a frame costs.
             let draw_ms = t.elapsed().as_secs_f64() * 1e3;
