@@ -389,7 +389,8 @@ fn skipped_passes_are_not_dispatched_and_change_nothing() {
     // Forcing the skipped passes: shadow, inject, gbuffer and one more bounce.
     r.set_forced(&[Pass::Shadow, Pass::Inject, Pass::Gbuffer, Pass::Mip, Pass::Env, Pass::Propagate]);
     let (c, plan) = r.render(&cam, 64, 48).unwrap();
-    assert!(plan.steps.iter().all(|s| s.run));
+    // All but the resolve, which only a still frame's samples have to add (draw_still).
+    assert!(plan.steps.iter().filter(|s| s.pass != Pass::Resolve).all(|s| s.run), "{}", plan.explain());
     let d = &r.stats().dispatches;
     assert_eq!(d.get(&Pass::Shadow).copied(), Some(1));
     assert_eq!(d.get(&Pass::Inject).copied(), Some(1));

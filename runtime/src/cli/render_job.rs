@@ -471,6 +471,14 @@ pub fn load_scene(package: &Path) -> Result<SceneData> {
     non_empty(SceneData::from_package(&Package::open(package)?)?)
 }
 
+/// A bad `still_samples` is the command line's `--samples`.
+fn as_samples(e: Error) -> Error {
+    match e {
+        Error::Setting { name: "still_samples", problem } => Error::Setting { name: "samples", problem },
+        e => e,
+    }
+}
+
 /// Runs a render job.
 pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<RenderSummary> {
     image_out::kind_of(&opts.out)?;
@@ -488,10 +496,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
     settings.still_samples = opts.samples;
-    settings.validate().map_err(|e| match e {
-        Error::Setting { name: "still_samples", problem } => Error::Setting { name: "samples", problem },
-        e => e,
-    })?;
+    settings.validate().map_err(as_samples)?;
     let (mut r, mut follow) = crate::stream::follow::start(
         &gpu,
         &scene,
@@ -543,9 +548,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             frame = r.render(cam, w_px, h_px)?.0;
         }
         if opts.samples > 1 {
-            let (still, plan) = r.render_still(cam, w_px, h_px)?;
-            frame = still;
-            last_plan = plan;
+            (frame, last_plan) = r.render_still(cam, w_px, h_px)?;
         }
         if opts.supersample > 1 {
             frame = frame.downsampled(opts.supersample);

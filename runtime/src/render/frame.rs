@@ -22,7 +22,7 @@ impl Renderer {
             (Some((c, w, h)), Some(v)) => {
                 !self.gbuffer_stale
                     && v.camera == *c
-                    && v.jitter_px == self.jitter_px
+                    && v.jitter_px == self.stills.jitter_px
                     && v.targets.width == w
                     && v.targets.height == h
             }
@@ -55,7 +55,7 @@ impl Renderer {
             frame: frame.is_some(),
             gbuffer_valid,
             splats: if self.gbuffer.blends() {
-                "blended splats: a depth pass, then every disc within a radius of the front surface"
+                "blended splats: the front-most disc, then every disc within a radius behind it that faces as it does"
             } else if self.settings.splat_blend {
                 "front-most discs: the adapter cannot blend f16 targets"
             } else {
@@ -66,7 +66,7 @@ impl Renderer {
                 self.bounce_readback.is_some().then_some("the last bounce's change is on its way back")
             }),
             bounce_part: self.bounce_at.map(|next| (next, self.active_written.unwrap_or(0))),
-            still: self.still_next.filter(|_| frame.is_some()),
+            still: self.stills.next.filter(|_| frame.is_some()),
         }
     }
 
@@ -125,9 +125,9 @@ impl Renderer {
         Self::check_size(width, height)?;
         self.poll_light()?;
         // One sample a pixel at the centres: any still frame gathered so far is over.
-        self.still = None;
-        self.still_next = None;
-        self.jitter_px = [0.0; 2];
+        self.stills.still = None;
+        self.stills.next = None;
+        self.stills.jitter_px = [0.0; 2];
         let p = self.plan(Some((camera, width, height)));
         self.execute(&p, Some((camera, width, height)), None)?;
         Ok(p)
@@ -240,14 +240,38 @@ impl Renderer {
             let right = forward.cross(c.up).normalize();
             let up = right.cross(forward);
             let tan = (c.fov_y_deg.to_radians() * 0.5).tan();
-            let forward =
-                crate::passes::resolve::jittered_forward(forward, (right, up), tan, self.jitter_px, (w, h));
+            let forward = crate::passes::resolve::jittered_forward(
+                forward,
+                (right, up),
+                tan,
+                self.stills.jitter_px,
+                (w, h),
+            );
             p.camera_eye_m = c.eye_m.extend(0.0).to_array();
             p.camera_forward = forward.extend(tan).to_array();
             p.camera_right = right.extend(w as f32 / h as f32).to_array();
             p.camera_up = up.extend(0.0).to_array();
         }
         p
+    }
+
+    /// The resolve's sums where the plan runs it; a change of light ends the still frame.
+    fn prepare_still(&mut self, plan: &EffectPlan) -> Result<()> {
+        if plan.runs(Pass::Resolve) {
+            let resolve = &self.stills.resolve;
+            let gpu = &self.gpu;
+            if let Some(v) = self.view.as_mut()
+                && v.sums.is_none()
+            {
+                v.sums = Some(resolve.sums(gpu, &v.outputs.frame, v.targets.width, v.targets.height)?);
+            }
+            self.stats_now.last_upload_bytes += 16;
+        }
+        if [Pass::Shadow, Pass::Inject, Pass::Mip, Pass::Env, Pass::Propagate].iter().any(|&p| plan.runs(p)) {
+            // The light changes: a still frame gathered so far shows the old light.
+            self.stills.still = None;
+        }
+        Ok(())
     }
 
     pub(super) fn timestamp_pair(&self, pass: Pass) -> Option<(&wgpu::QuerySet, u32)> {
@@ -261,7 +285,8 @@ impl Renderer {
         let far = (camera.eye_m.length() + self.scene_diag_m) * 2.0 + 1.0;
         let m = camera.view_proj(w, h, near, far);
         let u = SplatUniform {
-            view_proj: crate::passes::resolve::jittered_view_proj(m, self.jitter_px, w, h).to_cols_array_2d(),
+            view_proj: crate::passes::resolve::jittered_view_proj(m, self.stills.jitter_px, w, h)
+                .to_cols_array_2d(),
             eye_m: camera.eye_m.extend(1.0).to_array(),
             viewport: [
                 w as f32,
@@ -288,11 +313,16 @@ impl Renderer {
             self.gpu.check_buffer("shade hdr", pixels * 16, wgpu::BufferUsages::STORAGE)?;
             let targets = self.gbuffer.targets(&self.gpu, w, h)?;
             let outputs = self.shade.outputs(&self.gpu, &targets)?;
-            self.view =
-                Some(View { camera: *camera, jitter_px: self.jitter_px, targets, outputs, sums: None });
+            self.view = Some(View {
+                camera: *camera,
+                jitter_px: self.stills.jitter_px,
+                targets,
+                outputs,
+                sums: None,
+            });
         } else if let Some(v) = self.view.as_mut() {
             v.camera = *camera;
-            v.jitter_px = self.jitter_px;
+            v.jitter_px = self.stills.jitter_px;
         }
         Ok(())
     }
@@ -383,8 +413,8 @@ impl Renderer {
                             what: "resolve",
                             message: "no sums were made for the view".into(),
                         })?;
-                        let (sample, _) = self.still_next.unwrap_or((0, 1));
-                        self.resolve.record(&self.gpu, &mut cp, sums, sample);
+                        let (sample, _) = self.stills.next.unwrap_or((0, 1));
+                        self.stills.resolve.record(&self.gpu, &mut cp, sums, sample);
                     }
                     Pass::Shadow | Pass::Gbuffer => {}
                 }
@@ -486,20 +516,7 @@ impl Renderer {
             self.prepare_view(camera, w, h)?;
             self.stats_now.last_upload_bytes += size_of::<SplatUniform>() as u64;
         }
-        if plan.runs(Pass::Resolve) {
-            let resolve = &self.resolve;
-            let gpu = &self.gpu;
-            if let Some(v) = self.view.as_mut()
-                && v.sums.is_none()
-            {
-                v.sums = Some(resolve.sums(gpu, &v.outputs.frame, v.targets.width, v.targets.height)?);
-            }
-            self.stats_now.last_upload_bytes += 16;
-        }
-        if [Pass::Shadow, Pass::Inject, Pass::Mip, Pass::Env, Pass::Propagate].iter().any(|&p| plan.runs(p)) {
-            // The light changes: a still frame gathered so far shows the old light.
-            self.still = None;
-        }
+        self.prepare_still(plan)?;
         // The frame runs inside one validation error scope; when it catches an error, each pass
         // is recorded again alone in a scope of its own (and not submitted) to name the culprit.
         // A command buffer per pass would name it directly, but costs lavapipe time on every frame

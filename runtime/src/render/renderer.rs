@@ -141,13 +141,38 @@ pub struct Renderer {
     pub(super) stats_now: PassStats,
     pub(super) queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
     pub(super) stat_queries: Option<StatQueries>,
-    /// Anti-aliasing at rest (passes/resolve.rs, render/still.rs): the pass, the sub-pixel
-    /// offset the next frame draws at, the still frame gathered so far, and the next frame's
-    /// place in it (sample, of) for the plan.
+    /// Anti-aliasing at rest (passes/resolve.rs, render/still.rs).
+    pub(super) stills: Stills,
+}
+
+/// Anti-aliasing at rest: the pass, the sub-pixel offset the next frame draws at, the still frame
+/// gathered so far (what it was gathered for, and its samples), and the next frame's place in it
+/// (sample, of) for the plan.
+#[derive(Debug)]
+pub(super) struct Stills {
     pub(super) resolve: passes::resolve::Resolve,
     pub(super) jitter_px: [f32; 2],
-    pub(super) still: Option<super::still::Still>,
-    pub(super) still_next: Option<(u32, u32)>,
+    pub(super) still: Option<(StillKey, u32)>,
+    pub(super) next: Option<(u32, u32)>,
+}
+
+impl Stills {
+    fn new(gpu: &Gpu) -> Result<Self> {
+        let resolve = gpu.scoped("resolve", || passes::resolve::Resolve::new(gpu))?;
+        Ok(Self { resolve, jitter_px: [0.0; 2], still: None, next: None })
+    }
+}
+
+/// What a still frame was gathered for: the same key, the same image.
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct StillKey {
+    pub(super) camera: Camera,
+    pub(super) size: (u32, u32),
+    pub(super) clip: Option<ClipBox>,
+    pub(super) detail_bits: u32,
+    pub(super) of: u32,
+    /// The frame's parameters without the jitter (bytes: they hold floats).
+    pub(super) params: Vec<u8>,
 }
 
 /// What two scenes must share for one to replace the other in a renderer's pools: the same lights,
@@ -308,10 +333,7 @@ impl Renderer {
             stats_now: PassStats::default(),
             queries: pass_queries(gpu),
             stat_queries: StatQueries::new(gpu),
-            resolve: gpu.scoped("resolve", || passes::resolve::Resolve::new(gpu))?,
-            jitter_px: [0.0; 2],
-            still: None,
-            still_next: None,
+            stills: Stills::new(gpu)?,
         };
         r.mark_shadow_faces(|_| true);
         gpu.check("upload")?;

@@ -7,28 +7,8 @@
 use crate::error::Result;
 use crate::light::plan::{EffectPlan, Pass};
 use crate::passes::resolve::jitter_px;
-use crate::render::renderer::Renderer;
-use crate::settings::ClipBox;
+use crate::render::renderer::{Renderer, StillKey};
 use crate::view::camera::Camera;
-
-/// What a still frame was gathered for: the same key, the same image.
-#[derive(Clone, Debug, PartialEq)]
-pub(crate) struct StillKey {
-    camera: Camera,
-    size: (u32, u32),
-    clip: Option<ClipBox>,
-    detail_bits: u32,
-    of: u32,
-    /// The frame's parameters without the jitter (bytes: they hold floats).
-    params: Vec<u8>,
-}
-
-/// A still frame gathered so far.
-#[derive(Clone, Debug)]
-pub(crate) struct Still {
-    key: StillKey,
-    samples: u32,
-}
 
 /// Where a still frame stands: samples a pixel gathered, of how many.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -59,7 +39,7 @@ impl Renderer {
         Self::check_size(width, height)?;
         self.poll_light()?;
         let of = self.settings.still_samples.max(1);
-        self.jitter_px = [0.0; 2];
+        self.stills.jitter_px = [0.0; 2];
         let key = StillKey {
             camera: *camera,
             size: (width, height),
@@ -68,9 +48,9 @@ impl Renderer {
             of,
             params: bytemuck::bytes_of(&self.frame_params(Some((camera, width, height)))).to_vec(),
         };
-        let mut sample = match &self.still {
+        let mut sample = match &self.stills.still {
             // Tiles swapped in since: the samples so far show the old ones.
-            Some(s) if s.key == key && !self.gbuffer_stale => s.samples,
+            Some((k, samples)) if *k == key && !self.gbuffer_stale => *samples,
             _ => 0,
         };
         if sample >= of {
@@ -95,16 +75,16 @@ impl Renderer {
             plan = self.still_plan(0, of, frame);
         }
         self.execute(&plan, frame, None)?;
-        self.still = Some(Still { key, samples: sample + 1 });
-        self.still_next = None;
-        self.jitter_px = [0.0; 2];
+        self.stills.still = Some((key, sample + 1));
+        self.stills.next = None;
+        self.stills.jitter_px = [0.0; 2];
         Ok((plan, StillProgress { samples: sample + 1, of }))
     }
 
     /// Where the still frame the last [`Renderer::draw_still`] drew stands; None after a
     /// [`Renderer::draw`] or a change of light.
     pub fn still_progress(&self) -> Option<StillProgress> {
-        self.still.as_ref().map(|s| StillProgress { samples: s.samples, of: s.key.of })
+        self.stills.still.as_ref().map(|(k, samples)| StillProgress { samples: *samples, of: k.of })
     }
 
     /// Draws a still frame with every sample (`Settings::still_samples`) and reads it back: what
@@ -115,8 +95,8 @@ impl Renderer {
         camera: &Camera,
         width: u32,
         height: u32,
-    ) -> Result<(crate::render::Frame, EffectPlan)> {
-        self.still = None;
+    ) -> Result<(super::frame::Frame, EffectPlan)> {
+        self.stills.still = None;
         let (mut plan, mut progress) = self.draw_still(camera, width, height)?;
         // The rest of the samples see the light the first one ran (a frame runs at most one
         // bounce; more would start the samples again).
@@ -135,8 +115,8 @@ impl Renderer {
     }
 
     fn still_plan(&mut self, sample: u32, of: u32, frame: Option<(&Camera, u32, u32)>) -> EffectPlan {
-        self.jitter_px = jitter_px(sample);
-        self.still_next = Some((sample, of));
+        self.stills.jitter_px = jitter_px(sample);
+        self.stills.next = Some((sample, of));
         self.plan(frame)
     }
 }
