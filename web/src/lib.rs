@@ -568,7 +568,7 @@ impl State {
         };
         self.present(moving)?;
         self.frames += 1;
-        if self.ready(moving) && self.renderer.still_progress().is_some_and(|p| p.complete()) {
+        if self.image_final(moving) {
             self.shown_at_rest = Some(rest_key);
         }
         if self.frames == 1 {
@@ -732,6 +732,11 @@ impl State {
             && self.frames > 0
     }
 
+    /// Ready, and the still frame's anti-aliasing samples all in: the image will not change.
+    fn image_final(&self, moving: bool) -> bool {
+        self.ready(moving) && self.renderer.still_progress().is_some_and(|p| p.complete())
+    }
+
     fn status(&mut self, moving: bool) -> Result<String, Error> {
         let progress = self.renderer.light_progress();
         let mut tiles = [0usize; 4];
@@ -744,7 +749,7 @@ impl State {
             }] += 1;
         }
         // Ready: the image is final, its anti-aliasing samples all in.
-        let ready = self.ready(moving) && self.renderer.still_progress().is_some_and(|p| p.complete());
+        let ready = self.image_final(moving);
         if ready && self.ready_ms.is_none() {
             self.ready_ms = Some(self.opened.elapsed().as_secs_f64() * 1e3);
         }

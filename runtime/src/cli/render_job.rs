@@ -545,8 +545,11 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             // Auto exposure from the first frame, kept for the sequence so it does not flicker.
             exposure = auto_exposure(&frame.hdr);
             r.set_exposure(exposure);
-            frame = r.render(cam, w_px, h_px)?.0;
+            if opts.samples == 1 {
+                frame = r.render(cam, w_px, h_px)?.0;
+            }
         }
+        // The still frame draws its own first sample, at the exposure just set.
         if opts.samples > 1 {
             (frame, last_plan) = r.render_still(cam, w_px, h_px)?;
         }
