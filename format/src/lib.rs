@@ -19,6 +19,7 @@ mod scene;
 mod section;
 mod source;
 pub mod spec;
+pub mod story;
 mod summary;
 pub mod svo;
 mod validate;
@@ -33,6 +34,7 @@ pub use scene::{
 };
 pub use section::{SectionInfo, TileInfo};
 pub use spec::{Codec, Scope, SectionKind};
+pub use story::{Poi, Tour, TourStop};
 pub use summary::{KindSummary, SectionSummary, Summary, TileSummary, parse_bytes};
 #[cfg(not(target_arch = "wasm32"))]
 pub use writer::{Compression, PackageWriter};

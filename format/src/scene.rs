@@ -9,6 +9,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::story::{Poi, Tour};
+
 /// Everything in a package that is not geometry.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -20,6 +22,11 @@ pub struct Scene {
     /// The scans the points came from (format 1.2), indexed by the surfel-scans sections.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub scans: Vec<ScanInfo>,
+    /// Points of interest and guided tours (story.rs; readers before them ignore them).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub pois: Vec<Poi>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub tours: Vec<Tour>,
 }
 
 /// One input scan of a package.
@@ -146,9 +153,20 @@ pub struct InputFile {
 }
 
 impl Scene {
-    /// The first non-finite number, if any, as a message (JSON cannot hold NaN, but it can hold
-    /// 1e400, which parses to infinity).
-    pub(crate) fn check_finite(&self) -> Result<(), String> {
+    /// The first problem, if any, as a message: a non-finite number (JSON cannot hold NaN, but it
+    /// can hold 1e400, which parses to infinity), or a story that does not hold together
+    /// ([`crate::story::check`]).
+    pub(crate) fn check(&self) -> Result<(), String> {
+        self.check_finite()?;
+        crate::story::check(&self.pois, &self.tours, &self.camera_names())
+    }
+
+    /// The names of the scene's cameras (what a tour's stops may name).
+    pub fn camera_names(&self) -> Vec<&str> {
+        self.cameras.iter().map(|c| c.name.as_str()).collect()
+    }
+
+    fn check_finite(&self) -> Result<(), String> {
         let bad = |what: &str, v: &[f64]| {
             if v.iter().all(|x| x.is_finite()) { Ok(()) } else { Err(format!("{what} is not finite: {v:?}")) }
         };

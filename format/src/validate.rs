@@ -444,7 +444,7 @@ pub(crate) fn check_content(kind: SectionKind, data: &[u8], depth: u32) -> Resul
         SectionKind::EnvMipLevels => crate::env_chain::check_levels(&cast::<EnvMipLevel>(data)),
         SectionKind::Scene => {
             let scene: Scene = serde_json::from_slice(data).map_err(|e| e.to_string())?;
-            scene.check_finite()
+            scene.check()
         }
         SectionKind::Provenance => {
             serde_json::from_slice::<Provenance>(data).map(drop).map_err(|e| e.to_string())

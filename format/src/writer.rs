@@ -271,7 +271,7 @@ impl PackageWriter {
 
     /// Adds the scene (JSON); returns its section index.
     pub fn add_scene(&mut self, scene: &Scene) -> Result<u32> {
-        scene.check_finite().map_err(|r| self.refuse(format!("scene: {r}")))?;
+        scene.check().map_err(|r| self.refuse(format!("scene: {r}")))?;
         let json = serde_json::to_vec(scene).map_err(|e| self.refuse(format!("scene: {e}")))?;
         self.add_section(SectionKind::Scene, Scope::Global, 0, &json, Compression::Auto(3))
     }

@@ -410,6 +410,17 @@ fn writer_refuses_what_the_format_cannot_hold_and_leaves_no_file() {
     let mut w = PackageWriter::create(&path).unwrap();
     assert!(w.add_section(SectionKind::Surfels, Scope::Global, 0, &[], Compression::Raw).is_err());
     assert!(w.add_section(SectionKind::Scene, Scope::Tile(0), 0, b"{}", Compression::Raw).is_err());
+    // A tour whose stop names no point of interest would break a viewer's tour mid-way.
+    let dangling = Scene {
+        tours: vec![Tour {
+            name: "t".into(),
+            title: String::new(),
+            stops: vec![TourStop { poi: Some("gone".into()), ..Default::default() }],
+        }],
+        ..Scene::default()
+    };
+    let err = w.add_scene(&dangling).unwrap_err().to_string();
+    assert!(err.contains("no point of interest named 'gone'"), "{err}");
     assert!(w.add_section(SectionKind::Surfels, Scope::Tile(3), 0, &[0; 32], Compression::Raw).is_err());
     assert!(
         w.add_tile(TileInfo {

@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
+use grotto_format::story::{PoiSpec, StorySpec, TourSpec};
 use grotto_format::{Camera, Environment, Light, LightShape, Material, Scene};
 use serde::Deserialize;
 
@@ -26,6 +27,11 @@ pub struct Manifest {
     pub environment: Option<EnvironmentSpec>,
     #[serde(default, rename = "camera")]
     pub(crate) cameras: Vec<CameraSpec>,
+    /// Points of interest and guided tours (grotto_format::story; docs/manifest.md).
+    #[serde(default, rename = "poi")]
+    pub(crate) pois: Vec<PoiSpec>,
+    #[serde(default, rename = "tour")]
+    pub(crate) tours: Vec<TourSpec>,
     /// Directory relative paths are resolved against (the manifest's own directory).
     #[serde(skip)]
     pub(crate) base_dir: PathBuf,
@@ -350,6 +356,20 @@ impl Manifest {
             };
             lights.push(Light { name: l.name.clone(), shape, color: l.color, power_w: l.power_w });
         }
+        let cameras: Vec<Camera> = self
+            .cameras
+            .iter()
+            .map(|c| Camera {
+                name: c.name.clone(),
+                eye_m: c.eye,
+                look_at_m: c.look_at,
+                up: c.up,
+                fov_y_deg: c.fov_deg,
+            })
+            .collect();
+        let (pois, tours) = StorySpec { poi: self.pois.clone(), tour: self.tours.clone() }
+            .into_story(&cameras.iter().map(|c| c.name.as_str()).collect::<Vec<_>>())
+            .map_err(|e| manifest_error(manifest_path, e))?;
         Ok(Scene {
             lights,
             materials: self
@@ -367,17 +387,7 @@ impl Manifest {
                     }),
                 })
                 .collect(),
-            cameras: self
-                .cameras
-                .iter()
-                .map(|c| Camera {
-                    name: c.name.clone(),
-                    eye_m: c.eye,
-                    look_at_m: c.look_at,
-                    up: c.up,
-                    fov_y_deg: c.fov_deg,
-                })
-                .collect(),
+            cameras,
             environment: self.environment.as_ref().map(|e| Environment {
                 index: 0,
                 intensity: e.intensity,
@@ -385,6 +395,8 @@ impl Manifest {
             }),
             // The build fills in the scans it read.
             scans: Vec::new(),
+            pois,
+            tours,
         })
     }
 }

@@ -40,6 +40,10 @@ pub enum Error {
     /// A camera path file (`grotto render --path FILE.toml`, `grotto view --record-path`).
     #[error("{path}: {problem}")]
     CameraPath { path: String, problem: String },
+    /// A story file (`grotto publish --story`, `grotto view --story`): points of interest and
+    /// tours that do not read or do not hold together.
+    #[error("{path}: {problem}")]
+    Story { path: String, problem: String },
     #[error("setting {name}: {problem}")]
     Setting { name: &'static str, problem: String },
     /// `grotto view` found no display to open its window on.

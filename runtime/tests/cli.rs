@@ -367,3 +367,63 @@ fn publish_writes_a_site_replaces_it_whole_and_refuses_what_it_cannot_serve() {
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
 }
+
+#[test]
+fn publish_adds_a_story_file_to_the_package_and_refuses_one_that_does_not_hold_together() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("demo.grotto");
+    let params = DemoParams { points: 3_000, ..DemoParams::default() };
+    demo::build(&path, &params).unwrap();
+    let bundle = dir.path().join("bundle");
+    std::fs::create_dir(&bundle).unwrap();
+    for f in grotto_runtime::cli::publish::BUNDLE_FILES {
+        std::fs::write(bundle.join(f), f).unwrap();
+    }
+    let c = params.center_m;
+    let story = dir.path().join("story.toml");
+    std::fs::write(
+        &story,
+        format!(
+            "[[poi]]\nname = \"wall\"\ntitle = \"The wall\"\nposition = [{}, {}, {}]\neye = [{}, {}, {}]\n\n\
+             [[tour]]\nname = \"round\"\n[[tour.stop]]\ncamera = \"centre\"\ndwell_s = 2\n[[tour.stop]]\npoi = \"wall\"\n",
+            c[0] + params.radius_m,
+            c[1],
+            c[2],
+            c[0],
+            c[1],
+            c[2]
+        ),
+    )
+    .unwrap();
+    let site = dir.path().join("site");
+    let (p, s, b) = (path.to_str().unwrap(), site.to_str().unwrap(), bundle.to_str().unwrap());
+    let out =
+        grotto(&["publish", p, "--out", s, "--bundle", b, "--story", story.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((summary["pois"].as_u64(), summary["tours"].as_u64()), (Some(1), Some(1)));
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(site.join("viewer.json")).unwrap()).unwrap();
+    assert_eq!(config["story"]["pois"][0]["name"], "wall");
+    // Survey coordinates reach the page whole.
+    assert_eq!(config["story"]["pois"][0]["position_m"][0].as_f64(), Some(c[0] + params.radius_m));
+    assert_eq!(config["story"]["tours"][0]["stops"][1]["poi"], "wall");
+
+    // A stop at a place that does not exist, or a misspelt key: refused, naming the file, and
+    // the site that was there stays.
+    for (text, expected) in [
+        (
+            "[[tour]]\nname = \"t\"\n[[tour.stop]]\npoi = \"nowhere\"\n",
+            "no point of interest named 'nowhere'",
+        ),
+        ("[[tour]]\nname = \"t\"\n[[tour.stop]]\ncamera = \"centre\"\ndwel_s = 3\n", "dwel_s"),
+    ] {
+        std::fs::write(&story, text).unwrap();
+        let out = grotto(&["publish", p, "--out", s, "--bundle", b, "--story", story.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains("story.toml") && err.contains(expected), "{err}");
+        let kept: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(site.join("viewer.json")).unwrap()).unwrap();
+        assert_eq!(kept["story"]["pois"][0]["name"], "wall");
+    }
+}

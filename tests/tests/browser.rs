@@ -151,6 +151,71 @@ impl Browser {
         self.call("POST", "/execute/sync", Some(&json!({"script": script, "args": []})))
     }
 
+    /// A DevTools protocol command through chromedriver (touch emulation, touch events).
+    fn cdp(&self, cmd: &str, params: Value) -> Value {
+        self.call("POST", "/goog/cdp/execute", Some(&json!({"cmd": cmd, "params": params})))
+    }
+
+    /// The canvas element's WebDriver id.
+    fn canvas(&self) -> String {
+        let canvas =
+            self.call("POST", "/element", Some(&json!({"using": "css selector", "value": "#canvas"})));
+        canvas.as_object().and_then(|o| o.values().next()).and_then(Value::as_str).unwrap().to_owned()
+    }
+
+    /// A mouse click at canvas pixel `(x, y)` (CSS pixels = rendered pixels), as a visitor's.
+    fn click_canvas(&self, x: u32, y: u32) {
+        let id = self.canvas();
+        let origin = json!({"element-6066-11e4-a52e-4f735466cecf": id});
+        // WebDriver offsets are from the element's centre.
+        let (dx, dy) = (x as i64 - i64::from(W / 2), y as i64 - i64::from(H / 2));
+        let actions = json!({"actions": [{"type": "pointer", "id": "mouse", "parameters": {"pointerType": "mouse"},
+        "actions": [
+            {"type": "pointerMove", "duration": 0, "origin": origin, "x": dx, "y": dy},
+            {"type": "pointerDown", "button": 0},
+            {"type": "pointerUp", "button": 0},
+        ]}]});
+        self.call("POST", "/actions", Some(&actions));
+    }
+
+    /// Keys typed into the canvas (as `KeyboardEvent`s with their codes).
+    fn type_into_canvas(&self, text: &str) {
+        let id = self.canvas();
+        self.call("POST", &format!("/element/{id}/value"), Some(&json!({"text": text})));
+    }
+
+    /// Touches: each step is the fingers down now (canvas pixels), through the DevTools
+    /// protocol's touch events (the page sees touch pointer events, as on a phone); the last
+    /// step lifts them.
+    fn touch(&self, steps: &[&[(f64, f64)]]) {
+        let r = self.eval(
+            "const r = document.getElementById('canvas').getBoundingClientRect(); return [r.left, r.top]",
+        );
+        let (left, top) = (r[0].as_f64().unwrap(), r[1].as_f64().unwrap());
+        let points = |s: &[(f64, f64)]| -> Vec<Value> {
+            s.iter().enumerate().map(|(i, (x, y))| json!({"x": left + x, "y": top + y, "id": i})).collect()
+        };
+        for (k, s) in steps.iter().enumerate() {
+            let kind = if k == 0 { "touchStart" } else { "touchMove" };
+            self.cdp("Input.dispatchTouchEvent", json!({"type": kind, "touchPoints": points(s)}));
+        }
+        self.cdp("Input.dispatchTouchEvent", json!({"type": "touchEnd", "touchPoints": []}));
+    }
+
+    /// Waits until `script` (returning a JSON string or null) gives something other than null.
+    fn wait_for(&self, script: &str, limit: Duration) -> Value {
+        let t0 = Instant::now();
+        loop {
+            let v = self.eval(script);
+            let v: Value = serde_json::from_str(v.as_str().unwrap_or("null")).unwrap_or(Value::Null);
+            if !v.is_null() {
+                return v;
+            }
+            assert!(t0.elapsed() < limit, "nothing after {limit:?} from {script}");
+            std::thread::sleep(Duration::from_millis(200));
+        }
+    }
+
     /// The page's status (`window.grottoStatus`), null before the viewer's first frame.
     fn status(&self) -> Value {
         let v = self.eval("return JSON.stringify(window.grottoStatus || null)");
@@ -233,6 +298,7 @@ fn published(
         bundle: Some(bundle),
         title: None,
         viewer_options: serde_json::from_value(viewer_options).unwrap(),
+        story: None,
     })
     .unwrap();
     (summary, serve::serve(&site).unwrap())
@@ -472,4 +538,146 @@ fn frame_times_while_moving() {
         status.get("traded").map_or_else(|| "-".into(), Value::to_string)
     );
     assert!(times.len() >= 2, "no frames while moving");
+}
+
+/// The numbers of a view link (`x,y,z,heading,pitch,fov`).
+fn link_numbers(link: &str) -> Vec<f64> {
+    link.split(',').map(|v| v.parse().unwrap()).collect()
+}
+
+/// Issue 45 in the browser, on the scanned room of known size (grotto_fixtures::room): labels of
+/// points of interest where the camera projects them, the one behind the pillar hidden; a
+/// measurement of the room's height by two clicks within a centimetre; the address's view link
+/// following the camera and a shared link restoring it to the centimetre; touch gestures (one
+/// finger looks, two pinch and pan, a double tap flies to the wall) through the DevTools
+/// protocol's touch events.
+#[test]
+fn a_published_room_labels_measures_shares_and_answers_touch() {
+    use grotto_fixtures::room;
+    use grotto_runtime::view::story;
+    let Some((chromium, driver, bundle)) = tools() else { return };
+    let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let package = room::room_package(dir.path()).unwrap();
+    let (summary, server) = published(dir.path(), &package, bundle, json!({"camera": "hall"}));
+    assert_eq!((summary.pois, summary.tours), (2, 1));
+    let browser = Browser::start(&chromium, &driver, true);
+    let base = format!(
+        "http://127.0.0.1:{}/index.html?width={W}&height={H}&quality=fast&bounces=1&panel=hidden&bar=hidden&samples=1",
+        server.port
+    );
+    browser.call("POST", "/url", Some(&json!({"url": base})));
+    let (state, status) = browser.wait_for_marker(Duration::from_secs(300));
+    assert_eq!(state, "ready", "{status}");
+    browser.wait_for(
+        "const s = window.grottoStatus; return s && s.labels_current ? JSON.stringify(s.labels) : null",
+        Duration::from_secs(60),
+    );
+
+    // Labels: where the camera projects each point of interest, hidden where the pillar is.
+    let rel = |p: [f64; 3]| glam::DVec3::from_array(p).as_vec3();
+    let hall = grotto_runtime::view::camera::Camera {
+        eye_m: rel(room::HALL_EYE_M),
+        look_at_m: rel(room::HALL_LOOK_AT_M),
+        up: glam::Vec3::Z,
+        fov_y_deg: 60.0,
+    };
+    let labels = browser.eval(
+        "return JSON.stringify([...document.querySelectorAll('.poi')].map(e => [e.dataset.poi, \
+         parseFloat(e.style.left), parseFloat(e.style.top), e.classList.contains('hidden')]))",
+    );
+    let labels: Vec<(String, f32, f32, bool)> = serde_json::from_str(labels.as_str().unwrap()).unwrap();
+    eprintln!("labels: {labels:?}");
+    for (name, at, hidden) in [("niche", room::NICHE_M, false), ("behind", room::BEHIND_M, true)] {
+        let expected = story::project(&hall, W, H, rel(at)).unwrap();
+        let l = labels.iter().find(|l| l.0 == name).unwrap();
+        assert!(
+            (l.1 - expected.x_px).abs() < 1.0 && (l.2 - expected.y_px).abs() < 1.0,
+            "label {name} at ({}, {}), the camera projects it to ({}, {})",
+            l.1,
+            l.2,
+            expected.x_px,
+            expected.y_px
+        );
+        assert_eq!(l.3, hidden, "label {name}: hidden {}", l.3);
+    }
+
+    // The address carries the camera, to the millimetre.
+    let hash = browser.wait_for(
+        "return location.hash.includes('at=') ? JSON.stringify(location.hash) : null",
+        Duration::from_secs(10),
+    );
+    let at = hash.as_str().unwrap().split("at=").nth(1).unwrap().split('&').next().unwrap().to_owned();
+    let n = link_numbers(&at);
+    let eye = room::world(room::HALL_EYE_M);
+    assert!((0..3).all(|a| (n[a] - eye[a]).abs() < 0.002), "hash {at}, the hall's eye is {eye:?}");
+
+    // Measuring: M, then a click on the floor and one on the ceiling.
+    browser.type_into_canvas("m");
+    browser.click_canvas(W / 2 + 7, H - 12);
+    std::thread::sleep(Duration::from_millis(500));
+    browser.click_canvas(W / 2 - 11, 10);
+    let m = browser.wait_for(
+        "const s = window.grottoStatus; return s && s.measure.result ? JSON.stringify(s.measure) : null",
+        Duration::from_secs(60),
+    );
+    eprintln!("measured: {m}");
+    let height = m["result"]["height_m"].as_f64().unwrap();
+    assert!((height - room::SIZE_M[2]).abs() < 0.01, "the room is 2.5 m high, measured {height} m");
+    let (a, b) = (&m["points"][0], &m["points"][1]);
+    assert!((a[2].as_f64().unwrap() - room::ORIGIN_M[2]).abs() < 0.01, "first point not on the floor: {a}");
+    let text = browser.eval("return document.getElementById('measuring').textContent");
+    assert!(text.as_str().unwrap().contains("height +2.50"), "{text}");
+    let _ = b;
+
+    // A shared link opens on its camera, to the centimetre.
+    let shared =
+        [room::ORIGIN_M[0] + 2.0, room::ORIGIN_M[1] + 1.0, room::ORIGIN_M[2] + 1.2, 30.0, -10.0, 55.0];
+    let link = shared.map(|v| format!("{v:.3}")).join(",");
+    browser.call("POST", "/url", Some(&json!({"url": format!("{base}&shared=1#at={link}")})));
+    let (state, status) = browser.wait_for_marker(Duration::from_secs(300));
+    assert_eq!(state, "ready", "{status}");
+    let got = link_numbers(status["link"].as_str().unwrap());
+    eprintln!("shared {link}, opened at {}", status["link"]);
+    assert!((0..3).all(|a| (got[a] - shared[a]).abs() < 0.01), "eye {got:?} vs {shared:?}");
+    assert!((3..6).all(|a| (got[a] - shared[a]).abs() < 0.01), "angles {got:?} vs {shared:?}");
+
+    // Touch: one finger to the right turns the view left by 0.005 rad a pixel (Nav::look).
+    browser.cdp("Emulation.setTouchEmulationEnabled", json!({"enabled": true, "maxTouchPoints": 5}));
+    let link_now = |b: &Browser| link_numbers(b.status()["link"].as_str().unwrap());
+    let before = link_now(&browser);
+    browser.touch(&[&[(160.0, 120.0)], &[(180.0, 120.0)], &[(200.0, 120.0)]]);
+    std::thread::sleep(Duration::from_millis(400));
+    let after = link_now(&browser);
+    let turned = after[3] - before[3];
+    assert!(
+        (turned - (-40.0 * 0.005f64).to_degrees()).abs() < 0.5,
+        "one finger turned the view {turned} deg"
+    );
+    // Two fingers spreading to twice their distance fly forward a second's flight (Nav::pinch).
+    let before = link_now(&browser);
+    browser.touch(&[
+        &[(140.0, 120.0), (180.0, 120.0)],
+        &[(130.0, 120.0), (190.0, 120.0)],
+        &[(120.0, 120.0), (200.0, 120.0)],
+    ]);
+    std::thread::sleep(Duration::from_millis(400));
+    let after = link_now(&browser);
+    let (yaw, pitch) = (before[3].to_radians(), before[4].to_radians());
+    let forward = [yaw.cos() * pitch.cos(), yaw.sin() * pitch.cos(), pitch.sin()];
+    let moved: f64 = (0..3).map(|a| (after[a] - before[a]) * forward[a]).sum();
+    assert!(moved > 0.3, "spreading two fingers moved the eye {moved} m forward");
+    // A double tap on the far wall flies toward it.
+    let before = link_now(&browser);
+    let frames = browser.status()["frames"].as_u64().unwrap();
+    browser.touch(&[&[(160.0, 100.0)]]);
+    browser.touch(&[&[(160.0, 100.0)]]);
+    browser.wait_for_frames(frames + 3, Duration::from_secs(60));
+    let (state, status) = browser.wait_for_marker(Duration::from_secs(300));
+    assert_eq!(state, "ready", "{status}");
+    let after = link_numbers(status["link"].as_str().unwrap());
+    let flown: f64 = (0..3).map(|a| (after[a] - before[a]).powi(2)).sum::<f64>().sqrt();
+    eprintln!("double tap: {before:?} -> {after:?}");
+    assert!(flown > 0.5, "a double tap flew {flown} m");
+    drop(browser);
 }

@@ -7,7 +7,7 @@ use std::ops::Range;
 use wasm_bindgen::JsCast;
 use wasm_bindgen_futures::JsFuture;
 
-use crate::Error;
+use crate::error::Error;
 
 /// What one request gave.
 #[derive(Debug)]

@@ -11,7 +11,16 @@
 //! On other targets the crate is empty.
 #![cfg(target_arch = "wasm32")]
 
+mod error;
 mod fetch;
+mod page;
+mod story;
+
+pub use error::Error;
+use error::to_js;
+pub use page::{Options, Status};
+use page::{parse_options, settings_of};
+pub use story::{LabelStatus, MeasureStatus, TourStatus};
 
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -23,112 +32,16 @@ use grotto_runtime::light::plan::Pass;
 use grotto_runtime::render::Renderer;
 use grotto_runtime::render::present::{Bar, Blit, Target};
 use grotto_runtime::scene::data::{SceneData, TileMode};
-use grotto_runtime::settings::{Quality, Settings, ViewMode};
+use grotto_runtime::settings::ViewMode;
 use grotto_runtime::stream::residency::{self, Budget, Residency};
 use grotto_runtime::stream::{self, Streaming};
 use grotto_runtime::view::camera::{Camera, Nav};
-use grotto_runtime::view::frame_target::{FrameTarget, Traded};
+use grotto_runtime::view::frame_target::FrameTarget;
 use grotto_runtime::view::framing::{CameraChoice, resolve_camera, scene_headlamp};
-use serde::{Deserialize, Serialize};
+use grotto_runtime::view::story::{Flight, TourPlayer};
+use story::{PickFor, Story, story_for};
 use wasm_bindgen::prelude::*;
 use web_time::Instant;
-
-/// What can go wrong in the viewer, shown in the page as it is.
-#[derive(Debug, thiserror::Error)]
-pub enum Error {
-    #[error("fetching {url}: {problem}")]
-    Fetch { url: String, problem: String },
-    #[error(transparent)]
-    Runtime(#[from] grotto_runtime::Error),
-    #[error(transparent)]
-    Package(#[from] grotto_format::Error),
-    #[error("{0}")]
-    Setting(String),
-}
-
-fn to_js(e: Error) -> JsError {
-    JsError::new(&e.to_string())
-}
-
-/// What the page asks for (JSON; every field optional): the query string's values, over
-/// `viewer.json`'s.
-#[derive(Clone, Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Options {
-    /// A camera named in the package (default: its first, else a view framed on the data).
-    pub camera: Option<String>,
-    /// The rendered image's size (default: the canvas's).
-    pub width: Option<u32>,
-    pub height: Option<u32>,
-    /// fast, balanced, high (as `grotto render --quality`).
-    pub quality: Option<String>,
-    pub bounces: Option<u32>,
-    /// Fixed exposure (default: automatic, from the frame once the light has converged).
-    pub exposure: Option<f32>,
-    /// Tile budget on the GPU in MB (default: half the largest buffer the adapter allows, at
-    /// most 2 GiB, as natively).
-    pub gpu_memory_mb: Option<u64>,
-    /// Most bytes of finer tiles one streaming step uploads (default 32 MB).
-    pub step_mb: Option<u64>,
-    /// lit, albedo, normals, light, level, scan.
-    pub view: Option<String>,
-    /// Shadow maps for the brightest lights (default true, as natively).
-    pub shadows: Option<bool>,
-    /// Draw the convergence bar along the bottom (default true; a screenshot compared with
-    /// `grotto render` turns it off).
-    pub bar: Option<bool>,
-    /// Frames a second to hold while the camera moves, by drawing at a smaller scale and then
-    /// thinning far surfels harder (view/frame_target.rs; default 60, 0: none).
-    pub target_fps: Option<f64>,
-    /// Milliseconds a frame may spend on shadow faces out of date after tiles arrive (default 8;
-    /// 0: every face at once): the rest follow over the next frames (render/shadow_queue.rs).
-    pub shadow_ms: Option<f32>,
-    /// Blend the discs of the front surface at each pixel (default true, as natively; false:
-    /// the front-most disc alone, the picture before issue 44).
-    pub splat_blend: Option<bool>,
-    /// Samples a pixel gathered at rest, one a frame, each jittered within the pixel and
-    /// averaged (anti-aliasing; default 8 as natively, 1: none).
-    pub samples: Option<u32>,
-}
-
-/// The status of a frame, for the page's panel and the ready marker (JSON).
-#[derive(Clone, Debug, Serialize)]
-pub struct Status {
-    /// "converging", or "ready": the light has converged, the tiles the view wants are resident,
-    /// no fetch is under way and the still frame's anti-aliasing samples are all in (what a test
-    /// waits for).
-    pub state: &'static str,
-    pub adapter: String,
-    pub package_bytes: u64,
-    /// Bytes fetched so far, and before the first frame.
-    pub fetched_bytes: u64,
-    pub first_frame_bytes: u64,
-    pub requests: u32,
-    pub fetching: bool,
-    /// Tiles full, coarse, far, not held.
-    pub tiles: [usize; 4],
-    pub bounces_done: u32,
-    pub bounce_budget: u32,
-    pub light_fraction: f32,
-    pub converged: bool,
-    pub frames: u32,
-    pub camera: String,
-    pub view: &'static str,
-    pub exposure: f32,
-    pub width: u32,
-    pub height: u32,
-    /// The server sent the whole file to a range request.
-    pub no_ranges: bool,
-    /// Milliseconds from opening to the first frame, and to "ready".
-    pub first_frame_ms: f64,
-    pub ready_ms: Option<f64>,
-    /// What the effect plan says of propagation.
-    pub light_plan: String,
-    /// GPU milliseconds of the last plain frame (no shadow maps or injection), and what the
-    /// frame-time target trades while moving (None: no target).
-    pub frame_ms: Option<f64>,
-    pub traded: Option<Traded>,
-}
 
 /// The package as fetched so far, and what was fetched.
 struct Source {
@@ -248,6 +161,7 @@ struct State {
     /// The frame read back for automatic exposure, and whether the light had converged then.
     exposure_read: Option<(PendingRead, bool)>,
     exposure_final: bool,
+    story: Story,
 }
 
 /// Longest frame at rest, as the window viewer's (window/pace.rs `REST_FRAME_MS`).
@@ -276,37 +190,6 @@ impl std::fmt::Debug for Viewer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Viewer").field("adapter", &self.state.gpu.describe()).finish_non_exhaustive()
     }
-}
-
-fn parse_options(json: &str) -> Result<Options, Error> {
-    if json.trim().is_empty() {
-        return Ok(Options::default());
-    }
-    serde_json::from_str(json).map_err(|e| Error::Setting(format!("viewer options {json}: {e}")))
-}
-
-fn settings_of(o: &Options) -> Result<Settings, Error> {
-    let quality = match &o.quality {
-        Some(p) => Quality::parse(p)
-            .ok_or_else(|| Error::Setting(format!("unknown quality {p:?} (fast, balanced, high)")))?,
-        None => Quality::Balanced,
-    };
-    let mut s = Settings::preset(quality);
-    if let Some(b) = o.bounces {
-        s.bounces = b;
-    }
-    if let Some(on) = o.shadows {
-        s.shadows = on;
-    }
-    if let Some(v) = &o.view {
-        s.view = ViewMode::parse(v).ok_or_else(|| Error::Setting(format!("unknown view {v:?}")))?;
-    }
-    s.exposure = o.exposure.unwrap_or(1.0);
-    s.shadow_frame_ms = o.shadow_ms.unwrap_or(8.0);
-    s.splat_blend = o.splat_blend.unwrap_or(true);
-    s.still_samples = o.samples.unwrap_or(grotto_runtime::passes::resolve::DEFAULT_STILL_SAMPLES);
-    s.validate()?;
-    Ok(s)
 }
 
 #[wasm_bindgen]
@@ -344,6 +227,7 @@ impl Viewer {
         let ranges = pkg.missing(far_sections, FETCH_GAP);
         let fetched = fetch_all(url.clone(), ranges).await?;
         insert(&mut pkg, &mut source, &fetched)?;
+        let world_scene = pkg.scene()?;
         let tiles = residency::footprints(&pkg, settings.radiance_f16)?;
         let gpu_bytes = o.gpu_memory_mb.map_or_else(|| default_gpu_memory(&gpu), |mb| mb << 20);
         let budget = Budget { gpu_bytes, points: u64::MAX, pools: None };
@@ -356,7 +240,12 @@ impl Viewer {
         // The first camera as `grotto render` resolves it (named, the package's first, or
         // framed on the data); Tab goes through the package's named cameras after it.
         let choice = o.camera.clone().map_or(CameraChoice::Default, CameraChoice::Named);
-        let (camera, framed) = resolve_camera(&far, &choice, aspect, settings.splat_scale)?;
+        let (mut camera, framed) = resolve_camera(&far, &choice, aspect, settings.splat_scale)?;
+        if let Some(at) = &o.at {
+            camera = grotto_runtime::view::story::parse_view_link(at, far.frame_origin_m)
+                .map_err(Error::Setting)?;
+        }
+        let story = story_for(&far, &world_scene, o.story.as_ref())?;
         let cameras = camera_list(&far, o.camera.clone(), camera);
         if !far.has_own_light() {
             let seen = framed.map(|f| f.estimate);
@@ -416,6 +305,7 @@ impl Viewer {
                 shown_at_rest: None,
                 exposure_read: None,
                 exposure_final: o.exposure.is_some(),
+                story,
             },
         })
     }
@@ -434,8 +324,18 @@ impl Viewer {
 
     /// The mouse dragged by (dx, dy) CSS pixels: look around.
     pub fn drag(&mut self, dx: f32, dy: f32) {
+        self.state.take_over();
         self.state.nav.look(dx, dy);
         self.state.last_input = Instant::now();
+    }
+
+    /// Two fingers on a touch screen: spread by `scale` since the last call (moves forward),
+    /// their midpoint moved by `(dx, dy)` canvas pixels (pans with them).
+    pub fn pinch(&mut self, scale: f32, dx: f32, dy: f32) {
+        let s = &mut self.state;
+        s.take_over();
+        s.nav.pinch(scale, dx, dy, s.height as f32);
+        s.last_input = Instant::now();
     }
 
     /// The wheel turned (lines, up positive): flying speed.
@@ -465,6 +365,99 @@ impl Viewer {
         self.state.renderer.set_view(v);
         Ok(())
     }
+
+    /// The points of interest and tours (JSON: `{"pois": [{name, title, text}], "tours": [{name,
+    /// title, stops: [{title, text}]}]}`).
+    pub fn story(&self) -> String {
+        let st = &self.state.story;
+        serde_json::json!({
+            "pois": st.pois.iter().map(|p| serde_json::json!({"name": p.name, "title": p.title, "text": p.text})).collect::<Vec<_>>(),
+            "tours": st.tours.iter().map(|t| serde_json::json!({
+                "name": t.name,
+                "title": t.title,
+                "stops": t.stops.iter().map(|s| serde_json::json!({"title": s.title, "text": s.text})).collect::<Vec<_>>(),
+            })).collect::<Vec<_>>(),
+        })
+        .to_string()
+    }
+
+    /// Flies to point of interest `i` of [`Viewer::story`] (a tour playing stops).
+    pub fn fly_to_poi(&mut self, i: usize) {
+        let s = &mut self.state;
+        if let Some(p) = s.story.pois.get(i) {
+            let to = grotto_runtime::view::story::stop_camera(&p.camera);
+            s.story.tour = None;
+            s.story.flight = Some(Flight::new(s.nav.camera(), to, None));
+        }
+    }
+
+    /// A click or tap at canvas pixel `(x, y)` of the rendered frame: `measure` picks a
+    /// measurement's next end, `fly` flies toward the surface there. Answered a few frames later
+    /// (the G-buffer's distance is read back without blocking); the status shows it.
+    pub fn pick(&mut self, x: f32, y: f32, what: &str) -> Result<(), JsError> {
+        let what = match what {
+            "measure" => PickFor::Measure,
+            "fly" => PickFor::Fly,
+            _ => return Err(JsError::new(&format!("pick for {what:?}: expected measure or fly"))),
+        };
+        self.state.story.pick(x, y, what);
+        Ok(())
+    }
+
+    /// Forgets the measurement.
+    pub fn clear_measure(&mut self) {
+        self.state.story.clear_measure();
+    }
+
+    /// Plays tour `i` from its first stop.
+    pub fn tour_play(&mut self, i: usize) {
+        let s = &mut self.state;
+        if let Some(t) = s.story.tours.get(i) {
+            s.story.flight = None;
+            s.story.tour = Some(TourPlayer::start(i, t, s.nav.camera()));
+        }
+    }
+
+    /// Pauses (true) or resumes (false) the tour.
+    pub fn tour_pause(&mut self, paused: bool) {
+        if let Some(p) = &mut self.state.story.tour {
+            p.paused = paused;
+        }
+    }
+
+    /// Goes `delta` stops on (negative: back) and plays from there.
+    pub fn tour_step(&mut self, delta: i32) {
+        let s = &mut self.state;
+        let from = s.nav.camera();
+        if let Some(p) = &mut s.story.tour
+            && let Some(t) = s.story.tours.get(p.tour)
+        {
+            p.step(t, delta, from);
+            p.paused = false;
+        }
+    }
+
+    /// Ends the tour where the camera is.
+    pub fn tour_stop(&mut self) {
+        self.state.story.tour = None;
+    }
+
+    /// The camera as a view link (`x,y,z,heading,pitch,fov`), for the page's address.
+    pub fn view_link(&self) -> String {
+        grotto_runtime::view::story::view_link(&self.state.nav.camera(), self.state.scene.frame_origin_m)
+    }
+
+    /// Jumps to the camera of a view link.
+    pub fn set_view_link(&mut self, link: &str) -> Result<(), JsError> {
+        let s = &mut self.state;
+        let c = grotto_runtime::view::story::parse_view_link(link, s.scene.frame_origin_m)
+            .map_err(|e| JsError::new(&e))?;
+        s.story.flight = None;
+        s.story.tour = None;
+        s.nav = Nav::from_camera(&c, s.nav.speed_m_s);
+        s.last_input = Instant::now();
+        Ok(())
+    }
 }
 
 /// The input stops counting as movement this long after the last event.
@@ -475,9 +468,20 @@ impl State {
         self.held.iter().any(|h| *h) || self.last_input.elapsed().as_millis() < REST_AFTER_MS
     }
 
+    /// The visitor moves the camera: a flight ends where it is, a tour pauses.
+    fn take_over(&mut self) {
+        self.story.flight = None;
+        if let Some(p) = &mut self.story.tour {
+            p.paused = true;
+        }
+    }
+
     fn key(&mut self, code: &str, down: bool) -> bool {
         let held = ["KeyW", "KeyA", "KeyS", "KeyD", "KeyQ", "KeyE"];
         if let Some(k) = held.iter().position(|c| *c == code) {
+            if down {
+                self.take_over();
+            }
             self.held[k] = down;
             self.last_input = Instant::now();
             return true;
@@ -494,6 +498,7 @@ impl State {
         }
         match code {
             "Tab" | "KeyR" => {
+                self.take_over();
                 let i = if code == "KeyR" { 0 } else { (self.camera_index + 1) % self.cameras.len() };
                 self.camera_index = i;
                 self.nav = Nav::from_camera(&self.cameras[i].1, self.nav.speed_m_s);
@@ -508,8 +513,16 @@ impl State {
         let now = Instant::now();
         let dt = now.duration_since(self.last_frame).as_secs_f32().min(0.25);
         self.last_frame = now;
-        self.nav.step(self.held, dt);
-        let moving = self.moving();
+        if let Some(to) = self.story.poll()? {
+            self.story.tour = None;
+            self.story.flight = Some(Flight::new(self.nav.camera(), to, None));
+        }
+        let settled = self.image_final(false);
+        match self.story.camera(dt, settled) {
+            Some(c) => self.nav = Nav::from_camera(&c, self.nav.speed_m_s),
+            None => self.nav.step(self.held, dt),
+        }
+        let moving = self.moving() || self.story.flying();
         let camera = self.nav.camera();
 
         // The GPU still works on the last frame: record nothing more (the queue would only grow).
@@ -526,6 +539,13 @@ impl State {
         let rest_key =
             (camera, self.width, self.height, self.renderer.settings().view, self.exposure.to_bits());
         if self.ready(moving) && self.shown_at_rest == Some(rest_key) {
+            // Clicks on the frame at rest still need its distances.
+            self.story.drawn(
+                &self.renderer,
+                &camera,
+                (self.width, self.height),
+                (self.width, self.height),
+            )?;
             return self.status(moving);
         }
         self.shown_at_rest = None;
@@ -567,6 +587,7 @@ impl State {
             self.renderer.draw(&camera, w, h)?
         };
         self.present(moving)?;
+        self.story.drawn(&self.renderer, &camera, (self.width, self.height), (w, h))?;
         self.frames += 1;
         if self.image_final(moving) {
             self.shown_at_rest = Some(rest_key);
@@ -750,6 +771,7 @@ impl State {
         }
         // Ready: the image is final, its anti-aliasing samples all in.
         let ready = self.image_final(moving);
+        let camera = self.nav.camera();
         if ready && self.ready_ms.is_none() {
             self.ready_ms = Some(self.opened.elapsed().as_secs_f64() * 1e3);
         }
@@ -778,6 +800,13 @@ impl State {
             light_plan: self.light_plan.clone(),
             frame_ms: self.recent_ms.last().copied(),
             traded: self.target.as_ref().map(FrameTarget::traded),
+            labels: self.story.labels(&camera, self.width, self.height),
+            labels_current: self.story.labels_current(&camera),
+            measure: self.story.measure_status(&camera, self.width, self.height),
+            tour: self.story.tour_status(),
+            link: grotto_runtime::view::story::view_link(&camera, self.scene.frame_origin_m),
+            gpu_bytes: self.renderer.gpu_bytes(),
+            wasm_bytes: (core::arch::wasm32::memory_size(0) as u64) << 16,
         };
         serde_json::to_string(&s).map_err(|e| Error::Setting(e.to_string()))
     }

@@ -161,6 +161,28 @@ pub(crate) fn sample_scene() -> Scene {
         }],
         environment: Some(Environment { index: 0, intensity: 1.5, source: "sky.hdr".into() }),
         scans: vec![ScanInfo { name: "a.las".into() }, ScanInfo { name: "site.e57#1".into() }],
+        pois: vec![Poi {
+            name: "altar".into(),
+            title: "The altar".into(),
+            text: "A flowstone altar.".into(),
+            position_m: [512_344.0, 5_123_452.0, 339.5],
+            eye_m: [512_342.0, 5_123_450.0, 340.5],
+            look_at_m: [512_344.0, 5_123_452.0, 339.5],
+            fov_y_deg: 50.0,
+        }],
+        tours: vec![Tour {
+            name: "visit".into(),
+            title: "A short visit".into(),
+            stops: vec![
+                TourStop { camera: Some("entrance".into()), dwell_s: 3.0, ..Default::default() },
+                TourStop {
+                    poi: Some("altar".into()),
+                    dwell_s: 5.0,
+                    flight_s: Some(4.0),
+                    ..Default::default()
+                },
+            ],
+        }],
     }
 }
 

@@ -95,6 +95,10 @@ struct PublishArgs {
     /// Fixed exposure (default: automatic, as grotto render).
     #[arg(long)]
     exposure: Option<f32>,
+    /// Points of interest and tours to add to the package's (TOML: [[poi]], [[tour]] as in a
+    /// manifest, docs/manifest.md); one named as one of the package's replaces it.
+    #[arg(long)]
+    story: Option<PathBuf>,
     /// Machine-readable output.
     #[arg(long)]
     json: bool,
@@ -128,19 +132,22 @@ fn publish(a: PublishArgs) -> anyhow::Result<ExitCode> {
         bundle: a.bundle,
         title: a.title,
         viewer_options,
+        story: a.story,
     })?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
         let mb = |b: u64| b as f64 / 1e6;
         println!(
-            "wrote {}: {} ({:.2} MB package, {:.2} MB viewer of which {:.2} MB wasm); serve it from any \
-             static host that answers range requests (docs/web.md)",
+            "wrote {}: {} ({:.2} MB package, {:.2} MB viewer of which {:.2} MB wasm; {} points of \
+             interest, {} tours); serve it from any static host that answers range requests (docs/web.md)",
             summary.site,
             summary.files.join(", "),
             mb(summary.package_bytes),
             mb(summary.bundle_bytes),
-            mb(summary.wasm_bytes)
+            mb(summary.wasm_bytes),
+            summary.pois,
+            summary.tours
         );
     }
     Ok(ExitCode::SUCCESS)

@@ -8,6 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use grotto_format::Package;
+use grotto_format::story::{self, Poi, StorySpec, Tour};
 use serde::Serialize;
 
 use crate::error::{Error, Result};
@@ -27,6 +28,8 @@ pub struct PublishOptions {
     pub title: Option<String>,
     /// The viewer's defaults (web crate `Options`: camera, preset, bounces...), as JSON.
     pub viewer_options: serde_json::Map<String, serde_json::Value>,
+    /// Points of interest and tours (TOML) added to the package's: [`story_of`].
+    pub story: Option<PathBuf>,
 }
 
 /// What was written.
@@ -38,6 +41,25 @@ pub struct PublishSummary {
     pub bundle_bytes: u64,
     pub wasm_bytes: u64,
     pub files: Vec<String>,
+    /// Points of interest and tours the page offers (the package's and the story file's).
+    pub pois: usize,
+    pub tours: usize,
+}
+
+/// The story a site shows: the package's points of interest and tours, with those of the TOML
+/// file `extra` (grotto_format::story::StorySpec) added, one named as one of the package's
+/// replacing it; checked whole against the package's cameras, so a tour may stop at the
+/// package's points of interest and the file's alike.
+pub fn story_of(scene: &grotto_format::Scene, extra: Option<&Path>) -> Result<(Vec<Poi>, Vec<Tour>)> {
+    let Some(path) = extra else { return Ok((scene.pois.clone(), scene.tours.clone())) };
+    let problem = |reason: String| Error::Story { path: path.display().to_string(), problem: reason };
+    let text = std::fs::read_to_string(path).map_err(|e| problem(e.to_string()))?;
+    let spec: StorySpec = toml::from_str(&text).map_err(|e| problem(e.to_string()))?;
+    let (pois, tours) = spec.convert();
+    let pois = story::merged(&scene.pois, &pois, |p| &p.name);
+    let tours = story::merged(&scene.tours, &tours, |t| &t.name);
+    story::check(&pois, &tours, &scene.camera_names()).map_err(problem)?;
+    Ok((pois, tours))
 }
 
 /// Where the viewer bundle is looked for: `GROTTO_WEB_BUNDLE`, else `web` beside the folder of
@@ -63,6 +85,7 @@ pub fn publish(opts: &PublishOptions) -> Result<PublishSummary> {
         return Err(output(&opts.package, format!("is damaged ({} problems; first: {p})", problems.len())));
     }
     let package_bytes = pkg.file_size();
+    let (pois, tours) = story_of(&pkg.scene()?, opts.story.as_deref())?;
     drop(pkg);
     let bundle = opts.bundle.clone().or_else(default_bundle).ok_or_else(|| {
         output(
@@ -118,6 +141,8 @@ pub fn publish(opts: &PublishOptions) -> Result<PublishSummary> {
         "package": file_name,
         "title": title,
         "options": opts.viewer_options,
+        // The page labels, lists and plays these (the package's own, amended by --story).
+        "story": { "pois": pois, "tours": tours },
     });
     let text = serde_json::to_string_pretty(&config).map_err(|e| output(&opts.out, e))?;
     std::fs::write(staging.path().join("viewer.json"), text).map_err(|e| output(&opts.out, e))?;
@@ -150,5 +175,7 @@ pub fn publish(opts: &PublishOptions) -> Result<PublishSummary> {
         bundle_bytes,
         wasm_bytes,
         files,
+        pois: pois.len(),
+        tours: tours.len(),
     })
 }

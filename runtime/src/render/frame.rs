@@ -154,23 +154,7 @@ impl Renderer {
         let buf =
             self.gpu.buffer("pick", 256, wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST)?;
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-        enc.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &view.targets.distance,
-                mip_level: 0,
-                origin: wgpu::Origin3d { x, y, z: 0 },
-                aspect: wgpu::TextureAspect::All,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buf,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(256),
-                    rows_per_image: Some(1),
-                },
-            },
-            wgpu::Extent3d { width: 1, height: 1, depth_or_array_layers: 1 },
-        );
+        crate::render::probe::copy_distance(&mut enc, &view.targets.distance, (x, y), &buf, 0);
         self.gpu.queue.submit([enc.finish()]);
         let b = self.gpu.read_buffer(&buf, 4)?;
         // The G-buffer packs the f32's bits into RGBA8 (packing.wgsl); cleared pixels are 0.

@@ -8,6 +8,7 @@ mod light;
 mod params;
 pub mod pool;
 pub mod present;
+pub mod probe;
 pub mod renderer;
 pub(crate) mod shadow_queue;
 mod still;

@@ -38,15 +38,8 @@ pub struct Spot {
     pub outer_angle_rad: f32,
 }
 
-/// A named viewpoint in frame coordinates.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SceneCamera {
-    pub name: String,
-    pub eye_m: Vec3,
-    pub look_at_m: Vec3,
-    pub up: Vec3,
-    pub fov_y_deg: f32,
-}
+/// Named viewpoints live with the points of interest and tours (story.rs).
+pub use crate::scene::story::SceneCamera;
 
 /// Attributes of one leaf for [`SceneData::from_voxels`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -76,6 +69,9 @@ pub struct SceneData {
     pub tile_surfels: Vec<std::ops::Range<u32>>,
     pub lights: Vec<SceneLight>,
     pub cameras: Vec<SceneCamera>,
+    /// Points of interest and guided tours (story.rs).
+    pub pois: Vec<crate::scene::story::ScenePoi>,
+    pub tours: Vec<crate::scene::story::SceneTour>,
     /// Environment radiance as 9 real SH coefficients (RGB, world axes, which the frame shares),
     /// scaled by the scene's environment intensity; None without an environment map.
     pub environment_sh: Option<[[f32; 3]; 9]>,

@@ -50,6 +50,8 @@ impl SceneData {
         out.push_environment(pkg, &scene)?;
         out.apply_materials(&scene)?;
         out.push_cameras(&scene);
+        (out.pois, out.tours) =
+            crate::scene::story::in_frame(out.frame_origin_m, &scene.pois, &scene.tours, &scene.cameras);
         out.rock = match (rock, stored_rock) {
             (Some(rock), _) => rock,
             (None, Some(bricks)) => RockTable::from_bricks(bricks),

@@ -1,9 +1,11 @@
 //! The scene as the GPU will hold it, built on the CPU: a package's tiles, nodes, leaves, surfels,
 //! lights and environment in one f32 frame ([`data`]), the rock behind the walls ([`rock`]), each
-//! tile's coarse and far levels ([`coarse`]) and the constant-time tile lookup ([`tile_index`]).
+//! tile's coarse and far levels ([`coarse`]), the constant-time tile lookup ([`tile_index`]) and
+//! the points of interest and tours ([`story`]).
 
 pub mod coarse;
 pub mod data;
 mod load;
 pub mod rock;
+pub mod story;
 pub mod tile_index;

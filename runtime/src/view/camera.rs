@@ -147,6 +147,25 @@ impl Nav {
         self.pitch_rad = (self.pitch_rad - dy * k).clamp(-1.5, 1.5);
     }
 
+    /// A two-finger gesture on a touch screen: fingers spread by `scale` (2: twice as far
+    /// apart) move the eye forward, as far as a second's flight for each doubling; the fingers'
+    /// midpoint moving by `(dx, dy)` pixels of a `height_px` tall view pans the eye with them
+    /// (a full view's height: a second's flight), right and up as the fingers go left and down,
+    /// as a map under the fingers would.
+    pub fn pinch(&mut self, scale: f32, dx: f32, dy: f32, height_px: f32) {
+        if !(scale.is_finite() && scale > 0.0 && dx.is_finite() && dy.is_finite()) {
+            return;
+        }
+        if self.orbit.is_some() {
+            self.fly();
+        }
+        let f = self.forward();
+        let right = f.cross(Vec3::Z).normalize_or(Vec3::X);
+        let up = right.cross(f);
+        let per_px = self.speed_m_s / height_px.max(1.0);
+        self.eye_m += f * (scale.log2() * self.speed_m_s) - right * (dx * per_px) + up * (dy * per_px);
+    }
+
     /// A turn of the wheel by `lines` (up positive): flying speed, or in orbit, the distance.
     pub fn wheel(&mut self, lines: f32) {
         match &mut self.orbit {
@@ -211,6 +230,23 @@ pub(crate) fn sees_box_grown(view_proj: &Mat4, lo: Vec3, hi: Vec3, grow_ndc: Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn spreading_two_fingers_moves_forward_and_dragging_them_pans() {
+        let c = Camera { eye_m: Vec3::ZERO, look_at_m: Vec3::X, up: Vec3::Z, fov_y_deg: 60.0 };
+        let mut n = Nav::from_camera(&c, 2.0);
+        n.pinch(2.0, 0.0, 0.0, 600.0);
+        assert!((n.camera().eye_m - Vec3::new(2.0, 0.0, 0.0)).length() < 1e-5, "{}", n.camera().eye_m);
+        n.pinch(0.5, 0.0, 0.0, 600.0);
+        assert!(n.camera().eye_m.length() < 1e-5, "pinching in comes back");
+        // Fingers to the left and down by a full view: the eye goes right (-y when looking
+        // along +x) and up by a second's flight.
+        n.pinch(1.0, -600.0, 600.0, 600.0);
+        assert!((n.camera().eye_m - Vec3::new(0.0, -2.0, 2.0)).length() < 1e-4, "{}", n.camera().eye_m);
+        let before = n.camera();
+        n.pinch(f32::NAN, 1.0, 1.0, 600.0);
+        assert_eq!(n.camera(), before, "a NaN gesture changes nothing");
+    }
 
     #[test]
     fn a_box_is_culled_only_when_wholly_outside_the_view() {

@@ -1,0 +1,20 @@
+//! The viewer's one error type, shown in the page as it is.
+
+use wasm_bindgen::JsError;
+
+/// What can go wrong in the viewer, shown in the page as it is.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("fetching {url}: {problem}")]
+    Fetch { url: String, problem: String },
+    #[error(transparent)]
+    Runtime(#[from] grotto_runtime::Error),
+    #[error(transparent)]
+    Package(#[from] grotto_format::Error),
+    #[error("{0}")]
+    Setting(String),
+}
+
+pub(crate) fn to_js(e: Error) -> JsError {
+    JsError::new(&e.to_string())
+}

@@ -1,0 +1,141 @@
+//! What the page and the viewer say to each other: the options the page passes in (viewer.json's,
+//! under the address's query and hash) and the status each frame hands back (the panel, the
+//! ready marker, a test's checks).
+
+use grotto_runtime::settings::{Quality, Settings, ViewMode};
+use grotto_runtime::view::frame_target::Traded;
+use serde::{Deserialize, Serialize};
+
+use crate::error::Error;
+
+use crate::story::{LabelStatus, MeasureStatus, TourStatus};
+
+/// What the page asks for (JSON; every field optional): the query string's values, over
+/// `viewer.json`'s.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Options {
+    /// A camera named in the package (default: its first, else a view framed on the data).
+    pub camera: Option<String>,
+    /// The rendered image's size (default: the canvas's).
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    /// fast, balanced, high (as `grotto render --quality`).
+    pub quality: Option<String>,
+    pub bounces: Option<u32>,
+    /// Fixed exposure (default: automatic, from the frame once the light has converged).
+    pub exposure: Option<f32>,
+    /// Tile budget on the GPU in MB (default: half the largest buffer the adapter allows, at
+    /// most 2 GiB, as natively).
+    pub gpu_memory_mb: Option<u64>,
+    /// Most bytes of finer tiles one streaming step uploads (default 32 MB).
+    pub step_mb: Option<u64>,
+    /// lit, albedo, normals, light, level, scan.
+    pub view: Option<String>,
+    /// Shadow maps for the brightest lights (default true, as natively).
+    pub shadows: Option<bool>,
+    /// Draw the convergence bar along the bottom (default true; a screenshot compared with
+    /// `grotto render` turns it off).
+    pub bar: Option<bool>,
+    /// Frames a second to hold while the camera moves, by drawing at a smaller scale and then
+    /// thinning far surfels harder (view/frame_target.rs; default 60, 0: none).
+    pub target_fps: Option<f64>,
+    /// Milliseconds a frame may spend on shadow faces out of date after tiles arrive (default 8;
+    /// 0: every face at once): the rest follow over the next frames (render/shadow_queue.rs).
+    pub shadow_ms: Option<f32>,
+    /// Blend the discs of the front surface at each pixel (default true, as natively; false:
+    /// the front-most disc alone, the picture before issue 44).
+    pub splat_blend: Option<bool>,
+    /// Samples a pixel gathered at rest, one a frame, each jittered within the pixel and
+    /// averaged (anti-aliasing; default 8 as natively, 1: none).
+    pub samples: Option<u32>,
+    /// The camera to open on as a view link carries it (`x,y,z,heading,pitch,fov`: world
+    /// metres and degrees, grotto_runtime::view::story::view_link), over `camera`: what a shared
+    /// address restores.
+    pub at: Option<String>,
+    /// Points of interest and tours (`{"pois": [...], "tours": [...]}`, the package scene's
+    /// shape), instead of the package's: what `grotto publish --story` writes to viewer.json.
+    pub story: Option<serde_json::Value>,
+}
+
+/// The status of a frame, for the page's panel and the ready marker (JSON).
+#[derive(Clone, Debug, Serialize)]
+pub struct Status {
+    /// "converging", or "ready": the light has converged, the tiles the view wants are resident,
+    /// no fetch is under way and the still frame's anti-aliasing samples are all in (what a test
+    /// waits for).
+    pub state: &'static str,
+    pub adapter: String,
+    pub package_bytes: u64,
+    /// Bytes fetched so far, and before the first frame.
+    pub fetched_bytes: u64,
+    pub first_frame_bytes: u64,
+    pub requests: u32,
+    pub fetching: bool,
+    /// Tiles full, coarse, far, not held.
+    pub tiles: [usize; 4],
+    pub bounces_done: u32,
+    pub bounce_budget: u32,
+    pub light_fraction: f32,
+    pub converged: bool,
+    pub frames: u32,
+    pub camera: String,
+    pub view: &'static str,
+    pub exposure: f32,
+    pub width: u32,
+    pub height: u32,
+    /// The server sent the whole file to a range request.
+    pub no_ranges: bool,
+    /// Milliseconds from opening to the first frame, and to "ready".
+    pub first_frame_ms: f64,
+    pub ready_ms: Option<f64>,
+    /// What the effect plan says of propagation.
+    pub light_plan: String,
+    /// GPU milliseconds of the last plain frame (no shadow maps or injection), and what the
+    /// frame-time target trades while moving (None: no target).
+    pub frame_ms: Option<f64>,
+    pub traded: Option<Traded>,
+    /// Points of interest in view (canvas pixels), whether rock hides each, and whether that is
+    /// known for this very view (a probe of its G-buffer has arrived).
+    pub labels: Vec<LabelStatus>,
+    pub labels_current: bool,
+    pub measure: MeasureStatus,
+    pub tour: Option<TourStatus>,
+    /// The camera as a view link (the page's address carries it).
+    pub link: String,
+    /// GPU memory the renderer holds, and the viewer's own (wasm) memory: what the page states
+    /// and a long visit's benchmark samples.
+    pub gpu_bytes: u64,
+    pub wasm_bytes: u64,
+}
+
+pub(crate) fn parse_options(json: &str) -> Result<Options, Error> {
+    if json.trim().is_empty() {
+        return Ok(Options::default());
+    }
+    serde_json::from_str(json).map_err(|e| Error::Setting(format!("viewer options {json}: {e}")))
+}
+
+pub(crate) fn settings_of(o: &Options) -> Result<Settings, Error> {
+    let quality = match &o.quality {
+        Some(p) => Quality::parse(p)
+            .ok_or_else(|| Error::Setting(format!("unknown quality {p:?} (fast, balanced, high)")))?,
+        None => Quality::Balanced,
+    };
+    let mut s = Settings::preset(quality);
+    if let Some(b) = o.bounces {
+        s.bounces = b;
+    }
+    if let Some(on) = o.shadows {
+        s.shadows = on;
+    }
+    if let Some(v) = &o.view {
+        s.view = ViewMode::parse(v).ok_or_else(|| Error::Setting(format!("unknown view {v:?}")))?;
+    }
+    s.exposure = o.exposure.unwrap_or(1.0);
+    s.shadow_frame_ms = o.shadow_ms.unwrap_or(8.0);
+    s.splat_blend = o.splat_blend.unwrap_or(true);
+    s.still_samples = o.samples.unwrap_or(grotto_runtime::passes::resolve::DEFAULT_STILL_SAMPLES);
+    s.validate()?;
+    Ok(s)
+}
