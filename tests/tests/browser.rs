@@ -151,6 +151,14 @@ impl Browser {
         self.call("POST", "/execute/sync", Some(&json!({"script": script, "args": []})))
     }
 
+    /// The canvas as the page shows it (PNG through WebDriver's element screenshot).
+    fn screenshot_canvas(&self) -> image::RgbaImage {
+        let id = self.canvas();
+        let png = self.call("GET", &format!("/element/{id}/screenshot"), None);
+        let png = base64::engine::general_purpose::STANDARD.decode(png.as_str().unwrap()).unwrap();
+        image::load_from_memory(&png).unwrap().to_rgba8()
+    }
+
     /// A DevTools protocol command through chromedriver (touch emulation, touch events).
     fn cdp(&self, cmd: &str, params: Value) -> Value {
         self.call("POST", "/goog/cdp/execute", Some(&json!({"cmd": cmd, "params": params})))
@@ -330,12 +338,7 @@ fn a_published_site_streams_the_package_by_ranges_and_shows_what_grotto_render_s
     let (state, status) = browser.wait_for_marker(Duration::from_secs(300));
     assert_eq!(state, "ready", "{status}");
     eprintln!("viewer status: {status}");
-    let canvas =
-        browser.call("POST", "/element", Some(&json!({"using": "css selector", "value": "#canvas"})));
-    let id = canvas.as_object().and_then(|o| o.values().next()).and_then(Value::as_str).unwrap().to_owned();
-    let png = browser.call("GET", &format!("/element/{id}/screenshot"), None);
-    let png = base64::engine::general_purpose::STANDARD.decode(png.as_str().unwrap()).unwrap();
-    let shot = image::load_from_memory(&png).unwrap().to_rgba8();
+    let shot = browser.screenshot_canvas();
     drop(browser);
     assert_eq!(shot.dimensions(), (W, H), "the canvas shows the frame pixel for pixel");
 
@@ -379,41 +382,57 @@ fn a_published_site_streams_the_package_by_ranges_and_shows_what_grotto_render_s
     );
 
     // The same camera through `grotto render` (lavapipe), compared through the one tolerance.
-    let native = dir.path().join("native.png");
+    let exposure = status["exposure"].as_f64().unwrap_or(0.0);
+    assert_matches_render(
+        &shot,
+        &package,
+        CameraChoice::Named("chamber".into()),
+        grotto_runtime::passes::resolve::DEFAULT_STILL_SAMPLES,
+        exposure,
+        None,
+        "browser",
+    );
+}
+
+/// `shot` (a canvas screenshot, W x H) against `grotto render` of `camera` on lavapipe with the
+/// test's settings and `samples` a pixel, through the golden tolerance per 2 x 2 block (two
+/// rasterisers resolve depth ties between overlapping surfels differently pixel by pixel;
+/// `golden::block_mean` has the measurements). On failure both images are kept as `name`.
+fn assert_matches_render(
+    shot: &image::RgbaImage,
+    package: &Path,
+    camera: CameraChoice,
+    samples: u32,
+    page_exposure: f64,
+    exposure: Option<f32>,
+    name: &str,
+) {
+    let keep = Path::new(env!("CARGO_TARGET_TMPDIR"));
+    let native = keep.join(format!("{name}-native.png"));
     let opts = RenderOptions {
-        camera: CameraChoice::Named("chamber".into()),
+        camera,
         width: W,
         height: H,
         settings: settings(),
         gpu: grotto_tests::lavapipe(),
-        // The page anti-aliases at rest with its default samples a pixel: the same here.
-        samples: grotto_runtime::passes::resolve::DEFAULT_STILL_SAMPLES,
-        ..RenderOptions::defaults(package.clone(), native.clone())
+        samples,
+        exposure,
+        ..RenderOptions::defaults(package.to_path_buf(), native.clone())
     };
     let rendered = render_job::run(&opts, |_| {}).unwrap();
     let expected = image::open(&native).unwrap().to_rgba8();
-    // Two rasterisers: compared per 2 x 2 block (golden::block_mean says why); per pixel too,
-    // for the record.
     let px = |img: &image::RgbaImage| img.pixels().map(|p| p.0).collect::<Vec<[u8; 4]>>();
-    let per_pixel = golden::diff(&px(&shot), &px(&expected));
+    let per_pixel = golden::diff(&px(shot), &px(&expected));
     let d =
-        golden::diff(&golden::block_mean(&px(&shot), W, H, 2), &golden::block_mean(&px(&expected), W, H, 2));
+        golden::diff(&golden::block_mean(&px(shot), W, H, 2), &golden::block_mean(&px(&expected), W, H, 2));
     eprintln!(
-        "browser vs grotto render: per 2x2 block mean {:.2}, p99 {}, max {}; per pixel mean {:.2}, p99 {}; \
-         exposure {} vs {}",
-        d.mean_abs,
-        d.p99_abs,
-        d.max_abs,
-        per_pixel.mean_abs,
-        per_pixel.p99_abs,
-        status["exposure"],
-        rendered.exposure
+        "{name}: browser vs grotto render: per 2x2 block mean {:.2}, p99 {}, max {}; per pixel mean {:.2}, \
+         p99 {}; exposure {page_exposure} vs {}",
+        d.mean_abs, d.p99_abs, d.max_abs, per_pixel.mean_abs, per_pixel.p99_abs, rendered.exposure
     );
     if !golden::within_tolerance(&d) {
-        let keep = Path::new(env!("CARGO_TARGET_TMPDIR"));
-        shot.save(keep.join("browser.png")).unwrap();
-        expected.save(keep.join("browser-native.png")).unwrap();
-        panic!("the browser's frame differs from grotto render's: {d:?} (both in {})", keep.display());
+        shot.save(keep.join(format!("{name}.png"))).unwrap();
+        panic!("{name}: the browser's frame differs from grotto render's: {d:?} (both in {})", keep.display());
     }
 }
 
@@ -679,5 +698,46 @@ fn a_published_room_labels_measures_shares_and_answers_touch() {
     let flown: f64 = (0..3).map(|a| (after[a] - before[a]).powi(2)).sum::<f64>().sqrt();
     eprintln!("double tap: {before:?} -> {after:?}");
     assert!(flown > 0.5, "a double tap flew {flown} m");
+
+    // The tour, played to its end from the panel's buttons: at each stop, once the light has
+    // converged (the dwell has begun), paused, and the canvas compared with `grotto render` of
+    // the stop's camera.
+    let click = |id: &str| browser.eval(&format!("document.getElementById('{id}').click(); return 0"));
+    click("tourplay");
+    for (stop, camera) in [(0u64, "niche"), (1, "hall")] {
+        let t = browser.wait_for(
+            &format!(
+                "const t = window.grottoStatus && window.grottoStatus.tour; \
+                 return t && t.stop === {stop} && t.phase === 'dwelling' ? JSON.stringify(t) : null"
+            ),
+            Duration::from_secs(300),
+        );
+        click("tourplay");
+        browser.wait_for(
+            "const t = window.grottoStatus && window.grottoStatus.tour; return t && t.paused ? '1' : null",
+            Duration::from_secs(30),
+        );
+        let (state, status) = browser.wait_for_marker(Duration::from_secs(300));
+        assert_eq!(state, "ready", "{status}");
+        assert_eq!(status["tour"]["stop"], stop, "paused at the stop: {status}");
+        let caption = browser.eval("return document.getElementById('caption').innerText");
+        eprintln!("tour at stop {stop}: {t}; caption {caption}");
+        assert!(caption.as_str().unwrap().contains(&format!("stop {} of 2", stop + 1)), "{caption}");
+        // The canvas alone: the labels and the caption drawn over it are the page's, not the
+        // renderer's. The page keeps its exposure as the view changes (automatic exposure is set
+        // as tiles arrive): the render takes the page's.
+        browser.eval("for (const id of ['labels', 'caption', 'overlay']) document.getElementById(id).style.visibility = 'hidden'; return 0");
+        let shot = browser.screenshot_canvas();
+        browser.eval("for (const id of ['labels', 'caption', 'overlay']) document.getElementById(id).style.visibility = ''; return 0");
+        let exposure = status["exposure"].as_f64().unwrap_or(0.0);
+        let choice = CameraChoice::Named(camera.into());
+        assert_matches_render(&shot, &package, choice, 1, exposure, Some(exposure as f32), camera);
+        click("tourplay");
+    }
+    browser.wait_for(
+        "const t = window.grottoStatus && window.grottoStatus.tour; \
+         return t && t.phase === 'finished' ? JSON.stringify(t) : null",
+        Duration::from_secs(120),
+    );
     drop(browser);
 }

@@ -116,3 +116,46 @@ fn a_camera_of_a_view_link_renders_what_the_named_camera_does() {
     let px = Vec2::new((qa.x - qb.x) * W as f32 / 2.0, (qa.y - qb.y) * H as f32 / 2.0).length();
     assert!(px < 0.02, "a point on the far wall moves {px} px between the named camera and its link");
 }
+
+#[test]
+fn grotto_render_draws_a_tour_a_frame_a_stop_or_as_a_film() {
+    use grotto_runtime::cli::render_job::{self, RenderOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let package = room::room_package(dir.path()).unwrap();
+    let render = |fps: Option<f32>, out: &str| {
+        let opts = RenderOptions {
+            tour: Some("walk".into()),
+            tour_fps: fps,
+            width: 64,
+            height: 48,
+            settings: Settings { bounces: 0, ..Settings::preset(Quality::Fast) },
+            gpu: grotto_tests::lavapipe(),
+            ..RenderOptions::defaults(package.clone(), dir.path().join(out))
+        };
+        render_job::run(&opts, |_| {})
+    };
+    let stops = render(None, "stop.png").unwrap();
+    assert_eq!(stops.images.len(), 2, "{:?}", stops.images);
+    // At 4 frames a second: the niche held 3 s (12), a 1.5 s flight (5 between), the hall 3 s (12).
+    let film = render(Some(4.0), "film.png").unwrap();
+    assert_eq!(film.images.len(), 12 + 5 + 12);
+    // The first stop's image is the niche's, as `--camera niche` (a point of interest) draws it.
+    let niche = RenderOptions {
+        camera: grotto_runtime::view::framing::CameraChoice::Named("niche".into()),
+        width: 64,
+        height: 48,
+        settings: Settings { bounces: 0, ..Settings::preset(Quality::Fast) },
+        gpu: grotto_tests::lavapipe(),
+        ..RenderOptions::defaults(package.clone(), dir.path().join("niche.png"))
+    };
+    render_job::run(&niche, |_| {}).unwrap();
+    let a = image::open(&stops.images[0]).unwrap().to_rgba8();
+    let b = image::open(dir.path().join("niche.png")).unwrap().to_rgba8();
+    assert_eq!(a.as_raw(), b.as_raw(), "the tour's first stop is the niche's view");
+    let err = render_job::run(
+        &RenderOptions { tour: Some("nope".into()), ..RenderOptions::defaults(package, dir.path().join("x.png")) },
+        |_| {},
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("no tour named \"nope\"") && err.to_string().contains("walk"), "{err}");
+}

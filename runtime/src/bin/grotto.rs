@@ -156,8 +156,8 @@ fn publish(a: PublishArgs) -> anyhow::Result<ExitCode> {
 #[derive(clap::Args, Debug)]
 struct RenderArgs {
     package: PathBuf,
-    /// A camera named in the package (default: its first camera; without one, a view framed on
-    /// the data, printed so it can be reused with --eye/--look-at).
+    /// A camera or point of interest named in the package (default: its first camera; without
+    /// one, a view framed on the data, printed so it can be reused with --eye/--look-at).
     #[arg(long, conflicts_with_all = ["eye", "path"])]
     camera: Option<String>,
     /// Eye position, world metres "x,y,z" (with --look-at); negative numbers as written.
@@ -183,6 +183,14 @@ struct RenderArgs {
     /// Frames along --path.
     #[arg(long, default_value_t = 30)]
     frames: u32,
+    /// A tour of the package (grotto publish's page plays it): an image a stop, what a visitor
+    /// sees there once the light has converged; with --tour-fps, the tour as a film (flights
+    /// and dwells at that many frames a second).
+    #[arg(long, conflicts_with_all = ["camera", "eye", "path"])]
+    tour: Option<String>,
+    /// Frames a second of a --tour film.
+    #[arg(long, requires = "tour")]
+    tour_fps: Option<f32>,
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "800x600", value_parser = grotto_runtime::cli::render_job::parse_size)]
     size: (u32, u32),
@@ -405,6 +413,8 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
         package: a.package.clone(),
         camera,
         path: a.path.clone(),
+        tour: a.tour.clone(),
+        tour_fps: a.tour_fps,
         frames: a.frames,
         width: a.size.0,
         height: a.size.1,

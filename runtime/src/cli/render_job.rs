@@ -51,6 +51,10 @@ pub struct RenderOptions {
     pub camera: CameraChoice,
     /// Named cameras to fly through; with `frames`, renders a sequence.
     pub path: Vec<String>,
+    /// A tour of the package (`--tour NAME`): an image a stop, or with `tour_fps` the tour as a
+    /// film (view/story.rs [`crate::view::story::tour_cameras`]).
+    pub tour: Option<String>,
+    pub tour_fps: Option<f32>,
     pub frames: u32,
     pub width: u32,
     pub height: u32,
@@ -113,6 +117,8 @@ impl RenderOptions {
             package,
             camera: CameraChoice::Default,
             path: Vec::new(),
+            tour: None,
+            tour_fps: None,
             frames: 30,
             width: 800,
             height: 600,
@@ -312,7 +318,17 @@ pub(crate) fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
     let splat = opts.settings.splat_scale;
     let mut notes = Vec::new();
     let mut framed = None;
-    let cameras: Vec<Camera> = if opts.path.is_empty() {
+    let cameras: Vec<Camera> = if let Some(name) = &opts.tour {
+        let tour = scene.tours.iter().find(|t| &t.name == name).ok_or_else(|| {
+            let names: Vec<&str> = scene.tours.iter().map(|t| t.name.as_str()).collect();
+            Error::Camera(format!(
+                "no tour named {name:?} in {} (it has: {})",
+                scene.name,
+                if names.is_empty() { "none".into() } else { names.join(", ") }
+            ))
+        })?;
+        crate::view::story::tour_cameras(tour, opts.tour_fps)
+    } else if opts.path.is_empty() {
         let (c, f) = resolve_camera(&scene, &opts.camera, aspect, splat)?;
         notes.extend(f.as_ref().map(|f| framing_note(&scene, f)));
         framed = f;

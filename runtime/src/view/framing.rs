@@ -610,18 +610,29 @@ pub fn resolve_camera(
     splat_scale: f32,
 ) -> Result<(Camera, Option<Framing>)> {
     match choice {
-        CameraChoice::Named(name) => {
-            scene.cameras.iter().find(|c| &c.name == name).map(|c| (Camera::from_scene(c), None)).ok_or_else(
-                || {
-                    let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
-                    Error::Camera(format!(
-                        "no camera named {name:?} in {} (it has: {})",
-                        scene.name,
-                        if names.is_empty() { "none".into() } else { names.join(", ") }
-                    ))
-                },
-            )
-        }
+        CameraChoice::Named(name) => scene
+            .cameras
+            .iter()
+            .find(|c| &c.name == name)
+            .map(|c| (Camera::from_scene(c), None))
+            // A point of interest's camera, as the viewers fly to it.
+            .or_else(|| {
+                let p = scene.pois.iter().find(|p| &p.name == name)?;
+                Some((crate::view::story::stop_camera(&p.camera), None))
+            })
+            .ok_or_else(|| {
+                let names: Vec<&str> = scene
+                    .cameras
+                    .iter()
+                    .map(|c| c.name.as_str())
+                    .chain(scene.pois.iter().map(|p| p.name.as_str()))
+                    .collect();
+                Error::Camera(format!(
+                    "no camera or point of interest named {name:?} in {} (it has: {})",
+                    scene.name,
+                    if names.is_empty() { "none".into() } else { names.join(", ") }
+                ))
+            }),
         CameraChoice::Explicit { eye_m, look_at_m, up, fov_y_deg } => {
             let frame = DVec3::from_array(scene.frame_origin_m);
             Ok((

@@ -208,6 +208,25 @@ impl TourPlayer {
     }
 }
 
+/// The cameras `grotto render --tour` draws: one a stop (the view a visitor sees there once the
+/// light has converged), or with `fps`, the tour as a film: each flight at `fps` frames a second
+/// (eased as the viewers fly it) and each stop held for its dwell.
+pub fn tour_cameras(tour: &SceneTour, fps: Option<f32>) -> Vec<Camera> {
+    let stops: Vec<Camera> = tour.stops.iter().map(|s| stop_camera(&s.camera)).collect();
+    let Some(fps) = fps.filter(|f| f.is_finite() && *f > 0.0) else { return stops };
+    let mut out = Vec::new();
+    for (i, s) in tour.stops.iter().enumerate() {
+        if i > 0 {
+            let f = Flight::new(stops[i - 1], stops[i], s.flight_s);
+            let n = (f.duration_s * fps).ceil().max(1.0) as u32;
+            out.extend((1..n).map(|k| f.at(k as f32 / n as f32)));
+        }
+        let hold = (s.dwell_s * fps).round().max(1.0) as u32;
+        out.extend(std::iter::repeat_n(stops[i], hold as usize));
+    }
+    out
+}
+
 /// A stop's or a point of interest's camera as the viewers show it: its eye and view direction
 /// with z up, as fly controls hold it ([`Nav::from_camera`]), so arriving and then looking
 /// around does not jump.
@@ -380,6 +399,18 @@ mod tests {
         // Stepping back flies to the first stop again.
         p.step(&t, -1, stop_camera(&t.stops[1].camera));
         assert_eq!((p.stop, p.phase), (0, TourPhase::Flying));
+    }
+
+    #[test]
+    fn a_tour_renders_a_frame_a_stop_or_a_film_of_its_flights_and_dwells() {
+        let t = tour();
+        let stops = tour_cameras(&t, None);
+        assert_eq!(stops, [stop_camera(&t.stops[0].camera), stop_camera(&t.stops[1].camera)]);
+        // 10 fps: stop 0 held 2 s (20 frames), a 1 s flight (9 frames between), stop 1 held 1 s.
+        let film = tour_cameras(&t, Some(10.0));
+        assert_eq!(film.len(), 20 + 9 + 10);
+        assert!(film[..20].iter().all(|c| *c == stops[0]) && film[29..].iter().all(|c| *c == stops[1]));
+        assert!(film[20..29].windows(2).all(|w| w[1].eye_m.x > w[0].eye_m.x), "the flight moves on");
     }
 
     #[test]
