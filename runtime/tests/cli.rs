@@ -326,6 +326,7 @@ fn publish_writes_a_site_replaces_it_whole_and_refuses_what_it_cannot_serve() {
         "centre",
         "--quality",
         "fast",
+        "--no-picture",
         "--json",
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -339,7 +340,7 @@ fn publish_writes_a_site_replaces_it_whole_and_refuses_what_it_cannot_serve() {
     assert_eq!(config["options"]["quality"], "fast");
     // Published again, the site is replaced whole: a stray file of the old one is gone.
     std::fs::write(site.join("stray.txt"), "old").unwrap();
-    assert!(grotto(&["publish", p, "--out", s, "--bundle", b]).status.success());
+    assert!(grotto(&["publish", p, "--out", s, "--bundle", b, "--no-picture"]).status.success());
     assert!(!site.join("stray.txt").exists() && site.join("index.html").is_file());
 
     // No bundle: a clear error, and the site that was there stays.
@@ -397,8 +398,18 @@ fn publish_adds_a_story_file_to_the_package_and_refuses_one_that_does_not_hold_t
     .unwrap();
     let site = dir.path().join("site");
     let (p, s, b) = (path.to_str().unwrap(), site.to_str().unwrap(), bundle.to_str().unwrap());
-    let out =
-        grotto(&["publish", p, "--out", s, "--bundle", b, "--story", story.to_str().unwrap(), "--json"]);
+    let out = grotto(&[
+        "publish",
+        p,
+        "--out",
+        s,
+        "--bundle",
+        b,
+        "--story",
+        story.to_str().unwrap(),
+        "--no-picture",
+        "--json",
+    ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!((summary["pois"].as_u64(), summary["tours"].as_u64()), (Some(1), Some(1)));
@@ -419,7 +430,17 @@ fn publish_adds_a_story_file_to_the_package_and_refuses_one_that_does_not_hold_t
         ("[[tour]]\nname = \"t\"\n[[tour.stop]]\ncamera = \"centre\"\ndwel_s = 3\n", "dwel_s"),
     ] {
         std::fs::write(&story, text).unwrap();
-        let out = grotto(&["publish", p, "--out", s, "--bundle", b, "--story", story.to_str().unwrap()]);
+        let out = grotto(&[
+            "publish",
+            p,
+            "--out",
+            s,
+            "--bundle",
+            b,
+            "--story",
+            story.to_str().unwrap(),
+            "--no-picture",
+        ]);
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success() && err.contains("story.toml") && err.contains(expected), "{err}");
         let kept: serde_json::Value =

@@ -307,6 +307,7 @@ fn published(
         title: None,
         viewer_options: serde_json::from_value(viewer_options).unwrap(),
         story: None,
+        picture: None,
     })
     .unwrap();
     (summary, serve::serve(&site).unwrap())
@@ -432,28 +433,55 @@ fn assert_matches_render(
     );
     if !golden::within_tolerance(&d) {
         shot.save(keep.join(format!("{name}.png"))).unwrap();
-        panic!("{name}: the browser's frame differs from grotto render's: {d:?} (both in {})", keep.display());
+        panic!(
+            "{name}: the browser's frame differs from grotto render's: {d:?} (both in {})",
+            keep.display()
+        );
     }
 }
 
 #[test]
-fn a_browser_without_webgpu_gets_a_message_not_a_blank_page() {
+fn a_browser_without_webgpu_gets_the_picture_and_the_points_of_interest_not_a_blank_page() {
     let Some((chromium, driver, bundle)) = tools() else { return };
     let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
-    // Any valid package will do: the page stops before fetching it.
-    let package = dir.path().join("tiny.grotto");
-    let params = grotto_preprocess::demo::DemoParams { points: 2_000, ..Default::default() };
-    grotto_preprocess::demo::build(&package, &params).unwrap();
-    let (_, server) = published(dir.path(), &package, bundle, json!({}));
+    let package = grotto_fixtures::room::room_package(dir.path()).unwrap();
+    let site = dir.path().join("site");
+    let summary = publish::publish(&PublishOptions {
+        package: package.clone(),
+        out: site.clone(),
+        bundle: Some(bundle),
+        title: Some("The room".into()),
+        viewer_options: serde_json::Map::new(),
+        story: None,
+        picture: Some(publish::Picture { width: 160, height: 120, gpu: grotto_tests::lavapipe() }),
+    })
+    .unwrap();
+    assert_eq!(summary.picture.as_deref(), Some(publish::PICTURE_FILE));
+    // The picture is the tour's first stop (the niche), as grotto render draws it.
+    let picture = image::open(site.join(publish::PICTURE_FILE)).unwrap().to_rgb8();
+    assert_eq!(picture.dimensions(), (160, 120));
+    let server = serve::serve(&site).unwrap();
     let browser = Browser::start(&chromium, &driver, false);
     browser.call("POST", "/url", Some(&json!({"url": format!("http://127.0.0.1:{}/", server.port)})));
     let (state, _) = browser.wait_for_marker(Duration::from_secs(60));
     assert_eq!(state, "no-webgpu");
     let text = browser.eval("return document.getElementById('message').innerText");
-    assert!(text.as_str().unwrap().contains("no WebGPU"), "{text}");
+    let text = text.as_str().unwrap();
+    assert!(
+        text.contains("no WebGPU") && text.contains("The niche") && text.contains("Behind the pillar"),
+        "{text}"
+    );
+    // The picture arrived and shows (decoded at its size).
+    let shown = browser.wait_for(
+        "const i = document.getElementById('picture'); return i && i.complete && i.naturalWidth ? \
+         JSON.stringify([i.naturalWidth, i.naturalHeight]) : null",
+        Duration::from_secs(30),
+    );
+    assert_eq!(shown, json!([160, 120]));
     let log = server.log.lock().unwrap().clone();
-    assert!(log.iter().all(|s| s.path != "tiny.grotto"), "the package was fetched: {log:?}");
+    assert!(log.iter().all(|s| s.path != "room.grotto"), "the package was fetched: {log:?}");
+    assert!(log.iter().any(|s| s.path == publish::PICTURE_FILE && s.status == 200), "{log:?}");
 }
 
 /// What the page fetched before its first frame, on a package of your choice: the figures in

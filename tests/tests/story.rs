@@ -153,7 +153,10 @@ fn grotto_render_draws_a_tour_a_frame_a_stop_or_as_a_film() {
     let b = image::open(dir.path().join("niche.png")).unwrap().to_rgba8();
     assert_eq!(a.as_raw(), b.as_raw(), "the tour's first stop is the niche's view");
     let err = render_job::run(
-        &RenderOptions { tour: Some("nope".into()), ..RenderOptions::defaults(package, dir.path().join("x.png")) },
+        &RenderOptions {
+            tour: Some("nope".into()),
+            ..RenderOptions::defaults(package, dir.path().join("x.png"))
+        },
         |_| {},
     )
     .unwrap_err();

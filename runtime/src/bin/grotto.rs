@@ -99,6 +99,16 @@ struct PublishArgs {
     /// manifest, docs/manifest.md); one named as one of the package's replaces it.
     #[arg(long)]
     story: Option<PathBuf>,
+    /// Size WIDTHxHEIGHT of the still picture a browser without WebGPU shows (rendered here,
+    /// at the first tour stop or the page's camera).
+    #[arg(long, default_value = "800x600", value_parser = grotto_runtime::cli::render_job::parse_size)]
+    picture: (u32, u32),
+    /// Publish without the still picture (no GPU here to render it).
+    #[arg(long)]
+    no_picture: bool,
+    /// Render the picture on the software rasteriser.
+    #[arg(long)]
+    software: bool,
     /// Machine-readable output.
     #[arg(long)]
     json: bool,
@@ -133,6 +143,11 @@ fn publish(a: PublishArgs) -> anyhow::Result<ExitCode> {
         title: a.title,
         viewer_options,
         story: a.story,
+        picture: (!a.no_picture).then(|| publish::Picture {
+            width: a.picture.0,
+            height: a.picture.1,
+            gpu: grotto_runtime::gpu::GpuOptions { prefer_software: a.software, ..Default::default() },
+        }),
     })?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);

@@ -1,5 +1,5 @@
-//! Writing rendered frames: PNG (the tonemapped sRGB8 image) or OpenEXR (linear f32 radiance), by
-//! extension, atomically (temp file beside the target, then rename), like every grotto output.
+//! Writing rendered frames: PNG (the tonemapped sRGB8 image), JPEG (the same, lossy: a published
+//! site's still picture) or OpenEXR (linear f32 radiance), by extension, atomically (temp file beside the target, then rename), like every grotto output.
 
 use std::io::BufWriter;
 use std::path::Path;
@@ -11,6 +11,7 @@ use crate::render::Frame;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ImageKind {
     Png,
+    Jpeg,
     Exr,
 }
 
@@ -18,20 +19,33 @@ pub enum ImageKind {
 pub fn kind_of(path: &Path) -> Result<ImageKind> {
     match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
         Some("png") => Ok(ImageKind::Png),
+        Some("jpg" | "jpeg") => Ok(ImageKind::Jpeg),
         Some("exr") => Ok(ImageKind::Exr),
         _ => Err(Error::Output {
             path: path.display().to_string(),
-            reason: "unknown image format (use .png or .exr)".into(),
+            reason: "unknown image format (use .png, .jpg or .exr)".into(),
         }),
     }
 }
 
-/// Writes `frame` to `path` (.png or .exr).
+/// Writes `frame` to `path` (.png, .jpg or .exr).
 pub fn write_frame(frame: &Frame, path: &Path) -> Result<()> {
     match kind_of(path)? {
         ImageKind::Png => write_png(frame, path),
+        ImageKind::Jpeg => write_jpeg(frame, path),
         ImageKind::Exr => write_exr(frame, path),
     }
+}
+
+/// Quality 88: a cave's soft gradients without visible blocks at a tenth of the PNG's bytes.
+fn write_jpeg(frame: &Frame, path: &Path) -> Result<()> {
+    use image::ImageEncoder;
+    let rgb: Vec<u8> = frame.ldr.iter().flat_map(|p| [p[0], p[1], p[2]]).collect();
+    atomically(path, |file| {
+        let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(BufWriter::new(file), 88);
+        enc.write_image(&rgb, frame.width, frame.height, image::ExtendedColorType::Rgb8)
+            .map_err(|e| output_error(path, e))
+    })
 }
 
 fn write_png(frame: &Frame, path: &Path) -> Result<()> {

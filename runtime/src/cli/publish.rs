@@ -8,6 +8,9 @@
 use std::path::{Path, PathBuf};
 
 use grotto_format::Package;
+
+use crate::cli::render_job::{self, RenderOptions};
+use crate::view::framing::CameraChoice;
 use grotto_format::story::{self, Poi, StorySpec, Tour};
 use serde::Serialize;
 
@@ -30,7 +33,21 @@ pub struct PublishOptions {
     pub viewer_options: serde_json::Map<String, serde_json::Value>,
     /// Points of interest and tours (TOML) added to the package's: [`story_of`].
     pub story: Option<PathBuf>,
+    /// The still picture a browser without WebGPU shows (None: none).
+    pub picture: Option<Picture>,
 }
+
+/// The still picture `grotto publish` renders for browsers without WebGPU: the first tour's first
+/// stop, else the camera the page opens on, at the page's quality and bounces, anti-aliased.
+#[derive(Clone, Debug)]
+pub struct Picture {
+    pub width: u32,
+    pub height: u32,
+    pub gpu: crate::gpu::GpuOptions,
+}
+
+/// The picture's file in the site.
+pub const PICTURE_FILE: &str = "picture.jpg";
 
 /// What was written.
 #[derive(Clone, Debug, Serialize)]
@@ -44,6 +61,74 @@ pub struct PublishSummary {
     /// Points of interest and tours the page offers (the package's and the story file's).
     pub pois: usize,
     pub tours: usize,
+    /// The still picture for browsers without WebGPU, and the seconds it took to render.
+    pub picture: Option<String>,
+    pub picture_s: f64,
+}
+
+/// Where the still picture is taken from: the first tour's first stop, else the page's camera
+/// (`options["camera"]`), else the package's first camera or a framed view.
+fn picture_camera(
+    pois: &[Poi],
+    tours: &[Tour],
+    options: &serde_json::Map<String, serde_json::Value>,
+) -> CameraChoice {
+    let z_up = [0.0, 0.0, 1.0];
+    if let Some(stop) = tours.first().and_then(|t| t.stops.first()) {
+        if let Some(p) = stop.poi.as_ref().and_then(|n| pois.iter().find(|p| &p.name == n)) {
+            return CameraChoice::Explicit {
+                eye_m: p.eye_m,
+                look_at_m: p.look_at_m,
+                up: z_up,
+                fov_y_deg: p.fov_y_deg,
+            };
+        }
+        if let Some(c) = &stop.camera {
+            return CameraChoice::Named(c.clone());
+        }
+        if let (Some(eye_m), Some(look_at_m)) = (stop.eye_m, stop.look_at_m) {
+            return CameraChoice::Explicit {
+                eye_m,
+                look_at_m,
+                up: z_up,
+                fov_y_deg: stop.fov_y_deg.unwrap_or(60.0),
+            };
+        }
+    }
+    match options.get("camera").and_then(|c| c.as_str()) {
+        Some(name) => CameraChoice::Named(name.to_owned()),
+        None => CameraChoice::Default,
+    }
+}
+
+/// Renders the still picture into `dir` (the page's quality and bounces, 8 samples a pixel).
+fn render_picture(opts: &PublishOptions, picture: &Picture, camera: CameraChoice, dir: &Path) -> Result<()> {
+    use crate::settings::{Quality, Settings};
+    let o = &opts.viewer_options;
+    let quality =
+        o.get("quality").and_then(|q| q.as_str()).and_then(Quality::parse).unwrap_or(Quality::Balanced);
+    let mut settings = Settings::preset(quality);
+    if let Some(b) = o.get("bounces").and_then(serde_json::Value::as_u64) {
+        settings.bounces = b.min(64) as u32;
+    }
+    let render = RenderOptions {
+        camera,
+        width: picture.width,
+        height: picture.height,
+        settings,
+        exposure: o.get("exposure").and_then(serde_json::Value::as_f64).map(|e| e as f32),
+        gpu: picture.gpu.clone(),
+        samples: crate::passes::resolve::DEFAULT_STILL_SAMPLES,
+        ..RenderOptions::defaults(opts.package.clone(), dir.join(PICTURE_FILE))
+    };
+    render_job::run(&render, |_| {}).map(drop).map_err(|e| {
+        output(
+            &opts.package,
+            format!(
+                "the still picture for browsers without WebGPU: {e} (--no-picture publishes without one)"
+            ),
+        )
+    })
 }
 
 /// The story a site shows: the package's points of interest and tours, with those of the TOML
@@ -136,6 +221,13 @@ pub fn publish(opts: &PublishOptions) -> Result<PublishSummary> {
     }
     std::fs::copy(&opts.package, staging.path().join(&file_name)).map_err(|e| output(&opts.package, e))?;
     files.push(file_name.clone());
+    let mut picture_s = 0.0;
+    if let Some(p) = &opts.picture {
+        let t0 = web_time::Instant::now();
+        render_picture(opts, p, picture_camera(&pois, &tours, &opts.viewer_options), staging.path())?;
+        picture_s = t0.elapsed().as_secs_f64();
+        files.push(PICTURE_FILE.into());
+    }
     let title = opts.title.clone().unwrap_or_else(|| file_name.trim_end_matches(".grotto").to_owned());
     let config = serde_json::json!({
         "package": file_name,
@@ -143,6 +235,8 @@ pub fn publish(opts: &PublishOptions) -> Result<PublishSummary> {
         "options": opts.viewer_options,
         // The page labels, lists and plays these (the package's own, amended by --story).
         "story": { "pois": pois, "tours": tours },
+        // What a browser without WebGPU shows.
+        "picture": opts.picture.as_ref().map(|_| PICTURE_FILE),
     });
     let text = serde_json::to_string_pretty(&config).map_err(|e| output(&opts.out, e))?;
     std::fs::write(staging.path().join("viewer.json"), text).map_err(|e| output(&opts.out, e))?;
@@ -177,5 +271,7 @@ pub fn publish(opts: &PublishOptions) -> Result<PublishSummary> {
         files,
         pois: pois.len(),
         tours: tours.len(),
+        picture: opts.picture.as_ref().map(|_| PICTURE_FILE.to_owned()),
+        picture_s,
     })
 }
