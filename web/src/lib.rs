@@ -13,6 +13,8 @@
 
 mod error;
 mod fetch;
+use fetch::{FETCH_GAP, Source, fetch_all, insert};
+mod health;
 mod page;
 mod story;
 
@@ -26,7 +28,6 @@ use std::cell::RefCell;
 use std::rc::Rc;
 use std::sync::{Arc, Mutex};
 
-use grotto_format::Package;
 use grotto_runtime::gpu::{Gpu, GpuOptions, PendingRead, default_gpu_memory};
 use grotto_runtime::light::plan::Pass;
 use grotto_runtime::render::Renderer;
@@ -42,66 +43,6 @@ use grotto_runtime::view::story::{Flight, TourPlayer};
 use story::{PickFor, Story, story_for};
 use wasm_bindgen::prelude::*;
 use web_time::Instant;
-
-/// The package as fetched so far, and what was fetched.
-struct Source {
-    url: String,
-    package_bytes: u64,
-    fetched_bytes: u64,
-    requests: u32,
-    no_ranges: bool,
-}
-
-/// Merge ranges closer than this: fewer requests for a few wasted bytes.
-const FETCH_GAP: u64 = 64 << 10;
-
-impl Source {
-    /// Head, then directory: a package with no section yet.
-    async fn open(url: &str) -> Result<(Self, Package), Error> {
-        let mut src =
-            Self { url: url.to_owned(), package_bytes: 0, fetched_bytes: 0, requests: 0, no_ranges: false };
-        let head = fetch::range(url, 0..Package::HEAD_BYTES, false).await?;
-        src.count(&head);
-        let name = url.rsplit('/').next().unwrap_or(url).to_owned();
-        if head.whole_file {
-            src.no_ranges = true;
-            src.package_bytes = head.bytes.len() as u64;
-            return Ok((src, Package::from_bytes(name, &head.bytes)?));
-        }
-        let file_len = head.file_len.ok_or_else(|| Error::Fetch {
-            url: url.into(),
-            problem: "the server answered a range request without Content-Range (the file's size)".into(),
-        })?;
-        src.package_bytes = file_len;
-        let dir = Package::directory_range(name.clone(), &head.bytes, file_len)?;
-        let d = fetch::range(url, dir.clone(), true).await?;
-        src.count(&d);
-        Ok((src, Package::from_directory(name, file_len, &head.bytes, dir.start, &d.bytes)?))
-    }
-
-    fn count(&mut self, f: &fetch::Fetched) {
-        self.fetched_bytes += f.bytes.len() as u64;
-        self.requests += 1;
-    }
-}
-
-/// Fetches `ranges` one after another (they are merged already, so few).
-async fn fetch_all(url: String, ranges: Vec<std::ops::Range<u64>>) -> Result<Vec<fetch::Fetched>, Error> {
-    let mut out = Vec::with_capacity(ranges.len());
-    for r in ranges {
-        out.push(fetch::range(&url, r, true).await?);
-    }
-    Ok(out)
-}
-
-/// Inserts fetched ranges into the package, counting them.
-fn insert(pkg: &mut Package, src: &mut Source, fetched: &[fetch::Fetched]) -> Result<(), Error> {
-    for f in fetched {
-        src.count(f);
-        pkg.insert(f.offset, &f.bytes)?;
-    }
-    Ok(())
-}
 
 /// Where a fetch under way leaves its result for the next frame.
 type Slot = Rc<RefCell<Option<Result<Vec<fetch::Fetched>, Error>>>>;
@@ -162,6 +103,7 @@ struct State {
     exposure_read: Option<(PendingRead, bool)>,
     exposure_final: bool,
     story: Story,
+    health: health::Health,
 }
 
 /// Longest frame at rest, as the window viewer's (window/pace.rs `REST_FRAME_MS`).
@@ -225,7 +167,7 @@ impl Viewer {
         // The first frame: every tile at its far level.
         let far_sections = stream::sections_for(&pkg, &vec![TileMode::Far; pkg.tile_count() as usize], false);
         let ranges = pkg.missing(far_sections, FETCH_GAP);
-        let fetched = fetch_all(url.clone(), ranges).await?;
+        let fetched = fetch_all(url.clone(), ranges, source.expect.clone()).await?;
         insert(&mut pkg, &mut source, &fetched)?;
         let world_scene = pkg.scene()?;
         let tiles = residency::footprints(&pkg, settings.radiance_f16)?;
@@ -306,6 +248,7 @@ impl Viewer {
                 exposure_read: None,
                 exposure_final: o.exposure.is_some(),
                 story,
+                health: health::Health::default(),
             },
         })
     }
@@ -648,13 +591,28 @@ impl State {
         if let Some(step) = &self.step {
             let Some(arrived) = step.arrived.borrow_mut().take() else { return Ok(()) };
             let step = self.step.take().expect("checked above");
-            insert(self.streaming.package_mut(), &mut self.source, &arrived?)?;
+            // A failed step is tried again later or stops streaming (health.rs); the view stays.
+            let arrived = match arrived {
+                Ok(a) => a,
+                Err(e) => {
+                    self.chosen_for = None;
+                    return self.health.failed(e, Instant::now());
+                }
+            };
+            self.health.succeeded();
+            insert(self.streaming.package_mut(), &mut self.source, &arrived)?;
             return self.swap(step.residency);
         }
-        if moving || self.chosen_for.as_ref() == Some(camera) {
+        if self.health.stopped() {
+            // What arrived is all there will be: the view is as settled as it gets.
+            self.settled = true;
+            return Ok(());
+        }
+        if moving || self.chosen_for.as_ref() == Some(camera) || !self.health.may_fetch(Instant::now()) {
             return Ok(());
         }
         let want = self.streaming.choose(camera, self.renderer.clip())?;
+        let want = residency::cap_modes(self.streaming.tiles(), want, &self.health.damaged);
         let (next, deferred) =
             residency::limit_uploads(self.streaming.tiles(), &self.current, want, self.step_bytes);
         self.settled = deferred == 0 && next.modes() == self.current.modes();
@@ -669,8 +627,9 @@ impl State {
         let arrived: Slot = Rc::new(RefCell::new(None));
         let slot = arrived.clone();
         let url = self.source.url.clone();
+        let expect = self.source.expect.clone();
         wasm_bindgen_futures::spawn_local(async move {
-            let r = fetch_all(url, ranges).await;
+            let r = fetch_all(url, ranges, expect).await;
             *slot.borrow_mut() = Some(r);
         });
         self.step = Some(Step { residency: next, arrived });
@@ -678,7 +637,17 @@ impl State {
     }
 
     fn swap(&mut self, next: Residency) -> Result<(), Error> {
-        let scene = self.streaming.load(&next, self.scene.lights.clone(), self.scene.headlamp)?;
+        let scene = match self.streaming.load(&next, self.scene.lights.clone(), self.scene.headlamp) {
+            Ok(scene) => scene,
+            // Damaged sections: their tiles stay as they are (health.rs), the rest stream on.
+            Err(grotto_runtime::Error::Package(e)) => {
+                let e = Error::Package(e);
+                self.health.damaged_step(self.streaming.package(), &self.current, &next, &e);
+                self.chosen_for = None;
+                return Ok(());
+            }
+            Err(e) => return Err(e.into()),
+        };
         stream::swap_tiles(&self.gpu, &mut self.renderer, &mut self.scene, scene)?;
         self.current = next;
         // Choose again: the step may have been one of several.
@@ -707,6 +676,10 @@ impl State {
             self.exposure = grotto_runtime::render::auto_exposure(&hdr);
             self.renderer.set_exposure(self.exposure);
             self.exposure_final = converged;
+            return Ok(());
+        }
+        // A view without light (normals, albedo...) says nothing of the exposure the lit view wants.
+        if !self.renderer.settings().view.shows_light() {
             return Ok(());
         }
         let converged = self.renderer.light_progress().converged && self.settled && self.step.is_none();
@@ -744,11 +717,13 @@ impl State {
     /// The light has converged, the tiles the view wants are resident, the exposure is final
     /// and the camera rests.
     fn ready(&self, moving: bool) -> bool {
-        self.renderer.light_progress().converged
+        // A view without light (normals, albedo...) waits for neither the light nor the exposure.
+        let lit = self.renderer.settings().view.shows_light();
+        (self.renderer.light_progress().converged || !lit)
             && !moving
             && self.step.is_none()
             && self.settled
-            && self.exposure_final
+            && (self.exposure_final || !lit)
             && self.exposure_read.is_none()
             && self.frames > 0
     }
@@ -806,6 +781,10 @@ impl State {
             tour: self.story.tour_status(),
             link: grotto_runtime::view::story::view_link(&camera, self.scene.frame_origin_m),
             gpu_bytes: self.renderer.gpu_bytes(),
+            streaming: self.health.state(),
+            notice: self.health.notice(),
+            damaged_tiles: self.health.damaged.len(),
+            stream_failures: self.health.failures(),
             wasm_bytes: (core::arch::wasm32::memory_size(0) as u64) << 16,
         };
         serde_json::to_string(&s).map_err(|e| Error::Setting(e.to_string()))

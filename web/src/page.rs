@@ -106,6 +106,12 @@ pub struct Status {
     /// GPU memory the renderer holds, and the viewer's own (wasm) memory: what the page states
     /// and a long visit's benchmark samples.
     pub gpu_bytes: u64,
+    /// How streaming fares (health.rs): "ok", "retrying", "stopped" or "replaced"; what the
+    /// page tells the visitor of it; tiles held back as damaged; failed steps so far.
+    pub streaming: &'static str,
+    pub notice: Option<String>,
+    pub damaged_tiles: usize,
+    pub stream_failures: u32,
     pub wasm_bytes: u64,
 }
 

@@ -484,9 +484,62 @@ pub fn limit_uploads(
     (Residency { decisions, totals }, deferred)
 }
 
+/// `next` with some tiles held no finer than a mode (`caps`: tile and the finest mode it may take;
+/// a browser holds a tile whose finer sections arrived damaged at the form it had). A coarser
+/// form costs less, so the result keeps every budget `next` keeps; its totals are recounted.
+pub fn cap_modes(
+    tiles: &[TileFootprint],
+    next: Residency,
+    caps: &std::collections::BTreeMap<usize, TileMode>,
+) -> Residency {
+    if caps.is_empty() {
+        return next;
+    }
+    let by_index: std::collections::HashMap<usize, &TileFootprint> =
+        tiles.iter().map(|t| (t.index, t)).collect();
+    let mut decisions = next.decisions;
+    for d in &mut decisions {
+        if let Some(&cap) = caps.get(&d.tile)
+            && fineness(d.mode) > fineness(cap)
+        {
+            d.mode = cap;
+        }
+    }
+    let (mut bytes, mut surfels) = (0u64, 0u64);
+    for d in &decisions {
+        if let Some(t) = by_index.get(&d.tile) {
+            bytes += t.cost(d.mode).bytes;
+            surfels += t.cost(d.mode).surfels;
+        }
+    }
+    let totals =
+        ResidencyTotals::of(&decisions, next.totals.budget, bytes, next.totals.coarse_bytes, surfels);
+    Residency { decisions, totals }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_capped_tile_stays_at_its_cap_and_the_totals_follow() {
+        let tiles = row(3);
+        let decisions = (0..3)
+            .map(|i| Decision {
+                tile: i,
+                relevance: Relevance::Visible,
+                distance_m: 1.0,
+                mode: TileMode::Full,
+            })
+            .collect::<Vec<_>>();
+        let budget = Budget { gpu_bytes: 1 << 20, points: u64::MAX, pools: None };
+        let next = Residency { totals: ResidencyTotals::of(&decisions, budget, 3000, 300, 150), decisions };
+        let caps = [(1, TileMode::Far)].into_iter().collect();
+        let capped = cap_modes(&tiles, next, &caps);
+        assert_eq!(capped.modes(), [TileMode::Full, TileMode::Far, TileMode::Full]);
+        assert_eq!((capped.totals.resident_bytes, capped.totals.surfels), (2100, 105));
+        assert_eq!(capped.totals.full_tiles, 2);
+    }
 
     /// A row of `n` 4 m tiles along +x, each 1000 B full / 100 B coarse and far, 50 / 5 surfels
     /// (shallow tiles, whose far level is their coarse level).
