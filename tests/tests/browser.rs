@@ -971,3 +971,100 @@ fn a_page_survives_hostile_servers_and_damaged_packages() {
     std::fs::write(&site_package, &original).unwrap();
     drop(browser);
 }
+
+/// The page's memory over a long visit (issue 45): PACKAGE (GROTTO_WEB_BENCH_PACKAGE) published
+/// with a tour through its named cameras (each held GROTTO_WEB_BENCH_DWELL_S, default 5 s),
+/// opened at GROTTO_WEB_BENCH_SIZE (default 480x360) on SwiftShader, the tour played round and
+/// round for GROTTO_WEB_BENCH_MINUTES (default 30). Every 10 s: the JS heap (DevTools
+/// `Runtime.getHeapUsage`), the viewer's wasm memory and the renderer's GPU bytes. Prints every
+/// sample, then a row: each figure at the end of the first loop and the largest after it.
+#[test]
+#[ignore = "a measurement: scripts/bench-web-memory.sh PACKAGE"]
+fn memory_over_a_tour_loop() {
+    let Some((chromium, driver, bundle)) = tools() else { return };
+    let package =
+        PathBuf::from(std::env::var_os("GROTTO_WEB_BENCH_PACKAGE").expect("GROTTO_WEB_BENCH_PACKAGE"));
+    let env = |k: &str, d: f64| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
+    let (minutes, dwell_s) = (env("GROTTO_WEB_BENCH_MINUTES", 30.0), env("GROTTO_WEB_BENCH_DWELL_S", 5.0));
+    let size = std::env::var("GROTTO_WEB_BENCH_SIZE").unwrap_or_else(|_| "480x360".into());
+    let (w, h) = size.split_once('x').expect("SIZE as WxH");
+    let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let cameras: Vec<String> = grotto_format::Package::open(&package)
+        .unwrap()
+        .scene()
+        .unwrap()
+        .cameras
+        .into_iter()
+        .map(|c| c.name)
+        .collect();
+    assert!(cameras.len() >= 2, "the package needs two named cameras for a tour: {cameras:?}");
+    let mut story = "[[tour]]\nname = \"loop\"\n".to_owned();
+    for c in &cameras {
+        story += &format!("[[tour.stop]]\ncamera = \"{c}\"\ndwell_s = {dwell_s}\n");
+    }
+    let story_path = dir.path().join("story.toml");
+    std::fs::write(&story_path, story).unwrap();
+    let site = dir.path().join("site");
+    publish::publish(&PublishOptions {
+        package: package.clone(),
+        out: site.clone(),
+        bundle: Some(bundle),
+        title: None,
+        viewer_options: serde_json::Map::new(),
+        story: Some(story_path),
+        picture: None,
+    })
+    .unwrap();
+    let server = serve::serve(&site).unwrap();
+    let browser = Browser::start(&chromium, &driver, true);
+    let url =
+        format!("http://127.0.0.1:{}/index.html?width={w}&height={h}&quality=fast&panel=hidden", server.port);
+    browser.call("POST", "/url", Some(&json!({"url": url})));
+    browser.wait_for_frames(1, Duration::from_secs(900));
+    // Played round and round: restarted whenever it finishes, loops counted.
+    browser.eval(
+        "window.grottoLoops = 0; const go = () => document.getElementById('tourplay').click(); go(); \
+         const watch = () => { const t = window.grottoStatus && window.grottoStatus.tour; \
+         if (t && t.phase === 'finished') { window.grottoLoops++; go(); } setTimeout(watch, 250); }; watch(); return 0",
+    );
+    let t0 = Instant::now();
+    let mut samples: Vec<(f64, u64, f64, f64, f64)> = Vec::new();
+    println!("| s | loops | frames | JS heap MB | wasm MB | GPU MB |");
+    while t0.elapsed().as_secs_f64() < minutes * 60.0 {
+        std::thread::sleep(Duration::from_secs(10));
+        let heap = browser.cdp("Runtime.getHeapUsage", json!({}));
+        let s = browser.status();
+        let loops = browser.eval("return window.grottoLoops").as_u64().unwrap_or(0);
+        let mb = |v: &Value| v.as_f64().unwrap_or(0.0) / 1e6;
+        let row = (
+            t0.elapsed().as_secs_f64(),
+            loops,
+            mb(&heap["usedSize"]),
+            mb(&s["wasm_bytes"]),
+            mb(&s["gpu_bytes"]),
+        );
+        println!(
+            "| {:.0} | {} | {} | {:.1} | {:.1} | {:.1} |",
+            row.0, row.1, s["frames"], row.2, row.3, row.4
+        );
+        samples.push(row);
+    }
+    drop(browser);
+    let first_loop = samples.iter().position(|s| s.1 >= 1).expect("the tour never finished a loop");
+    let after = &samples[first_loop..];
+    let max = |f: fn(&(f64, u64, f64, f64, f64)) -> f64| after.iter().map(f).fold(0.0, f64::max);
+    let at = &samples[first_loop];
+    let name = package.file_name().unwrap().to_string_lossy().into_owned();
+    println!("| package | minutes | loops | JS heap MB, first loop / largest after | wasm MB | GPU MB |");
+    println!(
+        "| {name} | {minutes} | {} | {:.1} / {:.1} | {:.1} / {:.1} | {:.1} / {:.1} |",
+        samples.last().map_or(0, |s| s.1),
+        at.2,
+        max(|s| s.2),
+        at.3,
+        max(|s| s.3),
+        at.4,
+        max(|s| s.4)
+    );
+}
