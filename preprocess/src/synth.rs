@@ -307,6 +307,29 @@ impl SynthCave {
         f + n
     }
 
+    /// The first wall point along the ray from `from` (in open space) toward `toward`, within
+    /// `max_m` (sphere tracing `f`, as the scanner does): where a label can sit on the rock.
+    pub fn first_wall(&self, from: [f64; 3], toward: [f64; 3], max_m: f64) -> Option<[f64; 3]> {
+        let d: [f64; 3] = std::array::from_fn(|a| toward[a] - from[a]);
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if len < 1e-9 {
+            return None;
+        }
+        let mut t = 0.0;
+        for _ in 0..512 {
+            let p: [f64; 3] = std::array::from_fn(|a| from[a] + d[a] / len * t);
+            let f = self.eval(p);
+            if f > -1e-3 {
+                return Some(p);
+            }
+            t += (-f).max(2e-3) * 0.8;
+            if t > max_m {
+                return None;
+            }
+        }
+        None
+    }
+
     /// Unit wall normal at (or near) `p`, pointing into the open cave (-grad f).
     pub fn normal(&self, p: [f64; 3]) -> [f64; 3] {
         let e = 1e-4;
@@ -496,6 +519,49 @@ pub struct SynthSummary {
     pub(crate) files: Vec<String>,
 }
 
+/// Points of interest on the rock seen from the cameras, and a tour through them (docs/web.md's
+/// example): the passage ahead of the entrance, the first chamber's far wall and its first
+/// column.
+fn story(cave: &SynthCave, manifest: &mut String, world: &dyn Fn([f64; 3]) -> String) {
+    use std::fmt::Write as _;
+    let mut stops = Vec::new();
+    let mut poi = |name: &str, title: &str, text: &str, eye: [f64; 3], toward: [f64; 3]| {
+        let Some(at) = cave.first_wall(eye, toward, 60.0) else { return };
+        let _ = writeln!(
+            manifest,
+            "[[poi]]\nname = \"{name}\"\ntitle = \"{title}\"\ntext = \"{text}\"\nposition = {}\neye = {}\n",
+            world(at),
+            world(eye)
+        );
+        stops.push(name.to_owned());
+    };
+    if cave.path.len() > 3 {
+        let (e, ahead) = (cave.path[0], cave.path[3]);
+        poi("passage", "The main passage", "The passage winds on past the lamps.", e, ahead);
+    }
+    if let Some(c) = cave.chambers.first() {
+        let eye = [c[0] - 3.0, c[1] - 2.0, c[2] + 0.5];
+        let beyond = [c[0] + 3.0, c[1] + 2.0, c[2] - 0.5];
+        poi("chamber", "The first chamber", "Its far wall, lit by the chamber's lamp.", eye, beyond);
+        if let Some(col) = cave.columns.first() {
+            let toward = [col.xy[0], col.xy[1], c[2]];
+            poi(
+                "column",
+                "A rock column",
+                "Floor to ceiling, left standing as the passage grew.",
+                eye,
+                toward,
+            );
+        }
+    }
+    if stops.len() >= 2 {
+        let _ = writeln!(manifest, "[[tour]]\nname = \"visit\"\ntitle = \"A short visit\"\n");
+        for s in &stops {
+            let _ = writeln!(manifest, "[[tour.stop]]\npoi = \"{s}\"\ndwell_s = 5.0\n");
+        }
+    }
+}
+
 /// Writes the scans (formats assigned round-robin from `formats`), `manifest.toml` and
 /// `synth.json` (the parameters, to rebuild the analytic cave as ground truth) into `dir`.
 /// E57 scans carry their pose in the file and the manifest leaves it out, so both pose paths are
@@ -594,6 +660,7 @@ pub fn write_dataset(
             world(*c)
         );
     }
+    story(&cave, &mut manifest, &world);
     let manifest_path = dir.join("manifest.toml");
     std::fs::write(&manifest_path, manifest).map_err(io)?;
     std::fs::write(dir.join("synth.json"), serde_json::to_string_pretty(params).unwrap_or_default())

@@ -22,7 +22,8 @@ pub mod settings;
 pub mod gpu;
 /// A package loaded into one f32 frame; rock, coarse levels and the tile index.
 pub mod scene;
-/// Cameras and camera paths; default views and the headlamp for a bare package.
+/// Cameras and camera paths; default views and the headlamp for a bare package; points of
+/// interest, flights, tours and view links.
 pub mod view;
 /// Shared WGSL by subsystem and the `#import` composer.
 pub mod shaders;
@@ -34,6 +35,8 @@ pub mod light;
 pub mod render;
 /// Residency, streaming for every shell, and the loader thread.
 pub mod stream;
+/// A viewer's story and tools (labels, flights, tours, measuring), the window's and the page's.
+pub mod guide;
 /// The command line's jobs: render and bench, inspect and verify, export, images, publish.
 #[cfg(not(target_arch = "wasm32"))]
 pub mod cli;

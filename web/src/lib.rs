@@ -20,15 +20,16 @@ mod story;
 
 pub use error::Error;
 use error::to_js;
+pub use grotto_runtime::guide::{LabelStatus, MeasureStatus, TourStatus};
 pub use page::{Options, Status};
 use page::{parse_options, settings_of};
-pub use story::{LabelStatus, MeasureStatus, TourStatus};
 
 use std::cell::RefCell;
 use std::rc::Rc;
 use std::sync::{Arc, Mutex};
 
 use grotto_runtime::gpu::{Gpu, GpuOptions, PendingRead, default_gpu_memory};
+use grotto_runtime::guide::{Guide, PickFor};
 use grotto_runtime::light::plan::Pass;
 use grotto_runtime::render::Renderer;
 use grotto_runtime::render::present::{Bar, Blit, Target};
@@ -40,7 +41,7 @@ use grotto_runtime::view::camera::{Camera, Nav};
 use grotto_runtime::view::frame_target::FrameTarget;
 use grotto_runtime::view::framing::{CameraChoice, resolve_camera, scene_headlamp};
 use grotto_runtime::view::story::{Flight, TourPlayer};
-use story::{PickFor, Story, story_for};
+use story::story_for;
 use wasm_bindgen::prelude::*;
 use web_time::Instant;
 
@@ -102,7 +103,7 @@ struct State {
     /// The frame read back for automatic exposure, and whether the light had converged then.
     exposure_read: Option<(PendingRead, bool)>,
     exposure_final: bool,
-    story: Story,
+    story: Guide,
     health: health::Health,
 }
 

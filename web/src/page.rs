@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 
-use crate::story::{LabelStatus, MeasureStatus, TourStatus};
+use grotto_runtime::guide::{LabelStatus, MeasureStatus, TourStatus};
 
 /// What the page asks for (JSON; every field optional): the query string's values, over
 /// `viewer.json`'s.

@@ -299,6 +299,28 @@ pub fn parse_view_link(text: &str, frame_origin_m: [f64; 3]) -> Result<Camera, S
     Ok(nav.camera())
 }
 
+/// Stops recorded in a viewer as a story file (`[[tour]]` with `[[tour.stop]]`s in world metres,
+/// grotto_format::story::StorySpec's syntax), which `grotto publish --story` and `grotto render
+/// --story` read: each stop's eye, the point a metre ahead, its field of view, `dwell_s`.
+pub fn tour_toml(name: &str, stops: &[Camera], frame_origin_m: [f64; 3], dwell_s: f32) -> String {
+    let origin = DVec3::from_array(frame_origin_m);
+    let world = |p: Vec3| {
+        let w = origin + p.as_dvec3();
+        format!("[{:.4}, {:.4}, {:.4}]", w.x, w.y, w.z)
+    };
+    let mut out = format!("# Recorded by grotto view.\n[[tour]]\nname = {name:?}\n");
+    for c in stops {
+        let ahead = c.eye_m + (c.look_at_m - c.eye_m).normalize_or(Vec3::X);
+        out += &format!(
+            "\n[[tour.stop]]\neye = {}\nlook_at = {}\nfov_deg = {:.2}\ndwell_s = {dwell_s}\n",
+            world(c.eye_m),
+            world(ahead),
+            c.fov_y_deg
+        );
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -411,6 +433,26 @@ mod tests {
         assert_eq!(film.len(), 20 + 9 + 10);
         assert!(film[..20].iter().all(|c| *c == stops[0]) && film[29..].iter().all(|c| *c == stops[1]));
         assert!(film[20..29].windows(2).all(|w| w[1].eye_m.x > w[0].eye_m.x), "the flight moves on");
+    }
+
+    #[test]
+    fn recorded_stops_read_back_as_a_tour_of_the_same_views() {
+        let origin = [512_345.25, 5_123_456.75, 345.5];
+        let stops = [
+            cam(Vec3::new(1.0, 2.0, 1.5), Vec3::new(4.0, 2.0, 1.0)),
+            cam(Vec3::new(3.0, -1.0, 2.0), Vec3::new(3.0, 5.0, 2.0)),
+        ];
+        let text = tour_toml("recorded", &stops, origin, 4.0);
+        let spec: grotto_format::story::StorySpec = toml::from_str(&text).unwrap();
+        let (pois, tours) = spec.into_story(&[]).unwrap();
+        let (_, tours) = crate::scene::story::in_frame(origin, &pois, &tours, &[]);
+        let back = tour_cameras(&tours[0], None);
+        for (a, b) in stops.iter().zip(&back) {
+            assert!((a.eye_m - b.eye_m).length() < 1e-3, "{} vs {}", a.eye_m, b.eye_m);
+            let (da, db) = (a.look_at_m - a.eye_m, b.look_at_m - b.eye_m);
+            assert!(da.angle_between(db) < 1e-3);
+        }
+        assert_eq!(tours[0].stops[1].dwell_s, 4.0);
     }
 
     #[test]

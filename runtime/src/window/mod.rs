@@ -16,10 +16,14 @@
 //! camera, R back to the first, 1-6 switch the view (lit, albedo, normals, light, level, scan),
 //! C cuts the view to a clip box (a section at eye height; the panel edits it), H hides the
 //! panel, K starts and stops recording a camera path (`grotto render --path FILE.toml` flies
-//! it), P writes a screenshot once the light has converged, F11 toggles full screen, Esc quits.
+//! it; T marks a tour stop meanwhile), P writes a screenshot once the light has converged, F11
+//! toggles full screen, Esc quits. The package's points of interest are labelled and listed,
+//! its tours play (G, N, B), M measures between two clicked points and a double click flies to
+//! the wall there ([`story`]).
 
 mod pace;
 mod panel;
+mod story;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -80,8 +84,9 @@ pub struct ViewSummary {
     pub frames: u32,
     pub seconds: f64,
     pub screenshots: Vec<String>,
-    /// Camera path files written, with their keyframes.
+    /// Camera path files written, with their keyframes, and tours recorded with their stops.
     pub paths: Vec<(String, usize)>,
+    pub tours: Vec<(String, usize)>,
     /// Changes of resident tiles swapped in while flying.
     pub(crate) tile_swaps: u32,
     /// Frame times while moving and at rest, and how long the light took to converge at rest.
@@ -101,6 +106,7 @@ pub fn run(opts: ViewOptions) -> Result<ViewSummary> {
         // A recording still running when the window closed is kept.
         if let Some(keys) = s.recording.take() {
             app.summary.paths.push(save_path(&app.opts, &keys, &s.scene)?);
+            app.summary.tours.extend(save_tour(&app.opts, &mut s.story, &s.scene)?);
         }
         app.summary.log = std::mem::take(&mut s.log);
     }
@@ -114,6 +120,29 @@ fn save_path(opts: &ViewOptions, keys: &[Camera], scene: &SceneData) -> Result<(
     let file = opts.record_path.clone().unwrap_or_else(|| next_name("grotto-path", "toml"));
     camera::path_file::write(&file, keys, scene.frame_origin_m)?;
     Ok((file.display().to_string(), keys.len()))
+}
+
+/// Writes the tour stops marked while recording (T) beside the path, as a story file (`grotto
+/// publish --story`, `grotto render --story`); returns it and its stops, None without stops.
+fn save_tour(
+    opts: &ViewOptions,
+    story: &mut story::StoryUi,
+    scene: &SceneData,
+) -> Result<Option<(String, usize)>> {
+    let stops = std::mem::take(&mut story.stops);
+    if stops.is_empty() {
+        return Ok(None);
+    }
+    let file = opts.record_path.as_ref().map_or_else(
+        || next_name("grotto-tour", "toml"),
+        |p| p.with_file_name(format!("{}-tour.toml", p.file_stem().unwrap_or_default().to_string_lossy())),
+    );
+    let text = crate::view::story::tour_toml("recorded", &stops, scene.frame_origin_m, 6.0);
+    crate::cli::export::atomically(&file, |mut f| {
+        std::io::Write::write_all(&mut f, text.as_bytes())
+            .map_err(|e| crate::cli::export::output_error(&file, e))
+    })?;
+    Ok(Some((file.display().to_string(), stops.len())))
 }
 
 /// Where a screenshot goes: `--screenshot`, or the next `grotto-view-N.png`.
@@ -174,6 +203,7 @@ struct State {
     shot: Option<PathBuf>,
     quit_after_shot: bool,
     frame_ms: f64,
+    story: story::StoryUi,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -274,6 +304,7 @@ impl App {
         let ui = Ui { ctx, input, painter, visible: self.opts.panel, knobs };
         window.request_redraw();
         self.summary.device = gpu.describe();
+        let story = story::StoryUi::new(&prepared.scene);
         self.state = Some(State {
             window,
             gpu,
@@ -306,6 +337,7 @@ impl App {
             shot: None,
             quit_after_shot: false,
             frame_ms: 0.0,
+            story,
         });
         Ok(())
     }
@@ -315,9 +347,9 @@ impl App {
         let now = Instant::now();
         let dt = now.duration_since(s.last_frame).as_secs_f32().min(0.25);
         s.last_frame = now;
-        s.nav.step(s.held, dt);
+        let flying = s.story.step(&s.gpu, &mut s.nav, s.held, dt)?;
         let cam = s.nav.camera();
-        let moving = s.last_camera.is_some_and(|c| c != cam);
+        let moving = flying || s.last_camera.is_some_and(|c| c != cam);
         s.last_camera = Some(cam);
 
         // Tiles follow the camera: take what the loader has ready, ask for the view now.
@@ -352,6 +384,7 @@ impl App {
         let settled = s.renderer.light_progress().converged || !s.renderer.settings().view.shows_light();
         let still = !moving && settled && s.follow.as_ref().is_none_or(|f| !f.busy());
         let plan = if still { s.renderer.draw_still(&cam, w, h)?.0 } else { s.renderer.draw(&cam, w, h)? };
+        s.story.drawn(&s.renderer, &cam, (s.config.width, s.config.height), (w, h))?;
         if !(plan.runs(crate::light::plan::Pass::Shadow) || plan.runs(crate::light::plan::Pass::Inject)) {
             // Direct light (after a change of lights or tiles) is not what a frame costs.
             let draw_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -400,6 +433,7 @@ impl App {
             && (progress.converged || !s.renderer.settings().view.shows_light())
             && s.follow.as_ref().is_none_or(|f| !f.busy())
             && s.renderer.still_progress().is_some_and(|p| p.complete());
+        s.story.at_rest = at_rest;
         if self.summary.frames >= self.opts.after_frames.unwrap_or(u32::MAX) && at_rest && s.shot.is_none() {
             s.shot = Some(shot_path(&self.opts));
             s.quit_after_shot = true;
@@ -416,7 +450,7 @@ impl App {
         // At rest with the light converged, nothing changes until an event: the loop waits
         // (but for the frames a scripted screenshot waits for: a view without light rests at once).
         let scripted = self.summary.frames < self.opts.after_frames.unwrap_or(0);
-        if !at_rest || scripted || s.shot.is_some() || s.recording.is_some() {
+        if !at_rest || scripted || s.shot.is_some() || s.recording.is_some() || s.story.busy(&cam) {
             s.window.request_redraw();
         }
         Ok(())
@@ -448,7 +482,13 @@ impl App {
             let shown = model(s, progress, held, plan);
             let raw = s.ui.input.take_egui_input(&s.window);
             let mut knobs = s.ui.knobs;
-            let mut out = s.ui.ctx.run_ui(raw, |ui| panel::show(ui.ctx(), &shown, &mut knobs));
+            let (cam, window_px, recording) =
+                (s.nav.camera(), (s.config.width, s.config.height), s.recording.is_some());
+            let story = &mut s.story;
+            let mut out = s.ui.ctx.run_ui(raw, |ui| {
+                panel::show(ui.ctx(), &shown, &mut knobs);
+                story.show(ui.ctx(), &cam, window_px, recording);
+            });
             s.ui.input.handle_platform_output(&s.window, out.platform_output);
             let screen = egui_wgpu::ScreenDescriptor {
                 size_in_pixels: [s.config.width, s.config.height],
@@ -497,6 +537,9 @@ impl App {
 
     fn key(&mut self, event_loop: &ActiveEventLoop, code: KeyCode, pressed: bool) -> Result<()> {
         let Some(s) = self.state.as_mut() else { return Ok(()) };
+        if pressed && s.story.key(code, s.nav.camera(), s.recording.is_some()) {
+            return Ok(());
+        }
         let held = [KeyCode::KeyW, KeyCode::KeyA, KeyCode::KeyS, KeyCode::KeyD, KeyCode::KeyQ, KeyCode::KeyE];
         if let Some(k) = held.iter().position(|c| *c == code) {
             s.held[k] = pressed;
@@ -739,6 +782,11 @@ impl ApplicationHandler for App {
             WindowEvent::MouseInput { state, button: MouseButton::Left, .. } => {
                 if let Some(s) = self.state.as_mut() {
                     s.dragging = state == ElementState::Pressed;
+                    let k = s
+                        .renderer
+                        .ldr_output()
+                        .map_or(1.0, |o| o.width as f64 / f64::from(s.config.width.max(1)));
+                    s.story.mouse(s.dragging, s.cursor, k);
                 }
                 Ok(())
             }
@@ -758,6 +806,7 @@ impl ApplicationHandler for App {
             WindowEvent::CursorMoved { position, .. } => {
                 if let Some(s) = self.state.as_mut() {
                     if let (true, Some((x, y))) = (s.dragging, s.cursor) {
+                        s.story.take_over();
                         s.nav.look((position.x - x) as f32, (position.y - y) as f32);
                     }
                     s.cursor = Some((position.x, position.y));

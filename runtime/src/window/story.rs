@@ -1,0 +1,257 @@
+//! `grotto view`'s story: the package's points of interest labelled over the frame (hidden where
+//! rock is nearer) and listed in a small window that flies to them, its tours played, paused and
+//! stepped, measuring between two clicked surface points, a double click flying to the wall
+//! there, and tour stops marked while a camera path is recorded. The state and the decisions are
+//! the runtime's guide (guide.rs), the browser's too; this is the window's input and egui.
+//!
+//! Keys: M measures (click two points), G plays or pauses the tour, N and B step to the next and
+//! the previous stop, T marks a tour stop while recording (K).
+
+use std::time::Instant;
+
+use crate::error::Result;
+use crate::guide::{Guide, PickFor};
+use crate::render::Renderer;
+use crate::scene::data::SceneData;
+use crate::view::camera::{Camera, Nav};
+use crate::view::story::{Flight, TourPlayer, stop_camera};
+use winit::keyboard::KeyCode;
+
+/// Two clicks this close in time and place are a double click.
+const DOUBLE_CLICK_S: f32 = 0.35;
+const DOUBLE_CLICK_PX: f64 = 6.0;
+
+pub(super) struct StoryUi {
+    pub(super) guide: Guide,
+    measuring: bool,
+    /// The tour the window's menu picks.
+    tour: usize,
+    /// Tour stops marked while recording (T).
+    pub(super) stops: Vec<Camera>,
+    press: Option<(f64, f64)>,
+    last_click: Option<(Instant, (f64, f64))>,
+    /// The image at rest was final at the last frame (a tour's dwell waits for it).
+    pub(super) at_rest: bool,
+}
+
+impl StoryUi {
+    pub(super) fn new(scene: &SceneData) -> Self {
+        Self {
+            guide: Guide::new(scene.pois.clone(), scene.tours.clone(), scene.frame_origin_m),
+            measuring: false,
+            tour: 0,
+            stops: Vec::new(),
+            press: None,
+            last_click: None,
+            at_rest: false,
+        }
+    }
+
+    /// Before a frame: takes arrived probes, then moves the camera along a flight or tour, or
+    /// by the keys held. Returns whether the story moved it (the light waits, as for the keys).
+    pub(super) fn step(
+        &mut self,
+        gpu: &crate::gpu::Gpu,
+        nav: &mut Nav,
+        held: [bool; 6],
+        dt_s: f32,
+    ) -> Result<bool> {
+        // Read-backs complete as the device is polled (a browser does this by itself).
+        let _ = gpu.device.poll(wgpu::PollType::Poll);
+        if let Some(to) = self.guide.poll()? {
+            self.guide.tour = None;
+            self.guide.flight = Some(Flight::new(nav.camera(), to, None));
+        }
+        if held.iter().any(|h| *h) {
+            self.take_over();
+        }
+        match self.guide.camera(dt_s, self.at_rest) {
+            Some(c) => *nav = Nav::from_camera(&c, nav.speed_m_s),
+            None => nav.step(held, dt_s),
+        }
+        Ok(self.guide.flying())
+    }
+
+    /// The person moves the camera: a flight ends, a tour pauses.
+    pub(super) fn take_over(&mut self) {
+        self.guide.flight = None;
+        if let Some(p) = &mut self.guide.tour {
+            p.paused = true;
+        }
+    }
+
+    /// After a frame drawn at `drawn` pixels in a window of `full`: probes labels and clicks.
+    pub(super) fn drawn(
+        &mut self,
+        r: &Renderer,
+        cam: &Camera,
+        full: (u32, u32),
+        drawn: (u32, u32),
+    ) -> Result<()> {
+        self.guide.drawn(r, cam, full, drawn)
+    }
+
+    /// Something is under way that needs frames even at rest (a probe, a flight, a tour).
+    pub(super) fn busy(&self, cam: &Camera) -> bool {
+        !self.guide.labels_current(cam)
+            || self.guide.flying()
+            || self
+                .guide
+                .tour
+                .as_ref()
+                .is_some_and(|t| !t.paused && t.phase != crate::view::story::TourPhase::Finished)
+    }
+
+    /// The story's keys; returns whether one was used.
+    pub(super) fn key(&mut self, code: KeyCode, cam: Camera, recording: bool) -> bool {
+        match code {
+            KeyCode::KeyM => {
+                self.measuring = !self.measuring;
+                if !self.measuring {
+                    self.guide.clear_measure();
+                }
+            }
+            KeyCode::KeyT if recording => self.stops.push(cam),
+            KeyCode::KeyG => self.play_or_pause(cam),
+            KeyCode::KeyN | KeyCode::KeyB => {
+                let delta = if code == KeyCode::KeyN { 1 } else { -1 };
+                if let Some(p) = &mut self.guide.tour
+                    && let Some(t) = self.guide.tours.get(p.tour)
+                {
+                    p.step(t, delta, cam);
+                    p.paused = false;
+                }
+            }
+            _ => return false,
+        }
+        true
+    }
+
+    fn play_or_pause(&mut self, cam: Camera) {
+        match &mut self.guide.tour {
+            Some(p) if p.tour == self.tour && p.phase != crate::view::story::TourPhase::Finished => {
+                p.paused = !p.paused
+            }
+            _ => {
+                if let Some(t) = self.guide.tours.get(self.tour) {
+                    self.guide.flight = None;
+                    self.guide.tour = Some(TourPlayer::start(self.tour, t, cam));
+                }
+            }
+        }
+    }
+
+    /// The left button at `cursor` (window pixels; the frame is `frame_per_window` of them): a
+    /// click without a drag measures (M), a double click flies to the wall there.
+    pub(super) fn mouse(&mut self, pressed: bool, cursor: Option<(f64, f64)>, frame_per_window: f64) {
+        let Some((x, y)) = cursor else { return };
+        if pressed {
+            self.press = Some((x, y));
+            return;
+        }
+        let Some((px, py)) = self.press.take() else { return };
+        if (x - px).hypot(y - py) > DOUBLE_CLICK_PX {
+            return;
+        }
+        let at = ((x * frame_per_window) as f32, (y * frame_per_window) as f32);
+        let double = self.last_click.is_some_and(|(t, (lx, ly))| {
+            t.elapsed().as_secs_f32() < DOUBLE_CLICK_S && (x - lx).hypot(y - ly) < DOUBLE_CLICK_PX
+        });
+        if double {
+            self.last_click = None;
+            self.guide.pick(at.0, at.1, PickFor::Fly);
+        } else {
+            self.last_click = Some((Instant::now(), (x, y)));
+            if self.measuring {
+                self.guide.pick(at.0, at.1, PickFor::Measure);
+            }
+        }
+    }
+
+    /// The labels and the measurement over the frame, and the story's window (points of
+    /// interest, tours, measuring). `window_px`: the window's size in pixels.
+    pub(super) fn show(&mut self, ctx: &egui::Context, cam: &Camera, window_px: (u32, u32), recording: bool) {
+        let k = 1.0 / ctx.pixels_per_point();
+        let painter = ctx.layer_painter(egui::LayerId::background());
+        let yellow = egui::Color32::from_rgb(255, 207, 64);
+        for l in self.guide.labels(cam, window_px.0, window_px.1) {
+            if l.visible == Some(false) {
+                continue;
+            }
+            let at = egui::pos2(l.x * k, l.y * k);
+            painter.circle(at, 4.0, yellow, egui::Stroke::new(1.0, egui::Color32::BLACK));
+            let title = &self.guide.pois[l.poi].title;
+            let font = egui::FontId::proportional(14.0);
+            let text = painter.layout_no_wrap(title.clone(), font, egui::Color32::WHITE);
+            let rect =
+                egui::Rect::from_center_size(at - egui::vec2(0.0, 16.0), text.size() + egui::vec2(10.0, 4.0));
+            painter.rect_filled(rect, 3.0, egui::Color32::from_black_alpha(180));
+            painter.galley(rect.min + egui::vec2(5.0, 2.0), text, egui::Color32::WHITE);
+        }
+        let m = self.guide.measure_status(cam, window_px.0, window_px.1);
+        let ends: Vec<egui::Pos2> =
+            m.pixels.iter().flatten().map(|p| egui::pos2(p[0] * k, p[1] * k)).collect();
+        for p in &ends {
+            painter.circle_filled(*p, 4.0, yellow);
+        }
+        if let [a, b] = ends[..] {
+            painter.line_segment([a, b], egui::Stroke::new(2.0, yellow));
+        }
+        egui::Window::new("story").default_pos([8.0, 420.0]).default_width(220.0).show(ctx, |ui| {
+            for p in self.guide.pois.clone() {
+                if ui.button(&p.title).on_hover_text(&p.text).clicked() {
+                    self.guide.tour = None;
+                    self.guide.flight = Some(Flight::new(*cam, stop_camera(&p.camera), None));
+                }
+            }
+            if !self.guide.tours.is_empty() {
+                ui.separator();
+                let names: Vec<String> = self
+                    .guide
+                    .tours
+                    .iter()
+                    .map(|t| if t.title.is_empty() { t.name.clone() } else { t.title.clone() })
+                    .collect();
+                egui::ComboBox::from_label("tour")
+                    .selected_text(names[self.tour.min(names.len() - 1)].clone())
+                    .show_ui(ui, |ui| {
+                        for (i, n) in names.iter().enumerate() {
+                            ui.selectable_value(&mut self.tour, i, n);
+                        }
+                    });
+                ui.horizontal(|ui| {
+                    if ui.button("play / pause (G)").clicked() {
+                        self.play_or_pause(*cam);
+                    }
+                    if ui.button("next (N)").clicked() {
+                        self.key(KeyCode::KeyN, *cam, recording);
+                    }
+                });
+                if let Some(t) = self.guide.tour_status() {
+                    ui.label(format!(
+                        "stop {} of {} ({}{}): {}",
+                        t.stop + 1,
+                        t.stops,
+                        t.phase,
+                        if t.paused { ", paused" } else { "" },
+                        if t.text.is_empty() { &t.title } else { &t.text }
+                    ));
+                }
+            }
+            ui.separator();
+            if ui.checkbox(&mut self.measuring, "measure (M): click two points").changed() && !self.measuring
+            {
+                self.guide.clear_measure();
+            }
+            if let Some(r) = m.result {
+                ui.label(format!(
+                    "{:.3} m apart, height {:+.3} m, level {:.3} m",
+                    r.distance_m, r.height_m, r.horizontal_m
+                ));
+            }
+            if recording {
+                ui.label(format!("tour stops marked (T): {}", self.stops.len()));
+            }
+        });
+    }
+}
