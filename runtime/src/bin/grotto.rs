@@ -206,6 +206,10 @@ struct RenderArgs {
     /// Frames a second of a --tour film.
     #[arg(long, requires = "tour")]
     tour_fps: Option<f32>,
+    /// Points of interest and tours to add to the package's (TOML: [[poi]], [[tour]] as in a
+    /// manifest): --camera and --tour find them, grotto view shows them.
+    #[arg(long)]
+    story: Option<PathBuf>,
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "800x600", value_parser = grotto_runtime::cli::render_job::parse_size)]
     size: (u32, u32),
@@ -430,6 +434,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
         path: a.path.clone(),
         tour: a.tour.clone(),
         tour_fps: a.tour_fps,
+        story: a.story.clone(),
         frames: a.frames,
         width: a.size.0,
         height: a.size.1,

@@ -11,7 +11,7 @@ use grotto_format::Package;
 
 use crate::cli::render_job::{self, RenderOptions};
 use crate::view::framing::CameraChoice;
-use grotto_format::story::{self, Poi, StorySpec, Tour};
+use grotto_format::{Poi, Tour};
 use serde::Serialize;
 
 use crate::error::{Error, Result};
@@ -31,7 +31,7 @@ pub struct PublishOptions {
     pub title: Option<String>,
     /// The viewer's defaults (web crate `Options`: camera, preset, bounces...), as JSON.
     pub viewer_options: serde_json::Map<String, serde_json::Value>,
-    /// Points of interest and tours (TOML) added to the package's: [`story_of`].
+    /// Points of interest and tours (TOML) added to the package's: [`crate::cli::story_file::story_of`].
     pub story: Option<PathBuf>,
     /// The still picture a browser without WebGPU shows (None: none).
     pub picture: Option<Picture>,
@@ -131,22 +131,6 @@ fn render_picture(opts: &PublishOptions, picture: &Picture, camera: CameraChoice
     })
 }
 
-/// The story a site shows: the package's points of interest and tours, with those of the TOML
-/// file `extra` (grotto_format::story::StorySpec) added, one named as one of the package's
-/// replacing it; checked whole against the package's cameras, so a tour may stop at the
-/// package's points of interest and the file's alike.
-pub fn story_of(scene: &grotto_format::Scene, extra: Option<&Path>) -> Result<(Vec<Poi>, Vec<Tour>)> {
-    let Some(path) = extra else { return Ok((scene.pois.clone(), scene.tours.clone())) };
-    let problem = |reason: String| Error::Story { path: path.display().to_string(), problem: reason };
-    let text = std::fs::read_to_string(path).map_err(|e| problem(e.to_string()))?;
-    let spec: StorySpec = toml::from_str(&text).map_err(|e| problem(e.to_string()))?;
-    let (pois, tours) = spec.convert();
-    let pois = story::merged(&scene.pois, &pois, |p| &p.name);
-    let tours = story::merged(&scene.tours, &tours, |t| &t.name);
-    story::check(&pois, &tours, &scene.camera_names()).map_err(problem)?;
-    Ok((pois, tours))
-}
-
 /// Where the viewer bundle is looked for: `GROTTO_WEB_BUNDLE`, else `web` beside the folder of
 /// the running binary (`target/release/grotto` finds `target/web`).
 pub(crate) fn default_bundle() -> Option<PathBuf> {
@@ -170,7 +154,7 @@ pub fn publish(opts: &PublishOptions) -> Result<PublishSummary> {
         return Err(output(&opts.package, format!("is damaged ({} problems; first: {p})", problems.len())));
     }
     let package_bytes = pkg.file_size();
-    let (pois, tours) = story_of(&pkg.scene()?, opts.story.as_deref())?;
+    let (pois, tours) = crate::cli::story_file::story_of(&pkg.scene()?, opts.story.as_deref())?;
     drop(pkg);
     let bundle = opts.bundle.clone().or_else(default_bundle).ok_or_else(|| {
         output(

@@ -55,6 +55,8 @@ pub struct RenderOptions {
     /// film (view/story.rs [`crate::view::story::tour_cameras`]).
     pub tour: Option<String>,
     pub tour_fps: Option<f32>,
+    /// Points of interest and tours added to the package's (`--story FILE`, cli/story_file.rs).
+    pub story: Option<PathBuf>,
     pub frames: u32,
     pub width: u32,
     pub height: u32,
@@ -119,6 +121,7 @@ impl RenderOptions {
             path: Vec::new(),
             tour: None,
             tour_fps: None,
+            story: None,
             frames: 30,
             width: 800,
             height: 600,
@@ -175,6 +178,22 @@ fn non_empty(scene: SceneData) -> Result<SceneData> {
 /// never loaded whole.
 fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Streaming>)> {
     let pkg = Package::open(&opts.package)?;
+    // A story file amends the package's points of interest and tours (`--story`).
+    let story = match &opts.story {
+        Some(path) => {
+            let world = pkg.scene()?;
+            let (pois, tours) = crate::cli::story_file::story_of(&world, Some(path))?;
+            Some((pois, tours, world.cameras))
+        }
+        None => None,
+    };
+    let with_story = |mut scene: SceneData| {
+        if let Some((pois, tours, cameras)) = &story {
+            (scene.pois, scene.tours) =
+                crate::scene::story::in_frame(scene.frame_origin_m, pois, tours, cameras);
+        }
+        scene
+    };
     let budget = Budget {
         gpu_bytes: opts.gpu_memory.unwrap_or_else(|| default_gpu_memory(gpu)),
         points: opts.point_budget.unwrap_or(u64::MAX),
@@ -184,14 +203,14 @@ fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Stre
     let full_bytes: u64 = tiles.iter().map(|t| t.full.bytes).sum();
     let full_surfels: u64 = tiles.iter().map(|t| t.full.surfels).sum();
     if full_bytes <= budget.gpu_bytes && full_surfels <= budget.points {
-        let mut scene = non_empty(SceneData::from_package(&pkg)?)?;
+        let mut scene = with_story(non_empty(SceneData::from_package(&pkg)?)?);
         apply_lamps(opts, &mut scene);
         return Ok((scene, None));
     }
     let aspect = opts.width as f32 / opts.height.max(1) as f32;
     let (coarse, streaming) =
         Streaming::far_first(pkg, tiles, budget, aspect, &opts.settings, |s| apply_lamps(opts, s))?;
-    Ok((non_empty(coarse)?, Some(streaming)))
+    Ok((with_story(non_empty(coarse)?), Some(streaming)))
 }
 
 /// One frame of a job, for `--json` and the fly-through tables.
@@ -353,7 +372,10 @@ pub(crate) fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
     let residency = match &streaming {
         Some(st) => {
             let r = st.choose(&cameras[0], clip)?;
+            // The story as opened (a story file's amendments included) stays.
+            let story = (std::mem::take(&mut scene.pois), std::mem::take(&mut scene.tours));
             scene = st.load(&r, std::mem::take(&mut scene.lights), false)?;
+            (scene.pois, scene.tours) = story;
             Some(r)
         }
         None => None,
