@@ -320,7 +320,8 @@ impl SynthCave {
             let p: [f64; 3] = std::array::from_fn(|a| from[a] + d[a] / len * t);
             let f = self.eval(p);
             if f > -1e-3 {
-                return Some(p);
+                // A start in or at the rock is no view of it (a label on the eye is refused).
+                return (t > 0.1).then_some(p);
             }
             t += (-f).max(2e-3) * 0.8;
             if t > max_m {
@@ -497,6 +498,22 @@ mod tests {
             })
             .count();
         assert!(facing > 1950, "{facing}");
+    }
+
+    #[test]
+    fn a_label_lands_on_the_wall_ahead_and_never_on_the_eye() {
+        let cave = SynthCave::new(&SynthParams { segments: 8, ..SynthParams::default() });
+        let eye = cave.stations[0];
+        let ahead = cave.path[3];
+        let at = cave.first_wall(eye, ahead, 60.0).unwrap();
+        assert!(cave.eval(at).abs() < 0.01, "{} m off the wall", cave.eval(at));
+        let d = (0..3).map(|a| (at[a] - eye[a]).powi(2)).sum::<f64>().sqrt();
+        assert!(d > 0.1, "the wall point is the eye");
+        // From inside the rock: nothing (a label there would sit on the eye).
+        let rock = [at[0] + 5.0 * (at[0] - eye[0]) / d, at[1] + 5.0 * (at[1] - eye[1]) / d, at[2]];
+        if cave.eval(rock) > 0.0 {
+            assert!(cave.first_wall(rock, ahead, 60.0).is_none());
+        }
     }
 
     #[test]
