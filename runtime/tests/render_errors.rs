@@ -49,9 +49,9 @@ fn bad_requests_are_typed_errors() {
         .unwrap_err();
     assert!(matches!(e, Error::Camera(_)) && e.to_string().contains("nowhere"), "{e}");
 
-    let e = render_job::run(&opts(pkg.clone(), CameraChoice::Default, dir.path().join("x.jpg")), |_| {})
+    let e = render_job::run(&opts(pkg.clone(), CameraChoice::Default, dir.path().join("x.tif")), |_| {})
         .unwrap_err();
-    assert!(matches!(e, Error::Output { .. }) && e.to_string().contains("x.jpg"), "{e}");
+    assert!(matches!(e, Error::Output { .. }) && e.to_string().contains("x.tif"), "{e}");
 
     let same = [512_345.0, 5_123_456.0, 345.0];
     let cam = CameraChoice::Explicit { eye_m: same, look_at_m: same, up: [0.0, 0.0, 1.0], fov_y_deg: 60.0 };
