@@ -151,10 +151,15 @@ impl Browser {
         self.call("POST", "/execute/sync", Some(&json!({"script": script, "args": []})))
     }
 
-    /// The canvas as the page shows it (PNG through WebDriver's element screenshot).
+    /// The canvas as the renderer drew it (PNG through WebDriver's element screenshot), without
+    /// the page's labels, caption and measuring line drawn over it.
     fn screenshot_canvas(&self) -> image::RgbaImage {
         let id = self.canvas();
+        let overlays = "['labels', 'caption', 'overlay', 'notice'].forEach(id => \
+                        document.getElementById(id).style.visibility = VALUE); return 0";
+        self.eval(&overlays.replace("VALUE", "'hidden'"));
         let png = self.call("GET", &format!("/element/{id}/screenshot"), None);
+        self.eval(&overlays.replace("VALUE", "''"));
         let png = base64::engine::general_purpose::STANDARD.decode(png.as_str().unwrap()).unwrap();
         image::load_from_memory(&png).unwrap().to_rgba8()
     }
@@ -751,12 +756,9 @@ fn a_published_room_labels_measures_shares_and_answers_touch() {
         let caption = browser.eval("return document.getElementById('caption').innerText");
         eprintln!("tour at stop {stop}: {t}; caption {caption}");
         assert!(caption.as_str().unwrap().contains(&format!("stop {} of 2", stop + 1)), "{caption}");
-        // The canvas alone: the labels and the caption drawn over it are the page's, not the
-        // renderer's. The page keeps its exposure as the view changes (automatic exposure is set
-        // as tiles arrive): the render takes the page's.
-        browser.eval("for (const id of ['labels', 'caption', 'overlay']) document.getElementById(id).style.visibility = 'hidden'; return 0");
+        // The page keeps its exposure as the view changes (automatic exposure is set as tiles
+        // arrive): the render takes the page's.
         let shot = browser.screenshot_canvas();
-        browser.eval("for (const id of ['labels', 'caption', 'overlay']) document.getElementById(id).style.visibility = ''; return 0");
         let exposure = status["exposure"].as_f64().unwrap_or(0.0);
         let choice = CameraChoice::Named(camera.into());
         assert_matches_render(&shot, &package, choice, 1, exposure, Some(exposure as f32), camera);
@@ -1076,7 +1078,7 @@ fn memory_over_a_tour_loop() {
 }
 
 /// The screenshots of docs/web.md (issue 45): PACKAGE (GROTTO_WEB_BENCH_PACKAGE) published and
-/// opened at 800x600 with its panel, once at rest with its points of interest labelled
+/// opened at 640x480 with its panel, once at rest with its points of interest labelled
 /// (`web-pois.png`), once at its first tour's second stop with the caption (`web-tour.png`),
 /// and once on a 390x844 phone screen (`web-phone.png`), into GROTTO_WEB_DOCS_OUT.
 #[test]
@@ -1090,13 +1092,13 @@ fn screenshots_for_the_docs() {
     let dir = tempfile::tempdir().unwrap();
     let (_, server) = published(dir.path(), &package, bundle, json!({"quality": "fast"}));
     let browser = Browser::start(&chromium, &driver, true);
-    browser.call("POST", "/window/rect", Some(&json!({"width": 820, "height": 660})));
+    browser.call("POST", "/window/rect", Some(&json!({"width": 660, "height": 560})));
     let page = |b: &Browser, name: &str| {
         let png = b.call("GET", "/screenshot", None);
         let png = base64::engine::general_purpose::STANDARD.decode(png.as_str().unwrap()).unwrap();
         std::fs::write(out.join(name), png).unwrap();
     };
-    let url = format!("http://127.0.0.1:{}/index.html?width=800&height=600&bar=hidden", server.port);
+    let url = format!("http://127.0.0.1:{}/index.html?width=640&height=480&bar=hidden", server.port);
     browser.call("POST", "/url", Some(&json!({"url": url})));
     browser.wait_for_marker(Duration::from_secs(900));
     browser.wait_for(
