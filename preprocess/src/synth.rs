@@ -509,11 +509,13 @@ mod tests {
         assert!(cave.eval(at).abs() < 0.01, "{} m off the wall", cave.eval(at));
         let d = (0..3).map(|a| (at[a] - eye[a]).powi(2)).sum::<f64>().sqrt();
         assert!(d > 0.1, "the wall point is the eye");
-        // From inside the rock: nothing (a label there would sit on the eye).
-        let rock = [at[0] + 5.0 * (at[0] - eye[0]) / d, at[1] + 5.0 * (at[1] - eye[1]) / d, at[2]];
-        if cave.eval(rock) > 0.0 {
-            assert!(cave.first_wall(rock, ahead, 60.0).is_none());
-        }
+        // From inside the rock (found a little past the wall along the same ray): nothing, a
+        // label there would sit on the eye.
+        let inside = (1..200)
+            .map(|k| std::array::from_fn(|a| at[a] + (at[a] - eye[a]) / d * 0.01 * k as f64))
+            .find(|p: &[f64; 3]| cave.eval(*p) > 0.02)
+            .expect("rock behind the wall within 2 m");
+        assert!(cave.first_wall(inside, ahead, 60.0).is_none());
     }
 
     #[test]

@@ -133,14 +133,61 @@ impl Guide {
         player.tick(self.tours.get(player.tour)?, dt_s, settled)
     }
 
+    /// Flies from `from` to point of interest `i` (a tour playing stops).
+    pub fn fly_to_poi(&mut self, i: usize, from: Camera) {
+        if let Some(p) = self.pois.get(i) {
+            self.tour = None;
+            self.flight = Some(Flight::new(from, story::stop_camera(&p.camera), None));
+        }
+    }
+
+    /// Plays tour `i` from its first stop, flying there from `from`.
+    pub fn play(&mut self, i: usize, from: Camera) {
+        if let Some(t) = self.tours.get(i) {
+            self.flight = None;
+            self.tour = Some(TourPlayer::start(i, t, from));
+        }
+    }
+
+    /// Pauses (true) or resumes (false) the tour playing.
+    pub fn pause(&mut self, paused: bool) {
+        if let Some(p) = &mut self.tour {
+            p.paused = paused;
+        }
+    }
+
+    /// Goes `delta` stops on (negative: back) and plays from there.
+    pub fn step(&mut self, delta: i32, from: Camera) {
+        if let Some(p) = &mut self.tour
+            && let Some(t) = self.tours.get(p.tour)
+        {
+            p.step(t, delta, from);
+            p.paused = false;
+        }
+    }
+
+    /// The visitor moves the camera: a flight ends where it is, a tour pauses.
+    pub fn take_over(&mut self) {
+        self.flight = None;
+        self.pause(true);
+    }
+
     /// The story moves the camera (the light waits, as while the visitor moves it).
     pub fn flying(&self) -> bool {
         self.flight.is_some() || self.tour.as_ref().is_some_and(TourPlayer::flying)
     }
 
-    /// Takes an arrived probe: labels' visibility, clicked points. Returns a camera to fly to
-    /// for a double tap.
-    pub fn poll(&mut self) -> Result<Option<Camera>> {
+    /// Takes an arrived probe: labels' visibility, clicked points; a double tap's point starts
+    /// a flight from `from` toward it.
+    pub fn poll(&mut self, from: Camera) -> Result<()> {
+        if let Some(to) = self.take_probe()? {
+            self.tour = None;
+            self.flight = Some(Flight::new(from, to, None));
+        }
+        Ok(())
+    }
+
+    fn take_probe(&mut self) -> Result<Option<Camera>> {
         let Some(p) = &self.pending else { return Ok(None) };
         let Some(read) = p.probe.take() else { return Ok(None) };
         let p = self.pending.take().expect("checked above");

@@ -302,17 +302,22 @@ fn view_flies_the_cave_under_xvfb_matches_grotto_render_and_says_so_clearly_with
     assert!(row_lit(2) < 16 && row_lit(117) > 144, "top row {} lit, bottom row {}", row_lit(2), row_lit(117));
 }
 
+/// A stand-in viewer bundle in `dir`: publish copies it, the browser test runs the real one.
+fn stand_in_bundle(dir: &std::path::Path) -> std::path::PathBuf {
+    let bundle = dir.join("bundle");
+    std::fs::create_dir(&bundle).unwrap();
+    for f in grotto_runtime::cli::publish::BUNDLE_FILES {
+        std::fs::write(bundle.join(f), f).unwrap();
+    }
+    bundle
+}
+
 #[test]
 fn publish_writes_a_site_replaces_it_whole_and_refuses_what_it_cannot_serve() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("demo.grotto");
     demo::build(&path, &DemoParams { points: 3_000, ..DemoParams::default() }).unwrap();
-    // A stand-in bundle: publish copies it, the browser test runs the real one.
-    let bundle = dir.path().join("bundle");
-    std::fs::create_dir(&bundle).unwrap();
-    for f in grotto_runtime::cli::publish::BUNDLE_FILES {
-        std::fs::write(bundle.join(f), f).unwrap();
-    }
+    let bundle = stand_in_bundle(dir.path());
     let site = dir.path().join("site");
     let (p, s, b) = (path.to_str().unwrap(), site.to_str().unwrap(), bundle.to_str().unwrap());
     let out = grotto(&[
@@ -375,11 +380,7 @@ fn publish_adds_a_story_file_to_the_package_and_refuses_one_that_does_not_hold_t
     let path = dir.path().join("demo.grotto");
     let params = DemoParams { points: 3_000, ..DemoParams::default() };
     demo::build(&path, &params).unwrap();
-    let bundle = dir.path().join("bundle");
-    std::fs::create_dir(&bundle).unwrap();
-    for f in grotto_runtime::cli::publish::BUNDLE_FILES {
-        std::fs::write(bundle.join(f), f).unwrap();
-    }
+    let bundle = stand_in_bundle(dir.path());
     let c = params.center_m;
     let story = dir.path().join("story.toml");
     std::fs::write(

@@ -26,7 +26,7 @@ pub(crate) struct Health {
     /// Tiles held back, and the finest form each may take.
     pub damaged: BTreeMap<usize, TileMode>,
     notice: Option<String>,
-    /// Whether the stop came from a failure the page may offer a reload for.
+    /// Failed steps over the visit (the status's `stream_failures`).
     failures: u32,
 }
 

@@ -40,7 +40,6 @@ use grotto_runtime::stream::{self, Streaming};
 use grotto_runtime::view::camera::{Camera, Nav};
 use grotto_runtime::view::frame_target::FrameTarget;
 use grotto_runtime::view::framing::{CameraChoice, resolve_camera, scene_headlamp};
-use grotto_runtime::view::story::{Flight, TourPlayer};
 use story::story_for;
 use wasm_bindgen::prelude::*;
 use web_time::Instant;
@@ -327,12 +326,8 @@ impl Viewer {
 
     /// Flies to point of interest `i` of [`Viewer::story`] (a tour playing stops).
     pub fn fly_to_poi(&mut self, i: usize) {
-        let s = &mut self.state;
-        if let Some(p) = s.story.pois.get(i) {
-            let to = grotto_runtime::view::story::stop_camera(&p.camera);
-            s.story.tour = None;
-            s.story.flight = Some(Flight::new(s.nav.camera(), to, None));
-        }
+        let from = self.state.nav.camera();
+        self.state.story.fly_to_poi(i, from);
     }
 
     /// A click or tap at canvas pixel `(x, y)` of the rendered frame: `measure` picks a
@@ -355,30 +350,19 @@ impl Viewer {
 
     /// Plays tour `i` from its first stop.
     pub fn tour_play(&mut self, i: usize) {
-        let s = &mut self.state;
-        if let Some(t) = s.story.tours.get(i) {
-            s.story.flight = None;
-            s.story.tour = Some(TourPlayer::start(i, t, s.nav.camera()));
-        }
+        let from = self.state.nav.camera();
+        self.state.story.play(i, from);
     }
 
     /// Pauses (true) or resumes (false) the tour.
     pub fn tour_pause(&mut self, paused: bool) {
-        if let Some(p) = &mut self.state.story.tour {
-            p.paused = paused;
-        }
+        self.state.story.pause(paused);
     }
 
     /// Goes `delta` stops on (negative: back) and plays from there.
     pub fn tour_step(&mut self, delta: i32) {
-        let s = &mut self.state;
-        let from = s.nav.camera();
-        if let Some(p) = &mut s.story.tour
-            && let Some(t) = s.story.tours.get(p.tour)
-        {
-            p.step(t, delta, from);
-            p.paused = false;
-        }
+        let from = self.state.nav.camera();
+        self.state.story.step(delta, from);
     }
 
     /// Ends the tour where the camera is.
@@ -414,10 +398,7 @@ impl State {
 
     /// The visitor moves the camera: a flight ends where it is, a tour pauses.
     fn take_over(&mut self) {
-        self.story.flight = None;
-        if let Some(p) = &mut self.story.tour {
-            p.paused = true;
-        }
+        self.story.take_over();
     }
 
     fn key(&mut self, code: &str, down: bool) -> bool {
@@ -457,10 +438,7 @@ impl State {
         let now = Instant::now();
         let dt = now.duration_since(self.last_frame).as_secs_f32().min(0.25);
         self.last_frame = now;
-        if let Some(to) = self.story.poll()? {
-            self.story.tour = None;
-            self.story.flight = Some(Flight::new(self.nav.camera(), to, None));
-        }
+        self.story.poll(self.nav.camera())?;
         let settled = self.image_final(false);
         match self.story.camera(dt, settled) {
             Some(c) => self.nav = Nav::from_camera(&c, self.nav.speed_m_s),

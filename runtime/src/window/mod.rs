@@ -612,11 +612,8 @@ fn pick_orbit(s: &mut State, x: u32, y: u32) -> Result<()> {
     let Some(distance_m) = s.renderer.distance_at(x, y)? else { return Ok(()) };
     let cam = s.nav.camera();
     // The pixel's ray (the same projection the G-buffer drew with).
-    let ndc =
-        glam::Vec2::new((x as f32 + 0.5) / w as f32 * 2.0 - 1.0, 1.0 - (y as f32 + 0.5) / h as f32 * 2.0);
-    let inv = cam.view_proj(w, h, 0.01, 1000.0).inverse();
-    let far = inv.project_point3(ndc.extend(1.0));
-    let dir = (far - cam.eye_m).normalize_or(Vec3::X);
+    let centre = glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+    let dir = crate::render::probe::ray_through(&cam, w, h, centre);
     s.nav.orbit_around(cam.eye_m + dir * distance_m);
     Ok(())
 }
@@ -806,7 +803,7 @@ impl ApplicationHandler for App {
             WindowEvent::CursorMoved { position, .. } => {
                 if let Some(s) = self.state.as_mut() {
                     if let (true, Some((x, y))) = (s.dragging, s.cursor) {
-                        s.story.take_over();
+                        s.story.guide.take_over();
                         s.nav.look((position.x - x) as f32, (position.y - y) as f32);
                     }
                     s.cursor = Some((position.x, position.y));

@@ -14,7 +14,6 @@ use crate::guide::{Guide, PickFor};
 use crate::render::Renderer;
 use crate::scene::data::SceneData;
 use crate::view::camera::{Camera, Nav};
-use crate::view::story::{Flight, TourPlayer, stop_camera};
 use winit::keyboard::KeyCode;
 
 /// Two clicks this close in time and place are a double click.
@@ -58,26 +57,15 @@ impl StoryUi {
     ) -> Result<bool> {
         // Read-backs complete as the device is polled (a browser does this by itself).
         let _ = gpu.device.poll(wgpu::PollType::Poll);
-        if let Some(to) = self.guide.poll()? {
-            self.guide.tour = None;
-            self.guide.flight = Some(Flight::new(nav.camera(), to, None));
-        }
+        self.guide.poll(nav.camera())?;
         if held.iter().any(|h| *h) {
-            self.take_over();
+            self.guide.take_over();
         }
         match self.guide.camera(dt_s, self.at_rest) {
             Some(c) => *nav = Nav::from_camera(&c, nav.speed_m_s),
             None => nav.step(held, dt_s),
         }
         Ok(self.guide.flying())
-    }
-
-    /// The person moves the camera: a flight ends, a tour pauses.
-    pub(super) fn take_over(&mut self) {
-        self.guide.flight = None;
-        if let Some(p) = &mut self.guide.tour {
-            p.paused = true;
-        }
     }
 
     /// After a frame drawn at `drawn` pixels in a window of `full`: probes labels and clicks.
@@ -113,15 +101,8 @@ impl StoryUi {
             }
             KeyCode::KeyT if recording => self.stops.push(cam),
             KeyCode::KeyG => self.play_or_pause(cam),
-            KeyCode::KeyN | KeyCode::KeyB => {
-                let delta = if code == KeyCode::KeyN { 1 } else { -1 };
-                if let Some(p) = &mut self.guide.tour
-                    && let Some(t) = self.guide.tours.get(p.tour)
-                {
-                    p.step(t, delta, cam);
-                    p.paused = false;
-                }
-            }
+            KeyCode::KeyN => self.guide.step(1, cam),
+            KeyCode::KeyB => self.guide.step(-1, cam),
             _ => return false,
         }
         true
@@ -132,12 +113,7 @@ impl StoryUi {
             Some(p) if p.tour == self.tour && p.phase != crate::view::story::TourPhase::Finished => {
                 p.paused = !p.paused
             }
-            _ => {
-                if let Some(t) = self.guide.tours.get(self.tour) {
-                    self.guide.flight = None;
-                    self.guide.tour = Some(TourPlayer::start(self.tour, t, cam));
-                }
-            }
+            _ => self.guide.play(self.tour, cam),
         }
     }
 
@@ -198,10 +174,9 @@ impl StoryUi {
             painter.line_segment([a, b], egui::Stroke::new(2.0, yellow));
         }
         egui::Window::new("story").default_pos([8.0, 420.0]).default_width(220.0).show(ctx, |ui| {
-            for p in self.guide.pois.clone() {
+            for (i, p) in self.guide.pois.clone().iter().enumerate() {
                 if ui.button(&p.title).on_hover_text(&p.text).clicked() {
-                    self.guide.tour = None;
-                    self.guide.flight = Some(Flight::new(*cam, stop_camera(&p.camera), None));
+                    self.guide.fly_to_poi(i, *cam);
                 }
             }
             if !self.guide.tours.is_empty() {
@@ -224,7 +199,7 @@ impl StoryUi {
                         self.play_or_pause(*cam);
                     }
                     if ui.button("next (N)").clicked() {
-                        self.key(KeyCode::KeyN, *cam, recording);
+                        self.guide.step(1, *cam);
                     }
                 });
                 if let Some(t) = self.guide.tour_status() {
