@@ -277,6 +277,11 @@ impl Guide {
             .collect()
     }
 
+    /// The scene's frame origin, world metres (what view links are given in).
+    pub fn frame_origin_m(&self) -> [f64; 3] {
+        self.frame_origin_m
+    }
+
     /// Whether the labels' visibility is that of `camera`'s view (what a test waits for).
     pub fn labels_current(&self, camera: &Camera) -> bool {
         self.pois.is_empty() || (self.probed_for == Some(*camera) && self.pending.is_none())

@@ -449,3 +449,56 @@ fn publish_adds_a_story_file_to_the_package_and_refuses_one_that_does_not_hold_t
         assert_eq!(kept["story"]["pois"][0]["name"], "wall");
     }
 }
+
+#[test]
+fn view_labels_measures_and_tours_the_room_under_xvfb() {
+    use grotto_fixtures::room;
+    let dir = tempfile::tempdir().unwrap();
+    let package = room::room_package(dir.path()).unwrap();
+    let walk = dir.path().join("walk.toml");
+    // Real X input on Xvfb (as above): with the panel hidden (H) the clicks reach the cave. M and
+    // two clicks measure from a floor pixel to a ceiling pixel of the hall camera; T marks a tour
+    // stop on the path --record-path records from the start, K ends that recording; G plays the room's tour; Escape ends the session, whose --json
+    // says what the story was doing then.
+    let script = format!(
+        "timeout 300 {bin} view {p} --camera hall --size 320x240 --quality fast --bounces 0 --software \
+         --render-scale 1 --samples 1 --record-path {walk} --json > {dir}/view.json 2> {dir}/view.err & pid=$!; \
+         wid=$(timeout 120 xdotool search --sync --onlyvisible --name 'grotto view') || exit 3; \
+         for i in $(seq 100); do xdotool windowfocus $wid 2>/dev/null; \
+         [ \"$(xdotool getwindowfocus 2>/dev/null)\" = \"$wid\" ] && break; sleep 0.2; done; \
+         sleep 3; timeout 60 xdotool key h sleep 0.5 key m sleep 0.3 \
+         mousemove --window $wid 167 228 click 1 sleep 1 mousemove --window $wid 149 10 click 1 sleep 2 \
+         key t sleep 0.3 key k sleep 0.3 key g sleep 1 key Escape || exit 4; wait $pid",
+        bin = env!("CARGO_BIN_EXE_grotto"),
+        p = package.display(),
+        walk = walk.display(),
+        dir = dir.path().display(),
+    );
+    let xvfb = Command::new("timeout")
+        .args(["600", "xvfb-run", "-a", "-s", "-screen 0 640x480x24", "bash", "-c", &script])
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap_or_else(|e| panic!("xvfb-run (scripts/test.sh installs xvfb and xdotool): {e}"));
+    let log = std::fs::read_to_string(dir.path().join("view.err")).unwrap_or_default();
+    assert!(
+        xvfb.status.success(),
+        "{}{}\n{log}",
+        String::from_utf8_lossy(&xvfb.stdout),
+        String::from_utf8_lossy(&xvfb.stderr)
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("view.json")).unwrap()).unwrap();
+    let story = &summary["story"];
+    eprintln!("{story:#}");
+    // The labels were probed in the hall's view before anything moved.
+    assert_eq!(story["labels"][0], serde_json::json!(["niche", true]), "{story}");
+    // Measured floor to ceiling: the room is 2.5 m high.
+    let height = story["measure"]["result"]["height_m"].as_f64().unwrap();
+    assert!((height - room::SIZE_M[2]).abs() < 0.01, "measured {height} m");
+    // The tour started at its first stop; the marked stop was written beside the path.
+    assert_eq!(story["tour"]["name"], "walk", "{story}");
+    assert_eq!(story["tour"]["stop"], 0);
+    assert_eq!(summary["tours"][0][1], 1, "{}", summary["tours"]);
+    let tour = std::fs::read_to_string(dir.path().join("walk-tour.toml")).unwrap();
+    assert!(tour.contains("[[tour.stop]]"), "{tour}");
+}

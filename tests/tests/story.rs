@@ -191,3 +191,44 @@ fn grotto_render_draws_a_tour_a_frame_a_stop_or_as_a_film() {
     .unwrap_err();
     assert!(err.to_string().contains("no tour named \"nope\"") && err.to_string().contains("walk"), "{err}");
 }
+
+#[test]
+fn grotto_render_draws_the_labels_rock_does_not_hide() {
+    use grotto_runtime::cli::render_job::{self, RenderOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let package = room::room_package(dir.path()).unwrap();
+    let opts = |labels: bool, supersample: u32, out: &str| RenderOptions {
+        camera: grotto_runtime::view::framing::CameraChoice::Named("hall".into()),
+        width: W,
+        height: H,
+        supersample,
+        labels,
+        settings: Settings { bounces: 0, ..Settings::preset(Quality::Fast) },
+        gpu: grotto_tests::lavapipe(),
+        exposure: Some(3.0),
+        ..RenderOptions::defaults(package.clone(), dir.path().join(out))
+    };
+    let plain = render_job::run(&opts(false, 1, "plain.png"), |_| {}).unwrap();
+    assert!(plain.frames[0].labels.is_empty(), "no labels unless asked");
+    let labelled = render_job::run(&opts(true, 1, "labels.png"), |_| {}).unwrap();
+    let labels = &labelled.frames[0].labels;
+    let names: Vec<(&str, bool)> = labels.iter().map(|l| (l.poi.as_str(), l.visible)).collect();
+    assert_eq!(names, [("niche", true), ("behind", false)], "the pillar hides the label behind it");
+    let a = image::open(dir.path().join("plain.png")).unwrap().to_rgba8();
+    let b = image::open(dir.path().join("labels.png")).unwrap().to_rgba8();
+    let changed = |x0: f32, y0: f32, r: f32| {
+        a.enumerate_pixels()
+            .filter(|(x, y, p)| (*x as f32 - x0).hypot(*y as f32 - y0) < r && b.get_pixel(*x, *y) != *p)
+            .count()
+    };
+    let (niche, behind) = (&labels[0], &labels[1]);
+    assert_eq!(b.get_pixel(niche.x_px as u32, niche.y_px as u32).0, [255, 207, 64, 255], "the dot");
+    assert!(changed(niche.x_px, niche.y_px - 15.0, 12.0) > 40, "the title's box above the niche");
+    assert_eq!(changed(behind.x_px, behind.y_px, 4.0), 0, "the hidden label leaves its pixels alone");
+    // Supersampled, the labels land at the same place in the written image.
+    let big = render_job::run(&opts(true, 2, "labels2.png"), |_| {}).unwrap();
+    let n2 = &big.frames[0].labels[0];
+    assert!((n2.x_px - niche.x_px).abs() < 1.0 && (n2.y_px - niche.y_px).abs() < 1.0, "{n2:?} vs {niche:?}");
+    let err = render_job::run(&opts(true, 1, "labels.exr"), |_| {}).unwrap_err();
+    assert!(err.to_string().contains(".exr"), "{err}");
+}

@@ -210,6 +210,11 @@ struct RenderArgs {
     /// manifest): --camera and --tour find them, grotto view shows them.
     #[arg(long)]
     story: Option<PathBuf>,
+    /// grotto render: draw the labels of the points of interest in view (not those rock hides)
+    /// into the image, as the published page shows them (.png and .jpg). grotto view always
+    /// shows them.
+    #[arg(long)]
+    labels: bool,
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "800x600", value_parser = grotto_runtime::cli::render_job::parse_size)]
     size: (u32, u32),
@@ -452,6 +457,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
         clip_world_m: a.clip,
         supersample: a.supersample,
         samples: a.samples.unwrap_or(1),
+        labels: a.labels,
     })
 }
 

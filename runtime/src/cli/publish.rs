@@ -119,6 +119,8 @@ fn render_picture(opts: &PublishOptions, picture: &Picture, camera: CameraChoice
         exposure: o.get("exposure").and_then(serde_json::Value::as_f64).map(|e| e as f32),
         gpu: picture.gpu.clone(),
         samples: crate::passes::resolve::DEFAULT_STILL_SAMPLES,
+        // The picture stands in for the page: its labels too.
+        labels: true,
         ..RenderOptions::defaults(opts.package.clone(), dir.join(PICTURE_FILE))
     };
     render_job::run(&render, |_| {}).map(drop).map_err(|e| {

@@ -9,7 +9,7 @@ use glam::{DVec3, Vec3};
 use grotto_format::Package;
 use serde::Serialize;
 
-use crate::cli::image_out;
+use crate::cli::{image_out, labels};
 use crate::error::{Error, Result};
 use crate::gpu::{Gpu, GpuOptions};
 use crate::light::plan::EffectPlan;
@@ -89,6 +89,9 @@ pub struct RenderOptions {
     /// viewers do at rest: passes/resolve.rs): anti-aliased at that many frames' G-buffer and
     /// shade work, no more memory. 1: the pixel centres.
     pub samples: u32,
+    /// Draw the labels of the points of interest in view into the image (`--labels`, as the
+    /// page shows them; cli/labels.rs). PNG and JPEG only.
+    pub labels: bool,
 }
 
 /// A box in world metres `[min, max]` in a scene's frame; an error where it is empty or not
@@ -138,6 +141,7 @@ impl RenderOptions {
             clip_world_m: None,
             supersample: 1,
             samples: 1,
+            labels: false,
         }
     }
 }
@@ -263,6 +267,9 @@ pub struct FrameReport {
     pub(crate) load_wait_ms: f64,
     /// Milliseconds of each pass that ran for this frame.
     pub(crate) pass_ms: std::collections::BTreeMap<String, f64>,
+    /// The points of interest in view and whether their labels were drawn (`--labels`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub labels: Vec<labels::LabelReport>,
 }
 
 /// What a render did, for `--json` and the summary line.
@@ -517,15 +524,28 @@ fn as_samples(e: Error) -> Error {
     }
 }
 
-/// Runs a render job.
-pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<RenderSummary> {
-    image_out::kind_of(&opts.out)?;
+/// What a job's options can be refused for before any work.
+fn check_options(opts: &RenderOptions) -> Result<()> {
+    let kind = image_out::kind_of(&opts.out)?;
     if !(1..=MAX_SUPERSAMPLE).contains(&opts.supersample) {
         return Err(Error::Setting {
             name: "supersample",
             problem: format!("{} is outside 1..={MAX_SUPERSAMPLE}", opts.supersample),
         });
     }
+    if opts.labels && kind == image_out::ImageKind::Exr {
+        return Err(Error::Setting {
+            name: "labels",
+            problem: "labels are drawn into .png and .jpg images; an .exr keeps the radiance as rendered"
+                .into(),
+        });
+    }
+    Ok(())
+}
+
+/// Runs a render job.
+pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<RenderSummary> {
+    check_options(opts)?;
     let (w_px, h_px) = (opts.width * opts.supersample, opts.height * opts.supersample);
     let gpu = Gpu::new(&opts.gpu)?;
     let t_load = Instant::now();
@@ -591,13 +611,21 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         if opts.samples > 1 {
             (frame, last_plan) = r.render_still(cam, w_px, h_px)?;
         }
+        let labels = match opts.labels {
+            true => labels::find(&gpu, &r, &scene.pois, cam, (w_px, h_px), opts.supersample)?,
+            false => Vec::new(),
+        };
         if opts.supersample > 1 {
             frame = frame.downsampled(opts.supersample);
         }
         let (uncovered, black) = uncovered_and_black(&frame);
         uncovered_pixels = uncovered_pixels.max(uncovered);
         black_pixels = black_pixels.max(black);
-        frames.push(frame_report(i as u32, &scene, current, change, frame_ms, &mut r));
+        labels::draw(&mut frame, &labels);
+        frames.push(FrameReport {
+            labels,
+            ..frame_report(i as u32, &scene, current, change, frame_ms, &mut r)
+        });
         let path = frame_path(&opts.out, i as u32, n);
         image_out::write_frame(&frame, &path)?;
         images.push(path.display().to_string());
@@ -863,5 +891,6 @@ fn frame_report(
         frame_ms,
         load_wait_ms: change.load_wait_ms,
         pass_ms: r.stats().last_ms.iter().map(|(p, ms)| (p.name().to_string(), *ms)).collect(),
+        labels: Vec::new(),
     }
 }

@@ -91,6 +91,8 @@ pub struct ViewSummary {
     pub(crate) tile_swaps: u32,
     /// Frame times while moving and at rest, and how long the light took to converge at rest.
     pub log: FrameLog,
+    /// The story's state when the window closed: labels, measurement, tour.
+    pub story: Option<story::StorySummary>,
 }
 
 /// Opens the window and runs until it is closed (or the scripted screenshot is written).
@@ -109,6 +111,8 @@ pub fn run(opts: ViewOptions) -> Result<ViewSummary> {
             app.summary.tours.extend(save_tour(&app.opts, &mut s.story, &s.scene)?);
         }
         app.summary.log = std::mem::take(&mut s.log);
+        let size = s.renderer.ldr_output().map_or((s.config.width, s.config.height), |o| (o.width, o.height));
+        app.summary.story = Some(s.story.summary(&s.nav.camera(), size));
     }
     app.summary.seconds = app.started.elapsed().as_secs_f64();
     Ok(app.summary)
@@ -586,7 +590,11 @@ impl App {
             }
             KeyCode::KeyK => match s.recording.take() {
                 None => s.recording = Some(Vec::new()),
-                Some(keys) => self.summary.paths.push(save_path(&self.opts, &keys, &s.scene)?),
+                Some(keys) => {
+                    self.summary.paths.push(save_path(&self.opts, &keys, &s.scene)?);
+                    // The stops marked (T) belong to this recording: written beside it now.
+                    self.summary.tours.extend(save_tour(&self.opts, &mut s.story, &s.scene)?);
+                }
             },
             KeyCode::F11 => {
                 let full = s.window.fullscreen().is_none().then_some(Fullscreen::Borderless(None));

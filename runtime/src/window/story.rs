@@ -10,7 +10,9 @@
 use std::time::Instant;
 
 use crate::error::Result;
-use crate::guide::{Guide, PickFor};
+use serde::Serialize;
+
+use crate::guide::{Guide, MeasureStatus, PickFor, TourStatus};
 use crate::render::Renderer;
 use crate::scene::data::SceneData;
 use crate::view::camera::{Camera, Nav};
@@ -33,7 +35,30 @@ pub(super) struct StoryUi {
     pub(super) at_rest: bool,
 }
 
+/// The story's state as `grotto view --json` reports it on exit.
+#[derive(Clone, Debug, Serialize)]
+pub struct StorySummary {
+    /// Points of interest in view and whether rock hides them (None: not probed yet).
+    pub labels: Vec<(String, Option<bool>)>,
+    pub measure: MeasureStatus,
+    pub tour: Option<TourStatus>,
+    /// The camera as a view link (`x,y,z,heading,pitch,fov`, world metres).
+    pub camera: String,
+}
+
 impl StoryUi {
+    /// The summary for `camera`'s frame of `size` pixels.
+    pub(super) fn summary(&self, camera: &Camera, size: (u32, u32)) -> StorySummary {
+        StorySummary {
+            labels: (self.guide.labels(camera, size.0, size.1).into_iter())
+                .map(|l| (self.guide.pois[l.poi].name.clone(), l.visible))
+                .collect(),
+            measure: self.guide.measure_status(camera, size.0, size.1),
+            tour: self.guide.tour_status(),
+            camera: crate::view::story::view_link(camera, self.guide.frame_origin_m()),
+        }
+    }
+
     pub(super) fn new(scene: &SceneData) -> Self {
         Self {
             guide: Guide::new(scene.pois.clone(), scene.tours.clone(), scene.frame_origin_m),
