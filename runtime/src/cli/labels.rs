@@ -49,6 +49,7 @@ pub(crate) fn find(
     let seen: Vec<(&ScenePoi, story::Projected)> =
         pois.iter().filter_map(|p| Some((p, story::project(camera, w_px, h_px, p.position_m)?))).collect();
     let mut labels = Vec::with_capacity(seen.len());
+    // Nothing in view (or none asked for): no read-back at all.
     for chunk in seen.chunks(MAX_PROBE_PIXELS) {
         let pixels: Vec<(u32, u32)> = chunk.iter().map(|(_, a)| (a.x_px as u32, a.y_px as u32)).collect();
         let Some(probe) = r.start_probe(&pixels)? else { return Ok(Vec::new()) };

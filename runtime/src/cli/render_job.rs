@@ -611,10 +611,8 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         if opts.samples > 1 {
             (frame, last_plan) = r.render_still(cam, w_px, h_px)?;
         }
-        let labels = match opts.labels {
-            true => labels::find(&gpu, &r, &scene.pois, cam, (w_px, h_px), opts.supersample)?,
-            false => Vec::new(),
-        };
+        let pois = if opts.labels { &scene.pois[..] } else { &[] };
+        let labels = labels::find(&gpu, &r, pois, cam, (w_px, h_px), opts.supersample)?;
         if opts.supersample > 1 {
             frame = frame.downsampled(opts.supersample);
         }
