@@ -12,6 +12,9 @@
 
 pub mod color;
 pub mod compact;
+pub mod ies;
+pub mod lighting;
+pub mod photometry;
 mod env_chain;
 mod error;
 mod reader;
@@ -30,7 +33,8 @@ pub use env_chain::{EnvChain, level_table};
 pub use error::{Error, Problem, Region, Result};
 pub use reader::{CoarseData, Element, Package, SvoData, Tile};
 pub use scene::{
-    Camera, Environment, InputFile, Light, LightShape, Material, MaterialRegion, Provenance, ScanInfo, Scene,
+    Camera, Circuit, Environment, InputFile, Light, LightProfile, LightShape, Material, MaterialRegion,
+    Profile, Provenance, ScanInfo, Scene,
 };
 pub use section::{SectionInfo, TileInfo};
 pub use spec::{Codec, Scope, SectionKind};

@@ -123,6 +123,8 @@ pub fn build(out: &Path, params: &DemoParams) -> Result<DemoSummary> {
             shape: LightShape::Point { position_m: [c[0] + 1.0, c[1] - 0.5, c[2] + 1.5] },
             color: [1.0, 0.85, 0.7],
             power_w: 40.0,
+            circuit: None,
+            profile: None,
         }],
         cameras: vec![Camera {
             name: "centre".into(),

@@ -354,7 +354,14 @@ impl Manifest {
                     ));
                 }
             };
-            lights.push(Light { name: l.name.clone(), shape, color: l.color, power_w: l.power_w });
+            lights.push(Light {
+                name: l.name.clone(),
+                shape,
+                color: l.color,
+                power_w: l.power_w,
+                circuit: None,
+                profile: None,
+            });
         }
         let cameras: Vec<Camera> = self
             .cameras

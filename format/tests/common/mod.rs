@@ -140,6 +140,8 @@ pub(crate) fn sample_scene() -> Scene {
             },
             color: [1.0, 0.85, 0.7],
             power_w: 40.0,
+            circuit: None,
+            profile: None,
         }],
         materials: vec![Material {
             name: "wet".into(),
@@ -183,6 +185,7 @@ pub(crate) fn sample_scene() -> Scene {
                 },
             ],
         }],
+        circuits: Vec::new(),
     }
 }
 
