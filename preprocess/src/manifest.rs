@@ -379,6 +379,7 @@ impl Manifest {
             .map_err(|e| manifest_error(manifest_path, e))?;
         Ok(Scene {
             lights,
+            circuits: Vec::new(),
             materials: self
                 .materials
                 .iter()

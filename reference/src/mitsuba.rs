@@ -132,6 +132,9 @@ pub(crate) fn sensor_and_lights(
         if l.spot.is_some() {
             return Err(Error::SpotForMitsuba(l.name.clone()));
         }
+        if l.profile.is_some() {
+            return Err(Error::ProfileForMitsuba(l.name.clone()));
+        }
         let _ = writeln!(
             s,
             "  <emitter type=\"point\"><point name=\"position\" value=\"{}\"/><rgb name=\"intensity\" value=\"{}\"/></emitter>",
@@ -204,6 +207,7 @@ mod tests {
             position_m: Vec3::ZERO,
             intensity_w_sr: Vec3::ONE,
             spot: Some(Spot { direction: Vec3::X, inner_angle_rad: 0.2, outer_angle_rad: 0.4 }),
+            profile: None,
         };
         let scene =
             SurfelScene::new(vec![Disc::new(Vec3::X, Vec3::X, 0.1, Vec3::ONE, Vec3::ZERO)], vec![spot], 0.05);

@@ -327,7 +327,7 @@ impl SurfelScene {
     }
 
     /// Direct radiance reflected at `p` (normal `n` facing the viewer, albedo `albedo`) from
-    /// point and spot lights, shadow rays included.
+    /// point and spot lights (profiles included), shadow rays included.
     fn direct(&self, p: Vec3, n: Vec3, albedo: Vec3) -> Vec3 {
         let mut e = Vec3::ZERO;
         for l in &self.lights {
@@ -338,18 +338,8 @@ impl SurfelScene {
             if c <= 0.0 {
                 continue;
             }
-            let spot = match l.spot {
-                None => 1.0,
-                Some(s) => {
-                    let cos_a = (-dir).dot(s.direction);
-                    let (co, ci) = (
-                        s.outer_angle_rad.cos(),
-                        s.inner_angle_rad.cos().max(s.outer_angle_rad.cos() + 1e-4),
-                    );
-                    let x = ((cos_a - co) / (ci - co)).clamp(0.0, 1.0);
-                    x * x * (3.0 - 2.0 * x)
-                }
-            };
+            // The spot's falloff and the profile, as the runtime's lights give them.
+            let spot = l.factor_toward(-dir);
             if spot <= 0.0 || self.occluded(p + n * self.shadow_offset_m, l.position_m) {
                 continue;
             }

@@ -32,6 +32,7 @@ fn direct_light_is_exact() {
         position_m: Vec3::new(0.0, 1.0, 2.0),
         intensity_w_sr: Vec3::splat(10.0),
         spot: None,
+        profile: None,
     };
     let scene = SurfelScene::new(vec![disc], vec![light], 0.01);
     let e = scene.surface_radiance(0, 16, &PathSettings::default(), 1);

@@ -44,6 +44,9 @@ pub enum Error {
     /// tours that do not read or do not hold together.
     #[error("{path}: {problem}")]
     Story { path: String, problem: String },
+    /// A lighting file (`--lights`) or an IES file it names that does not read or hold together.
+    #[error("{path}{}: {problem}", line.map(|l| format!(", line {l}")).unwrap_or_default())]
+    Lighting { path: String, line: Option<usize>, problem: String },
     #[error("setting {name}: {problem}")]
     Setting { name: &'static str, problem: String },
     /// `grotto view` found no display to open its window on.

@@ -433,6 +433,7 @@ fn spot_light_lights_only_its_cone() {
         position_m: Vec3::new(8.0, 5.0, 6.0) * leaf,
         intensity_w_sr: Vec3::splat(10.0),
         spot: Some(Spot { direction: Vec3::NEG_X, inner_angle_rad: 0.2, outer_angle_rad: 0.3 }),
+        profile: None,
     }];
     let mut r = Renderer::new(gpu(), &scene, Settings { bounces: 0, ..Default::default() }).unwrap();
     r.update_light().unwrap();
@@ -788,6 +789,7 @@ fn a_scene_with_256_lights_renders_and_culling_drops_only_light_under_the_cutoff
                 position_m: lo + (hi - lo) * (0.3 + 0.4 * f),
                 intensity_w_sr: Vec3::splat(0.05 + w.out[1] * 0.5),
                 spot: None,
+                profile: None,
             }
         })
         .collect();
@@ -874,6 +876,7 @@ fn many_cone_shadowed_lamps_add_up_like_the_same_lamps_one_at_a_time() {
             position_m: (air[k * step].as_vec3() + 0.5) * scene.leaf_size_m,
             intensity_w_sr: Vec3::splat(0.5),
             spot: None,
+            profile: None,
         })
         .collect();
     let far = |lights: &[SceneLight]| {
@@ -1006,6 +1009,7 @@ fn sixty_four_shadowed_lamps_fit_the_uniform_binding_limit_and_shadow_nothing_in
                 position_m: lo + (hi - lo) * (0.3 + 0.4 * f),
                 intensity_w_sr: Vec3::splat(0.1),
                 spot: None,
+                profile: None,
             }
         })
         .collect();

@@ -312,6 +312,7 @@ fn published(
         title: None,
         viewer_options: serde_json::from_value(viewer_options).unwrap(),
         story: None,
+        lights: None,
         picture: None,
     })
     .unwrap();
@@ -459,6 +460,7 @@ fn a_browser_without_webgpu_gets_the_picture_and_the_points_of_interest_not_a_bl
         title: Some("The room".into()),
         viewer_options: serde_json::Map::new(),
         story: None,
+        lights: None,
         picture: Some(publish::Picture { width: 160, height: 120, gpu: grotto_tests::lavapipe() }),
     })
     .unwrap();
@@ -1018,6 +1020,7 @@ fn memory_over_a_tour_loop() {
         title: None,
         viewer_options: serde_json::Map::new(),
         story: Some(story_path),
+        lights: None,
         picture: None,
     })
     .unwrap();

@@ -191,6 +191,7 @@ fn lamp(position_m: Vec3) -> SceneLight {
         position_m,
         intensity_w_sr: Vec3::splat(100.0 / (4.0 * std::f32::consts::PI)),
         spot: None,
+        profile: None,
     }
 }
 

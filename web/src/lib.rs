@@ -174,7 +174,20 @@ impl Viewer {
         let gpu_bytes = o.gpu_memory_mb.map_or_else(|| default_gpu_memory(&gpu), |mb| mb << 20);
         let budget = Budget { gpu_bytes, points: u64::MAX, pools: None };
         let aspect = width as f32 / height as f32;
-        let (mut far, mut streaming) = Streaming::far_first(pkg, tiles, budget, aspect, &settings, |_| {})?;
+        let relight = match &o.lighting {
+            Some(v) => {
+                let r: grotto_runtime::scene::lighting::Relight = serde_json::from_value(v.clone())
+                    .map_err(|e| Error::Setting(format!("viewer.json lighting: {e}")))?;
+                r.check().map_err(|e| Error::Setting(format!("viewer.json lighting: {e}")))?;
+                Some(r)
+            }
+            None => None,
+        };
+        let (mut far, mut streaming) = Streaming::far_first(pkg, tiles, budget, aspect, &settings, |s| {
+            if let Some(r) = &relight {
+                r.apply(s);
+            }
+        })?;
         if far.leaves.is_empty() {
             return Err(Error::Setting(format!("{url}: no voxels to show (empty package)")));
         }

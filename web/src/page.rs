@@ -56,6 +56,10 @@ pub struct Options {
     /// Points of interest and tours (`{"pois": [...], "tours": [...]}`, the package scene's
     /// shape), instead of the package's: what `grotto publish --story` writes to viewer.json.
     pub story: Option<serde_json::Value>,
+    /// The lights (`{"lights": [...], "circuits": [...], "baked": [...]}`,
+    /// grotto_runtime::scene::lighting::Relight), instead of the package's: what `grotto publish
+    /// --lights` writes to viewer.json.
+    pub lighting: Option<serde_json::Value>,
 }
 
 /// The status of a frame, for the page's panel and the ready marker (JSON).

@@ -264,6 +264,7 @@ pub fn bunny() -> Result<SceneData, String> {
         // About 3 W/m^2 on the bunny.
         intensity_w_sr: Vec3::splat(3.0 * (light_m - c).length_squared()),
         spot: None,
+        profile: None,
     });
     scene.cameras.push(grotto_runtime::scene::data::SceneCamera {
         name: "front".into(),

@@ -99,6 +99,10 @@ struct PublishArgs {
     /// manifest, docs/manifest.md); one named as one of the package's replaces it.
     #[arg(long)]
     story: Option<PathBuf>,
+    /// A lighting file changing the package's lights ([[light]], [[circuit]]; docs/runtime.md):
+    /// the page and its picture are lit by it.
+    #[arg(long)]
+    lights: Option<PathBuf>,
     /// Size WIDTHxHEIGHT of the still picture a browser without WebGPU shows (rendered here,
     /// at the first tour stop or the page's camera).
     #[arg(long, default_value = "800x600", value_parser = grotto_runtime::cli::render_job::parse_size)]
@@ -143,6 +147,7 @@ fn publish(a: PublishArgs) -> anyhow::Result<ExitCode> {
         title: a.title,
         viewer_options,
         story: a.story,
+        lights: a.lights,
         picture: (!a.no_picture).then(|| publish::Picture {
             width: a.picture.0,
             height: a.picture.1,
@@ -210,6 +215,10 @@ struct RenderArgs {
     /// manifest): --camera and --tour find them, grotto view shows them.
     #[arg(long)]
     story: Option<PathBuf>,
+    /// A lighting file (TOML: [[light]] and [[circuit]] in watts or lumens, RGB or kelvin, IES
+    /// profiles) changing the package's lights without a rebuild (docs/runtime.md).
+    #[arg(long)]
+    lights: Option<PathBuf>,
     /// grotto render: draw the labels of the points of interest in view (not those rock hides)
     /// into the image, as the published page shows them (.png and .jpg). grotto view always
     /// shows them.
@@ -440,6 +449,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
         tour: a.tour.clone(),
         tour_fps: a.tour_fps,
         story: a.story.clone(),
+        lights: a.lights.clone(),
         frames: a.frames,
         width: a.size.0,
         height: a.size.1,
@@ -566,7 +576,7 @@ fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
         "--supersample is for grotto render (bench the larger --size instead)"
     );
     let opts = options(&b.render)?;
-    let report = grotto_runtime::cli::render_job::bench(&opts, b.reps)?;
+    let report = grotto_runtime::cli::bench_job::bench(&opts, b.reps)?;
     if b.render.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {

@@ -35,6 +35,9 @@ pub struct PublishOptions {
     pub story: Option<PathBuf>,
     /// The still picture a browser without WebGPU shows (None: none).
     pub picture: Option<Picture>,
+    /// A lighting file changing the package's lights (cli/lighting_file.rs): the page and its
+    /// picture are lit by it.
+    pub lights: Option<PathBuf>,
 }
 
 /// The still picture `grotto publish` renders for browsers without WebGPU: the first tour's first
@@ -119,8 +122,9 @@ fn render_picture(opts: &PublishOptions, picture: &Picture, camera: CameraChoice
         exposure: o.get("exposure").and_then(serde_json::Value::as_f64).map(|e| e as f32),
         gpu: picture.gpu.clone(),
         samples: crate::passes::resolve::DEFAULT_STILL_SAMPLES,
-        // The picture stands in for the page: its labels too.
+        // The picture stands in for the page: its labels and lighting too.
         labels: true,
+        lights: opts.lights.clone(),
         ..RenderOptions::defaults(opts.package.clone(), dir.join(PICTURE_FILE))
     };
     render_job::run(&render, |_| {}).map(drop).map_err(|e| {
@@ -157,6 +161,8 @@ pub fn publish(opts: &PublishOptions) -> Result<PublishSummary> {
     }
     let package_bytes = pkg.file_size();
     let (pois, tours) = crate::cli::story_file::story_of(&pkg.scene()?, opts.story.as_deref())?;
+    let relight =
+        opts.lights.as_ref().map(|p| crate::cli::lighting_file::relight_of(&pkg.scene()?, p)).transpose()?;
     drop(pkg);
     let bundle = opts.bundle.clone().or_else(default_bundle).ok_or_else(|| {
         output(
@@ -223,6 +229,8 @@ pub fn publish(opts: &PublishOptions) -> Result<PublishSummary> {
         "story": { "pois": pois, "tours": tours },
         // What a browser without WebGPU shows.
         "picture": opts.picture.as_ref().map(|_| PICTURE_FILE),
+        // The package's lights as --lights changed them (None: the package's own).
+        "lighting": relight,
     });
     let text = serde_json::to_string_pretty(&config).map_err(|e| output(&opts.out, e))?;
     std::fs::write(staging.path().join("viewer.json"), text).map_err(|e| output(&opts.out, e))?;

@@ -4,4 +4,5 @@
 
 pub mod activity;
 pub mod plan;
+pub(crate) mod profile;
 pub mod setup;

@@ -16,6 +16,7 @@
 use glam::{Mat4, UVec3, Vec3};
 
 use crate::gpu::types::{LightGpu, LightShadow};
+use crate::light::profile;
 use crate::passes::shadow::Face;
 use crate::scene::data::{SceneData, SceneLight};
 use crate::settings::{Settings, ShadowFallback};
@@ -27,6 +28,9 @@ use crate::settings::{Settings, ShadowFallback};
 pub(crate) struct LightSetup {
     pub(crate) lights: Vec<LightGpu>,
     pub(crate) faces: Vec<Face>,
+    /// Profiles' records (light/profile.rs), after the faces' matrices in the lights buffer;
+    /// a profiled light's `params.x` is its block's record index there.
+    pub(crate) profiles: Vec<LightGpu>,
     /// Lights with shadow maps; the others are lit per leaf by inject.
     pub(crate) shadowed: usize,
     pub(crate) point_lights: usize,
@@ -60,7 +64,9 @@ impl LightSetup {
         let order = (0..scene.lights.len())
             .filter(|&k| mapped[k])
             .chain((0..scene.lights.len()).filter(|&k| !mapped[k]));
-        let (mut lights, mut faces) = (Vec::new(), Vec::new());
+        let (mut lights, mut faces, mut profiles) = (Vec::new(), Vec::new(), Vec::new());
+        // Lights with a profile and where their block starts among `profiles`.
+        let mut profiled: Vec<(usize, usize)> = Vec::new();
         for k in order {
             let (l, has_map) = (&scene.lights[k], mapped[k]);
             let first = if has_map { faces.len() as f32 } else { -1.0 };
@@ -84,10 +90,18 @@ impl LightSetup {
                             faces.push(Face { view_proj, eye_m: p, proj_scale: 1.0, range_m: range });
                         }
                     }
+                    let (kind, aim) = match &l.profile {
+                        Some(prof) => {
+                            profiled.push((lights.len(), profiles.len()));
+                            profiles.extend(profile::records(prof));
+                            (profile::KIND_PROFILED, Vec3::from_array(prof.frame().0))
+                        }
+                        None => (0.0, Vec3::NEG_Z),
+                    };
                     lights.push(LightGpu {
-                        position_kind: p.extend(0.0).to_array(),
+                        position_kind: p.extend(kind).to_array(),
                         intensity_layer: l.intensity_w_sr.extend(first).to_array(),
-                        direction_cos_outer: [0.0, 0.0, -1.0, -1.0],
+                        direction_cos_outer: aim.extend(-1.0).to_array(),
                         params: [-1.0, range.min(f32::MAX), how, settings.light_cutoff_w_m2],
                     });
                 }
@@ -114,6 +128,10 @@ impl LightSetup {
                 }
             }
         }
+        // A profile block's index counts the lights and the faces' matrices before it.
+        for (light, at) in profiled {
+            lights[light].params[0] = (lights.len() + faces.len() + at) as f32;
+        }
         let grid = LightGrid::build(
             grid_lo_m,
             grid_hi_m,
@@ -126,6 +144,7 @@ impl LightSetup {
         LightSetup {
             lights,
             faces,
+            profiles,
             shadowed: mapped.iter().filter(|&&m| m).count(),
             point_lights,
             spot_lights: scene.lights.len() - point_lights,

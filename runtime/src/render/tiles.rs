@@ -395,12 +395,14 @@ impl Upload {
         let tiles = pool(gpu, "tiles", caps.tiles, &scene.tiles, STORAGE)?;
         let nodes = pool(gpu, "nodes", caps.nodes, &scene.nodes, STORAGE)?;
         let leaves = pool(gpu, "leaves", caps.leaves, &scene.leaves, STORAGE)?;
-        // The shadow faces' matrices follow the lights, one 64-byte record each (lights.wgsl).
+        // The shadow faces' matrices follow the lights, one 64-byte record each, then the lights'
+        // profiles (lights.wgsl).
         let mut light_records: Vec<LightGpu> = lights.lights.clone();
         light_records.extend(lights.faces.iter().map(|f| {
             let [c0, c1, c2, c3] = f.view_proj.to_cols_array_2d();
             LightGpu { position_kind: c0, intensity_layer: c1, direction_cos_outer: c2, params: c3 }
         }));
+        light_records.extend_from_slice(&lights.profiles);
         let static_buffers = [
             (0, params.clone()),
             (1, tiles.clone()),

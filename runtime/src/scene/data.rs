@@ -28,6 +28,26 @@ pub struct SceneLight {
     /// intensity, so narrowing a spot does not brighten it).
     pub intensity_w_sr: Vec3,
     pub spot: Option<Spot>,
+    /// How its intensity varies with direction (an IES profile, or an area light's cosine); with
+    /// one, `intensity_w_sr` is the peak's.
+    pub profile: Option<std::sync::Arc<grotto_format::LightProfile>>,
+}
+
+impl SceneLight {
+    /// The fraction of `intensity_w_sr` sent toward unit direction `d` (from the light): the
+    /// spot's smoothstep falloff (as lights.wgsl's `spot_factor`) and the profile. The GPU
+    /// samples the profile on a 1 degree x 5 degree grid (light/profile.rs): the same within
+    /// that grid's interpolation.
+    pub fn factor_toward(&self, d: Vec3) -> f32 {
+        let spot = self.spot.map_or(1.0, |s| {
+            let outer = s.outer_angle_rad.clamp(1e-3, 1.48);
+            let inner = s.inner_angle_rad.clamp(0.0, outer);
+            let (co, ci) = (outer.cos(), inner.cos().max(outer.cos() + 1e-4));
+            let t = ((d.dot(s.direction) - co) / (ci - co)).clamp(0.0, 1.0);
+            t * t * (3.0 - 2.0 * t)
+        });
+        spot * self.profile.as_ref().map_or(1.0, |p| p.toward(d.to_array()))
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -457,6 +477,7 @@ impl SceneData {
                 position_m: candidates[k],
                 intensity_w_sr: intensity,
                 spot: None,
+                profile: None,
             })
             .collect()
     }

@@ -3,13 +3,13 @@
 
 use glam::{DVec3, IVec3, Vec3};
 use grotto_format::spec::ShRgb9;
-use grotto_format::{LightShape, Package, Scene, Scope, SectionKind, Tile};
+use grotto_format::{Package, Scene, Scope, SectionKind, Tile};
 
 use crate::error::{Error, Result};
 use crate::gpu::types::{LeafGpu, SurfelGpu, TileGpu};
 use crate::scene::coarse::{CoarseLevel, coarse_level, gpu_tile};
 use crate::scene::data::{
-    MAX_MATERIALS, SceneCamera, SceneData, SceneLight, SceneMaterial, Spot, TileMode, frame_of, full_leaves,
+    MAX_MATERIALS, SceneCamera, SceneData, SceneMaterial, TileMode, frame_of, full_leaves,
     move_leaves_to_surfels, read_env_chain, tile_colors, tile_scans,
 };
 use crate::scene::rock::RockTable;
@@ -219,29 +219,14 @@ impl SceneData {
         (DVec3::from_array(p) - DVec3::from_array(self.frame_origin_m)).as_vec3()
     }
 
-    /// The scene's point and spot lights (area lights are emissive leaves already).
+    /// The scene's point and spot lights whose circuits are on (area lights are emissive leaves
+    /// already).
     fn push_lights(&mut self, scene: &Scene) {
-        for l in &scene.lights {
-            let intensity = Vec3::from_array(l.color) * (l.power_w / (4.0 * std::f32::consts::PI));
-            let (position_m, spot) = match &l.shape {
-                LightShape::Point { position_m } => (self.to_frame(*position_m), None),
-                LightShape::Spot { position_m, direction, inner_angle_rad, outer_angle_rad } => (
-                    self.to_frame(*position_m),
-                    Some(Spot {
-                        direction: Vec3::from_array(*direction).normalize_or(Vec3::NEG_Z),
-                        inner_angle_rad: *inner_angle_rad,
-                        outer_angle_rad: *outer_angle_rad,
-                    }),
-                ),
-                LightShape::Area { .. } => continue,
-            };
-            self.lights.push(SceneLight {
-                name: l.name.clone(),
-                position_m,
-                intensity_w_sr: intensity,
-                spot,
+        let lights =
+            crate::scene::lighting::scene_lights(&scene.lights, &scene.circuits, self.frame_origin_m, |_| {
+                true
             });
-        }
+        self.lights.extend(lights);
     }
 
     /// The environment's SH irradiance and prefiltered chain, scaled by its intensity.

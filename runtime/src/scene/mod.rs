@@ -5,6 +5,7 @@
 
 pub mod coarse;
 pub mod data;
+pub mod lighting;
 mod load;
 pub mod rock;
 pub mod story;

@@ -39,7 +39,8 @@ fn shadow_visibility(light: Light, p: vec3<f32>, dist: f32, bias_m: f32) -> f32 
     }
     let d = p - light.position_kind.xyz;
     var face = 0u;
-    if light.position_kind.w < 0.5 {
+    // Point lights, profiled or not, have six faces; a spot (kind 1) one.
+    if abs(light.position_kind.w - 1.0) > 0.5 {
         let a = abs(d);
         if a.x >= a.y && a.x >= a.z {
             face = select(1u, 0u, d.x >= 0.0);
@@ -105,13 +106,63 @@ fn light_seen(light: Light, p: vec3<f32>) -> LightSeen {
 }
 
 
-// Spot falloff of a light toward unit direction `l` from the lit point (1 for point lights).
+// Spot falloff or profile of a light toward unit direction `l` from the lit point (1 for point
+// lights).
 fn spot_factor(light: Light, l: vec3<f32>) -> f32 {
-    if light.position_kind.w < 0.5 {
+    let kind = light.position_kind.w;
+    if kind < 0.5 {
         return 1.0;
+    }
+    if kind > 1.5 {
+        return profile_factor(light, -l);
     }
     let c = dot(-l, light.direction_cos_outer.xyz);
     let outer = light.direction_cos_outer.w;
     let inner = light.params.x;
     return smoothstep(outer, max(inner, outer + 1e-4), c);
 }
+
+// Value k of the profile block at record `base` (its samples start at the next record, 16 a
+// record: runtime/src/light/profile.rs).
+fn profile_value(base: u32, k: u32) -> f32 {
+    let r = lights[base + 1u + k / 16u];
+    var v = r.params;
+    switch (k % 16u) / 4u {
+        case 0u: { v = r.position_kind; }
+        case 1u: { v = r.intensity_layer; }
+        case 2u: { v = r.direction_cos_outer; }
+        default: {}
+    }
+    return v[k % 4u];
+}
+
+// A profiled light's relative intensity toward unit direction `d` (from the light): bilinear in
+// its grid, 1 degree from the aim (the light's direction), 5 degrees about it from the header's
+// 0-degree axis, wrapping; one column where it is the same all round.
+fn profile_factor(light: Light, d: vec3<f32>) -> f32 {
+    let base = u32(light.params.x);
+    let head = lights[base];
+    let n_theta = u32(head.position_kind.w);
+    let n_phi = u32(head.intensity_layer.w);
+    let theta = acos(clamp(dot(d, light.direction_cos_outer.xyz), -1.0, 1.0));
+    let ft = theta / PROFILE_PI * f32(n_theta - 1u);
+    let i0 = min(u32(ft), n_theta - 2u);
+    let wt = clamp(ft - f32(i0), 0.0, 1.0);
+    let a = mix(profile_value(base, i0), profile_value(base, i0 + 1u), wt);
+    if n_phi <= 1u {
+        return a;
+    }
+    var phi = atan2(dot(d, head.intensity_layer.xyz), dot(d, head.position_kind.xyz));
+    if phi < 0.0 {
+        phi += 2.0 * PROFILE_PI;
+    }
+    let fp = phi / (2.0 * PROFILE_PI) * f32(n_phi);
+    let j0 = min(u32(fp), n_phi - 1u);
+    let wp = clamp(fp - f32(j0), 0.0, 1.0);
+    let j1 = (j0 + 1u) % n_phi;
+    let row0 = mix(profile_value(base, j0 * n_theta + i0), profile_value(base, j0 * n_theta + i0 + 1u), wt);
+    let row1 = mix(profile_value(base, j1 * n_theta + i0), profile_value(base, j1 * n_theta + i0 + 1u), wt);
+    return mix(row0, row1, wp);
+}
+
+const PROFILE_PI: f32 = 3.14159265;

@@ -586,6 +586,7 @@ pub(crate) fn headlamp(camera: &Camera, aspect: f32, distance_m: f32) -> SceneLi
         position_m: camera.eye_m,
         intensity_w_sr: Vec3::from_array(HEADLAMP_COLOR) * (HEADLAMP_IRRADIANCE_W_M2 * d * d),
         spot: Some(Spot { direction: forward, inner_angle_rad: 0.8 * outer, outer_angle_rad: outer }),
+        profile: None,
     }
 }
 

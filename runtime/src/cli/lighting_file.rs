@@ -1,0 +1,38 @@
+//! Lighting files (`--lights FILE` of `grotto render`, `view` and `publish`): a package's lights
+//! changed without a rebuild (grotto_format::lighting), IES files read beside the lighting file.
+
+use std::path::Path;
+
+use grotto_format::lighting::{self, LightingError};
+
+use crate::error::{Error, Result};
+use crate::scene::lighting::Relight;
+
+/// IES files larger than this are not photometric data (the largest tables are ~1 MB).
+const MAX_IES_BYTES: u64 = 16 << 20;
+
+/// Reads the lighting file at `path` and merges it with `package`'s lights.
+pub fn relight_of(package: &grotto_format::Scene, path: &Path) -> Result<Relight> {
+    let at = |e: LightingError| Error::Lighting {
+        path: match &e.file {
+            Some(f) => path.parent().unwrap_or(Path::new("")).join(f).display().to_string(),
+            None => path.display().to_string(),
+        },
+        line: e.line,
+        problem: e.problem,
+    };
+    let whole = |problem: String| Error::Lighting { path: path.display().to_string(), line: None, problem };
+    let text = std::fs::read_to_string(path).map_err(|e| whole(e.to_string()))?;
+    let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
+    let read_ies = |name: &str| -> std::result::Result<String, String> {
+        let file = dir.join(name);
+        let len = std::fs::metadata(&file).map_err(|e| e.to_string())?.len();
+        if len > MAX_IES_BYTES {
+            return Err(format!("{len} bytes: more than an IES file holds ({MAX_IES_BYTES} at most)"));
+        }
+        // IES files are ASCII, sometimes Latin-1 in their keywords.
+        std::fs::read(&file).map(|b| String::from_utf8_lossy(&b).into_owned()).map_err(|e| e.to_string())
+    };
+    let file = lighting::parse(&text, read_ies).map_err(at)?;
+    crate::scene::lighting::merged((&package.lights, &package.circuits), &file).map_err(whole)
+}
