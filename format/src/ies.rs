@@ -7,7 +7,7 @@
 //! (lidrs, unmaintained since 2022; eulumdat, anyhow errors without lines) do neither. The format
 //! is a keyword header, a TILT line, then whitespace- or comma-separated numbers.
 
-use crate::scene::Profile;
+use crate::profile::Profile;
 
 /// Most vertical angles (0.25 degree steps over 180) and horizontal angles (over 360) a file may
 /// declare: finer than any goniophotometer, so a larger count is a damaged header.

@@ -15,6 +15,7 @@ pub mod compact;
 pub mod ies;
 pub mod lighting;
 pub mod photometry;
+pub mod profile;
 mod env_chain;
 mod error;
 mod reader;
@@ -31,10 +32,11 @@ mod writer;
 
 pub use env_chain::{EnvChain, level_table};
 pub use error::{Error, Problem, Region, Result};
+pub use profile::{LightProfile, Profile};
 pub use reader::{CoarseData, Element, Package, SvoData, Tile};
 pub use scene::{
-    Camera, Circuit, Environment, InputFile, Light, LightProfile, LightShape, Material, MaterialRegion,
-    Profile, Provenance, ScanInfo, Scene,
+    Camera, Circuit, Environment, InputFile, Light, LightShape, Material, MaterialRegion, Provenance,
+    ScanInfo, Scene, check_lights,
 };
 pub use section::{SectionInfo, TileInfo};
 pub use spec::{Codec, Scope, SectionKind};

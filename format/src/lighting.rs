@@ -28,7 +28,8 @@ use toml::Spanned;
 
 use crate::ies;
 use crate::photometry;
-use crate::scene::{Circuit, Light, LightProfile, LightShape};
+use crate::profile::LightProfile;
+use crate::scene::{Circuit, Light, LightShape};
 
 /// A lighting file as written.
 #[derive(Debug, Default, Deserialize)]
@@ -357,28 +358,8 @@ pub fn merged(base: (&[Light], &[Circuit]), file: &Lighting) -> Result<(Vec<Ligh
             crate::story::merged(base.1, &file.circuits, |c| &c.name),
         )
     };
-    check(&lights, &circuits)?;
+    crate::scene::check_lights(&lights, &circuits)?;
     Ok((lights, circuits))
-}
-
-/// Circuits named by lights exist, and each circuit has a light.
-pub fn check(lights: &[Light], circuits: &[Circuit]) -> Result<(), String> {
-    for l in lights {
-        if let Some(c) = &l.circuit
-            && !circuits.iter().any(|k| &k.name == c)
-        {
-            return Err(format!("light {:?} is on circuit {c:?}, which no [[circuit]] defines", l.name));
-        }
-        if let Some(p) = &l.profile {
-            p.profile.check().map_err(|e| format!("light {:?}'s profile: {e}", l.name))?;
-        }
-    }
-    for c in circuits {
-        if !lights.iter().any(|l| l.circuit.as_deref() == Some(c.name.as_str())) {
-            return Err(format!("circuit {:?} has no lights", c.name));
-        }
-    }
-    Ok(())
 }
 
 #[cfg(test)]

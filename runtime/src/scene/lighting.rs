@@ -151,7 +151,7 @@ pub struct Relight {
 impl Relight {
     /// Checked whole (a page's viewer.json is not trusted): circuits and profiles hold together.
     pub fn check(&self) -> Result<(), String> {
-        grotto_format::lighting::check(&self.lights, &self.circuits)
+        grotto_format::check_lights(&self.lights, &self.circuits)
     }
 
     pub fn apply(&self, scene: &mut SceneData) {
