@@ -116,6 +116,9 @@ pub enum ViewMode {
     Normals,
     /// The light alone: the lit scene with every albedo 1 (grey walls), tonemapped.
     Light,
+    /// Illuminance on the surfaces in lux as false colours (view/lux.rs, a legend with it): a
+    /// lighting designer's glare and darkness at a glance. The HDR image holds the lux.
+    Lux,
     /// The level each tile is held at (full green, coarse yellow, far red; magenta where no tile
     /// holds the point), shaded by the angle to the eye: to see what residency chose.
     Level,
@@ -160,11 +163,12 @@ impl ClipBox {
 
 impl ViewMode {
     /// Every view mode, in the panel's order.
-    pub const ALL: [ViewMode; 6] = [
+    pub const ALL: [ViewMode; 7] = [
         ViewMode::Lit,
         ViewMode::Albedo,
         ViewMode::Normals,
         ViewMode::Light,
+        ViewMode::Lux,
         ViewMode::Level,
         ViewMode::Scan,
     ];
@@ -176,6 +180,7 @@ impl ViewMode {
             ViewMode::Albedo => "albedo",
             ViewMode::Normals => "normals",
             ViewMode::Light => "light",
+            ViewMode::Lux => "lux",
             ViewMode::Level => "level",
             ViewMode::Scan => "scan",
         }
@@ -188,6 +193,11 @@ impl ViewMode {
 
     /// The image shows no light: the light passes have nothing to do for it.
     pub fn shows_light(self) -> bool {
+        matches!(self, ViewMode::Lit | ViewMode::Light | ViewMode::Lux)
+    }
+
+    /// The image is exposed and tonemapped (the lux view shows lux on a fixed scale instead).
+    pub fn exposed(self) -> bool {
         matches!(self, ViewMode::Lit | ViewMode::Light)
     }
 }

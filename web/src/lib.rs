@@ -670,8 +670,9 @@ impl State {
             self.exposure_final = converged;
             return Ok(());
         }
-        // A view without light (normals, albedo...) says nothing of the exposure the lit view wants.
-        if !self.renderer.settings().view.shows_light() {
+        // A view without light (normals, albedo...) or on a fixed scale (lux) says nothing of the
+        // exposure the lit view wants.
+        if !self.renderer.settings().view.exposed() {
             return Ok(());
         }
         let converged = self.renderer.light_progress().converged && self.settled && self.step.is_none();
@@ -715,7 +716,7 @@ impl State {
             && !moving
             && self.step.is_none()
             && self.settled
-            && (self.exposure_final || !lit)
+            && (self.exposure_final || !self.renderer.settings().view.exposed())
             && self.exposure_read.is_none()
             && self.frames > 0
     }

@@ -609,7 +609,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         change.bounces += r.stats().bounces_done - before_render;
         last_plan = plan;
         // Views without light are not exposed.
-        if opts.exposure.is_none() && i == 0 && settings.view.shows_light() {
+        if opts.exposure.is_none() && i == 0 && settings.view.exposed() {
             // Auto exposure from the first frame, kept for the sequence so it does not flicker.
             exposure = auto_exposure(&frame.hdr);
             r.set_exposure(exposure);

@@ -276,11 +276,14 @@ pub mod flags {
     /// The G-buffer holds blended splats' sums (passes/gbuffer.rs): shade takes the normal,
     /// albedo and distance from them.
     pub const BLEND: u32 = 32768;
+    /// View mode: illuminance in lux as false colours (with VIEW_LIGHT: albedo 1; view/lux.rs).
+    pub const VIEW_LUX: u32 = 65536;
     /// The views shade writes without light (settings.rs `ViewMode::shows_light`).
     pub const VIEWS_WITHOUT_LIGHT: u32 = VIEW_ALBEDO | VIEW_NORMALS | VIEW_LEVEL | VIEW_SCAN;
 
     /// Every flag with its WGSL name.
-    pub const ALL: [(&str, u32); 16] = [
+    pub const ALL: [(&str, u32); 17] = [
+        ("FLAG_VIEW_LUX", VIEW_LUX),
         ("FLAG_VIEW_ALBEDO", VIEW_ALBEDO),
         ("FLAG_VIEW_SCAN", VIEW_SCAN),
         ("FLAG_VIEW_NORMALS", VIEW_NORMALS),

@@ -291,7 +291,9 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         // Material slot from the albedo's alpha: 0 diffuse, 1..=7 specular (Params::materials).
         let slot = min(u32(round(albedo_slot.a * 255.0)), 7u);
-        let specular = (params.flags & FLAG_SPECULAR) != 0u && slot > 0u;
+        // The lux view wants the light arriving: no reflection off wet surfaces, no emission.
+        let lux_view = (params.flags & FLAG_VIEW_LUX) != 0u;
+        let specular = (params.flags & FLAG_SPECULAR) != 0u && slot > 0u && !lux_view;
         let mat = params.materials[slot];
         let v = -ray;
         let nv = max(dot(n, v), 1e-3);
@@ -344,7 +346,7 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             if (params.flags & FLAG_INDIRECT) != 0u {
                 color += albedo * l[0];
             }
-            if (params.flags & FLAG_EMISSION) != 0u {
+            if (params.flags & FLAG_EMISSION) != 0u && !lux_view {
                 color += l[1];
             }
             if (params.flags & FLAG_FAR_LIGHTS) != 0u {
@@ -373,8 +375,15 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
             color = color * (1.0 - mat.x * f) + mat.x * (f * reflected + highlight);
         }
         hdr = color;
+        if lux_view {
+            // With every albedo 1, `color` is the irradiance over pi per channel: lux is 683 lm/W
+            // times its luminance (grotto_format::photometry).
+            let lux = 683.0 * PI * dot(color, vec3<f32>(0.2126, 0.7152, 0.0722));
+            write_pixel(idx, vec4<f32>(vec3<f32>(lux), coverage), lux_color(lux));
+            return;
+        }
     }
-    if d <= 0.0 && (params.flags & FLAG_VIEWS_WITHOUT_LIGHT) != 0u {
+    if d <= 0.0 && (params.flags & (FLAG_VIEWS_WITHOUT_LIGHT | FLAG_VIEW_LUX)) != 0u {
         hdr = vec3<f32>(0.0);
     }
     write_pixel(idx, vec4<f32>(hdr, coverage), tonemap(hdr * params.exposure));

@@ -213,6 +213,7 @@ impl Renderer {
             ViewMode::Albedo => flags::VIEW_ALBEDO,
             ViewMode::Normals => flags::VIEW_NORMALS,
             ViewMode::Light => flags::VIEW_LIGHT,
+            ViewMode::Lux => flags::VIEW_LIGHT | flags::VIEW_LUX,
             ViewMode::Level => flags::VIEW_LEVEL,
             ViewMode::Scan => flags::VIEW_SCAN,
         };

@@ -67,6 +67,7 @@ pub(crate) fn constants() -> String {
     out += &format!("const NO_SCAN: u32 = {}u;\n", crate::gpu::types::NO_SCAN);
     // The level a coarse tile's leaves are held at (coarse.rs): the level view tells coarse from far.
     out += &format!("const COARSE_LEVELS: u32 = {}u;\n", crate::scene::coarse::COARSE_LEVELS);
+    out += &crate::view::lux::wgsl();
     for kind in LightShadow::ALL {
         out += &format!("const {}: u32 = {}u;\n", kind.wgsl_name(), kind as u32);
     }

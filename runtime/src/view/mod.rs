@@ -6,5 +6,6 @@
 
 pub mod camera;
 pub mod framing;
+pub mod lux;
 pub mod frame_target;
 pub mod story;

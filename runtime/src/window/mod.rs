@@ -333,7 +333,7 @@ impl App {
             target: self.opts.frame_target_ms.map(FrameTarget::new),
             log: FrameLog::default(),
             recording: self.opts.record_path.as_ref().map(|_| Vec::new()),
-            auto_exposure: if o.exposure.is_none() && settings.view.shows_light() {
+            auto_exposure: if o.exposure.is_none() && settings.view.exposed() {
                 AutoExposure::FirstFrame
             } else {
                 AutoExposure::Off

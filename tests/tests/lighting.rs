@@ -1,0 +1,147 @@
+//! Lighting files and photometry (issue 46), natively on lavapipe, against answers worked out by
+//! hand: a lamp of known lumens over a floor gives the inverse-square illuminance in the lux view,
+//! and an IES downlight's candela read back from the lit floor are the file's.
+
+use glam::{IVec3, Vec2, Vec3};
+use grotto_fixtures::testscenes::carved;
+use grotto_runtime::gpu::Gpu;
+use grotto_runtime::render::Renderer;
+use grotto_runtime::render::probe::ray_through;
+use grotto_runtime::scene::data::SceneData;
+use grotto_runtime::settings::{IndirectFilter, Settings, ViewMode};
+use grotto_runtime::view::camera::Camera;
+
+const W: u32 = 160;
+const H: u32 = 160;
+/// The floor's top, metres (one 0.1 m leaf of rock; its surfels face up at its top).
+const FLOOR_Z_M: f32 = 0.1;
+
+/// A 4 x 4 m floor with nothing above it: no light comes back to it, so what it receives is
+/// the lamp's alone.
+fn floor() -> SceneData {
+    let dims = IVec3::new(40, 40, 24);
+    carved("floor", 0.1, 6, dims, &|c: IVec3| c.z >= 1, &|_| Vec3::splat(0.5), Vec3::ZERO, None)
+}
+
+/// The floor lit by the lighting file `text` (world = frame here: the floor's origin is 0).
+fn lit_floor(text: &str, ies: &str) -> SceneData {
+    let mut scene = floor();
+    let file = grotto_format::lighting::parse(text, |_| Ok(ies.to_string())).unwrap();
+    let relight = grotto_runtime::scene::lighting::merged((&[], &[]), &file).unwrap();
+    relight.apply(&mut scene);
+    scene
+}
+
+/// Lux per pixel and the floor point each pixel sees, from straight above.
+fn lux_view(scene: &SceneData) -> Vec<(Vec3, f32)> {
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
+    let settings = Settings {
+        bounces: 0,
+        indirect: IndirectFilter::Off,
+        view: ViewMode::Lux,
+        shadow_map_size: 1024,
+        ..Settings::default()
+    };
+    let mut r = Renderer::new(&gpu, scene, settings).unwrap();
+    r.settle(|_, _| {}).unwrap();
+    let cam = Camera {
+        eye_m: Vec3::new(2.0, 2.0, 3.9),
+        look_at_m: Vec3::new(2.0, 2.0, 0.0),
+        up: Vec3::Y,
+        fov_y_deg: 60.0,
+    };
+    let (frame, _) = r.render(&cam, W, H).unwrap();
+    (0..H)
+        .flat_map(|y| (0..W).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let ray = ray_through(&cam, W, H, Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
+            let t = (FLOOR_Z_M - cam.eye_m.z) / ray.z;
+            (cam.eye_m + ray * t, frame.hdr[(y * W + x) as usize][0])
+        })
+        .collect()
+}
+
+/// The pixels seeing floor points whose horizontal distance from `below` is within `r_m` of
+/// `at_m`, away from the floor's edge.
+fn ring(view: &[(Vec3, f32)], below: Vec3, at_m: f32, r_m: f32) -> Vec<(Vec3, f32)> {
+    view.iter()
+        .copied()
+        .filter(|(p, _)| {
+            let h = (p.truncate() - below.truncate()).length();
+            (h - at_m).abs() < r_m && p.x > 0.3 && p.x < 3.7 && p.y > 0.3 && p.y < 3.7
+        })
+        .collect()
+}
+
+#[test]
+fn a_lamp_of_known_lumens_gives_the_inverse_square_illuminance_in_the_lux_view() {
+    let h = 1.5;
+    let lamp = Vec3::new(2.0, 2.0, FLOOR_Z_M + h);
+    let text = format!(
+        "[[light]]\nname = \"lamp\"\nposition = [{}, {}, {}]\nlumens = 1000.0\nkelvin = 4000.0\n",
+        lamp.x, lamp.y, lamp.z
+    );
+    let view = lux_view(&lit_floor(&text, ""));
+    // E = I cos(theta) / d^2 with I = 1000 lm / 4 pi sr; cos(theta) = h / d.
+    let intensity_cd = 1000.0 / (4.0 * std::f32::consts::PI);
+    let mut worst = 0.0f32;
+    for (r, expect_name) in [(0.0, "below"), (0.75, "0.75 m out"), (1.5, "1.5 m out")] {
+        let pixels = ring(&view, lamp, r, 0.05);
+        assert!(pixels.len() > 3, "{expect_name}: {} pixels", pixels.len());
+        for (p, lux) in pixels {
+            let d = (lamp - p).length();
+            let want = intensity_cd * h / (d * d * d);
+            let err = (lux - want).abs() / want;
+            worst = worst.max(err);
+            assert!(err < 0.01, "{expect_name} at {p}: {lux} lx, inverse square {want} lx ({err:.4})");
+        }
+    }
+    eprintln!("worst relative error against the inverse-square law: {worst:.5}");
+    // Below the lamp: 1000 / (4 pi 1.5^2) = 35.4 lx.
+    let below = ring(&view, lamp, 0.0, 0.03);
+    assert!((below[0].1 - 35.37).abs() < 0.36, "{} lx below the lamp", below[0].1);
+}
+
+/// A round-symmetric downlight: 400 cd down, 350 at 22.5 degrees, 200 at 45, 50 at 67.5, 0 at 90.
+const DOWNLIGHT: &str = "IESNA:LM-63-2002\n[TEST] grotto\nTILT=NONE\n1 -1 1.0 5 1 1 2 0.1 0.1 0.05\n\
+    1.0 1.0 12\n0 22.5 45 67.5 90\n0\n400 350 200 50 0\n";
+
+#[test]
+fn an_ies_profiles_candela_read_back_from_the_lit_floor_are_the_files() {
+    let h = 1.2;
+    let lamp = Vec3::new(2.0, 2.0, FLOOR_Z_M + h);
+    let text = format!(
+        "[[light]]\nname = \"down\"\nposition = [{}, {}, {}]\nies = \"down.ies\"\naim_at = [2.0, 2.0, 0.0]\n",
+        lamp.x, lamp.y, lamp.z
+    );
+    let view = lux_view(&lit_floor(&text, DOWNLIGHT));
+    for (theta_deg, candela) in [(0.0f32, 400.0f32), (22.5, 350.0), (45.0, 200.0)] {
+        let theta = theta_deg.to_radians();
+        let pixels = ring(&view, lamp, h * theta.tan(), 0.02);
+        assert!(!pixels.is_empty(), "{theta_deg} degrees: no pixel");
+        // Back from illuminance to intensity along each pixel's own direction: I = E d^2 / cos.
+        let mut got = Vec::new();
+        for (p, lux) in &pixels {
+            let d = lamp - *p;
+            let (dist, cos) = (d.length(), d.z / d.length());
+            let at = cos.acos().to_degrees();
+            // The table is linear between its angles: the file's candela at this pixel's angle.
+            let want = interpolate(&[(0.0, 400.0), (22.5, 350.0), (45.0, 200.0), (67.5, 50.0)], at);
+            got.push((lux * dist * dist / cos, want));
+        }
+        let (sum_got, sum_want): (f32, f32) = got.iter().fold((0.0, 0.0), |a, g| (a.0 + g.0, a.1 + g.1));
+        let err = (sum_got - sum_want).abs() / sum_want;
+        eprintln!(
+            "{theta_deg} degrees: {:.1} cd read back, {:.1} cd in the file ({err:.4})",
+            sum_got / got.len() as f32,
+            sum_want / got.len() as f32
+        );
+        assert!(err < 0.02, "{theta_deg} degrees: {candela} cd in the file, {err:.4} off");
+    }
+}
+
+fn interpolate(table: &[(f32, f32)], x: f32) -> f32 {
+    let i = table.iter().rposition(|t| t.0 <= x).unwrap_or(0).min(table.len() - 2);
+    let (a, b) = (table[i], table[i + 1]);
+    a.1 + (b.1 - a.1) * (x - a.0) / (b.0 - a.0)
+}
