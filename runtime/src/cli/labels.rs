@@ -67,9 +67,13 @@ pub(crate) fn find(
     Ok(labels)
 }
 
-/// Draws the visible `labels` into `frame`'s tonemapped image (the radiance stays as rendered).
-/// The far ones first, so a nearer label covers a farther one, as on the page.
-pub(crate) fn draw(frame: &mut Frame, labels: &[LabelReport]) {
+/// Draws the visible `labels` into `frame`'s tonemapped image (the radiance stays as rendered),
+/// and with `lux_legend` the lux view's legend. The far labels first, so a nearer one covers a
+/// farther one, as on the page.
+pub(crate) fn draw(frame: &mut Frame, labels: &[LabelReport], lux_legend: bool) {
+    if lux_legend {
+        draw_lux_legend(frame);
+    }
     // The page's 13 px at 600 rows and up, in proportion; never smaller than readable.
     let text_px = (frame.height as f32 / 46.0).clamp(13.0, 64.0);
     let font = FontRef::try_from_slice(epaint_default_fonts::UBUNTU_LIGHT)
@@ -131,15 +135,14 @@ impl Canvas<'_> {
         }
     }
 
-    fn label(&mut self, font: &FontRef<'_>, text_px: f32, l: &LabelReport) {
-        let k = text_px / 13.0;
-        let title = title_of(&l.title);
+    /// `text` laid out at `text_px`: its glyphs (origin at the top left) and its width.
+    fn layout(font: &FontRef<'_>, text_px: f32, text: &str) -> (Vec<ab_glyph::Glyph>, f32) {
         let scale = PxScale::from(text_px);
         let scaled = font.as_scaled(scale);
         let mut glyphs = Vec::new();
         let mut pen = 0.0;
         let mut previous = None;
-        for ch in title.chars() {
+        for ch in text.chars() {
             let id = scaled.glyph_id(ch);
             if let Some(p) = previous {
                 pen += scaled.kern(p, id);
@@ -148,6 +151,26 @@ impl Canvas<'_> {
             pen += scaled.h_advance(id);
             previous = Some(id);
         }
+        (glyphs, pen)
+    }
+
+    /// Draws laid-out glyphs with their top left at `(x0, y0)`.
+    fn ink(&mut self, font: &FontRef<'_>, glyphs: Vec<ab_glyph::Glyph>, (x0, y0): (f32, f32)) {
+        for g in glyphs {
+            if let Some(outline) = font.outline_glyph(g) {
+                let b = outline.px_bounds();
+                let (ox, oy) = (x0 + b.min.x, y0 + b.min.y);
+                outline.draw(|gx, gy, cover| {
+                    self.blend((ox + gx as f32).round() as i64, (oy + gy as f32).round() as i64, INK, cover)
+                });
+            }
+        }
+    }
+
+    fn label(&mut self, font: &FontRef<'_>, text_px: f32, l: &LabelReport) {
+        let k = text_px / 13.0;
+        let scaled = font.as_scaled(PxScale::from(text_px));
+        let (glyphs, pen) = Self::layout(font, text_px, &title_of(&l.title));
         let (pad_x, pad_y) = (6.0 * k, 1.0 * k);
         let (box_w, box_h) = (pen + 2.0 * pad_x, scaled.height() + 2.0 * pad_y);
         // Centred over the anchor, 8 px above it; kept inside the image sideways (the page lets a
@@ -157,18 +180,51 @@ impl Canvas<'_> {
         let y1 = l.y_px - 8.0 * k;
         let y0 = y1 - box_h;
         self.rounded_box((x0, y0), (x0 + box_w, y1), 3.0 * k, BLACK, 0.7);
-        for g in glyphs {
-            if let Some(outline) = font.outline_glyph(g) {
-                let b = outline.px_bounds();
-                let (ox, oy) = (x0 + pad_x + b.min.x, y0 + pad_y + b.min.y);
-                outline.draw(|gx, gy, cover| {
-                    self.blend((ox + gx as f32).round() as i64, (oy + gy as f32).round() as i64, INK, cover)
-                });
-            }
-        }
+        self.ink(font, glyphs, (x0 + pad_x, y0 + pad_y));
         // The dot: 8 px across with a 1 px black ring.
         self.disc(l.x_px, l.y_px, 5.0 * k, BLACK, 1.0);
         self.disc(l.x_px, l.y_px, 4.0 * k, DOT, 1.0);
+    }
+}
+
+/// The lux view's legend (view/lux.rs) in the image's bottom left corner: the colour scale from
+/// 0.1 to 20,000 lux on its logarithmic axis, the decades named.
+pub(crate) fn draw_lux_legend(frame: &mut Frame) {
+    use crate::view::lux::lux_color;
+    let text_px = (frame.height as f32 / 46.0).clamp(11.0, 48.0);
+    let k = text_px / 13.0;
+    let font = FontRef::try_from_slice(epaint_default_fonts::UBUNTU_LIGHT)
+        .expect("egui's bundled font is a valid TrueType font");
+    let (lo, hi) = (-1.0f32, 4.3f32);
+    let bar_w = (frame.width as f32 * 0.45).clamp(120.0, 600.0);
+    let bar_h = 10.0 * k;
+    let (x0, y1) = (10.0 * k, frame.height as f32 - 8.0 * k);
+    let y_bar = y1 - bar_h - text_px * 1.4;
+    let mut canvas = Canvas { frame };
+    canvas.rounded_box(
+        (x0 - 6.0 * k, y_bar - text_px * 1.5),
+        (x0 + bar_w + 24.0 * k, y1 + 4.0 * k),
+        3.0 * k,
+        BLACK,
+        0.7,
+    );
+    for i in 0..bar_w.ceil() as i64 {
+        let l = lo + (hi - lo) * (i as f32 + 0.5) / bar_w;
+        let c = lux_color(10f32.powf(l)).map(|v| v * 255.0);
+        for y in y_bar as i64..(y_bar + bar_h) as i64 {
+            canvas.blend(x0 as i64 + i, y, c, 1.0);
+        }
+    }
+    let (title, w) = Canvas::layout(&font, text_px, "illuminance, lux");
+    let _ = w;
+    canvas.ink(&font, title, (x0, y_bar - text_px * 1.35));
+    for (decade, name) in [(0.0, "1"), (1.0, "10"), (2.0, "100"), (3.0, "1k"), (4.0, "10k")] {
+        let x = x0 + (decade - lo) / (hi - lo) * bar_w;
+        for y in (y_bar + bar_h) as i64..(y_bar + bar_h + 3.0 * k) as i64 {
+            canvas.blend(x as i64, y, INK, 1.0);
+        }
+        let (glyphs, w) = Canvas::layout(&font, text_px, name);
+        canvas.ink(&font, glyphs, (x - w * 0.5, y_bar + bar_h + 3.0 * k));
     }
 }
 
@@ -196,7 +252,7 @@ mod tests {
     #[test]
     fn a_label_draws_its_dot_on_the_anchor_and_its_title_above_it() {
         let mut f = frame(320, 240, 40);
-        draw(&mut f, &[label(160.0, 150.0, true)]);
+        draw(&mut f, &[label(160.0, 150.0, true)], false);
         let at = |x: u32, y: u32| f.ldr[(y * 320 + x) as usize];
         assert_eq!(at(160, 150), [255, 207, 64, 255], "the dot's centre has the page's yellow");
         // The box above the anchor is darker than the grey it covers; white ink lies within it.
@@ -214,15 +270,29 @@ mod tests {
     #[test]
     fn a_hidden_label_draws_nothing_and_one_at_the_edge_stays_whole() {
         let mut f = frame(200, 100, 40);
-        draw(&mut f, &[label(100.0, 50.0, false)]);
+        draw(&mut f, &[label(100.0, 50.0, false)], false);
         assert!(f.ldr.iter().all(|p| *p == [40, 40, 40, 255]));
         // At the right edge: the box moves in, so its text is not cut; the dot stays at the anchor.
-        draw(&mut f, &[label(199.0, 60.0, true)]);
+        draw(&mut f, &[label(199.0, 60.0, true)], false);
         let col = |x: u32| (0..100).any(|y| f.ldr[(y * 200 + x) as usize][0] > 200);
         assert!(col(199) || col(198), "the dot at the edge");
         let inked: Vec<u32> =
             (0..200).filter(|&x| (0..45).any(|y| f.ldr[(y * 200 + x) as usize][0] > 200)).collect();
         assert!(inked.first().is_some_and(|&x| x < 150), "the title runs left of the anchor: {inked:?}");
+    }
+
+    #[test]
+    fn the_lux_legend_shows_the_scale_in_the_bottom_left_corner() {
+        let mut f = frame(400, 300, 40);
+        draw_lux_legend(&mut f);
+        let rows = |y0: u32, y1: u32| (y0..y1).flat_map(|y| (0..400).map(move |x| (x, y)));
+        let changed = rows(0, 300).filter(|&(x, y)| f.ldr[(y * 400 + x) as usize] != [40, 40, 40, 255]);
+        let (xs, ys): (Vec<u32>, Vec<u32>) = changed.unzip();
+        assert!(xs.iter().max().unwrap() < &300 && ys.iter().min().unwrap() > &200, "in the corner");
+        // The scale's colours are in it: the 100 lx green somewhere.
+        let green = crate::view::lux::lux_color(100.0).map(|c| (c * 255.0).round() as u8);
+        let near = |p: &[u8; 4]| (0..3).all(|c| p[c].abs_diff(green[c]) <= 3);
+        assert!(f.ldr.iter().any(near), "the 100 lx colour");
     }
 
     #[test]

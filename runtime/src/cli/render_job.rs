@@ -629,7 +629,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         let (uncovered, black) = uncovered_and_black(&frame);
         uncovered_pixels = uncovered_pixels.max(uncovered);
         black_pixels = black_pixels.max(black);
-        labels::draw(&mut frame, &labels);
+        labels::draw(&mut frame, &labels, settings.view == crate::settings::ViewMode::Lux);
         frames.push(FrameReport {
             labels,
             ..frame_report(i as u32, &scene, current, change, frame_ms, &mut r)
