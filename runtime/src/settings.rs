@@ -168,9 +168,9 @@ impl ViewMode {
         ViewMode::Albedo,
         ViewMode::Normals,
         ViewMode::Light,
-        ViewMode::Lux,
         ViewMode::Level,
         ViewMode::Scan,
+        ViewMode::Lux,
     ];
 
     /// The mode's name, as `--view` takes it.

@@ -273,7 +273,7 @@ impl Viewer {
     }
 
     /// A key went down or up (`KeyboardEvent.code`): WASD fly, Q/E down/up, Tab next camera, R
-    /// the first, 1-6 the view. Returns whether the viewer used it.
+    /// the first, 1-7 the view. Returns whether the viewer used it.
     pub fn key(&mut self, code: &str, down: bool) -> bool {
         self.state.key(code, down)
     }

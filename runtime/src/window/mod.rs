@@ -13,7 +13,7 @@
 //! Controls: mouse drag looks around (in orbit, turns around the pivot), WASD flies (Q/E
 //! down/up), the wheel sets the speed (in orbit, the distance), a right click orbits the point
 //! under the cursor and O the point at the centre (O again: fly), Tab jumps to the next named
-//! camera, R back to the first, 1-6 switch the view (lit, albedo, normals, light, level, scan),
+//! camera, R back to the first, 1-7 switch the view (lit, albedo, normals, light, level, scan, lux),
 //! C cuts the view to a clip box (a section at eye height; the panel edits it), H hides the
 //! panel, K starts and stops recording a camera path (`grotto render --path FILE.toml` flies
 //! it; T marks a tour stop meanwhile), P writes a screenshot once the light has converged, F11
@@ -559,6 +559,7 @@ impl App {
             KeyCode::Digit4,
             KeyCode::Digit5,
             KeyCode::Digit6,
+            KeyCode::Digit7,
         ];
         if let Some(k) = views.iter().position(|c| *c == code) {
             s.renderer.set_view(ViewMode::ALL[k]);

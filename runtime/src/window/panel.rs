@@ -117,6 +117,9 @@ pub(crate) fn show(ctx: &egui::Context, m: &PanelModel, k: &mut PanelKnobs) {
             if k.view == ViewMode::Scan {
                 scan_legend(ui, m);
             }
+            if k.view == ViewMode::Lux {
+                lux_legend(ui);
+            }
             clip_box(ui, m, k);
             ui.separator();
             match m.tiles {
@@ -151,7 +154,7 @@ pub(crate) fn show(ctx: &egui::Context, m: &PanelModel, k: &mut PanelKnobs) {
                 ui.small(
                     "drag: look (orbit: turn)  WASD: fly, Q/E down/up  wheel: speed (orbit: \
                      distance)\nright click: orbit the point under the cursor  O: orbit the \
-                     centre / fly\nTab: next camera  R: first camera  1-6: view  H: panel\n\
+                     centre / fly\nTab: next camera  R: first camera  1-7: view  H: panel\n\
                      C: clip box (section at eye height) on/off  K: record a camera path\n\
                      P: screenshot  F11: full screen  Esc: quit",
                 );
@@ -179,6 +182,22 @@ fn scan_legend(ui: &mut egui::Ui, m: &PanelModel) {
             ui.small(format!("... {} more", m.scans.len() - 24));
         }
     });
+}
+
+/// The lux view's legend (view/lux.rs): the colour scale over its decades.
+fn lux_legend(ui: &mut egui::Ui) {
+    use crate::view::lux::lux_color;
+    let (lo, hi) = (-1.0f32, 4.3f32);
+    let (rect, _) = ui.allocate_exact_size(egui::vec2(200.0, 12.0), egui::Sense::hover());
+    let n = 100;
+    for i in 0..n {
+        let l = lo + (hi - lo) * (i as f32 + 0.5) / n as f32;
+        let c = lux_color(10f32.powf(l)).map(|v| (v * 255.0).round() as u8);
+        let x0 = rect.left() + rect.width() * i as f32 / n as f32;
+        let cell = egui::Rect::from_min_max(egui::pos2(x0, rect.top()), egui::pos2(x0 + rect.width() / n as f32 + 0.5, rect.bottom()));
+        ui.painter().rect_filled(cell, 0.0, egui::Color32::from_rgb(c[0], c[1], c[2]));
+    }
+    ui.small("illuminance: 1  10  100  1k  10k lux (magenta: glare above 14k)");
 }
 
 /// The section tool: a box (frame metres, within the scene's) outside which nothing is drawn.
