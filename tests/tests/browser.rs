@@ -1094,7 +1094,8 @@ fn screenshots_for_the_docs() {
     let dir = tempfile::tempdir().unwrap();
     let (_, server) = published(dir.path(), &package, bundle, json!({"quality": "fast"}));
     let browser = Browser::start(&chromium, &driver, true);
-    browser.call("POST", "/window/rect", Some(&json!({"width": 660, "height": 560})));
+    // Headless Chromium's window is ~140 px taller than its viewport: room for the 640 x 480 canvas.
+    browser.call("POST", "/window/rect", Some(&json!({"width": 680, "height": 640})));
     let page = |b: &Browser, name: &str| {
         let png = b.call("GET", "/screenshot", None);
         let png = base64::engine::general_purpose::STANDARD.decode(png.as_str().unwrap()).unwrap();

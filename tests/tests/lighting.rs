@@ -145,3 +145,59 @@ fn interpolate(table: &[(f32, f32)], x: f32) -> f32 {
     let (a, b) = (table[i], table[i + 1]);
     a.1 + (b.1 - a.1) * (x - a.0) / (b.0 - a.0)
 }
+
+/// The colour box lit by a lighting file with two circuits: "lamp" (on) and "side" (off).
+fn two_circuits(side_on: bool) -> SceneData {
+    let mut scene = grotto_fixtures::testscenes::colour_box();
+    let text = format!(
+        "[[circuit]]\nname = \"main\"\n[[circuit]]\nname = \"side\"\non = {side_on}\n\
+         [[light]]\nname = \"lamp\"\nposition = [1.3, 1.3, 2.2]\npower_w = 30.0\ncircuit = \"main\"\n\
+         [[light]]\nname = \"side\"\nkind = \"spot\"\nposition = [0.4, 1.3, 1.2]\naim_at = [2.2, 1.3, 0.3]\n\
+         outer_angle_deg = 25.0\nlumens = 4000.0\nkelvin = 2700.0\ncircuit = \"side\"\n"
+    );
+    let file = grotto_format::lighting::parse(&text, |_| Err("no IES".into())).unwrap();
+    grotto_runtime::scene::lighting::merged((&[], &[]), &file).unwrap().apply(&mut scene);
+    scene
+}
+
+#[test]
+fn switching_a_circuit_converges_to_a_fresh_render_of_that_lighting() {
+    use grotto_tests::golden;
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
+    let settings = Settings { bounces: 64, exposure: 3.0, ..Settings::default() };
+    let cam = {
+        let c = &grotto_fixtures::testscenes::colour_box().cameras[0];
+        Camera { eye_m: c.eye_m, look_at_m: c.look_at_m, up: c.up, fov_y_deg: c.fov_y_deg }
+    };
+    let pixels = |f: &grotto_runtime::render::Frame| f.ldr.clone();
+    // The side circuit off, converged; then switched on in place.
+    let mut scene = two_circuits(false);
+    assert_eq!(scene.lights.len(), 1, "the side spot is off");
+    let mut r = Renderer::new(&gpu, &scene, settings.clone()).unwrap();
+    let cold_off = r.settle(|_, _| {}).unwrap();
+    let before = pixels(&r.render(&cam, W, H).unwrap().0);
+    assert!(scene.switch_circuit("side", true).unwrap());
+    assert_eq!(scene.lights.len(), 2);
+    let carried = grotto_runtime::stream::relit(&gpu, &mut r, &scene).unwrap();
+    assert_eq!(carried, scene.leaves.len(), "every leaf's light is the start");
+    let warm = r.settle(|_, _| {}).unwrap();
+    let switched = pixels(&r.render(&cam, W, H).unwrap().0);
+    // A fresh renderer of the lighting file with the circuit on from the start.
+    let fresh_scene = two_circuits(true);
+    let mut fresh = Renderer::new(&gpu, &fresh_scene, settings).unwrap();
+    let cold = fresh.settle(|_, _| {}).unwrap();
+    let want = pixels(&fresh.render(&cam, W, H).unwrap().0);
+    let d = golden::diff(&switched, &want);
+    eprintln!(
+        "bounces: {cold_off} cold (off), {warm} after the switch from the carried light, {cold} cold (on); {d:?}"
+    );
+    assert!(golden::within_tolerance(&d), "switched against fresh: {d:?}");
+    // The switch changed the picture (the spot lights the floor), and switching back restores it.
+    assert!(!golden::within_tolerance(&golden::diff(&before, &want)), "the side spot shows");
+    assert!(scene.switch_circuit("side", false).unwrap());
+    grotto_runtime::stream::relit(&gpu, &mut r, &scene).unwrap();
+    r.settle(|_, _| {}).unwrap();
+    let back = pixels(&r.render(&cam, W, H).unwrap().0);
+    assert!(golden::within_tolerance(&golden::diff(&back, &before)), "switched off again");
+    assert!(scene.switch_circuit("nope", true).unwrap_err().contains("main, side"));
+}

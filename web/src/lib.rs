@@ -338,6 +338,22 @@ impl Viewer {
     }
 
     /// Flies to point of interest `i` of [`Viewer::story`] (a tour playing stops).
+    /// The lighting circuits a visitor can switch (JSON: `[{name, title, on}]`; empty without).
+    pub fn circuits(&self) -> String {
+        serde_json::to_string(self.state.scene.circuits()).unwrap_or_else(|_| "[]".into())
+    }
+
+    /// Switches circuit `name` on or off (show lighting, work lighting...): the page's renderer
+    /// takes the new lights and the light converges again, as it does at rest.
+    pub fn switch_circuit(&mut self, name: &str, on: bool) -> Result<(), JsError> {
+        let s = &mut self.state;
+        if s.scene.switch_circuit(name, on).map_err(|e| JsError::new(&e))? {
+            stream::relit(&s.gpu, &mut s.renderer, &s.scene).map_err(|e| JsError::new(&e.to_string()))?;
+            s.shown_at_rest = None;
+        }
+        Ok(())
+    }
+
     pub fn fly_to_poi(&mut self, i: usize) {
         let from = self.state.nav.camera();
         self.state.story.fly_to_poi(i, from);

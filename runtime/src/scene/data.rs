@@ -18,6 +18,7 @@ use grotto_format::{Package, SectionKind, SvoData};
 use crate::error::Result;
 use crate::gpu::types::{LeafGpu, MipRange, NodeGpu, SurfelGpu, TileBufferBytes, TileGpu};
 use crate::scene::coarse::{COARSE_LEVELS, FAR_LEVELS};
+use grotto_format::{Circuit, Light};
 
 /// A point or spot light in frame coordinates.
 #[derive(Clone, Debug, PartialEq)]
@@ -107,6 +108,19 @@ pub struct SceneData {
     pub headlamp: bool,
     /// The package's scans by index (`SurfelGpu::scan`), for the scan view's legend.
     pub scan_names: Vec<String>,
+    /// The lights before their circuits were switched, where there are circuits to switch (the
+    /// package's, or a lighting file's: scene/lighting.rs): `lights` is made from it.
+    pub lighting: Option<Relight>,
+}
+
+/// A package's lights with a lighting file's merged in (scene/lighting.rs `merged`), as a scene takes them
+/// (`SceneData::relight`) and a published page is given them (viewer.json `lighting`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Relight {
+    pub lights: Vec<Light>,
+    pub circuits: Vec<Circuit>,
+    /// The package's area lights that glow from its leaves.
+    pub baked: Vec<String>,
 }
 
 /// GPU bytes of the scene-sized buffers ([`SceneData::buffer_bytes`]).

@@ -9,6 +9,7 @@ use glam::{DVec3, Vec3};
 use grotto_format::lighting::Lighting;
 use grotto_format::{Circuit, Light, LightProfile, LightShape, Profile};
 
+pub use crate::scene::data::Relight;
 use crate::scene::data::{SceneData, SceneLight, Spot};
 
 /// Point lights an area light becomes along each side, at most (16 in all).
@@ -138,16 +139,6 @@ pub fn merged(package: (&[Light], &[Circuit]), file: &Lighting) -> Result<Religh
     Ok(Relight { lights, circuits, baked })
 }
 
-/// A package's lights with a lighting file's merged in ([`merged`]), as a scene takes them
-/// ([`SceneData::relight`]) and a published page is given them (viewer.json `lighting`).
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Relight {
-    pub lights: Vec<Light>,
-    pub circuits: Vec<Circuit>,
-    /// The package's area lights that glow from its leaves.
-    pub baked: Vec<String>,
-}
-
 impl Relight {
     /// Checked whole (a page's viewer.json is not trusted): circuits and profiles hold together.
     pub fn check(&self) -> Result<(), String> {
@@ -171,5 +162,36 @@ impl SceneData {
                 leaf.emission = [0.0; 4];
             }
         }
+        self.lighting =
+            Some(Relight { lights: lights.to_vec(), circuits: circuits.to_vec(), baked: baked.to_vec() });
+    }
+
+    /// The scene's circuits (none without a lighting file or a package that has them).
+    pub fn circuits(&self) -> &[Circuit] {
+        self.lighting.as_ref().map_or(&[], |l| &l.circuits)
+    }
+
+    /// Switches circuit `name` on or off: the lights are made again from the lighting (a
+    /// headlamp added for a scene without light stays). Returns whether anything changed; an
+    /// error names a circuit the scene does not have.
+    pub fn switch_circuit(&mut self, name: &str, on: bool) -> Result<bool, String> {
+        let Some(lighting) = self.lighting.as_mut() else {
+            return Err(format!("no circuit named {name:?}: the scene has no circuits"));
+        };
+        let known = lighting.circuits.iter().map(|c| c.name.clone()).collect::<Vec<_>>().join(", ");
+        let Some(c) = lighting.circuits.iter_mut().find(|c| c.name == name) else {
+            return Err(format!("no circuit named {name:?} (the scene has: {known})"));
+        };
+        if c.on == on {
+            return Ok(false);
+        }
+        c.on = on;
+        let lighting = lighting.clone();
+        let headlamp = if self.headlamp { self.lights.pop() } else { None };
+        self.lights = scene_lights(&lighting.lights, &lighting.circuits, self.frame_origin_m, |l| {
+            lighting.baked.contains(&l.name)
+        });
+        self.lights.extend(headlamp);
+        Ok(true)
     }
 }

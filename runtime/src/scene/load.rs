@@ -227,6 +227,15 @@ impl SceneData {
                 true
             });
         self.lights.extend(lights);
+        if !scene.circuits.is_empty() {
+            let baked =
+                scene.lights.iter().filter(|l| matches!(l.shape, grotto_format::LightShape::Area { .. }));
+            self.lighting = Some(crate::scene::lighting::Relight {
+                lights: scene.lights.clone(),
+                circuits: scene.circuits.clone(),
+                baked: baked.map(|l| l.name.clone()).collect(),
+            });
+        }
     }
 
     /// The environment's SH irradiance and prefiltered chain, scaled by its intensity.

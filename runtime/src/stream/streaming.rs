@@ -253,8 +253,13 @@ pub fn swap_tiles(
     gpu: &Gpu,
     r: &mut Renderer,
     scene: &mut SceneData,
-    new_scene: SceneData,
+    mut new_scene: SceneData,
 ) -> Result<Swapped> {
+    // The lights are the scene's as they are now, with their circuits' state: a residency asked
+    // for before a circuit was switched arrives with the lights of then.
+    new_scene.lighting = scene.lighting.take();
+    new_scene.lights.clone_from(&scene.lights);
+    new_scene.headlamp = scene.headlamp;
     if let Some(u) = r.update_scene(&new_scene)? {
         *scene = new_scene;
         return Ok(Swapped { carried_leaves: u.carried_leaves, update: Some(u), made_anew: false });
@@ -269,4 +274,23 @@ pub fn swap_tiles(
         None => 0,
     };
     Ok(Swapped { update: None, made_anew: true, carried_leaves })
+}
+
+/// After `scene`'s lights changed (a circuit switched: SceneData::switch_circuit): a renderer
+/// for the new lights in the same pools. Natively the light of every leaf is carried over as
+/// the start the new light converges from (a browser cannot block on the read-back and starts
+/// from darkness); shadow maps and direct light are made again for every light, and the bounces
+/// count afresh. Returns the leaves whose light was carried.
+pub fn relit(gpu: &Gpu, r: &mut Renderer, scene: &SceneData) -> Result<usize> {
+    // The tiles are the same; only the lights changed.
+    let carried = if cfg!(target_arch = "wasm32") { None } else { Some(r.light_by_tile(scene)?) };
+    let (caps, clip) = (r.pool_caps(), r.clip());
+    *r = Renderer::with_pools(gpu, scene, r.settings().clone(), caps)?;
+    r.set_clip(clip);
+    let carried = match carried {
+        Some(c) => r.seed_light(scene, &c)?,
+        None => 0,
+    };
+    r.invalidate_lights();
+    Ok(carried)
 }

@@ -489,9 +489,10 @@ impl App {
             let (cam, window_px, recording) =
                 (s.nav.camera(), (s.config.width, s.config.height), s.recording.is_some());
             let story = &mut s.story;
+            let circuits = s.scene.circuits();
             let mut out = s.ui.ctx.run_ui(raw, |ui| {
                 panel::show(ui.ctx(), &shown, &mut knobs);
-                story.show(ui.ctx(), &cam, window_px, recording);
+                story.show(ui.ctx(), &cam, (window_px, recording), circuits);
             });
             s.ui.input.handle_platform_output(&s.window, out.platform_output);
             let screen = egui_wgpu::ScreenDescriptor {
@@ -527,6 +528,13 @@ impl App {
             }
             // Applied above (epaint checks that none is dropped unapplied).
             out.textures_delta.clear();
+            if let Some((name, on)) = s.story.switch.take()
+                && s.scene
+                    .switch_circuit(&name, on)
+                    .map_err(|e| Error::Setting { name: "circuit", problem: e })?
+            {
+                crate::stream::relit(&s.gpu, &mut s.renderer, &s.scene)?;
+            }
             if knobs != s.ui.knobs {
                 apply_knobs(s, knobs)?;
             }

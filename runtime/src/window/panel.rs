@@ -194,7 +194,10 @@ fn lux_legend(ui: &mut egui::Ui) {
         let l = lo + (hi - lo) * (i as f32 + 0.5) / n as f32;
         let c = lux_color(10f32.powf(l)).map(|v| (v * 255.0).round() as u8);
         let x0 = rect.left() + rect.width() * i as f32 / n as f32;
-        let cell = egui::Rect::from_min_max(egui::pos2(x0, rect.top()), egui::pos2(x0 + rect.width() / n as f32 + 0.5, rect.bottom()));
+        let cell = egui::Rect::from_min_max(
+            egui::pos2(x0, rect.top()),
+            egui::pos2(x0 + rect.width() / n as f32 + 0.5, rect.bottom()),
+        );
         ui.painter().rect_filled(cell, 0.0, egui::Color32::from_rgb(c[0], c[1], c[2]));
     }
     ui.small("illuminance: 1  10  100  1k  10k lux (magenta: glare above 14k)");

@@ -33,6 +33,8 @@ pub(super) struct StoryUi {
     last_click: Option<(Instant, (f64, f64))>,
     /// The image at rest was final at the last frame (a tour's dwell waits for it).
     pub(super) at_rest: bool,
+    /// A circuit switched in the window (name, on), for the window to relight.
+    pub(super) switch: Option<(String, bool)>,
 }
 
 /// The story's state as `grotto view --json` reports it on exit.
@@ -68,6 +70,7 @@ impl StoryUi {
             press: None,
             last_click: None,
             at_rest: false,
+            switch: None,
         }
     }
 
@@ -171,7 +174,13 @@ impl StoryUi {
 
     /// The labels and the measurement over the frame, and the story's window (points of
     /// interest, tours, measuring). `window_px`: the window's size in pixels.
-    pub(super) fn show(&mut self, ctx: &egui::Context, cam: &Camera, window_px: (u32, u32), recording: bool) {
+    pub(super) fn show(
+        &mut self,
+        ctx: &egui::Context,
+        cam: &Camera,
+        (window_px, recording): ((u32, u32), bool),
+        circuits: &[grotto_format::Circuit],
+    ) {
         let k = 1.0 / ctx.pixels_per_point();
         let painter = ctx.layer_painter(egui::LayerId::background());
         let yellow = egui::Color32::from_rgb(255, 207, 64);
@@ -236,6 +245,17 @@ impl StoryUi {
                         if t.paused { ", paused" } else { "" },
                         if t.text.is_empty() { &t.title } else { &t.text }
                     ));
+                }
+            }
+            if !circuits.is_empty() {
+                ui.separator();
+                ui.label("lighting");
+                for c in circuits {
+                    let mut on = c.on;
+                    let title = if c.title.is_empty() { &c.name } else { &c.title };
+                    if ui.checkbox(&mut on, title).changed() {
+                        self.switch = Some((c.name.clone(), on));
+                    }
                 }
             }
             ui.separator();
