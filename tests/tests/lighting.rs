@@ -201,3 +201,27 @@ fn switching_a_circuit_converges_to_a_fresh_render_of_that_lighting() {
     assert!(golden::within_tolerance(&golden::diff(&back, &before)), "switched off again");
     assert!(scene.switch_circuit("nope", true).unwrap_err().contains("main, side"));
 }
+
+#[test]
+fn circuits_switch_from_the_command_line_and_unknown_ones_are_named() {
+    use grotto_runtime::cli::lighting_file::{parse_switch, with_circuits};
+    assert_eq!(parse_switch("work=on"), Ok(("work".into(), true)));
+    assert_eq!(parse_switch("a=b=off"), Ok(("a=b".into(), false)));
+    assert!(parse_switch("work").unwrap_err().contains("NAME=on"));
+    let file = "[[circuit]]\nname = \"show\"\n[[circuit]]\nname = \"work\"\non = false\n\
+                [[light]]\nname = \"a\"\nposition = [0.0, 0.0, 1.0]\npower_w = 1.0\ncircuit = \"show\"\n\
+                [[light]]\nname = \"b\"\nposition = [0.0, 0.0, 1.0]\npower_w = 1.0\ncircuit = \"work\"\n";
+    let lighting = grotto_format::lighting::parse(file, |_| Err(String::new())).unwrap();
+    let package = grotto_format::Scene::default();
+    let r = grotto_runtime::scene::lighting::merged((&[], &[]), &lighting).unwrap();
+    let switched = with_circuits(&package, Some(r.clone()), &[("work".into(), true), ("show".into(), false)])
+        .unwrap()
+        .unwrap();
+    let mut scene = floor();
+    switched.apply(&mut scene);
+    assert_eq!(scene.lights.iter().map(|l| l.name.as_str()).collect::<Vec<_>>(), ["b"]);
+    let e = with_circuits(&package, Some(r), &[("stage".into(), true)]).unwrap_err().to_string();
+    assert!(e.contains("\"stage\"") && e.contains("show, work"), "{e}");
+    let e = with_circuits(&package, None, &[("show".into(), true)]).unwrap_err().to_string();
+    assert!(e.contains("no circuits"), "{e}");
+}

@@ -219,6 +219,9 @@ struct RenderArgs {
     /// profiles) changing the package's lights without a rebuild (docs/runtime.md).
     #[arg(long)]
     lights: Option<PathBuf>,
+    /// Circuits switched on or off, NAME=on|off[,...] (the lighting file's or the package's).
+    #[arg(long, value_delimiter = ',', value_parser = grotto_runtime::cli::lighting_file::parse_switch)]
+    circuits: Vec<(String, bool)>,
     /// grotto render: draw the labels of the points of interest in view (not those rock hides)
     /// into the image, as the published page shows them (.png and .jpg). grotto view always
     /// shows them.
@@ -450,6 +453,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
         tour_fps: a.tour_fps,
         story: a.story.clone(),
         lights: a.lights.clone(),
+        circuits: a.circuits.clone(),
         frames: a.frames,
         width: a.size.0,
         height: a.size.1,

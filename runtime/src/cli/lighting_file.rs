@@ -36,3 +36,49 @@ pub fn relight_of(package: &grotto_format::Scene, path: &Path) -> Result<Relight
     let file = lighting::parse(&text, read_ies).map_err(at)?;
     crate::scene::lighting::merged((&package.lights, &package.circuits), &file).map_err(whole)
 }
+
+/// The lighting a job uses with `switches` (`--circuits NAME=on|off`) applied: the lighting
+/// file's (`relight`), else the package's own circuits. None where there is nothing to change.
+pub fn with_circuits(
+    package: &grotto_format::Scene,
+    relight: Option<Relight>,
+    switches: &[(String, bool)],
+) -> Result<Option<Relight>> {
+    if switches.is_empty() {
+        return Ok(relight);
+    }
+    let problem = |p: String| Error::Setting { name: "circuits", problem: p };
+    let mut r = match relight {
+        Some(r) => r,
+        None if !package.circuits.is_empty() => Relight {
+            lights: package.lights.clone(),
+            circuits: package.circuits.clone(),
+            baked: (package.lights.iter())
+                .filter(|l| matches!(l.shape, grotto_format::LightShape::Area { .. }))
+                .map(|l| l.name.clone())
+                .collect(),
+        },
+        None => {
+            return Err(problem("the package has no circuits (a lighting file, --lights, gives some)".into()));
+        }
+    };
+    for (name, on) in switches {
+        let known = r.circuits.iter().map(|c| c.name.as_str()).collect::<Vec<_>>().join(", ");
+        let c = r
+            .circuits
+            .iter_mut()
+            .find(|c| &c.name == name)
+            .ok_or_else(|| problem(format!("no circuit named {name:?} (there are: {known})")))?;
+        c.on = *on;
+    }
+    Ok(Some(r))
+}
+
+/// `NAME=on` or `NAME=off` (`--circuits`).
+pub fn parse_switch(s: &str) -> std::result::Result<(String, bool), String> {
+    match s.rsplit_once('=') {
+        Some((name, "on")) if !name.is_empty() => Ok((name.to_string(), true)),
+        Some((name, "off")) if !name.is_empty() => Ok((name.to_string(), false)),
+        _ => Err(format!("{s:?}: expected NAME=on or NAME=off")),
+    }
+}

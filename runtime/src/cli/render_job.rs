@@ -59,6 +59,9 @@ pub struct RenderOptions {
     pub story: Option<PathBuf>,
     /// A lighting file changing the package's lights (`--lights FILE`, cli/lighting_file.rs).
     pub lights: Option<PathBuf>,
+    /// Circuits switched on or off (`--circuits NAME=on|off`), the lighting file's or the
+    /// package's.
+    pub circuits: Vec<(String, bool)>,
     pub frames: u32,
     pub width: u32,
     pub height: u32,
@@ -128,6 +131,7 @@ impl RenderOptions {
             tour_fps: None,
             story: None,
             lights: None,
+            circuits: Vec::new(),
             frames: 30,
             width: 800,
             height: 600,
@@ -195,6 +199,7 @@ fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Stre
         None => None,
     };
     let relight = opts.lights.as_ref().map(|p| lighting_file::relight_of(&pkg.scene()?, p)).transpose()?;
+    let relight = lighting_file::with_circuits(&pkg.scene()?, relight, &opts.circuits)?;
     let with_story = |mut scene: SceneData| {
         if let Some((pois, tours, cameras)) = &story {
             (scene.pois, scene.tours) =
