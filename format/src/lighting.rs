@@ -37,6 +37,9 @@ use crate::scene::{Circuit, Light, LightShape};
 pub struct LightingSpec {
     #[serde(default)]
     pub replace: bool,
+    /// The package's lights (by name) this file takes away.
+    #[serde(default)]
+    pub remove: Vec<String>,
     #[serde(default)]
     pub circuit: Vec<Spanned<CircuitSpec>>,
     #[serde(default)]
@@ -92,6 +95,8 @@ pub struct LightSpec {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Lighting {
     pub replace: bool,
+    /// Names of the package's lights taken away.
+    pub remove: Vec<String>,
     pub lights: Vec<Light>,
     pub circuits: Vec<Circuit>,
 }
@@ -130,7 +135,7 @@ pub fn parse(
         line: e.span().map(|s| line_of(text, s.start)),
         problem: e.message().trim().to_string(),
     })?;
-    let mut lighting = Lighting { replace: spec.replace, ..Default::default() };
+    let mut lighting = Lighting { replace: spec.replace, remove: spec.remove, ..Default::default() };
     for c in spec.circuit {
         let line = line_of(text, c.span().start);
         let c = c.into_inner();
@@ -350,16 +355,81 @@ pub fn spot_solid_angle_sr(inner_rad: f64, outer_rad: f64) -> f64 {
 /// replacing it, or `file`'s alone where it says `replace`. Checked whole: every light's circuit
 /// exists and every circuit has a light.
 pub fn merged(base: (&[Light], &[Circuit]), file: &Lighting) -> Result<(Vec<Light>, Vec<Circuit>), String> {
+    if let Some(gone) = file.remove.iter().find(|n| !base.0.iter().any(|l| &l.name == *n)) {
+        return Err(format!("remove: the package has no light named {gone:?}"));
+    }
+    let kept: Vec<Light> = base.0.iter().filter(|l| !file.remove.contains(&l.name)).cloned().collect();
     let (lights, circuits) = if file.replace {
         (file.lights.clone(), file.circuits.clone())
     } else {
         (
-            crate::story::merged(base.0, &file.lights, |l| &l.name),
+            crate::story::merged(&kept, &file.lights, |l| &l.name),
             crate::story::merged(base.1, &file.circuits, |c| &c.name),
         )
     };
     crate::scene::check_lights(&lights, &circuits)?;
     Ok((lights, circuits))
+}
+
+/// A lighting file that, read back ([`parse`]) and merged with the package's lights, gives
+/// `lighting`'s lights exactly: colours as linear RGB and powers in watts (what they became),
+/// profiles by the IES file they were read from. What a viewer saves after editing.
+pub fn to_toml(lighting: &Lighting) -> String {
+    use std::fmt::Write;
+    let v3 = |v: [f64; 3]| format!("[{:?}, {:?}, {:?}]", v[0], v[1], v[2]);
+    let f3 = |v: [f32; 3]| v3(v.map(f64::from));
+    let q = |s: &str| toml::Value::String(s.to_string()).to_string();
+    let mut out = String::from("# grotto lighting file (docs/runtime.md, \"Lighting a cave\")\n");
+    let _ = writeln!(out, "replace = {}", lighting.replace);
+    if !lighting.remove.is_empty() {
+        let names: Vec<String> = lighting.remove.iter().map(|n| q(n)).collect();
+        let _ = writeln!(out, "remove = [{}]", names.join(", "));
+    }
+    for c in &lighting.circuits {
+        let _ = write!(out, "\n[[circuit]]\nname = {}\ntitle = {}\non = {}\n", q(&c.name), q(&c.title), c.on);
+    }
+    for l in &lighting.lights {
+        let _ = write!(out, "\n[[light]]\nname = {}\n", q(&l.name));
+        match &l.shape {
+            LightShape::Point { position_m } => {
+                let _ = writeln!(out, "kind = \"point\"\nposition = {}", v3(*position_m));
+            }
+            LightShape::Spot { position_m, direction, inner_angle_rad, outer_angle_rad } => {
+                let _ = writeln!(
+                    out,
+                    "kind = \"spot\"\nposition = {}\ndirection = {}\ninner_angle_deg = {:?}\nouter_angle_deg = {:?}",
+                    v3(*position_m),
+                    f3(*direction),
+                    f64::from(*inner_angle_rad).to_degrees(),
+                    f64::from(*outer_angle_rad).to_degrees()
+                );
+            }
+            LightShape::Area { center_m, normal, size_m } => {
+                let _ = writeln!(
+                    out,
+                    "kind = \"area\"\ncenter = {}\nnormal = {}\nsize = [{:?}, {:?}]",
+                    v3(*center_m),
+                    f3(*normal),
+                    f64::from(size_m[0]),
+                    f64::from(size_m[1])
+                );
+            }
+        }
+        let _ = writeln!(out, "color = {}\npower_w = {:?}", f3(l.color), f64::from(l.power_w));
+        if let Some(p) = &l.profile {
+            let _ = writeln!(
+                out,
+                "ies = {}\ndirection = {}\nturn_deg = {:?}",
+                q(&p.source),
+                f3(p.aim),
+                f64::from(p.turn_deg)
+            );
+        }
+        if let Some(c) = &l.circuit {
+            let _ = writeln!(out, "circuit = {}", q(c));
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -420,6 +490,15 @@ power_w = 10.0
         // Merged with a package: same name replaces, the circuit must hold a light.
         let (lights, _) = merged((&[], &[]), &l).unwrap();
         assert_eq!(lights.len(), 2);
+        // Written out and read back: the same lights, to the bit.
+        let back = parse(&to_toml(&l), read).unwrap();
+        assert_eq!(back, l, "{}", to_toml(&l));
+        // `remove` takes a package light away; one it does not have is refused.
+        let package = [Light { name: "old".into(), ..l.lights[1].clone() }];
+        let gone = parse("remove = [\"old\"]\n", read).unwrap();
+        assert!(merged((&package, &[]), &gone).unwrap().0.is_empty());
+        let wrong = parse("remove = [\"nope\"]\n", read).unwrap();
+        assert!(merged((&package, &[]), &wrong).unwrap_err().contains("\"nope\""));
     }
 
     #[test]

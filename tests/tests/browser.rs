@@ -775,6 +775,86 @@ fn a_published_room_labels_measures_shares_and_answers_touch() {
 
 /// Package requests the page makes before its first frame: the head, the directory and the
 /// merged ranges of every tile's far level (worked out from the file as the viewer does).
+#[test]
+fn a_visitor_switches_lighting_circuits_and_reads_the_lux_view() {
+    use grotto_fixtures::room;
+    let Some((chromium, driver, bundle)) = tools() else { return };
+    let _one = BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let package = room::room_package(dir.path()).unwrap();
+    // A spot on the far wall on a circuit that starts switched off.
+    let lights = dir.path().join("show.toml");
+    std::fs::write(
+        &lights,
+        format!(
+            "[[circuit]]\nname = \"wash\"\ntitle = \"Wall wash\"\non = false\n[[light]]\nname = \"wash\"\nkind = \"spot\"\n\
+             position = {:?}\naim_at = {:?}\nouter_angle_deg = 25.0\nlumens = 20000.0\nkelvin = 2700.0\ncircuit = \"wash\"\n",
+            room::world([1.0, 2.0, 2.2]),
+            room::world(room::NICHE_M)
+        ),
+    )
+    .unwrap();
+    let site = dir.path().join("site");
+    publish::publish(&PublishOptions {
+        package: package.clone(),
+        out: site.clone(),
+        bundle: Some(bundle),
+        title: None,
+        viewer_options: serde_json::from_value(json!({"camera": "hall", "exposure": 2.0})).unwrap(),
+        story: None,
+        lights: Some(lights),
+        picture: None,
+    })
+    .unwrap();
+    let server = serve::serve(&site).unwrap();
+    let browser = Browser::start(&chromium, &driver, true);
+    let url = format!(
+        "http://127.0.0.1:{}/index.html?width=160&height=120&quality=fast&bounces=1&bar=hidden&samples=1",
+        server.port
+    );
+    browser.call("POST", "/url", Some(&json!({"url": url})));
+    assert_eq!(browser.wait_for_marker(Duration::from_secs(300)).0, "ready");
+    let boxes = browser.eval(
+        "return JSON.stringify([...document.querySelectorAll('#circuits input')].map(b => \
+         [b.dataset.circuit, b.checked, b.parentElement.textContent.trim()]))",
+    );
+    assert_eq!(boxes.as_str(), Some(r#"[["wash",false,"Wall wash"]]"#), "the panel lists the circuit");
+    // Each change: click, then the page converges again (its frame count moves on first).
+    let settle = |b: &Browser| {
+        let f = b.status()["frames"].as_u64().unwrap_or(0);
+        b.wait_for_frames(f + 2, Duration::from_secs(60));
+        let (state, status) = b.wait_for_marker(Duration::from_secs(300));
+        assert_eq!(state, "ready", "{status}");
+        b.screenshot_canvas()
+    };
+    let off = settle(&browser);
+    browser.eval("document.querySelector('#circuits input').click(); return 0");
+    let on = settle(&browser);
+    let px = |i: &image::RgbaImage| i.pixels().map(|p| p.0).collect::<Vec<[u8; 4]>>();
+    let lum = |i: &image::RgbaImage| i.pixels().map(|p| u64::from(p.0[0]) + u64::from(p.0[1])).sum::<u64>();
+    eprintln!("canvas brightness: wash off {}, on {}", lum(&off), lum(&on));
+    assert!(lum(&on) > lum(&off) * 11 / 10, "the wall wash brightens the view");
+    browser.eval("document.querySelector('#circuits input').click(); return 0");
+    let again = settle(&browser);
+    let d = golden::diff(&px(&again), &px(&off));
+    assert!(golden::within_tolerance(&d), "switched off again: {d:?}");
+    // The lux view and its legend.
+    browser.eval(
+        "const v = document.getElementById('viewmode'); v.value = 'lux'; \
+         v.dispatchEvent(new Event('change')); return 0",
+    );
+    let lux = settle(&browser);
+    assert_eq!(
+        browser.eval("return String(document.getElementById('luxlegend').hidden)").as_str(),
+        Some("false")
+    );
+    assert_eq!(browser.status()["view"], "lux");
+    assert!(
+        !golden::within_tolerance(&golden::diff(&px(&lux), &px(&off))),
+        "false colours, not the lit view"
+    );
+}
+
 fn first_frame_requests(package: &Path) -> usize {
     let (sparse, _) = sparse_package(package);
     let far = grotto_runtime::stream::sections_for(

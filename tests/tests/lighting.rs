@@ -225,3 +225,90 @@ fn circuits_switch_from_the_command_line_and_unknown_ones_are_named() {
     let e = with_circuits(&package, None, &[("show".into(), true)]).unwrap_err().to_string();
     assert!(e.contains("no circuits"), "{e}");
 }
+
+#[test]
+fn each_kind_of_edit_converges_to_a_fresh_render_of_the_saved_lighting_file() {
+    use grotto_format::LightShape;
+    use grotto_format::lighting::{Lighting, parse, to_toml};
+    use grotto_tests::golden;
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
+    let settings = Settings { bounces: 64, exposure: 3.0, ..Settings::default() };
+    let c = &grotto_fixtures::testscenes::colour_box().cameras[0];
+    let cam = Camera { eye_m: c.eye_m, look_at_m: c.look_at_m, up: c.up, fov_y_deg: c.fov_y_deg };
+    // A designer's session: the colour box as two_circuits(true) lights it, edited in place.
+    let mut scene = two_circuits(true);
+    let mut lighting = scene.lighting.clone().unwrap();
+    let mut r = Renderer::new(&gpu, &scene, settings.clone()).unwrap();
+    r.settle(|_, _| {}).unwrap();
+    type Edit = Box<dyn Fn(&mut grotto_runtime::scene::lighting::Relight)>;
+    let find = |r: &mut grotto_runtime::scene::lighting::Relight, n: &str| {
+        r.lights.iter().position(|l| l.name == n).unwrap()
+    };
+    let edits: Vec<(&str, Edit)> = vec![
+        (
+            "move",
+            Box::new(move |r| {
+                let i = find(r, "lamp");
+                r.lights[i].shape = LightShape::Point { position_m: [0.8, 1.6, 1.9] };
+            }),
+        ),
+        (
+            "dim",
+            Box::new(move |r| {
+                let i = find(r, "lamp");
+                r.lights[i].power_w *= 0.3;
+            }),
+        ),
+        (
+            "recolour",
+            Box::new(move |r| {
+                let i = find(r, "lamp");
+                r.lights[i].color = grotto_format::photometry::kelvin_rgb(2200.0).unwrap().map(|c| c as f32);
+            }),
+        ),
+        (
+            "add",
+            Box::new(|r| {
+                let mut extra = r.lights[0].clone();
+                extra.name = "extra".into();
+                extra.shape = LightShape::Point { position_m: [2.0, 0.6, 1.0] };
+                extra.power_w = 12.0;
+                r.lights.push(extra);
+            }),
+        ),
+        (
+            "delete",
+            Box::new(move |r| {
+                let i = find(r, "side");
+                r.lights.remove(i);
+                r.circuits.retain(|c| c.name != "side");
+            }),
+        ),
+        ("circuit", Box::new(|r| r.circuits[0].on = false)),
+    ];
+    for (what, edit) in edits {
+        edit(&mut lighting);
+        scene.relight(&lighting.lights, &lighting.circuits, &lighting.baked);
+        grotto_runtime::stream::relit(&gpu, &mut r, &scene).unwrap();
+        let bounces = r.settle(|_, _| {}).unwrap();
+        let got = r.render(&cam, W, H).unwrap().0.ldr;
+        // Saved, read back, and rendered from scratch.
+        let saved = Lighting {
+            replace: true,
+            remove: Vec::new(),
+            lights: lighting.lights.clone(),
+            circuits: lighting.circuits.clone(),
+        };
+        let text = to_toml(&saved);
+        let file = parse(&text, |_| Err("no IES".into())).unwrap();
+        let mut fresh_scene = grotto_fixtures::testscenes::colour_box();
+        grotto_runtime::scene::lighting::merged((&[], &[]), &file).unwrap().apply(&mut fresh_scene);
+        assert_eq!(fresh_scene.lights, scene.lights, "{what}: the saved file gives the same lights");
+        let mut fresh = Renderer::new(&gpu, &fresh_scene, settings.clone()).unwrap();
+        let cold = fresh.settle(|_, _| {}).unwrap();
+        let want = fresh.render(&cam, W, H).unwrap().0.ldr;
+        let d = golden::diff(&got, &want);
+        eprintln!("{what}: {bounces} bounces after the edit, {cold} from darkness; {d:?}");
+        assert!(golden::within_tolerance(&d), "{what}: edited in place against a fresh render: {d:?}");
+    }
+}

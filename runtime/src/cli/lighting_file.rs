@@ -59,7 +59,9 @@ pub fn with_circuits(
                 .collect(),
         },
         None => {
-            return Err(problem("the package has no circuits (a lighting file, --lights, gives some)".into()));
+            return Err(problem(
+                "the package has no circuits (a lighting file, --lights, gives some)".into(),
+            ));
         }
     };
     for (name, on) in switches {

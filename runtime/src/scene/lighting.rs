@@ -128,6 +128,12 @@ pub fn merged(package: (&[Light], &[Circuit]), file: &Lighting) -> Result<Religh
             .map(|l| l.name.clone())
             .collect()
     };
+    if let Some(name) = file.remove.iter().find(|n| baked.contains(n)) {
+        return Err(format!(
+            "remove: {name:?} is an area light whose glow is baked into the scan's leaves; set replace = true to \
+             turn every baked glow off"
+        ));
+    }
     if let Some(l) = file.lights.iter().find(|l| baked.contains(&l.name)) {
         return Err(format!(
             "light {:?} would replace the package's area light of that name, whose glow is baked into \

@@ -282,8 +282,10 @@ pub fn swap_tiles(
 /// from darkness); shadow maps and direct light are made again for every light, and the bounces
 /// count afresh. Returns the leaves whose light was carried.
 pub fn relit(gpu: &Gpu, r: &mut Renderer, scene: &SceneData) -> Result<usize> {
-    // The tiles are the same; only the lights changed.
-    let carried = if cfg!(target_arch = "wasm32") { None } else { Some(r.light_by_tile(scene)?) };
+    // The tiles are the same; only the lights changed. Nothing lights the scene now: nothing
+    // propagates, so nothing may be carried (the old light would stay on the walls).
+    let carry = !cfg!(target_arch = "wasm32") && scene.has_own_light();
+    let carried = if carry { Some(r.light_by_tile(scene)?) } else { None };
     let (caps, clip) = (r.pool_caps(), r.clip());
     *r = Renderer::with_pools(gpu, scene, r.settings().clone(), caps)?;
     r.set_clip(clip);
