@@ -24,6 +24,8 @@ pub enum PickFor {
     Measure,
     /// Fly toward the point (a double tap).
     Fly,
+    /// A lamp placed or aimed there (`grotto view`'s lighting mode): [`Guide::placed`].
+    Place,
 }
 
 /// A probe under way: which of its pixels are labels (by point-of-interest index) and which are
@@ -89,6 +91,9 @@ pub struct Guide {
     pub flight: Option<Flight>,
     pub tour: Option<TourPlayer>,
     frame_origin_m: [f64; 3],
+    /// Surface points picked for [`PickFor::Place`] (frame metres) with the eye they were seen
+    /// from, for the caller to take.
+    pub placed: Vec<(Vec3, Vec3)>,
 }
 
 impl Guide {
@@ -105,6 +110,7 @@ impl Guide {
             flight: None,
             tour: None,
             frame_origin_m,
+            placed: Vec::new(),
         }
     }
 
@@ -214,6 +220,7 @@ impl Guide {
                     self.measure.push(DVec3::from_array(self.frame_origin_m) + point.as_dvec3());
                 }
                 PickFor::Fly => fly = Some(toward(&p.probe.camera, point)),
+                PickFor::Place => self.placed.push((point, p.probe.camera.eye_m)),
             }
         }
         Ok(fly)

@@ -502,3 +502,85 @@ fn view_labels_measures_and_tours_the_room_under_xvfb() {
     let tour = std::fs::read_to_string(dir.path().join("walk-tour.toml")).unwrap();
     assert!(tour.contains("[[tour.stop]]"), "{tour}");
 }
+
+#[test]
+fn view_places_a_lamp_in_lighting_mode_and_saves_a_file_render_reads() {
+    use grotto_fixtures::room;
+    let dir = tempfile::tempdir().unwrap();
+    let package = room::room_package(dir.path()).unwrap();
+    let lights = dir.path().join("show.toml");
+    std::fs::write(&lights, "[[circuit]]\nname = \"show\"\n").unwrap();
+    // The niche's pixel in the hall camera's 320 x 240 frame: a click there finds the far wall.
+    let rel = |p: [f64; 3]| glam::DVec3::from_array(p).as_vec3();
+    let hall = grotto_runtime::view::camera::Camera {
+        eye_m: rel(room::HALL_EYE_M),
+        look_at_m: rel(room::HALL_LOOK_AT_M),
+        up: glam::Vec3::Z,
+        fov_y_deg: 60.0,
+    };
+    let at = grotto_runtime::view::story::project(&hall, 320, 240, rel(room::NICHE_M)).unwrap();
+    // L (lighting mode), a click at the niche (a lamp 0.5 m off the wall toward the eye), V saves.
+    // The circuit-only file is refused (a circuit without lights): the session starts from a
+    // file with a lamp on it instead.
+    std::fs::write(
+        &lights,
+        format!(
+            "[[circuit]]\nname = \"show\"\n[[light]]\nname = \"first\"\nposition = {:?}\nlumens = 500.0\ncircuit = \"show\"\n",
+            room::world([1.0, 1.0, 2.0])
+        ),
+    )
+    .unwrap();
+    let script = format!(
+        "timeout 300 {bin} view {p} --camera hall --size 320x240 --quality fast --bounces 0 --software \
+         --render-scale 1 --samples 1 --lights {lights} --json > {dir}/view.json 2> {dir}/view.err & pid=$!; \
+         wid=$(timeout 120 xdotool search --sync --onlyvisible --name 'grotto view') || exit 3; \
+         for i in $(seq 100); do xdotool windowfocus $wid 2>/dev/null; \
+         [ \"$(xdotool getwindowfocus 2>/dev/null)\" = \"$wid\" ] && break; sleep 0.2; done; \
+         sleep 3; timeout 60 xdotool key h sleep 0.3 key l sleep 0.3 \
+         mousemove --window $wid {x} {y} click 1 sleep 3 key v sleep 0.5 key Escape || exit 4; wait $pid",
+        bin = env!("CARGO_BIN_EXE_grotto"),
+        p = package.display(),
+        lights = lights.display(),
+        dir = dir.path().display(),
+        x = at.x_px as u32,
+        y = at.y_px as u32,
+    );
+    let xvfb = Command::new("timeout")
+        .args(["600", "xvfb-run", "-a", "-s", "-screen 0 640x480x24", "bash", "-c", &script])
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap_or_else(|e| panic!("xvfb-run (scripts/test.sh installs xvfb and xdotool): {e}"));
+    let log = std::fs::read_to_string(dir.path().join("view.err")).unwrap_or_default();
+    assert!(xvfb.status.success(), "{}\n{log}", String::from_utf8_lossy(&xvfb.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("view.json")).unwrap()).unwrap();
+    assert_eq!(
+        summary["lights_saved"][0].as_str(),
+        Some(lights.to_str().unwrap()),
+        "{}",
+        summary["lights_saved"]
+    );
+    let text = std::fs::read_to_string(&lights).unwrap();
+    let saved = grotto_format::lighting::parse(&text, |_| Err("no IES".into())).unwrap();
+    let names: Vec<&str> = saved.lights.iter().map(|l| l.name.as_str()).collect();
+    assert_eq!(names, ["first", "lamp-1"], "{text}");
+    let grotto_format::LightShape::Point { position_m } = saved.lights[1].shape else { panic!("{text}") };
+    let local = [0, 1, 2].map(|a| position_m[a] - room::ORIGIN_M[a]);
+    // 0.5 m in front of the far wall (x = 6) along the ray through the niche's pixel.
+    assert!((5.3..5.75).contains(&local[0]) && (2.6..3.4).contains(&local[1]), "lamp at {local:?}\n{text}");
+    // grotto render reads the saved file.
+    let out = grotto(&[
+        "render",
+        package.to_str().unwrap(),
+        "--lights",
+        lights.to_str().unwrap(),
+        "--size",
+        "64x48",
+        "--quality",
+        "fast",
+        "--software",
+        "--out",
+        dir.path().join("lit.png").to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

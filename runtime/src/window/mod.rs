@@ -21,6 +21,7 @@
 //! its tours play (G, N, B), M measures between two clicked points and a double click flies to
 //! the wall there ([`story`]).
 
+mod lamps;
 mod pace;
 mod panel;
 mod story;
@@ -93,6 +94,8 @@ pub struct ViewSummary {
     pub log: FrameLog,
     /// The story's state when the window closed: labels, measurement, tour.
     pub story: Option<story::StorySummary>,
+    /// Lighting files saved in lighting mode (V).
+    pub lights_saved: Vec<String>,
 }
 
 /// Opens the window and runs until it is closed (or the scripted screenshot is written).
@@ -113,6 +116,7 @@ pub fn run(opts: ViewOptions) -> Result<ViewSummary> {
         app.summary.log = std::mem::take(&mut s.log);
         let size = s.renderer.ldr_output().map_or((s.config.width, s.config.height), |o| (o.width, o.height));
         app.summary.story = Some(s.story.summary(&s.nav.camera(), size));
+        app.summary.lights_saved = std::mem::take(&mut s.lamps.saved);
     }
     app.summary.seconds = app.started.elapsed().as_secs_f64();
     Ok(app.summary)
@@ -208,6 +212,7 @@ struct State {
     quit_after_shot: bool,
     frame_ms: f64,
     story: story::StoryUi,
+    lamps: lamps::LampEditor,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -309,6 +314,10 @@ impl App {
         window.request_redraw();
         self.summary.device = gpu.describe();
         let story = story::StoryUi::new(&prepared.scene);
+        let lamps = lamps::LampEditor::new(
+            o.lights.clone(),
+            grotto_format::Package::open(&o.package)?.scene()?.lights,
+        );
         self.state = Some(State {
             window,
             gpu,
@@ -342,6 +351,7 @@ impl App {
             quit_after_shot: false,
             frame_ms: 0.0,
             story,
+            lamps,
         });
         Ok(())
     }
@@ -482,17 +492,19 @@ impl App {
             srgb: s.config.format.is_srgb(),
         };
         s.blit.record(&s.gpu, &mut enc, &out, &target, progress.fraction(), Bar::of(&progress, moving));
+        let mut edit = None;
         if s.ui.visible {
             let shown = model(s, progress, held, plan);
             let raw = s.ui.input.take_egui_input(&s.window);
             let mut knobs = s.ui.knobs;
             let (cam, window_px, recording) =
                 (s.nav.camera(), (s.config.width, s.config.height), s.recording.is_some());
-            let story = &mut s.story;
-            let circuits = s.scene.circuits();
+            let (story, lamps, scene) = (&mut s.story, &mut s.lamps, &s.scene);
+            let mut lamp_edit = None;
             let mut out = s.ui.ctx.run_ui(raw, |ui| {
                 panel::show(ui.ctx(), &shown, &mut knobs);
-                story.show(ui.ctx(), &cam, (window_px, recording), circuits);
+                story.show(ui.ctx(), &cam, (window_px, recording), scene.circuits());
+                lamp_edit = lamp_edit.take().or(lamps.show(ui.ctx(), scene));
             });
             s.ui.input.handle_platform_output(&s.window, out.platform_output);
             let screen = egui_wgpu::ScreenDescriptor {
@@ -528,28 +540,23 @@ impl App {
             }
             // Applied above (epaint checks that none is dropped unapplied).
             out.textures_delta.clear();
-            if let Some((name, on)) = s.story.switch.take()
-                && s.scene
-                    .switch_circuit(&name, on)
-                    .map_err(|e| Error::Setting { name: "circuit", problem: e })?
-            {
-                crate::stream::relit(&s.gpu, &mut s.renderer, &s.scene)?;
-            }
             if knobs != s.ui.knobs {
                 apply_knobs(s, knobs)?;
             }
+            edit = lamp_edit;
         } else {
             s.gpu.queue.submit([enc.finish()]);
         }
         s.window.pre_present_notify();
         s.gpu.queue.present(frame);
         s.gpu.check("window")?;
-        Ok(())
+        // Lighting mode works with the panel hidden too (clicks and keys).
+        lamps::update(s, edit)
     }
 
     fn key(&mut self, event_loop: &ActiveEventLoop, code: KeyCode, pressed: bool) -> Result<()> {
         let Some(s) = self.state.as_mut() else { return Ok(()) };
-        if pressed && s.story.key(code, s.nav.camera(), s.recording.is_some()) {
+        if pressed && (s.story.key(code, s.nav.camera(), s.recording.is_some()) || lamps::key(s, code)?) {
             return Ok(());
         }
         let held = [KeyCode::KeyW, KeyCode::KeyA, KeyCode::KeyS, KeyCode::KeyD, KeyCode::KeyQ, KeyCode::KeyE];

@@ -35,6 +35,8 @@ pub(super) struct StoryUi {
     pub(super) at_rest: bool,
     /// A circuit switched in the window (name, on), for the window to relight.
     pub(super) switch: Option<(String, bool)>,
+    /// Lighting mode (window/lamps.rs): a click places a lamp instead of measuring.
+    pub(super) placing: bool,
 }
 
 /// The story's state as `grotto view --json` reports it on exit.
@@ -71,6 +73,7 @@ impl StoryUi {
             last_click: None,
             at_rest: false,
             switch: None,
+            placing: false,
         }
     }
 
@@ -166,7 +169,9 @@ impl StoryUi {
             self.guide.pick(at.0, at.1, PickFor::Fly);
         } else {
             self.last_click = Some((Instant::now(), (x, y)));
-            if self.measuring {
+            if self.placing {
+                self.guide.pick(at.0, at.1, PickFor::Place);
+            } else if self.measuring {
                 self.guide.pick(at.0, at.1, PickFor::Measure);
             }
         }
