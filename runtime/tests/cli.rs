@@ -163,6 +163,35 @@ fn negative_vectors_parse_as_written_and_gpu_memory_is_reported() {
 #[path = "../../tests/src/golden.rs"]
 mod golden;
 
+/// Runs `grotto view ARGS --json` in a real window on Xvfb's display, driven by real X input
+/// (xdotool, XTEST: `input` is its command chain), and returns the session's JSON summary. Focus
+/// is set by hand (no window manager), retried until the server reports it; every step has a time
+/// limit, so a lost event fails the test with the viewer's log instead of hanging.
+fn view_under_xvfb(dir: &std::path::Path, args: &str, input: &str) -> serde_json::Value {
+    let script = format!(
+        "timeout 300 {bin} view {args} --json > {dir}/view.json 2> {dir}/view.err & pid=$!; \
+         wid=$(timeout 120 xdotool search --sync --onlyvisible --name 'grotto view') || exit 3; \
+         for i in $(seq 100); do xdotool windowfocus $wid 2>/dev/null; \
+         [ \"$(xdotool getwindowfocus 2>/dev/null)\" = \"$wid\" ] && break; sleep 0.2; done; \
+         timeout 60 xdotool {input} || exit 4; wait $pid",
+        bin = env!("CARGO_BIN_EXE_grotto"),
+        dir = dir.display(),
+    );
+    let xvfb = Command::new("timeout")
+        .args(["600", "xvfb-run", "-a", "-s", "-screen 0 640x480x24", "bash", "-c", &script])
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap_or_else(|e| panic!("xvfb-run (scripts/test.sh installs xvfb and xdotool): {e}"));
+    let log = std::fs::read_to_string(dir.join("view.err")).unwrap_or_default();
+    assert!(
+        xvfb.status.success(),
+        "{}{}\n{log}",
+        String::from_utf8_lossy(&xvfb.stdout),
+        String::from_utf8_lossy(&xvfb.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(dir.join("view.json")).unwrap()).unwrap()
+}
+
 #[test]
 fn view_flies_the_cave_under_xvfb_matches_grotto_render_and_says_so_clearly_without_a_display() {
     let dir = tempfile::tempdir().unwrap();
@@ -198,40 +227,19 @@ fn view_flies_the_cave_under_xvfb_matches_grotto_render_and_says_so_clearly_with
     let rendered: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let exposure = rendered["exposure"].as_f64().unwrap().to_string();
 
-    // A real window on Xvfb's display, driven by real X input (xdotool, XTEST): hide the panel,
-    // fly forward, drag the view, jump to the next camera (the chamber), look at the albedo and
-    // back, ask for a screenshot (written once the light has converged) and quit.
-    // Focus is set by hand (no window manager), retried until the server reports it; every step
-    // has a time limit, so a lost event fails the test with the viewer's log instead of hanging.
-    let script = format!(
-        "timeout 300 {bin} view {p} {common} --render-scale 1 --exposure {exposure} --screenshot {shot} \
-         --record-path {walk} --json > {dir}/view.json 2> {dir}/view.err & pid=$!; \
-         wid=$(timeout 120 xdotool search --sync --onlyvisible --name 'grotto view') || exit 3; \
-         for i in $(seq 100); do xdotool windowfocus $wid 2>/dev/null; \
-         [ \"$(xdotool getwindowfocus 2>/dev/null)\" = \"$wid\" ] && break; sleep 0.2; done; \
-         timeout 60 xdotool key h mousemove 80 60 keydown w sleep 1 keyup w \
-         mousedown 1 mousemove_relative --sync 60 0 mouseup 1 sleep 0.5 key Tab key 2 sleep 0.3 \
-         key 1 key p key Escape || exit 4; wait $pid",
-        bin = env!("CARGO_BIN_EXE_grotto"),
-        common = common.join(" "),
-        shot = shot.display(),
-        walk = walk.display(),
-        dir = dir.path().display(),
+    // Hide the panel, fly forward, drag the view, jump to the next camera (the chamber), look at
+    // the albedo and back, ask for a screenshot (written once the light has converged) and quit.
+    let summary = view_under_xvfb(
+        dir.path(),
+        &format!(
+            "{p} {} --render-scale 1 --exposure {exposure} --screenshot {} --record-path {}",
+            common.join(" "),
+            shot.display(),
+            walk.display()
+        ),
+        "key h mousemove 80 60 keydown w sleep 1 keyup w mousedown 1 mousemove_relative --sync 60 0 \
+         mouseup 1 sleep 0.5 key Tab key 2 sleep 0.3 key 1 key p key Escape",
     );
-    let xvfb = Command::new("timeout")
-        .args(["600", "xvfb-run", "-a", "-s", "-screen 0 640x480x24", "bash", "-c", &script])
-        .env_remove("WAYLAND_DISPLAY")
-        .output()
-        .unwrap_or_else(|e| panic!("xvfb-run (scripts/test.sh installs xvfb and xdotool): {e}"));
-    let log = std::fs::read_to_string(dir.path().join("view.err")).unwrap_or_default();
-    assert!(
-        xvfb.status.success(),
-        "{}{}\n{log}",
-        String::from_utf8_lossy(&xvfb.stdout),
-        String::from_utf8_lossy(&xvfb.stderr)
-    );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("view.json")).unwrap()).unwrap();
     assert!(!summary["log"]["moving_ms"].as_array().unwrap().is_empty(), "W flew the camera: {summary}");
     assert!(!summary["log"]["converge_frames"].as_array().unwrap().is_empty(), "{summary}");
 
@@ -460,34 +468,17 @@ fn view_labels_measures_and_tours_the_room_under_xvfb() {
     // two clicks measure from a floor pixel to a ceiling pixel of the hall camera; T marks a tour
     // stop on the path --record-path records from the start, K ends that recording; G plays the room's tour; Escape ends the session, whose --json
     // says what the story was doing then.
-    let script = format!(
-        "timeout 300 {bin} view {p} --camera hall --size 320x240 --quality fast --bounces 0 --software \
-         --render-scale 1 --samples 1 --record-path {walk} --json > {dir}/view.json 2> {dir}/view.err & pid=$!; \
-         wid=$(timeout 120 xdotool search --sync --onlyvisible --name 'grotto view') || exit 3; \
-         for i in $(seq 100); do xdotool windowfocus $wid 2>/dev/null; \
-         [ \"$(xdotool getwindowfocus 2>/dev/null)\" = \"$wid\" ] && break; sleep 0.2; done; \
-         sleep 3; timeout 60 xdotool key h sleep 0.5 key m sleep 0.3 \
-         mousemove --window $wid 167 228 click 1 sleep 1 mousemove --window $wid 149 10 click 1 sleep 2 \
-         key t sleep 0.3 key k sleep 0.3 key g sleep 1 key Escape || exit 4; wait $pid",
-        bin = env!("CARGO_BIN_EXE_grotto"),
-        p = package.display(),
-        walk = walk.display(),
-        dir = dir.path().display(),
+    let summary = view_under_xvfb(
+        dir.path(),
+        &format!(
+            "{} --camera hall --size 320x240 --quality fast --bounces 0 --software --render-scale 1 \
+             --samples 1 --record-path {}",
+            package.display(),
+            walk.display()
+        ),
+        "sleep 3 key h sleep 0.5 key m sleep 0.3 mousemove --window $wid 167 228 click 1 sleep 1 \
+         mousemove --window $wid 149 10 click 1 sleep 2 key t sleep 0.3 key k sleep 0.3 key g sleep 1 key Escape",
     );
-    let xvfb = Command::new("timeout")
-        .args(["600", "xvfb-run", "-a", "-s", "-screen 0 640x480x24", "bash", "-c", &script])
-        .env_remove("WAYLAND_DISPLAY")
-        .output()
-        .unwrap_or_else(|e| panic!("xvfb-run (scripts/test.sh installs xvfb and xdotool): {e}"));
-    let log = std::fs::read_to_string(dir.path().join("view.err")).unwrap_or_default();
-    assert!(
-        xvfb.status.success(),
-        "{}{}\n{log}",
-        String::from_utf8_lossy(&xvfb.stdout),
-        String::from_utf8_lossy(&xvfb.stderr)
-    );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("view.json")).unwrap()).unwrap();
     let story = &summary["story"];
     eprintln!("{story:#}");
     // The labels were probed in the hall's view before anything moved.
@@ -509,19 +500,11 @@ fn view_places_a_lamp_in_lighting_mode_and_saves_a_file_render_reads() {
     let dir = tempfile::tempdir().unwrap();
     let package = room::room_package(dir.path()).unwrap();
     let lights = dir.path().join("show.toml");
-    std::fs::write(&lights, "[[circuit]]\nname = \"show\"\n").unwrap();
     // The niche's pixel in the hall camera's 320 x 240 frame: a click there finds the far wall.
-    let rel = |p: [f64; 3]| glam::DVec3::from_array(p).as_vec3();
-    let hall = grotto_runtime::view::camera::Camera {
-        eye_m: rel(room::HALL_EYE_M),
-        look_at_m: rel(room::HALL_LOOK_AT_M),
-        up: glam::Vec3::Z,
-        fov_y_deg: 60.0,
-    };
+    let (rel, hall) = (room::local, room::hall_camera());
     let at = grotto_runtime::view::story::project(&hall, 320, 240, rel(room::NICHE_M)).unwrap();
-    // L (lighting mode), a click at the niche (a lamp 0.5 m off the wall toward the eye), V saves.
-    // The circuit-only file is refused (a circuit without lights): the session starts from a
-    // file with a lamp on it instead.
+    // The session starts from a file with a lamp on a circuit; L (lighting mode), a click at the
+    // niche (a lamp 0.5 m off the wall toward the eye), V saves.
     std::fs::write(
         &lights,
         format!(
@@ -530,30 +513,20 @@ fn view_places_a_lamp_in_lighting_mode_and_saves_a_file_render_reads() {
         ),
     )
     .unwrap();
-    let script = format!(
-        "timeout 300 {bin} view {p} --camera hall --size 320x240 --quality fast --bounces 0 --software \
-         --render-scale 1 --samples 1 --lights {lights} --json > {dir}/view.json 2> {dir}/view.err & pid=$!; \
-         wid=$(timeout 120 xdotool search --sync --onlyvisible --name 'grotto view') || exit 3; \
-         for i in $(seq 100); do xdotool windowfocus $wid 2>/dev/null; \
-         [ \"$(xdotool getwindowfocus 2>/dev/null)\" = \"$wid\" ] && break; sleep 0.2; done; \
-         sleep 3; timeout 60 xdotool key h sleep 0.3 key l sleep 0.3 \
-         mousemove --window $wid {x} {y} click 1 sleep 3 key v sleep 0.5 key Escape || exit 4; wait $pid",
-        bin = env!("CARGO_BIN_EXE_grotto"),
-        p = package.display(),
-        lights = lights.display(),
-        dir = dir.path().display(),
-        x = at.x_px as u32,
-        y = at.y_px as u32,
+    let summary = view_under_xvfb(
+        dir.path(),
+        &format!(
+            "{} --camera hall --size 320x240 --quality fast --bounces 0 --software --render-scale 1 \
+             --samples 1 --lights {}",
+            package.display(),
+            lights.display()
+        ),
+        &format!(
+            "sleep 3 key h sleep 0.3 key l sleep 0.3 mousemove --window $wid {} {} click 1 sleep 3 key v \
+             sleep 0.5 key Escape",
+            at.x_px as u32, at.y_px as u32
+        ),
     );
-    let xvfb = Command::new("timeout")
-        .args(["600", "xvfb-run", "-a", "-s", "-screen 0 640x480x24", "bash", "-c", &script])
-        .env_remove("WAYLAND_DISPLAY")
-        .output()
-        .unwrap_or_else(|e| panic!("xvfb-run (scripts/test.sh installs xvfb and xdotool): {e}"));
-    let log = std::fs::read_to_string(dir.path().join("view.err")).unwrap_or_default();
-    assert!(xvfb.status.success(), "{}\n{log}", String::from_utf8_lossy(&xvfb.stderr));
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("view.json")).unwrap()).unwrap();
     assert_eq!(
         summary["lights_saved"][0].as_str(),
         Some(lights.to_str().unwrap()),

@@ -304,6 +304,17 @@ fn published(
     bundle: PathBuf,
     viewer_options: Value,
 ) -> (publish::PublishSummary, serve::Server) {
+    published_lit(dir, package, bundle, viewer_options, None)
+}
+
+/// [`published`] with a lighting file (`grotto publish --lights`).
+fn published_lit(
+    dir: &Path,
+    package: &Path,
+    bundle: PathBuf,
+    viewer_options: Value,
+    lights: Option<PathBuf>,
+) -> (publish::PublishSummary, serve::Server) {
     let site = dir.join("site");
     let summary = publish::publish(&PublishOptions {
         package: package.to_path_buf(),
@@ -312,7 +323,7 @@ fn published(
         title: None,
         viewer_options: serde_json::from_value(viewer_options).unwrap(),
         story: None,
-        lights: None,
+        lights,
         picture: None,
     })
     .unwrap();
@@ -629,13 +640,7 @@ fn a_published_room_labels_measures_shares_and_answers_touch() {
     );
 
     // Labels: where the camera projects each point of interest, hidden where the pillar is.
-    let rel = |p: [f64; 3]| glam::DVec3::from_array(p).as_vec3();
-    let hall = grotto_runtime::view::camera::Camera {
-        eye_m: rel(room::HALL_EYE_M),
-        look_at_m: rel(room::HALL_LOOK_AT_M),
-        up: glam::Vec3::Z,
-        fov_y_deg: 60.0,
-    };
+    let (rel, hall) = (room::local, room::hall_camera());
     let labels = browser.eval(
         "return JSON.stringify([...document.querySelectorAll('.poi')].map(e => [e.dataset.poi, \
          parseFloat(e.style.left), parseFloat(e.style.top), e.classList.contains('hidden')]))",
@@ -794,19 +799,8 @@ fn a_visitor_switches_lighting_circuits_and_reads_the_lux_view() {
         ),
     )
     .unwrap();
-    let site = dir.path().join("site");
-    publish::publish(&PublishOptions {
-        package: package.clone(),
-        out: site.clone(),
-        bundle: Some(bundle),
-        title: None,
-        viewer_options: serde_json::from_value(json!({"camera": "hall", "exposure": 2.0})).unwrap(),
-        story: None,
-        lights: Some(lights),
-        picture: None,
-    })
-    .unwrap();
-    let server = serve::serve(&site).unwrap();
+    let (_, server) =
+        published_lit(dir.path(), &package, bundle, json!({"camera": "hall", "exposure": 2.0}), Some(lights));
     let browser = Browser::start(&chromium, &driver, true);
     let url = format!(
         "http://127.0.0.1:{}/index.html?width=160&height=120&quality=fast&bounces=1&bar=hidden&samples=1",

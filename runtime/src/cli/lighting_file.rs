@@ -50,14 +50,7 @@ pub fn with_circuits(
     let problem = |p: String| Error::Setting { name: "circuits", problem: p };
     let mut r = match relight {
         Some(r) => r,
-        None if !package.circuits.is_empty() => Relight {
-            lights: package.lights.clone(),
-            circuits: package.circuits.clone(),
-            baked: (package.lights.iter())
-                .filter(|l| matches!(l.shape, grotto_format::LightShape::Area { .. }))
-                .map(|l| l.name.clone())
-                .collect(),
-        },
+        None if !package.circuits.is_empty() => Relight::of_package(&package.lights, &package.circuits),
         None => {
             return Err(problem(
                 "the package has no circuits (a lighting file, --lights, gives some)".into(),

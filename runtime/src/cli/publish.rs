@@ -160,9 +160,10 @@ pub fn publish(opts: &PublishOptions) -> Result<PublishSummary> {
         return Err(output(&opts.package, format!("is damaged ({} problems; first: {p})", problems.len())));
     }
     let package_bytes = pkg.file_size();
-    let (pois, tours) = crate::cli::story_file::story_of(&pkg.scene()?, opts.story.as_deref())?;
+    let world = pkg.scene()?;
+    let (pois, tours) = crate::cli::story_file::story_of(&world, opts.story.as_deref())?;
     let relight =
-        opts.lights.as_ref().map(|p| crate::cli::lighting_file::relight_of(&pkg.scene()?, p)).transpose()?;
+        opts.lights.as_ref().map(|p| crate::cli::lighting_file::relight_of(&world, p)).transpose()?;
     drop(pkg);
     let bundle = opts.bundle.clone().or_else(default_bundle).ok_or_else(|| {
         output(

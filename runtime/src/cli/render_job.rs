@@ -189,17 +189,17 @@ fn non_empty(scene: SceneData) -> Result<SceneData> {
 /// never loaded whole.
 fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Streaming>)> {
     let pkg = Package::open(&opts.package)?;
+    let world = pkg.scene()?;
     // A story file amends the package's points of interest and tours (`--story`).
     let story = match &opts.story {
         Some(path) => {
-            let world = pkg.scene()?;
             let (pois, tours) = crate::cli::story_file::story_of(&world, Some(path))?;
-            Some((pois, tours, world.cameras))
+            Some((pois, tours, world.cameras.clone()))
         }
         None => None,
     };
-    let relight = opts.lights.as_ref().map(|p| lighting_file::relight_of(&pkg.scene()?, p)).transpose()?;
-    let relight = lighting_file::with_circuits(&pkg.scene()?, relight, &opts.circuits)?;
+    let relight = opts.lights.as_ref().map(|p| lighting_file::relight_of(&world, p)).transpose()?;
+    let relight = lighting_file::with_circuits(&world, relight, &opts.circuits)?;
     let with_story = |mut scene: SceneData| {
         if let Some((pois, tours, cameras)) = &story {
             (scene.pois, scene.tours) =

@@ -113,21 +113,17 @@ fn lambertian() -> Profile {
     Profile { vertical_deg, horizontal_deg: vec![0.0], relative }
 }
 
+/// The names of the area lights among `lights`.
+fn area_names(lights: &[Light]) -> Vec<String> {
+    lights.iter().filter(|l| matches!(l.shape, LightShape::Area { .. })).map(|l| l.name.clone()).collect()
+}
+
 /// A package's lights and circuits with a lighting file's merged in
 /// (grotto_format::lighting::merged), and the names of the package's area lights that still glow
 /// from its leaves. A file's light may not take the name of such an area light: its glow is
 /// baked into the scan and would stay.
 pub fn merged(package: (&[Light], &[Circuit]), file: &Lighting) -> Result<Relight, String> {
-    let baked: Vec<String> = if file.replace {
-        Vec::new()
-    } else {
-        package
-            .0
-            .iter()
-            .filter(|l| matches!(l.shape, LightShape::Area { .. }))
-            .map(|l| l.name.clone())
-            .collect()
-    };
+    let baked = if file.replace { Vec::new() } else { area_names(package.0) };
     if let Some(name) = file.remove.iter().find(|n| baked.contains(n)) {
         return Err(format!(
             "remove: {name:?} is an area light whose glow is baked into the scan's leaves; set replace = true to \
@@ -146,6 +142,11 @@ pub fn merged(package: (&[Light], &[Circuit]), file: &Lighting) -> Result<Religh
 }
 
 impl Relight {
+    /// A package's own lights and circuits, as they are: its area lights glow from the leaves.
+    pub fn of_package(lights: &[Light], circuits: &[Circuit]) -> Self {
+        Relight { lights: lights.to_vec(), circuits: circuits.to_vec(), baked: area_names(lights) }
+    }
+
     /// Checked whole (a page's viewer.json is not trusted): circuits and profiles hold together.
     pub fn check(&self) -> Result<(), String> {
         grotto_format::check_lights(&self.lights, &self.circuits)

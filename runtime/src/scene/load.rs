@@ -228,13 +228,7 @@ impl SceneData {
             });
         self.lights.extend(lights);
         if !scene.circuits.is_empty() {
-            let baked =
-                scene.lights.iter().filter(|l| matches!(l.shape, grotto_format::LightShape::Area { .. }));
-            self.lighting = Some(crate::scene::lighting::Relight {
-                lights: scene.lights.clone(),
-                circuits: scene.circuits.clone(),
-                baked: baked.map(|l| l.name.clone()).collect(),
-            });
+            self.lighting = Some(crate::scene::lighting::Relight::of_package(&scene.lights, &scene.circuits));
         }
     }
 

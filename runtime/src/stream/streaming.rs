@@ -264,16 +264,23 @@ pub fn swap_tiles(
         *scene = new_scene;
         return Ok(Swapped { carried_leaves: u.carried_leaves, update: Some(u), made_anew: false });
     }
-    let carried = if cfg!(target_arch = "wasm32") { None } else { Some(r.light_by_tile(scene)?) };
-    let (caps, clip) = (r.pool_caps(), r.clip());
+    let carried_leaves = anew(gpu, r, scene, &new_scene, !cfg!(target_arch = "wasm32"))?;
     *scene = new_scene;
-    *r = Renderer::with_pools(gpu, scene, r.settings().clone(), caps)?;
-    r.set_clip(clip);
-    let carried_leaves = match carried {
-        Some(c) => r.seed_light(scene, &c)?,
-        None => 0,
-    };
     Ok(Swapped { update: None, made_anew: true, carried_leaves })
+}
+
+/// A new renderer for `new` in `r`'s pools (same capacities and clip box), seeded with the light
+/// `r` held for `old`'s tiles where `carry` (a read-back: natively only). Returns the leaves
+/// whose light was carried.
+fn anew(gpu: &Gpu, r: &mut Renderer, old: &SceneData, new: &SceneData, carry: bool) -> Result<usize> {
+    let carried = if carry { Some(r.light_by_tile(old)?) } else { None };
+    let (caps, clip) = (r.pool_caps(), r.clip());
+    *r = Renderer::with_pools(gpu, new, r.settings().clone(), caps)?;
+    r.set_clip(clip);
+    match carried {
+        Some(c) => r.seed_light(new, &c),
+        None => Ok(0),
+    }
 }
 
 /// After `scene`'s lights changed (a circuit switched: SceneData::switch_circuit): a renderer
@@ -284,15 +291,7 @@ pub fn swap_tiles(
 pub fn relit(gpu: &Gpu, r: &mut Renderer, scene: &SceneData) -> Result<usize> {
     // The tiles are the same; only the lights changed. Nothing lights the scene now: nothing
     // propagates, so nothing may be carried (the old light would stay on the walls).
-    let carry = !cfg!(target_arch = "wasm32") && scene.has_own_light();
-    let carried = if carry { Some(r.light_by_tile(scene)?) } else { None };
-    let (caps, clip) = (r.pool_caps(), r.clip());
-    *r = Renderer::with_pools(gpu, scene, r.settings().clone(), caps)?;
-    r.set_clip(clip);
-    let carried = match carried {
-        Some(c) => r.seed_light(scene, &c)?,
-        None => 0,
-    };
+    let carried = anew(gpu, r, scene, scene, !cfg!(target_arch = "wasm32") && scene.has_own_light())?;
     r.invalidate_lights();
     Ok(carried)
 }

@@ -67,14 +67,7 @@ impl LampEditor {
 
     /// The scene's lighting to edit: its own, or one made of the package's lights.
     fn lighting(&self, scene: &SceneData) -> Relight {
-        scene.lighting.clone().unwrap_or_else(|| Relight {
-            lights: self.package.clone(),
-            circuits: Vec::new(),
-            baked: (self.package.iter())
-                .filter(|l| matches!(l.shape, LightShape::Area { .. }))
-                .map(|l| l.name.clone())
-                .collect(),
-        })
+        scene.lighting.clone().unwrap_or_else(|| Relight::of_package(&self.package, &[]))
     }
 
     /// Applies `edit` to the scene's lighting, keeping the lighting before it for undo.
@@ -175,7 +168,15 @@ impl LampEditor {
             return None;
         }
         let mut out: Option<PanelEdit> = None;
-        let lighting = self.lighting(scene);
+        // Drawn every frame: the scene's lighting borrowed, a copy only where it has none.
+        let owned;
+        let lighting = match &scene.lighting {
+            Some(l) => l,
+            None => {
+                owned = Relight::of_package(&self.package, &[]);
+                &owned
+            }
+        };
         egui::Window::new("lighting").default_pos([8.0, 260.0]).default_width(240.0).show(ctx, |ui| {
             ui.label("click the cave: place a lamp (or move / aim the selected one)");
             ui.add(egui::Slider::new(&mut self.offset_m, 0.1..=3.0).text("off the surface, m"));
