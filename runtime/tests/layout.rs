@@ -128,7 +128,7 @@ fn shared() -> Vec<(&'static str, RustLayout)> {
             }),
         ),
         ("MipRange", rust_layout!(MipRange { first, count, height, pad })),
-        ("InjectBatch", rust_layout!(InjectBatch { first, count, reset, pad })),
+        ("InjectBatch", rust_layout!(InjectBatch { first, count, reset, last })),
         ("ConeBatch", rust_layout!(ConeBatch { first, count, pad0, pad1 })),
         ("ActiveTile", rust_layout!(ActiveTile { tile, first_leaf, leaf_count, first_item })),
         (

@@ -178,8 +178,11 @@ fn switching_a_circuit_converges_to_a_fresh_render_of_that_lighting() {
     let before = pixels(&r.render(&cam, W, H).unwrap().0);
     assert!(scene.switch_circuit("side", true).unwrap());
     assert_eq!(scene.lights.len(), 2);
-    let carried = grotto_runtime::stream::relit(&gpu, &mut r, &scene).unwrap();
-    assert_eq!(carried, scene.leaves.len(), "every leaf's light is the start");
+    let relit = grotto_runtime::stream::relit(&gpu, &mut r, &scene).unwrap();
+    let grotto_runtime::stream::Relit::InPlace(edit) = relit else { panic!("not in place: {relit:?}") };
+    // The spot added: one light, its one face, and the tiles its light reaches.
+    assert_eq!((edit.scope.lights, edit.scope.faces), (1, 1), "{edit:?}");
+    assert!(edit.scope.tiles >= 1 && edit.scope.tiles <= edit.scope.of_tiles, "{edit:?}");
     let warm = r.settle(|_, _| {}).unwrap();
     let switched = pixels(&r.render(&cam, W, H).unwrap().0);
     // A fresh renderer of the lighting file with the circuit on from the start.
@@ -289,7 +292,10 @@ fn each_kind_of_edit_converges_to_a_fresh_render_of_the_saved_lighting_file() {
     for (what, edit) in edits {
         edit(&mut lighting);
         scene.relight(&lighting.lights, &lighting.circuits, &lighting.baked);
-        grotto_runtime::stream::relit(&gpu, &mut r, &scene).unwrap();
+        let how = grotto_runtime::stream::relit(&gpu, &mut r, &scene).unwrap();
+        // In place while some light is left (with none, a new renderer clears the direct light).
+        let in_place = matches!(how, grotto_runtime::stream::Relit::InPlace(_));
+        assert_eq!(in_place, !scene.lights.is_empty(), "{what}: {how:?}");
         let bounces = r.settle(|_, _| {}).unwrap();
         let got = r.render(&cam, W, H).unwrap().0.ldr;
         // Saved, read back, and rendered from scratch.
@@ -308,7 +314,69 @@ fn each_kind_of_edit_converges_to_a_fresh_render_of_the_saved_lighting_file() {
         let cold = fresh.settle(|_, _| {}).unwrap();
         let want = fresh.render(&cam, W, H).unwrap().0.ldr;
         let d = golden::diff(&got, &want);
-        eprintln!("{what}: {bounces} bounces after the edit, {cold} from darkness; {d:?}");
+        eprintln!("{what}: {how:?}; {bounces} bounces after the edit, {cold} from darkness; {d:?}");
         assert!(golden::within_tolerance(&d), "{what}: edited in place against a fresh render: {d:?}");
     }
+}
+
+/// A lamp moved in the small cave cut into 4 m tiles: edited in place, its bounces update the
+/// tiles whose direct light it changed and their neighbours, fewer leaves than relighting every
+/// light does, and the light converges to a fresh render's.
+#[test]
+fn a_lamp_edit_costs_less_than_a_full_relight_and_ends_at_the_same_light() {
+    use grotto_runtime::stream::{Relit, relit};
+    use grotto_tests::golden;
+    let dir = tempfile::tempdir().unwrap();
+    let cave = grotto_fixtures::SmallCave { max_tile_extent_m: 4.0, ..Default::default() };
+    let package = grotto_fixtures::small_cave_package(dir.path(), &cave).unwrap();
+    let pkg = grotto_format::Package::open(&package).unwrap();
+    let mut scene = SceneData::from_package(&pkg).unwrap();
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
+    let settings = Settings { bounces: 32, shadow_map_size: 128, exposure: 8.0, ..Settings::default() };
+    let c = &scene.cameras[0];
+    let cam = Camera { eye_m: c.eye_m, look_at_m: c.look_at_m, up: c.up, fov_y_deg: c.fov_y_deg };
+    let mut r = Renderer::new(&gpu, &scene, settings.clone()).unwrap();
+    r.settle(|_, _| {}).unwrap();
+    r.take_bounce_work();
+    // The entrance passage's lamp, 30 cm further along.
+    let world = pkg.scene().unwrap();
+    let mut lights = world.lights.clone();
+    let lamp = lights.iter_mut().find(|l| l.name == "lamp-0").expect("the synthetic cave's first lamp");
+    let grotto_format::LightShape::Point { position_m } = &mut lamp.shape else { panic!("a point lamp") };
+    position_m[0] += 0.3;
+    let before = std::mem::take(&mut scene.lights);
+    scene.relight(&lights, &world.circuits, &[]);
+    let after = scene.lights.clone();
+    let Relit::InPlace(edit) = relit(&gpu, &mut r, &scene).unwrap() else { panic!("not in place") };
+    assert_eq!((edit.scope.lights, edit.scope.faces), (2, 6), "{edit:?}");
+    r.settle(|_, _| {}).unwrap();
+    let edited = r.take_bounce_work();
+    let got = r.render(&cam, W, H).unwrap().0.ldr;
+    // The lamp back, then the same edit as every edit was before: every light's shadow faces,
+    // every leaf injected, every tile bouncing, from the same start.
+    scene.lights = before;
+    relit(&gpu, &mut r, &scene).unwrap();
+    r.settle(|_, _| {}).unwrap();
+    scene.lights = after;
+    relit(&gpu, &mut r, &scene).unwrap();
+    r.invalidate_lights();
+    r.take_bounce_work();
+    r.settle(|_, _| {}).unwrap();
+    let full = r.take_bounce_work();
+    let leaves = |w: &[grotto_runtime::light::activity::BounceWork]| w.iter().map(|b| b.leaves).sum::<u64>();
+    let tiles = scene.tiles.len();
+    eprintln!(
+        "{tiles} tiles; edit in place: {:?} tiles a bounce, {} leaves; relighting every light: {:?}, {} leaves",
+        edited.iter().map(|b| b.tiles).collect::<Vec<_>>(),
+        leaves(&edited),
+        full.iter().map(|b| b.tiles).collect::<Vec<_>>(),
+        leaves(&full)
+    );
+    assert!(edited[0].tiles < tiles, "the first bounce after the edit updates only where it changed");
+    assert!(leaves(&edited) < leaves(&full), "the edit propagates fewer leaves than a full relight");
+    let mut fresh = Renderer::new(&gpu, &scene, settings).unwrap();
+    fresh.settle(|_, _| {}).unwrap();
+    let want = fresh.render(&cam, W, H).unwrap().0.ldr;
+    let d = golden::diff(&got, &want);
+    assert!(golden::within_tolerance(&d), "edited in place against a fresh render: {d:?}");
 }

@@ -373,6 +373,11 @@ struct BenchArgs {
     /// Repetitions (the median is reported).
     #[arg(long, default_value_t = 3)]
     reps: u32,
+    /// Instead of pass times: what light edits cost. Each `[[light]]` of this lighting file is
+    /// added to the scene's lights and removed again, each change settled (in place where it
+    /// fits), then every light is relit for comparison: wall time, bounces, leaves, faces.
+    #[arg(long, value_name = "FILE.toml")]
+    edit_lights: Option<PathBuf>,
 }
 
 /// `N` finite comma-separated numbers.
@@ -580,6 +585,9 @@ fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
         "--supersample is for grotto render (bench the larger --size instead)"
     );
     let opts = options(&b.render)?;
+    if let Some(file) = &b.edit_lights {
+        return bench_edits(&opts, file, (b.render.json, b.render.explain));
+    }
     let report = grotto_runtime::cli::bench_job::bench(&opts, b.reps)?;
     if b.render.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -619,6 +627,20 @@ fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
             "  a repetition: {} submits, {} bytes written to GPU buffers",
             report.submits, report.upload_bytes
         );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn bench_edits(
+    opts: &grotto_runtime::cli::render_job::RenderOptions,
+    file: &std::path::Path,
+    (json, explain): (bool, bool),
+) -> anyhow::Result<ExitCode> {
+    let report = grotto_runtime::cli::bench_job::bench_light_edits(opts, file)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.table(explain));
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -278,11 +278,14 @@ pub mod flags {
     pub const BLEND: u32 = 32768;
     /// View mode: illuminance in lux as false colours (with VIEW_LIGHT: albedo 1; view/lux.rs).
     pub const VIEW_LUX: u32 = 65536;
+    /// Inject runs over the active tiles' leaves only (a light edit in place: light/edit.rs).
+    pub const INJECT_ACTIVE: u32 = 131072;
     /// The views shade writes without light (settings.rs `ViewMode::shows_light`).
     pub const VIEWS_WITHOUT_LIGHT: u32 = VIEW_ALBEDO | VIEW_NORMALS | VIEW_LEVEL | VIEW_SCAN;
 
     /// Every flag with its WGSL name.
-    pub const ALL: [(&str, u32); 17] = [
+    pub const ALL: [(&str, u32); 18] = [
+        ("FLAG_INJECT_ACTIVE", INJECT_ACTIVE),
         ("FLAG_VIEW_LUX", VIEW_LUX),
         ("FLAG_VIEW_ALBEDO", VIEW_ALBEDO),
         ("FLAG_VIEW_SCAN", VIEW_SCAN),
@@ -321,8 +324,10 @@ pub struct MipRange {
 pub struct InjectBatch {
     pub first: u32,
     pub count: u32,
+    /// The first batch: it starts the direct light from zero.
     pub reset: u32,
-    pub pad: u32,
+    /// The last batch: after an edit in place it records how much the direct light changed.
+    pub last: u32,
 }
 
 /// One propagate dispatch: cones `first .. first + count` of the cone set (passes/propagate.rs).

@@ -24,6 +24,8 @@ pub enum Why {
     Start,
     /// The lights changed (every tile).
     LightsChanged,
+    /// A light edit changed the tile's direct light (light/edit.rs).
+    LightEdited,
     /// The tile was not resident in this form before: its light starts from darkness.
     New,
     /// The tile touches a new tile.
@@ -41,6 +43,7 @@ impl Why {
         match self {
             Why::Start => "no light yet",
             Why::LightsChanged => "lights changed",
+            Why::LightEdited => "direct light changed by an edit",
             Why::New => "new",
             Why::BesideNew => "beside a new tile",
             Why::Changed => "still changing",
@@ -81,18 +84,22 @@ pub(crate) struct TileActivity {
     neighbours: Vec<Vec<u32>>,
     /// Why the next bounce updates each tile (`None`: it does not).
     next: Vec<Option<Why>>,
+    /// During a light edit in place: `next` as it was before (activity.rs `begin_edit`).
+    before_edit: Option<Vec<Option<Why>>>,
 }
 
 impl TileActivity {
     /// Every tile active (`Why::Start`).
     pub(crate) fn new(tiles: &[TileGpu]) -> Self {
         let leaves = tiles.iter().map(|t| (t.leaf_offset, t.leaf_count)).collect();
-        Self { leaves, neighbours: touching(tiles), next: vec![Some(Why::Start); tiles.len()] }
+        let next = vec![Some(Why::Start); tiles.len()];
+        Self { leaves, neighbours: touching(tiles), next, before_edit: None }
     }
 
-    /// Every tile active for `why`.
+    /// Every tile active for `why` (an edit under way is forgotten: everything runs).
     pub(crate) fn all(&mut self, why: Why) {
         self.next.fill(Some(why));
+        self.before_edit = None;
     }
 
     /// After a reload: `carried[t]` says tile `t` kept its light. The others are new, and the
@@ -116,9 +123,46 @@ impl TileActivity {
         }
     }
 
+    /// A light edit in place: the tiles `reached[t]` names (an edited light's old or new light
+    /// reaches them) become the active tiles inject redoes; the tiles pending before (still
+    /// changing) wait for [`TileActivity::end_edit`]. A second edit before that adds its tiles.
+    pub(crate) fn begin_edit(&mut self, reached: &[bool]) {
+        if self.before_edit.is_none() {
+            let idle = vec![None; self.next.len()];
+            self.before_edit = Some(std::mem::replace(&mut self.next, idle));
+        }
+        for (next, _) in self.next.iter_mut().zip(reached).filter(|(_, r)| **r) {
+            *next = Some(Why::LightEdited);
+        }
+    }
+
+    /// The edit's direct light is injected, and `change[t]` is how much it changed tile `t`'s
+    /// (relative, inject_tally.wgsl; meaningful for the tiles it redid): the tiles it changed by
+    /// the tolerance or more start the bounces, with those pending before the edit. Where none
+    /// is, one bounce over every tile checks (the stopping test stays the batch render's).
+    pub(crate) fn end_edit(&mut self, change: &[f32], tolerance: f32) {
+        let redone = std::mem::take(&mut self.next);
+        self.next = self.before_edit.take().unwrap_or_else(|| vec![None; redone.len()]);
+        for (t, r) in redone.iter().enumerate() {
+            let c = change.get(t).copied().unwrap_or(f32::NAN);
+            if r.is_some() && (c.is_nan() || c >= tolerance) {
+                self.next[t] = Some(Why::LightEdited);
+            }
+        }
+        if self.pending_tiles() == 0 {
+            self.all(Why::Verify);
+        }
+    }
+
     /// Tiles the next bounce updates.
     pub(crate) fn pending_tiles(&self) -> usize {
         self.next.iter().filter(|w| w.is_some()).count()
+    }
+
+    /// Tiles the next bounce updates, and their leaves.
+    pub(crate) fn pending_tiles_leaves(&self) -> (usize, u64) {
+        let pending = (self.next.iter().zip(&self.leaves)).filter(|(w, _)| w.is_some());
+        pending.fold((0, 0), |(t, l), (_, &(_, n))| (t + 1, l + u64::from(n)))
     }
 
     pub(crate) fn tiles(&self) -> usize {
@@ -312,6 +356,39 @@ mod tests {
         let mut a = TileActivity::new(&row(3));
         a.finish(&[0.0, f32::NAN, 0.0], 1e-3);
         assert_eq!(a.next, vec![Some(Why::BesideChanged), Some(Why::Changed), Some(Why::BesideChanged)]);
+    }
+
+    #[test]
+    fn an_edit_redoes_the_tiles_it_reaches_and_bounces_from_those_it_changed() {
+        let mut a = TileActivity::new(&row(5));
+        a.finish(&[0.0, 0.0, 0.0, 0.1, 0.0], 1e-3);
+        assert_eq!(a.pending_tiles(), 3);
+        // Its reach: tiles 0 and 1; inject redoes those only.
+        a.begin_edit(&[true, true, false, false, false]);
+        assert_eq!(a.next, vec![Some(Why::LightEdited), Some(Why::LightEdited), None, None, None]);
+        // A second edit before the tally adds its tiles.
+        a.begin_edit(&[false, false, false, false, true]);
+        assert_eq!(a.pending_tiles(), 3);
+        // Tile 1's direct light did not change (rock between it and the lamp): it does not
+        // bounce; the tiles pending before the edit do.
+        a.end_edit(&[0.2, 0.0, 9.0, 0.0, f32::NAN], 1e-3);
+        assert_eq!(
+            a.next,
+            vec![
+                Some(Why::LightEdited),
+                None,
+                Some(Why::BesideChanged),
+                Some(Why::Changed),
+                Some(Why::LightEdited)
+            ]
+        );
+        // An edit that changes nothing, with nothing pending: one check over every tile.
+        let mut b = TileActivity::new(&row(2));
+        b.finish(&[0.0; 2], 1e-3);
+        assert_eq!(b.pending_tiles(), 0);
+        b.begin_edit(&[true, false]);
+        b.end_edit(&[0.0, 0.0], 1e-3);
+        assert_eq!(b.next, vec![Some(Why::Verify); 2]);
     }
 
     #[test]

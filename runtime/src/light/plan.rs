@@ -13,6 +13,8 @@
 
 use serde::Serialize;
 
+use crate::light::edit::EditScope;
+
 /// A pass of the frame, in execution order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -116,6 +118,9 @@ pub struct PlanInputs {
     pub env_valid: bool,
     /// Shadow maps and injected direct light match the current lights.
     pub direct_valid: bool,
+    /// A light edit in place waits for its direct light: the lights it changed, the faces drawn
+    /// again and the tiles injected again (light/edit.rs).
+    pub light_edit: Option<EditScope>,
     /// Shadow maps catching up under a per-frame budget: faces the next pass draws, of those
     /// out of date, and the budget in milliseconds (render/shadow_queue.rs). None: the next pass
     /// draws every face out of date, or none is.
@@ -209,11 +214,18 @@ fn shadow_step(i: &PlanInputs, analytic: usize, lights_text: &str) -> Step {
             ),
             None => String::new(),
         };
+        let why = match &i.light_edit {
+            Some(e) => format!(
+                "a light edit changed {} light(s): their {} face(s) drawn again, the others kept",
+                e.lights, e.faces
+            ),
+            None => "lights or tiles changed".into(),
+        };
         Step {
             pass: Pass::Shadow,
             run: true,
             reason: format!(
-                "{} of {lights_text} get shadow maps (brightest first, budget {}){beyond}; lights or tiles changed{faces}",
+                "{} of {lights_text} get shadow maps (brightest first, budget {}){beyond}; {why}{faces}",
                 i.shadowed, i.shadow_budget
             ),
         }
@@ -243,11 +255,18 @@ fn inject_step(i: &PlanInputs, analytic: usize, lights_text: &str) -> Step {
             ),
         }
     } else {
+        let why = match &i.light_edit {
+            Some(e) => format!(
+                "a light edit changed {} light(s): only the {} of {} tiles ({} leaves) their light reaches",
+                e.lights, e.tiles, e.of_tiles, e.leaves
+            ),
+            None => "lights changed".into(),
+        };
         Step {
             pass: Pass::Inject,
             run: true,
             reason: format!(
-                "{lights_text}, {:.1} in range per grid cell on average (at most {}); lights changed",
+                "{lights_text}, {:.1} in range per grid cell on average (at most {}); {why}",
                 i.lights_in_range.0, i.lights_in_range.1
             ),
         }
@@ -281,6 +300,14 @@ fn propagate_step(i: &PlanInputs, analytic: usize) -> (bool, String) {
         (false, "bounce budget is 0 (direct light only)".to_string())
     } else if !any_light {
         (false, "no light in the scene: nothing to propagate".to_string())
+    } else if let Some(e) = &i.light_edit {
+        (
+            false,
+            format!(
+                "a light edit's direct light first: the bounces start from the tiles it changes, of the {} in its lights' reach",
+                e.tiles
+            ),
+        )
     } else if i.bounces_done >= i.bounce_budget {
         (false, format!("converged by budget: {} of {} bounces done", i.bounces_done, i.bounce_budget))
     } else if let Some(c) = i.last_change.filter(|&c| c < i.convergence_tolerance && i.tiles_pending == 0) {
@@ -409,6 +436,7 @@ mod tests {
             ambient: false,
             env_valid: false,
             direct_valid: false,
+            light_edit: None,
             shadow_catch_up: None,
             bounces_done: 0,
             bounce_budget: 4,
@@ -425,6 +453,21 @@ mod tests {
             bounce_part: None,
             still: None,
         }
+    }
+
+    #[test]
+    fn a_light_edit_says_what_it_redoes() {
+        let edit = EditScope { lights: 2, faces: 6, tiles: 3, of_tiles: 40, leaves: 900 };
+        let p = plan(&PlanInputs { light_edit: Some(edit), ..base() });
+        let text = p.explain();
+        assert!(p.runs(Pass::Shadow) && p.runs(Pass::Inject), "{text}");
+        assert!(text.contains("changed 2 light(s): their 6 face(s) drawn again"), "{text}");
+        assert!(text.contains("only the 3 of 40 tiles (900 leaves)"), "{text}");
+        assert!(
+            !p.runs(Pass::Propagate) && text.contains("bounces start from the tiles it changes"),
+            "{text}"
+        );
+        assert!(!plan(&base()).explain().contains("light edit"));
     }
 
     #[test]

@@ -33,6 +33,12 @@ pub(crate) struct LightSetup {
     pub(crate) profiles: Vec<LightGpu>,
     /// Lights with shadow maps; the others are lit per leaf by inject.
     pub(crate) shadowed: usize,
+    /// Whether each scene light (in the scene's order) has a shadow map.
+    pub(crate) mapped: Vec<bool>,
+    /// Each light with a map: its index in `lights`, its first face and how many it has.
+    face_blocks: Vec<(usize, usize, usize)>,
+    /// Each light with a profile: its index in `lights` and where its block starts in `profiles`.
+    profiled: Vec<(usize, usize)>,
     pub(crate) point_lights: usize,
     pub(crate) spot_lights: usize,
     pub(crate) grid: LightGrid,
@@ -65,11 +71,14 @@ impl LightSetup {
             .filter(|&k| mapped[k])
             .chain((0..scene.lights.len()).filter(|&k| !mapped[k]));
         let (mut lights, mut faces, mut profiles) = (Vec::new(), Vec::new(), Vec::new());
-        // Lights with a profile and where their block starts among `profiles`.
         let mut profiled: Vec<(usize, usize)> = Vec::new();
+        let mut face_blocks = Vec::new();
         for k in order {
             let (l, has_map) = (&scene.lights[k], mapped[k]);
             let first = if has_map { faces.len() as f32 } else { -1.0 };
+            if has_map {
+                face_blocks.push((lights.len(), faces.len(), if l.spot.is_some() { 1 } else { 6 }));
+            }
             // Without shadows at all every light is shaded per pixel, unshadowed.
             let how = if has_map || !settings.shadows { LightShadow::Map } else { fallback }.encode();
             let range = range_m(l.intensity_w_sr, settings.light_cutoff_w_m2);
@@ -128,10 +137,6 @@ impl LightSetup {
                 }
             }
         }
-        // A profile block's index counts the lights and the faces' matrices before it.
-        for (light, at) in profiled {
-            lights[light].params[0] = (lights.len() + faces.len() + at) as f32;
-        }
         let grid = LightGrid::build(
             grid_lo_m,
             grid_hi_m,
@@ -141,15 +146,81 @@ impl LightSetup {
                 .collect::<Vec<_>>(),
         );
         let point_lights = scene.lights.iter().filter(|l| l.spot.is_none()).count();
-        LightSetup {
+        let mut setup = LightSetup {
             lights,
             faces,
             profiles,
             shadowed: mapped.iter().filter(|&&m| m).count(),
+            mapped,
+            face_blocks,
+            profiled,
             point_lights,
             spot_lights: scene.lights.len() - point_lights,
             grid,
+        };
+        setup.index_profiles();
+        setup
+    }
+
+    /// A profile block's index counts the lights and the faces' matrices before it.
+    fn index_profiles(&mut self) {
+        for &(light, at) in &self.profiled {
+            self.lights[light].params[0] = (self.lights.len() + self.faces.len() + at) as f32;
         }
+    }
+
+    /// The lights buffer's records (lights.wgsl): the lights, each shadow face's matrix (one
+    /// 64-byte record), then the profiles.
+    pub(crate) fn records(&self) -> Vec<LightGpu> {
+        let mut out = self.lights.clone();
+        out.extend(self.faces.iter().map(|f| {
+            let [c0, c1, c2, c3] = f.view_proj.to_cols_array_2d();
+            LightGpu { position_kind: c0, intensity_layer: c1, direction_cos_outer: c2, params: c3 }
+        }));
+        out.extend_from_slice(&self.profiles);
+        out
+    }
+
+    /// Lays the faces out in an atlas of `capacity` faces so that a light whose faces are the
+    /// same as `old`'s keep the slots they had there (an edit then draws only the faces of the
+    /// lights it changed, not those of every light after them); the other lights take the first
+    /// free run of slots. Slots no light uses are holes ([`Face::hole`]). Returns false, with
+    /// `self` unchanged, where the faces do not fit.
+    pub(crate) fn keep_slots(&mut self, old: &[Face], capacity: usize) -> bool {
+        let mut slot_of: Vec<Option<usize>> = vec![None; self.face_blocks.len()];
+        let mut used = vec![false; capacity];
+        for (b, &(_, first, n)) in self.face_blocks.iter().enumerate() {
+            let want = &self.faces[first..first + n];
+            let start = (0..old.len().saturating_sub(n - 1).min(capacity.saturating_sub(n - 1)))
+                .find(|&s| old[s..s + n] == *want && used[s..s + n].iter().all(|u| !u));
+            if let Some(s) = start {
+                used[s..s + n].fill(true);
+                slot_of[b] = Some(s);
+            }
+        }
+        for (b, &(_, _, n)) in self.face_blocks.iter().enumerate() {
+            if slot_of[b].is_some() {
+                continue;
+            }
+            let Some(s) = (0..capacity.saturating_sub(n - 1)).find(|&s| used[s..s + n].iter().all(|u| !u))
+            else {
+                return false;
+            };
+            used[s..s + n].fill(true);
+            slot_of[b] = Some(s);
+        }
+        let len = used.iter().rposition(|&u| u).map_or(0, |i| i + 1);
+        let mut faces = vec![Face::hole(); len];
+        let blocks = self.face_blocks.clone();
+        for (b, &(light, first, n)) in blocks.iter().enumerate() {
+            let s = slot_of[b].unwrap_or(first);
+            faces[s..s + n].copy_from_slice(&self.faces[first..first + n]);
+            self.lights[light].intensity_layer[3] = s as f32;
+            self.face_blocks[b].1 = s;
+        }
+        self.faces = faces;
+        self.index_profiles();
+        true
     }
 }
 
@@ -319,6 +390,54 @@ mod tests {
         assert!(grid.words.len() <= GRID_MAX_ENTRIES + grid.cells() + 1 + lights.len());
         assert_eq!(grid.lights_at(Vec3::splat(49.0)).len(), 5000);
         assert_eq!(grid.lights_at(Vec3::splat(-10.0)).len(), 5000, "points outside clamp into the grid");
+    }
+
+    fn lamps(xs: &[f32], spot_at: Option<usize>) -> SceneData {
+        let lights = (xs.iter().enumerate())
+            .map(|(k, &x)| SceneLight {
+                name: format!("l{k}"),
+                position_m: Vec3::new(x, 1.0, 1.0),
+                intensity_w_sr: Vec3::splat(x),
+                spot: (spot_at == Some(k)).then_some(crate::scene::data::Spot {
+                    direction: Vec3::NEG_Z,
+                    inner_angle_rad: 0.3,
+                    outer_angle_rad: 0.5,
+                }),
+                profile: None,
+            })
+            .collect();
+        SceneData { lights, ..Default::default() }
+    }
+
+    fn setup(scene: &SceneData) -> LightSetup {
+        LightSetup::new(scene, &Settings::default(), 0.01, 100.0, Vec3::ZERO, Vec3::splat(10.0))
+    }
+
+    #[test]
+    fn an_edit_keeps_the_atlas_slots_of_the_lights_it_did_not_change() {
+        let before = setup(&lamps(&[1.0, 2.0, 3.0], Some(1)));
+        assert_eq!(before.faces.len(), 13);
+        // The first lamp deleted: the spot and the last lamp keep their slots (6 and 7..13), and
+        // slots 0..6 are holes that nothing draws.
+        let mut after = setup(&lamps(&[2.0, 3.0], Some(0)));
+        let mut faces = after.faces.clone();
+        assert!(after.keep_slots(&before.faces, 19));
+        assert_eq!(after.faces.len(), 13);
+        assert!(after.faces[..6].iter().all(Face::is_hole));
+        assert_eq!(after.faces[6..], before.faces[6..]);
+        assert_eq!(after.lights.iter().map(|l| l.intensity_layer[3]).collect::<Vec<_>>(), [6.0, 7.0]);
+        // A point lamp added takes the first free run of six: the holes.
+        let mut more = setup(&lamps(&[2.0, 3.0, 5.0], Some(0)));
+        assert!(more.keep_slots(&after.faces, 13));
+        assert!(more.faces[..6].iter().all(|f| !f.is_hole()) && more.faces[6..] == before.faces[6..]);
+        // Too little room: false, the setup unchanged.
+        faces.truncate(7);
+        let mut big = setup(&lamps(&[7.0, 8.0, 9.0], None));
+        let unchanged = big.faces.clone();
+        assert!(!big.keep_slots(&faces, 13));
+        assert_eq!(big.faces, unchanged);
+        let records = more.records();
+        assert_eq!(records.len(), more.lights.len() + more.faces.len() + more.profiles.len());
     }
 
     #[test]

@@ -17,21 +17,68 @@ use crate::gpu::types::InjectBatch;
 /// Lights of a cell handled by one inject dispatch.
 pub(crate) const LIGHTS_PER_BATCH: u32 = 4;
 
-/// The inject pass for a light grid whose longest cell list holds `max_lights_per_cell` lights
-/// (at least one batch runs, so that a scene whose lights reach no leaf still resets the direct
-/// light).
-pub(crate) fn new(
-    gpu: &Gpu,
-    shared: &super::Shared,
-    radiance_f16: bool,
-    max_lights_per_cell: u32,
-) -> Result<super::Batched> {
+/// Inject's pipelines: the batched pass, and the tally of an edit's change
+/// (inject_tally.wgsl).
+#[derive(Debug)]
+pub(crate) struct Inject {
+    lights: super::Batched,
+    tally: super::ComputePipeline,
+}
+
+impl Inject {
+    /// The inject pass for a light grid whose longest cell list holds `max_lights_per_cell`
+    /// lights.
+    pub(crate) fn new(
+        gpu: &Gpu,
+        shared: &super::Shared,
+        radiance_f16: bool,
+        max_lights_per_cell: u32,
+    ) -> Result<Self> {
+        let lights = super::Batched::new(
+            gpu,
+            "inject",
+            crate::shaders::INJECT,
+            shared,
+            radiance_f16,
+            batches(max_lights_per_cell),
+        )?;
+        let tally = super::compute_pipeline(
+            gpu,
+            "inject tally",
+            crate::shaders::INJECT_TALLY,
+            "tally",
+            shared,
+            radiance_f16,
+        )?;
+        Ok(Self { lights, tally })
+    }
+
+    /// The batches for a light grid whose longest list now holds `max_lights_per_cell` lights
+    /// (after an edit in place).
+    pub(crate) fn set_max_lights_per_cell(&mut self, gpu: &Gpu, max_lights_per_cell: u32) -> Result<()> {
+        self.lights.set_values(gpu, batches(max_lights_per_cell))
+    }
+
+    /// Injects `n` leaves (every leaf, or after an edit in place the active tiles' leaves, then
+    /// tallies their change per tile: `edit`).
+    pub(crate) fn record(&self, pass: &mut wgpu::ComputePass<'_>, n: u32, edit: bool) {
+        self.lights.record(pass, n);
+        if edit {
+            self.tally.bind(pass);
+            super::dispatch_linear(pass, n);
+        }
+    }
+}
+
+/// The batches of lights for a light grid whose longest cell list holds `max_lights_per_cell`
+/// lights (at least one batch runs, so that a scene whose lights reach no leaf still resets the
+/// direct light).
+fn batches(max_lights_per_cell: u32) -> impl Iterator<Item = InjectBatch> {
     let count = max_lights_per_cell.div_ceil(LIGHTS_PER_BATCH).max(1);
-    let batches = (0..count).map(|b| InjectBatch {
+    (0..count).map(move |b| InjectBatch {
         first: b * LIGHTS_PER_BATCH,
         count: LIGHTS_PER_BATCH,
         reset: u32::from(b == 0),
-        pad: 0,
-    });
-    super::Batched::new(gpu, "inject", crate::shaders::INJECT, shared, radiance_f16, batches)
+        last: u32::from(b + 1 == count),
+    })
 }

@@ -4,6 +4,7 @@
 // `far` for shade. Then the leaf's outgoing radiance out = emission + direct + env +
 // albedo * gather. Area lights are already emissive leaves.
 #import lights
+#import active
 #import cone
 #import dispatch
 #import brdf
@@ -13,15 +14,23 @@ struct InjectBatch {
     first: u32,
     count: u32,
     reset: u32,
-    pad: u32,
+    last: u32,
 }
 
 @group(2) @binding(0) var<uniform> batch: InjectBatch;
 
 @compute @workgroup_size(64)
 fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let i = linear_index(gid, nwg);
-    if i >= params.leaf_count {
+    // After a light edit in place, only the active tiles' leaves (those an edited light
+    // reaches: runtime/src/light/edit.rs); else every leaf.
+    let k = linear_index(gid, nwg);
+    var i = k;
+    if (params.flags & FLAG_INJECT_ACTIVE) != 0u {
+        if k >= active_tiles.item_count {
+            return;
+        }
+        i = active_leaf(k).x;
+    } else if i >= params.leaf_count {
         return;
     }
     let leaf = leaves[i];
@@ -69,7 +78,13 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
         }
     }
     var state = leaf_light[i];
+    let edit = (params.flags & FLAG_INJECT_ACTIVE) != 0u;
     if batch.reset == 1u {
+        if edit {
+            // The direct light before the edit, to measure what it changed (the last batch);
+            // `pending` is free outside a propagation bounce.
+            state.pending = vec4<f32>(state.direct.rgb, 0.0);
+        }
         state.direct = vec4<f32>(0.0);
         state.far = vec4<f32>(0.0);
     }
@@ -82,5 +97,12 @@ fn inject(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
         state.residual = vec4<f32>(0.0);
     }
     state.out = leaf_out(leaf, state);
+    if edit && batch.last == 1u {
+        // Relative to what the leaf shows, as propagate measures a bounce's change: the tiles
+        // where this exceeds the tolerance start the bounces (inject_tally.wgsl).
+        let shown = leaf_shown(leaf, state);
+        let d = abs(state.direct.rgb - state.pending.rgb);
+        state.pending.w = max(d.r, max(d.g, d.b)) / max(max(shown.r, max(shown.g, shown.b)), 1e-6);
+    }
     leaf_light[i] = state;
 }

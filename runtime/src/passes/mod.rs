@@ -198,6 +198,7 @@ pub(crate) fn compute_pipeline(
 /// passes' cones (`cone_batched`). Results accumulate in the leaf state between dispatches.
 #[derive(Debug)]
 pub(crate) struct Batched {
+    name: &'static str,
     pipeline: ComputePipeline,
     batches: Vec<wgpu::BindGroup>,
 }
@@ -213,8 +214,21 @@ impl Batched {
         values: impl IntoIterator<Item = T>,
     ) -> Result<Self> {
         let pipeline = compute_pipeline(gpu, name, pass_src, name, shared, radiance_f16)?;
-        let layout = own_layout(&pipeline, name)?;
-        let batches = values
+        let mut pass = Self { name, pipeline, batches: Vec::new() };
+        pass.set_values(gpu, values)?;
+        Ok(pass)
+    }
+
+    /// One batch per value from now on (inject's batches after a light edit: the pipeline
+    /// stays, only the small uniforms are made again).
+    pub(crate) fn set_values<T: bytemuck::Pod>(
+        &mut self,
+        gpu: &Gpu,
+        values: impl IntoIterator<Item = T>,
+    ) -> Result<()> {
+        let name = self.name;
+        let layout = own_layout(&self.pipeline, name)?;
+        self.batches = values
             .into_iter()
             .map(|v| {
                 let u = gpu.buffer_init(name, bytemuck::bytes_of(&v), wgpu::BufferUsages::UNIFORM)?;
@@ -225,7 +239,7 @@ impl Batched {
                 }))
             })
             .collect::<Result<_>>()?;
-        Ok(Self { pipeline, batches })
+        Ok(())
     }
 
     pub(crate) fn record(&self, pass: &mut wgpu::ComputePass<'_>, leaf_count: u32) {

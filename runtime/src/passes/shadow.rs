@@ -39,6 +39,18 @@ pub(crate) struct Face {
     pub(crate) range_m: f32,
 }
 
+impl Face {
+    /// An atlas slot no light uses (after an edit in place: light/setup.rs `keep_slots`):
+    /// never marked out of date, never drawn.
+    pub(crate) fn hole() -> Self {
+        Face { view_proj: Mat4::ZERO, eye_m: Vec3::ZERO, proj_scale: 0.0, range_m: 0.0 }
+    }
+
+    pub(crate) fn is_hole(&self) -> bool {
+        self.proj_scale == 0.0
+    }
+}
+
 #[derive(Debug)]
 pub(crate) struct Shadow {
     pipeline: wgpu::RenderPipeline,
@@ -54,16 +66,20 @@ pub(crate) struct Shadow {
     uniforms: splat::Uniforms,
     faces: Vec<Face>,
     atlas_bytes: u64,
+    /// The splat uniforms' smallest disc in pixels and disc scale.
+    splat: (f32, f32),
 }
 
 impl Shadow {
-    /// The atlas for `faces` at `face_size` texels each, in a near-square grid; faces shrink if
-    /// the grid would pass the adapter's largest 2D texture. The faces' uniforms are written once
-    /// (lights are static).
+    /// The atlas for `faces`, with room for `capacity` faces in all (lights an edit adds: see
+    /// [`Shadow::set_faces`]), at `face_size` texels each, in a near-square grid; faces shrink if
+    /// the grid would pass the adapter's largest 2D texture.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn new(
         gpu: &Gpu,
         layout: &wgpu::BindGroupLayout,
         faces: &[Face],
+        capacity: usize,
         face_size: u32,
         min_splat_px: f32,
         splat_scale: f32,
@@ -75,7 +91,7 @@ impl Shadow {
             write_mask: wgpu::ColorWrites::ALL,
         })];
         let pipeline = splat::pipeline(gpu, "shadow", layout, fetch, ("fs_shadow", &targets), None)?;
-        let layers = faces.len().max(1) as u32;
+        let layers = capacity.max(faces.len()).max(1) as u32;
         let cols = (f64::from(layers).sqrt().ceil() as u32).max(1);
         let rows = layers.div_ceil(cols);
         let max_dim = gpu.device.limits().max_texture_dimension_2d;
@@ -129,20 +145,7 @@ impl Shadow {
                 wgpu::TextureUsages::RENDER_ATTACHMENT,
             )?
             .create_view(&Default::default());
-        let uniforms = splat::Uniforms::new(gpu, "shadow splat", layout, faces.len())?;
-        for (i, f) in faces.iter().enumerate() {
-            let u = SplatUniform {
-                view_proj: f.view_proj.to_cols_array_2d(),
-                eye_m: f.eye_m.extend(1.0).to_array(),
-                viewport: [face_size as f32, face_size as f32, min_splat_px, f.proj_scale],
-                splat: [splat_scale, 0.0, 0.0, 0.0],
-                // Shadows come from the whole cave: the clip box cuts the view only.
-                clip_min_m: [0.0; 4],
-                clip_max_m: [0.0; 4],
-                pad: [[0.0; 4]; 7],
-            };
-            uniforms.write(gpu, i, &u);
-        }
+        let uniforms = splat::Uniforms::new(gpu, "shadow splat", layout, layers as usize)?;
         let atlas_bytes = (u64::from(width) * u64::from(height) + u64::from(face_size * face_size)) * 8;
         Ok(Self {
             pipeline,
@@ -154,9 +157,48 @@ impl Shadow {
             depth,
             staging: None,
             uniforms,
-            faces: faces.to_vec(),
+            faces: Vec::new(),
             atlas_bytes,
-        })
+            splat: (min_splat_px, splat_scale),
+        }
+        .with_faces(gpu, faces))
+    }
+
+    fn with_faces(mut self, gpu: &Gpu, faces: &[Face]) -> Self {
+        self.set_faces(gpu, faces);
+        self
+    }
+
+    /// Slots the atlas has room for.
+    pub(crate) fn capacity(&self) -> usize {
+        self.uniforms.groups.len()
+    }
+
+    /// Takes `faces` (at most [`Shadow::capacity`]; more are dropped) in place of the faces it
+    /// had; returns the slots whose face changed (holes left out: nothing draws them). Their
+    /// texels are stale until drawn again.
+    pub(crate) fn set_faces(&mut self, gpu: &Gpu, faces: &[Face]) -> Vec<usize> {
+        let faces = &faces[..faces.len().min(self.capacity())];
+        let mut changed = Vec::new();
+        for (i, f) in faces.iter().enumerate() {
+            if self.faces.get(i) == Some(f) || f.is_hole() {
+                continue;
+            }
+            changed.push(i);
+            let u = SplatUniform {
+                view_proj: f.view_proj.to_cols_array_2d(),
+                eye_m: f.eye_m.extend(1.0).to_array(),
+                viewport: [self.face_size as f32, self.face_size as f32, self.splat.0, f.proj_scale],
+                splat: [self.splat.1, 0.0, 0.0, 0.0],
+                // Shadows come from the whole cave: the clip box cuts the view only.
+                clip_min_m: [0.0; 4],
+                clip_max_m: [0.0; 4],
+                pad: [[0.0; 4]; 7],
+            };
+            self.uniforms.write(gpu, i, &u);
+        }
+        self.faces = faces.to_vec();
+        changed
     }
 
     /// The distance atlas, as inject and shade bind it.
@@ -172,7 +214,7 @@ impl Shadow {
         self.cols
     }
 
-    /// The faces, as [`Shadow::new`] was given them.
+    /// The faces, as [`Shadow::new`] or [`Shadow::set_faces`] was given them.
     pub(crate) fn faces(&self) -> &[Face] {
         &self.faces
     }

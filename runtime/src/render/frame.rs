@@ -44,6 +44,7 @@ impl Renderer {
             ambient: self.settings.background.iter().any(|&b| b > 0.0),
             env_valid: self.env_valid,
             direct_valid: self.direct_valid,
+            light_edit: self.light_edit.as_ref().map(|e| e.scope.clone()),
             shadow_catch_up: self.shadow_catch_up(),
             bounces_done: self.stats_now.bounces_done,
             bounce_budget: self.settings.bounces,
@@ -184,6 +185,9 @@ impl Renderer {
         }
         if s.direct && p.light_count > 0 {
             f |= flags::DIRECT;
+        }
+        if self.light_edit.is_some() {
+            f |= flags::INJECT_ACTIVE;
         }
         if s.direct && s.shadows && self.shadowed < p.light_count as usize {
             f |= flags::FAR_LIGHTS;
@@ -384,7 +388,12 @@ impl Renderer {
                     cp.begin_pipeline_statistics_query(set, i);
                 }
                 match compute {
-                    Pass::Inject => self.inject.record(&mut cp, self.leaf_count),
+                    Pass::Inject => {
+                        // After an edit in place, the active tiles' leaves (frame_params' flag).
+                        let edit = self.light_edit.is_some();
+                        let n = if edit { self.active_written.unwrap_or(0) } else { self.leaf_count };
+                        self.inject.record(&mut cp, n, edit)
+                    }
                     Pass::Env => self.env.record(&mut cp, self.leaf_count),
                     Pass::Mip => self.mip.record(&mut cp),
                     Pass::Propagate => self.propagate.record(&mut cp, self.slice_run.1 - self.slice_run.0),
@@ -415,8 +424,10 @@ impl Renderer {
     /// no timestamp queries and each is timed on the CPU); `ran` collects the passes recorded.
     pub(super) fn record_frame(&mut self, plan: &EffectPlan, ran: &mut Vec<Pass>) -> Result<()> {
         let mut enc = self.encoder();
-        if plan.runs(Pass::Propagate) && self.slice_run.0 == 0 {
-            // A bounce starts: its changes are gathered over all its slices.
+        let tally = plan.runs(Pass::Inject) && self.light_edit.is_some();
+        if plan.runs(Pass::Propagate) && self.slice_run.0 == 0 || tally {
+            // A bounce starts: its changes are gathered over all its slices (or an edit's
+            // inject tallies what it changed).
             enc.clear_buffer(&self.changes, 0, None);
         }
         for step in plan.steps.iter().filter(|s| s.run) {
@@ -458,19 +469,11 @@ impl Renderer {
         Ok(())
     }
 
-    /// Runs `plan`; its propagation runs at most `slice` invocations of the bounce (None: the
-    /// rest of it).
-    pub(super) fn execute(
-        &mut self,
-        plan: &EffectPlan,
-        frame: Option<(&Camera, u32, u32)>,
-        slice: Option<u32>,
-    ) -> Result<()> {
-        let params = self.frame_params(frame);
-        self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-        self.stats_now.last_submits = 0;
-        self.stats_now.last_upload_bytes = size_of::<Params>() as u64;
-        if plan.runs(Pass::Propagate) {
+    /// Writes the active tiles where the plan propagates (or injects after a light edit) and
+    /// the slice of them this call runs.
+    fn write_active(&mut self, plan: &EffectPlan, slice: Option<u32>) {
+        let inject_active = self.light_edit.is_some() && plan.runs(Pass::Inject);
+        if plan.runs(Pass::Propagate) || inject_active {
             if self.bounce_at.is_none() && self.activity.pending_tiles() == 0 {
                 // Forced past convergence: a bounce means every tile.
                 self.set_all_active(Why::Verify);
@@ -492,6 +495,21 @@ impl Renderer {
             self.gpu.queue.write_buffer(&self.active, 8, bytemuck::cast_slice(&[first, end]));
             self.stats_now.last_upload_bytes += 8;
         }
+    }
+
+    /// Runs `plan`; its propagation runs at most `slice` invocations of the bounce (None: the
+    /// rest of it).
+    pub(super) fn execute(
+        &mut self,
+        plan: &EffectPlan,
+        frame: Option<(&Camera, u32, u32)>,
+        slice: Option<u32>,
+    ) -> Result<()> {
+        let params = self.frame_params(frame);
+        self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        self.stats_now.last_submits = 0;
+        self.stats_now.last_upload_bytes = size_of::<Params>() as u64;
+        self.write_active(plan, slice);
         if plan.runs(Pass::Shadow) {
             self.choose_shadow_batch()?;
         }
@@ -557,6 +575,9 @@ impl Renderer {
             // Faces deferred to the next round of a budgeted catch-up keep the shadow pass going
             // (and the next round ends in an inject of its own).
             self.direct_valid = self.shadow_faces_left() == 0;
+            if ran.contains(&Pass::Inject) {
+                self.start_edit_tally()?;
+            }
         }
         if ran.contains(&Pass::Env) {
             self.env_valid = true;

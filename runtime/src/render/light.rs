@@ -51,10 +51,11 @@ impl Renderer {
             bounces_done: self.stats_now.bounces_done,
             bounce_budget: self.settings.bounces,
             last_change: self.stats_now.last_change,
-            converged: !(p.runs(Pass::Shadow)
-                || p.runs(Pass::Inject)
-                || p.runs(Pass::Env)
-                || p.runs(Pass::Propagate)),
+            converged: self.light_edit.is_none()
+                && !(p.runs(Pass::Shadow)
+                    || p.runs(Pass::Inject)
+                    || p.runs(Pass::Env)
+                    || p.runs(Pass::Propagate)),
         }
     }
 
@@ -76,7 +77,8 @@ impl Renderer {
     /// bounces are counted afresh (the light converges again from the new direct light).
     pub fn invalidate_lights(&mut self) {
         self.direct_valid = false;
-        self.mark_shadow_faces(|_| true);
+        self.light_edit = None;
+        self.mark_shadow_faces(|_, _| true);
         self.stats_now.last_change = None;
         self.stats_now.bounces_done = 0;
         self.bounce_at = None;
@@ -87,11 +89,11 @@ impl Renderer {
 
     /// Marks the shadow faces `which` picks out of date, each with the surfel chunks it draws
     /// now; faces already out of date are marked again (the pools may have moved under them).
-    pub(super) fn mark_shadow_faces(&mut self, which: impl Fn(&Face) -> bool) {
+    pub(super) fn mark_shadow_faces(&mut self, which: impl Fn(usize, &Face) -> bool) {
         let size = self.shadow.face_size();
         let grow_ndc = Viewer::grow_for(size, size, self.settings.min_splat_px);
         let marks: Vec<(usize, Vec<SplatRun>)> = (self.shadow.faces().iter().enumerate())
-            .filter(|(i, f)| which(f) || self.shadow_queue.is_dirty(*i))
+            .filter(|(i, f)| !f.is_hole() && (which(*i, f) || self.shadow_queue.is_dirty(*i)))
             .map(|(i, f)| {
                 let viewer = Viewer {
                     view_proj: &f.view_proj,
@@ -171,7 +173,11 @@ impl Renderer {
             let p = self.update_light()?;
             progress(self.stats_now.bounces_done, self.stats_now.last_change);
             // A shadow pass catching up holds the bounces; the loop goes on until they run.
-            if !(p.runs(Pass::Propagate) || p.runs(Pass::Shadow) && !self.direct_valid) {
+            // An edit's inject holds the bounces until its tally says where they start.
+            if !(p.runs(Pass::Propagate)
+                || p.runs(Pass::Inject)
+                || p.runs(Pass::Shadow) && !self.direct_valid)
+            {
                 return Ok(self.stats_now.bounces_done - start);
             }
         }
@@ -226,6 +232,9 @@ impl Renderer {
     /// calls it first, so in a browser a bounce that ended on an earlier frame is counted before
     /// the next plan.
     pub(super) fn poll_light(&mut self) -> Result<bool> {
+        if self.light_edit.is_some() {
+            return self.poll_edit_tally();
+        }
         let Some(read) = &self.bounce_readback else { return Ok(true) };
         let Some(bytes) = read.take() else { return Ok(false) };
         self.bounce_readback = None;

@@ -3,6 +3,7 @@
 
 mod chunks;
 mod counters;
+mod edit;
 mod frame;
 mod light;
 mod params;
@@ -16,6 +17,7 @@ mod tiles;
 mod update;
 
 pub use counters::PassWork;
+pub use edit::LightEdit;
 pub use frame::{Frame, LdrOutput};
 pub use light::{CarriedLight, LightProgress};
 pub use params::{auto_exposure, cone_set};

@@ -155,28 +155,41 @@ pub(super) fn tail_ratio_max(settings: &Settings, leaves: &[LeafGpu]) -> [f32; 4
     m.map(|v| v.min(crate::gpu::types::TAIL_RATIO_MAX))
 }
 
-/// The one lookup buffer's contents (lookup.wgsl): the rock table, the light grid and the tile
-/// index, at word offsets `base`, with room after the index for the index of a scene with other
+/// The one lookup buffer's contents (lookup.wgsl): the rock table, the tile index and the light
+/// grid, at word offsets `base`. After the index comes room for the index of a scene with other
 /// tile forms (its size follows how the tiles align; one that outgrows it makes a new renderer,
-/// `update_scene`).
+/// `update_scene`), after the grid room for the grid of edited lights (one that outgrows it
+/// makes a new renderer, `edit_lights`).
 pub(super) struct Lookup {
     pub(super) base: [u32; 4],
     pub(super) words: Vec<u32>,
+    /// Words the tile index and the light grid may take, from their bases.
+    pub(super) index_room: u32,
+    pub(super) grid_room: u32,
 }
 
 impl Lookup {
     pub(super) fn new(scene: &SceneData, lights: &LightSetup) -> Result<Self> {
         let index = crate::scene::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
         let (rock, grid) = (&scene.rock.words, &lights.grid.words);
-        let room = 2 * index.words.len() + 64;
-        let mut words = Vec::with_capacity(rock.len() + grid.len() + room);
+        let index_room = 2 * index.words.len() + 64;
+        let grid_room = 2 * grid.len() + 1024;
+        let mut words = Vec::with_capacity(rock.len() + index_room + grid_room);
         words.extend_from_slice(rock);
-        words.extend_from_slice(grid);
         let index_base = words.len();
         words.extend_from_slice(&index.words);
-        words.resize(index_base + room, 0);
-        let base = [0, rock.len() as u32, index_base as u32, 0];
-        Ok(Self { base, words })
+        words.resize(index_base + index_room, 0);
+        let grid_base = words.len();
+        words.extend_from_slice(grid);
+        words.resize(grid_base + grid_room, 0);
+        let base = [0, grid_base as u32, index_base as u32, 0];
+        Ok(Self { base, words, index_room: index_room as u32, grid_room: grid_room as u32 })
+    }
+
+    /// The bytes the tile index may take.
+    pub(super) fn index_bytes(&self) -> std::ops::Range<u64> {
+        let at = 4 * u64::from(self.base[2]);
+        at..at + 4 * u64::from(self.index_room)
     }
 }
 

@@ -115,7 +115,7 @@ pub struct Renderer {
     pub(super) compat: Compat,
     /// The tile pools and where each resident tile form lives in them (tiles.rs).
     pub(super) pools: TilePools,
-    pub(super) inject: passes::Batched,
+    pub(super) inject: passes::inject::Inject,
     pub(super) env: passes::Batched,
     pub(super) mip: passes::mip::Mip,
     pub(super) propagate: passes::Batched,
@@ -126,6 +126,12 @@ pub struct Renderer {
     pub(super) shade: shade::Shade,
     pub(super) view: Option<View>,
     pub(super) direct_valid: bool,
+    /// What an edit in place (render/edit.rs) writes and compares.
+    pub(super) light_room: LightRoom,
+    /// A light edit whose direct light waits to be injected and tallied: inject then redoes
+    /// only the tiles its lights reach (the active tiles), and the bounces wait for the tally
+    /// of which tiles it changed (render/edit.rs).
+    pub(super) light_edit: Option<crate::light::edit::PendingEdit>,
     pub(super) forced: Vec<Pass>,
     /// Why a viewer holds the bounces, if it does ([`Renderer::hold_light`]).
     pub(super) light_held: Option<&'static str>,
@@ -143,6 +149,15 @@ pub struct Renderer {
     pub(super) stat_queries: Option<StatQueries>,
     /// Anti-aliasing at rest (passes/resolve.rs, render/still.rs).
     pub(super) stills: Stills,
+}
+
+/// The lights' records (lights.wgsl) with room for more, the words the light grid may take in
+/// the lookup buffer, and whether each scene light has a shadow map.
+#[derive(Debug)]
+pub(super) struct LightRoom {
+    pub(super) buf: wgpu::Buffer,
+    pub(super) grid_room: u32,
+    pub(super) mapped: Vec<bool>,
 }
 
 /// Anti-aliasing at rest: the pass, the sub-pixel offset the next frame draws at, the still frame
@@ -248,7 +263,6 @@ impl Renderer {
             &lookup,
         );
 
-        let index_offset = 4 * u64::from(base_params.lookup_base[2]);
         let up = Upload::new(
             gpu,
             scene,
@@ -260,12 +274,13 @@ impl Renderer {
             f16,
             splats.pulls(),
         )?;
-        let tile_pools = TilePools::new(pools, placed, (scene, cull_tiles), &up, index_offset);
+        let tile_pools = TilePools::new(pools, placed, (scene, cull_tiles), &up, lookup.index_bytes());
         let shared = &up.shared;
 
         let (by_height, ranges) = scene.nodes_by_height();
         let lights_in_range = lights.grid.occupancy();
-        let inject = gpu.scoped("inject", || passes::inject::new(gpu, shared, f16, lights_in_range.1))?;
+        let inject =
+            gpu.scoped("inject", || passes::inject::Inject::new(gpu, shared, f16, lights_in_range.1))?;
         let env = gpu.scoped("env", || passes::env::new(gpu, shared, f16, settings.cones))?;
         let mip =
             gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, caps.nodes, &by_height, &ranges, f16))?;
@@ -276,7 +291,6 @@ impl Renderer {
         splats.set_surfels(gpu, &up.surfels);
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
         let static_bytes = up.bytes + shadow.bytes() + shade.env_atlas_bytes();
-        let shadow_faces = lights.faces.len();
         let mut r = Self {
             inject,
             env,
@@ -298,7 +312,7 @@ impl Renderer {
             spot_lights: lights.spot_lights,
             headlamp: scene.headlamp,
             shadowed: lights.shadowed,
-            shadow_faces,
+            shadow_faces: lights.faces.len(),
             lights_in_range,
             specular_materials,
             specular_surfels,
@@ -314,7 +328,7 @@ impl Renderer {
             activity: TileActivity::new(&scene.tiles),
             active_written: None,
             bounce_work: Vec::new(),
-            shadow_queue: ShadowQueue::new(shadow_faces),
+            shadow_queue: ShadowQueue::new(lights.faces.len()),
             shadow_batch: Batch::default(),
             shadow_drawn: 0,
             camera_view_proj: None,
@@ -324,6 +338,12 @@ impl Renderer {
             pools: tile_pools,
             view: None,
             direct_valid: false,
+            light_room: LightRoom {
+                buf: up.lights.clone(),
+                grid_room: lookup.grid_room,
+                mapped: lights.mapped,
+            },
+            light_edit: None,
             forced: Vec::new(),
             light_held: None,
             bounce_readback: None,
@@ -335,7 +355,7 @@ impl Renderer {
             stat_queries: StatQueries::new(gpu),
             stills: Stills::new(gpu)?,
         };
-        r.mark_shadow_faces(|_| true);
+        r.mark_shadow_faces(|_, _| true);
         gpu.check("upload")?;
         Ok(r)
     }
@@ -443,7 +463,7 @@ pub(super) struct View {
 }
 
 /// The scene's light setup, its light grid over the scene with one leaf of slack on every side.
-fn light_setup(scene: &SceneData, settings: &Settings, scene_diag_m: f32) -> LightSetup {
+pub(super) fn light_setup(scene: &SceneData, settings: &Settings, scene_diag_m: f32) -> LightSetup {
     let (lo, hi) = scene.bounds_leaf();
     let leaf = scene.leaf_size_m.max(1e-6);
     let near = (0.05 * leaf).max(1e-4);
@@ -471,10 +491,15 @@ fn shadow_pass(
     splats: &passes::splat::Fetch,
 ) -> Result<shadow::Shadow> {
     gpu.scoped("shadow", || {
+        // Room for one more point light's faces within the budget, so that a designer adding a
+        // lamp redraws its faces only (render/edit.rs).
+        let room =
+            if settings.shadows && lights.shadowed < settings.shadowed_lights as usize { 6 } else { 0 };
         shadow::Shadow::new(
             gpu,
             splat_layout,
             &lights.faces,
+            lights.faces.len() + room,
             settings.shadow_map_size,
             settings.min_splat_px,
             settings.splat_scale,

@@ -64,6 +64,14 @@ impl ShadowQueue {
         }
     }
 
+    /// The atlas now has `faces` faces (a light edit in place added or removed some): new ones
+    /// start up to date (the edit marks those it drew), dropped ones are forgotten.
+    pub(crate) fn resize(&mut self, faces: usize) {
+        self.dirty.resize(faces, None);
+        self.staged.resize(faces, false);
+        self.deferred.resize(faces, false);
+    }
+
     /// Whether `face` is out of date.
     pub(crate) fn is_dirty(&self, face: usize) -> bool {
         self.dirty.get(face).is_some_and(Option::is_some)

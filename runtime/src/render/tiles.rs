@@ -10,7 +10,7 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
-use crate::gpu::types::{ActiveTile, LeafGpu, LeafLightGpu, LightGpu, NodeGpu, Params, SurfelGpu, TileGpu};
+use crate::gpu::types::{ActiveTile, LeafGpu, LeafLightGpu, NodeGpu, Params, SurfelGpu, TileGpu};
 use crate::light::setup::LightSetup;
 use crate::passes::splat::SplatRun;
 use crate::passes::{self};
@@ -41,10 +41,10 @@ pub(super) struct TilePools {
     leaves_buf: wgpu::Buffer,
     leaf_light: wgpu::Buffer,
     surfels: wgpu::Buffer,
-    /// The lookup buffer (rock, light grid, tile index: lookup.wgsl), and the byte where the tile
-    /// index starts in it (it runs to the end of the buffer).
+    /// The lookup buffer (rock, tile index, light grid: lookup.wgsl), and the bytes the tile
+    /// index may take in it.
     lookup: wgpu::Buffer,
-    index_offset: u64,
+    index_bytes: Range<u64>,
 }
 
 /// What [`TilePools::place`] wrote, for the renderer to follow.
@@ -64,7 +64,7 @@ impl TilePools {
         placed: Placement,
         (scene, cull_tiles): (&SceneData, bool),
         up: &Upload,
-        index_offset: u64,
+        index_bytes: Range<u64>,
     ) -> Self {
         let (owners, _) = surfel_owners(scene);
         let mut chunk_cache = ChunkCache::default();
@@ -87,8 +87,13 @@ impl TilePools {
             leaf_light: up.leaf_light.clone(),
             surfels: up.surfels.clone(),
             lookup: up.lookup.clone(),
-            index_offset,
+            index_bytes,
         }
+    }
+
+    /// Writes `words` into the lookup buffer from word `at` (the light grid of edited lights).
+    pub(super) fn write_lookup(&self, gpu: &Gpu, at: u32, words: &[u32]) {
+        gpu.queue.write_buffer(&self.lookup, 4 * u64::from(at), bytemuck::cast_slice(words));
     }
 
     /// The resident tiles, as the GPU holds them.
@@ -190,7 +195,7 @@ impl TilePools {
             return Ok(None);
         }
         let index = crate::scene::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
-        if 4 * index.words.len() as u64 > self.lookup.size() - self.index_offset {
+        if 4 * index.words.len() as u64 > self.index_bytes.end - self.index_bytes.start {
             return Ok(None);
         }
         let old_slots = self.slots.slots().clone();
@@ -308,7 +313,7 @@ impl TilePools {
             );
         }
         update.upload_bytes += write(&self.tiles_buf, 0, bytemuck::cast_slice(&placed.tiles))
-            + write(&self.lookup, self.index_offset, bytemuck::cast_slice(&index.words));
+            + write(&self.lookup, self.index_bytes.start, bytemuck::cast_slice(&index.words));
         (update, light_kept)
     }
 }
@@ -324,6 +329,8 @@ pub(super) struct Upload {
     pub(super) nodes: wgpu::Buffer,
     pub(super) leaves: wgpu::Buffer,
     pub(super) lookup: wgpu::Buffer,
+    /// The lights' records (light/setup.rs `records`), with room for more.
+    pub(super) lights: wgpu::Buffer,
     #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
     pub(super) leaf_light: wgpu::Buffer,
     #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
@@ -395,20 +402,17 @@ impl Upload {
         let tiles = pool(gpu, "tiles", caps.tiles, &scene.tiles, STORAGE)?;
         let nodes = pool(gpu, "nodes", caps.nodes, &scene.nodes, STORAGE)?;
         let leaves = pool(gpu, "leaves", caps.leaves, &scene.leaves, STORAGE)?;
-        // The shadow faces' matrices follow the lights, one 64-byte record each, then the lights'
-        // profiles (lights.wgsl).
-        let mut light_records: Vec<LightGpu> = lights.lights.clone();
-        light_records.extend(lights.faces.iter().map(|f| {
-            let [c0, c1, c2, c3] = f.view_proj.to_cols_array_2d();
-            LightGpu { position_kind: c0, intensity_layer: c1, direction_cos_outer: c2, params: c3 }
-        }));
-        light_records.extend_from_slice(&lights.profiles);
+        // Room for the records of edited lights (`Renderer::edit_lights`): as many again, and
+        // two asymmetric profiles' worth.
+        let records = lights.records();
+        let room = records.len() + records.len().max(256) + 2048;
+        let lights_buf = pool(gpu, "lights", room as u64, &records, STORAGE)?;
         let static_buffers = [
             (0, params.clone()),
             (1, tiles.clone()),
             (2, nodes.clone()),
             (3, leaves.clone()),
-            (4, gpu.buffer_init("lights", bytemuck::cast_slice(&light_records), STORAGE)?),
+            (4, lights_buf.clone()),
             (7, lookup.clone()),
         ];
         let mut shared = passes::Shared::default();
@@ -429,6 +433,7 @@ impl Upload {
             nodes,
             leaves,
             lookup,
+            lights: lights_buf,
             leaf_light,
             faces,
             active,

@@ -28,7 +28,7 @@ impl Renderer {
         self.mip.set_order(&self.gpu, &by_height, &ranges)?;
         update.upload_bytes += 4 * by_height.len() as u64;
         // Shadow faces that see a tile form that came or went.
-        self.mark_shadow_faces(|face| {
+        self.mark_shadow_faces(|_, face| {
             placed.changed.iter().any(|(lo, hi)| crate::view::camera::sees_box(&face.view_proj, *lo, *hi))
         });
         update.shadow_faces = self.shadow_queue.dirty_count();
@@ -58,6 +58,8 @@ impl Renderer {
         // Direct and environment light for the new leaves (and the faces drawn again), a new
         // G-buffer, and bounces counted afresh as for a new renderer.
         self.direct_valid = false;
+        // The new tiles need direct light wherever they are: inject runs over every leaf.
+        self.light_edit = None;
         self.env_valid = false;
         self.gbuffer_stale = true;
         self.stats_now = PassStats::default();

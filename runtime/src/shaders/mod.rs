@@ -11,6 +11,7 @@ use crate::error::{Error, Result};
 
 /// The shared library: (import name, source).
 pub(crate) const LIBRARY: &[(&str, &str)] = &[
+    ("active", include_str!("active.wgsl")),
     ("activity", include_str!("activity.wgsl")),
     ("brdf", include_str!("brdf.wgsl")),
     ("color", include_str!("color.wgsl")),
@@ -32,6 +33,7 @@ pub(crate) const LIBRARY: &[(&str, &str)] = &[
 
 pub(crate) const ENV: &str = include_str!("../passes/env.wgsl");
 pub(crate) const INJECT: &str = include_str!("../passes/inject.wgsl");
+pub(crate) const INJECT_TALLY: &str = include_str!("../passes/inject_tally.wgsl");
 pub(crate) const MIP: &str = include_str!("../passes/mip.wgsl");
 pub(crate) const PROPAGATE: &str = include_str!("../passes/propagate.wgsl");
 pub(crate) const SPLAT: &str = include_str!("../passes/splat.wgsl");
@@ -126,9 +128,10 @@ pub fn compose(src: &str) -> Result<String> {
 }
 
 /// (name, source) of every shader module the runtime creates, before composing.
-pub(crate) const PASSES: [(&str, &str); 7] = [
+pub(crate) const PASSES: [(&str, &str); 8] = [
     ("env", ENV),
     ("inject", INJECT),
+    ("inject_tally", INJECT_TALLY),
     ("mip", MIP),
     ("propagate", PROPAGATE),
     ("resolve", RESOLVE),

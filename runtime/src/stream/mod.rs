@@ -7,4 +7,4 @@ pub mod follow;
 pub mod residency;
 mod streaming;
 
-pub use streaming::{Streaming, Swapped, relit, renderer_for, sections_for, swap_tiles};
+pub use streaming::{Relit, Streaming, Swapped, relit, renderer_for, sections_for, swap_tiles};

@@ -283,15 +283,31 @@ fn anew(gpu: &Gpu, r: &mut Renderer, old: &SceneData, new: &SceneData, carry: bo
     }
 }
 
-/// After `scene`'s lights changed (a circuit switched: SceneData::switch_circuit): a renderer
-/// for the new lights in the same pools. Natively the light of every leaf is carried over as
-/// the start the new light converges from (a browser cannot block on the read-back and starts
-/// from darkness); shadow maps and direct light are made again for every light, and the bounces
-/// count afresh. Returns the leaves whose light was carried.
-pub fn relit(gpu: &Gpu, r: &mut Renderer, scene: &SceneData) -> Result<usize> {
+/// After `scene`'s lights changed (a lamp edited, a circuit switched: SceneData::relight,
+/// switch_circuit): the renderer takes the new lights in place where they fit
+/// ([`Renderer::edit_lights`]: the shadow faces, direct light and first bounces of the changed
+/// lights' reach only, every other leaf's light kept as the start). Where they do not (more
+/// shadow faces or light records than the renderer has room for, no light left), a renderer for
+/// the new lights in the same pools: natively every leaf's light is carried over as the start
+/// (a browser cannot block on the read-back and starts from darkness), shadow maps and direct
+/// light are made again for every light. Says which it did.
+pub fn relit(gpu: &Gpu, r: &mut Renderer, scene: &SceneData) -> Result<Relit> {
+    if let Some(edit) = r.edit_lights(scene)? {
+        return Ok(Relit::InPlace(edit));
+    }
     // The tiles are the same; only the lights changed. Nothing lights the scene now: nothing
     // propagates, so nothing may be carried (the old light would stay on the walls).
     let carried = anew(gpu, r, scene, scene, !cfg!(target_arch = "wasm32") && scene.has_own_light())?;
     r.invalidate_lights();
-    Ok(carried)
+    Ok(Relit::Anew { carried_leaves: carried })
+}
+
+/// What [`relit`] did.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Relit {
+    /// The renderer took the lights in place.
+    InPlace(crate::render::LightEdit),
+    /// A new renderer in the same pools, with the leaves whose light it carried.
+    Anew { carried_leaves: usize },
 }

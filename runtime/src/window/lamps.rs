@@ -42,8 +42,9 @@ pub(super) struct LampEditor {
     save_to: PathBuf,
     /// Files written (for the session's summary).
     pub(super) saved: Vec<String>,
-    /// What the last action did, for the panel.
+    /// What the last action did, and what the renderer redid for it, for the panel.
     said: String,
+    redone: String,
 }
 
 impl LampEditor {
@@ -62,6 +63,7 @@ impl LampEditor {
             save_to: lights.unwrap_or_else(|| super::next_name("grotto-lights", "toml")),
             saved: Vec::new(),
             said: String::new(),
+            redone: String::new(),
         }
     }
 
@@ -245,6 +247,7 @@ impl LampEditor {
                 self.save_to.display()
             ));
             ui.small(&self.said);
+            ui.small(&self.redone);
         });
         out
     }
@@ -288,8 +291,22 @@ pub(super) fn update(s: &mut State, panel_edit: Option<PanelEdit>) -> Result<()>
             s.scene.switch_circuit(&name, on).map_err(|e| Error::Setting { name: "circuit", problem: e })?;
     }
     if changed {
-        crate::stream::relit(&s.gpu, &mut s.renderer, &s.scene)?;
+        relit(s)?;
     }
+    Ok(())
+}
+
+/// The renderer takes the scene's new lights; the panel says how much the edit redoes.
+fn relit(s: &mut State) -> Result<()> {
+    let how = crate::stream::relit(&s.gpu, &mut s.renderer, &s.scene)?;
+    let redo = match how {
+        crate::stream::Relit::InPlace(e) => format!(
+            "in place: {} light(s) changed, {} shadow face(s), direct light in {} of {} tiles",
+            e.scope.lights, e.scope.faces, e.scope.tiles, e.scope.of_tiles
+        ),
+        crate::stream::Relit::Anew { .. } => "every light relit (no room in place)".into(),
+    };
+    s.lamps.redone = redo;
     Ok(())
 }
 
@@ -302,13 +319,13 @@ pub(super) fn key(s: &mut State, code: KeyCode) -> Result<bool> {
             if let Some(before) = e.undo.pop() {
                 s.scene.relight(&before.lights, &before.circuits, &before.baked);
                 e.said = "undone".into();
-                crate::stream::relit(&s.gpu, &mut s.renderer, &s.scene)?;
+                relit(s)?;
             }
         }
         KeyCode::Delete | KeyCode::Backspace if e.on => {
             if let Some(name) = e.selected.take() {
                 e.edit(&mut s.scene, &format!("deleted {name}"), |r| r.lights.retain(|l| l.name != name));
-                crate::stream::relit(&s.gpu, &mut s.renderer, &s.scene)?;
+                relit(s)?;
             }
         }
         KeyCode::KeyV if e.on => e.save(&s.scene)?,

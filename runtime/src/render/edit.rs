@@ -1,0 +1,162 @@
+//! Light edits in place ([`Renderer::edit_lights`]): the new lights written over the old ones in
+//! the buffers the renderer already has (lights, light grid, shadow atlas), the shadow faces of
+//! the changed lights drawn again, direct light injected again only in the tiles their light
+//! reaches, and propagation started from those tiles (light/edit.rs says why that is exact).
+//! Everything else keeps its light: a lamp moved in a side passage does not relight the cave.
+
+use serde::Serialize;
+
+use crate::error::Result;
+use crate::light::activity::Why;
+use crate::light::edit::{self, EditScope, PendingEdit};
+use crate::render::renderer::{Compat, Renderer, light_setup};
+use crate::scene::data::SceneData;
+
+impl Renderer {
+    /// Inject ran for a pending edit: starts reading its tally back (natively, waits for it).
+    pub(super) fn start_edit_tally(&mut self) -> Result<()> {
+        let Some(edit) = self.light_edit.as_mut() else { return Ok(()) };
+        if !self.direct_valid {
+            // Shadow faces deferred to another round (tiles changed under them): that round's
+            // inject redoes every leaf, and every tile bounces, as for any change of lights.
+            self.light_edit = None;
+            self.set_all_active(Why::LightsChanged);
+            return Ok(());
+        }
+        let tiles = self.activity.tiles() as u64;
+        edit.tally = Some(self.gpu.start_read(&self.changes, 16 + 4 * tiles));
+        if !cfg!(target_arch = "wasm32") {
+            let gpu = self.gpu.clone();
+            gpu.wait_for("inject tally", || Ok(self.poll_light()?.then_some(())))?;
+        }
+        Ok(())
+    }
+
+    /// Where the tally of an edit's direct light has arrived: the tiles it changed start the
+    /// bounces (activity.rs `end_edit`). Returns whether none is pending any longer.
+    pub(super) fn poll_edit_tally(&mut self) -> Result<bool> {
+        let Some(read) = self.light_edit.as_ref().and_then(|e| e.tally.as_ref()) else { return Ok(true) };
+        let Some(bytes) = read.take() else { return Ok(false) };
+        let bytes = bytes?;
+        let tiles = self.activity.tiles();
+        let change: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[16..16 + 4 * tiles]);
+        self.activity.end_edit(&change, self.settings.convergence_tolerance);
+        self.active_written = None;
+        self.light_edit = None;
+        Ok(true)
+    }
+}
+
+/// What [`Renderer::edit_lights`] did.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LightEdit {
+    /// The edit's scope: lights changed, faces drawn again, tiles injected again.
+    pub scope: EditScope,
+    /// Bytes written to the GPU (lights, light grid, shadow faces' uniforms).
+    pub upload_bytes: u64,
+}
+
+impl Renderer {
+    /// Takes `scene`'s lights (the scene this renderer holds, its lights edited: moved, added,
+    /// deleted, dimmed, recoloured, a circuit switched) in place. The shadow faces of lights
+    /// that changed are drawn again; the next inject redoes the tiles an old or new changed light
+    /// reaches, and the bounces start from them, spreading as their light changes (activity.rs),
+    /// with one bounce over every tile as the stopping test. The fixed point is the one a new
+    /// renderer of `scene` converges to.
+    ///
+    /// `None`, with nothing changed, where the edit does not fit in place: another scene (tiles,
+    /// frame, materials), more shadow faces, light records or light-grid words than the buffers
+    /// have room for. Make a new renderer then (`stream::relit` does).
+    pub fn edit_lights(&mut self, scene: &SceneData) -> Result<Option<LightEdit>> {
+        let mut same_but_lights = Compat::of(scene);
+        same_but_lights.lights.clone_from(&self.compat.lights);
+        same_but_lights.headlamp = self.compat.headlamp;
+        if same_but_lights != self.compat || self.pools.check_holds(scene, "edit_lights").is_err() {
+            return Ok(None);
+        }
+        let mut setup = light_setup(scene, &self.settings, self.scene_diag_m);
+        if setup.lights.is_empty() && !self.compat.lights.is_empty() {
+            // Inject does not run without lights, so nothing would clear the old direct light.
+            return Ok(None);
+        }
+        let records = setup.records().len() as u64;
+        let room = self.light_room.buf.size() / size_of::<crate::gpu::types::LightGpu>() as u64;
+        if setup.grid.words.len() > self.light_room.grid_room as usize
+            || !setup.keep_slots(self.shadow.faces(), self.shadow.capacity())
+            || records > room
+        {
+            return Ok(None);
+        }
+        // Which lights changed, before the renderer forgets the old ones.
+        let reach = edit::changed(
+            &edit::lit_by(&self.compat.lights, &self.light_room.mapped),
+            &edit::lit_by(&scene.lights, &setup.mapped),
+            self.settings.light_cutoff_w_m2,
+        );
+        let reached = edit::tiles_reached(self.pools.tiles(), self.leaf_size_m, &reach);
+
+        let records = setup.records();
+        self.gpu.queue.write_buffer(&self.light_room.buf, 0, bytemuck::cast_slice(&records));
+        self.pools.write_lookup(&self.gpu, self.base_params.lookup_base[1], &setup.grid.words);
+        let redrawn = self.shadow.set_faces(&self.gpu, &setup.faces);
+        self.shadow_queue.resize(setup.faces.len());
+        self.mark_shadow_faces(|i, _| redrawn.contains(&i));
+        let upload_bytes = (records.len() * size_of::<crate::gpu::types::LightGpu>()
+            + 4 * setup.grid.words.len()
+            + redrawn.len() * size_of::<crate::gpu::types::SplatUniform>()) as u64;
+
+        let p = &mut self.base_params;
+        p.light_count = setup.lights.len() as u32;
+        p.light_grid_dims = setup.grid.dims.to_array();
+        p.light_grid_min_m = setup.grid.min_m.extend(setup.grid.cell_m).to_array();
+        self.lights_in_range = setup.grid.occupancy();
+        self.inject.set_max_lights_per_cell(&self.gpu, self.lights_in_range.1)?;
+        self.point_lights = setup.point_lights;
+        self.spot_lights = setup.spot_lights;
+        self.shadowed = setup.shadowed;
+        self.shadow_faces = setup.faces.iter().filter(|f| !f.is_hole()).count();
+        self.headlamp = scene.headlamp;
+        self.light_room.mapped = setup.mapped;
+        self.compat = Compat::of(scene);
+
+        // Direct light again, bounces counted afresh; the light elsewhere is the start.
+        let tiles = self.activity.tiles();
+        let scope = EditScope {
+            lights: reach.len(),
+            faces: redrawn.len(),
+            tiles: reached.iter().filter(|&&r| r).count(),
+            of_tiles: tiles,
+            leaves: (self.pools.tiles().iter().zip(&reached))
+                .filter(|(_, r)| **r)
+                .map(|(t, _)| u64::from(t.leaf_count))
+                .sum(),
+        };
+        if self.direct_valid || self.light_edit.is_some() {
+            // Inject redoes the tiles in reach (with an earlier edit's still waiting), then
+            // the bounces start from those whose direct light it changed (`end_edit`).
+            self.activity.begin_edit(&reached);
+            let (tiles, leaves) = self.activity.pending_tiles_leaves();
+            let before = self.light_edit.as_ref().map_or(0, |e| e.scope.lights);
+            let scope = EditScope {
+                lights: before + scope.lights,
+                faces: self.shadow_queue.dirty_count(),
+                tiles,
+                of_tiles: scope.of_tiles,
+                leaves,
+            };
+            self.light_edit = Some(PendingEdit { scope, tally: None });
+        } else {
+            // Every leaf still waits for direct light (a new renderer, a change of tiles): it
+            // all runs, as it would have.
+            self.set_all_active(Why::LightsChanged);
+        }
+        self.active_written = None;
+        self.direct_valid = false;
+        self.stats_now.last_change = None;
+        self.stats_now.bounces_done = 0;
+        self.bounce_at = None;
+        // A bounce under the old lights still on its way back counts for nothing now.
+        self.bounce_readback = None;
+        Ok(Some(LightEdit { scope, upload_bytes }))
+    }
+}
