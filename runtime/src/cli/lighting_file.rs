@@ -24,17 +24,19 @@ pub fn relight_of(package: &grotto_format::Scene, path: &Path) -> Result<Relight
     let whole = |problem: String| Error::Lighting { path: path.display().to_string(), line: None, problem };
     let text = std::fs::read_to_string(path).map_err(|e| whole(e.to_string()))?;
     let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
-    let read_ies = |name: &str| -> std::result::Result<String, String> {
-        let file = dir.join(name);
-        let len = std::fs::metadata(&file).map_err(|e| e.to_string())?.len();
-        if len > MAX_IES_BYTES {
-            return Err(format!("{len} bytes: more than an IES file holds ({MAX_IES_BYTES} at most)"));
-        }
-        // IES files are ASCII, sometimes Latin-1 in their keywords.
-        std::fs::read(&file).map(|b| String::from_utf8_lossy(&b).into_owned()).map_err(|e| e.to_string())
-    };
+    let read_ies = |name: &str| read_ies(&dir.join(name));
     let file = lighting::parse(&text, read_ies).map_err(at)?;
     crate::scene::lighting::merged((&package.lights, &package.circuits), &file).map_err(whole)
+}
+
+/// The text of the IES file at `file`, refused where it is larger than any photometric table.
+pub fn read_ies(file: &Path) -> std::result::Result<String, String> {
+    let len = std::fs::metadata(file).map_err(|e| e.to_string())?.len();
+    if len > MAX_IES_BYTES {
+        return Err(format!("{len} bytes: more than an IES file holds ({MAX_IES_BYTES} at most)"));
+    }
+    // IES files are ASCII, sometimes Latin-1 in their keywords.
+    std::fs::read(file).map(|b| String::from_utf8_lossy(&b).into_owned()).map_err(|e| e.to_string())
 }
 
 /// The lighting a job uses with `switches` (`--circuits NAME=on|off`) applied: the lighting

@@ -6,7 +6,7 @@
 //! read back without blocking (the guide's probe). Every edit relights the renderer in place
 //! (stream::relit: the light converges again from what it was).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use grotto_format::lighting::{Lighting, to_toml};
@@ -45,6 +45,8 @@ pub(super) struct LampEditor {
     /// What the last action did, and what the renderer redid for it, for the panel.
     said: String,
     redone: String,
+    /// The IES file the panel's "profile" button gives the selected lamp.
+    ies_path: String,
 }
 
 impl LampEditor {
@@ -64,6 +66,7 @@ impl LampEditor {
             saved: Vec::new(),
             said: String::new(),
             redone: String::new(),
+            ies_path: String::new(),
         }
     }
 
@@ -231,6 +234,26 @@ impl LampEditor {
                         out = Some((format!("{name}: a spot"), Box::new(move |r| set(r, &n, to_spot))));
                     }
                 });
+                ui.horizontal(|ui| {
+                    ui.add(
+                        egui::TextEdit::singleline(&mut self.ies_path)
+                            .desired_width(120.0)
+                            .hint_text("file.ies"),
+                    );
+                    if ui.button("IES profile").clicked() {
+                        let mut lamp = l.clone();
+                        match profiled(&mut lamp, Path::new(&self.ies_path)) {
+                            Ok(()) => {
+                                let n = name.clone();
+                                out = Some((
+                                    format!("{name}: profile {}", self.ies_path),
+                                    Box::new(move |r| set(r, &n, |l| *l = lamp)),
+                                ));
+                            }
+                            Err(e) => self.said = format!("{}: {e}", self.ies_path),
+                        }
+                    }
+                });
                 if ui.button("delete (Del)").clicked() {
                     let n = name.clone();
                     out = Some((
@@ -258,6 +281,26 @@ fn set(r: &mut Relight, name: &str, f: impl FnOnce(&mut Light)) {
     if let Some(l) = r.lights.iter_mut().find(|l| l.name == name) {
         f(l);
     }
+}
+
+/// `l` shaped by the IES file at `path` (type C; a spot becomes a point lamp aimed along its axis,
+/// since a profile shapes the beam itself). Saved as `ies = "path"`, which a lighting file reads
+/// relative to its own folder.
+fn profiled(l: &mut Light, path: &Path) -> std::result::Result<(), String> {
+    let text = crate::cli::lighting_file::read_ies(path)?;
+    let ies = grotto_format::ies::parse(&text).map_err(|e| format!("line {}: {}", e.line, e.problem))?;
+    let (profile, _lumens) = ies.profile()?;
+    let (position_m, aim) = match l.shape {
+        LightShape::Point { position_m } => {
+            (position_m, l.profile.as_ref().map_or([0.0, 0.0, -1.0], |p| p.aim))
+        }
+        LightShape::Spot { position_m, direction, .. } => (position_m, direction),
+        _ => return Err("an IES profile shapes a point lamp".into()),
+    };
+    l.shape = LightShape::Point { position_m };
+    l.profile =
+        Some(grotto_format::LightProfile { aim, turn_deg: 0.0, profile, source: path.display().to_string() });
+    Ok(())
 }
 
 /// A point lamp made a spot pointing down (30 degrees, soft), aimed by the next "aim" click.
@@ -332,4 +375,36 @@ pub(super) fn key(s: &mut State, code: KeyCode) -> Result<bool> {
         _ => return Ok(false),
     }
     Ok(true)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_spot_takes_an_ies_profile_aimed_along_its_axis_and_a_bad_file_is_named() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/examples");
+        let mut lamp = Light {
+            name: "wash".into(),
+            shape: LightShape::Spot {
+                position_m: [1.0, 2.0, 3.0],
+                direction: [0.0, 1.0, 0.0],
+                inner_angle_rad: 0.2,
+                outer_angle_rad: 0.4,
+            },
+            color: [1.0; 3],
+            power_w: 5.0,
+            circuit: None,
+            profile: None,
+        };
+        profiled(&mut lamp, &dir.join("downlight.ies")).unwrap();
+        assert_eq!(lamp.shape, LightShape::Point { position_m: [1.0, 2.0, 3.0] });
+        let p = lamp.profile.as_ref().unwrap();
+        assert_eq!(p.aim, [0.0, 1.0, 0.0]);
+        assert!(p.source.ends_with("downlight.ies") && p.profile.relative.iter().all(|v| v.is_finite()));
+        // Not an IES file: refused with what is wrong, the lamp as it was.
+        let e = profiled(&mut lamp, &dir.join("show-lighting.toml")).unwrap_err();
+        assert!(e.contains("TILT"), "{e}");
+        assert!(profiled(&mut lamp, &dir.join("missing.ies")).is_err());
+    }
 }
