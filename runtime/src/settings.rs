@@ -51,6 +51,11 @@ pub struct Settings {
     /// next frames, shown together when the last is drawn (render/shadow_queue.rs). 0: every
     /// face at once (images and batch work); the viewers set it (`--shadow-ms`).
     pub shadow_frame_ms: f32,
+    /// Shadow-atlas faces kept free, beyond the spare cells of its grid, for lights a designer
+    /// adds in place (`Renderer::edit_lights`; 6: one point light). 0 for images and batch work,
+    /// which never edit; the viewers set 6. An added light that does not fit makes a new
+    /// renderer (with every light's faces drawn again).
+    pub light_room_faces: u32,
     pub indirect: IndirectFilter,
     /// Direct light at pixels (off: only indirect and emission, for tests).
     pub direct: bool,
@@ -250,6 +255,7 @@ impl Default for Settings {
             shadows: true,
             shadow_map_size: 512,
             shadow_frame_ms: 0.0,
+            light_room_faces: 0,
             indirect: IndirectFilter::Trilinear,
             direct: true,
             exposure: 1.0,

@@ -164,7 +164,8 @@ fn two_circuits(side_on: bool) -> SceneData {
 fn switching_a_circuit_converges_to_a_fresh_render_of_that_lighting() {
     use grotto_tests::golden;
     let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
-    let settings = Settings { bounces: 64, exposure: 3.0, ..Settings::default() };
+    // Room for a lamp added in place, as the viewers keep.
+    let settings = Settings { bounces: 64, exposure: 3.0, light_room_faces: 6, ..Settings::default() };
     let cam = {
         let c = &grotto_fixtures::testscenes::colour_box().cameras[0];
         Camera { eye_m: c.eye_m, look_at_m: c.look_at_m, up: c.up, fov_y_deg: c.fov_y_deg }
@@ -235,7 +236,8 @@ fn each_kind_of_edit_converges_to_a_fresh_render_of_the_saved_lighting_file() {
     use grotto_format::lighting::{Lighting, parse, to_toml};
     use grotto_tests::golden;
     let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
-    let settings = Settings { bounces: 64, exposure: 3.0, ..Settings::default() };
+    // Room for a lamp added in place, as the viewers keep.
+    let settings = Settings { bounces: 64, exposure: 3.0, light_room_faces: 6, ..Settings::default() };
     let c = &grotto_fixtures::testscenes::colour_box().cameras[0];
     let cam = Camera { eye_m: c.eye_m, look_at_m: c.look_at_m, up: c.up, fov_y_deg: c.fov_y_deg };
     // A designer's session: the colour box as two_circuits(true) lights it, edited in place.

@@ -144,6 +144,8 @@ pub(crate) fn settings_of(o: &Options) -> Result<Settings, Error> {
     }
     s.exposure = o.exposure.unwrap_or(1.0);
     s.shadow_frame_ms = o.shadow_ms.unwrap_or(8.0);
+    // Circuits switch lights on in place: room for one more point light's faces.
+    s.light_room_faces = 6;
     s.splat_blend = o.splat_blend.unwrap_or(true);
     s.still_samples = o.samples.unwrap_or(grotto_runtime::passes::resolve::DEFAULT_STILL_SAMPLES);
     s.validate()?;

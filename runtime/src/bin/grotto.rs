@@ -526,6 +526,8 @@ fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
         v.render.samples.unwrap_or(grotto_runtime::passes::resolve::DEFAULT_STILL_SAMPLES);
     render.settings.validate()?;
     render.settings.shadow_frame_ms = v.render.shadow_ms.unwrap_or(VIEW_SHADOW_MS);
+    // A designer adds lamps in lighting mode: room for one more point light's faces.
+    render.settings.light_room_faces = 6;
     let a = &v.render;
     // The panel names the preset only where no knob changed it.
     let knobs_set = a.bounces.is_some()

@@ -72,8 +72,8 @@ pub(crate) struct Shadow {
 
 impl Shadow {
     /// The atlas for `faces`, with room for `capacity` faces in all (lights an edit adds: see
-    /// [`Shadow::set_faces`]), at `face_size` texels each, in a near-square grid; faces shrink if
-    /// the grid would pass the adapter's largest 2D texture.
+    /// [`Shadow::set_faces`]; the near-square grid's spare cells add to it), at `face_size`
+    /// texels each; faces shrink if the grid would pass the adapter's largest 2D texture.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn new(
         gpu: &Gpu,
@@ -94,6 +94,8 @@ impl Shadow {
         let layers = capacity.max(faces.len()).max(1) as u32;
         let cols = (f64::from(layers).sqrt().ceil() as u32).max(1);
         let rows = layers.div_ceil(cols);
+        // The grid's spare cells cost nothing more: they are room for faces an edit adds.
+        let layers = if faces.is_empty() { layers } else { cols * rows };
         let max_dim = gpu.device.limits().max_texture_dimension_2d;
         let face_size =
             if faces.is_empty() { 1 } else { face_size.min(max_dim / cols).min(max_dim / rows).max(1) };

@@ -491,15 +491,16 @@ fn shadow_pass(
     splats: &passes::splat::Fetch,
 ) -> Result<shadow::Shadow> {
     gpu.scoped("shadow", || {
-        // Room for one more point light's faces within the budget, so that a designer adding a
-        // lamp redraws its faces only (render/edit.rs).
-        let room =
-            if settings.shadows && lights.shadowed < settings.shadowed_lights as usize { 6 } else { 0 };
+        // Room for the faces of lights a designer adds, within the budget (render/edit.rs); the
+        // grid's spare cells are room too.
+        let budget_faces = 6 * settings.shadowed_lights as usize;
+        let room = if settings.shadows { settings.light_room_faces as usize } else { 0 };
+        let want = (lights.faces.len() + room).min(budget_faces.max(lights.faces.len()));
         shadow::Shadow::new(
             gpu,
             splat_layout,
             &lights.faces,
-            lights.faces.len() + room,
+            want,
             settings.shadow_map_size,
             settings.min_splat_px,
             settings.splat_scale,
