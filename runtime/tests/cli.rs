@@ -237,7 +237,7 @@ fn view_flies_the_cave_under_xvfb_matches_grotto_render_and_says_so_clearly_with
             shot.display(),
             walk.display()
         ),
-        "key h mousemove 80 60 keydown w sleep 1 keyup w mousedown 1 mousemove_relative --sync 60 0 \
+        "key h mousemove 80 60 keydown w sleep 2 keyup w mousedown 1 mousemove_relative --sync 60 0 \
          mouseup 1 sleep 0.5 key Tab key 2 sleep 0.3 key 1 key p key Escape",
     );
     assert!(!summary["log"]["moving_ms"].as_array().unwrap().is_empty(), "W flew the camera: {summary}");
