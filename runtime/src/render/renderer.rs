@@ -18,6 +18,7 @@ use crate::gpu::types::Params;
 use crate::light::activity::{BounceWork, TileActivity};
 use crate::light::plan::Pass;
 use crate::light::setup::LightSetup;
+use crate::passes::inject::Inject;
 use crate::passes::{self, gbuffer, shade, shadow};
 use crate::render::pool::{Placement, PoolCaps, Pools, surfel_owners};
 use crate::scene::data::{SceneData, SceneLight};
@@ -115,7 +116,7 @@ pub struct Renderer {
     pub(super) compat: Compat,
     /// The tile pools and where each resident tile form lives in them (tiles.rs).
     pub(super) pools: TilePools,
-    pub(super) inject: passes::inject::Inject,
+    pub(super) inject: Inject,
     pub(super) env: passes::Batched,
     pub(super) mip: passes::mip::Mip,
     pub(super) propagate: passes::Batched,
@@ -246,7 +247,6 @@ impl Renderer {
         let environment_on = scene.environment_sh.is_some() && settings.environment;
         let chain = scene.env_chain.as_ref().filter(|_| environment_on);
         let (materials, specular_materials, specular_surfels) = material_slots(scene, &settings);
-
         let splat_layout = passes::splat::layout(gpu);
         let mut splats = passes::splat::Fetch::new(gpu, caps.surfels);
         let shadow = shadow_pass(gpu, &splat_layout, &lights, &settings, &splats)?;
@@ -262,7 +262,6 @@ impl Renderer {
             materials,
             &lookup,
         );
-
         let up = Upload::new(
             gpu,
             scene,
@@ -279,8 +278,7 @@ impl Renderer {
 
         let (by_height, ranges) = scene.nodes_by_height();
         let lights_in_range = lights.grid.occupancy();
-        let inject =
-            gpu.scoped("inject", || passes::inject::Inject::new(gpu, shared, f16, lights_in_range.1))?;
+        let inject = gpu.scoped("inject", || Inject::new(gpu, shared, f16, lights_in_range.1))?;
         let env = gpu.scoped("env", || passes::env::new(gpu, shared, f16, settings.cones))?;
         let mip =
             gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, caps.nodes, &by_height, &ranges, f16))?;
@@ -291,6 +289,7 @@ impl Renderer {
         splats.set_surfels(gpu, &up.surfels);
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
         let static_bytes = up.bytes + shadow.bytes() + shade.env_atlas_bytes();
+        let room = LightRoom { buf: up.lights.clone(), grid_room: lookup.grid_room, mapped: lights.mapped };
         let mut r = Self {
             inject,
             env,
@@ -338,11 +337,7 @@ impl Renderer {
             pools: tile_pools,
             view: None,
             direct_valid: false,
-            light_room: LightRoom {
-                buf: up.lights.clone(),
-                grid_room: lookup.grid_room,
-                mapped: lights.mapped,
-            },
+            light_room: room,
             light_edit: None,
             forced: Vec::new(),
             light_held: None,
