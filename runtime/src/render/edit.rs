@@ -79,12 +79,15 @@ impl Renderer {
             // Inject does not run without lights, so nothing would clear the old direct light.
             return Ok(None);
         }
-        let records = setup.records().len() as u64;
-        let room = self.light_room.buf.size() / size_of::<crate::gpu::types::LightGpu>() as u64;
         if setup.grid.words.len() > self.light_room.grid_room as usize
             || !setup.keep_slots(self.shadow.faces(), self.shadow.capacity())
-            || records > room
         {
+            return Ok(None);
+        }
+        // Counted after the faces took their slots: holes are records too.
+        let records = setup.records();
+        let room = self.light_room.buf.size() / size_of::<crate::gpu::types::LightGpu>() as u64;
+        if records.len() as u64 > room {
             return Ok(None);
         }
         // Which lights changed, before the renderer forgets the old ones.
@@ -95,7 +98,6 @@ impl Renderer {
         );
         let reached = edit::tiles_reached(self.pools.tiles(), self.leaf_size_m, &reach);
 
-        let records = setup.records();
         self.gpu.queue.write_buffer(&self.light_room.buf, 0, bytemuck::cast_slice(&records));
         self.pools.write_lookup(&self.gpu, self.base_params.lookup_base[1], &setup.grid.words);
         let redrawn = self.shadow.set_faces(&self.gpu, &setup.faces);
