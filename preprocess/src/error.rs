@@ -15,6 +15,14 @@ pub enum Error {
     Read { path: PathBuf, format: &'static str, reason: String },
     #[error("{path}: manifest: {reason}")]
     Manifest { path: PathBuf, reason: String },
+    /// Tile packages in a work directory that `assemble` cannot use, each with its reason.
+    #[error(
+        "{work_dir}: {} of {total} tiles cannot be assembled; run build-tile for them (it builds \
+         exactly these again):{}",
+        problems.len(),
+        crate::build::list_tile_problems(problems)
+    )]
+    Tiles { work_dir: PathBuf, total: usize, problems: Vec<crate::build::TileProblem> },
     /// The OS error is the `source` (printed by `{:#}` chains).
     #[error("{path}: input/output failed")]
     Io { path: PathBuf, source: std::io::Error },

@@ -45,6 +45,8 @@ pub enum Stage {
     CompactSurfels,
     /// Per tile: encoding (zstd) and writing the tile package.
     WriteTiles,
+    /// Assemble: every tile package checked whole (fingerprint, checksums, content).
+    CheckTiles,
     /// Assemble: every tile's coarse levels and rock.
     Levels,
     /// Assemble: copying the tile packages' sections into the output and writing it.
@@ -56,7 +58,7 @@ pub enum Stage {
 }
 
 impl Stage {
-    pub(crate) const ALL: [Stage; 18] = [
+    pub(crate) const ALL: [Stage; 19] = [
         Stage::Setup,
         Stage::CountRead,
         Stage::Count,
@@ -71,6 +73,7 @@ impl Stage {
         Stage::Colors,
         Stage::CompactSurfels,
         Stage::WriteTiles,
+        Stage::CheckTiles,
         Stage::Levels,
         Stage::Assemble,
         Stage::Environment,
@@ -93,6 +96,7 @@ impl Stage {
             Stage::Colors => "tiles: colours",
             Stage::CompactSurfels => "tiles: compact surfels",
             Stage::WriteTiles => "tiles: encode and write",
+            Stage::CheckTiles => "assemble: check tiles",
             Stage::Levels => "assemble: levels",
             Stage::Assemble => "assemble: copy and write",
             Stage::Environment => "assemble: environment",

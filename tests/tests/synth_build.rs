@@ -186,6 +186,7 @@ fn an_interrupted_build_resumes_and_gives_the_same_bytes() {
             "tiles: colours",
             "tiles: compact surfels",
             "tiles: encode and write",
+            "assemble: check tiles",
             "assemble: levels",
             "assemble: copy and write",
             "assemble: hash inputs",

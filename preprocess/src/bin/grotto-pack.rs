@@ -547,8 +547,19 @@ fn run_build_tile(inputs: &[PathBuf], shard: &str, opts: &BuildOpts) -> anyhow::
         println!("{}", serde_json::to_string_pretty(&stage)?);
     } else {
         println!(
-            "shard {}/{}: built {} tiles, {} already built",
-            shard.index, shard.count, stage.built, stage.reused
+            "shard {}/{} on {}: built {} tiles{}, {} already built",
+            shard.index,
+            shard.count,
+            stage.host,
+            stage.built,
+            match stage.built_tiles.len() {
+                1..=16 => format!(
+                    " ({})",
+                    stage.built_tiles.iter().map(|t| t.to_string()).collect::<Vec<_>>().join(", ")
+                ),
+                _ => String::new(),
+            },
+            stage.reused
         );
         print_stages(&stage.stages);
     }

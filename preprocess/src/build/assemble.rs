@@ -7,12 +7,12 @@ use grotto_format::{Compression, InputFile, Package, PackageWriter, Provenance, 
 use rayon::prelude::*;
 
 use crate::bins::TilePlan;
+use crate::build::inspect::{self, Finished};
 use crate::build::params::BuildParams;
 use crate::build::plan::cut_short;
 use crate::build::plan::planned;
 use crate::build::summary::BuildSummary;
 use crate::build::summary::StepSeconds;
-use crate::build::tile::finished_tile_package;
 use crate::build::tile::tile_fingerprint;
 use crate::build::tile::tile_of_package;
 use crate::build::tile::tile_package_path;
@@ -91,12 +91,13 @@ pub(crate) fn assemble_plan(
     let start = std::time::Instant::now();
     let fingerprint = tile_fingerprint(plan, params);
     let total = plan.tiles.len();
-    check_all_built(total, &params.work_dir, &fingerprint)?;
     let mut clock = std::time::Instant::now();
+    let finished = check_all_built(plan, &params.work_dir, &fingerprint, progress)?;
+    profile.lap(Stage::CheckTiles, &mut clock);
     let levels = tile_levels(&params.work_dir, total, progress)?;
     profile.lap(Stage::Levels, &mut clock);
     let mut writer = PackageWriter::create(out)?;
-    let copied = copy_tiles(&mut writer, &params.work_dir, &levels, &fingerprint, progress)?;
+    let copied = copy_tiles(&mut writer, &params.work_dir, &levels, &finished, progress)?;
     profile.lap(Stage::Assemble, &mut clock);
     let mut inputs = Vec::new();
     let mut env_window = None;
@@ -127,22 +128,31 @@ pub(crate) fn assemble_plan(
     Ok(summary)
 }
 
-/// Fails, naming the first of them, when tiles are not built with these parameters.
-fn check_all_built(total: usize, work_dir: &Path, fingerprint: &str) -> Result<()> {
-    let missing: Vec<usize> = (0..total)
-        .filter(|&t| finished_tile_package(&tile_package_path(work_dir, t), fingerprint).is_none())
+/// Every tile's record, or an error listing each tile that cannot be used and why (missing,
+/// partial, stale, damaged). Every tile is checked whole (fingerprint, checksums, content) here,
+/// in parallel, because a work directory shared by many nodes is not trusted.
+fn check_all_built(
+    plan: &TilePlan,
+    work_dir: &Path,
+    fingerprint: &str,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<Vec<Finished>> {
+    let total = plan.tiles.len();
+    let done = std::sync::atomic::AtomicU64::new(0);
+    let checked: Vec<_> = (0..total)
+        .into_par_iter()
+        .map(|t| {
+            let state = inspect::inspect(work_dir, t, &plan.fingerprint, fingerprint);
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress(Progress { stage: "check tiles", done: n, total: total as u64 });
+            state
+        })
         .collect();
-    if missing.is_empty() {
-        return Ok(());
+    let problems: Vec<_> = checked.iter().filter_map(|c| c.as_ref().err().cloned()).collect();
+    if !problems.is_empty() {
+        return Err(Error::Tiles { work_dir: work_dir.to_path_buf(), total, problems });
     }
-    Err(Error::Parameter {
-        name: "tiles",
-        reason: format!(
-            "{} of {total} tiles are not built with these parameters (first: {:?}); run build-tile for them",
-            missing.len(),
-            &missing[..missing.len().min(8)]
-        ),
-    })
+    Ok(checked.into_iter().filter_map(|c| c.ok()).collect())
 }
 
 /// Each tile's coarse level and rock (format 1.1), so a renderer opening the package reads only
@@ -183,7 +193,7 @@ fn copy_tiles(
     writer: &mut PackageWriter,
     work_dir: &Path,
     levels: &[grotto_levels::TileLevels],
-    fingerprint: &str,
+    finished: &[Finished],
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<Copied> {
     let total = levels.len();
@@ -200,11 +210,8 @@ fn copy_tiles(
     };
     let mut next = (total > 0).then(|| open_checked(0));
     for (t, levels) in levels.iter().enumerate() {
-        let path = tile_package_path(work_dir, t);
-        if let Some((seam, tile_normals)) = finished_tile_package(&path, fingerprint) {
-            copied.seam_limited_points += seam;
-            copied.normals.add(&tile_normals);
-        }
+        copied.seam_limited_points += finished[t].seam_limited;
+        copied.normals.add(&finished[t].normals);
         let Some(tile_pkg) = next.take() else { break };
         let tile_pkg = tile_pkg?;
         let tile = tile_of_package(&tile_pkg, t)?;

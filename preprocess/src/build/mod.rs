@@ -19,6 +19,7 @@
 //! once ([`BuildParams::tiles_at_once`]), not how large a tile is.
 
 mod assemble;
+mod inspect;
 mod params;
 mod plan;
 mod summary;
@@ -26,6 +27,7 @@ mod tile;
 mod tiles;
 
 pub use assemble::assemble;
+pub use inspect::{PartialFile, TileFault, TileProblem};
 pub use params::{
     AutoLeaf, BUILD_BYTES_PER_POINT, BuildParams, ColorCodec, DEFAULT_LEAF_M, DEFAULT_MAX_TILE_POINTS,
     HALO_LEAVES, MAX_TILE_LEAVES, MIN_TILE_LEAVES, SPACING_SAMPLE_POINTS, SurfelCodec, auto_leaf,
@@ -39,6 +41,7 @@ use std::path::Path;
 
 use crate::Result;
 use crate::build::assemble::assemble_plan;
+pub(crate) use crate::build::inspect::list as list_tile_problems;
 use crate::build::plan::PlanStep;
 use crate::build::plan::check_params;
 use crate::build::plan::plan_scans;

@@ -253,18 +253,6 @@ pub(crate) fn tile_fingerprint(plan: &TilePlan, params: &BuildParams) -> String 
     )
 }
 
-/// What a finished tile package with this fingerprint recorded (seam-limited points, file normals
-/// and orientation), or `None` when it must be built (missing, damaged, other parameters).
-pub(crate) fn finished_tile_package(path: &Path, fingerprint: &str) -> Option<(u64, NormalStats)> {
-    let prov = Package::open(path).ok()?.provenance().ok()??;
-    if prov.parameters.get("tile_fingerprint")?.as_str()? != fingerprint {
-        return None;
-    }
-    let seam = prov.parameters.get("seam_limited_points")?.as_u64()?;
-    let normals = serde_json::from_value(prov.parameters.get("normals")?.clone()).ok()?;
-    Some((seam, normals))
-}
-
 pub(crate) fn write_tile_package(
     path: &Path,
     tile: &BuiltTile,

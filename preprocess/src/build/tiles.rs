@@ -7,10 +7,10 @@ use grotto_format::Scene;
 use serde::Serialize;
 
 use crate::bins::TilePlan;
+use crate::build::inspect;
 use crate::build::params::BuildParams;
 use crate::build::plan::planned;
 use crate::build::tile::build_tile;
-use crate::build::tile::finished_tile_package;
 use crate::build::tile::tile_fingerprint;
 use crate::build::tile::tile_package_path;
 use crate::build::tile::write_tile_package;
@@ -39,8 +39,12 @@ impl Shard {
 /// What the build-tile step did.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct TileStage {
+    /// The host the job ran on (a cluster's logs say which node built which shard).
+    pub host: String,
     pub built: usize,
     pub reused: usize,
+    /// The tiles this job built (not those it found built), in tile order.
+    pub built_tiles: Vec<usize>,
     /// Seconds per stage of the tiles built, summed over tiles built at once ([`crate::profile`]).
     pub stages: Vec<StageTime>,
 }
@@ -65,6 +69,7 @@ pub fn build_tiles(
     let mut stage =
         tile_stage(&plan, &manifest.scene(manifest_path)?, params, shard, grid.as_ref(), progress, &profile)?;
     stage.stages = profile.report();
+    stage.host = gethostname::gethostname().to_string_lossy().into_owned();
     Ok(stage)
 }
 
@@ -110,7 +115,8 @@ pub(crate) fn tile_stage(
                     let Some(&t) = mine.get(next.fetch_add(1, Relaxed)) else { break };
                     let done = pool.install(|| {
                         let path = tile_package_path(&params.work_dir, t);
-                        if finished_tile_package(&path, &fingerprint).is_some() {
+                        // Checked whole (another node may have written it, or died writing it).
+                        if inspect::inspect(&params.work_dir, t, &plan.fingerprint, &fingerprint).is_ok() {
                             return Ok(true);
                         }
                         let built = build_tile(plan, &params.work_dir, t, params, scene, grid, profile)?;
@@ -121,7 +127,10 @@ pub(crate) fn tile_stage(
                     let mut stage = stage.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
                     match done {
                         Ok(true) => stage.0.reused += 1,
-                        Ok(false) => stage.0.built += 1,
+                        Ok(false) => {
+                            stage.0.built += 1;
+                            stage.0.built_tiles.push(t);
+                        }
                         Err(e) => {
                             failed.store(true, Relaxed);
                             stage.1.get_or_insert(e);
@@ -134,9 +143,10 @@ pub(crate) fn tile_stage(
             });
         }
     });
-    let (stage, error) = stage.into_inner().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let (mut stage, error) = stage.into_inner().unwrap_or_else(|poisoned| poisoned.into_inner());
     if let Some(e) = error {
         return Err(e);
     }
+    stage.built_tiles.sort_unstable();
     Ok(stage)
 }
