@@ -547,7 +547,7 @@ fn run_build_tile(inputs: &[PathBuf], shard: &str, opts: &BuildOpts) -> anyhow::
         println!("{}", serde_json::to_string_pretty(&stage)?);
     } else {
         println!(
-            "shard {}/{} on {}: built {} tiles{}, {} already built",
+            "shard {}/{} on {}: built {} tiles{}, {} already built, peak memory {} MB",
             shard.index,
             shard.count,
             stage.host,
@@ -559,7 +559,8 @@ fn run_build_tile(inputs: &[PathBuf], shard: &str, opts: &BuildOpts) -> anyhow::
                 ),
                 _ => String::new(),
             },
-            stage.reused
+            stage.reused,
+            stage.peak_rss_bytes / 1_000_000
         );
         print_stages(&stage.stages);
     }

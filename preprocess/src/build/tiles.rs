@@ -45,6 +45,9 @@ pub struct TileStage {
     pub reused: usize,
     /// The tiles this job built (not those it found built), in tile order.
     pub built_tiles: Vec<usize>,
+    /// The job's peak resident memory, bytes (0 where the OS does not say): what a scheduler's
+    /// memory request per task must cover.
+    pub peak_rss_bytes: u64,
     /// Seconds per stage of the tiles built, summed over tiles built at once ([`crate::profile`]).
     pub stages: Vec<StageTime>,
 }
@@ -70,6 +73,7 @@ pub fn build_tiles(
         tile_stage(&plan, &manifest.scene(manifest_path)?, params, shard, grid.as_ref(), progress, &profile)?;
     stage.stages = profile.report();
     stage.host = gethostname::gethostname().to_string_lossy().into_owned();
+    stage.peak_rss_bytes = crate::profile::peak_rss_bytes().unwrap_or(0);
     Ok(stage)
 }
 
