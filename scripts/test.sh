@@ -23,7 +23,8 @@ export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-$(mktemp -d)}
 # The browser viewer the browser test publishes (tests/tests/browser.rs).
 ./scripts/build-web.sh > /dev/null
 cargo test --workspace --locked
-# The cluster steps on a real scheduler (issue 20): plan, a build-tile job array and assemble on a
-# one-node Slurm cluster started here, against one build. Skipped with a message where a scheduler
-# cannot start; a failed job or a different package fails.
+# The cluster steps on a real scheduler (issues 20, 48): plan, a build-tile job array and assemble
+# on a 3-node Slurm cluster made here in namespaces, one node lost mid-build, against one build
+# (the one-node cluster where namespaces cannot be made). Skipped with a message where no scheduler
+# can start; a failed job or a different package fails.
 GROTTO_PACK=target/debug/grotto-pack GROTTO_SLURM_OPTIONAL=1 ./scripts/test-slurm.sh

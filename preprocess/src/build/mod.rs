@@ -26,8 +26,8 @@ mod summary;
 mod tile;
 mod tiles;
 
+pub use crate::error::{PartialFile, TileFault, TileProblem};
 pub use assemble::assemble;
-pub use inspect::{PartialFile, TileFault, TileProblem};
 pub use params::{
     AutoLeaf, BUILD_BYTES_PER_POINT, BuildParams, ColorCodec, DEFAULT_LEAF_M, DEFAULT_MAX_TILE_POINTS,
     HALO_LEAVES, MAX_TILE_LEAVES, MIN_TILE_LEAVES, SPACING_SAMPLE_POINTS, SurfelCodec, auto_leaf,
@@ -41,7 +41,6 @@ use std::path::Path;
 
 use crate::Result;
 use crate::build::assemble::assemble_plan;
-pub(crate) use crate::build::inspect::list as list_tile_problems;
 use crate::build::plan::PlanStep;
 use crate::build::plan::check_params;
 use crate::build::plan::plan_scans;
