@@ -3,6 +3,7 @@
 //! its error against the reference, its GPU time per pass and its GPU memory. `report` turns the
 //! rows into docs/accuracy.md (table, Pareto front, preset check).
 
+pub mod breakdown;
 mod configs;
 mod report;
 mod scenes;

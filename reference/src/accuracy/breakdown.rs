@@ -1,0 +1,256 @@
+//! Where light carried through passages goes wrong (issue 47): the runtime's outgoing radiance
+//! per leaf against the reference's (path traced from each leaf's surfels), summed per region of
+//! the dogleg (the lit room, the three corridors, the hidden chamber) and per bounce: each run
+//! with k bounces and no tail against the reference cut after k bounces, what each bounce adds
+//! against what the reference's k-th bounce adds, and the presets against full transport.
+//! Leaves, not pixels: the camera sees only the lit room and the first corridor, the light that
+//! reaches the rest is judged where it lands.
+
+use grotto_fixtures::testscenes;
+use grotto_runtime::gpu::Gpu;
+use grotto_runtime::render::Renderer;
+use grotto_runtime::scene::data::SceneData;
+use grotto_runtime::settings::{Quality, Settings};
+use serde::Serialize;
+
+use crate::tracer::{Estimate, PathSettings, SurfelScene};
+
+/// Bounce counts judged against a reference cut after as many bounces.
+pub const CUT_BOUNCES: [u32; 5] = [0, 1, 2, 3, 4];
+
+/// One region's figures for one runtime configuration.
+#[derive(Clone, Debug, Serialize)]
+pub struct RegionError {
+    pub region: String,
+    /// Leaves of the region both sides measure.
+    pub leaves: usize,
+    /// sum(runtime) / sum(reference) - 1 over the region's leaves (luminance: mean of r, g, b).
+    pub bias: f64,
+    /// sqrt(sum (runtime - reference)^2 / sum reference^2) over the region's leaves.
+    pub rel_rmse: f64,
+    /// The reference's own noise on the same scale.
+    pub reference_noise: f64,
+}
+
+/// One runtime configuration against its reference, per region.
+#[derive(Clone, Debug, Serialize)]
+pub struct BreakdownRow {
+    pub config: String,
+    /// "cut after k bounces" or "full transport".
+    pub against: String,
+    pub regions: Vec<RegionError>,
+}
+
+/// What bounce k adds to a region's light, runtime against reference.
+#[derive(Clone, Debug, Serialize)]
+pub struct BounceShare {
+    pub bounce: u32,
+    pub region: String,
+    /// (runtime after k - after k-1) / (reference after k - after k-1), summed over the region.
+    pub share: f64,
+}
+
+/// The whole breakdown of one scene.
+#[derive(Clone, Debug, Serialize)]
+pub struct Breakdown {
+    pub scene: String,
+    pub paths_per_surfel: u32,
+    /// Each region's share of the reference's light (full transport), for weighing its error.
+    pub light_share: Vec<(String, f64)>,
+    pub rows: Vec<BreakdownRow>,
+    pub bounces: Vec<BounceShare>,
+}
+
+/// The dogleg's leaves per region ([`testscenes::DOGLEG_REGIONS`]).
+fn dogleg_regions(scene: &SceneData) -> Vec<(String, Vec<usize>)> {
+    let mut regions: Vec<(String, Vec<usize>)> =
+        testscenes::DOGLEG_REGIONS.iter().map(|(name, _, _)| ((*name).to_owned(), Vec::new())).collect();
+    for (i, leaf) in scene.leaves.iter().enumerate() {
+        let c = (glam::Vec3::from_slice(&leaf.center_m[..3]) / scene.leaf_size_m).floor().as_ivec3();
+        if let Some(r) = testscenes::dogleg_region(c) {
+            regions[r].1.push(i);
+        }
+    }
+    regions
+}
+
+fn luminance(v: [f32; 3]) -> f64 {
+    (f64::from(v[0]) + f64::from(v[1]) + f64::from(v[2])) / 3.0
+}
+
+/// A region's error: `runtime` per leaf against `reference` per leaf (leaves without a reference
+/// value, which no surfel reaches, are left out).
+fn region_error(
+    name: &str,
+    leaves: &[usize],
+    runtime: &[f64],
+    reference: &[Option<Estimate>],
+) -> RegionError {
+    let (mut sum_rt, mut sum_ref, mut sq_err, mut sq_ref, mut sq_se, mut n) = (0.0, 0.0, 0.0, 0.0, 0.0, 0);
+    for &i in leaves {
+        let Some(e) = &reference[i] else { continue };
+        let want = luminance(e.mean.to_array());
+        let se = luminance(e.std_err.to_array());
+        sum_rt += runtime[i];
+        sum_ref += want;
+        sq_err += (runtime[i] - want).powi(2);
+        sq_ref += want * want;
+        sq_se += se * se;
+        n += 1;
+    }
+    let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+    RegionError {
+        region: name.to_owned(),
+        leaves: n,
+        bias: ratio(sum_rt, sum_ref) - 1.0,
+        rel_rmse: ratio(sq_err, sq_ref).sqrt(),
+        reference_noise: ratio(sq_se, sq_ref).sqrt(),
+    }
+}
+
+/// The radiance each leaf shows (luminance) after settling with `settings`: the bounces run and
+/// the tail's estimate of the rest, as the shade pass adds them up.
+fn runtime_leaves(gpu: &Gpu, data: &SceneData, settings: Settings) -> grotto_runtime::Result<Vec<f64>> {
+    let mut r = Renderer::new(gpu, data, settings)?;
+    r.settle(|_, _| {})?;
+    Ok(r.read_leaf_light()?.iter().zip(&data.leaves).map(|(l, leaf)| luminance(l.shown(leaf))).collect())
+}
+
+/// The dogleg's breakdown with `paths` reference paths per surfel; `progress` gets each step.
+pub fn dogleg(gpu: &Gpu, paths: u32, progress: impl Fn(&str)) -> grotto_runtime::Result<Breakdown> {
+    let data = testscenes::dogleg();
+    let regions = dogleg_regions(&data);
+    let base = Settings::preset(Quality::Balanced);
+    let scene = SurfelScene::from_scene(&data, base.splat_scale);
+    let full_settings = PathSettings::for_scene(&data);
+    progress("reference, full transport");
+    let full = scene.leaf_radiance(&data, paths, &full_settings, 1);
+    let mut cut = Vec::new();
+    for k in CUT_BOUNCES {
+        progress(&format!("reference cut after {k} bounces"));
+        let settings = PathSettings { max_bounces: k, ..full_settings };
+        cut.push(scene.leaf_radiance(&data, paths, &settings, 2 + u64::from(k)));
+    }
+    let per_region = |config: &str, against: &str, rt: &[f64], reference: &[Option<Estimate>]| BreakdownRow {
+        config: config.to_owned(),
+        against: against.to_owned(),
+        regions: regions.iter().map(|(name, leaves)| region_error(name, leaves, rt, reference)).collect(),
+    };
+    let mut rows = Vec::new();
+    let mut runtime_cut = Vec::new();
+    for (k, reference) in CUT_BOUNCES.iter().zip(&cut) {
+        progress(&format!("runtime, {k} bounces, no tail"));
+        let settings = Settings { bounces: *k, bounce_tail: false, ..base.clone() };
+        let rt = runtime_leaves(gpu, &data, settings)?;
+        rows.push(per_region(
+            &format!("bounces {k}, no tail"),
+            &format!("cut after {k} bounces"),
+            &rt,
+            reference,
+        ));
+        runtime_cut.push(rt);
+    }
+    let fulls = [
+        ("balanced (3 bounces + tail)", base.clone()),
+        ("balanced, no tail", Settings { bounce_tail: false, ..base.clone() }),
+        ("balanced, 16 bounces", Settings { bounces: 16, ..base.clone() }),
+        ("high", Settings::preset(Quality::High)),
+    ];
+    for (name, settings) in fulls {
+        progress(&format!("runtime, {name}"));
+        rows.push(per_region(name, "full transport", &runtime_leaves(gpu, &data, settings)?, &full));
+    }
+    let sum = |values: &[f64], leaves: &[usize], reference: &[Option<Estimate>]| -> f64 {
+        leaves.iter().filter(|&&i| reference[i].is_some()).map(|&i| values[i]).sum()
+    };
+    let ref_lum = |e: &[Option<Estimate>]| -> Vec<f64> {
+        e.iter().map(|x| x.as_ref().map_or(0.0, |e| luminance(e.mean.to_array()))).collect()
+    };
+    let mut bounces = Vec::new();
+    for k in 1..CUT_BOUNCES.len() {
+        let (ref_now, ref_before) = (ref_lum(&cut[k]), ref_lum(&cut[k - 1]));
+        for (name, leaves) in &regions {
+            let added_ref = sum(&ref_now, leaves, &full) - sum(&ref_before, leaves, &full);
+            let added_rt = sum(&runtime_cut[k], leaves, &full) - sum(&runtime_cut[k - 1], leaves, &full);
+            bounces.push(BounceShare {
+                bounce: CUT_BOUNCES[k],
+                region: name.clone(),
+                share: if added_ref > 0.0 { added_rt / added_ref } else { f64::NAN },
+            });
+        }
+    }
+    let full_lum = ref_lum(&full);
+    let total: f64 = regions.iter().map(|(_, l)| sum(&full_lum, l, &full)).sum();
+    let light_share =
+        regions.iter().map(|(name, l)| (name.clone(), sum(&full_lum, l, &full) / total)).collect();
+    Ok(Breakdown { scene: "dogleg".into(), paths_per_surfel: paths, light_share, rows, bounces })
+}
+
+/// The breakdown as Markdown tables.
+pub fn markdown(b: &Breakdown) -> String {
+    let names: Vec<&str> = b.light_share.iter().map(|(n, _)| n.as_str()).collect();
+    let header = |first: &str| {
+        format!(
+            "| {first} | {} |\n|---|{}\n",
+            names.join(" | "),
+            names.iter().map(|_| "---:|").collect::<String>()
+        )
+    };
+    let mut out = String::new();
+    out.push_str(&header("region"));
+    out.push_str(&format!(
+        "| share of the reference's light | {} |\n",
+        b.light_share.iter().map(|(_, s)| format!("{:.1}%", 100.0 * s)).collect::<Vec<_>>().join(" | ")
+    ));
+    let leaves = b.rows.first().map(|r| r.regions.iter().map(|e| e.leaves.to_string()).collect::<Vec<_>>());
+    out.push_str(&format!("| leaves | {} |\n", leaves.unwrap_or_default().join(" | ")));
+    out.push_str("\nBias (sum of the runtime's leaf radiance over the reference's, minus 1) and relative RMSE over the region's leaves, each run against its reference:\n\n");
+    out.push_str(&header("run (against)"));
+    for row in &b.rows {
+        let cells: Vec<String> =
+            row.regions
+                .iter()
+                .map(|e| {
+                    if e.bias.is_finite() {
+                        format!("{:+.3} / {:.3}", e.bias, e.rel_rmse)
+                    } else {
+                        "-".into()
+                    }
+                })
+                .collect();
+        out.push_str(&format!("| {} ({}) | {} |\n", row.config, row.against, cells.join(" | ")));
+    }
+    out.push_str("\n(- : the reference carries no light there after so few bounces.) The reference's own noise on the relative RMSE scale, largest over the runs, per region: ");
+    let noise: Vec<String> = (0..names.len())
+        .map(|k| {
+            let n = b
+                .rows
+                .iter()
+                .map(|r| r.regions[k].reference_noise)
+                .filter(|v| v.is_finite())
+                .fold(0.0, f64::max);
+            format!("{} {n:.3}", names[k])
+        })
+        .collect();
+    out.push_str(&noise.join(", "));
+    out.push_str(".\n");
+    out.push_str("\nWhat bounce k adds to a region, the runtime's (bounces k minus bounces k - 1, no tail) over the reference's (cut after k minus cut after k - 1): 1 carries the bounce's light exactly.\n\n");
+    out.push_str(&header("bounce"));
+    let mut k = 0;
+    for s in &b.bounces {
+        if s.bounce != k {
+            if k != 0 {
+                out.push_str(" |\n");
+            }
+            k = s.bounce;
+            out.push_str(&format!("| {k}"));
+        }
+        if s.share.is_finite() {
+            out.push_str(&format!(" | {:.3}", s.share));
+        } else {
+            out.push_str(" | -");
+        }
+    }
+    out.push_str(" |\n");
+    out
+}
