@@ -59,6 +59,10 @@ pub struct Breakdown {
     pub light_share: Vec<(String, f64)>,
     pub rows: Vec<BreakdownRow>,
     pub bounces: Vec<BounceShare>,
+    /// Per region, the 10th, 25th, 50th, 75th and 90th percentiles of the leaves' ratio runtime /
+    /// reference for the direct light alone (bounces 0 against the reference cut there): whether
+    /// a region's direct error is every leaf a little or some leaves a lot.
+    pub direct_ratio_percentiles: Vec<(String, [f64; 5])>,
 }
 
 /// The dogleg's leaves per region ([`testscenes::DOGLEG_REGIONS`]).
@@ -179,11 +183,38 @@ pub fn dogleg(gpu: &Gpu, paths: u32, progress: impl Fn(&str)) -> grotto_runtime:
             });
         }
     }
+    let direct_ref = ref_lum(&cut[0]);
+    let direct_ratio_percentiles = regions
+        .iter()
+        .map(|(name, leaves)| {
+            let mut ratios: Vec<f64> = leaves
+                .iter()
+                .filter(|&&i| direct_ref[i] > 1e-6)
+                .map(|&i| runtime_cut[0][i] / direct_ref[i])
+                .collect();
+            ratios.sort_by(f64::total_cmp);
+            let at = |q: f64| {
+                if ratios.is_empty() {
+                    f64::NAN
+                } else {
+                    ratios[((ratios.len() - 1) as f64 * q).round() as usize]
+                }
+            };
+            (name.clone(), [at(0.1), at(0.25), at(0.5), at(0.75), at(0.9)])
+        })
+        .collect();
     let full_lum = ref_lum(&full);
     let total: f64 = regions.iter().map(|(_, l)| sum(&full_lum, l, &full)).sum();
     let light_share =
         regions.iter().map(|(name, l)| (name.clone(), sum(&full_lum, l, &full) / total)).collect();
-    Ok(Breakdown { scene: "dogleg".into(), paths_per_surfel: paths, light_share, rows, bounces })
+    Ok(Breakdown {
+        scene: "dogleg".into(),
+        paths_per_surfel: paths,
+        light_share,
+        rows,
+        bounces,
+        direct_ratio_percentiles,
+    })
 }
 
 /// The breakdown as Markdown tables.
@@ -252,5 +283,15 @@ pub fn markdown(b: &Breakdown) -> String {
         }
     }
     out.push_str(" |\n");
+    out.push_str("\nThe direct light alone, leaf by leaf: percentiles of the runtime's leaf radiance over the reference's (bounces 0 against the reference cut there), over the leaves the reference lights:\n\n");
+    out.push_str(&header("percentile"));
+    for (k, q) in ["10th", "25th", "50th", "75th", "90th"].iter().enumerate() {
+        let cells: Vec<String> = b
+            .direct_ratio_percentiles
+            .iter()
+            .map(|(_, p)| if p[k].is_finite() { format!("{:.3}", p[k]) } else { "-".into() })
+            .collect();
+        out.push_str(&format!("| {q} | {} |\n", cells.join(" | ")));
+    }
     out
 }
