@@ -84,7 +84,6 @@ if ! pgrep -x munged >/dev/null; then
 fi
 
 mode=one
-share="the controller's own disk (one node)"
 made_bridge=0
 made_ns=()
 nfs_server=0
@@ -107,21 +106,24 @@ teardown_net() {
     made_bridge=0
     return 0
 }
-stop() {
-    set +e
+# Stops the daemons (each waited for: slurmctld saves its state as it shuts down), and whatever
+# did not write its pid file (a daemon that never came up).
+stop_daemons() {
     local d pid
     for d in "$work"/run/slurmd-*.pid "$work/slurmctld.pid"; do
         [ -f "$d" ] || continue
         pid=$(cat "$d")
         kill "$pid" 2>/dev/null || continue
-        # slurmctld saves its state as it shuts down: wait (up to 10 s) before the directory goes.
         for _ in $(seq 100); do
             kill -0 "$pid" 2>/dev/null || break
             sleep 0.1
         done
     done
-    # Whatever did not write its pid file (a daemon that never came up).
-    pkill -f -- "-f $work/slurm.conf" 2>/dev/null
+    pkill -f -- "-f $work/slurm.conf" 2>/dev/null || true
+}
+stop() {
+    set +e
+    stop_daemons
     teardown_net
     if [ "$started_munge" = 1 ]; then
         pkill -x munged 2>/dev/null
@@ -265,22 +267,6 @@ CONF
     return 1
 }
 
-# Stops the daemons (keeping munge), for the one-node fallback.
-stop_daemons() {
-    local d pid
-    for d in "$work"/run/slurmd-*.pid "$work/slurmctld.pid"; do
-        [ -f "$d" ] || continue
-        pid=$(cat "$d")
-        kill "$pid" 2>/dev/null || continue
-        for _ in $(seq 100); do
-            kill -0 "$pid" 2>/dev/null || break
-            sleep 0.1
-        done
-    done
-    pkill -f -- "-f $work/slurm.conf" 2>/dev/null || true
-    rm -rf "$work"/state/* "$work"/run/*
-}
-
 export SLURM_CONF=$work/slurm.conf
 share_kind=bind
 if make_network; then
@@ -294,6 +280,7 @@ if make_network; then
     if ! start_cluster; then
         echo "the multi-node cluster did not start: $why" >&2
         stop_daemons
+        rm -rf "$work"/state/* "$work"/run/*
         mode=one
     fi
 else

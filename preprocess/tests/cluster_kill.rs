@@ -42,8 +42,16 @@ fn partial_tiles(work: &Path) -> Vec<String> {
     })
 }
 
+/// Sends `signal` (STOP, CONT) to process `pid` with kill(1).
+fn signal(pid: u32, signal: &str) {
+    let status = Command::new("kill").arg(format!("-{signal}")).arg(pid.to_string()).status().unwrap();
+    assert!(status.success(), "kill -{signal} {pid}");
+}
+
 /// Spawns `cmd`, kills it (SIGKILL) as soon as `ready` holds or after `limit`, and says whether it
-/// was still running then.
+/// was still running then. `ready` is asked again once the process is stopped (SIGSTOP), so what
+/// it saw (a temp file being written) is what the kill leaves; if it no longer holds, the process
+/// goes on and is watched again.
 fn kill_when(mut cmd: Command, ready: impl Fn() -> bool, limit: Duration) -> bool {
     let mut child =
         cmd.stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null()).spawn().unwrap();
@@ -52,28 +60,38 @@ fn kill_when(mut cmd: Command, ready: impl Fn() -> bool, limit: Duration) -> boo
         if let Some(_status) = child.try_wait().unwrap() {
             return false;
         }
-        if ready() || start.elapsed() > limit {
-            child.kill().unwrap();
-            child.wait().unwrap();
-            return true;
+        let timed_out = start.elapsed() > limit;
+        if timed_out || ready() {
+            signal(child.id(), "STOP");
+            if timed_out || ready() {
+                child.kill().unwrap();
+                child.wait().unwrap();
+                return true;
+            }
+            signal(child.id(), "CONT");
         }
         std::thread::sleep(Duration::from_millis(2));
     }
 }
 
-#[test]
-fn a_killed_shard_and_a_killed_assemble_rerun_to_the_same_package() {
-    let dir = tempfile::tempdir().unwrap();
-    let scans = dir.path().join("scans");
+/// A synthetic survey of `points` points in four PLY scans under `dir`/scans; its manifest.
+fn synth_manifest(dir: &Path, points: u32) -> PathBuf {
+    let scans = dir.join("scans");
     ok(
         pack()
-            .args(["synth", "--points", "80000", "--segments", "4", "--formats", "ply", "--out"])
+            .args(["synth", "--points", &points.to_string(), "--segments", "4", "--formats", "ply", "--out"])
             .arg(&scans)
             .output()
             .unwrap(),
         "synth",
     );
-    let manifest = scans.join("manifest.toml");
+    scans.join("manifest.toml")
+}
+
+#[test]
+fn a_killed_shard_and_a_killed_assemble_rerun_to_the_same_package() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = synth_manifest(dir.path(), 80_000);
     let common = |c: &mut Command, work: &PathBuf| {
         c.arg(&manifest)
             .args(["--threads", "1", "--leaf-m", "0.125", "--min-tile-m", "2", "--max-tile-m", "4"])
@@ -104,6 +122,7 @@ fn a_killed_shard_and_a_killed_assemble_rerun_to_the_same_package() {
     eprintln!("build-tile killed: {killed}, with {done} tiles finished, partial files {partials:?}");
     // The shard has dozens of tiles and is killed at its first: it must not have finished.
     assert!(killed, "build-tile finished before it could be killed: the kill path went untested");
+    assert!(!partials.is_empty(), "build-tile was not killed while it wrote a tile");
     // What the dead job left is refused by name: assemble lists the tile whose temp file is there
     // as not built, with the partial file, and writes nothing.
     let early = dir.path().join("early.grotto");
@@ -160,16 +179,7 @@ fn a_killed_shard_and_a_killed_assemble_rerun_to_the_same_package() {
 #[test]
 fn assemble_refuses_partial_stale_and_damaged_tiles_by_name() {
     let dir = tempfile::tempdir().unwrap();
-    let scans = dir.path().join("scans");
-    ok(
-        pack()
-            .args(["synth", "--points", "30000", "--segments", "4", "--formats", "ply", "--out"])
-            .arg(&scans)
-            .output()
-            .unwrap(),
-        "synth",
-    );
-    let manifest = scans.join("manifest.toml");
+    let manifest = synth_manifest(dir.path(), 30_000);
     let run = |step: &str, work: &Path, extra: &[&str]| {
         let mut c = pack();
         c.arg(step).arg(&manifest).args(["--threads", "2", "--leaf-m", "0.125"]);

@@ -41,6 +41,7 @@ impl Shard {
 pub struct TileStage {
     /// The host the job ran on (a cluster's logs say which node built which shard).
     pub host: String,
+    /// How many tiles this job built: `built_tiles.len()`, kept for the JSON summary.
     pub built: usize,
     pub reused: usize,
     /// The tiles this job built (not those it found built), in tile order.
@@ -131,17 +132,14 @@ pub(crate) fn tile_stage(
                     let mut stage = stage.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
                     match done {
                         Ok(true) => stage.0.reused += 1,
-                        Ok(false) => {
-                            stage.0.built += 1;
-                            stage.0.built_tiles.push(t);
-                        }
+                        Ok(false) => stage.0.built_tiles.push(t),
                         Err(e) => {
                             failed.store(true, Relaxed);
                             stage.1.get_or_insert(e);
                             break;
                         }
                     }
-                    let finished = (stage.0.built + stage.0.reused) as u64;
+                    let finished = (stage.0.built_tiles.len() + stage.0.reused) as u64;
                     progress(Progress { stage: "tiles", done: finished, total: mine.len() as u64 });
                 }
             });
@@ -152,5 +150,6 @@ pub(crate) fn tile_stage(
         return Err(e);
     }
     stage.built_tiles.sort_unstable();
+    stage.built = stage.built_tiles.len();
     Ok(stage)
 }

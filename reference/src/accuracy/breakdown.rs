@@ -120,9 +120,19 @@ fn runtime_leaves(gpu: &Gpu, data: &SceneData, settings: Settings) -> grotto_run
     Ok(r.read_leaf_light()?.iter().zip(&data.leaves).map(|(l, leaf)| luminance(l.shown(leaf))).collect())
 }
 
-/// The dogleg's breakdown with `paths` reference paths per surfel; `progress` gets each step.
-pub fn dogleg(gpu: &Gpu, paths: u32, progress: impl Fn(&str)) -> grotto_runtime::Result<Breakdown> {
-    let data = testscenes::dogleg();
+/// The dogleg's breakdown with `paths` reference paths per surfel; with `leaves_on_surfels` its
+/// leaves sit on their surfels as in a built package ([`testscenes::leaves_on_surfels`]) instead
+/// of at their cells' centres. `progress` gets each step.
+pub fn dogleg(
+    gpu: &Gpu,
+    paths: u32,
+    leaves_on_surfels: bool,
+    progress: impl Fn(&str),
+) -> grotto_runtime::Result<Breakdown> {
+    let mut data = testscenes::dogleg();
+    if leaves_on_surfels {
+        testscenes::leaves_on_surfels(&mut data);
+    }
     let regions = dogleg_regions(&data);
     let base = Settings::preset(Quality::Balanced);
     let scene = SurfelScene::from_scene(&data, base.splat_scale);
@@ -170,11 +180,11 @@ pub fn dogleg(gpu: &Gpu, paths: u32, progress: impl Fn(&str)) -> grotto_runtime:
     let ref_lum = |e: &[Option<Estimate>]| -> Vec<f64> {
         e.iter().map(|x| x.as_ref().map_or(0.0, |e| luminance(e.mean.to_array()))).collect()
     };
+    let cut_lum: Vec<Vec<f64>> = cut.iter().map(|c| ref_lum(c)).collect();
     let mut bounces = Vec::new();
     for k in 1..CUT_BOUNCES.len() {
-        let (ref_now, ref_before) = (ref_lum(&cut[k]), ref_lum(&cut[k - 1]));
         for (name, leaves) in &regions {
-            let added_ref = sum(&ref_now, leaves, &full) - sum(&ref_before, leaves, &full);
+            let added_ref = sum(&cut_lum[k], leaves, &full) - sum(&cut_lum[k - 1], leaves, &full);
             let added_rt = sum(&runtime_cut[k], leaves, &full) - sum(&runtime_cut[k - 1], leaves, &full);
             bounces.push(BounceShare {
                 bounce: CUT_BOUNCES[k],
@@ -183,7 +193,7 @@ pub fn dogleg(gpu: &Gpu, paths: u32, progress: impl Fn(&str)) -> grotto_runtime:
             });
         }
     }
-    let direct_ref = ref_lum(&cut[0]);
+    let direct_ref = &cut_lum[0];
     let direct_ratio_percentiles = regions
         .iter()
         .map(|(name, leaves)| {
