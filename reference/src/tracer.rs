@@ -92,14 +92,14 @@ impl IntersectsAabb<f32, 3> for Segment {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathSettings {
     /// Bounces before Russian roulette starts.
-    pub(crate) min_bounces: u32,
+    pub min_bounces: u32,
     /// Hard cap (a path this long has throughput below any displayable level at albedo <= 0.99).
-    pub(crate) max_bounces: u32,
+    pub max_bounces: u32,
     /// Radiance of rays that leave the scene (the runtime's background).
-    pub(crate) background: Vec3,
+    pub background: Vec3,
     /// Environment radiance as 9 SH coefficients (the package's env-sh9 times its intensity):
     /// rays that leave the scene add its radiance in their direction, clamped at 0.
-    pub(crate) env_sh: Option<[[f32; 3]; 9]>,
+    pub env_sh: Option<[[f32; 3]; 9]>,
 }
 
 impl PathSettings {
@@ -373,7 +373,7 @@ impl SurfelScene {
     }
 
     /// Radiance arriving at `o` from direction `-d` (one path sample).
-    pub(crate) fn trace(&self, o: Vec3, d: Vec3, settings: &PathSettings, rng: &mut SmallRng) -> Vec3 {
+    pub fn trace(&self, o: Vec3, d: Vec3, settings: &PathSettings, rng: &mut SmallRng) -> Vec3 {
         let mut radiance = Vec3::ZERO;
         let mut throughput = Vec3::ONE;
         let (mut o, mut d) = (o, d);

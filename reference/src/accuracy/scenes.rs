@@ -30,8 +30,9 @@ pub struct SweepScene {
     pub variants: Vec<Variant>,
 }
 
-/// The hand-built scenes (name, description, scene): the furnace shell, the colour box and the
-/// hidden-chamber dogleg (also rendered by Mitsuba 3 to check the reference: mitsuba.rs).
+/// The hand-built scenes (name, description, scene): the furnace shell, the colour box, the
+/// hidden-chamber dogleg and the long passage (also rendered by Mitsuba 3 to check the
+/// reference: mitsuba.rs).
 pub fn closed_scenes() -> Vec<(&'static str, &'static str, SceneData)> {
     let mut furnace = testscenes::furnace_sphere(5, 11.0, 0.8, 1.0);
     let c = Vec3::splat(1.6);
@@ -53,6 +54,11 @@ pub fn closed_scenes() -> Vec<(&'static str, &'static str, SceneData)> {
             "dogleg",
             "rock, a lit room and a chamber behind three right-angle corridors, one 200 W lamp",
             testscenes::dogleg(),
+        ),
+        (
+            "passage",
+            "a 30 m tube of wandering width with a flat floor, 18 m straight then round a bend, lit by one 100 W lamp 1 m from its closed end; albedo 0.7 (issue 47)",
+            testscenes::passage(),
         ),
     ]
 }

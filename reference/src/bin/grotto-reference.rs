@@ -132,7 +132,7 @@ struct AccuracyArgs {
     /// Prefer the software adapter.
     #[arg(long)]
     software: bool,
-    /// Only this scene (furnace, "colour box", dogleg, bunny, "cave with sky", "demo cave"); the
+    /// Only this scene (furnace, "colour box", dogleg, passage, bunny, "cave with sky", "demo cave"); the
     /// report then covers it alone.
     #[arg(long)]
     scene: Option<String>,

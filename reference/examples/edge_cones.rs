@@ -1,0 +1,79 @@
+//! What the runtime's cones see, direction by direction, from three floor leaves of the dogleg's
+//! lit room (at the wall's edge, one leaf in, in the middle), against the path tracer's first hit
+//! (the direct light it sees), per band of elevation, cosine-weighted (issue 47: where the room's
+//! extra light per bounce comes from; docs/reference.md). The cones march the CPU reference
+//! (`cpu_ref`, the same march as the GPU's) over the pyramid of the direct light.
+//!
+//! `cargo run --release -p grotto-reference --example edge_cones` (TAN=0.05 for narrow cones).
+use glam::{IVec3, Vec3};
+use grotto_fixtures::testscenes;
+use grotto_reference::{PathSettings, SurfelScene};
+use grotto_runtime::gpu::{Gpu, GpuOptions};
+use grotto_runtime::passes::cpu_ref::CpuScene;
+use grotto_runtime::render::Renderer;
+use grotto_runtime::settings::{Quality, Settings};
+use rand::SeedableRng;
+
+fn main() -> anyhow::Result<()> {
+    let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })?;
+    // Leaves on their surfels, as in a package: the cones start one leaf off the surface.
+    let mut data = testscenes::dogleg();
+    testscenes::leaves_on_surfels(&mut data);
+    let leaf = data.leaf_size_m;
+    let base = Settings::preset(Quality::Balanced);
+    let mut r = Renderer::new(&gpu, &data, Settings { bounces: 0, bounce_tail: false, ..base.clone() })?;
+    r.settle(|_, _| {})?;
+    let light = r.read_leaf_light()?;
+    let mut p = r.params();
+    let narrow: f32 = std::env::var("TAN").ok().and_then(|v| v.parse().ok()).unwrap_or(p.cone_tan_half);
+    p.cone_tan_half = narrow;
+    let cpu = CpuScene::mip(&data, &light);
+    let scene = SurfelScene::from_scene(&data, base.splat_scale);
+    let ps = PathSettings { max_bounces: 1, ..PathSettings::for_scene(&data) };
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(5);
+    for cell in [IVec3::new(2, 5, 1), IVec3::new(3, 5, 1), IVec3::new(6, 5, 1)] {
+        let Some(i) = data.leaves.iter().position(|l| l.cell(leaf) == cell) else { continue };
+        let l = &data.leaves[i];
+        let n = Vec3::from_slice(&l.normal_mean[..3]).normalize();
+        let centre = Vec3::from_slice(&l.center_m[..3]);
+        let origin = centre + n * leaf;
+        println!("leaf {cell} centre {centre} normal {n}");
+        let (mut tot_rt, mut tot_ref) = (0.0, 0.0);
+        for e in 0..9 {
+            let elev = (5.0 + 10.0 * e as f32).to_radians();
+            let (mut band_rt, mut band_ref, mut w_sum) = (0.0, 0.0, 0.0);
+            for a in 0..24 {
+                let az = (a as f32 + 0.5) * std::f32::consts::TAU / 24.0;
+                let d = Vec3::new(elev.cos() * az.cos(), elev.cos() * az.sin(), elev.sin());
+                let w = f64::from(elev.sin() * elev.cos());
+                let c = cpu.trace_cone(
+                    &p,
+                    origin.as_dvec3(),
+                    d.as_dvec3(),
+                    [f64::from(leaf), f64::from(d.dot(n))],
+                );
+                let rt = c[1];
+                let mut rf = 0.0;
+                let rays = 64;
+                for _ in 0..rays {
+                    rf += f64::from(scene.trace(centre + n * (0.01 * leaf + 2e-3), d, &ps, &mut rng).y)
+                        / rays as f64;
+                }
+                band_rt += w * rt;
+                band_ref += w * rf;
+                w_sum += w;
+            }
+            println!(
+                "  elevation {:>2}: runtime {:.3} reference {:.3} ratio {:.3}",
+                5 + 10 * e,
+                band_rt / w_sum,
+                band_ref / w_sum,
+                band_rt / band_ref
+            );
+            tot_rt += band_rt;
+            tot_ref += band_ref;
+        }
+        println!("  all: ratio {:.3}", tot_rt / tot_ref);
+    }
+    Ok(())
+}
