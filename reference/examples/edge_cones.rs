@@ -4,7 +4,8 @@
 //! extra light per bounce comes from; docs/reference.md). The cones march the CPU reference
 //! (`cpu_ref`, the same march as the GPU's) over the pyramid of the direct light.
 //!
-//! `cargo run --release -p grotto-reference --example edge_cones` (TAN=0.05 for narrow cones).
+//! `cargo run --release -p grotto-reference --example edge_cones [x,y,z ...]` (leaf cells; TAN=0.05
+//! for narrow cones).
 use glam::{IVec3, Vec3};
 use grotto_fixtures::testscenes;
 use grotto_reference::{PathSettings, SurfelScene};
@@ -31,12 +32,24 @@ fn main() -> anyhow::Result<()> {
     let scene = SurfelScene::from_scene(&data, base.splat_scale);
     let ps = PathSettings { max_bounces: 1, ..PathSettings::for_scene(&data) };
     let mut rng = rand::rngs::SmallRng::seed_from_u64(5);
-    for cell in [IVec3::new(2, 5, 1), IVec3::new(3, 5, 1), IVec3::new(6, 5, 1)] {
+    // Cells from the command line (`x,y,z` each), else the room's three floor leaves.
+    let mut cells: Vec<IVec3> = std::env::args()
+        .skip(1)
+        .filter_map(|a| {
+            let v: Vec<i32> = a.split(',').filter_map(|x| x.trim().parse().ok()).collect();
+            (v.len() == 3).then(|| IVec3::new(v[0], v[1], v[2]))
+        })
+        .collect();
+    if cells.is_empty() {
+        cells = vec![IVec3::new(2, 5, 1), IVec3::new(3, 5, 1), IVec3::new(6, 5, 1)];
+    }
+    for cell in cells {
         let Some(i) = data.leaves.iter().position(|l| l.cell(leaf) == cell) else { continue };
         let l = &data.leaves[i];
         let n = Vec3::from_slice(&l.normal_mean[..3]).normalize();
         let centre = Vec3::from_slice(&l.center_m[..3]);
         let origin = centre + n * leaf;
+        let (t1, t2) = n.any_orthonormal_pair();
         println!("leaf {cell} centre {centre} normal {n}");
         let (mut tot_rt, mut tot_ref) = (0.0, 0.0);
         for e in 0..9 {
@@ -44,7 +57,7 @@ fn main() -> anyhow::Result<()> {
             let (mut band_rt, mut band_ref, mut w_sum) = (0.0, 0.0, 0.0);
             for a in 0..24 {
                 let az = (a as f32 + 0.5) * std::f32::consts::TAU / 24.0;
-                let d = Vec3::new(elev.cos() * az.cos(), elev.cos() * az.sin(), elev.sin());
+                let d = (t1 * az.cos() + t2 * az.sin()) * elev.cos() + n * elev.sin();
                 let w = f64::from(elev.sin() * elev.cos());
                 let c = cpu.trace_cone(
                     &p,
