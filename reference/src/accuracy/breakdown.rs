@@ -70,8 +70,7 @@ fn dogleg_regions(scene: &SceneData) -> Vec<(String, Vec<usize>)> {
     let mut regions: Vec<(String, Vec<usize>)> =
         testscenes::DOGLEG_REGIONS.iter().map(|(name, _, _)| ((*name).to_owned(), Vec::new())).collect();
     for (i, leaf) in scene.leaves.iter().enumerate() {
-        let c = (glam::Vec3::from_slice(&leaf.center_m[..3]) / scene.leaf_size_m).floor().as_ivec3();
-        if let Some(r) = testscenes::dogleg_region(c) {
+        if let Some(r) = testscenes::dogleg_region(leaf.cell(scene.leaf_size_m)) {
             regions[r].1.push(i);
         }
     }
