@@ -1,6 +1,7 @@
 //! Where light carried through passages goes wrong (issue 47): the runtime's outgoing radiance
 //! per leaf against the reference's (path traced from each leaf's surfels), summed per region of
-//! the dogleg (the lit room, the three corridors, the hidden chamber) and per bounce: each run
+//! the dogleg (the lit room, the three corridors, the hidden chamber) or of the long passage
+//! (stretches along it) and per bounce: each run
 //! with k bounces and no tail against the reference cut after k bounces, what each bounce adds
 //! against what the reference's k-th bounce adds, and the presets against full transport.
 //! Leaves, not pixels: the camera sees only the lit room and the first corridor, the light that
@@ -65,16 +66,59 @@ pub struct Breakdown {
     pub direct_ratio_percentiles: Vec<(String, [f64; 5])>,
 }
 
-/// The dogleg's leaves per region ([`testscenes::DOGLEG_REGIONS`]).
-fn dogleg_regions(scene: &SceneData) -> Vec<(String, Vec<usize>)> {
-    let mut regions: Vec<(String, Vec<usize>)> =
-        testscenes::DOGLEG_REGIONS.iter().map(|(name, _, _)| ((*name).to_owned(), Vec::new())).collect();
-    for (i, leaf) in scene.leaves.iter().enumerate() {
-        if let Some(r) = testscenes::dogleg_region(leaf.cell(scene.leaf_size_m)) {
-            regions[r].1.push(i);
+/// The scenes a breakdown is made for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BreakdownScene {
+    /// The lit room, three corridors and the hidden chamber ([`testscenes::dogleg`]).
+    Dogleg,
+    /// 30 m of passage lit at one end ([`testscenes::passage`]).
+    Passage,
+}
+
+/// Where the long passage's regions end along its centreline, metres from the lit end: 6 m
+/// stretches down the straight leg, the bend (18 to 22.7 m) and the leg after it.
+const PASSAGE_REGION_ENDS_M: [(&str, f32); 5] =
+    [("0-6 m", 6.0), ("6-12 m", 12.0), ("12-18 m", 18.0), ("bend", 22.7), ("past the bend", f32::INFINITY)];
+
+impl BreakdownScene {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Dogleg => "dogleg",
+            Self::Passage => "passage",
         }
     }
-    regions
+
+    fn data(self) -> SceneData {
+        match self {
+            Self::Dogleg => testscenes::dogleg(),
+            Self::Passage => testscenes::passage(),
+        }
+    }
+
+    /// The scene's leaves per region: the dogleg's [`testscenes::DOGLEG_REGIONS`], the passage's
+    /// stretches by distance along its centreline.
+    fn regions(self, scene: &SceneData) -> Vec<(String, Vec<usize>)> {
+        let names: Vec<&str> = match self {
+            Self::Dogleg => testscenes::DOGLEG_REGIONS.iter().map(|(name, _, _)| *name).collect(),
+            Self::Passage => PASSAGE_REGION_ENDS_M.iter().map(|(name, _)| *name).collect(),
+        };
+        let mut regions: Vec<(String, Vec<usize>)> =
+            names.iter().map(|n| ((*n).to_owned(), Vec::new())).collect();
+        for (i, leaf) in scene.leaves.iter().enumerate() {
+            let cell = leaf.cell(scene.leaf_size_m);
+            let region = match self {
+                Self::Dogleg => testscenes::dogleg_region(cell),
+                Self::Passage => {
+                    let along_m = testscenes::passage_position(cell).1;
+                    PASSAGE_REGION_ENDS_M.iter().position(|(_, end)| along_m < *end)
+                }
+            };
+            if let Some(r) = region {
+                regions[r].1.push(i);
+            }
+        }
+        regions
+    }
 }
 
 fn luminance(v: [f32; 3]) -> f64 {
@@ -119,20 +163,21 @@ fn runtime_leaves(gpu: &Gpu, data: &SceneData, settings: Settings) -> grotto_run
     Ok(r.read_leaf_light()?.iter().zip(&data.leaves).map(|(l, leaf)| luminance(l.shown(leaf))).collect())
 }
 
-/// The dogleg's breakdown with `paths` reference paths per surfel; with `leaves_on_surfels` its
+/// A scene's breakdown with `paths` reference paths per surfel; with `leaves_on_surfels` its
 /// leaves sit on their surfels as in a built package ([`testscenes::leaves_on_surfels`]) instead
 /// of at their cells' centres. `progress` gets each step.
-pub fn dogleg(
+pub fn breakdown(
     gpu: &Gpu,
+    which: BreakdownScene,
     paths: u32,
     leaves_on_surfels: bool,
     progress: impl Fn(&str),
 ) -> grotto_runtime::Result<Breakdown> {
-    let mut data = testscenes::dogleg();
+    let mut data = which.data();
     if leaves_on_surfels {
         testscenes::leaves_on_surfels(&mut data);
     }
-    let regions = dogleg_regions(&data);
+    let regions = which.regions(&data);
     let base = Settings::preset(Quality::Balanced);
     let scene = SurfelScene::from_scene(&data, base.splat_scale);
     let full_settings = PathSettings::for_scene(&data);
@@ -217,7 +262,7 @@ pub fn dogleg(
     let light_share =
         regions.iter().map(|(name, l)| (name.clone(), sum(&full_lum, l, &full) / total)).collect();
     Ok(Breakdown {
-        scene: "dogleg".into(),
+        scene: which.name().into(),
         paths_per_surfel: paths,
         light_share,
         rows,

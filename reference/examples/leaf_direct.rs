@@ -1,0 +1,105 @@
+//! The leaves whose direct light (no bounce) the runtime gets most wrong against the reference's
+//! (mean over the leaf's surfels), with their surfels' normals, and for the worst three the discs
+//! that stand between each of their surfels and the lamp. Issue 47: this is how the long
+//! passage's fins (discs standing past convex edges) and unit normals on edges showed up.
+//!
+//! `cargo run --release -p grotto-reference --example leaf_direct [passage|dogleg] [surfels]`
+//! (`surfels`: leaves on their surfels' centroid, as packages have them).
+use glam::Vec3;
+use grotto_fixtures::testscenes;
+use grotto_reference::{PathSettings, SurfelScene};
+use grotto_runtime::gpu::{Gpu, GpuOptions};
+use grotto_runtime::render::Renderer;
+use grotto_runtime::settings::{Quality, Settings};
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })?;
+    let mut data = if args.get(1).map(String::as_str) == Some("dogleg") {
+        testscenes::dogleg()
+    } else {
+        testscenes::passage()
+    };
+    if args.get(2).map(String::as_str) == Some("surfels") {
+        testscenes::leaves_on_surfels(&mut data);
+    }
+    let leaf = data.leaf_size_m;
+    let base = Settings::preset(Quality::Balanced);
+    let mut r = Renderer::new(&gpu, &data, Settings { bounces: 0, bounce_tail: false, ..base.clone() })?;
+    r.settle(|_, _| {})?;
+    let light = r.read_leaf_light()?;
+    let scene = SurfelScene::from_scene(&data, base.splat_scale);
+    let ps = PathSettings { max_bounces: 0, ..PathSettings::for_scene(&data) };
+    let reference = scene.leaf_radiance(&data, 16, &ps, 1);
+    let lum = |v: [f32; 3]| (v[0] + v[1] + v[2]) / 3.0;
+    let mut rows = Vec::new();
+    for (i, l) in data.leaves.iter().enumerate() {
+        let Some(e) = &reference[i] else { continue };
+        let want = lum(e.mean.to_array());
+        let got = lum(light[i].shown(l));
+        rows.push((i, got, want));
+    }
+    let total_got: f32 = rows.iter().map(|r| r.1).sum();
+    let total_want: f32 = rows.iter().map(|r| r.2).sum();
+    println!("sum runtime {total_got:.3} reference {total_want:.3}");
+    rows.sort_by(|a, b| (b.1 - b.2).abs().total_cmp(&(a.1 - a.2).abs()));
+    for &(i, got, want) in rows.iter().take(25) {
+        let l = &data.leaves[i];
+        let n = Vec3::from_slice(&l.normal_mean[..3]);
+        let c = Vec3::from_slice(&l.center_m[..3]);
+        let cell = l.cell(leaf);
+        let surfels: Vec<String> = data
+            .surfels
+            .iter()
+            .filter(|s| {
+                let p = Vec3::from_slice(&s.position_radius[..3]);
+                let sn = Vec3::from_slice(&s.normal_spread[..3]);
+                ((p - sn * 0.25 * leaf) / leaf).floor().as_ivec3() == cell
+            })
+            .map(|s| format!("{:?}", Vec3::from_slice(&s.normal_spread[..3])))
+            .collect();
+        println!(
+            "leaf {i} cell {cell} centre {c:.3} normal {n:.2} |n| {:.2} runtime {got:.3} reference {want:.3} surfels {}",
+            n.length(),
+            surfels.join(" ")
+        );
+    }
+    let lamp = data.lights[0].position_m;
+    for &(i, _, _) in rows.iter().take(3) {
+        let l = &data.leaves[i];
+        let cell = l.cell(leaf);
+        for s in &data.surfels {
+            let p = Vec3::from_slice(&s.position_radius[..3]);
+            let sn = Vec3::from_slice(&s.normal_spread[..3]);
+            if ((p - sn * 0.25 * leaf) / leaf).floor().as_ivec3() == cell {
+                println!("surfel {p:.3} n {sn} to lamp {lamp:.3}:");
+                for b in blockers(&data, base.splat_scale, p + sn * 0.25 * leaf, lamp) {
+                    println!("   {b}");
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The surfels (discs at `splat` times their radius) the segment from `a` to `b` crosses.
+fn blockers(data: &grotto_runtime::scene::data::SceneData, splat: f32, a: Vec3, b: Vec3) -> Vec<String> {
+    let v = b - a;
+    let len = v.length();
+    let d = v / len;
+    let mut out = Vec::new();
+    for s in &data.surfels {
+        let c = Vec3::from_slice(&s.position_radius[..3]);
+        let n = Vec3::from_slice(&s.normal_spread[..3]);
+        let r = s.position_radius[3] * splat;
+        let denom = n.dot(d);
+        if denom.abs() < 1e-8 {
+            continue;
+        }
+        let t = n.dot(c - a) / denom;
+        if t > 1e-3 && t < len - 1e-3 && (a + d * t - c).length_squared() <= r * r {
+            out.push(format!("disc at {c:.3} n {n} hit t {t:.3} at {:.3}", a + d * t));
+        }
+    }
+    out
+}
