@@ -5,7 +5,7 @@
 //! (`cpu_ref`, the same march as the GPU's) over the pyramid of the direct light.
 //!
 //! `cargo run --release -p grotto-reference --example edge_cones [x,y,z ...]` (leaf cells; TAN=0.05
-//! for narrow cones).
+//! for narrow cones; SCENE=passage for the long passage).
 use glam::{IVec3, Vec3};
 use grotto_fixtures::testscenes;
 use grotto_reference::{PathSettings, SurfelScene};
@@ -18,7 +18,8 @@ use rand::SeedableRng;
 fn main() -> anyhow::Result<()> {
     let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })?;
     // Leaves on their surfels, as in a package: the cones start one leaf off the surface.
-    let mut data = testscenes::dogleg();
+    let passage = std::env::var("SCENE").is_ok_and(|s| s == "passage");
+    let mut data = if passage { testscenes::passage() } else { testscenes::dogleg() };
     testscenes::leaves_on_surfels(&mut data);
     let leaf = data.leaf_size_m;
     let base = Settings::preset(Quality::Balanced);

@@ -43,6 +43,17 @@ fn main() -> anyhow::Result<()> {
     let total_want: f32 = rows.iter().map(|r| r.2).sum();
     println!("sum runtime {total_got:.3} reference {total_want:.3}");
     rows.sort_by(|a, b| (b.1 - b.2).abs().total_cmp(&(a.1 - a.2).abs()));
+    // Cells named in CELLS (`x,y,z;x,y,z`) first.
+    if let Ok(cells) = std::env::var("CELLS") {
+        let want: Vec<glam::IVec3> = cells
+            .split(';')
+            .filter_map(|c| {
+                let v: Vec<i32> = c.split(',').filter_map(|x| x.trim().parse().ok()).collect();
+                (v.len() == 3).then(|| glam::IVec3::new(v[0], v[1], v[2]))
+            })
+            .collect();
+        rows.retain(|r| want.contains(&data.leaves[r.0].cell(leaf)));
+    }
     for &(i, got, want) in rows.iter().take(25) {
         let l = &data.leaves[i];
         let n = Vec3::from_slice(&l.normal_mean[..3]);

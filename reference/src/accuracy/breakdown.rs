@@ -88,10 +88,11 @@ impl BreakdownScene {
         }
     }
 
-    fn data(self) -> SceneData {
+    /// The scene: the hand-built dogleg, the scanned passage (as the accuracy report has them).
+    fn data(self) -> Result<SceneData, String> {
         match self {
-            Self::Dogleg => testscenes::dogleg(),
-            Self::Passage => testscenes::passage(),
+            Self::Dogleg => Ok(testscenes::dogleg()),
+            Self::Passage => crate::accuracy::scanned_passage(),
         }
     }
 
@@ -105,11 +106,14 @@ impl BreakdownScene {
         let mut regions: Vec<(String, Vec<usize>)> =
             names.iter().map(|n| ((*n).to_owned(), Vec::new())).collect();
         for (i, leaf) in scene.leaves.iter().enumerate() {
-            let cell = leaf.cell(scene.leaf_size_m);
             let region = match self {
-                Self::Dogleg => testscenes::dogleg_region(cell),
+                Self::Dogleg => testscenes::dogleg_region(leaf.cell(scene.leaf_size_m)),
                 Self::Passage => {
-                    let along_m = testscenes::passage_position(cell).1;
+                    // The package's frame to the passage's own (scanned_passage::ORIGIN_M).
+                    let world = glam::DVec3::from_array(scene.frame_origin_m)
+                        + glam::Vec3::from_slice(&leaf.center_m[..3]).as_dvec3();
+                    let own = (world - grotto_fixtures::scanned_passage::origin_m()).as_vec3();
+                    let along_m = testscenes::passage_position_m(own).1;
                     PASSAGE_REGION_ENDS_M.iter().position(|(_, end)| along_m < *end)
                 }
             };
@@ -173,8 +177,9 @@ pub fn breakdown(
     leaves_on_surfels: bool,
     progress: impl Fn(&str),
 ) -> grotto_runtime::Result<Breakdown> {
-    let mut data = which.data();
-    if leaves_on_surfels {
+    let mut data =
+        which.data().map_err(|problem| grotto_runtime::Error::Scene { package: which.name().into(), problem })?;
+    if leaves_on_surfels && which == BreakdownScene::Dogleg {
         testscenes::leaves_on_surfels(&mut data);
     }
     let regions = which.regions(&data);

@@ -30,8 +30,8 @@ pub struct SweepScene {
     pub variants: Vec<Variant>,
 }
 
-/// The hand-built scenes (name, description, scene): the furnace shell, the colour box, the
-/// hidden-chamber dogleg and the long passage (also rendered by Mitsuba 3 to check the
+/// The closed scenes (name, description, scene): the hand-built furnace shell, colour box and
+/// hidden-chamber dogleg, and the scanned long passage (also rendered by Mitsuba 3 to check the
 /// reference: mitsuba.rs).
 pub fn closed_scenes() -> Vec<(&'static str, &'static str, SceneData)> {
     let mut furnace = testscenes::furnace_sphere(5, 11.0, 0.8, 1.0);
@@ -43,7 +43,7 @@ pub fn closed_scenes() -> Vec<(&'static str, &'static str, SceneData)> {
         up: Vec3::Z,
         fov_y_deg: 70.0,
     });
-    vec![
+    let mut scenes = vec![
         ("furnace", "closed shell, emission 1, albedo 0.8 (exact radiance 5 everywhere)", furnace),
         (
             "colour box",
@@ -55,12 +55,25 @@ pub fn closed_scenes() -> Vec<(&'static str, &'static str, SceneData)> {
             "rock, a lit room and a chamber behind three right-angle corridors, one 200 W lamp",
             testscenes::dogleg(),
         ),
-        (
+    ];
+    match scanned_passage() {
+        Ok(data) => scenes.push((
             "passage",
-            "a 30 m tube of wandering width with a flat floor, 18 m straight then round a bend, lit by one 100 W lamp 1 m from its closed end; albedo 0.7 (issue 47)",
-            testscenes::passage(),
-        ),
-    ]
+            "a 30 m tube of wandering width with a flat floor, 18 m straight then round a bend, lit by one 100 W lamp 1 m from its closed end; albedo 0.7; its smooth surface sampled every 5 cm by six scans at survey coordinates and built by grotto-pack with 0.25 m leaves (issue 47)",
+            data,
+        )),
+        Err(e) => eprintln!("passage scene skipped: {e}"),
+    }
+    scenes
+}
+
+/// The long passage scanned and built through the preprocessor
+/// (`grotto_fixtures::scanned_passage`).
+pub fn scanned_passage() -> Result<SceneData, String> {
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let out = grotto_fixtures::scanned_passage::passage_package(dir.path()).map_err(|e| e.to_string())?;
+    let pkg = grotto_format::Package::open(&out).map_err(|e| e.to_string())?;
+    SceneData::from_package(&pkg).map_err(|e| e.to_string())
 }
 
 /// The built-in scenes: the furnace shell, the colour box, the hidden-chamber dogleg and the
