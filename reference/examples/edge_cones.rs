@@ -19,13 +19,23 @@ fn main() -> anyhow::Result<()> {
     let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })?;
     // Leaves on their surfels, as in a package: the cones start one leaf off the surface.
     let passage = std::env::var("SCENE").is_ok_and(|s| s == "passage");
-    let mut data = if passage { testscenes::passage() } else { testscenes::dogleg() };
-    testscenes::leaves_on_surfels(&mut data);
+    let mut data = if passage {
+        grotto_reference::accuracy::scanned_passage().map_err(anyhow::Error::msg)?
+    } else {
+        testscenes::dogleg()
+    };
+    if !passage {
+        testscenes::leaves_on_surfels(&mut data);
+    }
     let leaf = data.leaf_size_m;
     let base = Settings::preset(Quality::Balanced);
     let mut r = Renderer::new(&gpu, &data, Settings { bounces: 0, bounce_tail: false, ..base.clone() })?;
     r.settle(|_, _| {})?;
     let light = r.read_leaf_light()?;
+    // The GPU's own gather after one bounce (8 interleaved cones), for comparison.
+    let mut r1 = Renderer::new(&gpu, &data, Settings { bounces: 1, bounce_tail: false, ..base.clone() })?;
+    r1.settle(|_, _| {})?;
+    let light1 = r1.read_leaf_light()?;
     let mut p = r.params();
     let narrow: f32 = std::env::var("TAN").ok().and_then(|v| v.parse().ok()).unwrap_or(p.cone_tan_half);
     p.cone_tan_half = narrow;
@@ -41,7 +51,30 @@ fn main() -> anyhow::Result<()> {
             (v.len() == 3).then(|| IVec3::new(v[0], v[1], v[2]))
         })
         .collect();
-    if cells.is_empty() {
+    if cells.is_empty() && passage {
+        // A floor, a wall and a ceiling leaf ALONG=a,b metres down the scanned passage (default
+        // 4.5-5, 3.5-4 m past the lamp).
+        let along_range: Vec<f32> = std::env::var("ALONG")
+            .unwrap_or_else(|_| "4.5,5".into())
+            .split(',')
+            .filter_map(|x| x.parse().ok())
+            .collect();
+        let (a0, a1) =
+            (along_range.first().copied().unwrap_or(4.5), along_range.get(1).copied().unwrap_or(5.0));
+        for want in [Vec3::Z, Vec3::Y, -Vec3::Z] {
+            let found = data.leaves.iter().find(|l| {
+                let world = glam::DVec3::from_array(data.frame_origin_m)
+                    + Vec3::from_slice(&l.center_m[..3]).as_dvec3();
+                let own = (world - grotto_fixtures::scanned_passage::origin_m()).as_vec3();
+                let along = testscenes::passage_position_m(own).1;
+                let n = Vec3::from_slice(&l.normal_mean[..3]).normalize_or_zero();
+                (a0..a1).contains(&along)
+                    && n.dot(want) > 0.95
+                    && (0.99..).contains(&Vec3::from_slice(&l.normal_mean[..3]).length())
+            });
+            cells.extend(found.map(|l| l.cell(leaf)));
+        }
+    } else if cells.is_empty() {
         cells = vec![IVec3::new(2, 5, 1), IVec3::new(3, 5, 1), IVec3::new(6, 5, 1)];
     }
     for cell in cells {
@@ -49,10 +82,12 @@ fn main() -> anyhow::Result<()> {
         let l = &data.leaves[i];
         let n = Vec3::from_slice(&l.normal_mean[..3]).normalize();
         let centre = Vec3::from_slice(&l.center_m[..3]);
-        let origin = centre + n * leaf;
+        // LIFT: the cone origin's height above the surface in leaves (the runtime's is 1).
+        let lift: f32 = std::env::var("LIFT").ok().and_then(|v| v.parse().ok()).unwrap_or(1.0) * leaf;
+        let origin = centre + n * lift;
         let (t1, t2) = n.any_orthonormal_pair();
         println!("leaf {cell} centre {centre} normal {n}");
-        let (mut tot_rt, mut tot_ref) = (0.0, 0.0);
+        let (mut tot_rt, mut tot_ref, mut tot_w) = (0.0, 0.0, 0.0);
         for e in 0..9 {
             let elev = (5.0 + 10.0 * e as f32).to_radians();
             let (mut band_rt, mut band_ref, mut w_sum) = (0.0, 0.0, 0.0);
@@ -64,7 +99,7 @@ fn main() -> anyhow::Result<()> {
                     &p,
                     origin.as_dvec3(),
                     d.as_dvec3(),
-                    [f64::from(leaf), f64::from(d.dot(n))],
+                    [f64::from(lift), f64::from(d.dot(n))],
                 );
                 let rt = c[1];
                 let mut rf = 0.0;
@@ -84,10 +119,17 @@ fn main() -> anyhow::Result<()> {
                 band_ref / w_sum,
                 band_rt / band_ref
             );
+            tot_w += w_sum;
             tot_rt += band_rt;
             tot_ref += band_ref;
         }
-        println!("  all: ratio {:.3}", tot_rt / tot_ref);
+        println!(
+            "  all: ratio {:.3} (dense cones {:.3}, path tracer {:.3}, the GPU's 8-cone gather {:.3})",
+            tot_rt / tot_ref,
+            tot_rt / tot_w,
+            tot_ref / tot_w,
+            light1[i].gather[1]
+        );
     }
     Ok(())
 }

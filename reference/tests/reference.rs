@@ -178,3 +178,38 @@ fn propagation_gathers_every_cone_on_the_demo_cave_with_every_preset() {
         assert!(worst < 1e-3, "{}: a cone was cut short: {worst}", q.name());
     }
 }
+
+#[test]
+fn the_scanned_passage_is_closed_and_in_the_passage_frame() {
+    // Built through the preprocessor at survey coordinates: its lamp and camera come back in the
+    // package's frame where the hand-built passage has them, every leaf lies on the passage's
+    // wall, and no ray from the lamp escapes between the surfels (the reference sees no sky).
+    let data = grotto_reference::accuracy::scanned_passage().expect("the scanned passage builds");
+    let origin = grotto_fixtures::scanned_passage::origin_m();
+    let own = |p: Vec3| (glam::DVec3::from_array(data.frame_origin_m) + p.as_dvec3() - origin).as_vec3();
+    assert_eq!(data.lights.len(), 1);
+    assert!((own(data.lights[0].position_m) - testscenes::passage_lamp().position_m).length() < 1e-3);
+    assert!((own(data.cameras[0].eye_m) - testscenes::passage_camera().eye_m).length() < 1e-3);
+    assert!(data.leaves.len() > 3000, "{} leaves", data.leaves.len());
+    for leaf in &data.leaves {
+        let p = own(Vec3::from_slice(&leaf.center_m[..3]));
+        let (dist_leaves, along_m) = testscenes::passage_position_m(p);
+        assert!(dist_leaves < 7.0 && along_m <= testscenes::PASSAGE_LENGTH_M + 1e-3, "leaf at {p}");
+    }
+    let lamp = data.lights[0].position_m;
+    let scene = SurfelScene::from_scene(&data, 2.0);
+    let discs = SurfelScene::new(scene.discs().to_vec(), Vec::new(), data.leaf_size_m);
+    let sky = PathSettings { min_bounces: 1, max_bounces: 1, background: Vec3::ONE, env_sh: None };
+    let mut rng = <rand::rngs::SmallRng as rand::SeedableRng>::seed_from_u64(3);
+    let n = 4000;
+    let escaped = (0..n)
+        .filter(|i| {
+            let z = 1.0 - 2.0 * (*i as f32 + 0.5) / n as f32;
+            let phi = *i as f32 * std::f32::consts::PI * (3.0 - 5f32.sqrt());
+            let rho = (1.0 - z * z).sqrt();
+            let d = Vec3::new(rho * phi.cos(), rho * phi.sin(), z);
+            discs.trace(lamp, d, &sky, &mut rng).x > 0.5
+        })
+        .count();
+    assert_eq!(escaped, 0, "{escaped} of {n} rays from the lamp left the passage");
+}

@@ -177,8 +177,9 @@ pub fn breakdown(
     leaves_on_surfels: bool,
     progress: impl Fn(&str),
 ) -> grotto_runtime::Result<Breakdown> {
-    let mut data =
-        which.data().map_err(|problem| grotto_runtime::Error::Scene { package: which.name().into(), problem })?;
+    let mut data = which
+        .data()
+        .map_err(|problem| grotto_runtime::Error::Scene { package: which.name().into(), problem })?;
     if leaves_on_surfels && which == BreakdownScene::Dogleg {
         testscenes::leaves_on_surfels(&mut data);
     }

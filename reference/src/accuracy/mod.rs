@@ -17,5 +17,7 @@ pub use report::{
     MONOTONE_KNOBS, MONOTONE_SLACK, NOISE_FLOOR, knob_errors, knob_monotone, knob_series, lights_report,
     pareto, plot_svg, presets_monotone, report, with_truth,
 };
-pub use scenes::{SweepScene, bunny, closed_scenes, demo_cave, scanned_passage, scenes, scenes_cached, shared_data};
+pub use scenes::{
+    SweepScene, bunny, closed_scenes, demo_cave, scanned_passage, scenes, scenes_cached, shared_data,
+};
 pub use sweep::{SUPERSAMPLE, SUPERSAMPLE_CHECK, error_map, lights_sweep, sweep};

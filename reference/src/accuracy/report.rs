@@ -187,9 +187,10 @@ fn report_intro(s: &mut String, device: &str, width: u32, height: u32, command: 
          renderer holds. Knobs vary one at a time around the balanced preset; package knobs (SVO depth, \
          colour codec, compact surfels) rebuild the scene's package and run the balanced preset on it, against the same \
          reference. Pareto-optimal rows (no other row is both faster and more accurate) are marked *. \
-         Where the dogleg's error sits, region by region and bounce by bounce (`breakdown`): \
-         [accuracy-passages.md](accuracy-passages.md), and before issue 47 changed the hand-built scenes \
-         [accuracy-passages-before.md](accuracy-passages-before.md) (docs/reference.md, \"Where the light goes wrong\").\n"
+         Where the error sits, region by region and bounce by bounce (`breakdown`): the dogleg's \
+         [accuracy-passages.md](accuracy-passages.md) (and before issue 47 changed the hand-built scenes \
+         [accuracy-passages-before.md](accuracy-passages-before.md)), the passage's stretches \
+         [accuracy-passage-long.md](accuracy-passage-long.md) (docs/reference.md, \"Where the light goes wrong\").\n"
     );
 }
 
