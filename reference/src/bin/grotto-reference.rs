@@ -222,7 +222,7 @@ fn breakdown(a: BreakdownArgs) -> anyhow::Result<()> {
             "each region of the dogleg (an air box and the rock cells around it, `testscenes::DOGLEG_REGIONS`): the lit room, the three corridors in the order light reaches them, and the chamber behind them. Leaves, not pixels: the report's camera sees only the lit room and the first corridor"
         }
         breakdown::BreakdownScene::Passage => {
-            "each stretch of the long passage (`testscenes::passage`; a leaf belongs to the stretch its nearest point of the centreline lies in, metres from the lit end): three 6 m stretches of the straight leg, the bend and the 7 m past it, where only light that bounced arrives"
+            "each stretch of the long passage (scanned and built by grotto-pack, `grotto_fixtures::scanned_passage`; a leaf belongs to the stretch its nearest point of the centreline lies in, metres from the lit end): three 6 m stretches of the straight leg, the bend and the 7 m past it, where only light that bounced arrives"
         }
     };
     let md = format!(
