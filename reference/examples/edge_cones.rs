@@ -5,7 +5,10 @@
 //! (`cpu_ref`, the same march as the GPU's) over the pyramid of the direct light.
 //!
 //! `cargo run --release -p grotto-reference --example edge_cones [x,y,z ...]` (leaf cells; TAN=0.05
-//! for narrow cones; SCENE=passage for the long passage).
+//! for narrow cones; LIFT=k for cones starting k leaves off the surface; SCENE=passage for the
+//! scanned long passage, whose floor, wall and ceiling leaves ALONG=a,b metres down it are taken
+//! when no cells are given; HIT=1 adds the runtime's radiance of the leaves the path tracer's rays
+//! hit, to tell a cone meeting other leaves from a leaf with the wrong radiance).
 use glam::{IVec3, Vec3};
 use grotto_fixtures::testscenes;
 use grotto_reference::{PathSettings, SurfelScene};
@@ -87,7 +90,7 @@ fn main() -> anyhow::Result<()> {
         let origin = centre + n * lift;
         let (t1, t2) = n.any_orthonormal_pair();
         println!("leaf {cell} centre {centre} normal {n}");
-        let (mut tot_rt, mut tot_ref, mut tot_w) = (0.0, 0.0, 0.0);
+        let (mut tot_rt, mut tot_ref, mut tot_w, mut tot_hit, mut hit_w) = (0.0, 0.0, 0.0, 0.0, 0.0);
         for e in 0..9 {
             let elev = (5.0 + 10.0 * e as f32).to_radians();
             let (mut band_rt, mut band_ref, mut w_sum) = (0.0, 0.0, 0.0);
@@ -108,6 +111,42 @@ fn main() -> anyhow::Result<()> {
                     rf += f64::from(scene.trace(centre + n * (0.01 * leaf + 2e-3), d, &ps, &mut rng).y)
                         / rays as f64;
                 }
+                // HIT: the runtime's radiance of the leaf the path tracer's first hit lies in
+                // (brute force over the discs): whether a cone meets other leaves than the ray
+                // does, or the same leaves with a radiance other than the point's.
+                if std::env::var("HIT").is_ok() {
+                    let o = centre + n * (0.01 * leaf + 2e-3);
+                    let mut best: Option<(f32, Vec3)> = None;
+                    for sf in &data.surfels {
+                        let c = Vec3::from_slice(&sf.position_radius[..3]);
+                        let sn = Vec3::from_slice(&sf.normal_spread[..3]);
+                        let r = sf.position_radius[3] * base.splat_scale;
+                        let denom = sn.dot(d);
+                        if denom.abs() < 1e-8 {
+                            continue;
+                        }
+                        let t = sn.dot(c - o) / denom;
+                        if t > 1e-3
+                            && best.is_none_or(|b| t < b.0)
+                            && (o + d * t - c).length_squared() <= r * r
+                        {
+                            best = Some((t, c));
+                        }
+                    }
+                    if let Some((_, c)) = best {
+                        // The disc's leaf: the nearest leaf centre (a package's surfel lies in or
+                        // beside its leaf's cell).
+                        let k = data.leaves.iter().enumerate().min_by(|a, b| {
+                            let da = (Vec3::from_slice(&a.1.center_m[..3]) - c).length_squared();
+                            let db = (Vec3::from_slice(&b.1.center_m[..3]) - c).length_squared();
+                            da.total_cmp(&db)
+                        });
+                        if let Some((k, _)) = k {
+                            tot_hit += w * f64::from(light[k].out[1]);
+                            hit_w += w;
+                        }
+                    }
+                }
                 band_rt += w * rt;
                 band_ref += w * rf;
                 w_sum += w;
@@ -124,11 +163,12 @@ fn main() -> anyhow::Result<()> {
             tot_ref += band_ref;
         }
         println!(
-            "  all: ratio {:.3} (dense cones {:.3}, path tracer {:.3}, the GPU's 8-cone gather {:.3})",
+            "  all: ratio {:.3} (dense cones {:.3}, path tracer {:.3}, the GPU's 8-cone gather {:.3}, leaves the rays hit {:.3})",
             tot_rt / tot_ref,
             tot_rt / tot_w,
             tot_ref / tot_w,
-            light1[i].gather[1]
+            light1[i].gather[1],
+            tot_hit / hit_w.max(1e-12)
         );
     }
     Ok(())
