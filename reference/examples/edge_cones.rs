@@ -8,15 +8,78 @@
 //! for narrow cones; LIFT=k for cones starting k leaves off the surface; SCENE=passage for the
 //! scanned long passage, whose floor, wall and ceiling leaves ALONG=a,b metres down it are taken
 //! when no cells are given; HIT=1 adds the runtime's radiance of the leaves the path tracer's rays
-//! hit, to tell a cone meeting other leaves from a leaf with the wrong radiance).
+//! hit, to tell a cone meeting other leaves from a leaf with the wrong radiance; DIRS=1 prints
+//! every direction: the cone's and the ray's light, where the cone reaches half its opacity and
+//! where the ray meets a disc).
 use glam::{IVec3, Vec3};
 use grotto_fixtures::testscenes;
+use grotto_reference::accuracy::breakdown::{balanced_cut, settled};
 use grotto_reference::{PathSettings, SurfelScene};
+use grotto_runtime::gpu::types::Params;
 use grotto_runtime::gpu::{Gpu, GpuOptions};
 use grotto_runtime::passes::cpu_ref::CpuScene;
-use grotto_runtime::render::Renderer;
+use grotto_runtime::scene::data::SceneData;
 use grotto_runtime::settings::{Quality, Settings};
 use rand::SeedableRng;
+
+fn env_f32(name: &str) -> Option<f32> {
+    std::env::var(name).ok().and_then(|v| v.parse().ok())
+}
+
+/// A flat floor, wall and ceiling leaf ALONG=a,b metres down the scanned passage (default 4.5-5,
+/// 3.5-4 m past the lamp).
+fn passage_cells(data: &SceneData) -> Vec<IVec3> {
+    let range: Vec<f32> = std::env::var("ALONG")
+        .unwrap_or_else(|_| "4.5,5".into())
+        .split(',')
+        .filter_map(|x| x.parse().ok())
+        .collect();
+    let (a0, a1) = (range.first().copied().unwrap_or(4.5), range.get(1).copied().unwrap_or(5.0));
+    [Vec3::Z, Vec3::Y, -Vec3::Z]
+        .into_iter()
+        .filter_map(|want| {
+            data.leaves.iter().find(|l| {
+                let own = grotto_fixtures::scanned_passage::passage_frame_m(
+                    data,
+                    Vec3::from_slice(&l.center_m[..3]),
+                );
+                let along = testscenes::passage_position_m(own).1;
+                let mean = Vec3::from_slice(&l.normal_mean[..3]);
+                // A flat leaf (normals agree) facing the way wanted.
+                (a0..a1).contains(&along)
+                    && mean.length() >= 0.99
+                    && mean.normalize_or_zero().dot(want) > 0.95
+            })
+        })
+        .map(|l| l.cell(data.leaf_size_m))
+        .collect()
+}
+
+/// The leaf whose light the path tracer's ray from `o` along `d` first meets: the leaf nearest
+/// the disc it hits (a package's surfel lies in or beside its leaf's cell).
+fn hit_leaf(scene: &SurfelScene, data: &SceneData, o: Vec3, d: Vec3) -> Option<(f32, usize)> {
+    let (t, k) = scene.intersect(o, d, f32::INFINITY)?;
+    let c = scene.discs()[k].center_m();
+    let dist =
+        |l: &grotto_runtime::gpu::types::LeafGpu| (Vec3::from_slice(&l.center_m[..3]) - c).length_squared();
+    let nearest = data.leaves.iter().enumerate().min_by(|a, b| dist(a.1).total_cmp(&dist(b.1)))?;
+    Some((t, nearest.0))
+}
+
+/// Where a cone from `origin` along `d` reaches half its opacity (bisection on the march's length).
+fn half_opacity_m(cpu: &CpuScene<'_>, p: &Params, origin: Vec3, d: Vec3, rise: [f64; 2]) -> f32 {
+    let (mut lo, mut hi) = (0.0f32, p.max_distance_m);
+    for _ in 0..20 {
+        let mid = 0.5 * (lo + hi);
+        let q = Params { max_distance_m: mid, ..*p };
+        if cpu.trace_cone(&q, origin.as_dvec3(), d.as_dvec3(), rise)[3] >= 0.5 {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    hi
+}
 
 fn main() -> anyhow::Result<()> {
     let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })?;
@@ -31,22 +94,18 @@ fn main() -> anyhow::Result<()> {
         testscenes::leaves_on_surfels(&mut data);
     }
     let leaf = data.leaf_size_m;
-    let base = Settings::preset(Quality::Balanced);
-    let mut r = Renderer::new(&gpu, &data, Settings { bounces: 0, bounce_tail: false, ..base.clone() })?;
-    r.settle(|_, _| {})?;
+    let r = settled(&gpu, &data, balanced_cut(0))?;
     let light = r.read_leaf_light()?;
     // The GPU's own gather after one bounce (8 interleaved cones), for comparison.
-    let mut r1 = Renderer::new(&gpu, &data, Settings { bounces: 1, bounce_tail: false, ..base.clone() })?;
-    r1.settle(|_, _| {})?;
-    let light1 = r1.read_leaf_light()?;
+    let light1 = settled(&gpu, &data, balanced_cut(1))?.read_leaf_light()?;
     let mut p = r.params();
-    let narrow: f32 = std::env::var("TAN").ok().and_then(|v| v.parse().ok()).unwrap_or(p.cone_tan_half);
-    p.cone_tan_half = narrow;
+    p.cone_tan_half = env_f32("TAN").unwrap_or(p.cone_tan_half);
     let cpu = CpuScene::mip(&data, &light);
-    let scene = SurfelScene::from_scene(&data, base.splat_scale);
+    let scene = SurfelScene::from_scene(&data, Settings::preset(Quality::Balanced).splat_scale);
     let ps = PathSettings { max_bounces: 1, ..PathSettings::for_scene(&data) };
     let mut rng = rand::rngs::SmallRng::seed_from_u64(5);
-    // Cells from the command line (`x,y,z` each), else the room's three floor leaves.
+    let (hit, dirs) = (std::env::var("HIT").is_ok(), std::env::var("DIRS").is_ok());
+    // Cells from the command line (`x,y,z` each), else the passage's or the room's three leaves.
     let mut cells: Vec<IVec3> = std::env::args()
         .skip(1)
         .filter_map(|a| {
@@ -54,31 +113,12 @@ fn main() -> anyhow::Result<()> {
             (v.len() == 3).then(|| IVec3::new(v[0], v[1], v[2]))
         })
         .collect();
-    if cells.is_empty() && passage {
-        // A floor, a wall and a ceiling leaf ALONG=a,b metres down the scanned passage (default
-        // 4.5-5, 3.5-4 m past the lamp).
-        let along_range: Vec<f32> = std::env::var("ALONG")
-            .unwrap_or_else(|_| "4.5,5".into())
-            .split(',')
-            .filter_map(|x| x.parse().ok())
-            .collect();
-        let (a0, a1) =
-            (along_range.first().copied().unwrap_or(4.5), along_range.get(1).copied().unwrap_or(5.0));
-        for want in [Vec3::Z, Vec3::Y, -Vec3::Z] {
-            let found = data.leaves.iter().find(|l| {
-                let world = glam::DVec3::from_array(data.frame_origin_m)
-                    + Vec3::from_slice(&l.center_m[..3]).as_dvec3();
-                let own = (world - grotto_fixtures::scanned_passage::origin_m()).as_vec3();
-                let along = testscenes::passage_position_m(own).1;
-                let n = Vec3::from_slice(&l.normal_mean[..3]).normalize_or_zero();
-                (a0..a1).contains(&along)
-                    && n.dot(want) > 0.95
-                    && (0.99..).contains(&Vec3::from_slice(&l.normal_mean[..3]).length())
-            });
-            cells.extend(found.map(|l| l.cell(leaf)));
-        }
-    } else if cells.is_empty() {
-        cells = vec![IVec3::new(2, 5, 1), IVec3::new(3, 5, 1), IVec3::new(6, 5, 1)];
+    if cells.is_empty() {
+        cells = if passage {
+            passage_cells(&data)
+        } else {
+            vec![IVec3::new(2, 5, 1), IVec3::new(3, 5, 1), IVec3::new(6, 5, 1)]
+        };
     }
     for cell in cells {
         let Some(i) = data.leaves.iter().position(|l| l.cell(leaf) == cell) else { continue };
@@ -86,8 +126,10 @@ fn main() -> anyhow::Result<()> {
         let n = Vec3::from_slice(&l.normal_mean[..3]).normalize();
         let centre = Vec3::from_slice(&l.center_m[..3]);
         // LIFT: the cone origin's height above the surface in leaves (the runtime's is 1).
-        let lift: f32 = std::env::var("LIFT").ok().and_then(|v| v.parse().ok()).unwrap_or(1.0) * leaf;
+        let lift = env_f32("LIFT").unwrap_or(1.0) * leaf;
         let origin = centre + n * lift;
+        // The path tracer's rays start on the surface.
+        let ray_o = centre + n * (0.01 * leaf + 2e-3);
         let (t1, t2) = n.any_orthonormal_pair();
         println!("leaf {cell} centre {centre} normal {n}");
         let (mut tot_rt, mut tot_ref, mut tot_w, mut tot_hit, mut hit_w) = (0.0, 0.0, 0.0, 0.0, 0.0);
@@ -98,54 +140,24 @@ fn main() -> anyhow::Result<()> {
                 let az = (a as f32 + 0.5) * std::f32::consts::TAU / 24.0;
                 let d = (t1 * az.cos() + t2 * az.sin()) * elev.cos() + n * elev.sin();
                 let w = f64::from(elev.sin() * elev.cos());
-                let c = cpu.trace_cone(
-                    &p,
-                    origin.as_dvec3(),
-                    d.as_dvec3(),
-                    [f64::from(lift), f64::from(d.dot(n))],
-                );
-                let rt = c[1];
-                let mut rf = 0.0;
+                let rise = [f64::from(lift), f64::from(d.dot(n))];
+                let rt = cpu.trace_cone(&p, origin.as_dvec3(), d.as_dvec3(), rise)[1];
                 let rays = 64;
-                for _ in 0..rays {
-                    rf += f64::from(scene.trace(centre + n * (0.01 * leaf + 2e-3), d, &ps, &mut rng).y)
+                let rf: f64 =
+                    (0..rays).map(|_| f64::from(scene.trace(ray_o, d, &ps, &mut rng).y)).sum::<f64>()
                         / rays as f64;
+                let first = if hit || dirs { hit_leaf(&scene, &data, ray_o, d) } else { None };
+                if let Some((_, k)) = first.filter(|_| hit) {
+                    tot_hit += w * f64::from(light[k].out[1]);
+                    hit_w += w;
                 }
-                // HIT: the runtime's radiance of the leaf the path tracer's first hit lies in
-                // (brute force over the discs): whether a cone meets other leaves than the ray
-                // does, or the same leaves with a radiance other than the point's.
-                if std::env::var("HIT").is_ok() {
-                    let o = centre + n * (0.01 * leaf + 2e-3);
-                    let mut best: Option<(f32, Vec3)> = None;
-                    for sf in &data.surfels {
-                        let c = Vec3::from_slice(&sf.position_radius[..3]);
-                        let sn = Vec3::from_slice(&sf.normal_spread[..3]);
-                        let r = sf.position_radius[3] * base.splat_scale;
-                        let denom = sn.dot(d);
-                        if denom.abs() < 1e-8 {
-                            continue;
-                        }
-                        let t = sn.dot(c - o) / denom;
-                        if t > 1e-3
-                            && best.is_none_or(|b| t < b.0)
-                            && (o + d * t - c).length_squared() <= r * r
-                        {
-                            best = Some((t, c));
-                        }
-                    }
-                    if let Some((_, c)) = best {
-                        // The disc's leaf: the nearest leaf centre (a package's surfel lies in or
-                        // beside its leaf's cell).
-                        let k = data.leaves.iter().enumerate().min_by(|a, b| {
-                            let da = (Vec3::from_slice(&a.1.center_m[..3]) - c).length_squared();
-                            let db = (Vec3::from_slice(&b.1.center_m[..3]) - c).length_squared();
-                            da.total_cmp(&db)
-                        });
-                        if let Some((k, _)) = k {
-                            tot_hit += w * f64::from(light[k].out[1]);
-                            hit_w += w;
-                        }
-                    }
+                if dirs {
+                    println!(
+                        "    elevation {:>2} azimuth {a:>2}: cone {rt:.3} ray {rf:.3}; the cone reaches half opacity {:.2} m from its origin, the ray meets a disc at {:.2} m",
+                        5 + 10 * e,
+                        half_opacity_m(&cpu, &p, origin, d, rise),
+                        first.map_or(f32::NAN, |f| f.0)
+                    );
                 }
                 band_rt += w * rt;
                 band_ref += w * rf;

@@ -1,15 +1,17 @@
 //! The leaves whose direct light (no bounce) the runtime gets most wrong against the reference's
 //! (mean over the leaf's surfels), with their surfels' normals, and for the worst three the discs
-//! that stand between each of their surfels and the lamp. Issue 47: this is how the long
+//! that stand between each of their surfels and the lamp. Issue 47: this is how the carved long
 //! passage's fins (discs standing past convex edges) and unit normals on edges showed up.
 //!
 //! `cargo run --release -p grotto-reference --example leaf_direct [passage|dogleg] [surfels]`
-//! (`surfels`: leaves on their surfels' centroid, as packages have them).
+//! (`passage`: the carved `testscenes::passage`; `surfels`: leaves on their surfels' centroid, as
+//! packages have them; CELLS=`x,y,z;...` lists those leaves instead of the worst).
 use glam::Vec3;
 use grotto_fixtures::testscenes;
+use grotto_reference::accuracy::breakdown::{balanced_cut, settled};
 use grotto_reference::{PathSettings, SurfelScene};
+use grotto_runtime::gpu::types::SurfelGpu;
 use grotto_runtime::gpu::{Gpu, GpuOptions};
-use grotto_runtime::render::Renderer;
 use grotto_runtime::settings::{Quality, Settings};
 
 fn main() -> anyhow::Result<()> {
@@ -24,11 +26,15 @@ fn main() -> anyhow::Result<()> {
         testscenes::leaves_on_surfels(&mut data);
     }
     let leaf = data.leaf_size_m;
-    let base = Settings::preset(Quality::Balanced);
-    let mut r = Renderer::new(&gpu, &data, Settings { bounces: 0, bounce_tail: false, ..base.clone() })?;
-    r.settle(|_, _| {})?;
-    let light = r.read_leaf_light()?;
-    let scene = SurfelScene::from_scene(&data, base.splat_scale);
+    let light = settled(&gpu, &data, balanced_cut(0))?.read_leaf_light()?;
+    let scene = SurfelScene::from_scene(&data, Settings::preset(Quality::Balanced).splat_scale);
+    // A carved scene's surfel lies on a face of its leaf's cell (the reference's rule, a quarter
+    // leaf behind the surface).
+    let in_cell = |s: &SurfelGpu, cell: glam::IVec3| {
+        let p = Vec3::from_slice(&s.position_radius[..3]);
+        let sn = Vec3::from_slice(&s.normal_spread[..3]);
+        ((p - sn * 0.25 * leaf) / leaf).floor().as_ivec3() == cell
+    };
     let ps = PathSettings { max_bounces: 0, ..PathSettings::for_scene(&data) };
     let reference = scene.leaf_radiance(&data, 16, &ps, 1);
     let lum = |v: [f32; 3]| (v[0] + v[1] + v[2]) / 3.0;
@@ -62,11 +68,7 @@ fn main() -> anyhow::Result<()> {
         let surfels: Vec<String> = data
             .surfels
             .iter()
-            .filter(|s| {
-                let p = Vec3::from_slice(&s.position_radius[..3]);
-                let sn = Vec3::from_slice(&s.normal_spread[..3]);
-                ((p - sn * 0.25 * leaf) / leaf).floor().as_ivec3() == cell
-            })
+            .filter(|s| in_cell(s, cell))
             .map(|s| format!("{:?}", Vec3::from_slice(&s.normal_spread[..3])))
             .collect();
         println!(
@@ -79,38 +81,25 @@ fn main() -> anyhow::Result<()> {
     for &(i, _, _) in rows.iter().take(3) {
         let l = &data.leaves[i];
         let cell = l.cell(leaf);
-        for s in &data.surfels {
+        for s in data.surfels.iter().filter(|s| in_cell(s, cell)) {
             let p = Vec3::from_slice(&s.position_radius[..3]);
             let sn = Vec3::from_slice(&s.normal_spread[..3]);
-            if ((p - sn * 0.25 * leaf) / leaf).floor().as_ivec3() == cell {
-                println!("surfel {p:.3} n {sn} to lamp {lamp:.3}:");
-                for b in blockers(&data, base.splat_scale, p + sn * 0.25 * leaf, lamp) {
-                    println!("   {b}");
+            println!("surfel {p:.3} n {sn} to lamp {lamp:.3}:");
+            // Every disc (as drawn and path traced) the shadow ray crosses, not only the first.
+            let a = p + sn * 0.25 * leaf;
+            let len = (lamp - a).length();
+            let d = (lamp - a) / len;
+            for disc in scene.discs() {
+                if let Some(t) = disc.hit(a, d, 1e-3, len - 1e-3) {
+                    println!(
+                        "   disc at {:.3} n {} hit t {t:.3} at {:.3}",
+                        disc.center_m(),
+                        disc.normal,
+                        a + d * t
+                    );
                 }
             }
         }
     }
     Ok(())
-}
-
-/// The surfels (discs at `splat` times their radius) the segment from `a` to `b` crosses.
-fn blockers(data: &grotto_runtime::scene::data::SceneData, splat: f32, a: Vec3, b: Vec3) -> Vec<String> {
-    let v = b - a;
-    let len = v.length();
-    let d = v / len;
-    let mut out = Vec::new();
-    for s in &data.surfels {
-        let c = Vec3::from_slice(&s.position_radius[..3]);
-        let n = Vec3::from_slice(&s.normal_spread[..3]);
-        let r = s.position_radius[3] * splat;
-        let denom = n.dot(d);
-        if denom.abs() < 1e-8 {
-            continue;
-        }
-        let t = n.dot(c - a) / denom;
-        if t > 1e-3 && t < len - 1e-3 && (a + d * t - c).length_squared() <= r * r {
-            out.push(format!("disc at {c:.3} n {n} hit t {t:.3} at {:.3}", a + d * t));
-        }
-    }
-    out
 }

@@ -35,8 +35,13 @@ impl Disc {
         Self { center_m, normal: normal.normalize_or(Vec3::Z), radius_m, albedo, emission, node_index: 0 }
     }
 
+    /// The disc's centre, metres.
+    pub fn center_m(&self) -> Vec3 {
+        self.center_m
+    }
+
     /// Ray parameter of the hit, if the ray meets the disc within (t_min, t_max).
-    fn hit(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> Option<f32> {
+    pub fn hit(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> Option<f32> {
         let denom = self.normal.dot(d);
         if denom.abs() < 1e-8 {
             return None;
@@ -280,8 +285,9 @@ impl SurfelScene {
         &self.lights
     }
 
-    /// Closest disc hit by the ray (unit `d`), within `t_max`.
-    pub(crate) fn intersect(&self, o: Vec3, d: Vec3, t_max: f32) -> Option<(f32, usize)> {
+    /// Closest disc hit by the ray (unit `d`), within `t_max`: its ray parameter and its index in
+    /// [`SurfelScene::discs`].
+    pub fn intersect(&self, o: Vec3, d: Vec3, t_max: f32) -> Option<(f32, usize)> {
         let mut t_lo = 0.0f32;
         let mut seg = self.step_m;
         let inv_d = Vec3::ONE / d;

@@ -11,17 +11,22 @@ use rayon::prelude::*;
 /// A closed sphere of `n` discs (Fibonacci lattice, normals inward), each twice the radius that
 /// would tile the sphere's area, so no ray escapes between them.
 fn sphere(n: usize, radius: f32, albedo: f32, emission: f32) -> Vec<Disc> {
-    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
     let r_disc = 2.0 * (4.0 * radius * radius / n as f32).sqrt();
     (0..n)
         .map(|i| {
-            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
-            let rho = (1.0 - z * z).sqrt();
-            let phi = i as f32 * golden;
-            let p = Vec3::new(rho * phi.cos(), rho * phi.sin(), z) * radius;
+            let p = fibonacci_dir(i, n) * radius;
             Disc::new(p, -p.normalize(), r_disc, Vec3::splat(albedo), Vec3::splat(emission))
         })
         .collect()
+}
+
+/// Direction `i` of `n` spread evenly over the sphere (Fibonacci lattice).
+fn fibonacci_dir(i: usize, n: usize) -> Vec3 {
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+    let rho = (1.0 - z * z).sqrt();
+    let phi = i as f32 * golden;
+    Vec3::new(rho * phi.cos(), rho * phi.sin(), z)
 }
 
 #[test]
@@ -185,8 +190,7 @@ fn the_scanned_passage_is_closed_and_in_the_passage_frame() {
     // package's frame where the hand-built passage has them, every leaf lies on the passage's
     // wall, and no ray from the lamp escapes between the surfels (the reference sees no sky).
     let data = grotto_reference::accuracy::scanned_passage().expect("the scanned passage builds");
-    let origin = grotto_fixtures::scanned_passage::origin_m();
-    let own = |p: Vec3| (glam::DVec3::from_array(data.frame_origin_m) + p.as_dvec3() - origin).as_vec3();
+    let own = |p: Vec3| grotto_fixtures::scanned_passage::passage_frame_m(&data, p);
     assert_eq!(data.lights.len(), 1);
     assert!((own(data.lights[0].position_m) - testscenes::passage_lamp().position_m).length() < 1e-3);
     assert!((own(data.cameras[0].eye_m) - testscenes::passage_camera().eye_m).length() < 1e-3);
@@ -202,14 +206,6 @@ fn the_scanned_passage_is_closed_and_in_the_passage_frame() {
     let sky = PathSettings { min_bounces: 1, max_bounces: 1, background: Vec3::ONE, env_sh: None };
     let mut rng = <rand::rngs::SmallRng as rand::SeedableRng>::seed_from_u64(3);
     let n = 4000;
-    let escaped = (0..n)
-        .filter(|i| {
-            let z = 1.0 - 2.0 * (*i as f32 + 0.5) / n as f32;
-            let phi = *i as f32 * std::f32::consts::PI * (3.0 - 5f32.sqrt());
-            let rho = (1.0 - z * z).sqrt();
-            let d = Vec3::new(rho * phi.cos(), rho * phi.sin(), z);
-            discs.trace(lamp, d, &sky, &mut rng).x > 0.5
-        })
-        .count();
+    let escaped = (0..n).filter(|&i| discs.trace(lamp, fibonacci_dir(i, n), &sky, &mut rng).x > 0.5).count();
     assert_eq!(escaped, 0, "{escaped} of {n} rays from the lamp left the passage");
 }

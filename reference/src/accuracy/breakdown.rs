@@ -1,11 +1,10 @@
 //! Where light carried through passages goes wrong (issue 47): the runtime's outgoing radiance
 //! per leaf against the reference's (path traced from each leaf's surfels), summed per region of
 //! the dogleg (the lit room, the three corridors, the hidden chamber) or of the long passage
-//! (stretches along it) and per bounce: each run
-//! with k bounces and no tail against the reference cut after k bounces, what each bounce adds
-//! against what the reference's k-th bounce adds, and the presets against full transport.
-//! Leaves, not pixels: the camera sees only the lit room and the first corridor, the light that
-//! reaches the rest is judged where it lands.
+//! (stretches along it) and per bounce: each run with k bounces and no tail against the reference
+//! cut after k bounces, what each bounce adds against what the reference's k-th bounce adds, and
+//! the presets against full transport. Leaves, not pixels: the dogleg's camera sees only the lit
+//! room and the first corridor, the light that reaches the rest is judged where it lands.
 
 use grotto_fixtures::testscenes;
 use grotto_runtime::gpu::Gpu;
@@ -71,7 +70,7 @@ pub struct Breakdown {
 pub enum BreakdownScene {
     /// The lit room, three corridors and the hidden chamber ([`testscenes::dogleg`]).
     Dogleg,
-    /// 30 m of passage lit at one end ([`testscenes::passage`]).
+    /// 30 m of passage lit at one end, scanned ([`grotto_fixtures::scanned_passage`]).
     Passage,
 }
 
@@ -85,6 +84,26 @@ impl BreakdownScene {
         match self {
             Self::Dogleg => "dogleg",
             Self::Passage => "passage",
+        }
+    }
+
+    /// Where `breakdown` writes its report unless told otherwise.
+    pub fn default_out(self) -> &'static str {
+        match self {
+            Self::Dogleg => "docs/accuracy-passages.md",
+            Self::Passage => "docs/accuracy-passage-long.md",
+        }
+    }
+
+    /// The report's sentence on what a region is.
+    pub fn regions_described(self) -> &'static str {
+        match self {
+            Self::Dogleg => {
+                "each region of the dogleg (an air box and the rock cells around it, `testscenes::DOGLEG_REGIONS`): the lit room, the three corridors in the order light reaches them, and the chamber behind them. Leaves, not pixels: the report's camera sees only the lit room and the first corridor"
+            }
+            Self::Passage => {
+                "each stretch of the long passage (scanned and built by grotto-pack, `grotto_fixtures::scanned_passage`; a leaf belongs to the stretch its nearest point of the centreline lies in, metres from the lit end): three 6 m stretches of the straight leg, the bend and the 7 m past it, where only light that bounced arrives"
+            }
         }
     }
 
@@ -109,10 +128,10 @@ impl BreakdownScene {
             let region = match self {
                 Self::Dogleg => testscenes::dogleg_region(leaf.cell(scene.leaf_size_m)),
                 Self::Passage => {
-                    // The package's frame to the passage's own (scanned_passage::ORIGIN_M).
-                    let world = glam::DVec3::from_array(scene.frame_origin_m)
-                        + glam::Vec3::from_slice(&leaf.center_m[..3]).as_dvec3();
-                    let own = (world - grotto_fixtures::scanned_passage::origin_m()).as_vec3();
+                    let own = grotto_fixtures::scanned_passage::passage_frame_m(
+                        scene,
+                        glam::Vec3::from_slice(&leaf.center_m[..3]),
+                    );
                     let along_m = testscenes::passage_position_m(own).1;
                     PASSAGE_REGION_ENDS_M.iter().position(|(_, end)| along_m < *end)
                 }
@@ -159,12 +178,24 @@ fn region_error(
     }
 }
 
+/// The balanced preset with `bounces` bounces run and no tail: what is judged against the
+/// reference cut after as many bounces.
+pub fn balanced_cut(bounces: u32) -> Settings {
+    Settings { bounces, bounce_tail: false, ..Settings::preset(Quality::Balanced) }
+}
+
+/// A renderer of `data` with `settings`, its light settled (for reading the leaves' light).
+pub fn settled(gpu: &Gpu, data: &SceneData, settings: Settings) -> grotto_runtime::Result<Renderer> {
+    let mut r = Renderer::new(gpu, data, settings)?;
+    r.settle(|_, _| {})?;
+    Ok(r)
+}
+
 /// The radiance each leaf shows (luminance) after settling with `settings`: the bounces run and
 /// the tail's estimate of the rest, as the shade pass adds them up.
 fn runtime_leaves(gpu: &Gpu, data: &SceneData, settings: Settings) -> grotto_runtime::Result<Vec<f64>> {
-    let mut r = Renderer::new(gpu, data, settings)?;
-    r.settle(|_, _| {})?;
-    Ok(r.read_leaf_light()?.iter().zip(&data.leaves).map(|(l, leaf)| luminance(l.shown(leaf))).collect())
+    let light = settled(gpu, data, settings)?.read_leaf_light()?;
+    Ok(light.iter().zip(&data.leaves).map(|(l, leaf)| luminance(l.shown(leaf))).collect())
 }
 
 /// A scene's breakdown with `paths` reference paths per surfel; with `leaves_on_surfels` its
@@ -180,7 +211,13 @@ pub fn breakdown(
     let mut data = which
         .data()
         .map_err(|problem| grotto_runtime::Error::Scene { package: which.name().into(), problem })?;
-    if leaves_on_surfels && which == BreakdownScene::Dogleg {
+    if leaves_on_surfels {
+        if which != BreakdownScene::Dogleg {
+            return Err(grotto_runtime::Error::Scene {
+                package: which.name().into(),
+                problem: "--leaves-on-surfels moves a hand-built scene's leaves; a package's already lie on their surfels".into(),
+            });
+        }
         testscenes::leaves_on_surfels(&mut data);
     }
     let regions = which.regions(&data);
@@ -204,8 +241,7 @@ pub fn breakdown(
     let mut runtime_cut = Vec::new();
     for (k, reference) in CUT_BOUNCES.iter().zip(&cut) {
         progress(&format!("runtime, {k} bounces, no tail"));
-        let settings = Settings { bounces: *k, bounce_tail: false, ..base.clone() };
-        let rt = runtime_leaves(gpu, &data, settings)?;
+        let rt = runtime_leaves(gpu, &data, balanced_cut(*k))?;
         rows.push(per_region(
             &format!("bounces {k}, no tail"),
             &format!("cut after {k} bounces"),

@@ -34,6 +34,12 @@ pub struct SweepScene {
 /// hidden-chamber dogleg, and the scanned long passage (also rendered by Mitsuba 3 to check the
 /// reference: mitsuba.rs).
 pub fn closed_scenes() -> Vec<(&'static str, &'static str, SceneData)> {
+    closed_scenes_named(None)
+}
+
+/// [`closed_scenes`], or only the one named `only`: the passage is built through the
+/// preprocessor, which a run for another scene should not wait for.
+fn closed_scenes_named(only: Option<&str>) -> Vec<(&'static str, &'static str, SceneData)> {
     let mut furnace = testscenes::furnace_sphere(5, 11.0, 0.8, 1.0);
     let c = Vec3::splat(1.6);
     furnace.cameras.push(grotto_runtime::scene::data::SceneCamera {
@@ -56,14 +62,16 @@ pub fn closed_scenes() -> Vec<(&'static str, &'static str, SceneData)> {
             testscenes::dogleg(),
         ),
     ];
-    match scanned_passage() {
-        Ok(data) => scenes.push((
+    match only.is_none_or(|o| o == "passage").then(scanned_passage) {
+        None => {}
+        Some(Ok(data)) => scenes.push((
             "passage",
             "a 30 m tube of wandering width with a flat floor, 18 m straight then round a bend, lit by one 100 W lamp 1 m from its closed end; albedo 0.7; its smooth surface sampled every 5 cm by six scans at survey coordinates and built by grotto-pack with 0.25 m leaves (issue 47)",
             data,
         )),
-        Err(e) => eprintln!("passage scene skipped: {e}"),
+        Some(Err(e)) => eprintln!("passage scene skipped: {e}"),
     }
+    scenes.retain(|d| only.is_none_or(|o| o == d.0));
     scenes
 }
 
@@ -95,7 +103,7 @@ pub fn scenes_cached(
     cache: Option<&std::path::Path>,
 ) -> Vec<SweepScene> {
     let mut out = Vec::new();
-    let defs: Vec<_> = closed_scenes().into_iter().filter(|d| only.is_none_or(|o| o == d.0)).collect();
+    let defs = closed_scenes_named(only);
     let mut defs: Vec<_> = defs.into_iter().map(|(a, b, c)| (a, b, c, Vec::new())).collect();
     if only.is_none_or(|o| o == "bunny") {
         match bunny() {
