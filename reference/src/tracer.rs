@@ -40,6 +40,11 @@ impl Disc {
         self.center_m
     }
 
+    /// The disc's radius as traced (the surfel's times the splat scale), metres.
+    pub fn radius_m(&self) -> f32 {
+        self.radius_m
+    }
+
     /// Ray parameter of the hit, if the ray meets the disc within (t_min, t_max).
     pub fn hit(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> Option<f32> {
         let denom = self.normal.dot(d);
