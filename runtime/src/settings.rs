@@ -44,6 +44,13 @@ pub struct Settings {
     /// leaves miss different directions and filtering averages the misses instead of one fixed
     /// set missing the same corridor on a whole wall. Off: every leaf uses the same set.
     pub cone_interleave: bool,
+    /// Gather cones see each leaf of the two finest levels as the half-space behind its surface
+    /// (the plane through its surfels' centroid across its mean normal) instead of a whole cube,
+    /// so they stop where the surface is rather than up to a voxel before it, as they did in
+    /// concave corners (issue 47, docs/reference.md "Where the light goes wrong"). Off by
+    /// default: it helps scans whose leaves sit on their surfels and hurts the hand-built
+    /// scenes (docs/accuracy.md, knob "cone planes").
+    pub cone_planes: bool,
     pub shadows: bool,
     pub shadow_map_size: u32,
     /// Milliseconds a frame may spend on shadow maps out of date (after a change of tiles or
@@ -252,6 +259,7 @@ impl Default for Settings {
             convergence_tolerance: 1e-3,
             bounce_tail: true,
             cone_interleave: true,
+            cone_planes: false,
             shadows: true,
             shadow_map_size: 512,
             shadow_frame_ms: 0.0,

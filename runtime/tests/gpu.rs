@@ -113,6 +113,34 @@ fn cone_gather_matches_cpu_reference() {
 }
 
 #[test]
+fn cone_gather_with_cone_planes_matches_cpu_reference() {
+    // The leaves on their surfels, as packages have them, so the planes cut the cubes where the
+    // surface is; the march still has to agree with the CPU's, leaf by leaf.
+    let mut scene = testscenes::dogleg();
+    testscenes::leaves_on_surfels(&mut scene);
+    let light = random_light(scene.leaves.len(), 13);
+    let gather = |cone_planes: bool| {
+        let settings = Settings { cones: 8, cone_planes, ..Default::default() };
+        let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+        r.write_leaf_light(&light).unwrap();
+        r.run_bounce().unwrap();
+        let got = r.read_leaf_light().unwrap();
+        let (worst, checked) = CpuScene::mip(&scene, &light).worst_gather_error(&r.params(), &got, 7);
+        (got, worst, checked)
+    };
+    let (cubes, _, _) = gather(false);
+    let (planes, worst, checked) = gather(true);
+    let changed = cubes.iter().zip(&planes).filter(|(a, b)| (a.gather[0] - b.gather[0]).abs() > 1e-3).count();
+    eprintln!(
+        "gather with cone planes: worst error {worst:.2e} over {checked} leaves, {changed} leaves moved"
+    );
+    assert!(checked > 100);
+    assert!(worst < 1e-3, "gather with cone planes differs from the CPU reference by {worst}");
+    // The knob reaches the march: a good share of leaves gather differently.
+    assert!(changed * 10 > cubes.len(), "only {changed} of {} leaves changed", cubes.len());
+}
+
+#[test]
 fn the_cone_march_is_step_invariant_where_every_surface_sends_the_same_light() {
     // Inside closed rock every cone ends on a surface, so with every leaf sending 1 the gather is 1
     // whatever the step (the rim of each cone's hemisphere leaks a little into the rock: 0.999).
@@ -246,6 +274,17 @@ fn furnace_with_f16_radiance_converges_within_two_percent() {
     eprintln!("furnace albedo 0.9, f16 radiance: {lo:.4} .. {hi:.4}, exact 10");
     assert!(finite);
     assert!((lo - 10.0).abs() / 10.0 < 0.02 && (hi - 10.0).abs() / 10.0 < 0.02);
+}
+
+#[test]
+fn furnace_with_cone_planes_converges_to_e_over_one_minus_albedo() {
+    // Cones that stop at the surface instead of its cube still end on it: the furnace stays exact.
+    let settings =
+        Settings { bounces: 60, convergence_tolerance: 1e-7, cone_planes: true, ..Default::default() };
+    let (lo, hi, finite) = furnace_with(0.5, settings);
+    eprintln!("furnace albedo 0.5, cone planes: {lo:.4} .. {hi:.4}, exact 2");
+    assert!(finite);
+    assert!((lo - 2.0).abs() / 2.0 < 0.02 && (hi - 2.0).abs() / 2.0 < 0.02);
 }
 
 #[test]

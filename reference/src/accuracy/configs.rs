@@ -132,6 +132,8 @@ pub fn configs() -> Vec<Config> {
     add("tail", "no tail".into(), Settings { bounce_tail: false, ..base.clone() });
     // What interleaved cone sets buy: every leaf with the same set, as before they came.
     add("interleave", "no interleave".into(), Settings { cone_interleave: false, ..base.clone() });
+    // Leaves as the half-spaces behind their surfaces at the finest levels (issue 47).
+    add("cone planes", "cone planes".into(), Settings { cone_planes: true, ..base.clone() });
     for b in TRUNCATED_BOUNCES {
         add(
             CUT_BOUNCES,

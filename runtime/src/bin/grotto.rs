@@ -265,10 +265,12 @@ struct RenderArgs {
     /// (the light then stops short of converged in bright closed rock).
     #[arg(long)]
     no_bounce_tail: bool,
-    /// Give every leaf the same cone set instead of turning it by the leaf's interleave angle
-    /// (one of eight by cell parity), which averages the directions the cones miss.
+    /// Give every leaf the same cone set, not one turned by its cell's parity (which averages misses).
     #[arg(long)]
     no_cone_interleave: bool,
+    /// Cones see the finest leaves as half-spaces behind their surface, not cubes (knob "cone planes").
+    #[arg(long)]
+    cone_planes: bool,
     /// Milliseconds a frame may spend redrawing shadow faces out of date (after a change of tiles
     /// or lights), at the measured surfels per millisecond; the rest follow over the next frames
     /// and show together when the last is drawn, so no frame stalls on the whole atlas. 0: every
@@ -427,6 +429,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
     settings.shadow_frame_ms = a.shadow_ms.unwrap_or(0.0);
     settings.bounce_tail = !a.no_bounce_tail;
     settings.cone_interleave = !a.no_cone_interleave;
+    settings.cone_planes = a.cone_planes;
     settings.shadowed_lights = a.shadowed_lights.unwrap_or(settings.shadowed_lights);
     settings.shadow_fallback = ShadowFallback::parse(&a.shadow_fallback)
         .ok_or_else(|| anyhow::anyhow!("--shadow-fallback {:?}: use cone or none", a.shadow_fallback))?;

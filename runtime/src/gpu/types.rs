@@ -280,11 +280,18 @@ pub mod flags {
     pub const VIEW_LUX: u32 = 65536;
     /// Inject runs over the active tiles' leaves only (a light edit in place: light/edit.rs).
     pub const INJECT_ACTIVE: u32 = 131072;
+    /// Cones traced through the radiance see the finest levels' leaves as the half-space behind
+    /// their surface (`Settings::cone_planes`, shaders/svo.wgsl `leaf_plane_share`).
+    pub const CONE_PLANES: u32 = 262144;
+    /// The levels whose nodes CONE_PLANES turns into half-spaces (WGSL `PLANE_LODS`): the
+    /// leaves and their parents. Coarser nodes hold more than one surface (a corridor's two
+    /// walls), which one plane does not describe.
+    pub const PLANE_LODS: u32 = 1;
     /// The views shade writes without light (settings.rs `ViewMode::shows_light`).
     pub const VIEWS_WITHOUT_LIGHT: u32 = VIEW_ALBEDO | VIEW_NORMALS | VIEW_LEVEL | VIEW_SCAN;
 
     /// Every flag with its WGSL name.
-    pub const ALL: [(&str, u32); 18] = [
+    pub const ALL: [(&str, u32); 19] = [
         ("FLAG_INJECT_ACTIVE", INJECT_ACTIVE),
         ("FLAG_VIEW_LUX", VIEW_LUX),
         ("FLAG_VIEW_ALBEDO", VIEW_ALBEDO),
@@ -303,6 +310,7 @@ pub mod flags {
         ("FLAG_NEW_SERIES", NEW_SERIES),
         ("FLAG_CONE_INTERLEAVE", CONE_INTERLEAVE),
         ("FLAG_BLEND", BLEND),
+        ("FLAG_CONE_PLANES", CONE_PLANES),
     ];
 }
 

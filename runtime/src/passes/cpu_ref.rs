@@ -127,8 +127,42 @@ impl<'a> CpuScene<'a> {
         add(add(fx.map(|v| v * w.x), fy, w.y), fz, w.z)
     }
 
-    /// Trilinear sample of level `lod` at `p_leaf` along `dir`.
-    pub(crate) fn sample_level(&self, p_leaf: DVec3, lod: u32, dir: DVec3) -> [f64; 4] {
+    /// How much of leaf `leaf_index` a sample at `p_leaf` sees under the cone-planes knob:
+    /// shaders/svo.wgsl `leaf_plane_share`.
+    fn leaf_plane_share(&self, leaf_index: u32, p_leaf: DVec3) -> f64 {
+        let leaf = &self.scene.leaves[leaf_index as usize];
+        let m = Vec3::from_slice(&leaf.normal_mean[..3]).as_dvec3();
+        let r = m.length();
+        if r < 0.3 {
+            return 1.0;
+        }
+        let leaf_m = f64::from(self.scene.leaf_size_m);
+        let edge = leaf_m.max(f64::from(leaf.center_m[3]));
+        let center = Vec3::from_slice(&leaf.center_m[..3]).as_dvec3();
+        let ahead = (p_leaf * leaf_m - center).dot(m / r) / edge;
+        (1.0 - 2.0 * ahead).clamp(0.0, 1.0)
+    }
+
+    /// shaders/svo.wgsl `node_plane_share`: a leaf node's share, or the mean of a parent's leaves'.
+    fn node_plane_share(&self, n: u32, p_leaf: DVec3) -> f64 {
+        let node = self.scene.nodes[n as usize];
+        let mask = node.child_mask();
+        if mask == 0 {
+            return self.leaf_plane_share(node.first_child, p_leaf);
+        }
+        let sum: f64 = (0..8u32)
+            .filter(|o| (mask >> o) & 1 != 0)
+            .map(|o| {
+                let c = self.scene.nodes[(node.first_child + (mask & ((1 << o) - 1)).count_ones()) as usize];
+                if c.child_mask() == 0 { self.leaf_plane_share(c.first_child, p_leaf) } else { 1.0 }
+            })
+            .sum();
+        sum / f64::from(mask.count_ones())
+    }
+
+    /// Trilinear sample of level `lod` at `p_leaf` along `dir`; with `planes`, the levels up to
+    /// `flags::PLANE_LODS` as half-spaces (shaders/svo.wgsl `corner_weight`).
+    pub(crate) fn sample_level(&self, p_leaf: DVec3, lod: u32, dir: DVec3, planes: bool) -> [f64; 4] {
         let u = p_leaf / f64::from(1u32 << lod) - DVec3::splat(0.5);
         let base = u.floor();
         let f = u - base;
@@ -143,6 +177,11 @@ impl<'a> CpuScene<'a> {
                 continue;
             }
             if let Some(n) = self.find_node(i0 + o, lod) {
+                let w = if planes && lod <= crate::gpu::types::flags::PLANE_LODS {
+                    w * self.node_plane_share(n, p_leaf)
+                } else {
+                    w
+                };
                 acc = add(acc, self.directional(n, dir), w);
             }
         }
@@ -150,15 +189,22 @@ impl<'a> CpuScene<'a> {
     }
 
     /// Quadrilinear sample at fractional `lod`.
-    pub(crate) fn sample_lod(&self, p_leaf: DVec3, lod: f64, max_lod: u32, dir: DVec3) -> [f64; 4] {
+    pub(crate) fn sample_lod(
+        &self,
+        p_leaf: DVec3,
+        lod: f64,
+        max_lod: u32,
+        dir: DVec3,
+        planes: bool,
+    ) -> [f64; 4] {
         let l = lod.clamp(0.0, f64::from(max_lod));
         let l0 = l.floor() as u32;
         let t = l - f64::from(l0);
-        let a = self.sample_level(p_leaf, l0, dir);
+        let a = self.sample_level(p_leaf, l0, dir, planes);
         if t <= 0.0 || l0 >= max_lod {
             return a;
         }
-        let b = self.sample_level(p_leaf, l0 + 1, dir);
+        let b = self.sample_level(p_leaf, l0 + 1, dir, planes);
         [0, 1, 2, 3].map(|k| a[k] + (b[k] - a[k]) * t)
     }
 
@@ -175,6 +221,7 @@ impl<'a> CpuScene<'a> {
         let mut t = leaf;
         let mut t_prev = 0.0;
         let tan_half = f64::from(p.cone_tan_half);
+        let planes = p.flags & crate::gpu::types::flags::CONE_PLANES != 0;
         for _ in 0..p.max_steps {
             if t > f64::from(p.max_distance_m) {
                 break;
@@ -187,7 +234,7 @@ impl<'a> CpuScene<'a> {
                 if crate::scene::rock::in_rock(&self.scene.rock, qk.floor().as_ivec3()) {
                     let d = leaf.max(2.0 * tk * tan_half);
                     let lod = ((d / leaf).log2() + 1.0).max(f64::from(crate::scene::rock::ROCK_LEVEL + 1));
-                    return enter_rock(acc, self.sample_lod(qk, lod, p.max_lod, dir), last);
+                    return enter_rock(acc, self.sample_lod(qk, lod, p.max_lod, dir, false), last);
                 }
             }
             let q = (origin_m + dir * t) / leaf;
@@ -197,7 +244,7 @@ impl<'a> CpuScene<'a> {
             let clear = PLANE_CLEAR * (rise[0] + t * rise[1] - 0.5 * leaf);
             let diameter = leaf.max((2.0 * t * tan_half).min(clear));
             let edge = leaf.max(SAMPLE_EDGE * diameter);
-            let mut s = self.sample_lod(q, (edge / leaf).log2(), p.max_lod, dir);
+            let mut s = self.sample_lod(q, (edge / leaf).log2(), p.max_lod, dir, planes);
             if s[3] > 1e-6 {
                 last = [s[0] / s[3], s[1] / s[3], s[2] / s[3]];
                 let ratio = diameter * f64::from(p.step_scale) / edge;

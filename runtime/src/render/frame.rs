@@ -209,6 +209,9 @@ impl Renderer {
         if s.cone_interleave {
             f |= flags::CONE_INTERLEAVE;
         }
+        if s.cone_planes {
+            f |= flags::CONE_PLANES;
+        }
         if self.gbuffer.blends() {
             f |= flags::BLEND;
         }

@@ -60,7 +60,7 @@ fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32, rise: vec2<f32
         let diameter = max(leaf, min(2.0 * t * tan_half, clear));
         let edge = max(leaf, SAMPLE_EDGE * diameter);
         let lod = log2(edge / leaf);
-        let raw = sample_lod(p_leaf, lod, dir);
+        let raw = sample_lod_planes(p_leaf, lod, dir, (params.flags & FLAG_CONE_PLANES) != 0u);
         if raw.a > 1e-6 {
             last = raw.rgb / raw.a;
         }

@@ -117,12 +117,59 @@ fn descend(start: u32, local: vec3<u32>, levels: u32) -> u32 {
     return n;
 }
 
+// How much of a leaf a sample at `p_leaf` sees (Settings::cone_planes): a voxel's cube stands
+// up to a voxel in front of the surface it holds, so in a concave corner a cone meets the cubes
+// of the wall beside it before the surface a ray would meet. Here the leaf is the half-space
+// behind the plane through its surfels' centroid across its mean normal: whole at the plane and
+// behind it, nothing half a leaf in front. A leaf whose normals disagree (mean shorter than 0.3:
+// a thin sheet seen from both sides) keeps its cube. Mirrored by cpu_ref::leaf_plane_share.
+fn leaf_plane_share(leaf_index: u32, p_leaf: vec3<f32>) -> f32 {
+    let leaf = leaves[leaf_index];
+    let m = leaf.normal_mean.xyz;
+    let r = length(m);
+    if r < 0.3 {
+        return 1.0;
+    }
+    // center_m.w: a coarse leaf's edge (else 0).
+    let edge = max(params.leaf_size_m, leaf.center_m.w);
+    let ahead = dot(p_leaf * params.leaf_size_m - leaf.center_m.xyz, m / r) / edge;
+    return clamp(1.0 - 2.0 * ahead, 0.0, 1.0);
+}
+
+// `leaf_plane_share` of node `n`: its leaf's for a leaf node, the mean of its leaves' for a
+// parent (a leaf's cube is an eighth of it).
+fn node_plane_share(n: u32, p_leaf: vec3<f32>) -> f32 {
+    let node = nodes[n];
+    let mask = node.mask_level & 0xffu;
+    if mask == 0u {
+        return leaf_plane_share(node.first_child, p_leaf);
+    }
+    var sum = 0.0;
+    for (var o = 0u; o < 8u; o++) {
+        if ((mask >> o) & 1u) == 0u {
+            continue;
+        }
+        let c = nodes[node.first_child + countOneBits(mask & ((1u << o) - 1u))];
+        sum += select(1.0, leaf_plane_share(c.first_child, p_leaf), (c.mask_level & 0xffu) == 0u);
+    }
+    return sum / f32(countOneBits(mask));
+}
+
+// A corner's weight in a sample: its trilinear weight, times its plane share where `planes`.
+fn corner_weight(w: f32, n: u32, p_leaf: vec3<f32>, lod: u32, planes: bool) -> f32 {
+    if planes && lod <= PLANE_LODS {
+        return w * node_plane_share(n, p_leaf);
+    }
+    return w;
+}
+
 // Trilinear sample of level `lod` at `p_leaf` (leaf units from the frame origin): voxel centres
-// sit at (i + 0.5) * 2^lod. Empty space contributes zero radiance and zero opacity.
+// sit at (i + 0.5) * 2^lod. Empty space contributes zero radiance and zero opacity. `planes`:
+// the finest levels' nodes as half-spaces (`corner_weight`).
 // The eight corners share their ancestors down to where their coordinates' bits differ, so when
 // they lie in one tile the walk from the root is done once for all of them (same nodes as eight
 // find_node calls, which cpu_ref.rs does).
-fn sample_level(p_leaf: vec3<f32>, lod: u32, dir: vec3<f32>) -> vec4<f32> {
+fn sample_level(p_leaf: vec3<f32>, lod: u32, dir: vec3<f32>, planes: bool) -> vec4<f32> {
     let scale = f32(1u << lod);
     let u = p_leaf / scale - vec3<f32>(0.5);
     let base = floor(u);
@@ -152,7 +199,7 @@ fn sample_level(p_leaf: vec3<f32>, lod: u32, dir: vec3<f32>) -> vec4<f32> {
             }
             let n = descend(ancestor, (lo + o) & vec3<u32>(mask), low_bits);
             if n != EMPTY {
-                acc += w * directional(n, dir);
+                acc += corner_weight(w, n, p_leaf, lod, planes) * directional(n, dir);
             }
         }
         return acc;
@@ -167,7 +214,7 @@ fn sample_level(p_leaf: vec3<f32>, lod: u32, dir: vec3<f32>) -> vec4<f32> {
         }
         let n = find_node(i0 + vec3<i32>(o), lod);
         if n != EMPTY {
-            acc += w * directional(n, dir);
+            acc += corner_weight(w, n, p_leaf, lod, planes) * directional(n, dir);
         }
     }
     return acc;
@@ -175,14 +222,20 @@ fn sample_level(p_leaf: vec3<f32>, lod: u32, dir: vec3<f32>) -> vec4<f32> {
 
 // Quadrilinear sample: trilinear in the two levels around the fractional `lod`, blended.
 fn sample_lod(p_leaf: vec3<f32>, lod: f32, dir: vec3<f32>) -> vec4<f32> {
+    return sample_lod_planes(p_leaf, lod, dir, false);
+}
+
+// `sample_lod`, with the finest levels as half-spaces where `planes` (gather cones under
+// FLAG_CONE_PLANES).
+fn sample_lod_planes(p_leaf: vec3<f32>, lod: f32, dir: vec3<f32>, planes: bool) -> vec4<f32> {
     let l = clamp(lod, 0.0, f32(params.max_lod));
     let l0 = u32(floor(l));
     let t = l - f32(l0);
-    let a = sample_level(p_leaf, l0, dir);
+    let a = sample_level(p_leaf, l0, dir, planes);
     if t <= 0.0 || l0 >= params.max_lod {
         return a;
     }
-    let b = sample_level(p_leaf, l0 + 1u, dir);
+    let b = sample_level(p_leaf, l0 + 1u, dir, planes);
     return mix(a, b, t);
 }
 
