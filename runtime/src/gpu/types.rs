@@ -281,7 +281,8 @@ pub mod flags {
     /// Inject runs over the active tiles' leaves only (a light edit in place: light/edit.rs).
     pub const INJECT_ACTIVE: u32 = 131072;
     /// Cones traced through the radiance see the finest levels' leaves as the half-space behind
-    /// their surface (`Settings::cone_planes`, shaders/svo.wgsl `leaf_plane_share`).
+    /// their surface (`Settings::cone_planes`, shaders/svo.wgsl `leaf_plane_share`). The CPU
+    /// reference reads it here; the GPU passes have it as the pipeline constant `cone_planes`.
     pub const CONE_PLANES: u32 = 262144;
     /// The levels whose nodes CONE_PLANES turns into half-spaces (WGSL `PLANE_LODS`): the
     /// leaves and their parents. Coarser nodes hold more than one surface (a corridor's two

@@ -31,7 +31,7 @@ impl Inject {
     pub(crate) fn new(
         gpu: &Gpu,
         shared: &super::Shared,
-        radiance_f16: bool,
+        consts: super::PassConstants,
         max_lights_per_cell: u32,
     ) -> Result<Self> {
         let lights = super::Batched::new(
@@ -39,7 +39,7 @@ impl Inject {
             "inject",
             crate::shaders::INJECT,
             shared,
-            radiance_f16,
+            consts,
             batches(max_lights_per_cell),
         )?;
         let tally = super::compute_pipeline(
@@ -48,7 +48,7 @@ impl Inject {
             crate::shaders::INJECT_TALLY,
             "tally",
             shared,
-            radiance_f16,
+            consts,
         )?;
         Ok(Self { lights, tally })
     }

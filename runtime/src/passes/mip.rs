@@ -31,9 +31,9 @@ impl Mip {
         node_capacity: u64,
         by_height: &[u32],
         ranges: &[MipRange],
-        radiance_f16: bool,
+        consts: super::PassConstants,
     ) -> Result<Self> {
-        let pipeline = super::compute_pipeline(gpu, "mip", crate::shaders::MIP, "mip", shared, radiance_f16)?;
+        let pipeline = super::compute_pipeline(gpu, "mip", crate::shaders::MIP, "mip", shared, consts)?;
         let layout = super::own_layout(&pipeline, "mip")?;
         let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let order = gpu.buffer("mip order", 4 * node_capacity.max(by_height.len() as u64), usage)?;

@@ -126,8 +126,30 @@ impl ComputePipeline {
     }
 }
 
+/// The settings baked into the passes as WGSL pipeline constants (`override`s), so a pass
+/// compiles without the code an unset one would skip (a uniform flag cost propagate 40% on
+/// lavapipe even where it was off: the branch kept the plane code in the march's inner loop).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct PassConstants {
+    /// `radiance_f16` (shaders/light_state.wgsl): the radiance pyramid's precision.
+    pub radiance_f16: bool,
+    /// `cone_planes` (shaders/cone.wgsl): `Settings::cone_planes`.
+    pub cone_planes: bool,
+}
+
+impl PassConstants {
+    /// The pipeline constants a composed source declares, with their values.
+    fn for_source(self, src: &str) -> Vec<(&'static str, f64)> {
+        let all = [("radiance_f16", self.radiance_f16), ("cone_planes", self.cone_planes)];
+        all.into_iter()
+            .filter(|(name, _)| src.contains(&format!("override {name}:")))
+            .map(|(name, on)| (name, if on { 1.0 } else { 0.0 }))
+            .collect()
+    }
+}
+
 /// Pipeline `label` from `pass_src` (composed with its imports), entry point `entry`;
-/// `radiance_f16` sets the pipeline constant of that name (the radiance pyramid's precision).
+/// `consts` sets the pipeline constants the source declares ([`PassConstants`]).
 /// Groups other than [`OWN_GROUP`] are bound from `shared`.
 pub(crate) fn compute_pipeline(
     gpu: &Gpu,
@@ -135,9 +157,10 @@ pub(crate) fn compute_pipeline(
     pass_src: &str,
     entry: &str,
     shared: &Shared,
-    radiance_f16: bool,
+    consts: PassConstants,
 ) -> Result<ComputePipeline> {
     let src = crate::shaders::compose(pass_src)?;
+    let constants = consts.for_source(&src);
     let reflected = reflect_layouts(&src, wgpu::ShaderStages::COMPUTE)?;
     let top = reflected.keys().max().copied().unwrap_or(0);
     let layouts: Vec<wgpu::BindGroupLayout> = (0..=top)
@@ -183,10 +206,7 @@ pub(crate) fn compute_pipeline(
         layout: Some(&layout),
         module: &module,
         entry_point: Some(entry),
-        compilation_options: wgpu::PipelineCompilationOptions {
-            constants: &[("radiance_f16", if radiance_f16 { 1.0 } else { 0.0 })],
-            ..Default::default()
-        },
+        compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
         cache: None,
     });
     let own_layout = reflected.contains_key(&OWN_GROUP).then(|| layouts[OWN_GROUP as usize].clone());
@@ -210,10 +230,10 @@ impl Batched {
         name: &'static str,
         pass_src: &str,
         shared: &Shared,
-        radiance_f16: bool,
+        consts: PassConstants,
         values: impl IntoIterator<Item = T>,
     ) -> Result<Self> {
-        let pipeline = compute_pipeline(gpu, name, pass_src, name, shared, radiance_f16)?;
+        let pipeline = compute_pipeline(gpu, name, pass_src, name, shared, consts)?;
         let mut pass = Self { name, pipeline, batches: Vec::new() };
         pass.set_values(gpu, values)?;
         Ok(pass)
@@ -270,7 +290,7 @@ pub(crate) fn cone_batched(
     name: &'static str,
     pass_src: &str,
     shared: &Shared,
-    radiance_f16: bool,
+    consts: PassConstants,
     cones: u32,
 ) -> Result<Batched> {
     let batches = (0..cones.div_ceil(CONES_PER_BATCH).max(1)).map(|b| crate::gpu::types::ConeBatch {
@@ -279,7 +299,7 @@ pub(crate) fn cone_batched(
         pad0: 0,
         pad1: 0,
     });
-    Batched::new(gpu, name, pass_src, shared, radiance_f16, batches)
+    Batched::new(gpu, name, pass_src, shared, consts, batches)
 }
 
 /// The own group's layout of `p`, which its WGSL must declare.

@@ -8,8 +8,8 @@ use crate::gpu::Gpu;
 pub(crate) fn new(
     gpu: &Gpu,
     shared: &super::Shared,
-    radiance_f16: bool,
+    consts: super::PassConstants,
     cones: u32,
 ) -> Result<super::Batched> {
-    super::cone_batched(gpu, "propagate", crate::shaders::PROPAGATE, shared, radiance_f16, cones)
+    super::cone_batched(gpu, "propagate", crate::shaders::PROPAGATE, shared, consts, cones)
 }

@@ -41,11 +41,10 @@ impl Shade {
     pub(crate) fn new(
         gpu: &Gpu,
         shared: &super::Shared,
-        radiance_f16: bool,
+        consts: super::PassConstants,
         env_chain: Option<&EnvChain>,
     ) -> Result<Self> {
-        let pipeline =
-            super::compute_pipeline(gpu, "shade", crate::shaders::SHADE, "shade", shared, radiance_f16)?;
+        let pipeline = super::compute_pipeline(gpu, "shade", crate::shaders::SHADE, "shade", shared, consts)?;
         let (width, height) = env_chain.map_or((1, 1), |c| (c.width, c.height));
         let tex = gpu.texture_2d(
             "env atlas",

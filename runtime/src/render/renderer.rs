@@ -240,6 +240,7 @@ impl Renderer {
         let caps = caps.at_least(PoolCaps::of(scene));
         let (pools, placed, cull_tiles) = fresh_pools(scene, caps)?;
         let f16 = settings.radiance_f16;
+        let consts = passes::PassConstants { radiance_f16: f16, cone_planes: settings.cone_planes };
         let (lo, hi) = scene.bounds_leaf();
         let leaf = scene.leaf_size_m.max(1e-6);
         let scene_diag_m = ((hi - lo) * leaf).length().max(leaf);
@@ -278,16 +279,16 @@ impl Renderer {
 
         let (by_height, ranges) = scene.nodes_by_height();
         let lights_in_range = lights.grid.occupancy();
-        let inject = gpu.scoped("inject", || Inject::new(gpu, shared, f16, lights_in_range.1))?;
-        let env = gpu.scoped("env", || passes::env::new(gpu, shared, f16, settings.cones))?;
-        let mip =
-            gpu.scoped("mip", || passes::mip::Mip::new(gpu, shared, caps.nodes, &by_height, &ranges, f16))?;
+        let inject = gpu.scoped("inject", || Inject::new(gpu, shared, consts, lights_in_range.1))?;
+        let env = gpu.scoped("env", || passes::env::new(gpu, shared, consts, settings.cones))?;
+        let mip = gpu
+            .scoped("mip", || passes::mip::Mip::new(gpu, shared, caps.nodes, &by_height, &ranges, consts))?;
         let propagate =
-            gpu.scoped("propagate", || passes::propagate::new(gpu, shared, f16, settings.cones))?;
+            gpu.scoped("propagate", || passes::propagate::new(gpu, shared, consts, settings.cones))?;
         let gbuffer = gpu
             .scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout, &splats, settings.splat_blend))?;
         splats.set_surfels(gpu, &up.surfels);
-        let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, f16, chain))?;
+        let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, consts, chain))?;
         let static_bytes = up.bytes + shadow.bytes() + shade.env_atlas_bytes();
         let room = LightRoom { buf: up.lights.clone(), grid_room: lookup.grid_room, mapped: lights.mapped };
         let mut r = Self {

@@ -3,6 +3,11 @@
 #import rock
 #import ndf
 
+// Settings::cone_planes, as a pipeline constant (passes/mod.rs `PassConstants`): the march sees
+// the finest levels' leaves as half-spaces behind their surfaces (svo.wgsl `leaf_plane_share`).
+// Where it is off the plane code is compiled out of the march.
+override cone_planes: bool = false;
+
 // A sample's premultiplied radiance and opacity for one march step: the mip values are for
 // crossing one voxel, the step is `ratio` voxel edges long, so opacity (and premultiplied
 // radiance with it) is corrected to that length.
@@ -60,7 +65,7 @@ fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32, rise: vec2<f32
         let diameter = max(leaf, min(2.0 * t * tan_half, clear));
         let edge = max(leaf, SAMPLE_EDGE * diameter);
         let lod = log2(edge / leaf);
-        let raw = sample_lod_planes(p_leaf, lod, dir, (params.flags & FLAG_CONE_PLANES) != 0u);
+        let raw = sample_lod_planes(p_leaf, lod, dir, cone_planes);
         if raw.a > 1e-6 {
             last = raw.rgb / raw.a;
         }
