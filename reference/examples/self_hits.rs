@@ -13,10 +13,9 @@
 //! the surfels (the front-most disc there, as a camera ray or a bounce finds it), a hair off the
 //! surface along the normal that faces that ray, as the path tracer starts its bounces, and goes
 //! out cosine-distributed about that normal.
-use glam::Vec3;
 use grotto_preprocess::build::{ColorCodec, SurfelCodec};
-use grotto_reference::SurfelScene;
 use grotto_reference::accuracy;
+use grotto_reference::{SurfelScene, cosine_sample};
 use grotto_runtime::scene::data::SceneData;
 use grotto_runtime::settings::{Quality, Settings};
 use rand::{Rng, SeedableRng};
@@ -39,14 +38,6 @@ fn scene(name: &str) -> anyhow::Result<SceneData> {
                 .2
         }
     })
-}
-
-/// Unit vector cosine-distributed about unit `n`.
-fn cosine_about(n: Vec3, u1: f32, u2: f32) -> Vec3 {
-    let (b1, b2) = n.any_orthonormal_pair();
-    let r = u1.sqrt();
-    let phi = std::f32::consts::TAU * u2;
-    (b1 * (r * phi.cos()) + b2 * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt()).normalize()
 }
 
 fn main() -> anyhow::Result<()> {
@@ -72,7 +63,7 @@ fn main() -> anyhow::Result<()> {
             let Some((t0, j)) = traced.intersect(above, -seed.normal, 2.0 * leaf) else { continue };
             let n = if discs[j].normal.dot(seed.normal) >= 0.0 { discs[j].normal } else { -discs[j].normal };
             let o = above - seed.normal * t0 + n * hair;
-            let d = cosine_about(n, rng.random(), rng.random());
+            let d = cosine_sample(n, rng.random(), rng.random());
             rays += 1;
             match traced.intersect(o, d, f32::INFINITY) {
                 None => left += 1,

@@ -23,4 +23,4 @@ pub mod accuracy;
 pub mod truth;
 
 pub use error::Error;
-pub use tracer::{Disc, Estimate, PathSettings, SurfelScene, aces_srgb};
+pub use tracer::{Disc, Estimate, PathSettings, SurfelScene, aces_srgb, cosine_sample};

@@ -199,7 +199,7 @@ impl Estimate {
 }
 
 /// Cosine-distributed direction around unit `n`.
-fn cosine_sample(n: Vec3, u1: f32, u2: f32) -> Vec3 {
+pub fn cosine_sample(n: Vec3, u1: f32, u2: f32) -> Vec3 {
     let r = u1.sqrt();
     let phi = 2.0 * PI * u2;
     let (t1, t2) = n.any_orthonormal_pair();

@@ -35,13 +35,10 @@ pub struct SweepScene {
 pub const CARVED_SCENES: [&str; 2] = ["colour box", "dogleg"];
 
 impl SweepScene {
-    /// Moves a carved scene's leaves onto their surfels' centroid, as grotto-pack places a
-    /// package's (`testscenes::leaves_on_surfels`), and says so in its description; false (and
-    /// nothing moved) for the other scenes. The reference, traced from the surfels, is the same.
-    pub fn put_leaves_on_surfels(&mut self) -> bool {
-        if !CARVED_SCENES.contains(&self.name.as_str()) {
-            return false;
-        }
+    /// Moves a carved scene's leaves (one of [`CARVED_SCENES`]) onto their surfels' centroid, as
+    /// grotto-pack places a package's (`testscenes::leaves_on_surfels`), and says so in its
+    /// description. The reference, traced from the surfels, is the same.
+    pub fn put_leaves_on_surfels(&mut self) {
         testscenes::leaves_on_surfels(&mut self.data);
         for v in &mut self.variants {
             testscenes::leaves_on_surfels(&mut v.data);
@@ -49,7 +46,6 @@ impl SweepScene {
         self.description.push_str(
             "; leaves moved onto their surfels' centroid, as packages have them (`--leaves-on-surfels`; the scene puts them at their cells' centres, half a leaf behind the surface)",
         );
-        true
     }
 }
 

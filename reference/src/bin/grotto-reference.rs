@@ -368,11 +368,11 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
         let mut scenes: Vec<_> = carved
             .flat_map(|s| accuracy::scenes_cached(w, h, a.spp, Some(s), a.reference_cache.as_deref()))
             .collect();
-        scenes.retain_mut(|s| s.put_leaves_on_surfels());
+        scenes.iter_mut().for_each(accuracy::SweepScene::put_leaves_on_surfels);
         anyhow::ensure!(
             !scenes.is_empty(),
             "--leaves-on-surfels: no hand-built scene named {:?} (they are: {})",
-            a.scene,
+            a.scene.as_deref().unwrap_or_default(),
             accuracy::CARVED_SCENES.join(", ")
         );
         scenes

@@ -237,6 +237,11 @@ pub struct Params {
 pub const TAIL_RATIO_MAX: f32 = 0.95;
 
 /// `Params::flags` bits (generated into WGSL as `FLAG_*` by `shaders::constants`).
+/// The levels whose nodes `Settings::cone_planes` turns into half-spaces (WGSL `PLANE_LODS`):
+/// the leaves and their parents. Coarser nodes hold more than one surface (a corridor's two
+/// walls), which one plane does not describe.
+pub const PLANE_LODS: u32 = 1;
+
 pub mod flags {
     /// Shade adds `albedo * gather` (trilinear over leaves).
     pub const INDIRECT: u32 = 1;
@@ -284,15 +289,11 @@ pub mod flags {
     /// their surface (`Settings::cone_planes`, shaders/svo.wgsl `leaf_plane_share`). The CPU
     /// reference reads it here; the GPU passes have it as the pipeline constant `cone_planes`.
     pub const CONE_PLANES: u32 = 262144;
-    /// The levels whose nodes CONE_PLANES turns into half-spaces (WGSL `PLANE_LODS`): the
-    /// leaves and their parents. Coarser nodes hold more than one surface (a corridor's two
-    /// walls), which one plane does not describe.
-    pub const PLANE_LODS: u32 = 1;
     /// The views shade writes without light (settings.rs `ViewMode::shows_light`).
     pub const VIEWS_WITHOUT_LIGHT: u32 = VIEW_ALBEDO | VIEW_NORMALS | VIEW_LEVEL | VIEW_SCAN;
 
-    /// Every flag with its WGSL name.
-    pub const ALL: [(&str, u32); 19] = [
+    /// Every flag the WGSL reads, with its name there (not CONE_PLANES: a pipeline constant).
+    pub const ALL: [(&str, u32); 18] = [
         ("FLAG_INJECT_ACTIVE", INJECT_ACTIVE),
         ("FLAG_VIEW_LUX", VIEW_LUX),
         ("FLAG_VIEW_ALBEDO", VIEW_ALBEDO),
@@ -311,7 +312,6 @@ pub mod flags {
         ("FLAG_NEW_SERIES", NEW_SERIES),
         ("FLAG_CONE_INTERLEAVE", CONE_INTERLEAVE),
         ("FLAG_BLEND", BLEND),
-        ("FLAG_CONE_PLANES", CONE_PLANES),
     ];
 }
 

@@ -161,7 +161,7 @@ impl<'a> CpuScene<'a> {
     }
 
     /// Trilinear sample of level `lod` at `p_leaf` along `dir`; with `planes`, the levels up to
-    /// `flags::PLANE_LODS` as half-spaces (shaders/svo.wgsl `corner_weight`).
+    /// `PLANE_LODS` as half-spaces (shaders/svo.wgsl `corner_weight`).
     pub(crate) fn sample_level(&self, p_leaf: DVec3, lod: u32, dir: DVec3, planes: bool) -> [f64; 4] {
         let u = p_leaf / f64::from(1u32 << lod) - DVec3::splat(0.5);
         let base = u.floor();
@@ -177,7 +177,7 @@ impl<'a> CpuScene<'a> {
                 continue;
             }
             if let Some(n) = self.find_node(i0 + o, lod) {
-                let w = if planes && lod <= crate::gpu::types::flags::PLANE_LODS {
+                let w = if planes && lod <= crate::gpu::types::PLANE_LODS {
                     w * self.node_plane_share(n, p_leaf)
                 } else {
                     w

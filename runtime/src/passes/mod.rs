@@ -127,8 +127,9 @@ impl ComputePipeline {
 }
 
 /// The settings baked into the passes as WGSL pipeline constants (`override`s), so a pass
-/// compiles without the code an unset one would skip (a uniform flag cost propagate 40% on
-/// lavapipe even where it was off: the branch kept the plane code in the march's inner loop).
+/// compiles without the code an unset one would skip (a uniform flag cost propagate 29-36% on
+/// lavapipe even where it was off: the branch kept the plane code in the march's inner loop,
+/// docs/runtime.md "Cone planes").
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct PassConstants {
     /// `radiance_f16` (shaders/light_state.wgsl): the radiance pyramid's precision.
@@ -138,7 +139,9 @@ pub(crate) struct PassConstants {
 }
 
 impl PassConstants {
-    /// The pipeline constants a composed source declares, with their values.
+    /// The pipeline constants a composed source declares, with their values: WebGPU rejects a
+    /// constant the module does not declare (and naga does since wgpu #9133), and not every
+    /// pass imports both.
     fn for_source(self, src: &str) -> Vec<(&'static str, f64)> {
         let all = [("radiance_f16", self.radiance_f16), ("cone_planes", self.cone_planes)];
         all.into_iter()

@@ -66,7 +66,7 @@ pub(crate) fn constants() -> String {
         out += &format!("const {name}: u32 = {bit}u;\n");
     }
     out += &format!("const FLAG_VIEWS_WITHOUT_LIGHT: u32 = {}u;\n", flags::VIEWS_WITHOUT_LIGHT);
-    out += &format!("const PLANE_LODS: u32 = {}u;\n", flags::PLANE_LODS);
+    out += &format!("const PLANE_LODS: u32 = {}u;\n", crate::gpu::types::PLANE_LODS);
     out += &format!("const NO_SCAN: u32 = {}u;\n", crate::gpu::types::NO_SCAN);
     // The level a coarse tile's leaves are held at (coarse.rs): the level view tells coarse from far.
     out += &format!("const COARSE_LEVELS: u32 = {}u;\n", crate::scene::coarse::COARSE_LEVELS);

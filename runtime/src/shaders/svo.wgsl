@@ -225,8 +225,8 @@ fn sample_lod(p_leaf: vec3<f32>, lod: f32, dir: vec3<f32>) -> vec4<f32> {
     return sample_lod_planes(p_leaf, lod, dir, false);
 }
 
-// `sample_lod`, with the finest levels as half-spaces where `planes` (gather cones under
-// FLAG_CONE_PLANES).
+// `sample_lod`, with the finest levels as half-spaces where `planes` (the march, under the
+// `cone_planes` pipeline constant of cone.wgsl).
 fn sample_lod_planes(p_leaf: vec3<f32>, lod: f32, dir: vec3<f32>, planes: bool) -> vec4<f32> {
     let l = clamp(lod, 0.0, f32(params.max_lod));
     let l0 = u32(floor(l));
