@@ -214,9 +214,11 @@ fn the_bounce_tail_brings_the_furnace_to_its_limit_in_a_few_bounces() {
 
 #[test]
 fn the_bounce_tail_matches_its_cpu_statement() {
-    // Bounces from random light: the third's residual is the change of the gather, and its
-    // tail what LeafLightGpu::tail_of (the CPU statement of propagate.wgsl's bounce_tail) says.
-    let scene = testscenes::colour_box();
+    // Bounces from random light: the third's residual is the change of the gather, and its tail
+    // what LeafLightGpu::tile_ratio and tail_of (the CPU statement of tail.wgsl) say from the
+    // sums of the residuals of the tile's settling leaves. The dogleg has several tiles, so each
+    // must use its own.
+    let scene = testscenes::dogleg();
     let settings = Settings { cones: 4, ..Default::default() };
     let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
     let max_albedo = (0..3)
@@ -235,23 +237,39 @@ fn the_bounce_tail_matches_its_cpu_statement() {
     r.run_bounce().unwrap();
     let second = r.read_leaf_light().unwrap();
     let (mut checked, mut tailed, mut worst) = (0usize, 0usize, 0.0f32);
-    for (a, b) in first.iter().zip(&second) {
-        let residual: [f32; 3] = std::array::from_fn(|k| b.gather[k] - a.gather[k]);
-        let want = LeafLightGpu::tail_of(
-            residual,
-            a.residual[..3].try_into().unwrap(),
-            max_albedo[..].try_into().unwrap(),
-        );
-        for k in 0..3 {
-            let scale = residual[k].abs().max(1e-3);
-            worst = worst.max((b.residual[k] - residual[k]).abs() / scale);
-            worst = worst.max((b.tail[k] - want[k]).abs() / (want[k].abs().max(1e-3)));
+    let mut ratios = Vec::new();
+    for tile in &scene.tiles {
+        let range = tile.leaf_offset as usize..(tile.leaf_offset + tile.leaf_count) as usize;
+        let (mut sum, mut last) = ([0.0f32; 3], [0.0f32; 3]);
+        for (a, b) in first[range.clone()].iter().zip(&second[range.clone()]) {
+            for k in 0..3 {
+                let residual = b.gather[k] - a.gather[k];
+                if LeafLightGpu::settling(residual, a.residual[k]) {
+                    sum[k] += residual;
+                    last[k] += a.residual[k];
+                }
+            }
         }
-        checked += 1;
-        tailed += usize::from(want.iter().any(|t| t.abs() > 1e-4));
+        let ratio = LeafLightGpu::tile_ratio(sum, last, max_albedo[..].try_into().unwrap());
+        ratios.push(ratio[0]);
+        for (a, b) in first[range.clone()].iter().zip(&second[range]) {
+            let residual: [f32; 3] = std::array::from_fn(|k| b.gather[k] - a.gather[k]);
+            let want = LeafLightGpu::tail_of(residual, ratio);
+            for k in 0..3 {
+                let scale = residual[k].abs().max(1e-3);
+                worst = worst.max((b.residual[k] - residual[k]).abs() / scale);
+                // The sums run in another order on the GPU: the ratio agrees to rounding.
+                worst = worst.max((b.tail[k] - want[k]).abs() / (want[k].abs().max(1e-3)) * 0.1);
+            }
+            checked += 1;
+            tailed += usize::from(want.iter().any(|t| t.abs() > 1e-4));
+        }
     }
-    eprintln!("bounce tail: {tailed} of {checked} leaves with a tail, worst error {worst:.2e}");
+    eprintln!(
+        "bounce tail: {tailed} of {checked} leaves with a tail, tile ratios (red) {ratios:.3?}, worst error {worst:.2e}"
+    );
     assert!(tailed * 2 > checked, "most leaves should get a tail after three bounces");
+    assert!(ratios.iter().any(|r| (r - ratios[0]).abs() > 1e-3), "every tile got the same ratio: {ratios:?}");
     assert!(worst < 1e-4, "the tail differs from its CPU statement by {worst}");
 }
 

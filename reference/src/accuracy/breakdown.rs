@@ -72,6 +72,9 @@ pub enum BreakdownScene {
     Dogleg,
     /// 30 m of passage lit at one end, scanned ([`grotto_fixtures::scanned_passage`]).
     Passage,
+    /// The closed box with red and green walls and one lamp under the ceiling
+    /// ([`testscenes::colour_box`]), face by face, the ceiling near the lamp apart.
+    ColourBox,
 }
 
 /// Where the long passage's regions end along its centreline, metres from the lit end: 6 m
@@ -79,11 +82,39 @@ pub enum BreakdownScene {
 const PASSAGE_REGION_ENDS_M: [(&str, f32); 5] =
     [("0-6 m", 6.0), ("6-12 m", 12.0), ("12-18 m", 18.0), ("bend", 22.7), ("past the bend", f32::INFINITY)];
 
+/// The colour box's regions: its faces, the ceiling near the lamp apart.
+const COLOUR_BOX_REGIONS: [&str; 7] =
+    ["ceiling near the lamp", "ceiling, rest", "floor", "red wall", "green wall", "back wall", "front wall"];
+
+/// Which of [`COLOUR_BOX_REGIONS`] a rock cell of the colour box belongs to: its face is the side
+/// the air is on (a carved box's surface cells touch air across exactly one face).
+fn colour_box_region(scene: &SceneData, c: glam::IVec3) -> Option<usize> {
+    let last = 25;
+    let lamp_m = scene.lights.first()?.position_m;
+    Some(if c.z == last {
+        let centre_m = (c.as_vec3() + 0.5) * scene.leaf_size_m;
+        if (centre_m.truncate() - lamp_m.truncate()).length() < 0.5 { 0 } else { 1 }
+    } else if c.z == 0 {
+        2
+    } else if c.x == 0 {
+        3
+    } else if c.x == last {
+        4
+    } else if c.y == last {
+        5
+    } else if c.y == 0 {
+        6
+    } else {
+        return None;
+    })
+}
+
 impl BreakdownScene {
     pub fn name(self) -> &'static str {
         match self {
             Self::Dogleg => "dogleg",
             Self::Passage => "passage",
+            Self::ColourBox => "colour box",
         }
     }
 
@@ -92,6 +123,7 @@ impl BreakdownScene {
         match self {
             Self::Dogleg => "docs/accuracy-passages.md",
             Self::Passage => "docs/accuracy-passage-long.md",
+            Self::ColourBox => "docs/accuracy-colour-box.md",
         }
     }
 
@@ -104,6 +136,9 @@ impl BreakdownScene {
             Self::Passage => {
                 "each stretch of the long passage (scanned and built by grotto-pack, `grotto_fixtures::scanned_passage`; a leaf belongs to the stretch its nearest point of the centreline lies in, metres from the lit end): three 6 m stretches of the straight leg, the bend and the 7 m past it, where only light that bounced arrives"
             }
+            Self::ColourBox => {
+                "each face of the colour box (`testscenes::colour_box`, 2.4 m inside, the lamp 0.3 m under the ceiling's middle), the ceiling within 0.5 m of the point above the lamp apart from the rest of it"
+            }
         }
     }
 
@@ -112,6 +147,7 @@ impl BreakdownScene {
         match self {
             Self::Dogleg => Ok(testscenes::dogleg()),
             Self::Passage => crate::accuracy::scanned_passage(),
+            Self::ColourBox => Ok(testscenes::colour_box()),
         }
     }
 
@@ -121,6 +157,7 @@ impl BreakdownScene {
         let names: Vec<&str> = match self {
             Self::Dogleg => testscenes::DOGLEG_REGIONS.iter().map(|(name, _, _)| *name).collect(),
             Self::Passage => PASSAGE_REGION_ENDS_M.iter().map(|(name, _)| *name).collect(),
+            Self::ColourBox => COLOUR_BOX_REGIONS.to_vec(),
         };
         let mut regions: Vec<(String, Vec<usize>)> =
             names.iter().map(|n| ((*n).to_owned(), Vec::new())).collect();
@@ -135,6 +172,7 @@ impl BreakdownScene {
                     let along_m = testscenes::passage_position_m(own).1;
                     PASSAGE_REGION_ENDS_M.iter().position(|(_, end)| along_m < *end)
                 }
+                Self::ColourBox => colour_box_region(scene, leaf.cell(scene.leaf_size_m)),
             };
             if let Some(r) = region {
                 regions[r].1.push(i);
@@ -184,6 +222,18 @@ pub fn balanced_cut(bounces: u32) -> Settings {
     Settings { bounces, bounce_tail: false, ..Settings::preset(Quality::Balanced) }
 }
 
+/// What a breakdown varies besides its scene.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BreakdownOptions {
+    /// Reference paths per surfel.
+    pub paths: u32,
+    /// Leaves on their surfels' centroid ([`testscenes::leaves_on_surfels`]), as a built package
+    /// has them, instead of at their cells' centres (hand-built scenes only).
+    pub leaves_on_surfels: bool,
+    /// Every runtime configuration with [`Settings::cone_planes`] on.
+    pub cone_planes: bool,
+}
+
 /// A renderer of `data` with `settings`, its light settled (for reading the leaves' light).
 pub fn settled(gpu: &Gpu, data: &SceneData, settings: Settings) -> grotto_runtime::Result<Renderer> {
     let mut r = Renderer::new(gpu, data, settings)?;
@@ -198,21 +248,19 @@ fn runtime_leaves(gpu: &Gpu, data: &SceneData, settings: Settings) -> grotto_run
     Ok(light.iter().zip(&data.leaves).map(|(l, leaf)| luminance(l.shown(leaf))).collect())
 }
 
-/// A scene's breakdown with `paths` reference paths per surfel; with `leaves_on_surfels` its
-/// leaves sit on their surfels as in a built package ([`testscenes::leaves_on_surfels`]) instead
-/// of at their cells' centres. `progress` gets each step.
+/// A scene's breakdown as `options` say. `progress` gets each step.
 pub fn breakdown(
     gpu: &Gpu,
     which: BreakdownScene,
-    paths: u32,
-    leaves_on_surfels: bool,
+    options: BreakdownOptions,
     progress: impl Fn(&str),
 ) -> grotto_runtime::Result<Breakdown> {
+    let BreakdownOptions { paths, leaves_on_surfels, cone_planes } = options;
     let mut data = which
         .data()
         .map_err(|problem| grotto_runtime::Error::Scene { package: which.name().into(), problem })?;
     if leaves_on_surfels {
-        if which != BreakdownScene::Dogleg {
+        if which == BreakdownScene::Passage {
             return Err(grotto_runtime::Error::Scene {
                 package: which.name().into(),
                 problem: "--leaves-on-surfels moves a hand-built scene's leaves; a package's already lie on their surfels".into(),
@@ -221,7 +269,8 @@ pub fn breakdown(
         testscenes::leaves_on_surfels(&mut data);
     }
     let regions = which.regions(&data);
-    let base = Settings::preset(Quality::Balanced);
+    let planes = |s: Settings| Settings { cone_planes: s.cone_planes || cone_planes, ..s };
+    let base = planes(Settings::preset(Quality::Balanced));
     let scene = SurfelScene::from_scene(&data, base.splat_scale);
     let full_settings = PathSettings::for_scene(&data);
     progress("reference, full transport");
@@ -241,7 +290,7 @@ pub fn breakdown(
     let mut runtime_cut = Vec::new();
     for (k, reference) in CUT_BOUNCES.iter().zip(&cut) {
         progress(&format!("runtime, {k} bounces, no tail"));
-        let rt = runtime_leaves(gpu, &data, balanced_cut(*k))?;
+        let rt = runtime_leaves(gpu, &data, planes(balanced_cut(*k)))?;
         rows.push(per_region(
             &format!("bounces {k}, no tail"),
             &format!("cut after {k} bounces"),
@@ -254,7 +303,7 @@ pub fn breakdown(
         ("balanced (3 bounces + tail)", base.clone()),
         ("balanced, no tail", Settings { bounce_tail: false, ..base.clone() }),
         ("balanced, 16 bounces", Settings { bounces: 16, ..base.clone() }),
-        ("high", Settings::preset(Quality::High)),
+        ("high", planes(Settings::preset(Quality::High))),
     ];
     for (name, settings) in fulls {
         progress(&format!("runtime, {name}"));

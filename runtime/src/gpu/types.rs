@@ -90,11 +90,12 @@ pub struct LeafLightGpu {
     /// interpolated over leaves instead of evaluating those lights per pixel. Written by inject.
     pub far: [f32; 4],
     /// The running sum of a bounce's cones until its last batch (rgb), so that `gather` keeps
-    /// the bounce before for the residual meanwhile.
+    /// the bounce before for the residual meanwhile; after it, the bounce before's residual,
+    /// for the tail pass's ratio.
     pub pending: [f32; 4],
-    /// What the last bounce changed the gather by (rgb): the ratio of two successive ones
-    /// estimates the bounces not run (`Settings::bounce_tail`). Zeroed when the light sources
-    /// change ([`flags::NEW_SERIES`]).
+    /// What the last bounce changed the gather by (rgb): the ratio of two successive ones,
+    /// summed over the leaf's tile, estimates the bounces not run (`Settings::bounce_tail`,
+    /// passes/tail.wgsl). Zeroed when the light sources change ([`flags::NEW_SERIES`]).
     pub residual: [f32; 4],
     /// The estimated gather of the bounces not run (rgb, irradiance / pi): shade adds
     /// `albedo * (gather + tail)`; `out` and the pyramid hold only the bounces run.
@@ -108,15 +109,28 @@ impl LeafLightGpu {
         std::array::from_fn(|k| self.out[k] + leaf.albedo_opacity[k] * self.tail[k])
     }
 
-    /// The tail the propagate pass adds after a bounce that changed the gather by `residual`
-    /// when the bounce before changed it by `last`, with ratios trusted up to `ratio_max`
-    /// (`Params::tail_ratio_max`): the CPU statement of passes/propagate.wgsl `bounce_tail`.
-    pub fn tail_of(residual: [f32; 3], last: [f32; 3], ratio_max: [f32; 3]) -> [f32; 3] {
+    /// Whether a leaf whose bounce changed its gather by `residual` after the bounce before
+    /// changed it by `last` is settling in that channel (its own ratio in 0..=1), so that it
+    /// counts in its tile's ratio: passes/tail.wgsl `leaf_settling`.
+    pub fn settling(residual: f32, last: f32) -> bool {
+        last.abs() > 1e-20 && (0.0..=1.0).contains(&(residual / last))
+    }
+
+    /// The ratio the tail pass extrapolates a tile's bounces with, per channel: the summed
+    /// residual of the tile's settling leaves ([`LeafLightGpu::settling`]) over their bounce
+    /// before's (`last`), trusted where it lies in 0..=1 and at most `ratio_max`
+    /// (`Params::tail_ratio_max`), else 0: passes/tail.wgsl `tile_ratio`.
+    pub fn tile_ratio(residual: [f32; 3], last: [f32; 3], ratio_max: [f32; 3]) -> [f32; 3] {
         std::array::from_fn(|k| {
             let ratio = if last[k].abs() > 1e-20 { residual[k] / last[k] } else { 0.0 };
-            let r = if (0.0..=1.0).contains(&ratio) { ratio.min(ratio_max[k]) } else { 0.0 };
-            residual[k] * r / (1.0 - r)
+            if (0.0..=1.0).contains(&ratio) { ratio.min(ratio_max[k]) } else { 0.0 }
         })
+    }
+
+    /// The tail of a leaf whose bounce changed its gather by `residual`, in a tile whose ratio
+    /// is `r` ([`LeafLightGpu::tile_ratio`]): the rest of the geometric series, as tail.wgsl.
+    pub fn tail_of(residual: [f32; 3], r: [f32; 3]) -> [f32; 3] {
+        std::array::from_fn(|k| residual[k] * (r[k] / (1.0 - r[k])))
     }
 }
 

@@ -399,7 +399,13 @@ impl Renderer {
                     }
                     Pass::Env => self.env.record(&mut cp, self.leaf_count),
                     Pass::Mip => self.mip.record(&mut cp),
-                    Pass::Propagate => self.propagate.record(&mut cp, self.slice_run.1 - self.slice_run.0),
+                    Pass::Propagate => {
+                        // The slice that ends the bounce ends it with the tail (propagate.rs).
+                        let (first, end) = self.slice_run;
+                        let finish =
+                            (end >= self.active_written.unwrap_or(0)).then(|| self.activity.tiles() as u32);
+                        self.propagate.record(&mut cp, end - first, finish)
+                    }
                     Pass::Shade => {
                         let v = self.view("shade")?;
                         self.shade.record(&mut cp, &v.outputs, v.targets.width, v.targets.height);

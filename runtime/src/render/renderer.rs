@@ -119,7 +119,7 @@ pub struct Renderer {
     pub(super) inject: Inject,
     pub(super) env: passes::Batched,
     pub(super) mip: passes::mip::Mip,
-    pub(super) propagate: passes::Batched,
+    pub(super) propagate: passes::propagate::Propagate,
     pub(super) shadow: shadow::Shadow,
     pub(super) gbuffer: gbuffer::Gbuffer,
     /// How both splat passes fetch the surfel pool (passes/splat.rs).

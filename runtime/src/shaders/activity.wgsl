@@ -1,6 +1,6 @@
 // Light work only where something changed (runtime/src/light/activity.rs): the largest relative
 // change each tile's leaves made in a propagation bounce, over the active tiles (active.wgsl).
-// With the light state in bind group 1; only propagate imports it.
+// With the light state in bind group 1; only propagate and tail import it.
 #import active
 
 // What a bounce changed: the largest relative change of any leaf's outgoing radiance, then that

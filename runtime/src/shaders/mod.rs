@@ -36,6 +36,7 @@ pub(crate) const INJECT: &str = include_str!("../passes/inject.wgsl");
 pub(crate) const INJECT_TALLY: &str = include_str!("../passes/inject_tally.wgsl");
 pub(crate) const MIP: &str = include_str!("../passes/mip.wgsl");
 pub(crate) const PROPAGATE: &str = include_str!("../passes/propagate.wgsl");
+pub(crate) const TAIL: &str = include_str!("../passes/tail.wgsl");
 pub(crate) const SPLAT: &str = include_str!("../passes/splat.wgsl");
 /// Presents a frame in a window or a browser's canvas (present.rs).
 pub(crate) const PRESENT: &str = include_str!("../render/present.wgsl");
@@ -129,7 +130,7 @@ pub fn compose(src: &str) -> Result<String> {
 }
 
 /// (name, source) of every shader module the runtime creates, before composing.
-pub(crate) const PASSES: [(&str, &str); 8] = [
+pub(crate) const PASSES: [(&str, &str); 9] = [
     ("env", ENV),
     ("inject", INJECT),
     ("inject_tally", INJECT_TALLY),
@@ -138,6 +139,7 @@ pub(crate) const PASSES: [(&str, &str); 8] = [
     ("resolve", RESOLVE),
     ("shade", SHADE),
     ("splat", SPLAT),
+    ("tail", TAIL),
 ];
 
 /// (name, complete module source) of every shader module the runtime creates.
