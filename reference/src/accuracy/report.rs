@@ -107,7 +107,7 @@ pub(crate) fn verdict(v: Option<bool>, missing: &'static str) -> &'static str {
     }
 }
 
-/// docs/accuracy.md.
+/// docs/accuracy.md; each scene's plot is linked as `plots`/SLUG.svg (beside the report).
 pub fn report(
     scenes: &[SweepScene],
     rows: &[Row],
@@ -115,6 +115,7 @@ pub fn report(
     width: u32,
     height: u32,
     command: &str,
+    plots: &str,
 ) -> String {
     let mut s = String::new();
     report_intro(&mut s, device, width, height, command);
@@ -122,7 +123,7 @@ pub fn report(
     report_supersampling(&mut s, scenes, rows);
     report_march_knobs(&mut s, scenes, rows);
     for sc in scenes {
-        report_scene(&mut s, sc, rows);
+        report_scene(&mut s, sc, rows, plots);
     }
     s
 }
@@ -190,7 +191,8 @@ fn report_intro(s: &mut String, device: &str, width: u32, height: u32, command: 
          Where the error sits, region by region and bounce by bounce (`breakdown`): the dogleg's \
          [accuracy-passages.md](accuracy-passages.md) (and before issue 47 changed the hand-built scenes \
          [accuracy-passages-before.md](accuracy-passages-before.md)), the passage's stretches \
-         [accuracy-passage-long.md](accuracy-passage-long.md) (docs/reference.md, \"Where the light goes wrong\").\n"
+         [accuracy-passage-long.md](accuracy-passage-long.md), the colour box's faces \
+         [accuracy-colour-box.md](accuracy-colour-box.md) (docs/reference.md, \"Where the light goes wrong\").\n"
     );
 }
 
@@ -287,14 +289,14 @@ fn report_march_knobs(s: &mut String, scenes: &[SweepScene], rows: &[Row]) {
 }
 
 /// One scene's section: its rows, the Pareto front, the one-bounce march and the cut bounces.
-fn report_scene(s: &mut String, sc: &SweepScene, rows: &[Row]) {
+fn report_scene(s: &mut String, sc: &SweepScene, rows: &[Row], plots: &str) {
     let all: Vec<Row> = rows.iter().filter(|r| r.scene == sc.name).cloned().collect();
     // The one-bounce march rows are judged against the cut reference, in their own table.
     let (march, mine): (Vec<Row>, Vec<Row>) = all.iter().cloned().partition(|r| one_bounce_knob(&r.knob));
     let front = pareto(&mine);
     let noise = mine.first().map_or(0.0, |r| r.reference_noise);
     let _ = writeln!(s, "## {}\n", sc.name);
-    let _ = writeln!(s, "![{} error against time](accuracy/{}.svg)\n", sc.name, slug(&sc.name));
+    let _ = writeln!(s, "![{} error against time]({plots}/{}.svg)\n", sc.name, slug(&sc.name));
     let _ = writeln!(
         s,
         "{}. Reference: {} paths per pixel in {:.1} s, own noise {:.4} (relative RMSE scale). {} leaves, {} surfels.\n",

@@ -25,14 +25,16 @@ enum Cli {
 
 /// Where the light carried through passages goes wrong (issue 47): the runtime's outgoing radiance
 /// per leaf against the reference's, per region (the dogleg's lit room, three corridors and hidden
-/// chamber, or the long passage's stretches) and per bounce; written as Markdown to OUT.
+/// chamber, the long passage's stretches, or the colour box's faces) and per bounce; written as
+/// Markdown to OUT.
 #[derive(clap::Args, Debug)]
 struct BreakdownArgs {
     /// The scene to break down.
     #[arg(long, value_enum, default_value = "dogleg")]
     scene: grotto_reference::accuracy::breakdown::BreakdownScene,
     /// The report to write [default: docs/accuracy-passages.md for the dogleg,
-    /// docs/accuracy-passage-long.md for the passage].
+    /// docs/accuracy-passage-long.md for the passage, docs/accuracy-colour-box.md for the colour
+    /// box].
     #[arg(long)]
     out: Option<PathBuf>,
     /// Reference paths per surfel.
@@ -128,9 +130,10 @@ struct LightsArgs {
 /// with the path-traced reference, and write the report (docs/accuracy.md) and raw rows (JSON).
 #[derive(clap::Args, Debug)]
 struct AccuracyArgs {
-    /// The report to write.
-    #[arg(long, default_value = "docs/accuracy.md")]
-    out: PathBuf,
+    /// The report to write (its JSON beside it, its plots in the folder of its name) [default:
+    /// docs/accuracy.md, or docs/accuracy-hand-built-on-surfels.md with --leaves-on-surfels].
+    #[arg(long)]
+    out: Option<PathBuf>,
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "96x72")]
     size: String,
@@ -431,26 +434,36 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
     {
         command.push_str(&format!(" {flag} {value:?}"));
     }
-    let mut md = accuracy::report(&scenes, &rows, &gpu.describe(), w, h, &command);
+    let default_out = PathBuf::from(if a.leaves_on_surfels {
+        "docs/accuracy-hand-built-on-surfels.md"
+    } else {
+        "docs/accuracy.md"
+    });
+    let out = a.out.clone().unwrap_or_else(|| default_out.clone());
+    if out != default_out {
+        command.push_str(&format!(" --out {}", out.display()));
+    }
+    let plots = out.with_extension("");
+    let plots_name = plots.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let mut md = accuracy::report(&scenes, &rows, &gpu.describe(), w, h, &command, &plots_name);
     // The true-surface benchmark beside it (scripts/truth-check.py writes accuracy-truth.json),
     // where the report has the scene it is about.
-    let truth_json = a.out.with_file_name("accuracy-truth.json");
+    let truth_json = out.with_file_name("accuracy-truth.json");
     let has_demo_cave = scenes.iter().any(|s| s.name == "demo cave");
     if let Some(text) = has_demo_cave.then(|| std::fs::read_to_string(&truth_json).ok()).flatten() {
         let truth: serde_json::Value =
             serde_json::from_str(&text).with_context(|| truth_json.display().to_string())?;
         md = accuracy::with_truth(&md, &truth);
     }
-    let json = a.out.with_extension("json");
-    grotto_runtime::cli::export::write_atomically(&a.out, md.as_bytes())?;
-    let plots = a.out.with_extension("");
+    let json = out.with_extension("json");
+    grotto_runtime::cli::export::write_atomically(&out, md.as_bytes())?;
     std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
     for sc in &scenes {
         let path = plots.join(format!("{}.svg", accuracy::slug(&sc.name)));
         grotto_runtime::cli::export::write_atomically(&path, accuracy::plot_svg(&sc.name, &rows).as_bytes())?;
     }
     grotto_runtime::cli::export::write_atomically(&json, serde_json::to_string_pretty(&rows)?.as_bytes())?;
-    println!("wrote {} and {} ({} runs)", a.out.display(), json.display(), rows.len());
+    println!("wrote {} and {} ({} runs)", out.display(), json.display(), rows.len());
     Ok(())
 }
 
