@@ -8,35 +8,13 @@
 //! `aperture=X`, `step=X`, `planes` (cone planes), `nointerleave`.
 //!
 //! `cargo run --release -p grotto-reference --example box_bounce -- emit-ceiling cones=16 step=0.25`
-use glam::{IVec3, Vec3};
+use glam::Vec3;
 use grotto_fixtures::testscenes;
 use grotto_reference::PathSettings;
 use grotto_reference::SurfelScene;
-use grotto_reference::accuracy::breakdown::settled;
+use grotto_reference::accuracy::breakdown::{luminance as lum, settled};
 use grotto_runtime::gpu::{Gpu, GpuOptions};
 use grotto_runtime::settings::{Quality, Settings};
-
-const FACES: [&str; 6] = ["ceiling", "floor", "red", "green", "back", "front"];
-
-fn face(c: IVec3) -> usize {
-    if c.z == 25 {
-        0
-    } else if c.z == 0 {
-        1
-    } else if c.x == 0 {
-        2
-    } else if c.x == 25 {
-        3
-    } else if c.y == 25 {
-        4
-    } else {
-        5
-    }
-}
-
-fn lum(v: [f32; 3]) -> f64 {
-    (f64::from(v[0]) + f64::from(v[1]) + f64::from(v[2])) / 3.0
-}
 
 fn main() -> anyhow::Result<()> {
     let gpu = Gpu::new(&GpuOptions::default())?;
@@ -83,7 +61,7 @@ fn main() -> anyhow::Result<()> {
         configs.push((extra.clone(), s));
     }
     print!("| {variant} |");
-    for f in FACES {
+    for f in testscenes::COLOUR_BOX_FACES {
         print!(" {f} |");
     }
     println!();
@@ -98,7 +76,7 @@ fn main() -> anyhow::Result<()> {
         let mut rf = [0.0f64; 6];
         for (i, leaf) in data.leaves.iter().enumerate() {
             let (Some(a), Some(b)) = (&r0[i], &r1[i]) else { continue };
-            let f = face(leaf.cell(data.leaf_size_m));
+            let Some(f) = testscenes::colour_box_face(leaf.cell(data.leaf_size_m)) else { continue };
             rt[f] += t1[i] - t0[i];
             rf[f] += lum(b.mean.to_array()) - lum(a.mean.to_array());
         }

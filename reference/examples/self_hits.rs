@@ -13,7 +13,6 @@
 //! the surfels (the front-most disc there, as a camera ray or a bounce finds it), a hair off the
 //! surface along the normal that faces that ray, as the path tracer starts its bounces, and goes
 //! out cosine-distributed about that normal.
-use grotto_preprocess::build::{ColorCodec, SurfelCodec};
 use grotto_reference::accuracy;
 use grotto_reference::{SurfelScene, cosine_sample};
 use grotto_runtime::scene::data::SceneData;
@@ -23,21 +22,7 @@ use rand::{Rng, SeedableRng};
 const RAYS: usize = 200_000;
 
 fn scene(name: &str) -> anyhow::Result<SceneData> {
-    let err = |e: String| anyhow::anyhow!("{name}: {e}");
-    Ok(match name {
-        "passage" => accuracy::scanned_passage().map_err(err)?,
-        "bunny" => accuracy::bunny().map_err(err)?,
-        "demo cave" => {
-            accuracy::demo_cave(ColorCodec::Raw, SurfelCodec::Full, 0.25, None, false).map_err(err)?
-        }
-        other => {
-            accuracy::closed_scenes()
-                .into_iter()
-                .find(|s| s.0 == other)
-                .ok_or_else(|| anyhow::anyhow!("no scene {other:?}"))?
-                .2
-        }
-    })
+    accuracy::scene_named(name).map_err(|e| anyhow::anyhow!("{name}: {e}"))
 }
 
 fn main() -> anyhow::Result<()> {

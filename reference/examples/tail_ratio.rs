@@ -20,15 +20,8 @@ fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let name = args.iter().find(|a| !a.starts_with("--")).cloned().unwrap_or_else(|| "colour box".into());
     let on_surfels = args.iter().any(|a| a == "--leaves-on-surfels");
-    let mut data = if name == "passage" {
-        grotto_reference::accuracy::scanned_passage().map_err(|e| anyhow::anyhow!(e))?
-    } else {
-        grotto_reference::accuracy::closed_scenes()
-            .into_iter()
-            .find(|s| s.0 == name)
-            .ok_or_else(|| anyhow::anyhow!("no scene {name:?}"))?
-            .2
-    };
+    let mut data =
+        grotto_reference::accuracy::scene_named(&name).map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
     if on_surfels {
         testscenes::leaves_on_surfels(&mut data);
     }
@@ -40,9 +33,9 @@ fn main() -> anyhow::Result<()> {
         Ok(light.iter().zip(&data.leaves).map(|(l, leaf)| l.shown(leaf).map(f64::from)).collect())
     };
     let (s1, s2, s3, s16) = (run(k - 2)?, run(k - 1)?, run(k)?, run(16)?);
-    let ratio_max: [f32; 3] = std::array::from_fn(|c| {
-        data.leaves.iter().map(|l| l.albedo_opacity[c]).fold(0.0f32, f32::max).min(0.95)
-    });
+    // The ratios the tail pass trusts, as the renderer sets them for this scene.
+    let trusted = grotto_runtime::render::Renderer::new(&gpu, &data, base.clone())?.params().tail_ratio_max;
+    let ratio_max = [trusted[0], trusted[1], trusted[2]];
     let n = data.leaves.len();
     let mut tile_of = vec![0usize; n];
     for (t, tile) in data.tiles.iter().enumerate() {

@@ -86,27 +86,16 @@ const PASSAGE_REGION_ENDS_M: [(&str, f32); 5] =
 const COLOUR_BOX_REGIONS: [&str; 7] =
     ["ceiling near the lamp", "ceiling, rest", "floor", "red wall", "green wall", "back wall", "front wall"];
 
-/// Which of [`COLOUR_BOX_REGIONS`] a rock cell of the colour box belongs to: its face is the side
-/// the air is on (a carved box's surface cells touch air across exactly one face).
+/// Which of [`COLOUR_BOX_REGIONS`] a rock cell of the colour box belongs to: its face
+/// ([`testscenes::colour_box_face`]), the ceiling split at 0.5 m from the point above the lamp.
 fn colour_box_region(scene: &SceneData, c: glam::IVec3) -> Option<usize> {
-    let last = 25;
+    let face = testscenes::colour_box_face(c)?;
+    if face > 0 {
+        return Some(face + 1);
+    }
     let lamp_m = scene.lights.first()?.position_m;
-    Some(if c.z == last {
-        let centre_m = (c.as_vec3() + 0.5) * scene.leaf_size_m;
-        if (centre_m.truncate() - lamp_m.truncate()).length() < 0.5 { 0 } else { 1 }
-    } else if c.z == 0 {
-        2
-    } else if c.x == 0 {
-        3
-    } else if c.x == last {
-        4
-    } else if c.y == last {
-        5
-    } else if c.y == 0 {
-        6
-    } else {
-        return None;
-    })
+    let centre_m = (c.as_vec3() + 0.5) * scene.leaf_size_m;
+    Some(if (centre_m.truncate() - lamp_m.truncate()).length() < 0.5 { 0 } else { 1 })
 }
 
 impl BreakdownScene {
@@ -182,7 +171,8 @@ impl BreakdownScene {
     }
 }
 
-fn luminance(v: [f32; 3]) -> f64 {
+/// A radiance's luminance as the breakdown weighs it: the mean of r, g and b.
+pub fn luminance(v: [f32; 3]) -> f64 {
     (f64::from(v[0]) + f64::from(v[1]) + f64::from(v[2])) / 3.0
 }
 

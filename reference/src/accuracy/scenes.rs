@@ -56,6 +56,21 @@ pub fn closed_scenes() -> Vec<(&'static str, &'static str, SceneData)> {
     closed_scenes_named(None)
 }
 
+/// One accuracy scene's data by its report name (the closed scenes, "bunny", "demo cave" with raw
+/// colours and full surfels at 0.25 m, as the report's): for examples that study one scene.
+pub fn scene_named(name: &str) -> Result<SceneData, String> {
+    match name {
+        "bunny" => bunny(),
+        "passage" => scanned_passage(),
+        "demo cave" => demo_cave(ColorCodec::Raw, SurfelCodec::Full, 0.25, None, false),
+        other => closed_scenes_named(Some(other))
+            .into_iter()
+            .find(|s| s.0 == other)
+            .map(|s| s.2)
+            .ok_or_else(|| format!("no scene {other:?}")),
+    }
+}
+
 /// [`closed_scenes`], or only the one named `only`: the passage is built through the
 /// preprocessor, which a run for another scene should not wait for.
 fn closed_scenes_named(only: Option<&str>) -> Vec<(&'static str, &'static str, SceneData)> {

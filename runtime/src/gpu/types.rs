@@ -122,8 +122,7 @@ impl LeafLightGpu {
     /// (`Params::tail_ratio_max`), else 0: passes/tail.wgsl `tile_ratio`.
     pub fn tile_ratio(residual: [f32; 3], last: [f32; 3], ratio_max: [f32; 3]) -> [f32; 3] {
         std::array::from_fn(|k| {
-            let ratio = if last[k].abs() > 1e-20 { residual[k] / last[k] } else { 0.0 };
-            if (0.0..=1.0).contains(&ratio) { ratio.min(ratio_max[k]) } else { 0.0 }
+            if Self::settling(residual[k], last[k]) { (residual[k] / last[k]).min(ratio_max[k]) } else { 0.0 }
         })
     }
 
@@ -250,12 +249,12 @@ pub struct Params {
 /// Cap on the bounce ratio of the tail estimate: the tail is `r / (1 - r)` residuals, 19 here.
 pub const TAIL_RATIO_MAX: f32 = 0.95;
 
-/// `Params::flags` bits (generated into WGSL as `FLAG_*` by `shaders::constants`).
 /// The levels whose nodes `Settings::cone_planes` turns into half-spaces (WGSL `PLANE_LODS`):
 /// the leaves and their parents. Coarser nodes hold more than one surface (a corridor's two
 /// walls), which one plane does not describe.
 pub const PLANE_LODS: u32 = 1;
 
+/// `Params::flags` bits (generated into WGSL as `FLAG_*` by `shaders::constants`).
 pub mod flags {
     /// Shade adds `albedo * gather` (trilinear over leaves).
     pub const INDIRECT: u32 = 1;

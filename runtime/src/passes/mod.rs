@@ -318,7 +318,13 @@ pub(crate) fn own_layout<'a>(
 /// Dispatches 64-wide groups covering `n` items as a 2D grid (at most 65535 groups per
 /// dimension); shaders recover the item with `linear_index` (shaders/dispatch.wgsl).
 pub(crate) fn dispatch_linear(pass: &mut wgpu::ComputePass<'_>, n: u32) {
-    let groups = n.div_ceil(64).max(1);
+    dispatch_groups(pass, n.div_ceil(64));
+}
+
+/// Dispatches `groups` workgroups (at least one) as a 2D grid of at most 65535 per dimension;
+/// shaders recover the group's index as `id.x + id.y * num_workgroups.x`.
+pub(crate) fn dispatch_groups(pass: &mut wgpu::ComputePass<'_>, groups: u32) {
+    let groups = groups.max(1);
     let x = groups.min(65535);
     pass.dispatch_workgroups(x, groups.div_ceil(x), 1);
 }

@@ -26,15 +26,13 @@ pub(crate) fn new(
 
 impl Propagate {
     /// Records the cones over `leaf_count` invocations of the active tiles; where `finish` is
-    /// some, the bounce has now run every leaf and the tail pass ends it, one workgroup per
-    /// active tile of at most `finish` (those past the list's tile count return at once).
+    /// some, the bounce has now run every leaf and the tail pass ends it, one workgroup for each
+    /// of the `finish` active tiles.
     pub(crate) fn record(&self, pass: &mut wgpu::ComputePass<'_>, leaf_count: u32, finish: Option<u32>) {
         self.batched.record(pass, leaf_count);
         if let Some(tiles) = finish {
             self.tail.bind(pass);
-            let groups = tiles.max(1);
-            let x = groups.min(65535);
-            pass.dispatch_workgroups(x, groups.div_ceil(x), 1);
+            super::dispatch_groups(pass, tiles);
         }
     }
 }

@@ -90,13 +90,11 @@ fn tail(
 }
 
 // The ratio of a tile's summed residual to the bounce before's, per channel, as trusted
-// (LeafLightGpu::tile_ratio on the CPU): 0 where there is no bounce before or the ratio is
-// negative or above 1, at most params.tail_ratio_max.
+// (LeafLightGpu::tile_ratio on the CPU): where it lies in 0..=1 (as a settling leaf's own,
+// `leaf_settling`), at most params.tail_ratio_max; else 0.
 fn tile_ratio(residual: vec3<f32>, last: vec3<f32>) -> vec3<f32> {
-    let ok = abs(last) > vec3<f32>(1e-20);
-    let ratio = select(vec3<f32>(0.0), residual / select(vec3<f32>(1.0), last, ok), ok);
-    let trusted = (ratio >= vec3<f32>(0.0)) & (ratio <= vec3<f32>(1.0));
-    return select(vec3<f32>(0.0), min(ratio, params.tail_ratio_max.rgb), trusted);
+    let ratio = residual / select(vec3<f32>(1.0), last, abs(last) > vec3<f32>(1e-20));
+    return select(vec3<f32>(0.0), min(ratio, params.tail_ratio_max.rgb), leaf_settling(residual, last));
 }
 
 // Per channel, whether a leaf's own ratio (this bounce's residual over the bounce before's) lies in

@@ -66,7 +66,7 @@ impl Renderer {
             light_held: self.light_held.or_else(|| {
                 self.bounce_readback.is_some().then_some("the last bounce's change is on its way back")
             }),
-            bounce_part: self.bounce_at.map(|next| (next, self.active_written.unwrap_or(0))),
+            bounce_part: self.bounce_at.map(|next| (next, self.active_items())),
             still: self.stills.next.filter(|_| frame.is_some()),
         }
     }
@@ -394,7 +394,7 @@ impl Renderer {
                     Pass::Inject => {
                         // After an edit in place, the active tiles' leaves (frame_params' flag).
                         let edit = self.light_edit.is_some();
-                        let n = if edit { self.active_written.unwrap_or(0) } else { self.leaf_count };
+                        let n = if edit { self.active_items() } else { self.leaf_count };
                         self.inject.record(&mut cp, n, edit)
                     }
                     Pass::Env => self.env.record(&mut cp, self.leaf_count),
@@ -403,7 +403,7 @@ impl Renderer {
                         // The slice that ends the bounce ends it with the tail (propagate.rs).
                         let (first, end) = self.slice_run;
                         let finish =
-                            (end >= self.active_written.unwrap_or(0)).then(|| self.activity.tiles() as u32);
+                            self.active_written.and_then(|(items, tiles)| (end >= items).then_some(tiles));
                         self.propagate.record(&mut cp, end - first, finish)
                     }
                     Pass::Shade => {
@@ -478,6 +478,11 @@ impl Renderer {
         Ok(())
     }
 
+    /// Invocations (leaves) of the active tiles on the GPU (0 when none are written).
+    fn active_items(&self) -> u32 {
+        self.active_written.map_or(0, |(items, _)| items)
+    }
+
     /// Writes the active tiles where the plan propagates (or injects after a light edit) and
     /// the slice of them this call runs.
     fn write_active(&mut self, plan: &EffectPlan, slice: Option<u32>) {
@@ -495,9 +500,9 @@ impl Renderer {
                     self.gpu.queue.write_buffer(&self.active, 16, bytemuck::cast_slice(&tiles));
                 }
                 self.stats_now.last_upload_bytes += 8 + (tiles.len() * size_of::<ActiveTile>()) as u64;
-                self.active_written = Some(items);
+                self.active_written = Some((items, tiles.len() as u32));
             }
-            let items = self.active_written.unwrap_or(0);
+            let items = self.active_items();
             let first = self.bounce_at.unwrap_or(0).min(items);
             let end = slice.map_or(items, |n| first.saturating_add(n).min(items));
             self.slice_run = (first, end);
@@ -592,7 +597,7 @@ impl Renderer {
             self.env_valid = true;
         }
         let end = self.slice_run.1;
-        let items = self.active_written.unwrap_or(0);
+        let items = self.active_items();
         if ran.contains(&Pass::Propagate) && end < items {
             // Part of a bounce: the rest runs in later calls, from the same pyramid.
             self.bounce_at = Some(end);

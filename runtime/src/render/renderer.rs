@@ -94,9 +94,9 @@ pub struct Renderer {
     pub(super) active: wgpu::Buffer,
     pub(super) changes: wgpu::Buffer,
     pub(super) activity: TileActivity,
-    /// Invocations (leaves) of the active tiles on the GPU; `None` when the tiles changed since
-    /// they were written.
-    pub(super) active_written: Option<u32>,
+    /// Invocations (leaves) of the active tiles on the GPU, and the tiles (the tail pass's
+    /// workgroups); `None` when the tiles changed since they were written.
+    pub(super) active_written: Option<(u32, u32)>,
     /// Bounces since the last [`Renderer::take_bounce_work`], with what each updated.
     pub(super) bounce_work: Vec<BounceWork>,
     /// Shadow faces out of date (every face after a change of lights; after a change of tiles,
