@@ -7,20 +7,24 @@
 //! `cargo run --release -p grotto-reference --example edge_cones [x,y,z ...]` (leaf cells; TAN=0.05
 //! for narrow cones; LIFT=k for cones starting k leaves off the surface; SCENE=passage for the
 //! scanned long passage, whose floor, wall and ceiling leaves ALONG=a,b metres down it are taken
-//! when no cells are given; HIT=1 adds the runtime's radiance of the leaves the path tracer's rays
-//! hit, to tell a cone meeting other leaves from a leaf with the wrong radiance; DIRS=1 prints
+//! when no cells are given; SCENE="colour box" for the colour box, whose red wall half way up and
+//! under the ceiling and floor's middle are taken; HIT=1 adds the runtime's radiance of the leaves
+//! the path tracer's rays hit, to tell a cone meeting other leaves from a leaf with the wrong
+//! radiance; CONE=1 spreads the path tracer's rays evenly over each cone's solid angle, what the
+//! cone stands for, instead of along its axis; PLANES=1 marches with cone planes; DIRS=1 prints
 //! every direction: the cone's and the ray's light, where the cone reaches half its opacity and
-//! where the ray meets a disc).
+//! where the ray meets a disc; ONE=e,a prints the march of one cone, step by step: elevation band
+//! e (0-8) and azimuth a (0-23)).
 use glam::{IVec3, Vec3};
 use grotto_fixtures::testscenes;
 use grotto_reference::accuracy::breakdown::{balanced_cut, settled};
 use grotto_reference::{PathSettings, SurfelScene};
 use grotto_runtime::gpu::types::Params;
 use grotto_runtime::gpu::{Gpu, GpuOptions};
-use grotto_runtime::passes::cpu_ref::CpuScene;
+use grotto_runtime::passes::cpu_ref::{CpuScene, MarchStep};
 use grotto_runtime::scene::data::SceneData;
 use grotto_runtime::settings::{Quality, Settings};
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 
 fn env_f32(name: &str) -> Option<f32> {
     std::env::var(name).ok().and_then(|v| v.parse().ok())
@@ -81,12 +85,32 @@ fn half_opacity_m(cpu: &CpuScene<'_>, p: &Params, origin: Vec3, d: Vec3, rise: [
     hi
 }
 
+/// One step of a cone's march (`ONE=`), in the green channel.
+fn print_step(step: MarchStep) {
+    match step {
+        MarchStep::Sample { t_m, diameter_m, edge_m, step, acc } => println!(
+            "      {t_m:.3} m: footprint {diameter_m:.3} m read at edge {edge_m:.3} m, radiance {:.3} opacity {:.3}; the cone so far {:.3} opacity {:.3}",
+            step[1] / step[3].max(1e-9),
+            step[3],
+            acc[1],
+            acc[3]
+        ),
+        MarchStep::Rock { t_m, last, acc } => println!(
+            "      {t_m:.3} m: the axis enters rock; the rest filled with {:.3}: the cone {:.3}",
+            last[1], acc[1]
+        ),
+    }
+}
+
 fn main() -> anyhow::Result<()> {
     let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })?;
     // Leaves on their surfels, as in a package: the cones start one leaf off the surface.
     let passage = std::env::var("SCENE").is_ok_and(|s| s == "passage");
+    let colour_box = std::env::var("SCENE").is_ok_and(|s| s == "colour box");
     let mut data = if passage {
         grotto_reference::accuracy::scanned_passage().map_err(anyhow::Error::msg)?
+    } else if colour_box {
+        testscenes::colour_box()
     } else {
         testscenes::dogleg()
     };
@@ -100,11 +124,16 @@ fn main() -> anyhow::Result<()> {
     let light1 = settled(&gpu, &data, balanced_cut(1))?.read_leaf_light()?;
     let mut p = r.params();
     p.cone_tan_half = env_f32("TAN").unwrap_or(p.cone_tan_half);
+    if std::env::var("PLANES").is_ok() {
+        p.flags |= grotto_runtime::gpu::types::flags::CONE_PLANES;
+    }
     let cpu = CpuScene::mip(&data, &light);
     let scene = SurfelScene::from_scene(&data, Settings::preset(Quality::Balanced).splat_scale);
     let ps = PathSettings { max_bounces: 1, ..PathSettings::for_scene(&data) };
     let mut rng = rand::rngs::SmallRng::seed_from_u64(5);
     let (hit, dirs) = (std::env::var("HIT").is_ok(), std::env::var("DIRS").is_ok());
+    let spread = std::env::var("CONE").is_ok();
+    let one = std::env::var("ONE").ok();
     // Cells from the command line (`x,y,z` each), else the passage's or the room's three leaves.
     let mut cells: Vec<IVec3> = std::env::args()
         .skip(1)
@@ -116,6 +145,10 @@ fn main() -> anyhow::Result<()> {
     if cells.is_empty() {
         cells = if passage {
             passage_cells(&data)
+        } else if colour_box {
+            // The red wall half way up and under the ceiling, the floor's middle.
+            let m = testscenes::COLOUR_BOX_CELLS / 2;
+            vec![IVec3::new(0, m, m), IVec3::new(0, m, testscenes::COLOUR_BOX_CELLS - 3), IVec3::new(m, m, 0)]
         } else {
             vec![IVec3::new(2, 5, 1), IVec3::new(3, 5, 1), IVec3::new(6, 5, 1)]
         };
@@ -141,11 +174,34 @@ fn main() -> anyhow::Result<()> {
                 let d = (t1 * az.cos() + t2 * az.sin()) * elev.cos() + n * elev.sin();
                 let w = f64::from(elev.sin() * elev.cos());
                 let rise = [f64::from(lift), f64::from(d.dot(n))];
-                let rt = cpu.trace_cone(&p, origin.as_dvec3(), d.as_dvec3(), rise)[1];
+                let rt = if one.as_deref() == Some(&format!("{e},{a}")) {
+                    println!("    the cone along {d}, step by step (green):");
+                    cpu.trace_cone_observed(&p, origin.as_dvec3(), d.as_dvec3(), rise, &mut print_step)[1]
+                } else {
+                    cpu.trace_cone(&p, origin.as_dvec3(), d.as_dvec3(), rise)[1]
+                };
                 let rays = 64;
-                let rf: f64 =
-                    (0..rays).map(|_| f64::from(scene.trace(ray_o, d, &ps, &mut rng).y)).sum::<f64>()
-                        / rays as f64;
+                // CONE=1: the rays spread evenly over the cone's solid angle (what the cone stands
+                // for) instead of along its axis.
+                let (u1, u2) = d.any_orthonormal_pair();
+                let cos_max = 1.0 / (1.0 + p.cone_tan_half * p.cone_tan_half).sqrt();
+                let rf: f64 = (0..rays)
+                    .map(|_| {
+                        let r = if spread {
+                            let c = 1.0 - rng.random::<f32>() * (1.0 - cos_max);
+                            let s = (1.0f32 - c * c).max(0.0).sqrt();
+                            let phi = rng.random::<f32>() * std::f32::consts::TAU;
+                            d * c + (u1 * phi.cos() + u2 * phi.sin()) * s
+                        } else {
+                            d
+                        };
+                        if r.dot(n) <= 0.0 {
+                            return 0.0;
+                        }
+                        f64::from(scene.trace(ray_o, r, &ps, &mut rng).y)
+                    })
+                    .sum::<f64>()
+                    / rays as f64;
                 let first = if hit || dirs { hit_leaf(&scene, &data, ray_o, d) } else { None };
                 if let Some((_, k)) = first.filter(|_| hit) {
                     tot_hit += w * f64::from(light[k].out[1]);

@@ -30,6 +30,17 @@ pub(crate) fn enter_rock(acc: [f64; 4], s: [f64; 4], last: [f64; 3]) -> [f64; 4]
     [acc[0] + rest * behind[0], acc[1] + rest * behind[1], acc[2] + rest * behind[2], 1.0]
 }
 
+/// One step of [`CpuScene::trace_cone_observed`]'s march.
+#[derive(Clone, Copy, Debug)]
+pub enum MarchStep {
+    /// A sample at `t_m` along the axis, of a footprint `diameter_m` wide read at voxel edge
+    /// `edge_m`: its premultiplied radiance and opacity for the step, and the cone's after it.
+    Sample { t_m: f64, diameter_m: f64, edge_m: f64, step: [f64; 4], acc: [f64; 4] },
+    /// The axis entered rock at `t_m`: the cone ended with `acc`, what it had not seen filled with
+    /// `last`.
+    Rock { t_m: f64, last: [f64; 3], acc: [f64; 4] },
+}
+
 /// `PLANE_CLEAR` and `SAMPLE_EDGE` in shaders/cone.wgsl.
 const PLANE_CLEAR: f64 = 2.0 / 3.0;
 const SAMPLE_EDGE: f64 = 0.5;
@@ -211,6 +222,19 @@ impl<'a> CpuScene<'a> {
     /// One cone, as `trace_cone` in shaders/cone.wgsl: from `origin_m` along unit `dir`, the
     /// origin `rise[0]` metres above its own surface and rising `rise[1]` metres per metre.
     pub fn trace_cone(&self, p: &Params, origin_m: DVec3, dir: DVec3, rise: [f64; 2]) -> [f64; 4] {
+        self.trace_cone_observed(p, origin_m, dir, rise, &mut |_| {})
+    }
+
+    /// [`Self::trace_cone`], telling `observe` each step of the march (to see where a cone
+    /// gathers its light: reference/examples/edge_cones.rs).
+    pub fn trace_cone_observed(
+        &self,
+        p: &Params,
+        origin_m: DVec3,
+        dir: DVec3,
+        rise: [f64; 2],
+        observe: &mut dyn FnMut(MarchStep),
+    ) -> [f64; 4] {
         let leaf = f64::from(p.leaf_size_m);
         let lo =
             DVec3::new(p.scene_min_leaf[0].into(), p.scene_min_leaf[1].into(), p.scene_min_leaf[2].into());
@@ -234,7 +258,9 @@ impl<'a> CpuScene<'a> {
                 if crate::scene::rock::in_rock(&self.scene.rock, qk.floor().as_ivec3()) {
                     let d = leaf.max(2.0 * tk * tan_half);
                     let lod = ((d / leaf).log2() + 1.0).max(f64::from(crate::scene::rock::ROCK_LEVEL + 1));
-                    return enter_rock(acc, self.sample_lod(qk, lod, p.max_lod, dir, false), last);
+                    let end = enter_rock(acc, self.sample_lod(qk, lod, p.max_lod, dir, false), last);
+                    observe(MarchStep::Rock { t_m: tk, last, acc: end });
+                    return end;
                 }
             }
             let q = (origin_m + dir * t) / leaf;
@@ -253,6 +279,7 @@ impl<'a> CpuScene<'a> {
                 s = [s[0] * k, s[1] * k, s[2] * k, a];
             }
             acc = add(acc, s, 1.0 - acc[3]);
+            observe(MarchStep::Sample { t_m: t, diameter_m: diameter, edge_m: edge, step: s, acc });
             if acc[3] >= 0.995 {
                 return [acc[0] / acc[3], acc[1] / acc[3], acc[2] / acc[3], 1.0];
             }
