@@ -168,9 +168,16 @@ mod golden;
 /// is set by hand (no window manager), retried until the server reports it; every step has a time
 /// limit, so a lost event fails the test with the viewer's log instead of hanging.
 fn view_under_xvfb(dir: &std::path::Path, args: &str, input: &str) -> serde_json::Value {
+    // One window at a time: the input is timed with sleeps, and three viewers drawing in software
+    // on two cores at once ran late enough to lose clicks.
+    static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _turn = ONE_AT_A_TIME.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    // The input starts once the first frame is drawn (GROTTO_VIEW_TRACE logs each frame): on a
+    // cold shader cache or a loaded machine the window shows seconds before it can pick a point.
     let script = format!(
-        "timeout 300 {bin} view {args} --json > {dir}/view.json 2> {dir}/view.err & pid=$!; \
+        "GROTTO_VIEW_TRACE=1 timeout 300 {bin} view {args} --json > {dir}/view.json 2> {dir}/view.err & pid=$!; \
          wid=$(timeout 120 xdotool search --sync --onlyvisible --name 'grotto view') || exit 3; \
+         for i in $(seq 600); do grep -q '^frame ' {dir}/view.err 2>/dev/null && break; sleep 0.2; done; \
          for i in $(seq 100); do xdotool windowfocus $wid 2>/dev/null; \
          [ \"$(xdotool getwindowfocus 2>/dev/null)\" = \"$wid\" ] && break; sleep 0.2; done; \
          timeout 60 xdotool {input} || exit 4; wait $pid",

@@ -357,7 +357,11 @@ fn relit(s: &mut State) -> Result<()> {
 pub(super) fn key(s: &mut State, code: KeyCode) -> Result<bool> {
     let e = &mut s.lamps;
     match code {
-        KeyCode::KeyL => e.on = !e.on,
+        KeyCode::KeyL => {
+            e.on = !e.on;
+            // At once, not at the next frame's update: a click right after L is a placement.
+            s.story.placing = e.on;
+        }
         KeyCode::KeyZ if e.on => {
             if let Some(before) = e.undo.pop() {
                 s.scene.relight(&before.lights, &before.circuits, &before.baked);
