@@ -105,8 +105,8 @@ fn print_step(step: MarchStep) {
 fn main() -> anyhow::Result<()> {
     let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })?;
     // Leaves on their surfels, as in a package: the cones start one leaf off the surface.
-    let passage = std::env::var("SCENE").is_ok_and(|s| s == "passage");
-    let colour_box = std::env::var("SCENE").is_ok_and(|s| s == "colour box");
+    let scene_name = std::env::var("SCENE").unwrap_or_default();
+    let (passage, colour_box) = (scene_name == "passage", scene_name == "colour box");
     let mut data = if passage {
         grotto_reference::accuracy::scanned_passage().map_err(anyhow::Error::msg)?
     } else if colour_box {
@@ -134,6 +134,9 @@ fn main() -> anyhow::Result<()> {
     let (hit, dirs) = (std::env::var("HIT").is_ok(), std::env::var("DIRS").is_ok());
     let spread = std::env::var("CONE").is_ok();
     let one = std::env::var("ONE").ok();
+    // CONE=1: the rays spread evenly over the cone's solid angle (what the cone stands for)
+    // instead of along its axis.
+    let cos_max = 1.0 / (1.0 + p.cone_tan_half * p.cone_tan_half).sqrt();
     // Cells from the command line (`x,y,z` each), else the passage's or the room's three leaves.
     let mut cells: Vec<IVec3> = std::env::args()
         .skip(1)
@@ -176,15 +179,12 @@ fn main() -> anyhow::Result<()> {
                 let rise = [f64::from(lift), f64::from(d.dot(n))];
                 let rt = if one.as_deref() == Some(&format!("{e},{a}")) {
                     println!("    the cone along {d}, step by step (green):");
-                    cpu.trace_cone_observed(&p, origin.as_dvec3(), d.as_dvec3(), rise, &mut print_step)[1]
+                    cpu.trace_cone_observed(&p, origin.as_dvec3(), d.as_dvec3(), rise, print_step)[1]
                 } else {
                     cpu.trace_cone(&p, origin.as_dvec3(), d.as_dvec3(), rise)[1]
                 };
                 let rays = 64;
-                // CONE=1: the rays spread evenly over the cone's solid angle (what the cone stands
-                // for) instead of along its axis.
                 let (u1, u2) = d.any_orthonormal_pair();
-                let cos_max = 1.0 / (1.0 + p.cone_tan_half * p.cone_tan_half).sqrt();
                 let rf: f64 = (0..rays)
                     .map(|_| {
                         let r = if spread {

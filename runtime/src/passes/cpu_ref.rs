@@ -222,7 +222,7 @@ impl<'a> CpuScene<'a> {
     /// One cone, as `trace_cone` in shaders/cone.wgsl: from `origin_m` along unit `dir`, the
     /// origin `rise[0]` metres above its own surface and rising `rise[1]` metres per metre.
     pub fn trace_cone(&self, p: &Params, origin_m: DVec3, dir: DVec3, rise: [f64; 2]) -> [f64; 4] {
-        self.trace_cone_observed(p, origin_m, dir, rise, &mut |_| {})
+        self.trace_cone_observed(p, origin_m, dir, rise, |_| {})
     }
 
     /// [`Self::trace_cone`], telling `observe` each step of the march (to see where a cone
@@ -233,7 +233,7 @@ impl<'a> CpuScene<'a> {
         origin_m: DVec3,
         dir: DVec3,
         rise: [f64; 2],
-        observe: &mut dyn FnMut(MarchStep),
+        mut observe: impl FnMut(MarchStep),
     ) -> [f64; 4] {
         let leaf = f64::from(p.leaf_size_m);
         let lo =

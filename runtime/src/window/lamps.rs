@@ -319,7 +319,6 @@ fn to_spot(l: &mut Light) {
 /// After the frame's input and panel: picked points, the panel's edit or a circuit switched,
 /// and the renderer relit if the lights changed.
 pub(super) fn update(s: &mut State, panel_edit: Option<PanelEdit>) -> Result<()> {
-    s.story.placing = s.lamps.on;
     let mut changed = false;
     for (point, eye) in std::mem::take(&mut s.story.guide.placed) {
         s.lamps.placed(&mut s.scene, point, eye);
@@ -357,11 +356,7 @@ fn relit(s: &mut State) -> Result<()> {
 pub(super) fn key(s: &mut State, code: KeyCode) -> Result<bool> {
     let e = &mut s.lamps;
     match code {
-        KeyCode::KeyL => {
-            e.on = !e.on;
-            // At once, not at the next frame's update: a click right after L is a placement.
-            s.story.placing = e.on;
-        }
+        KeyCode::KeyL => e.on = !e.on,
         KeyCode::KeyZ if e.on => {
             if let Some(before) = e.undo.pop() {
                 s.scene.relight(&before.lights, &before.circuits, &before.baked);

@@ -807,7 +807,7 @@ impl ApplicationHandler for App {
                         .renderer
                         .ldr_output()
                         .map_or(1.0, |o| o.width as f64 / f64::from(s.config.width.max(1)));
-                    s.story.mouse(s.dragging, s.cursor, k);
+                    s.story.mouse(s.dragging, s.cursor, k, s.lamps.on);
                 }
                 Ok(())
             }

@@ -35,8 +35,6 @@ pub(super) struct StoryUi {
     pub(super) at_rest: bool,
     /// A circuit switched in the window (name, on), for the window to relight.
     pub(super) switch: Option<(String, bool)>,
-    /// Lighting mode (window/lamps.rs): a click places a lamp instead of measuring.
-    pub(super) placing: bool,
 }
 
 /// The story's state as `grotto view --json` reports it on exit.
@@ -73,7 +71,6 @@ impl StoryUi {
             last_click: None,
             at_rest: false,
             switch: None,
-            placing: false,
         }
     }
 
@@ -149,8 +146,15 @@ impl StoryUi {
     }
 
     /// The left button at `cursor` (window pixels; the frame is `frame_per_window` of them): a
-    /// click without a drag measures (M), a double click flies to the wall there.
-    pub(super) fn mouse(&mut self, pressed: bool, cursor: Option<(f64, f64)>, frame_per_window: f64) {
+    /// click without a drag places a lamp (`placing`: lighting mode, window/lamps.rs) or measures
+    /// (M), a double click flies to the wall there.
+    pub(super) fn mouse(
+        &mut self,
+        pressed: bool,
+        cursor: Option<(f64, f64)>,
+        frame_per_window: f64,
+        placing: bool,
+    ) {
         let Some((x, y)) = cursor else { return };
         if pressed {
             self.press = Some((x, y));
@@ -169,7 +173,7 @@ impl StoryUi {
             self.guide.pick(at.0, at.1, PickFor::Fly);
         } else {
             self.last_click = Some((Instant::now(), (x, y)));
-            if self.placing {
+            if placing {
                 self.guide.pick(at.0, at.1, PickFor::Place);
             } else if self.measuring {
                 self.guide.pick(at.0, at.1, PickFor::Measure);
