@@ -105,6 +105,23 @@ struct LeafSum {
 // where trilinear would show each leaf's own set at its centre as a mottle of leaf-sized dots).
 fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32, n: vec3<f32>) -> LeafSum {
     var sum = LeafSum(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0, 0.0, vec3<f32>(0.0), 0.0);
+    // The window's blocks (svo.wgsl, `find_block`): at most 2 an axis, each found once.
+    let anchor = tile_anchor();
+    let by_block = blocks_usable();
+    let first = i0 + vec3<i32>(lo) - anchor;
+    let base = first >> vec3<u32>(BLOCK_LOD);
+    let span = ((first + vec3<i32>(hi - lo)) >> vec3<u32>(BLOCK_LOD)) - base;
+    var blocks: array<vec2<u32>, 8>;
+    if by_block {
+        for (var bz = 0; bz <= span.z; bz++) {
+            for (var by = 0; by <= span.y; by++) {
+                for (var bx = 0; bx <= span.x; bx++) {
+                    let b = vec3<i32>(bx, by, bz);
+                    blocks[bx + 2 * by + 4 * bz] = find_block(anchor + ((base + b) << vec3<u32>(BLOCK_LOD)));
+                }
+            }
+        }
+    }
     for (var z = lo; z <= hi; z++) {
         for (var y = lo; y <= hi; y++) {
             for (var x = lo; x <= hi; x++) {
@@ -123,7 +140,15 @@ fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32, n:
                 if w <= 0.0 && wt <= 0.0 {
                     continue;
                 }
-                let leaf = find_leaf(i0 + vec3<i32>(x, y, z));
+                let cell = i0 + vec3<i32>(x, y, z);
+                var leaf: u32;
+                if by_block {
+                    let rel = cell - anchor;
+                    let b = (rel >> vec3<u32>(BLOCK_LOD)) - base;
+                    leaf = leaf_in_block(blocks[b.x + 2 * b.y + 4 * b.z], rel);
+                } else {
+                    leaf = find_leaf(cell);
+                }
                 if leaf != EMPTY {
                     var wt_leaf = wt;
                     if kernel == 3u {

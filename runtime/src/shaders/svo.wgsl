@@ -41,8 +41,7 @@ fn find_tile(v_leaf: vec3<i32>) -> u32 {
     let mask = tile_index_word(0);
     let longest = tile_index_word(1);
     var depths = tile_index_word(2);
-    let anchor = vec3<i32>(bitcast<i32>(tile_index_word(4)), bitcast<i32>(tile_index_word(5)), bitcast<i32>(tile_index_word(6)));
-    let rel = v_leaf - anchor;
+    let rel = v_leaf - tile_anchor();
     while depths != 0u {
         let d = firstTrailingBit(depths);
         depths &= depths - 1u;
@@ -79,6 +78,53 @@ fn find_node(v: vec3<i32>, lod: u32) -> u32 {
     let l = max(lod, tile.leaf_lod);
     let local = vec3<u32>(v_leaf - tile.origin_leaf) >> vec3<u32>(l);
     return descend(tile.node_offset, local, tile.depth - l);
+}
+
+// Windows of leaf cells (shade.wgsl's filters read 2 to 4 cells an axis around every pixel): the
+// cells of a block 4 leaves wide on the tile index's grid share one node, found once by
+// `find_block`, and each cell's leaf is then at most two levels under it (`leaf_in_block`) instead
+// of a hash probe and a descent from its tile's root. Valid when every index entry is at least 4
+// leaves wide (`blocks_usable`): then a block lies in one tile, on that tile's own octree grid.
+const BLOCK_LOD: u32 = 2u;
+
+fn blocks_usable() -> bool {
+    return (tile_index_word(2) & ((1u << BLOCK_LOD) - 1u)) == 0u;
+}
+
+// The tile index's anchor (leaf units): blocks are counted from it.
+fn tile_anchor() -> vec3<i32> {
+    return vec3<i32>(bitcast<i32>(tile_index_word(4)), bitcast<i32>(tile_index_word(5)), bitcast<i32>(tile_index_word(6)));
+}
+
+// The node of the block whose first cell is `v_leaf` (global leaf units, on the anchor's grid of
+// 4) and its tile's `leaf_lod`; the node is EMPTY where the block is empty or outside every tile.
+fn find_block(v_leaf: vec3<i32>) -> vec2<u32> {
+    let t = find_tile(v_leaf);
+    if t == EMPTY {
+        return vec2<u32>(EMPTY, 0u);
+    }
+    let tile = tiles[t];
+    // A coarse tile whose leaves are a block or wider: the node is the leaf itself.
+    let l = max(BLOCK_LOD, tile.leaf_lod);
+    let local = vec3<u32>(v_leaf - tile.origin_leaf) >> vec3<u32>(l);
+    return vec2<u32>(descend(tile.node_offset, local, tile.depth - l), tile.leaf_lod);
+}
+
+// The leaf of the cell `rel` (leaf units from the anchor) in its block `block` (`find_block`), or
+// EMPTY: what `find_leaf` finds for that cell.
+fn leaf_in_block(block: vec2<u32>, rel: vec3<i32>) -> u32 {
+    var n = block.x;
+    if n == EMPTY {
+        return EMPTY;
+    }
+    if block.y < BLOCK_LOD {
+        let in_block = vec3<u32>(rel & vec3<i32>(i32((1u << BLOCK_LOD) - 1u)));
+        n = descend(n, in_block >> vec3<u32>(block.y), BLOCK_LOD - block.y);
+        if n == EMPTY {
+            return EMPTY;
+        }
+    }
+    return nodes[n].first_child;
 }
 
 // Global leaf index of the leaf cell `v` (global leaf units), or EMPTY.
