@@ -105,7 +105,7 @@ struct LeafSum {
 // where trilinear would show each leaf's own set at its centre as a mottle of leaf-sized dots).
 fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32, n: vec3<f32>) -> LeafSum {
     var sum = LeafSum(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0, 0.0, vec3<f32>(0.0), 0.0);
-    // The window's blocks (svo.wgsl, `find_block`): at most 2 an axis, each found once.
+    // The window's blocks (svo.wgsl, `BLOCK_LOD`): at most 2 an axis, each found once.
     let anchor = tile_anchor();
     let by_block = blocks_usable();
     let first = i0 + vec3<i32>(lo) - anchor;
@@ -117,7 +117,7 @@ fn leaf_light_sum(i0: vec3<i32>, f: vec3<f32>, lo: i32, hi: i32, kernel: u32, n:
             for (var by = 0; by <= span.y; by++) {
                 for (var bx = 0; bx <= span.x; bx++) {
                     let b = vec3<i32>(bx, by, bz);
-                    blocks[bx + 2 * by + 4 * bz] = find_block(anchor + ((base + b) << vec3<u32>(BLOCK_LOD)));
+                    blocks[bx + 2 * by + 4 * bz] = find_node_at(anchor + ((base + b) << vec3<u32>(BLOCK_LOD)), BLOCK_LOD);
                 }
             }
         }

@@ -65,24 +65,30 @@ fn find_tile(v_leaf: vec3<i32>) -> u32 {
 // The node covering voxel `v` of the global grid at `lod` (0 = leaves, voxel edge leaf * 2^lod),
 // or EMPTY where that space is empty or outside every tile.
 fn find_node(v: vec3<i32>, lod: u32) -> u32 {
-    let v_leaf = v << vec3<u32>(lod);
+    return find_node_at(v << vec3<u32>(lod), lod).x;
+}
+
+// `find_node` of the voxel at `lod` whose first leaf cell is `v_leaf` (global leaf units), with
+// its tile's `leaf_lod` (0 where the node is EMPTY).
+fn find_node_at(v_leaf: vec3<i32>, lod: u32) -> vec2<u32> {
     let t = find_tile(v_leaf);
     if t == EMPTY {
-        return EMPTY;
+        return vec2<u32>(EMPTY, 0u);
     }
     let tile = tiles[t];
     if lod > tile.depth {
-        return EMPTY;
+        return vec2<u32>(EMPTY, 0u);
     }
     // A coarse tile ends at its coarse leaves: a finer sample reads the leaf that holds it.
     let l = max(lod, tile.leaf_lod);
     let local = vec3<u32>(v_leaf - tile.origin_leaf) >> vec3<u32>(l);
-    return descend(tile.node_offset, local, tile.depth - l);
+    return vec2<u32>(descend(tile.node_offset, local, tile.depth - l), tile.leaf_lod);
 }
 
 // Windows of leaf cells (shade.wgsl's filters read 2 to 4 cells an axis around every pixel): the
 // cells of a block 4 leaves wide on the tile index's grid share one node, found once by
-// `find_block`, and each cell's leaf is then at most two levels under it (`leaf_in_block`) instead
+// `find_node_at(first cell, BLOCK_LOD)` (for a coarse tile whose leaves are a block or wider, the
+// leaf itself), and each cell's leaf is then at most two levels under it (`leaf_in_block`) instead
 // of a hash probe and a descent from its tile's root. Valid when every index entry is at least 4
 // leaves wide (`blocks_usable`): then a block lies in one tile, on that tile's own octree grid.
 const BLOCK_LOD: u32 = 2u;
@@ -96,21 +102,7 @@ fn tile_anchor() -> vec3<i32> {
     return vec3<i32>(bitcast<i32>(tile_index_word(4)), bitcast<i32>(tile_index_word(5)), bitcast<i32>(tile_index_word(6)));
 }
 
-// The node of the block whose first cell is `v_leaf` (global leaf units, on the anchor's grid of
-// 4) and its tile's `leaf_lod`; the node is EMPTY where the block is empty or outside every tile.
-fn find_block(v_leaf: vec3<i32>) -> vec2<u32> {
-    let t = find_tile(v_leaf);
-    if t == EMPTY {
-        return vec2<u32>(EMPTY, 0u);
-    }
-    let tile = tiles[t];
-    // A coarse tile whose leaves are a block or wider: the node is the leaf itself.
-    let l = max(BLOCK_LOD, tile.leaf_lod);
-    let local = vec3<u32>(v_leaf - tile.origin_leaf) >> vec3<u32>(l);
-    return vec2<u32>(descend(tile.node_offset, local, tile.depth - l), tile.leaf_lod);
-}
-
-// The leaf of the cell `rel` (leaf units from the anchor) in its block `block` (`find_block`), or
+// The leaf of the cell `rel` (leaf units from the anchor) in its block `block` (`find_node_at`), or
 // EMPTY: what `find_leaf` finds for that cell.
 fn leaf_in_block(block: vec2<u32>, rel: vec3<i32>) -> u32 {
     var n = block.x;
