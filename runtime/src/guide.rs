@@ -83,7 +83,8 @@ pub struct Guide {
     visible: Vec<Option<bool>>,
     probed_for: Option<Camera>,
     pending: Option<Pending>,
-    /// Clicks waiting for a probe: rendered-size pixels and what for.
+    /// Clicks waiting for a probe: canvas (window) pixels, as [`Guide::pick`] takes them, and
+    /// what for.
     picks: Vec<((f32, f32), PickFor)>,
     measure: Vec<DVec3>,
     missed: u32,
@@ -114,7 +115,8 @@ impl Guide {
         }
     }
 
-    /// A click at rendered pixel `(x, y)`, answered once a probe of the frame shown arrives.
+    /// A click at pixel `(x, y)` of the canvas (the window; not of the frame, which may be drawn
+    /// smaller: [`Guide::drawn`] scales it), answered once a probe of the frame shown arrives.
     pub fn pick(&mut self, x: f32, y: f32, what: PickFor) {
         if self.picks.len() < 8 {
             self.picks.push(((x, y), what));
@@ -287,6 +289,16 @@ impl Guide {
     /// The scene's frame origin, world metres (what view links are given in).
     pub fn frame_origin_m(&self) -> [f64; 3] {
         self.frame_origin_m
+    }
+
+    /// Clicks not answered yet (waiting for a frame's probe, or its read-back under way).
+    pub fn answering(&self) -> bool {
+        self.pending.is_some() || !self.picks.is_empty()
+    }
+
+    /// A probe's read-back under way.
+    pub fn probing(&self) -> bool {
+        self.pending.is_some()
     }
 
     /// Whether the labels' visibility is that of `camera`'s view (what a test waits for).

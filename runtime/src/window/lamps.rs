@@ -370,7 +370,12 @@ pub(super) fn key(s: &mut State, code: KeyCode) -> Result<bool> {
                 relit(s)?;
             }
         }
-        KeyCode::KeyV if e.on => e.save(&s.scene)?,
+        KeyCode::KeyV if e.on => {
+            // A lamp clicked before V is in the file, though its frame may still be drawing.
+            super::story::answer_clicks(s)?;
+            update(s, None)?;
+            s.lamps.save(&s.scene)?
+        }
         _ => return Ok(false),
     }
     Ok(true)

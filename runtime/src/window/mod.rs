@@ -114,6 +114,7 @@ pub fn run(opts: ViewOptions) -> Result<ViewSummary> {
             app.summary.tours.extend(save_tour(&app.opts, &mut s.story, &s.scene)?);
         }
         app.summary.log = std::mem::take(&mut s.log);
+        story::answer_clicks(s)?;
         let size = s.renderer.ldr_output().map_or((s.config.width, s.config.height), |o| (o.width, o.height));
         app.summary.story = Some(s.story.summary(&s.nav.camera(), size));
         app.summary.lights_saved = std::mem::take(&mut s.lamps.saved);
@@ -803,11 +804,7 @@ impl ApplicationHandler for App {
             WindowEvent::MouseInput { state, button: MouseButton::Left, .. } => {
                 if let Some(s) = self.state.as_mut() {
                     s.dragging = state == ElementState::Pressed;
-                    let k = s
-                        .renderer
-                        .ldr_output()
-                        .map_or(1.0, |o| o.width as f64 / f64::from(s.config.width.max(1)));
-                    s.story.mouse(s.dragging, s.cursor, k, s.lamps.on);
+                    s.story.mouse(s.dragging, s.cursor, s.lamps.on);
                 }
                 Ok(())
             }

@@ -48,6 +48,14 @@ pub struct StorySummary {
     pub camera: String,
 }
 
+/// Answers the clicks made so far ([`StoryUi::settle`]) on the last frame drawn: before the
+/// session's summary, and before lighting mode saves its lamps.
+pub(super) fn answer_clicks(s: &mut super::State) -> Result<()> {
+    let full = (s.config.width, s.config.height);
+    let drawn = s.renderer.ldr_output().map_or(full, |o| (o.width, o.height));
+    s.story.settle(&s.gpu, &s.renderer, &s.nav.camera(), full, drawn)
+}
+
 impl StoryUi {
     /// The summary for `camera`'s frame of `size` pixels.
     pub(super) fn summary(&self, camera: &Camera, size: (u32, u32)) -> StorySummary {
@@ -94,6 +102,31 @@ impl StoryUi {
             None => nav.step(held, dt_s),
         }
         Ok(self.guide.flying())
+    }
+
+    /// When the window closes, before its summary: answers the clicks made before (a frame still
+    /// drawing when the window closed must not lose them). Waits for the read-back under way, and
+    /// probes the last frame drawn (`drawn` pixels in a window of `full`) for clicks still waiting.
+    pub(super) fn settle(
+        &mut self,
+        gpu: &crate::gpu::Gpu,
+        r: &Renderer,
+        cam: &Camera,
+        full: (u32, u32),
+        drawn: (u32, u32),
+    ) -> Result<()> {
+        // Two rounds: the probe under way, then one for the clicks that came after it started.
+        for _ in 0..2 {
+            if !self.guide.answering() {
+                break;
+            }
+            self.guide.drawn(r, cam, full, drawn)?;
+            gpu.wait_for("probe", || {
+                self.guide.poll(*cam)?;
+                Ok((!self.guide.probing()).then_some(()))
+            })?;
+        }
+        Ok(())
     }
 
     /// After a frame drawn at `drawn` pixels in a window of `full`: probes labels and clicks.
@@ -145,16 +178,10 @@ impl StoryUi {
         }
     }
 
-    /// The left button at `cursor` (window pixels; the frame is `frame_per_window` of them): a
-    /// click without a drag places a lamp (`placing`: lighting mode, window/lamps.rs) or measures
-    /// (M), a double click flies to the wall there.
-    pub(super) fn mouse(
-        &mut self,
-        pressed: bool,
-        cursor: Option<(f64, f64)>,
-        frame_per_window: f64,
-        placing: bool,
-    ) {
+    /// The left button at `cursor` (window pixels, which the guide takes as they are: it scales
+    /// them to the frame drawn): a click without a drag places a lamp (`placing`: lighting mode,
+    /// window/lamps.rs) or measures (M), a double click flies to the wall there.
+    pub(super) fn mouse(&mut self, pressed: bool, cursor: Option<(f64, f64)>, placing: bool) {
         let Some((x, y)) = cursor else { return };
         if pressed {
             self.press = Some((x, y));
@@ -164,7 +191,7 @@ impl StoryUi {
         if (x - px).hypot(y - py) > DOUBLE_CLICK_PX {
             return;
         }
-        let at = ((x * frame_per_window) as f32, (y * frame_per_window) as f32);
+        let at = (x as f32, y as f32);
         let double = self.last_click.is_some_and(|(t, (lx, ly))| {
             t.elapsed().as_secs_f32() < DOUBLE_CLICK_S && (x - lx).hypot(y - ly) < DOUBLE_CLICK_PX
         });
