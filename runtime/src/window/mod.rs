@@ -115,8 +115,7 @@ pub fn run(opts: ViewOptions) -> Result<ViewSummary> {
         }
         app.summary.log = std::mem::take(&mut s.log);
         story::answer_clicks(s)?;
-        let size = s.renderer.ldr_output().map_or((s.config.width, s.config.height), |o| (o.width, o.height));
-        app.summary.story = Some(s.story.summary(&s.nav.camera(), size));
+        app.summary.story = Some(s.story.summary(&s.nav.camera(), story::drawn_px(s)));
         app.summary.lights_saved = std::mem::take(&mut s.lamps.saved);
     }
     app.summary.seconds = app.started.elapsed().as_secs_f64();

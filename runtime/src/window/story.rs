@@ -48,12 +48,29 @@ pub struct StorySummary {
     pub camera: String,
 }
 
-/// Answers the clicks made so far ([`StoryUi::settle`]) on the last frame drawn: before the
-/// session's summary, and before lighting mode saves its lamps.
+/// The size the last frame was drawn at (the window's before the first).
+pub(super) fn drawn_px(s: &super::State) -> (u32, u32) {
+    s.renderer.ldr_output().map_or((s.config.width, s.config.height), |o| (o.width, o.height))
+}
+
+/// Answers the clicks made so far, before the session's summary and before lighting mode saves
+/// its lamps (a frame still drawing then must not lose them): waits for the probe's read-back
+/// under way, and probes the last frame drawn for clicks still waiting.
 pub(super) fn answer_clicks(s: &mut super::State) -> Result<()> {
-    let full = (s.config.width, s.config.height);
-    let drawn = s.renderer.ldr_output().map_or(full, |o| (o.width, o.height));
-    s.story.settle(&s.gpu, &s.renderer, &s.nav.camera(), full, drawn)
+    let (full, drawn, cam) = ((s.config.width, s.config.height), drawn_px(s), s.nav.camera());
+    let guide = &mut s.story.guide;
+    // Two rounds: the probe under way, then one for the clicks that came after it started.
+    for _ in 0..2 {
+        if !guide.answering() {
+            break;
+        }
+        guide.drawn(&s.renderer, &cam, full, drawn)?;
+        s.gpu.wait_for("probe", || {
+            guide.poll(cam)?;
+            Ok((!guide.probing()).then_some(()))
+        })?;
+    }
+    Ok(())
 }
 
 impl StoryUi {
@@ -102,31 +119,6 @@ impl StoryUi {
             None => nav.step(held, dt_s),
         }
         Ok(self.guide.flying())
-    }
-
-    /// When the window closes, before its summary: answers the clicks made before (a frame still
-    /// drawing when the window closed must not lose them). Waits for the read-back under way, and
-    /// probes the last frame drawn (`drawn` pixels in a window of `full`) for clicks still waiting.
-    pub(super) fn settle(
-        &mut self,
-        gpu: &crate::gpu::Gpu,
-        r: &Renderer,
-        cam: &Camera,
-        full: (u32, u32),
-        drawn: (u32, u32),
-    ) -> Result<()> {
-        // Two rounds: the probe under way, then one for the clicks that came after it started.
-        for _ in 0..2 {
-            if !self.guide.answering() {
-                break;
-            }
-            self.guide.drawn(r, cam, full, drawn)?;
-            gpu.wait_for("probe", || {
-                self.guide.poll(*cam)?;
-                Ok((!self.guide.probing()).then_some(()))
-            })?;
-        }
-        Ok(())
     }
 
     /// After a frame drawn at `drawn` pixels in a window of `full`: probes labels and clicks.
