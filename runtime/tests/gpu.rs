@@ -285,8 +285,11 @@ fn assert_furnace_exact(what: &str, albedo: f32, settings: Settings) {
 
 #[test]
 fn furnace_converges_to_e_over_one_minus_albedo() {
+    // Budgets, not counts: the light stops once a bounce changes it by under 1e-5 (with the
+    // bounce tail, a few bounces; at 1e-7, f32 rounding kept both runs going to their budgets,
+    // 260 bounces and 187 s of CI's time, to end at the same radiance).
     for (albedo, bounces) in [(0.5f32, 60u32), (0.9, 200)] {
-        let settings = Settings { bounces, convergence_tolerance: 1e-7, ..Default::default() };
+        let settings = Settings { bounces, convergence_tolerance: 1e-5, ..Default::default() };
         assert_furnace_exact("f32 radiance", albedo, settings);
     }
 }
@@ -308,11 +311,17 @@ fn furnace_with_cone_planes_converges_to_e_over_one_minus_albedo() {
 
 #[test]
 fn furnace_at_albedo_099_stays_bounded() {
-    let (lo, hi, finite) = furnace(0.99, 500);
-    eprintln!("furnace albedo 0.99 after 500 bounces: {lo:.3} .. {hi:.3} (limit 100)");
+    // 200 bounces past the point where a bounce changes the light by under 1e-7 (f32 rounding
+    // never lets it): the bounce tail's estimate must neither drift nor blow up when the light
+    // is bounced again and again at albedo 0.99, where its ratio is 0.99 and its tail 99 times a
+    // bounce's change.
+    let (lo, hi, finite) = furnace(0.99, 200);
+    eprintln!("furnace albedo 0.99 after 200 bounces: {lo:.3} .. {hi:.3} (limit 100)");
     assert!(finite);
-    // After 500 bounces the exact partial sum is (1 - 0.99^501) / 0.01 = 99.35.
-    assert!(hi <= 100.0 * 1.001 && lo > 90.0);
+    // Between what the bounces alone sum to, (1 - 0.99^201) / 0.01 = 86.7 (measured 89.28: the
+    // tail adds its guarded share), and the limit 100.
+    let bounces_alone = (1.0 - 0.99f32.powi(201)) / 0.01;
+    assert!(hi <= 100.0 * 1.001 && lo > bounces_alone * 0.995, "{lo} .. {hi}: not in {bounces_alone} .. 100");
 }
 
 /// The dogleg as a furnace: every surface leaf (one with a surfel) emits 1 with albedo 0.8 and no
@@ -961,7 +970,7 @@ fn a_scene_with_256_lights_renders_and_culling_drops_only_light_under_the_cutoff
 }
 
 #[test]
-fn many_cone_shadowed_lamps_add_up_like_the_same_lamps_one_at_a_time() {
+fn many_cone_shadowed_lamps_add_up_like_the_same_lamps_in_small_groups() {
     use grotto_runtime::scene::data::SceneLight;
     use grotto_runtime::settings::ShadowFallback;
     // 48 lamps along the dogleg's air (room, corridors, chamber), all beyond the shadow-map budget:
@@ -1000,15 +1009,17 @@ fn many_cone_shadowed_lamps_add_up_like_the_same_lamps_one_at_a_time() {
         r.read_leaf_light().unwrap().iter().map(|l| l.far[1]).collect::<Vec<f32>>()
     };
     let together = far(&scene.lights);
+    // The sum of small groups: each group's loop stays far below the drivers' limit (one lamp a
+    // run cost 48 renderers and 149 s of CI's time for the same check).
     let mut one_by_one = vec![0.0f32; together.len()];
-    for k in 0..scene.lights.len() {
-        for (s, v) in one_by_one.iter_mut().zip(far(&scene.lights[k..k + 1])) {
+    for group in scene.lights.chunks(6) {
+        for (s, v) in one_by_one.iter_mut().zip(far(group)) {
             *s += v;
         }
     }
     let worst =
         together.iter().zip(&one_by_one).map(|(a, b)| (a - b).abs() / b.max(1e-3)).fold(0.0f32, f32::max);
-    eprintln!("48 cone-shadowed lamps together vs one at a time: worst relative difference {worst:.2e}");
+    eprintln!("48 cone-shadowed lamps together vs in groups of six: worst relative difference {worst:.2e}");
     assert!(one_by_one.iter().any(|&v| v > 0.0));
     assert!(worst < 1e-4, "lamps together differ from their sum: {worst}");
 }

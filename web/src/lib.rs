@@ -92,6 +92,8 @@ struct State {
     /// GPU milliseconds of recent frames, and the leaves of the next light slice.
     recent_ms: Vec<f64>,
     slice_leaves: u32,
+    /// Longest frame at rest (ms).
+    rest_ms: f64,
     /// The frame-time target while moving.
     target: Option<FrameTarget>,
     /// What the plan said of propagation at the last frame (the panel shows it).
@@ -106,7 +108,8 @@ struct State {
     health: health::Health,
 }
 
-/// Longest frame at rest, as the window viewer's (window/pace.rs `REST_FRAME_MS`).
+/// Longest frame at rest, as the window viewer's (window/pace.rs `REST_FRAME_MS`), unless the
+/// page's `rest_ms` says otherwise.
 const REST_FRAME_MS: f64 = 100.0;
 
 /// A frame recorded: when, the leaves its light slice propagated, and whether it was a plain
@@ -249,6 +252,7 @@ impl Viewer {
                 last: None,
                 recent_ms: Vec::new(),
                 slice_leaves: 4096,
+                rest_ms: o.rest_ms.filter(|ms| ms.is_finite() && *ms > 0.0).unwrap_or(REST_FRAME_MS),
                 target: match o.target_fps {
                     Some(f) if !(f.is_finite() && f > 0.0) => None,
                     f => Some(FrameTarget::new(1000.0 / f.unwrap_or(60.0))),
@@ -564,7 +568,7 @@ impl State {
     /// Sizes the next light slice from what the last frame took on the GPU (submitted onto an
     /// idle queue, reported done: the only timing a browser gives without timestamp queries,
     /// and too coarse to split a frame into its light and its draw). As the window's pacer
-    /// (window/pace.rs): a frame at rest aims at `REST_FRAME_MS`, or at twice the draw where the
+    /// (window/pace.rs): a frame at rest aims at `rest_ms` (`REST_FRAME_MS`), or at twice the draw where the
     /// draw alone takes more, so the light always gets at least the draw's time; the draw is
     /// the quickest recent frame.
     fn pace(&mut self, last: LastFrame, done: Instant) {
@@ -588,7 +592,7 @@ impl State {
             return;
         }
         let draw_ms = self.recent_ms.iter().copied().fold(f64::INFINITY, f64::min);
-        let target = REST_FRAME_MS.max(2.0 * draw_ms);
+        let target = self.rest_ms.max(2.0 * draw_ms);
         let k = (target / ms.max(1.0)).clamp(0.5, 1.5);
         self.slice_leaves = ((f64::from(self.slice_leaves) * k) as u32).clamp(64, 1 << 24);
     }

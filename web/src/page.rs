@@ -49,6 +49,12 @@ pub struct Options {
     /// Samples a pixel gathered at rest, one a frame, each jittered within the pixel and
     /// averaged (anti-aliasing; default 8 as natively, 1: none).
     pub samples: Option<u32>,
+    /// Longest frame at rest in milliseconds (default 100, as natively): at rest the light gets
+    /// what the draw leaves of it, and at least the draw's own time where the draw alone takes
+    /// longer. A page that wants the converged light sooner than it wants quick answers while
+    /// the light converges (a kiosk's screen, a screenshot, a test on a software adapter)
+    /// raises it.
+    pub rest_ms: Option<f64>,
     /// The camera to open on as a view link carries it (`x,y,z,heading,pitch,fov`: world
     /// metres and degrees, grotto_runtime::view::story::view_link), over `camera`: what a shared
     /// address restores.
