@@ -158,6 +158,7 @@ impl Viewer {
         let opened = Instant::now();
         let o = parse_options(&options)?;
         let settings = settings_of(&o)?;
+        let rest_ms = page::rest_ms_of(&o, REST_FRAME_MS)?;
         let exposure = settings.exposure;
         let width = o.width.unwrap_or(canvas.width()).clamp(1, 4096);
         let height = o.height.unwrap_or(canvas.height()).clamp(1, 4096);
@@ -252,7 +253,7 @@ impl Viewer {
                 last: None,
                 recent_ms: Vec::new(),
                 slice_leaves: 4096,
-                rest_ms: o.rest_ms.filter(|ms| ms.is_finite() && *ms > 0.0).unwrap_or(REST_FRAME_MS),
+                rest_ms,
                 target: match o.target_fps {
                     Some(f) if !(f.is_finite() && f > 0.0) => None,
                     f => Some(FrameTarget::new(1000.0 / f.unwrap_or(60.0))),

@@ -132,6 +132,17 @@ pub(crate) fn parse_options(json: &str) -> Result<Options, Error> {
     serde_json::from_str(json).map_err(|e| Error::Setting(format!("viewer options {json}: {e}")))
 }
 
+/// The longest frame at rest (ms): the page's `rest_ms`, else `default_ms`.
+pub(crate) fn rest_ms_of(o: &Options, default_ms: f64) -> Result<f64, Error> {
+    match o.rest_ms {
+        None => Ok(default_ms),
+        Some(ms) if ms.is_finite() && ms > 0.0 => Ok(ms),
+        Some(ms) => Err(Error::Setting(format!(
+            "rest_ms {ms}: the longest frame at rest must be a positive number of milliseconds"
+        ))),
+    }
+}
+
 pub(crate) fn settings_of(o: &Options) -> Result<Settings, Error> {
     let quality = match &o.quality {
         Some(p) => Quality::parse(p)
