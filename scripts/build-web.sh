@@ -2,7 +2,8 @@
 # Builds the browser viewer (the web crate, wasm32 on WebGPU) into target/web, where
 # `grotto publish` finds it: index.html, grotto_web.js (wasm-bindgen's glue) and
 # grotto_web_bg.wasm. Installs the wasm32 target and the wasm-bindgen CLI of the version
-# Cargo.lock pins where missing (the CLI must match the crate; about 2 minutes to build once, unoptimised).
+# Cargo.lock pins where missing (the CLI must match the crate; built unoptimised, about 2 minutes
+# once).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-target/web}

@@ -544,3 +544,32 @@ fn the_folder_maps_agree_with_the_tree() {
     let in_readme = mapped_folders(&readme, "## Layout", 2);
     assert_eq!(in_readme, folders, "the README's layout (the runtime's folders) against runtime/src");
 }
+
+/// The `key = value` lines of `[section]` in a Cargo.toml's text (comments and blank lines
+/// left out), in order.
+fn toml_section(text: &str, section: &str) -> Vec<String> {
+    let mut lines = text.lines().map(str::trim).skip_while(|l| *l != section).skip(1);
+    let mut out = Vec::new();
+    for l in lines.by_ref() {
+        if l.starts_with('[') {
+            break;
+        }
+        if !l.is_empty() && !l.starts_with('#') {
+            out.push(l.to_owned());
+        }
+    }
+    out
+}
+
+/// CI checks the fuzz target in the main target folder (.ci/run); it finds the dependencies
+/// clippy checked there only while both workspaces build them under the same dev profile.
+#[test]
+fn the_fuzz_workspace_builds_with_the_main_dev_profile() {
+    let main = std::fs::read_to_string(workspace().join("Cargo.toml")).unwrap();
+    let fuzz = std::fs::read_to_string(workspace().join("fuzz/Cargo.toml")).unwrap();
+    for section in ["[profile.dev]", "[profile.dev.package.\"*\"]"] {
+        let want = toml_section(&main, section);
+        assert!(!want.is_empty(), "no {section} in Cargo.toml");
+        assert_eq!(toml_section(&fuzz, section), want, "fuzz/Cargo.toml's {section} against Cargo.toml's");
+    }
+}

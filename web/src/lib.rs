@@ -569,9 +569,9 @@ impl State {
     /// Sizes the next light slice from what the last frame took on the GPU (submitted onto an
     /// idle queue, reported done: the only timing a browser gives without timestamp queries,
     /// and too coarse to split a frame into its light and its draw). As the window's pacer
-    /// (window/pace.rs): a frame at rest aims at `rest_ms` (`REST_FRAME_MS`), or at twice the draw where the
-    /// draw alone takes more, so the light always gets at least the draw's time; the draw is
-    /// the quickest recent frame.
+    /// (window/pace.rs): a frame at rest aims at `rest_ms` (`REST_FRAME_MS` unless the page says),
+    /// or at twice the draw where the draw alone takes more, so the light always gets at least
+    /// the draw's time; the draw is the quickest recent frame.
     fn pace(&mut self, last: LastFrame, done: Instant) {
         let ms = done.saturating_duration_since(last.submitted).as_secs_f64() * 1e3;
         if last.shadow {
