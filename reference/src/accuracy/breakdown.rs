@@ -132,7 +132,7 @@ impl BreakdownScene {
     }
 
     /// The scene: the hand-built dogleg, the scanned passage (as the accuracy report has them).
-    fn data(self) -> Result<SceneData, String> {
+    pub fn data(self) -> Result<SceneData, String> {
         match self {
             Self::Dogleg => Ok(testscenes::dogleg()),
             Self::Passage => crate::accuracy::scanned_passage(),
@@ -142,7 +142,7 @@ impl BreakdownScene {
 
     /// The scene's leaves per region: the dogleg's [`testscenes::DOGLEG_REGIONS`], the passage's
     /// stretches by distance along its centreline.
-    fn regions(self, scene: &SceneData) -> Vec<(String, Vec<usize>)> {
+    pub fn regions(self, scene: &SceneData) -> Vec<(String, Vec<usize>)> {
         let names: Vec<&str> = match self {
             Self::Dogleg => testscenes::DOGLEG_REGIONS.iter().map(|(name, _, _)| *name).collect(),
             Self::Passage => PASSAGE_REGION_ENDS_M.iter().map(|(name, _)| *name).collect(),

@@ -200,14 +200,7 @@ impl<'a> CpuScene<'a> {
     }
 
     /// Quadrilinear sample at fractional `lod`.
-    pub(crate) fn sample_lod(
-        &self,
-        p_leaf: DVec3,
-        lod: f64,
-        max_lod: u32,
-        dir: DVec3,
-        planes: bool,
-    ) -> [f64; 4] {
+    pub fn sample_lod(&self, p_leaf: DVec3, lod: f64, max_lod: u32, dir: DVec3, planes: bool) -> [f64; 4] {
         let l = lod.clamp(0.0, f64::from(max_lod));
         let l0 = l.floor() as u32;
         let t = l - f64::from(l0);
@@ -291,6 +284,18 @@ impl<'a> CpuScene<'a> {
 
     /// The gathered radiance of leaf `i` (irradiance / pi), as propagate.wgsl.
     pub(crate) fn gather(&self, p: &Params, i: usize) -> DVec3 {
+        self.gather_with(p, i, |origin, d, rise| self.trace_cone(p, origin, d, rise))
+    }
+
+    /// [`Self::gather`] with another march: `march(origin_m, dir, rise)` returns a cone's
+    /// premultiplied radiance and opacity as [`Self::trace_cone`] does (reference/examples try
+    /// other marches over the same cone set, interleave and weights).
+    pub fn gather_with(
+        &self,
+        p: &Params,
+        i: usize,
+        mut march: impl FnMut(DVec3, DVec3, [f64; 2]) -> [f64; 4],
+    ) -> DVec3 {
         let leaf = &self.scene.leaves[i];
         let mean = Vec3::from_slice(&leaf.normal_mean[..3]).as_dvec3();
         let r = mean.length();
@@ -317,7 +322,7 @@ impl<'a> CpuScene<'a> {
             let (x, y) = (f64::from(c[0]), f64::from(c[1]));
             let (x, y) = (cos_phi * x - sin_phi * y, sin_phi * x + cos_phi * y);
             let d = (t1 * x + t2 * y + n * f64::from(c[2])).normalize();
-            let s = self.trace_cone(p, origin, d, [lift, d.dot(n)]);
+            let s = march(origin, d, [lift, d.dot(n)]);
             g += f64::from(c[3]) * (DVec3::new(s[0], s[1], s[2]) + (1.0 - s[3]) * bg);
         }
         g
