@@ -1,31 +1,37 @@
 //! A cone march whose coverage counts rays, not steps (issue 47), tried on the CPU against the
-//! runtime's march and the path tracer: what the first bounce carries to each face of the colour
-//! box or each region of the dogleg (leaves on their surfels, as packages have them), as a share of
-//! what the reference's first bounce carries (1 where the bounce is carried exactly).
+//! runtime's march and the path tracer: what the first bounces carry to each region of the colour
+//! box, the dogleg (both with their leaves on their surfels, as packages have them) or the scanned
+//! passage, as a share of what the reference's carry (1 where the bounces are carried exactly).
 //!
 //! The runtime's cone (`cpu_ref::trace_cone`, the GPU's march) composites every sample's opacity
 //! front to back, so a surface a cone runs along is counted again at every step, and a cone whose
 //! axis enters rock takes the colour it last sampled for all it had not yet seen
 //! (docs/reference.md, "Where a wall's cones read too much"). The march tried here follows `RAYS`
-//! rays spread evenly over each cone's solid angle through the rock behind the shells (the
-//! runtime's rock table); a ray ends where it enters rock, and brings the colour of the radiance
-//! pyramid where it met the surface, read at the share of the footprint it stands for. The cone
-//! is covered by the share of its rays that ended: a surface is counted once, by the rays that
-//! met it, where they met it.
+//! rays spread evenly over each cone's solid angle (the same cone set, interleave and weights,
+//! through `cpu_ref::gather_with`); a ray ends where it enters the rock behind the shells (the
+//! runtime's rock table) or meets a leaf, and brings the colour of the radiance pyramid there,
+//! read over the share of the footprint it stands for. The cone is covered by the share of its
+//! rays that ended: a surface is counted once, by the rays that met it, where they met it.
 //!
 //! `cargo run --release -p grotto-reference --example ray_cones -- [colour-box|emit-ceiling|dogleg|passage]`
 //! (`emit-ceiling`: the colour box with no lamp and its ceiling glowing). Knobs, by environment:
-//! `RAYS=1|7|19` (default 7); `LIFT=k`, the rays start k leaves off the surface instead of the
-//! cones' lift; `LOD_MIN=k` and `LOD_MAX=k`, the pyramid levels a ray's colour is read between;
-//! `GROW=g`, each step at least g times the ray's share of the footprint instead of half a leaf;
-//! `NOLEAF=1`, a ray ends at rock only, not where it meets a leaf. It prints, per region, the
-//! GPU's first bounce, the CPU cones' (the same march, as a check) and the rays', each over the
-//! reference's, then how many samples the cones took and how many steps the rays did.
-use glam::{DVec3, Vec3};
+//! `BOUNCES=k` (default 1), the bounces run (the GPU's, and the CPU's each over the pyramid of the
+//! one before), against the reference cut after as many; `RAYS=1|7|19` (default 7); `LIFT=k`, the
+//! rays start k leaves off the surface instead of the cones' lift; `LOD_MIN=k` and `LOD_MAX=k`,
+//! the pyramid levels a ray's colour is read between; `GROW=g`, each step at least g times the
+//! ray's share of the footprint instead of half a leaf; `NOLEAF=1`, a ray ends at rock only;
+//! `CELLS=1`, a ray walks the leaf cells it crosses and meets a leaf by its cell, and with it
+//! `PLANEHIT=1` only where it goes behind the leaf's plane in that cell; `COSW=1`, rays weighted
+//! by their cosine within their cone. It prints, per region, what the bounces add to the leaves'
+//! light on the GPU, with the CPU cones (the same march, as a check) and with the rays, each over
+//! what the reference's add, then how many samples the cones took and how many steps the rays did
+//! (with `CELLS`, also what a walk crossing empty nodes whole would visit, and the bricks of
+//! 4x4x4 leaves the rays enter).
+use glam::{DVec3, IVec3, Vec3};
 use grotto_fixtures::testscenes;
 use grotto_reference::accuracy::breakdown::{BreakdownScene, balanced_cut, luminance as lum, settled};
 use grotto_reference::{PathSettings, SurfelScene};
-use grotto_runtime::gpu::types::Params;
+use grotto_runtime::gpu::types::{LeafLightGpu, Params};
 use grotto_runtime::gpu::{Gpu, GpuOptions};
 use grotto_runtime::passes::cpu_ref::CpuScene;
 use grotto_runtime::scene::data::SceneData;
@@ -57,24 +63,28 @@ fn env<T: std::str::FromStr>(name: &str) -> Option<T> {
     std::env::var(name).ok().and_then(|v| v.parse().ok())
 }
 
-struct RayMarch<'a> {
-    cpu: &'a CpuScene<'a>,
+struct RayMarch {
     p: Params,
     pattern: Vec<[f64; 2]>,
     lod_min: f64,
     lod_max: f64,
     hit_leaves: bool,
+    cells: bool,
+    plane_hit: bool,
+    cos_weighted: bool,
     grow: f64,
     steps: std::cell::Cell<u64>,
+    visits: [std::cell::Cell<u64>; 2],
+    bricks: std::cell::Cell<u64>,
     hits: std::cell::Cell<u64>,
     escaped: std::cell::Cell<u64>,
     blank: std::cell::Cell<u64>,
 }
 
-impl RayMarch<'_> {
+impl RayMarch {
     /// One cone from `origin_m` along unit `dir`, its surface's normal `n`: premultiplied radiance
     /// and the share of its rays that ended on a surface (the cone's opacity).
-    fn cone(&self, origin_m: DVec3, dir: DVec3, n: DVec3) -> [f64; 4] {
+    fn cone(&self, cpu: &CpuScene<'_>, origin_m: DVec3, dir: DVec3, n: DVec3) -> [f64; 4] {
         let leaf = f64::from(self.p.leaf_size_m);
         let cell_m = leaf * f64::from(1u32 << ROCK_LEVEL);
         let tan_half = f64::from(self.p.cone_tan_half);
@@ -85,8 +95,13 @@ impl RayMarch<'_> {
         let (lo, hi) = (corner(self.p.scene_min_leaf), corner(self.p.scene_max_leaf));
         let share = 1.0 / self.pattern.len() as f64;
         let mut acc = [0.0f64; 4];
+        // COSW=1: each ray weighted by its cosine to the surface's normal (the cone's weight is its
+        // cosine-weighted solid angle, and the rays sample the solid angle evenly); else evenly.
+        let ray_dir = |u: &[f64; 2]| (dir + tan_half * (u[0] * e1 + u[1] * e2)).normalize();
+        let cos_sum: f64 = self.pattern.iter().map(|u| ray_dir(u).dot(n).max(0.0)).sum();
         for u in &self.pattern {
-            let mut d = (dir + tan_half * (u[0] * e1 + u[1] * e2)).normalize();
+            let mut d = ray_dir(u);
+            let weight = if self.cos_weighted && cos_sum > 0.0 { d.dot(n).max(0.0) / cos_sum } else { share };
             // Rays of a grazing cone that would dip under the cone's own surface run just above
             // it instead (a path from the surface cannot go below it).
             let rise = d.dot(n);
@@ -95,46 +110,133 @@ impl RayMarch<'_> {
             }
             let step = 0.5 * leaf;
             let mut t = leaf;
+            // CELLS=1: the ray walks the leaf cells it crosses (Amanatides & Woo), `t` where it
+            // enters each, and meets a leaf by its cell.
+            let start = (origin_m + d * t) / leaf;
+            let mut cell = start.floor().as_ivec3();
+            let dir_step = d.signum().as_ivec3();
+            let next_edge = (cell.as_dvec3() + d.signum().max(DVec3::ZERO) - start) / d;
+            let mut t_next = DVec3::select(d.abs().cmpgt(DVec3::splat(1e-12)), next_edge, DVec3::INFINITY);
+            let t_cell = DVec3::select(d.abs().cmpgt(DVec3::splat(1e-12)), (1.0 / d).abs(), DVec3::INFINITY);
+            let t_start = t;
+            let mut last_key: [Option<(u32, IVec3)>; 2] = [None; 2];
+            let mut last_brick: Option<IVec3> = None;
             loop {
                 let q = (origin_m + d * t) / leaf;
                 if t > f64::from(self.p.max_distance_m) || q.cmplt(lo).any() || q.cmpgt(hi).any() {
                     self.escaped.set(self.escaped.get() + 1);
                     break;
                 }
-                let rock = in_rock(&self.cpu.scene.rock, q.floor().as_ivec3());
-                let surface =
-                    self.hit_leaves && self.cpu.sample_lod(q, 0.0, self.p.max_lod, d, false)[3] >= 0.5;
+                let (rock, surface) = if self.cells {
+                    let leaf_here = if self.hit_leaves { cpu.find_node(cell, 0) } else { None };
+                    // PLANEHIT=1: a ray meets a leaf only where, in its cell, it goes behind the
+                    // plane through the leaf's surfels across their mean normal.
+                    let exit_m = origin_m + d * (t_start + t_next.min_element() * leaf);
+                    let surface = leaf_here.is_some_and(|n| !self.plane_hit || behind_leaf(cpu, n, exit_m));
+                    (in_rock(&cpu.scene.rock, cell), surface)
+                } else {
+                    let surface =
+                        self.hit_leaves && cpu.sample_lod(q, 0.0, self.p.max_lod, d, false)[3] >= 0.5;
+                    (in_rock(&cpu.scene.rock, q.floor().as_ivec3()), surface)
+                };
                 if rock || surface {
                     // Where the ray met the surface: at a leaf, here; at rock, at most a rock cell
-                    // back (the shell lies in front of the rock). Its colour is read over this
-                    // ray's share of the footprint, coarser where the finest level is empty.
+                    // back (the shell lies in front of the rock).
                     let back = if surface { 0.0 } else { 0.5 * cell_m };
                     let at = (origin_m + d * (t - back).max(leaf)) / leaf;
                     let diameter = (2.0 * t * tan_half * share.sqrt()).max(leaf);
-                    let mut lod = (0.5 * diameter / leaf).log2().clamp(self.lod_min, self.lod_max);
-                    let mut s = self.cpu.sample_lod(at, lod, self.p.max_lod, d, false);
-                    while s[3] <= 1e-6 && lod < f64::from(self.p.max_lod) {
-                        lod += 1.0;
-                        s = self.cpu.sample_lod(at, lod, self.p.max_lod, d, false);
-                    }
-                    if s[3] <= 1e-6 {
-                        self.blank.set(self.blank.get() + 1);
-                    }
-                    self.hits.set(self.hits.get() + 1);
-                    if s[3] > 1e-6 {
+                    if let Some(c) = self.colour_at(cpu, at, d, diameter) {
                         for k in 0..3 {
-                            acc[k] += share * s[k] / s[3];
+                            acc[k] += weight * c[k];
                         }
                     }
-                    acc[3] += share;
+                    acc[3] += weight;
                     break;
                 }
                 self.steps.set(self.steps.get() + 1);
-                t += step.max(self.grow * 2.0 * t * tan_half * share.sqrt());
+                if self.cells {
+                    self.count_visits(cpu, cell, &mut last_brick, &mut last_key);
+                    let axis = if t_next.x <= t_next.y && t_next.x <= t_next.z {
+                        0
+                    } else if t_next.y <= t_next.z {
+                        1
+                    } else {
+                        2
+                    };
+                    t = t_start + t_next[axis] * leaf;
+                    cell[axis] += dir_step[axis];
+                    t_next[axis] += t_cell[axis];
+                } else {
+                    t += step.max(self.grow * 2.0 * t * tan_half * share.sqrt());
+                }
             }
         }
         acc
     }
+
+    /// The pyramid's colour at `at` (leaf units) seen along `d`, read over a footprint
+    /// `diameter_m` wide (a ray's share of its cone's), coarser where the finer level is empty.
+    fn colour_at(&self, cpu: &CpuScene<'_>, at: DVec3, d: DVec3, diameter_m: f64) -> Option<[f64; 3]> {
+        let leaf = f64::from(self.p.leaf_size_m);
+        let mut lod = (0.5 * diameter_m / leaf).log2().clamp(self.lod_min, self.lod_max);
+        let mut s = cpu.sample_lod(at, lod, self.p.max_lod, d, false);
+        while s[3] <= 1e-6 && lod < f64::from(self.p.max_lod) {
+            lod += 1.0;
+            s = cpu.sample_lod(at, lod, self.p.max_lod, d, false);
+        }
+        self.hits.set(self.hits.get() + 1);
+        if s[3] <= 1e-6 {
+            self.blank.set(self.blank.get() + 1);
+            return None;
+        }
+        Some([s[0] / s[3], s[1] / s[3], s[2] / s[3]])
+    }
+
+    /// Counts, for a ray entering leaf cell `cell`, what a walk crossing empty nodes of 4 and 8
+    /// leaves whole would visit (a visit where the node it stands in changes) and the bricks of
+    /// 4x4x4 leaves it enters (a walk over a table of one 64-bit mask a brick, leaves and rock,
+    /// would fetch one a brick).
+    fn count_visits(
+        &self,
+        cpu: &CpuScene<'_>,
+        cell: IVec3,
+        last_brick: &mut Option<IVec3>,
+        last_key: &mut [Option<(u32, IVec3)>; 2],
+    ) {
+        if *last_brick != Some(cell >> 2) {
+            self.bricks.set(self.bricks.get() + 1);
+            *last_brick = Some(cell >> 2);
+        }
+        for (k, level) in [2u32, 3].into_iter().enumerate() {
+            let node = cell >> level as i32;
+            let empty = cpu.find_node(node, level).is_none() && {
+                let rock_cells = 1i32 << (level - ROCK_LEVEL);
+                let base = node * rock_cells;
+                !(0..rock_cells.pow(3)).any(|j| {
+                    let o = IVec3::new(j % rock_cells, (j / rock_cells) % rock_cells, j / rock_cells.pow(2));
+                    in_rock(&cpu.scene.rock, (base + o) << ROCK_LEVEL as i32)
+                })
+            };
+            let key = if empty { (level, node) } else { (0, cell) };
+            if last_key[k] != Some(key) {
+                self.visits[k].set(self.visits[k].get() + 1);
+                last_key[k] = Some(key);
+            }
+        }
+    }
+}
+
+/// Whether `p_m` lies behind the surface of leaf node `n`: the plane through its surfels' centroid
+/// across their mean normal (a leaf whose normals scatter too much to have one counts as solid).
+fn behind_leaf(cpu: &CpuScene<'_>, n: u32, p_m: DVec3) -> bool {
+    let node = cpu.scene.nodes[n as usize];
+    if node.child_mask() != 0 {
+        return true;
+    }
+    let leaf = &cpu.scene.leaves[node.first_child as usize];
+    let m = Vec3::from_slice(&leaf.normal_mean[..3]).as_dvec3();
+    let r = m.length();
+    r < 0.3 || (p_m - Vec3::from_slice(&leaf.center_m[..3]).as_dvec3()).dot(m / r) <= 0.0
 }
 
 fn surface_normal(data: &SceneData, i: usize) -> Option<DVec3> {
@@ -142,19 +244,17 @@ fn surface_normal(data: &SceneData, i: usize) -> Option<DVec3> {
     (m.length() > 1e-4).then(|| m.normalize())
 }
 
-fn main() -> anyhow::Result<()> {
-    let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })?;
-    let which = std::env::args().nth(1).unwrap_or_else(|| "colour-box".into());
-    let rays: usize = env("RAYS").unwrap_or(7);
-    let glowing = which == "emit-ceiling";
-    let kind = match which.as_str() {
+/// The scene `which` names (the hand-built ones with their leaves on their surfels), its regions'
+/// names and each leaf's region.
+fn scene_named(which: &str) -> anyhow::Result<(SceneData, Vec<String>, Vec<Option<usize>>)> {
+    let kind = match which {
         "colour-box" | "emit-ceiling" => BreakdownScene::ColourBox,
         "dogleg" => BreakdownScene::Dogleg,
         "passage" => BreakdownScene::Passage,
         other => anyhow::bail!("scene {other}: colour-box, emit-ceiling, dogleg or passage"),
     };
     let mut data = kind.data().map_err(anyhow::Error::msg)?;
-    if glowing {
+    if which == "emit-ceiling" {
         data.lights.clear();
         let leaf = data.leaf_size_m;
         for l in &mut data.leaves {
@@ -173,57 +273,87 @@ fn main() -> anyhow::Result<()> {
             region_of[i] = Some(r);
         }
     }
-    let names: Vec<&str> = regions.iter().map(|(n, _)| n.as_str()).collect();
+    Ok((data, regions.into_iter().map(|(n, _)| n).collect(), region_of))
+}
+
+fn main() -> anyhow::Result<()> {
+    let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })?;
+    let which = std::env::args().nth(1).unwrap_or_else(|| "colour-box".into());
+    let rays: usize = env("RAYS").unwrap_or(7);
+    let (data, names, region_of) = scene_named(&which)?;
     let lift: Option<f64> = env("LIFT");
     let r0 = settled(&gpu, &data, balanced_cut(0))?;
     let light0 = r0.read_leaf_light()?;
-    let light1 = settled(&gpu, &data, balanced_cut(1))?.read_leaf_light()?;
     let p = r0.params();
-    let cpu = CpuScene::mip(&data, &light0);
     let march = RayMarch {
-        cpu: &cpu,
         p,
         pattern: ray_pattern(rays)?,
         lod_min: env("LOD_MIN").unwrap_or(0.0),
         lod_max: env("LOD_MAX").unwrap_or(f64::from(p.max_lod)),
         hit_leaves: std::env::var("NOLEAF").is_err(),
+        cells: std::env::var("CELLS").is_ok(),
+        plane_hit: std::env::var("PLANEHIT").is_ok(),
+        cos_weighted: std::env::var("COSW").is_ok(),
         grow: env("GROW").unwrap_or(0.0),
         steps: 0.into(),
+        visits: [0.into(), 0.into()],
+        bricks: 0.into(),
         hits: 0.into(),
         escaped: 0.into(),
         blank: 0.into(),
     };
+    let bounces: u32 = env("BOUNCES").unwrap_or(1);
+    let light_k = settled(&gpu, &data, balanced_cut(bounces))?.read_leaf_light()?;
     let scene = SurfelScene::from_scene(&data, Settings::preset(Quality::Balanced).splat_scale);
     let full = PathSettings::for_scene(&data);
     let f0 = scene.leaf_radiance(&data, 256, &PathSettings { max_bounces: 0, ..full }, 2);
-    let f1 = scene.leaf_radiance(&data, 256, &PathSettings { max_bounces: 1, ..full }, 3);
+    let fk = scene.leaf_radiance(&data, 256, &PathSettings { max_bounces: bounces, ..full }, 3);
+    let normals: Vec<Option<DVec3>> = (0..data.leaves.len()).map(|i| surface_normal(&data, i)).collect();
+    // Bounces on the CPU: each gathers over the pyramid of the one before, out = the direct light
+    // (and emission) + albedo * gather, as propagate.wgsl.
+    let mut cone_steps = 0u64;
+    let mut run = |rays: bool| {
+        let mut light = light0.clone();
+        for _ in 0..bounces {
+            let cpu = CpuScene::mip(&data, &light);
+            let mut next = light0.clone();
+            for (i, leaf) in data.leaves.iter().enumerate() {
+                let Some(n) = normals[i] else { continue };
+                let g = if rays {
+                    cpu.gather_with(&p, i, |o, d, rise| {
+                        // LIFT=k: the rays start k leaves off the surface instead of the cones' lift.
+                        let o = lift.map_or(o, |k| o - n * (rise[0] - k * f64::from(data.leaf_size_m)));
+                        march.cone(&cpu, o, d, n)
+                    })
+                } else {
+                    cpu.gather_with(&p, i, |o, d, rise| {
+                        cpu.trace_cone_observed(&p, o, d, rise, |_| cone_steps += 1)
+                    })
+                };
+                for k in 0..3 {
+                    next[i].gather[k] = g[k] as f32;
+                    next[i].out[k] = light0[i].out[k] + leaf.albedo_opacity[k] * g[k] as f32;
+                }
+            }
+            light = next;
+        }
+        light
+    };
+    let cone_light = run(false);
+    let ray_light = run(true);
     let k = names.len();
     let (mut gpu_sum, mut cone_sum, mut ray_sum, mut ref_sum) =
         (vec![0.0; k], vec![0.0; k], vec![0.0; k], vec![0.0; k]);
-    let mut cone_steps = 0u64;
     for (i, leaf) in data.leaves.iter().enumerate() {
-        let (Some(a), Some(b)) = (&f0[i], &f1[i]) else { continue };
-        let Some(n) = surface_normal(&data, i) else { continue };
-        let Some(f) = region_of[i] else { continue };
-        let albedo = DVec3::new(
-            leaf.albedo_opacity[0].into(),
-            leaf.albedo_opacity[1].into(),
-            leaf.albedo_opacity[2].into(),
-        );
-        let bounce = |g: DVec3| lum((albedo * g).as_vec3().to_array());
-        let cone =
-            cpu.gather_with(&p, i, |o, d, rise| cpu.trace_cone_observed(&p, o, d, rise, |_| cone_steps += 1));
-        let ray = cpu.gather_with(&p, i, |o, d, rise| {
-            // LIFT=k: the rays start k leaves off the surface instead of the cones' lift.
-            let o = lift.map_or(o, |k| o - n * (rise[0] - k * f64::from(data.leaf_size_m)));
-            march.cone(o, d, n)
-        });
-        gpu_sum[f] += lum(light1[i].shown(leaf)) - lum(light0[i].shown(leaf));
-        cone_sum[f] += bounce(cone);
-        ray_sum[f] += bounce(ray);
+        let (Some(a), Some(b)) = (&f0[i], &fk[i]) else { continue };
+        let (Some(f), Some(_)) = (region_of[i], normals[i]) else { continue };
+        let added = |l: &[LeafLightGpu]| lum(l[i].shown(leaf)) - lum(light0[i].shown(leaf));
+        gpu_sum[f] += added(&light_k);
+        cone_sum[f] += added(&cone_light);
+        ray_sum[f] += added(&ray_light);
         ref_sum[f] += lum(b.mean.to_array()) - lum(a.mean.to_array());
     }
-    println!("| {which}, {rays} rays | {} |", names.join(" | "));
+    println!("| {which}, {rays} rays, {bounces} bounces | {} |", names.join(" | "));
     for (name, sums) in [("GPU cones", &gpu_sum), ("CPU cones", &cone_sum), ("rays", &ray_sum)] {
         let cells: Vec<String> = (0..k).map(|f| format!("{:.3}", sums[f] / ref_sum[f])).collect();
         println!("| {name} | {} |", cells.join(" | "));
@@ -235,5 +365,13 @@ fn main() -> anyhow::Result<()> {
         march.escaped.get(),
         march.steps.get()
     );
+    if std::env::var("CELLS").is_ok() {
+        eprintln!(
+            "a walk crossing empty nodes whole: {} visits with nodes of 4 leaves, {} with nodes of 8; {} bricks of 4x4x4 leaves entered",
+            march.visits[0].get(),
+            march.visits[1].get(),
+            march.bricks.get()
+        );
+    }
     Ok(())
 }
