@@ -21,12 +21,13 @@
 //! the pyramid levels a ray's colour is read between; `GROW=g`, each step at least g times the
 //! ray's share of the footprint instead of half a leaf; `NOLEAF=1`, a ray ends at rock only;
 //! `CELLS=1`, a ray walks the leaf cells it crosses and meets a leaf by its cell, and with it
-//! `PLANEHIT=1` only where it goes behind the leaf's plane in that cell; `COSW=1`, rays weighted
-//! by their cosine within their cone. It prints, per region, what the bounces add to the leaves'
-//! light on the GPU, with the CPU cones (the same march, as a check) and with the rays, each over
-//! what the reference's add, then how many samples the cones took and how many steps the rays did
-//! (with `CELLS`, also what a walk crossing empty nodes whole would visit, and the bricks of
-//! 4x4x4 leaves the rays enter).
+//! `PLANEHIT=1` only where it goes behind the leaf's plane in that cell (`PLANE_OFFSET=k`: the
+//! plane moved k leaves out, toward the air); `COSW=1`, rays weighted by their cosine within
+//! their cone. It prints, per region, what the bounces add to the leaves' light on the GPU, with
+//! the CPU cones (the same march, as a check) and with the rays, each over what the reference's
+//! add, then how many samples the cones took and how many steps the rays did (with `CELLS`, also
+//! what a walk crossing empty nodes whole would visit, and the bricks of 4x4x4 leaves the rays
+//! enter).
 use glam::{DVec3, IVec3, Vec3};
 use grotto_fixtures::testscenes;
 use grotto_reference::accuracy::breakdown::{BreakdownScene, balanced_cut, luminance as lum, settled};
@@ -71,6 +72,7 @@ struct RayMarch {
     hit_leaves: bool,
     cells: bool,
     plane_hit: bool,
+    plane_offset_m: f64,
     cos_weighted: bool,
     grow: f64,
     steps: std::cell::Cell<u64>,
@@ -132,7 +134,8 @@ impl RayMarch {
                     // PLANEHIT=1: a ray meets a leaf only where, in its cell, it goes behind the
                     // plane through the leaf's surfels across their mean normal.
                     let exit_m = origin_m + d * (t_start + t_next.min_element() * leaf);
-                    let surface = leaf_here.is_some_and(|n| !self.plane_hit || behind_leaf(cpu, n, exit_m));
+                    let surface = leaf_here
+                        .is_some_and(|n| !self.plane_hit || behind_leaf(cpu, n, exit_m, self.plane_offset_m));
                     (in_rock(&cpu.scene.rock, cell), surface)
                 } else {
                     let surface =
@@ -228,7 +231,7 @@ impl RayMarch {
 
 /// Whether `p_m` lies behind the surface of leaf node `n`: the plane through its surfels' centroid
 /// across their mean normal (a leaf whose normals scatter too much to have one counts as solid).
-fn behind_leaf(cpu: &CpuScene<'_>, n: u32, p_m: DVec3) -> bool {
+fn behind_leaf(cpu: &CpuScene<'_>, n: u32, p_m: DVec3, offset_m: f64) -> bool {
     let node = cpu.scene.nodes[n as usize];
     if node.child_mask() != 0 {
         return true;
@@ -236,7 +239,7 @@ fn behind_leaf(cpu: &CpuScene<'_>, n: u32, p_m: DVec3) -> bool {
     let leaf = &cpu.scene.leaves[node.first_child as usize];
     let m = Vec3::from_slice(&leaf.normal_mean[..3]).as_dvec3();
     let r = m.length();
-    r < 0.3 || (p_m - Vec3::from_slice(&leaf.center_m[..3]).as_dvec3()).dot(m / r) <= 0.0
+    r < 0.3 || (p_m - Vec3::from_slice(&leaf.center_m[..3]).as_dvec3()).dot(m / r) <= offset_m
 }
 
 fn surface_normal(data: &SceneData, i: usize) -> Option<DVec3> {
@@ -293,6 +296,7 @@ fn main() -> anyhow::Result<()> {
         hit_leaves: std::env::var("NOLEAF").is_err(),
         cells: std::env::var("CELLS").is_ok(),
         plane_hit: std::env::var("PLANEHIT").is_ok(),
+        plane_offset_m: env::<f64>("PLANE_OFFSET").unwrap_or(0.0) * f64::from(p.leaf_size_m),
         cos_weighted: std::env::var("COSW").is_ok(),
         grow: env("GROW").unwrap_or(0.0),
         steps: 0.into(),
