@@ -27,7 +27,7 @@
 //! the CPU cones (the same march, as a check) and with the rays, each over what the reference's
 //! add, then how many samples the cones took and how many steps the rays did (with `CELLS`, also
 //! what a walk crossing empty nodes whole would visit, and the bricks of 4x4x4 leaves the rays
-//! enter).
+//! enter). `SLABS=r` adds region r leaf slab by leaf slab (`slabs`).
 use glam::{DVec3, IVec3, Vec3};
 use grotto_fixtures::testscenes;
 use grotto_reference::accuracy::breakdown::{BreakdownScene, balanced_cut, luminance as lum, settled};
@@ -279,6 +279,48 @@ fn scene_named(which: &str) -> anyhow::Result<(SceneData, Vec<String>, Vec<Optio
     Ok((data, regions.into_iter().map(|(n, _)| n).collect(), region_of))
 }
 
+/// SLABS=r: region r's leaves in slabs one leaf thick across its longest axis (`SLAB_AXIS`
+/// overrides: 0, 1, 2): per slab, the reference's share of what the bounces add to the region,
+/// and the GPU's, the CPU cones' and the rays' over the reference's.
+fn slabs(
+    data: &SceneData,
+    region_of: &[Option<usize>],
+    region: usize,
+    light0: &[LeafLightGpu],
+    lights: [&Vec<LeafLightGpu>; 3],
+    (f0, fk): (&[Option<grotto_reference::Estimate>], &[Option<grotto_reference::Estimate>]),
+) {
+    let cells: Vec<(usize, IVec3)> = (0..data.leaves.len())
+        .filter(|&i| region_of[i] == Some(region) && f0[i].is_some() && fk[i].is_some())
+        .map(|i| (i, data.leaves[i].cell(data.leaf_size_m)))
+        .collect();
+    let (lo, hi) = cells.iter().fold((IVec3::MAX, IVec3::MIN), |(lo, hi), (_, c)| (lo.min(*c), hi.max(*c)));
+    let axis = env("SLAB_AXIS").unwrap_or_else(|| (hi - lo).max_position());
+    let mut sums = std::collections::BTreeMap::<i32, [f64; 4]>::new();
+    for &(i, c) in &cells {
+        let leaf = &data.leaves[i];
+        let e = sums.entry(c[axis]).or_default();
+        for (k, l) in lights.iter().enumerate() {
+            e[k] += lum(l[i].shown(leaf)) - lum(light0[i].shown(leaf));
+        }
+        let (a, b) = (f0[i].as_ref().map(|e| e.mean), fk[i].as_ref().map(|e| e.mean));
+        if let (Some(a), Some(b)) = (a, b) {
+            e[3] += lum(b.to_array()) - lum(a.to_array());
+        }
+    }
+    let total: f64 = sums.values().map(|v| v[3]).sum();
+    println!("| slab (axis {axis}) | share | GPU cones | CPU cones | rays |");
+    for (x, v) in &sums {
+        println!(
+            "| {x} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            v[3] / total,
+            v[0] / v[3],
+            v[1] / v[3],
+            v[2] / v[3]
+        );
+    }
+}
+
 fn main() -> anyhow::Result<()> {
     let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })?;
     let which = std::env::args().nth(1).unwrap_or_else(|| "colour-box".into());
@@ -345,6 +387,10 @@ fn main() -> anyhow::Result<()> {
     };
     let cone_light = run(false);
     let ray_light = run(true);
+    if let Some(region) = env::<usize>("SLABS") {
+        let lights = [&light_k, &cone_light, &ray_light];
+        slabs(&data, &region_of, region, &light0, lights, (&f0, &fk));
+    }
     let k = names.len();
     let (mut gpu_sum, mut cone_sum, mut ray_sum, mut ref_sum) =
         (vec![0.0; k], vec![0.0; k], vec![0.0; k], vec![0.0; k]);
