@@ -40,12 +40,13 @@ use grotto_runtime::scene::rock::{ROCK_LEVEL, in_rock};
 use grotto_runtime::settings::{Quality, Settings};
 
 /// Offsets over the unit disc (the cone's footprint in units of its radius), each standing for an
-/// equal share of it: the centre and rings at the radii that halve their annuli's area.
+/// equal share of it: the centre and rings at the radii that halve their annuli's area (7 rays:
+/// the annulus from sqrt(1/7) to 1; 19: from sqrt(1/19) to sqrt(7/19) and from there to 1).
 fn ray_pattern(rays: usize) -> anyhow::Result<Vec<[f64; 2]>> {
     let rings: &[(usize, f64)] = match rays {
         1 => &[],
         7 => &[(6, 0.756)],
-        19 => &[(6, 0.5), (12, 0.866)],
+        19 => &[(6, 0.459), (12, 0.827)],
         other => anyhow::bail!("RAYS={other}: 1, 7 or 19"),
     };
     let mut out = vec![[0.0, 0.0]];
@@ -64,6 +65,7 @@ fn env<T: std::str::FromStr>(name: &str) -> Option<T> {
     std::env::var(name).ok().and_then(|v| v.parse().ok())
 }
 
+/// The ray march's knobs (from the environment, `main`) and what it counted.
 struct RayMarch {
     p: Params,
     pattern: Vec<[f64; 2]>,
