@@ -244,9 +244,10 @@ fn behind_leaf(cpu: &CpuScene<'_>, n: u32, p_m: DVec3, offset_m: f64) -> bool {
     r < 0.3 || (p_m - Vec3::from_slice(&leaf.center_m[..3]).as_dvec3()).dot(m / r) <= offset_m
 }
 
-fn surface_normal(data: &SceneData, i: usize) -> Option<DVec3> {
-    let m = Vec3::from_slice(&data.leaves[i].normal_mean[..3]).as_dvec3();
-    (m.length() > 1e-4).then(|| m.normalize())
+/// Whether leaf `i` has a surface to gather over (a mean normal; `gather_with` gives it unit
+/// length): rock interiors have none.
+fn on_surface(data: &SceneData, i: usize) -> bool {
+    Vec3::from_slice(&data.leaves[i].normal_mean[..3]).length() > 1e-4
 }
 
 /// The scene `which` names (the hand-built ones with their leaves on their surfels), its regions'
@@ -356,7 +357,7 @@ fn main() -> anyhow::Result<()> {
     let full = PathSettings::for_scene(&data);
     let f0 = scene.leaf_radiance(&data, 256, &PathSettings { max_bounces: 0, ..full }, 2);
     let fk = scene.leaf_radiance(&data, 256, &PathSettings { max_bounces: bounces, ..full }, 3);
-    let normals: Vec<Option<DVec3>> = (0..data.leaves.len()).map(|i| surface_normal(&data, i)).collect();
+    let surface: Vec<bool> = (0..data.leaves.len()).map(|i| on_surface(&data, i)).collect();
     // Bounces on the CPU: each gathers over the pyramid of the one before, out = the direct light
     // (and emission) + albedo * gather, as propagate.wgsl.
     let mut cone_steps = 0u64;
@@ -366,15 +367,17 @@ fn main() -> anyhow::Result<()> {
             let cpu = CpuScene::mip(&data, &light);
             let mut next = light0.clone();
             for (i, leaf) in data.leaves.iter().enumerate() {
-                let Some(n) = normals[i] else { continue };
+                if !surface[i] {
+                    continue;
+                }
                 let g = if rays {
-                    cpu.gather_with(&p, i, |o, d, rise| {
+                    cpu.gather_with(&p, i, |o, d, n, rise| {
                         // LIFT=k: the rays start k leaves off the surface instead of the cones' lift.
                         let o = lift.map_or(o, |k| o - n * (rise[0] - k * f64::from(data.leaf_size_m)));
                         march.cone(&cpu, o, d, n)
                     })
                 } else {
-                    cpu.gather_with(&p, i, |o, d, rise| {
+                    cpu.gather_with(&p, i, |o, d, _, rise| {
                         cpu.trace_cone_observed(&p, o, d, rise, |_| cone_steps += 1)
                     })
                 };
@@ -398,7 +401,7 @@ fn main() -> anyhow::Result<()> {
         (vec![0.0; k], vec![0.0; k], vec![0.0; k], vec![0.0; k]);
     for (i, leaf) in data.leaves.iter().enumerate() {
         let (Some(a), Some(b)) = (&f0[i], &fk[i]) else { continue };
-        let (Some(f), Some(_)) = (region_of[i], normals[i]) else { continue };
+        let Some(f) = region_of[i].filter(|_| surface[i]) else { continue };
         let added = |l: &[LeafLightGpu]| lum(l[i].shown(leaf)) - lum(light0[i].shown(leaf));
         gpu_sum[f] += added(&light_k);
         cone_sum[f] += added(&cone_light);

@@ -284,17 +284,18 @@ impl<'a> CpuScene<'a> {
 
     /// The gathered radiance of leaf `i` (irradiance / pi), as propagate.wgsl.
     pub(crate) fn gather(&self, p: &Params, i: usize) -> DVec3 {
-        self.gather_with(p, i, |origin, d, rise| self.trace_cone(p, origin, d, rise))
+        self.gather_with(p, i, |origin, d, _, rise| self.trace_cone(p, origin, d, rise))
     }
 
-    /// [`Self::gather`] with another march: `march(origin_m, dir, rise)` returns a cone's
-    /// premultiplied radiance and opacity as [`Self::trace_cone`] does (reference/examples try
-    /// other marches over the same cone set, interleave and weights).
+    /// [`Self::gather`] with another march: `march(origin_m, dir, normal, rise)` (`normal`: the
+    /// leaf's unit mean normal the cones are set around) returns a cone's premultiplied radiance
+    /// and opacity as [`Self::trace_cone`] does (reference/examples try other marches over the
+    /// same cone set, interleave and weights).
     pub fn gather_with(
         &self,
         p: &Params,
         i: usize,
-        mut march: impl FnMut(DVec3, DVec3, [f64; 2]) -> [f64; 4],
+        mut march: impl FnMut(DVec3, DVec3, DVec3, [f64; 2]) -> [f64; 4],
     ) -> DVec3 {
         let leaf = &self.scene.leaves[i];
         let mean = Vec3::from_slice(&leaf.normal_mean[..3]).as_dvec3();
@@ -322,7 +323,7 @@ impl<'a> CpuScene<'a> {
             let (x, y) = (f64::from(c[0]), f64::from(c[1]));
             let (x, y) = (cos_phi * x - sin_phi * y, sin_phi * x + cos_phi * y);
             let d = (t1 * x + t2 * y + n * f64::from(c[2])).normalize();
-            let s = march(origin, d, [lift, d.dot(n)]);
+            let s = march(origin, d, n, [lift, d.dot(n)]);
             g += f64::from(c[3]) * (DVec3::new(s[0], s[1], s[2]) + (1.0 - s[3]) * bg);
         }
         g
