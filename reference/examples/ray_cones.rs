@@ -24,8 +24,9 @@
 //! `PLANEHIT=1` only where it goes behind the leaf's plane in that cell (`PLANE_OFFSET=k`: the
 //! plane moved k leaves out, toward the air); `COSW=1`, rays weighted by their cosine within
 //! their cone. It prints, per region, what the bounces add to the leaves' light on the GPU, with
-//! the CPU cones (the same march, as a check) and with the rays, each over what the reference's
-//! add, then how many samples the cones took and how many steps the rays did (with `CELLS`, also
+//! the CPU cones (the same march, as a check), with the rays and with the runtime's ray march on
+//! the GPU (`Settings::cone_rays`: these rays with `CELLS=1 PLANEHIT=1 PLANE_OFFSET=0.25
+//! LIFT=0.3`), each over what the reference's add, then how many samples the cones took and how many steps the rays did (with `CELLS`, also
 //! what a walk crossing empty nodes whole would visit, and the bricks of 4x4x4 leaves the rays
 //! enter). `SLABS=r` adds region r leaf slab by leaf slab (`slabs`).
 use glam::{DVec3, IVec3, Vec3};
@@ -353,6 +354,12 @@ fn main() -> anyhow::Result<()> {
     };
     let bounces: u32 = env("BOUNCES").unwrap_or(1);
     let light_k = settled(&gpu, &data, balanced_cut(bounces))?.read_leaf_light()?;
+    // The runtime's own ray march (`Settings::cone_rays`), the shell rule `CELLS=1 PLANEHIT=1
+    // PLANE_OFFSET=0.25 LIFT=0.3` runs here.
+    let rays_settings = Settings { cone_rays: true, ..balanced_cut(bounces) };
+    let started = std::time::Instant::now();
+    let light_gpu_rays = settled(&gpu, &data, rays_settings)?.read_leaf_light()?;
+    let rays_s = started.elapsed().as_secs_f64();
     let scene = SurfelScene::from_scene(&data, Settings::preset(Quality::Balanced).splat_scale);
     let full = PathSettings::for_scene(&data);
     let f0 = scene.leaf_radiance(&data, 256, &PathSettings { max_bounces: 0, ..full }, 2);
@@ -399,17 +406,21 @@ fn main() -> anyhow::Result<()> {
     let k = names.len();
     let (mut gpu_sum, mut cone_sum, mut ray_sum, mut ref_sum) =
         (vec![0.0; k], vec![0.0; k], vec![0.0; k], vec![0.0; k]);
+    let mut gpu_ray_sum = vec![0.0; k];
     for (i, leaf) in data.leaves.iter().enumerate() {
         let (Some(a), Some(b)) = (&f0[i], &fk[i]) else { continue };
         let Some(f) = region_of[i].filter(|_| surface[i]) else { continue };
         let added = |l: &[LeafLightGpu]| lum(l[i].shown(leaf)) - lum(light0[i].shown(leaf));
         gpu_sum[f] += added(&light_k);
+        gpu_ray_sum[f] += added(&light_gpu_rays);
         cone_sum[f] += added(&cone_light);
         ray_sum[f] += added(&ray_light);
         ref_sum[f] += lum(b.mean.to_array()) - lum(a.mean.to_array());
     }
     println!("| {which}, {rays} rays, {bounces} bounces | {} |", names.join(" | "));
-    for (name, sums) in [("GPU cones", &gpu_sum), ("CPU cones", &cone_sum), ("rays", &ray_sum)] {
+    let rows =
+        [("GPU cones", &gpu_sum), ("CPU cones", &cone_sum), ("rays", &ray_sum), ("GPU rays", &gpu_ray_sum)];
+    for (name, sums) in rows {
         let cells: Vec<String> = (0..k).map(|f| format!("{:.3}", sums[f] / ref_sum[f])).collect();
         println!("| {name} | {} |", cells.join(" | "));
     }
@@ -420,6 +431,7 @@ fn main() -> anyhow::Result<()> {
         march.escaped.get(),
         march.steps.get()
     );
+    eprintln!("the GPU's bounces with cone_rays settled in {rays_s:.2} s");
     if std::env::var("CELLS").is_ok() {
         eprintln!(
             "a walk crossing empty nodes whole: {} visits with nodes of 4 leaves, {} with nodes of 8; {} bricks of 4x4x4 leaves entered",

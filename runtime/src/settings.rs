@@ -51,6 +51,12 @@ pub struct Settings {
     /// default: it helps scans whose leaves sit on their surfels and hurts the hand-built
     /// scenes (docs/accuracy.md, knob "cone planes").
     pub cone_planes: bool,
+    /// Gather cones are followed as seven rays spread evenly over each cone, each ending where it
+    /// enters rock or goes behind a leaf's surface and bringing the radiance there; the cone is
+    /// covered by the share of its rays that ended. The composited march counts a surface a
+    /// cone runs along at every step (the closed rooms' excess, issue 47). Off by default until
+    /// the accuracy report (knob "cone rays") shows it pays for its time.
+    pub cone_rays: bool,
     pub shadows: bool,
     pub shadow_map_size: u32,
     /// Milliseconds a frame may spend on shadow maps out of date (after a change of tiles or
@@ -260,6 +266,7 @@ impl Default for Settings {
             bounce_tail: true,
             cone_interleave: true,
             cone_planes: false,
+            cone_rays: false,
             shadows: true,
             shadow_map_size: 512,
             shadow_frame_ms: 0.0,

@@ -141,6 +141,32 @@ fn cone_gather_with_cone_planes_matches_cpu_reference() {
 }
 
 #[test]
+fn cone_gather_with_cone_rays_matches_cpu_reference() {
+    // The rays' ends are decisions (which cell, which side of a plane) that f32 and f64 can take
+    // differently where a ray passes within rounding of a cell's face or a plane; the rest must
+    // agree as the cones do.
+    let mut scene = testscenes::dogleg();
+    testscenes::leaves_on_surfels(&mut scene);
+    let light = random_light(scene.leaves.len(), 17);
+    let gather = |cone_rays: bool| {
+        let settings = Settings { cones: 8, cone_rays, ..Default::default() };
+        let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+        r.write_leaf_light(&light).unwrap();
+        r.run_bounce().unwrap();
+        let got = r.read_leaf_light().unwrap();
+        let (worst, checked) = CpuScene::mip(&scene, &light).worst_gather_error(&r.params(), &got, 7);
+        (got, worst, checked)
+    };
+    let (cones, _, _) = gather(false);
+    let (rays, worst, checked) = gather(true);
+    let changed = cones.iter().zip(&rays).filter(|(a, b)| (a.gather[0] - b.gather[0]).abs() > 1e-3).count();
+    eprintln!("gather with cone rays: worst error {worst:.2e} over {checked} leaves, {changed} leaves moved");
+    assert!(checked > 100);
+    assert!(worst < 1e-3, "gather with cone rays differs from the CPU reference by {worst}");
+    assert!(changed * 10 > cones.len(), "only {changed} of {} leaves changed", cones.len());
+}
+
+#[test]
 fn the_cone_march_is_step_invariant_where_every_surface_sends_the_same_light() {
     // Inside closed rock every cone ends on a surface, so with every leaf sending 1 the gather is 1
     // whatever the step (the rim of each cone's hemisphere leaks a little into the rock: 0.999).
@@ -307,6 +333,14 @@ fn furnace_with_cone_planes_converges_to_e_over_one_minus_albedo() {
     let settings =
         Settings { bounces: 60, convergence_tolerance: 1e-7, cone_planes: true, ..Default::default() };
     assert_furnace_exact("cone planes", 0.5, settings);
+}
+
+#[test]
+fn furnace_with_cone_rays_converges_to_e_over_one_minus_albedo() {
+    // Inside a closed shell every ray ends on a surface sending the same light: still exact.
+    let settings =
+        Settings { bounces: 60, convergence_tolerance: 1e-7, cone_rays: true, ..Default::default() };
+    assert_furnace_exact("cone rays", 0.5, settings);
 }
 
 #[test]

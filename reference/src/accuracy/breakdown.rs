@@ -222,6 +222,8 @@ pub struct BreakdownOptions {
     pub leaves_on_surfels: bool,
     /// Every runtime configuration with [`Settings::cone_planes`] on.
     pub cone_planes: bool,
+    /// Every runtime configuration with [`Settings::cone_rays`] on.
+    pub cone_rays: bool,
 }
 
 /// A renderer of `data` with `settings`, its light settled (for reading the leaves' light).
@@ -245,7 +247,7 @@ pub fn breakdown(
     options: BreakdownOptions,
     progress: impl Fn(&str),
 ) -> grotto_runtime::Result<Breakdown> {
-    let BreakdownOptions { paths, leaves_on_surfels, cone_planes } = options;
+    let BreakdownOptions { paths, leaves_on_surfels, cone_planes, cone_rays } = options;
     let mut data = which
         .data()
         .map_err(|problem| grotto_runtime::Error::Scene { package: which.name().into(), problem })?;
@@ -259,7 +261,11 @@ pub fn breakdown(
         testscenes::leaves_on_surfels(&mut data);
     }
     let regions = which.regions(&data);
-    let planes = |s: Settings| Settings { cone_planes: s.cone_planes || cone_planes, ..s };
+    let planes = |s: Settings| Settings {
+        cone_planes: s.cone_planes || cone_planes,
+        cone_rays: s.cone_rays || cone_rays,
+        ..s
+    };
     let base = planes(Settings::preset(Quality::Balanced));
     let scene = SurfelScene::from_scene(&data, base.splat_scale);
     let full_settings = PathSettings::for_scene(&data);

@@ -134,6 +134,16 @@ pub fn configs() -> Vec<Config> {
     add("interleave", "no interleave".into(), Settings { cone_interleave: false, ..base.clone() });
     // Leaves as the half-spaces behind their surfaces at the finest levels (issue 47).
     add("cone planes", "cone planes".into(), Settings { cone_planes: true, ..base.clone() });
+    // Each gather cone followed as rays that end at the first surface (issue 47); with the fast and
+    // high presets too, to show whether presets with rays would keep their order.
+    add("cone rays", "cone rays".into(), Settings { cone_rays: true, ..base.clone() });
+    for q in [Quality::Fast, Quality::High] {
+        add(
+            "cone rays",
+            format!("{}, cone rays", q.name()),
+            Settings { cone_rays: true, ..Settings::preset(q) },
+        );
+    }
     for b in TRUNCATED_BOUNCES {
         add(
             CUT_BOUNCES,

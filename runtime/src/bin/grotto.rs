@@ -222,9 +222,8 @@ struct RenderArgs {
     /// Circuits switched on or off, NAME=on|off[,...] (the lighting file's or the package's).
     #[arg(long, value_delimiter = ',', value_parser = grotto_runtime::cli::lighting_file::parse_switch)]
     circuits: Vec<(String, bool)>,
-    /// grotto render: draw the labels of the points of interest in view (not those rock hides)
-    /// into the image, as the published page shows them (.png and .jpg). grotto view always
-    /// shows them.
+    /// grotto render: draw the labels of the points of interest in view (not those rock hides) into the
+    /// image, as the published page shows them (.png and .jpg). grotto view always shows them.
     #[arg(long)]
     labels: bool,
     /// Image size WIDTHxHEIGHT.
@@ -271,28 +270,30 @@ struct RenderArgs {
     /// Cones see the finest leaves as half-spaces behind their surface, not cubes (knob "cone planes").
     #[arg(long)]
     cone_planes: bool,
-    /// Milliseconds a frame may spend redrawing shadow faces out of date (after a change of tiles
-    /// or lights), at the measured surfels per millisecond; the rest follow over the next frames
-    /// and show together when the last is drawn, so no frame stalls on the whole atlas. 0: every
-    /// face at once (default for render and bench; the viewer's default is 8).
+    /// Follow each gather cone as rays that end at the first surface (knob "cone rays").
+    #[arg(long)]
+    cone_rays: bool,
+    /// Milliseconds a frame may spend redrawing shadow faces out of date (after a change of tiles or
+    /// lights), at the measured surfels per millisecond; the rest follow over the next frames and show
+    /// together when the last is drawn, so no frame stalls on the whole atlas (0, the default for render
+    /// and bench: every face at once; the viewer's default is 8).
     #[arg(long)]
     shadow_ms: Option<f32>,
-    /// Shadow-map budget: the N brightest point and spot lights get shadow maps and per-pixel
-    /// light; the others are lit per leaf with --shadow-fallback (default 16).
+    /// Shadow-map budget: the N brightest point and spot lights get shadow maps and per-pixel light;
+    /// the others are lit per leaf with --shadow-fallback (default 16).
     #[arg(long)]
     shadowed_lights: Option<u32>,
     /// Lights beyond the shadow-map budget: "cone" (SVO shadow cones) or "none" (unshadowed).
     #[arg(long, default_value = "cone")]
     shadow_fallback: String,
-    /// What the image shows: lit (default), albedo, normals (0.5 + 0.5 n as colour), light (the
-    /// light alone: every albedo 1), level (each tile's level: full green, coarse yellow, far
-    /// red), or scan (each point's source scan as a colour, to see misregistration). All but lit
-    /// and light skip the light passes.
+    /// What the image shows: lit (default), albedo, normals (0.5 + 0.5 n as colour), light (the light
+    /// alone: every albedo 1), level (each tile's level: full green, coarse yellow, far red), or scan (each
+    /// point's source scan as a colour, to see misregistration). All but lit and light skip the light passes.
     #[arg(long, default_value = "lit")]
     view: String,
-    /// Cut the view to a box, world metres: MINX,MINY,MINZ,MAXX,MAXY,MAXZ (a section: cut the
-    /// ceiling away to see a passage from above). Points outside are not drawn and get no point
-    /// budget; the light is the whole cave's.
+    /// Cut the view to a box, world metres: MINX,MINY,MINZ,MAXX,MAXY,MAXZ (a section: cut the ceiling
+    /// away to see a passage from above). Points outside are not drawn and get no point budget; the light
+    /// is the whole cave's.
     #[arg(long, value_parser = parse_box, allow_hyphen_values = true)]
     clip: Option<[[f64; 3]; 2]>,
     /// Irradiance (W/m^2) under which a light is culled: bounds each light's range (0: no culling).
@@ -316,10 +317,9 @@ struct RenderArgs {
     /// average each N x N block; costs N^2 in G-buffer and shade work.
     #[arg(long, default_value_t = 1)]
     supersample: u32,
-    /// Anti-aliasing by samples a pixel, each jittered within it, averaged (1..=64; costs that
-    /// many frames' G-buffer and shade work, no more memory). grotto render: default 1 (the pixel
-    /// centres). grotto view: gathered at rest, one a frame, default 8. grotto bench: times the
-    /// resolve pass that adds a sample.
+    /// Anti-aliasing by samples a pixel, each jittered within it, averaged (1..=64; costs that many frames'
+    /// G-buffer and shade work, no more memory). grotto render: default 1 (the pixel centres). grotto view:
+    /// gathered at rest, one a frame, default 8. grotto bench: times the resolve pass that adds a sample.
     #[arg(long)]
     samples: Option<u32>,
     /// Replace the package's lights by a lamp string of N 8 W lamps spread over the cave's floors
@@ -334,8 +334,7 @@ struct RenderArgs {
     /// tile at its coarse or far level, nearer ones finer.
     #[arg(long, value_parser = grotto_format::parse_bytes)]
     gpu_memory: Option<u64>,
-    /// Most surfels drawn (default: no limit); tiles beyond it are drawn from their coarse or far
-    /// level.
+    /// Most surfels drawn (default: no limit); tiles beyond it are drawn from their coarse or far level.
     #[arg(long)]
     point_budget: Option<u64>,
     /// Along a path, run at most this many bounces before a frame whose tiles changed (default:
@@ -430,6 +429,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
     settings.bounce_tail = !a.no_bounce_tail;
     settings.cone_interleave = !a.no_cone_interleave;
     settings.cone_planes = a.cone_planes;
+    settings.cone_rays = a.cone_rays;
     settings.shadowed_lights = a.shadowed_lights.unwrap_or(settings.shadowed_lights);
     settings.shadow_fallback = ShadowFallback::parse(&a.shadow_fallback)
         .ok_or_else(|| anyhow::anyhow!("--shadow-fallback {:?}: use cone or none", a.shadow_fallback))?;
@@ -768,8 +768,7 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// One bounce of `--explain`'s light work: tiles updated of all, why, which (when few), and what
-/// changed.
+/// One bounce of `--explain`'s light work: tiles updated of all, why, which (when few), and what changed.
 fn describe_bounce(w: &grotto_runtime::light::activity::BounceWork) -> String {
     let list = w.tile_list.as_ref().map_or(String::new(), |l| {
         format!(" [tiles {}]", l.iter().map(u32::to_string).collect::<Vec<_>>().join(" "))

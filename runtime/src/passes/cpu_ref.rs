@@ -1,10 +1,11 @@
 //! CPU reference of the mip and cone-gather passes: the same SVO walk, anisotropic compositing,
 //! quadrilinear sampling and cone marching as shaders/svo.wgsl, cone.wgsl / mip.wgsl / propagate.wgsl, written
-//! plainly in f64 so the GPU results can be checked against it on small hand-built SVOs.
+//! plainly in f64 so the GPU results can be checked against it on small hand-built SVOs; and the
+//! gather cones as rays (shaders/cone_rays.wgsl).
 
 use glam::{DVec3, IVec3, Vec3};
 
-use crate::gpu::types::{LeafLightGpu, Params};
+use crate::gpu::types::{LeafLightGpu, Params, cone_rays as rays};
 use crate::scene::data::SceneData;
 
 /// Closure of a cone that left the scene nearly opaque (`close_cone` in shaders/cone.wgsl): its
@@ -282,9 +283,14 @@ impl<'a> CpuScene<'a> {
         close_cone(acc, last)
     }
 
-    /// The gathered radiance of leaf `i` (irradiance / pi), as propagate.wgsl.
+    /// The gathered radiance of leaf `i` (irradiance / pi), as propagate.wgsl: with cones, or
+    /// each cone as rays where `p.flags` has `CONE_RAYS`.
     pub(crate) fn gather(&self, p: &Params, i: usize) -> DVec3 {
-        self.gather_with(p, i, |origin, d, _, rise| self.trace_cone(p, origin, d, rise))
+        if p.flags & crate::gpu::types::flags::CONE_RAYS != 0 {
+            self.gather_with(p, i, |origin, d, n, rise| self.trace_cone_rays(p, origin, d, n, rise[0]))
+        } else {
+            self.gather_with(p, i, |origin, d, _, rise| self.trace_cone(p, origin, d, rise))
+        }
     }
 
     /// [`Self::gather`] with another march: `march(origin_m, dir, normal, rise)` (`normal`: the
@@ -346,5 +352,126 @@ impl<'a> CpuScene<'a> {
             checked += 1;
         }
         (worst, checked)
+    }
+}
+
+/// Where a ray of [`CpuScene::ray_hit`] ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RayEnd {
+    /// Behind a leaf's surface, in the cell entered `t_m` along the ray.
+    Leaf { t_m: f64 },
+    /// In rock, in the cell entered `t_m` along the ray.
+    Rock { t_m: f64 },
+    /// Out of the scene or past the march's distance.
+    Escaped,
+}
+
+impl CpuScene<'_> {
+    /// `ray_behind_leaf` in shaders/cone_rays.wgsl.
+    fn ray_behind_leaf(&self, leaf_index: u32, p: &Params, p_m: DVec3) -> bool {
+        let leaf = &self.scene.leaves[leaf_index as usize];
+        let m = Vec3::from_slice(&leaf.normal_mean[..3]).as_dvec3();
+        let r = m.length();
+        let edge = f64::from(p.leaf_size_m.max(leaf.center_m[3]));
+        let centre = Vec3::from_slice(&leaf.center_m[..3]).as_dvec3();
+        r < 0.3 || (p_m - centre).dot(m / r) <= f64::from(rays::PLANE_OFFSET_LEAVES) * edge
+    }
+
+    /// `ray_hit` in shaders/cone_rays.wgsl: one ray from `origin_m` along unit `d` walks the leaf
+    /// cells it crosses (Amanatides & Woo) until it goes behind a leaf's surface or enters rock.
+    pub fn ray_hit(&self, p: &Params, origin_m: DVec3, d: DVec3) -> RayEnd {
+        let leaf = f64::from(p.leaf_size_m);
+        let corner = |v: [f32; 4]| DVec3::new(v[0].into(), v[1].into(), v[2].into());
+        let (lo, hi) = (corner(p.scene_min_leaf), corner(p.scene_max_leaf));
+        let t_start = leaf;
+        let start = (origin_m + d * t_start) / leaf;
+        let mut cell = start.floor().as_ivec3();
+        let moving = d.abs().cmpgt(DVec3::splat(1e-12));
+        let up = d.cmpgt(DVec3::ZERO);
+        let cell_step = IVec3::select(up, IVec3::ONE, IVec3::NEG_ONE);
+        let edge = (cell.as_dvec3() + DVec3::select(up, DVec3::ONE, DVec3::ZERO) - start) / d;
+        let mut t_next = DVec3::select(moving, edge, DVec3::INFINITY);
+        let t_cell = DVec3::select(moving, d.recip().abs(), DVec3::INFINITY);
+        let mut t = t_start;
+        let most = (1.732_050_8 * f64::from(p.max_distance_m) / leaf).ceil() as u32 + 4;
+        for _ in 0..most {
+            let q = (origin_m + d * t) / leaf;
+            if t > f64::from(p.max_distance_m) || q.cmplt(lo).any() || q.cmpgt(hi).any() {
+                break;
+            }
+            let t_exit = t_start + t_next.min_element() * leaf;
+            let leaf_index = self.find_node(cell, 0).map(|n| self.scene.nodes[n as usize].first_child);
+            if leaf_index.is_some_and(|i| self.ray_behind_leaf(i, p, origin_m + d * t_exit)) {
+                return RayEnd::Leaf { t_m: t };
+            }
+            if crate::scene::rock::in_rock(&self.scene.rock, cell) {
+                return RayEnd::Rock { t_m: t };
+            }
+            let axis = if t_next.x <= t_next.y && t_next.x <= t_next.z {
+                0
+            } else if t_next.y <= t_next.z {
+                1
+            } else {
+                2
+            };
+            t = t_start + t_next[axis] * leaf;
+            cell[axis] += cell_step[axis];
+            t_next[axis] += t_cell[axis];
+        }
+        RayEnd::Escaped
+    }
+
+    /// `ray_colour` in shaders/cone_rays.wgsl: the pyramid's colour at `at_leaf` along `d` over a
+    /// footprint `diameter_m` wide, coarser where the finer level is empty.
+    fn ray_colour(&self, p: &Params, at_leaf: DVec3, d: DVec3, diameter_m: f64) -> Option<[f64; 3]> {
+        let max_lod = f64::from(p.max_lod);
+        let mut lod = (0.5 * diameter_m / f64::from(p.leaf_size_m)).log2().clamp(0.0, max_lod);
+        let mut s = self.sample_lod(at_leaf, lod, p.max_lod, d, false);
+        while s[3] <= 1e-6 && lod < max_lod {
+            lod += 1.0;
+            s = self.sample_lod(at_leaf, lod, p.max_lod, d, false);
+        }
+        (s[3] > 1e-6).then(|| [s[0] / s[3], s[1] / s[3], s[2] / s[3]])
+    }
+
+    /// One gather cone as rays, as `trace_cone_rays` in shaders/cone_rays.wgsl: from the cone's
+    /// `origin_m` (`lift_m` above its surface of unit normal `n`) along unit `dir`, premultiplied
+    /// radiance and the share of its rays that met a surface.
+    pub fn trace_cone_rays(
+        &self,
+        p: &Params,
+        origin_m: DVec3,
+        dir: DVec3,
+        n: DVec3,
+        lift_m: f64,
+    ) -> [f64; 4] {
+        let leaf = f64::from(p.leaf_size_m);
+        let o = origin_m - n * (lift_m - f64::from(rays::LIFT_LEAVES) * leaf);
+        let rock_cell_m = leaf * f64::from(1u32 << crate::scene::rock::ROCK_LEVEL);
+        let tan_half = f64::from(p.cone_tan_half);
+        let up = if dir.z.abs() >= 0.9 { DVec3::X } else { DVec3::Z };
+        let e1 = dir.cross(up).normalize();
+        let e2 = dir.cross(e1);
+        let share = 1.0 / rays::PATTERN.len() as f64;
+        let min_rise = f64::from(rays::MIN_RISE);
+        let mut acc = [0.0f64; 4];
+        for [x, y] in rays::PATTERN {
+            let mut d = (dir + tan_half * (f64::from(x) * e1 + f64::from(y) * e2)).normalize();
+            let rise = d.dot(n);
+            if rise < min_rise {
+                d = (d + n * (min_rise - rise)).normalize();
+            }
+            let (t, back) = match self.ray_hit(p, o, d) {
+                RayEnd::Leaf { t_m } => (t_m, 0.0),
+                // The surface lies in front of the rock, at most half a rock cell back.
+                RayEnd::Rock { t_m } => (t_m, 0.5 * rock_cell_m),
+                RayEnd::Escaped => continue,
+            };
+            let at = (o + d * (t - back).max(leaf)) / leaf;
+            let c =
+                self.ray_colour(p, at, d, (2.0 * t * tan_half * share.sqrt()).max(leaf)).unwrap_or([0.0; 3]);
+            acc = add(acc, [c[0], c[1], c[2], 1.0], share);
+        }
+        acc
     }
 }

@@ -136,6 +136,8 @@ pub(crate) struct PassConstants {
     pub radiance_f16: bool,
     /// `cone_planes` (shaders/cone.wgsl): `Settings::cone_planes`.
     pub cone_planes: bool,
+    /// `cone_rays` (shaders/cone_rays.wgsl): `Settings::cone_rays`.
+    pub cone_rays: bool,
 }
 
 impl PassConstants {
@@ -143,7 +145,11 @@ impl PassConstants {
     /// constant the module does not declare (and naga does since wgpu #9133), and not every
     /// pass imports both.
     fn for_source(self, src: &str) -> Vec<(&'static str, f64)> {
-        let all = [("radiance_f16", self.radiance_f16), ("cone_planes", self.cone_planes)];
+        let all = [
+            ("radiance_f16", self.radiance_f16),
+            ("cone_planes", self.cone_planes),
+            ("cone_rays", self.cone_rays),
+        ];
         all.into_iter()
             .filter(|(name, _)| src.contains(&format!("override {name}:")))
             .map(|(name, on)| (name, if on { 1.0 } else { 0.0 }))

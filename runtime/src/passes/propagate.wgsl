@@ -1,5 +1,5 @@
-// One bounce of propagation: every leaf gathers incoming radiance with cones over the hemisphere of
-// its mean normal (cosine-distributed directions, weights summing to 1, so the result is
+// One bounce of propagation: every leaf gathers incoming radiance with cones (or, with
+// Settings::cone_rays, each cone as rays: cone_rays.wgsl) over the hemisphere of its mean normal (cosine-distributed directions, weights summing to 1, so the result is
 // irradiance / pi), then out = emission + direct + env + albedo * gather (env: the env pass's
 // reflected environment light; a cone's escaped share adds only the constant background here).
 // Reads only the mip pyramid, so leaves update independently. Runs over the active tiles
@@ -16,6 +16,7 @@
 #import activity
 #import cone
 #import cone_batch
+#import cone_rays
 #import dispatch
 
 
@@ -34,7 +35,13 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     for (var c = batch.first; c < end; c++) {
         let cone = params.cones[c];
         let dir = leaf_cone_dir(leaf, cone.xyz);
-        let s = trace_cone(leaf_cone_origin(leaf), dir, params.cone_tan_half, leaf_cone_rise(leaf, dir));
+        var s: vec4<f32>;
+        if cone_rays {
+            let n = leaf_normal(leaf.normal_mean.xyz);
+            s = trace_cone_rays(leaf_cone_origin(leaf), dir, n, params.cone_tan_half, leaf_cone_lift(leaf));
+        } else {
+            s = trace_cone(leaf_cone_origin(leaf), dir, params.cone_tan_half, leaf_cone_rise(leaf, dir));
+        }
         gathered += cone.w * (s.rgb + (1.0 - s.a) * params.background.rgb);
     }
     if end < params.cone_count {

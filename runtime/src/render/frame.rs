@@ -212,6 +212,9 @@ impl Renderer {
         if s.cone_planes {
             f |= flags::CONE_PLANES;
         }
+        if s.cone_rays {
+            f |= flags::CONE_RAYS;
+        }
         if self.gbuffer.blends() {
             f |= flags::BLEND;
         }

@@ -227,6 +227,15 @@ impl Compat {
     }
 }
 
+/// The pipeline constants `settings` ask for.
+fn pass_constants(settings: &Settings) -> passes::PassConstants {
+    passes::PassConstants {
+        radiance_f16: settings.radiance_f16,
+        cone_planes: settings.cone_planes,
+        cone_rays: settings.cone_rays,
+    }
+}
+
 impl Renderer {
     /// A renderer whose tile pools hold just `scene`.
     pub fn new(gpu: &Gpu, scene: &SceneData, settings: Settings) -> Result<Self> {
@@ -240,7 +249,7 @@ impl Renderer {
         let caps = caps.at_least(PoolCaps::of(scene));
         let (pools, placed, cull_tiles) = fresh_pools(scene, caps)?;
         let f16 = settings.radiance_f16;
-        let consts = passes::PassConstants { radiance_f16: f16, cone_planes: settings.cone_planes };
+        let consts = pass_constants(&settings);
         let (lo, hi) = scene.bounds_leaf();
         let leaf = scene.leaf_size_m.max(1e-6);
         let scene_diag_m = ((hi - lo) * leaf).length().max(leaf);

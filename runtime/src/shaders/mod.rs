@@ -17,6 +17,7 @@ pub(crate) const LIBRARY: &[(&str, &str)] = &[
     ("color", include_str!("color.wgsl")),
     ("cone", include_str!("cone.wgsl")),
     ("cone_batch", include_str!("cone_batch.wgsl")),
+    ("cone_rays", include_str!("cone_rays.wgsl")),
     ("dispatch", include_str!("dispatch.wgsl")),
     ("geometry", include_str!("geometry.wgsl")),
     ("hash", include_str!("hash.wgsl")),
@@ -68,6 +69,7 @@ pub(crate) fn constants() -> String {
     }
     out += &format!("const FLAG_VIEWS_WITHOUT_LIGHT: u32 = {}u;\n", flags::VIEWS_WITHOUT_LIGHT);
     out += &format!("const PLANE_LODS: u32 = {}u;\n", crate::gpu::types::PLANE_LODS);
+    out += &cone_rays_constants();
     out += &format!("const NO_SCAN: u32 = {}u;\n", crate::gpu::types::NO_SCAN);
     // The level a coarse tile's leaves are held at (coarse.rs): the level view tells coarse from far.
     out += &format!("const COARSE_LEVELS: u32 = {}u;\n", crate::scene::coarse::COARSE_LEVELS);
@@ -76,6 +78,23 @@ pub(crate) fn constants() -> String {
         out += &format!("const {}: u32 = {}u;\n", kind.wgsl_name(), kind as u32);
     }
     out
+}
+
+/// gpu/types.rs `cone_rays` as WGSL `RAY_*` constants.
+fn cone_rays_constants() -> String {
+    use crate::gpu::types::cone_rays as r;
+    let pattern: Vec<String> = r::PATTERN.iter().map(|[x, y]| format!("vec2<f32>({x:?}, {y:?})")).collect();
+    format!(
+        "const RAY_LIFT_LEAVES: f32 = {:?};\nconst RAY_PLANE_OFFSET_LEAVES: f32 = {:?};\n\
+         const RAY_MIN_RISE: f32 = {:?};\nconst RAY_COUNT: u32 = {}u;\n\
+         const RAY_PATTERN = array<vec2<f32>, {}>({});\n",
+        r::LIFT_LEAVES,
+        r::PLANE_OFFSET_LEAVES,
+        r::MIN_RISE,
+        r::PATTERN.len(),
+        r::PATTERN.len(),
+        pattern.join(", "),
+    )
 }
 
 /// The names a source imports (its `#import name` lines), in order.

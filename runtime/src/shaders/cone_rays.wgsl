@@ -1,0 +1,151 @@
+// A gather cone followed as rays (Settings::cone_rays, issue 47): the composited march (cone.wgsl)
+// counts a surface a cone runs along at every step, and a cone whose axis enters rock takes the
+// colour it last sampled for all it had not seen, which gave closed rooms near a lamp 5-15% too
+// much of each bounce (docs/reference.md, "Where a wall's cones read too much"). Here the cone's
+// footprint is split into RAY_COUNT equal shares (gpu/types.rs `cone_rays::PATTERN`); each ray
+// walks the leaf cells it crosses (Amanatides & Woo) and ends where it enters rock or goes behind
+// a leaf's surface, bringing the radiance pyramid's colour there read over its share of the
+// footprint. The cone is covered by the share of its rays that ended: a surface is counted once,
+// where the rays met it. Mirrored by cpu_ref::trace_cone_rays.
+#import svo
+#import rock
+
+// Settings::cone_rays, as a pipeline constant (passes/mod.rs `PassConstants`): where it is off
+// the ray code is compiled out of propagate.
+override cone_rays: bool = false;
+
+// Whether `p_m` (metres) lies behind leaf `leaf_index`'s surface: the plane through its surfels'
+// centroid across their mean normal, moved RAY_PLANE_OFFSET_LEAVES of its edge out. A leaf whose
+// normals disagree (mean shorter than 0.3: a thin sheet seen from both sides) is solid.
+fn ray_behind_leaf(leaf_index: u32, p_m: vec3<f32>) -> bool {
+    let leaf = leaves[leaf_index];
+    let m = leaf.normal_mean.xyz;
+    let r = length(m);
+    let edge = max(params.leaf_size_m, leaf.center_m.w);
+    return r < 0.3 || dot(p_m - leaf.center_m.xyz, m / r) <= RAY_PLANE_OFFSET_LEAVES * edge;
+}
+
+// The pyramid's colour at `at_leaf` seen along `d`, read over a footprint `diameter_m` wide, one
+// level coarser at a time where the finer is empty; w = 0 where every level is.
+fn ray_colour(at_leaf: vec3<f32>, d: vec3<f32>, diameter_m: f32) -> vec4<f32> {
+    var lod = clamp(log2(0.5 * diameter_m / params.leaf_size_m), 0.0, f32(params.max_lod));
+    var s = sample_lod(at_leaf, lod, d);
+    while s.a <= 1e-6 && lod < f32(params.max_lod) {
+        lod += 1.0;
+        s = sample_lod(at_leaf, lod, d);
+    }
+    if s.a <= 1e-6 {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(s.rgb / s.a, 1.0);
+}
+
+// One ray from `origin_m` along unit `d`: the distance (metres) at which it met a surface and
+// what it met (x: distance, y: 1 at a leaf, 2 at rock, 0 where it left the scene). A cell's leaf
+// comes from its block's node (svo.wgsl `BLOCK_LOD`) and its rock from its brick's 64 bits, each
+// looked up once where the ray enters a new block or brick instead of once a cell (the same
+// answers as find_leaf and in_rock, which cpu_ref::ray_hit asks cell by cell).
+fn ray_hit(origin_m: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
+    let leaf = params.leaf_size_m;
+    let t_start = leaf;
+    let start = (origin_m + d * t_start) / leaf;
+    var cell = vec3<i32>(floor(start));
+    let moving = abs(d) > vec3<f32>(1e-12);
+    let up = d > vec3<f32>(0.0);
+    let cell_step = select(vec3<i32>(-1), vec3<i32>(1), up);
+    let edge = (vec3<f32>(cell) + select(vec3<f32>(0.0), vec3<f32>(1.0), up) - start) / d;
+    let inf = vec3<f32>(1e30);
+    var t_next = select(inf, edge, moving);
+    let t_cell = select(inf, abs(1.0 / d), moving);
+    var t = t_start;
+    let by_block = blocks_usable();
+    let anchor = tile_anchor();
+    let none = vec3<i32>(0x7fffffff);
+    var block_key = none;
+    var block = vec2<u32>(EMPTY, 0u);
+    var brick_key = none;
+    var brick = vec2<u32>(0u);
+    // A segment of n leaf edges crosses at most sqrt(3) n + 3 cells.
+    let most = u32(ceil(1.7320508 * params.max_distance_m / leaf)) + 4u;
+    for (var i = 0u; i < most; i++) {
+        if t > params.max_distance_m || outside_scene((origin_m + d * t) / leaf) {
+            break;
+        }
+        var leaf_index = EMPTY;
+        if by_block {
+            let rel = cell - anchor;
+            let key = rel >> vec3<u32>(BLOCK_LOD);
+            if any(key != block_key) {
+                block_key = key;
+                block = find_node_at(anchor + (key << vec3<u32>(BLOCK_LOD)), BLOCK_LOD);
+            }
+            leaf_index = leaf_in_block(block, rel);
+        } else {
+            leaf_index = find_leaf(cell);
+        }
+        if leaf_index != EMPTY {
+            let t_exit = t_start + min(t_next.x, min(t_next.y, t_next.z)) * leaf;
+            if ray_behind_leaf(leaf_index, origin_m + d * t_exit) {
+                return vec2<f32>(t, 1.0);
+            }
+        }
+        let rock_cell = cell >> vec3<u32>(ROCK_LEVEL);
+        let key = rock_cell >> vec3<u32>(ROCK_BRICK_SHIFT);
+        if any(key != brick_key) {
+            brick_key = key;
+            brick = rock_brick_bits(key);
+        }
+        if rock_bit(brick, rock_cell, key) {
+            return vec2<f32>(t, 2.0);
+        }
+        var axis = 2u;
+        if t_next.x <= t_next.y && t_next.x <= t_next.z {
+            axis = 0u;
+        } else if t_next.y <= t_next.z {
+            axis = 1u;
+        }
+        t = t_start + t_next[axis] * leaf;
+        cell[axis] += cell_step[axis];
+        t_next[axis] += t_cell[axis];
+    }
+    return vec2<f32>(t, 0.0);
+}
+
+// The cone from `origin_m` along unit `dir` of half-angle tangent `tan_half`, over the surface of
+// unit normal `n`, as rays: premultiplied radiance and the share of its rays that met a surface.
+// `origin_m` is the composited march's origin, `lift_m` above the surface; the rays start
+// RAY_LIFT_LEAVES of a leaf above it instead (they stop at the first surface, so they need not
+// clear their own leaf's cube).
+fn trace_cone_rays(origin_m: vec3<f32>, dir: vec3<f32>, n: vec3<f32>, tan_half: f32, lift_m: f32) -> vec4<f32> {
+    let leaf = params.leaf_size_m;
+    let o = origin_m - n * (lift_m - RAY_LIFT_LEAVES * leaf);
+    let rock_cell_m = leaf * f32(1u << ROCK_LEVEL);
+    var up = vec3<f32>(0.0, 0.0, 1.0);
+    if abs(dir.z) >= 0.9 {
+        up = vec3<f32>(1.0, 0.0, 0.0);
+    }
+    let e1 = normalize(cross(dir, up));
+    let e2 = cross(dir, e1);
+    let share = 1.0 / f32(RAY_COUNT);
+    var acc = vec4<f32>(0.0);
+    // A local copy: indexing a constant array by a loop variable needs it in memory.
+    var pattern = RAY_PATTERN;
+    for (var k = 0u; k < RAY_COUNT; k++) {
+        let u = pattern[k];
+        var d = normalize(dir + tan_half * (u.x * e1 + u.y * e2));
+        let rise = dot(d, n);
+        if rise < RAY_MIN_RISE {
+            d = normalize(d + n * (RAY_MIN_RISE - rise));
+        }
+        let hit = ray_hit(o, d);
+        if hit.y == 0.0 {
+            continue;
+        }
+        // At rock the surface lies in front of it, at most half a rock cell back.
+        let back = select(0.0, 0.5 * rock_cell_m, hit.y == 2.0);
+        let at = (o + d * max(hit.x - back, leaf)) / leaf;
+        let c = ray_colour(at, d, max(2.0 * hit.x * tan_half * sqrt(share), leaf));
+        acc += share * vec4<f32>(c.rgb, 1.0);
+    }
+    return acc;
+}
