@@ -41,10 +41,12 @@ fn ray_colour(at_leaf: vec3<f32>, d: vec3<f32>, diameter_m: f32) -> vec4<f32> {
 }
 
 // One ray from `origin_m` along unit `d`: the distance (metres) at which it met a surface and
-// what it met (x: distance, y: 1 at a leaf, 2 at rock, 0 where it left the scene). A cell's leaf
-// comes from its block's node (svo.wgsl `BLOCK_LOD`) and its rock from its brick's 64 bits, each
-// looked up once where the ray enters a new block or brick instead of once a cell (the same
-// answers as find_leaf and in_rock, which cpu_ref::ray_hit asks cell by cell).
+// what it met (x: distance, y: 1 at a leaf, 2 at rock, 0 where it left the scene). A cell's rock
+// comes from its brick's 64 bits, looked up where the ray enters a new brick (8 leaves wide)
+// instead of once a cell: the same answers as in_rock, which cpu_ref::ray_hit asks cell by cell.
+// Doing the same for leaves (a block's node once a block, svo.wgsl `leaf_in_block`) made the pass
+// slower on lavapipe (colour box 1.99 times the cones' time against 1.46): the lanes of a SIMD group
+// enter new blocks at different cells, so the group pays the lookup on most steps anyway.
 fn ray_hit(origin_m: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
     let leaf = params.leaf_size_m;
     let t_start = leaf;
@@ -58,11 +60,7 @@ fn ray_hit(origin_m: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
     var t_next = select(inf, edge, moving);
     let t_cell = select(inf, abs(1.0 / d), moving);
     var t = t_start;
-    let by_block = blocks_usable();
-    let anchor = tile_anchor();
     let none = vec3<i32>(0x7fffffff);
-    var block_key = none;
-    var block = vec2<u32>(EMPTY, 0u);
     var brick_key = none;
     var brick = vec2<u32>(0u);
     // A segment of n leaf edges crosses at most sqrt(3) n + 3 cells.
@@ -71,18 +69,7 @@ fn ray_hit(origin_m: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
         if t > params.max_distance_m || outside_scene((origin_m + d * t) / leaf) {
             break;
         }
-        var leaf_index = EMPTY;
-        if by_block {
-            let rel = cell - anchor;
-            let key = rel >> vec3<u32>(BLOCK_LOD);
-            if any(key != block_key) {
-                block_key = key;
-                block = find_node_at(anchor + (key << vec3<u32>(BLOCK_LOD)), BLOCK_LOD);
-            }
-            leaf_index = leaf_in_block(block, rel);
-        } else {
-            leaf_index = find_leaf(cell);
-        }
+        let leaf_index = find_leaf(cell);
         if leaf_index != EMPTY {
             let t_exit = t_start + min(t_next.x, min(t_next.y, t_next.z)) * leaf;
             if ray_behind_leaf(leaf_index, origin_m + d * t_exit) {
