@@ -1,7 +1,8 @@
 // One bounce of propagation: every leaf gathers incoming radiance with cones (or, with
-// Settings::cone_rays, each cone as rays: cone_rays.wgsl) over the hemisphere of its mean normal (cosine-distributed directions, weights summing to 1, so the result is
-// irradiance / pi), then out = emission + direct + env + albedo * gather (env: the env pass's
-// reflected environment light; a cone's escaped share adds only the constant background here).
+// Settings::cone_rays, each cone as rays: cone_rays.wgsl) over the hemisphere of its mean normal
+// (cosine-distributed directions, weights summing to 1, so the result is irradiance / pi), then
+// out = emission + direct + env + albedo * gather (env: the env pass's reflected environment
+// light; a cone's escaped share adds only the constant background here).
 // Reads only the mip pyramid, so leaves update independently. Runs over the active tiles
 // (shaders/activity.wgsl): the leaves of the tiles whose light may still change.
 //

@@ -8,9 +8,9 @@
 // ROCK_ENTRY_WORDS words an entry: brick x, y, z, 64 rock bits. Constants come from rock.rs
 // (shaders::constants). The table lives in the lookup buffer (lookup.wgsl).
 
-// The 64 rock bits of the brick `b` (rock cells >> ROCK_BRICK_SHIFT): zero where the table holds
-// none. The probe loop is bounded by the longest probe sequence the table was built with.
-fn rock_brick_bits(b: vec3<i32>) -> vec2<u32> {
+// The word offset of brick `b`'s entry (rock cells >> ROCK_BRICK_SHIFT), or EMPTY where the table
+// holds none. The probe loop is bounded by the longest probe sequence the table was built with.
+fn rock_entry(b: vec3<i32>) -> u32 {
     let mask = rock_word(0);
     let longest = rock_word(1);
     var slot = cell_hash(b) & mask;
@@ -18,28 +18,48 @@ fn rock_brick_bits(b: vec3<i32>) -> vec2<u32> {
         let e = ROCK_HEADER_WORDS + slot * ROCK_ENTRY_WORDS;
         let k = vec3<i32>(bitcast<i32>(rock_word(e)), bitcast<i32>(rock_word(e + 1u)), bitcast<i32>(rock_word(e + 2u)));
         if k.x == ROCK_EMPTY_KEY {
-            return vec2<u32>(0u);
+            return EMPTY;
         }
         if all(k == b) {
-            return vec2<u32>(rock_word(e + 3u), rock_word(e + 4u));
+            return e;
         }
         slot = (slot + 1u) & mask;
     }
-    return vec2<u32>(0u);
+    return EMPTY;
 }
 
-// Whether rock cell `cell` of brick `b` is set in the brick's `bits`.
-fn rock_bit(bits: vec2<u32>, cell: vec3<i32>, b: vec3<i32>) -> bool {
+// The bit of rock cell `cell` in its brick `b`'s 64 bits.
+fn rock_bit_index(cell: vec3<i32>, b: vec3<i32>) -> u32 {
     let l = cell - (b << vec3<u32>(ROCK_BRICK_SHIFT));
-    let bit = u32(l.x + 4 * (l.y + 4 * l.z));
-    return ((bits[bit / 32u] >> (bit % 32u)) & 1u) == 1u;
+    return u32(l.x + 4 * (l.y + 4 * l.z));
 }
 
 // Whether the leaf cell holding `p_leaf` lies in rock (rock.rs, `in_rock`).
 fn in_rock(p_leaf: vec3<f32>) -> bool {
     let cell = vec3<i32>(floor(p_leaf)) >> vec3<u32>(ROCK_LEVEL);
     let b = cell >> vec3<u32>(ROCK_BRICK_SHIFT);
-    return rock_bit(rock_brick_bits(b), cell, b);
+    let e = rock_entry(b);
+    if e == EMPTY {
+        return false;
+    }
+    let bit = rock_bit_index(cell, b);
+    return ((rock_word(e + 3u + bit / 32u) >> (bit % 32u)) & 1u) == 1u;
+}
+
+// The 64 rock bits of brick `b`, zero where the table holds none: a walk that stays in one brick
+// for several cells reads them once (cone_rays.wgsl).
+fn rock_brick_bits(b: vec3<i32>) -> vec2<u32> {
+    let e = rock_entry(b);
+    if e == EMPTY {
+        return vec2<u32>(0u);
+    }
+    return vec2<u32>(rock_word(e + 3u), rock_word(e + 4u));
+}
+
+// Whether rock cell `cell` of brick `b` is set in the brick's `bits` (`rock_brick_bits`).
+fn rock_bit(bits: vec2<u32>, cell: vec3<i32>, b: vec3<i32>) -> bool {
+    let bit = rock_bit_index(cell, b);
+    return ((bits[bit / 32u] >> (bit % 32u)) & 1u) == 1u;
 }
 
 // The first distance in (t0, t1] (metres along the cone axis) at which the axis lies in rock,
