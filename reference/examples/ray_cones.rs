@@ -26,9 +26,9 @@
 //! their cone. It prints, per region, what the bounces add to the leaves' light on the GPU, with
 //! the CPU cones (the same march, as a check), with the rays and with the runtime's ray march on
 //! the GPU (`Settings::cone_rays`: these rays with `CELLS=1 PLANEHIT=1 PLANE_OFFSET=0.25
-//! LIFT=0.3`), each over what the reference's add, then how many samples the cones took and how many steps the rays did (with `CELLS`, also
-//! what a walk crossing empty nodes whole would visit, and the bricks of 4x4x4 leaves the rays
-//! enter). `SLABS=r` adds region r leaf slab by leaf slab (`slabs`).
+//! LIFT=0.3`), each over what the reference's add, then how many samples the cones took and how
+//! many steps the rays did (with `CELLS`, also what a walk crossing empty nodes whole would
+//! visit, and the bricks of 4x4x4 leaves the rays enter). `SLABS=r` adds region r leaf slab by leaf slab (`slabs`).
 use glam::{DVec3, IVec3, Vec3};
 use grotto_fixtures::testscenes;
 use grotto_reference::accuracy::breakdown::{BreakdownScene, balanced_cut, luminance as lum, settled};
@@ -356,10 +356,8 @@ fn main() -> anyhow::Result<()> {
     let light_k = settled(&gpu, &data, balanced_cut(bounces))?.read_leaf_light()?;
     // The runtime's own ray march (`Settings::cone_rays`), the shell rule `CELLS=1 PLANEHIT=1
     // PLANE_OFFSET=0.25 LIFT=0.3` runs here.
-    let rays_settings = Settings { cone_rays: true, ..balanced_cut(bounces) };
-    let started = std::time::Instant::now();
-    let light_gpu_rays = settled(&gpu, &data, rays_settings)?.read_leaf_light()?;
-    let rays_s = started.elapsed().as_secs_f64();
+    let light_gpu_rays =
+        settled(&gpu, &data, Settings { cone_rays: true, ..balanced_cut(bounces) })?.read_leaf_light()?;
     let scene = SurfelScene::from_scene(&data, Settings::preset(Quality::Balanced).splat_scale);
     let full = PathSettings::for_scene(&data);
     let f0 = scene.leaf_radiance(&data, 256, &PathSettings { max_bounces: 0, ..full }, 2);
@@ -431,7 +429,6 @@ fn main() -> anyhow::Result<()> {
         march.escaped.get(),
         march.steps.get()
     );
-    eprintln!("the GPU's bounces with cone_rays settled in {rays_s:.2} s");
     if std::env::var("CELLS").is_ok() {
         eprintln!(
             "a walk crossing empty nodes whole: {} visits with nodes of 4 leaves, {} with nodes of 8; {} bricks of 4x4x4 leaves entered",

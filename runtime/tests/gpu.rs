@@ -112,15 +112,19 @@ fn cone_gather_matches_cpu_reference() {
     }
 }
 
-#[test]
-fn cone_gather_with_cone_planes_matches_cpu_reference() {
-    // The leaves on their surfels, as packages have them, so the planes cut the cubes where the
-    // surface is; the march still has to agree with the CPU's, leaf by leaf.
+/// One bounce over the dogleg with its leaves on their surfels (as packages have them) and random
+/// light seeded `seed`, with 8 cones and with `knob` on: its gather agrees with the CPU
+/// reference's leaf by leaf, and the knob reaches the march (a good share of leaves gather
+/// differently than with it off). `what` names the knob in the log and the messages.
+fn assert_knob_gather_matches_cpu(what: &str, seed: u32, knob: fn(&mut Settings)) {
     let mut scene = testscenes::dogleg();
     testscenes::leaves_on_surfels(&mut scene);
-    let light = random_light(scene.leaves.len(), 13);
-    let gather = |cone_planes: bool| {
-        let settings = Settings { cones: 8, cone_planes, ..Default::default() };
+    let light = random_light(scene.leaves.len(), seed);
+    let gather = |on: bool| {
+        let mut settings = Settings { cones: 8, ..Default::default() };
+        if on {
+            knob(&mut settings);
+        }
         let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
         r.write_leaf_light(&light).unwrap();
         r.run_bounce().unwrap();
@@ -128,42 +132,28 @@ fn cone_gather_with_cone_planes_matches_cpu_reference() {
         let (worst, checked) = CpuScene::mip(&scene, &light).worst_gather_error(&r.params(), &got, 7);
         (got, worst, checked)
     };
-    let (cubes, _, _) = gather(false);
-    let (planes, worst, checked) = gather(true);
-    let changed = cubes.iter().zip(&planes).filter(|(a, b)| (a.gather[0] - b.gather[0]).abs() > 1e-3).count();
-    eprintln!(
-        "gather with cone planes: worst error {worst:.2e} over {checked} leaves, {changed} leaves moved"
-    );
+    let (off, _, _) = gather(false);
+    let (on, worst, checked) = gather(true);
+    let changed = off.iter().zip(&on).filter(|(a, b)| (a.gather[0] - b.gather[0]).abs() > 1e-3).count();
+    eprintln!("gather with {what}: worst error {worst:.2e} over {checked} leaves, {changed} leaves moved");
     assert!(checked > 100);
-    assert!(worst < 1e-3, "gather with cone planes differs from the CPU reference by {worst}");
-    // The knob reaches the march: a good share of leaves gather differently.
-    assert!(changed * 10 > cubes.len(), "only {changed} of {} leaves changed", cubes.len());
+    assert!(worst < 1e-3, "gather with {what} differs from the CPU reference by {worst}");
+    assert!(changed * 10 > off.len(), "only {changed} of {} leaves changed", off.len());
+}
+
+#[test]
+fn cone_gather_with_cone_planes_matches_cpu_reference() {
+    // The leaves on their surfels so the planes cut the cubes where the surface is; the march
+    // still has to agree with the CPU's, leaf by leaf.
+    assert_knob_gather_matches_cpu("cone planes", 13, |s| s.cone_planes = true);
 }
 
 #[test]
 fn cone_gather_with_cone_rays_matches_cpu_reference() {
-    // The rays' ends are decisions (which cell, which side of a plane) that f32 and f64 can take
-    // differently where a ray passes within rounding of a cell's face or a plane; the rest must
+    // The rays' ends are decisions (which cell, which side of a plane) that f32 and f64 could
+    // take differently where a ray passes within rounding of a cell's face or a plane; they must
     // agree as the cones do.
-    let mut scene = testscenes::dogleg();
-    testscenes::leaves_on_surfels(&mut scene);
-    let light = random_light(scene.leaves.len(), 17);
-    let gather = |cone_rays: bool| {
-        let settings = Settings { cones: 8, cone_rays, ..Default::default() };
-        let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
-        r.write_leaf_light(&light).unwrap();
-        r.run_bounce().unwrap();
-        let got = r.read_leaf_light().unwrap();
-        let (worst, checked) = CpuScene::mip(&scene, &light).worst_gather_error(&r.params(), &got, 7);
-        (got, worst, checked)
-    };
-    let (cones, _, _) = gather(false);
-    let (rays, worst, checked) = gather(true);
-    let changed = cones.iter().zip(&rays).filter(|(a, b)| (a.gather[0] - b.gather[0]).abs() > 1e-3).count();
-    eprintln!("gather with cone rays: worst error {worst:.2e} over {checked} leaves, {changed} leaves moved");
-    assert!(checked > 100);
-    assert!(worst < 1e-3, "gather with cone rays differs from the CPU reference by {worst}");
-    assert!(changed * 10 > cones.len(), "only {changed} of {} leaves changed", cones.len());
+    assert_knob_gather_matches_cpu("cone rays", 17, |s| s.cone_rays = true);
 }
 
 #[test]

@@ -33,12 +33,12 @@ fn propagate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     var state = leaf_light[i];
     var gathered = select(state.pending.rgb, vec3<f32>(0.0), batch.first == 0u);
     let end = batch_end();
+    let n = leaf_normal(leaf.normal_mean.xyz);
     for (var c = batch.first; c < end; c++) {
         let cone = params.cones[c];
         let dir = leaf_cone_dir(leaf, cone.xyz);
         var s: vec4<f32>;
         if cone_rays {
-            let n = leaf_normal(leaf.normal_mean.xyz);
             s = trace_cone_rays(leaf_cone_origin(leaf), dir, n, params.cone_tan_half, leaf_cone_lift(leaf));
         } else {
             s = trace_cone(leaf_cone_origin(leaf), dir, params.cone_tan_half, leaf_cone_rise(leaf, dir));
