@@ -335,7 +335,25 @@ pub(crate) fn write_tile_package(
         ]
         .into(),
     })?;
+    hold_first_tile_for_test();
     w.finish()?;
     profile.lap(Stage::WriteTiles, &mut clock);
     Ok(())
+}
+
+/// The cluster test's hook (scripts/test-slurm.sh, the node-loss case): with
+/// `GROTTO_PACK_HOLD_TILE_MS=N` the first tile package this process writes stays open under its
+/// temp name N ms (at most a minute) before it is finished, so a node can be lost while it writes.
+/// Without it a tile's write takes about 20 ms, which a script polling /proc catches only by luck.
+/// Later tiles are not held, and unset (every real build) it costs one lookup per process.
+fn hold_first_tile_for_test() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    static HELD: AtomicBool = AtomicBool::new(false);
+    if HELD.swap(true, Ordering::Relaxed) {
+        return;
+    }
+    let ms = std::env::var("GROTTO_PACK_HOLD_TILE_MS").ok().and_then(|v| v.trim().parse::<u64>().ok());
+    if let Some(ms) = ms {
+        std::thread::sleep(std::time::Duration::from_millis(ms.min(60_000)));
+    }
 }
