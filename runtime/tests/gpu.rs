@@ -10,6 +10,7 @@ use grotto_runtime::gpu::{Gpu, GpuOptions};
 use grotto_runtime::light::plan::Pass;
 use grotto_runtime::passes::cpu_ref::CpuScene;
 use grotto_runtime::render::Renderer;
+use grotto_runtime::scene::data::SceneData;
 use grotto_runtime::settings::Settings;
 
 fn gpu() -> &'static Gpu {
@@ -116,20 +117,18 @@ fn cone_gather_matches_cpu_reference() {
 /// light seeded `seed`, with 8 cones and with `knob` on: its gather agrees with the CPU
 /// reference's leaf by leaf, and the knob reaches the march (a good share of leaves gather
 /// differently than with it off). `what` names the knob in the log and the messages.
-fn assert_knob_gather_matches_cpu(what: &str, seed: u32, knob: fn(&mut Settings)) {
-    let mut scene = testscenes::dogleg();
-    testscenes::leaves_on_surfels(&mut scene);
+fn assert_knob_gather_matches_cpu(what: &str, scene: &SceneData, seed: u32, knob: fn(&mut Settings)) {
     let light = random_light(scene.leaves.len(), seed);
     let gather = |on: bool| {
         let mut settings = Settings { cones: 8, ..Default::default() };
         if on {
             knob(&mut settings);
         }
-        let mut r = Renderer::new(gpu(), &scene, settings).unwrap();
+        let mut r = Renderer::new(gpu(), scene, settings).unwrap();
         r.write_leaf_light(&light).unwrap();
         r.run_bounce().unwrap();
         let got = r.read_leaf_light().unwrap();
-        let (worst, checked) = CpuScene::mip(&scene, &light).worst_gather_error(&r.params(), &got, 7);
+        let (worst, checked) = CpuScene::mip(scene, &light).worst_gather_error(&r.params(), &got, 7);
         (got, worst, checked)
     };
     let (off, _, _) = gather(false);
@@ -145,7 +144,13 @@ fn assert_knob_gather_matches_cpu(what: &str, seed: u32, knob: fn(&mut Settings)
 fn cone_gather_with_cone_planes_matches_cpu_reference() {
     // The leaves on their surfels so the planes cut the cubes where the surface is; the march
     // still has to agree with the CPU's, leaf by leaf.
-    assert_knob_gather_matches_cpu("cone planes", 13, |s| s.cone_planes = true);
+    assert_knob_gather_matches_cpu("cone planes", &dogleg_on_surfels(), 13, |s| s.cone_planes = true);
+}
+
+fn dogleg_on_surfels() -> SceneData {
+    let mut scene = testscenes::dogleg();
+    testscenes::leaves_on_surfels(&mut scene);
+    scene
 }
 
 #[test]
@@ -153,7 +158,16 @@ fn cone_gather_with_cone_rays_matches_cpu_reference() {
     // The rays' ends are decisions (which cell, which side of a plane) that f32 and f64 could
     // take differently where a ray passes within rounding of a cell's face or a plane; they must
     // agree as the cones do.
-    assert_knob_gather_matches_cpu("cone rays", 17, |s| s.cone_rays = true);
+    assert_knob_gather_matches_cpu("cone rays", &dogleg_on_surfels(), 17, |s| s.cone_rays = true);
+}
+
+#[test]
+fn cone_rays_cross_empty_space_where_the_cpu_walks_every_cell() {
+    // The GPU's rays cross boxes proved empty (a missing node cut to rock-free space) in one step;
+    // the CPU's walk every cell. In an open shell most rays cross its hollow, and those through the
+    // opening leave the scene: both must end where the CPU's do.
+    let scene = testscenes::open_sphere(5, 11.0, 0.6, 0.0, 0.8);
+    assert_knob_gather_matches_cpu("cone rays (open shell)", &scene, 19, |s| s.cone_rays = true);
 }
 
 #[test]
@@ -614,7 +628,7 @@ fn random_sky(seed: u32) -> [[f32; 3]; 9] {
 
 #[test]
 fn sh_irradiance_on_the_gpu_matches_the_cpu_for_ten_thousand_normals() {
-    use grotto_runtime::scene::data::{SceneData, VoxelLeaf};
+    use grotto_runtime::scene::data::VoxelLeaf;
     // Isolated leaves on a sparse grid with random unit normals; cones end at once (max distance
     // below a leaf), so every leaf sees the whole sky (V = 1) and gets exactly albedo * E(n) / pi.
     let normals = random_light(10_000, 5);

@@ -379,6 +379,7 @@ impl CpuScene<'_> {
 
     /// `ray_hit` in shaders/cone_rays.wgsl: one ray from `origin_m` along unit `d` walks the leaf
     /// cells it crosses (Amanatides & Woo) until it goes behind a leaf's surface or enters rock.
+    /// Every cell, one at a time: the GPU crosses empty boxes whole, and is checked against this.
     pub fn ray_hit(&self, p: &Params, origin_m: DVec3, d: DVec3) -> RayEnd {
         let leaf = f64::from(p.leaf_size_m);
         let corner = |v: [f32; 4]| DVec3::new(v[0].into(), v[1].into(), v[2].into());

@@ -128,6 +128,47 @@ fn find_leaf(v: vec3<i32>) -> u32 {
     return nodes[n].first_child;
 }
 
+// `find_leaf` of the leaf cell `v`, and where that is EMPTY, a cube around `v` the lookup proved
+// empty (no resident leaf in it): from `lo` (global leaf units), 2^`level` leaves wide. That is
+// the node the descent found missing, or where no tile holds `v`, `v`'s cell at the tile index's
+// finest depth (no entry's cube meets it: the grids of all depths are nested on the anchor's).
+// For crossing empty space whole (cone_rays.wgsl, `ray_hit`).
+struct LeafOrGap {
+    leaf: u32,
+    level: u32,
+    lo: vec3<i32>,
+}
+
+fn find_leaf_or_gap(v: vec3<i32>) -> LeafOrGap {
+    let t = find_tile(v);
+    if t == EMPTY {
+        let depths = tile_index_word(2);
+        let d = select(0u, firstTrailingBit(depths), depths != 0u);
+        let anchor = tile_anchor();
+        return LeafOrGap(EMPTY, d, anchor + (((v - anchor) >> vec3<u32>(d)) << vec3<u32>(d)));
+    }
+    let tile = tiles[t];
+    // As find_node_at at lod 0: a coarse tile's descent ends at its coarse leaves.
+    let l = tile.leaf_lod;
+    let rel = vec3<u32>(v - tile.origin_leaf);
+    let local = rel >> vec3<u32>(l);
+    let levels = tile.depth - l;
+    var n = tile.node_offset;
+    for (var level = 0u; level < levels; level++) {
+        let b = levels - 1u - level;
+        let o = ((local.x >> b) & 1u) | (((local.y >> b) & 1u) << 1u) | (((local.z >> b) & 1u) << 2u);
+        let node = nodes[n];
+        let mask = node.mask_level & 0xffu;
+        if ((mask >> o) & 1u) == 0u {
+            // The missing child is 2^(b + l) leaves wide.
+            let k = b + l;
+            return LeafOrGap(EMPTY, k, tile.origin_leaf + vec3<i32>((rel >> vec3<u32>(k)) << vec3<u32>(k)));
+        }
+        n = node.first_child + countOneBits(mask & ((1u << o) - 1u));
+    }
+    return LeafOrGap(nodes[n].first_child, 0u, v);
+}
+
 // The node's value seen by a ray travelling along unit `dir`: its three facing directional
 // values weighted by the squared direction components (the weights sum to 1).
 fn directional(n: u32, dir: vec3<f32>) -> vec4<f32> {
