@@ -422,17 +422,17 @@ impl CpuScene<'_> {
         RayEnd::Escaped
     }
 
-    /// `ray_colour` in shaders/cone_rays.wgsl: the pyramid's colour at `at_leaf` along `d` over a
-    /// footprint `diameter_m` wide, coarser where the finer level is empty.
+    /// `ray_colour` in shaders/cone_rays.wgsl: the pyramid's colour at `at_leaf` along `d`, a
+    /// trilinear sample of the level nearest the footprint `diameter_m`, coarser where it is empty.
     fn ray_colour(&self, p: &Params, at_leaf: DVec3, d: DVec3, diameter_m: f64) -> Option<[f64; 3]> {
-        let max_lod = f64::from(p.max_lod);
-        let mut lod = (0.5 * diameter_m / f64::from(p.leaf_size_m)).log2().clamp(0.0, max_lod);
-        let mut s = self.sample_lod(at_leaf, lod, p.max_lod, d, false);
-        while s[3] <= 1e-6 && lod < max_lod {
-            lod += 1.0;
-            s = self.sample_lod(at_leaf, lod, p.max_lod, d, false);
+        let lod = (0.5 * diameter_m / f64::from(p.leaf_size_m)).log2().clamp(0.0, f64::from(p.max_lod));
+        for l in (lod + 0.5).floor() as u32..=p.max_lod {
+            let s = self.sample_level(at_leaf, l, d, false);
+            if s[3] > 1e-6 {
+                return Some([s[0] / s[3], s[1] / s[3], s[2] / s[3]]);
+            }
         }
-        (s[3] > 1e-6).then(|| [s[0] / s[3], s[1] / s[3], s[2] / s[3]])
+        None
     }
 
     /// One gather cone as rays, as `trace_cone_rays` in shaders/cone_rays.wgsl: from the cone's
