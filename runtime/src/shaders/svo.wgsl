@@ -132,7 +132,8 @@ fn find_leaf(v: vec3<i32>) -> u32 {
 // empty (no resident leaf in it): from `lo` (global leaf units), 2^`level` leaves wide. That is
 // the node the descent found missing, or where no tile holds `v`, `v`'s cell at the tile index's
 // finest depth (no entry's cube meets it: the grids of all depths are nested on the anchor's).
-// For crossing empty space whole (cone_rays.wgsl, `ray_hit`).
+// For crossing empty space whole (cone_rays.wgsl, `ray_hit`). The descent is `descend`'s, written
+// out because it must also say where it went empty; `descend` stays as it is on every sample's path.
 struct LeafOrGap {
     leaf: u32,
     level: u32,
