@@ -132,8 +132,7 @@ fn find_leaf(v: vec3<i32>) -> u32 {
 // empty (no resident leaf in it): from `lo` (global leaf units), 2^`level` leaves wide. That is
 // the node the descent found missing, or where no tile holds `v`, `v`'s cell at the tile index's
 // finest depth (no entry's cube meets it: the grids of all depths are nested on the anchor's).
-// For crossing empty space whole (cone_rays.wgsl, `ray_hit`). The descent is `descend`'s, written
-// out because it must also say where it went empty; `descend` stays as it is on every sample's path.
+// For crossing empty space whole (cone_rays.wgsl, `ray_hit`).
 struct LeafOrGap {
     leaf: u32,
     level: u32,
@@ -153,21 +152,13 @@ fn find_leaf_or_gap(v: vec3<i32>) -> LeafOrGap {
     let l = tile.leaf_lod;
     let rel = vec3<u32>(v - tile.origin_leaf);
     let local = rel >> vec3<u32>(l);
-    let levels = tile.depth - l;
-    var n = tile.node_offset;
-    for (var level = 0u; level < levels; level++) {
-        let b = levels - 1u - level;
-        let o = ((local.x >> b) & 1u) | (((local.y >> b) & 1u) << 1u) | (((local.z >> b) & 1u) << 2u);
-        let node = nodes[n];
-        let mask = node.mask_level & 0xffu;
-        if ((mask >> o) & 1u) == 0u {
-            // The missing child is 2^(b + l) leaves wide.
-            let k = b + l;
-            return LeafOrGap(EMPTY, k, tile.origin_leaf + vec3<i32>((rel >> vec3<u32>(k)) << vec3<u32>(k)));
-        }
-        n = node.first_child + countOneBits(mask & ((1u << o) - 1u));
+    let found = descend_or_gap(tile.node_offset, local, tile.depth - l);
+    if found.x == EMPTY {
+        // The missing child is 2^(found.y + l) leaves wide.
+        let k = found.y + l;
+        return LeafOrGap(EMPTY, k, tile.origin_leaf + vec3<i32>((rel >> vec3<u32>(k)) << vec3<u32>(k)));
     }
-    return LeafOrGap(nodes[n].first_child, 0u, v);
+    return LeafOrGap(nodes[found.x].first_child, 0u, v);
 }
 
 // The node's value seen by a ray travelling along unit `dir`: its three facing directional
@@ -183,6 +174,12 @@ fn directional(n: u32, dir: vec3<f32>) -> vec4<f32> {
 
 // Descends `levels` levels from node `n` along the low bits of `local` (bit levels-1 first).
 fn descend(start: u32, local: vec3<u32>, levels: u32) -> u32 {
+    return descend_or_gap(start, local, levels).x;
+}
+
+// `descend`, and where it finds a child missing, which: x is the node reached or EMPTY, y the
+// missing child's size, log2 of its edge in nodes of the level `levels` below `start`.
+fn descend_or_gap(start: u32, local: vec3<u32>, levels: u32) -> vec2<u32> {
     var n = start;
     for (var level = 0u; level < levels; level++) {
         let b = levels - 1u - level;
@@ -190,11 +187,11 @@ fn descend(start: u32, local: vec3<u32>, levels: u32) -> u32 {
         let node = nodes[n];
         let mask = node.mask_level & 0xffu;
         if ((mask >> o) & 1u) == 0u {
-            return EMPTY;
+            return vec2<u32>(EMPTY, b);
         }
         n = node.first_child + countOneBits(mask & ((1u << o) - 1u));
     }
-    return n;
+    return vec2<u32>(n, 0u);
 }
 
 // How much of a leaf a sample at `p_leaf` sees (Settings::cone_planes): a voxel's cube stands
