@@ -34,7 +34,7 @@ impl fmt::Display for Region {
 pub enum Problem {
     #[error("file is {len} bytes, shorter than the {needed}-byte header")]
     TooShort { len: u64, needed: u64 },
-    #[error("not a grotto package (magic bytes {found:02x?})")]
+    #[error("not a grotto package (magic bytes {found:02x?}){}", scan_hint(.found))]
     BadMagic { found: [u8; 8] },
     #[error(
         "package format {found_major}.{found_minor} is not one this reader opens (1.x to {supported_major}.{supported_minor}); a newer package needs a newer grotto"
@@ -121,3 +121,33 @@ impl Error {
 
 /// The format crate's result: [`Error`] names the package and what is wrong with it.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// For a scan given where a package was expected (a user's first try, `grotto render scan.laz`):
+/// which scan format its first bytes name, and the command that makes a package of it.
+fn scan_hint(magic: &[u8; 8]) -> &'static str {
+    if magic.starts_with(b"LASF") {
+        "; it is a LAS/LAZ scan: make a package of it first with `grotto-pack build FILE -o FILE.grotto`"
+    } else if magic.starts_with(b"ply\n") || magic.starts_with(b"ply\r") {
+        "; it is a PLY scan: make a package of it first with `grotto-pack build FILE -o FILE.grotto`"
+    } else if magic == b"ASTM-E57" {
+        "; it is an E57 scan: make a package of it first with `grotto-pack build FILE -o FILE.grotto`"
+    } else {
+        ""
+    }
+}
+
+#[cfg(test)]
+mod scan_hint_tests {
+    use super::Problem;
+
+    #[test]
+    fn a_scan_where_a_package_was_expected_is_named_with_the_command_that_packs_it() {
+        for (magic, kind) in [(*b"LASF\0\0\0\0", "LAS/LAZ"), (*b"ply\nform", "PLY"), (*b"ASTM-E57", "E57")] {
+            let message = Problem::BadMagic { found: magic }.to_string();
+            assert!(message.starts_with("not a grotto package"), "{message}");
+            assert!(message.contains(kind) && message.contains("grotto-pack build FILE"), "{message}");
+        }
+        let other = Problem::BadMagic { found: *b"GIF89a\0\0" }.to_string();
+        assert!(!other.contains("grotto-pack"), "{other}");
+    }
+}
