@@ -28,7 +28,10 @@
 //! the GPU (`Settings::cone_rays`: these rays with `CELLS=1 PLANEHIT=1 PLANE_OFFSET=0.25
 //! LIFT=0.3`), each over what the reference's add, then how many samples the cones took and how
 //! many steps the rays did (with `CELLS`, also what a walk crossing empty nodes whole would
-//! visit, and the bricks of 4x4x4 leaves the rays enter). `SLABS=r` adds region r leaf slab by leaf slab (`slabs`).
+//! visit, and the bricks of 4x4x4 leaves the rays enter). `SLABS=r` adds region r leaf slab by leaf slab (`slabs`);
+//! `BY_FACES=1` each region's leaves by how many facets their surfels lie on (`by_faces`);
+//! `FACETS=1|2` the CPU bounces again with the leaves of several facets lit (and with 2, also
+//! gathering) facet by facet (`FacetLight`).
 use glam::{DVec3, IVec3, Vec3};
 use grotto_fixtures::testscenes;
 use grotto_reference::accuracy::breakdown::{BreakdownScene, balanced_cut, luminance as lum, settled};
@@ -325,6 +328,160 @@ fn slabs(
     }
 }
 
+/// BY_FACES=1: each region's leaves by how many faces of their rock cell their surfels lie on
+/// (1: a wall, 2: an edge, 3: a corner; the mean normal's length tells them apart on a carved
+/// scene), per class the reference's share of what the bounces add to the region and the GPU
+/// cones' and rays' over the reference's.
+fn by_faces(
+    data: &SceneData,
+    names: &[String],
+    region_of: &[Option<usize>],
+    surface: &[bool],
+    light0: &[LeafLightGpu],
+    lights: [&Vec<LeafLightGpu>; 2],
+    (f0, fk): (&[Option<grotto_reference::Estimate>], &[Option<grotto_reference::Estimate>]),
+) {
+    let mut sums = std::collections::BTreeMap::<(usize, usize), [f64; 4]>::new();
+    for (i, leaf) in data.leaves.iter().enumerate() {
+        let (Some(a), Some(b)) = (&f0[i], &fk[i]) else { continue };
+        let Some(r) = region_of[i].filter(|_| surface[i]) else { continue };
+        let len = Vec3::from_slice(&leaf.normal_mean[..3]).length();
+        let faces = if len > 0.85 {
+            1
+        } else if len > 0.64 {
+            2
+        } else {
+            3
+        };
+        let e = sums.entry((r, faces)).or_default();
+        for (k, l) in lights.iter().enumerate() {
+            e[k] += lum(l[i].shown(leaf)) - lum(light0[i].shown(leaf));
+        }
+        e[2] += lum(b.mean.to_array()) - lum(a.mean.to_array());
+        e[3] += 1.0;
+    }
+    println!("| region | faces | leaves | share | GPU cones | GPU rays |");
+    for (&(r, faces), v) in &sums {
+        let total: f64 = sums.iter().filter(|((q, _), _)| *q == r).map(|(_, v)| v[2]).sum();
+        println!(
+            "| {} | {faces} | {} | {:.3} | {:.3} | {:.3} |",
+            names[r],
+            v[3],
+            v[2] / total,
+            v[0] / v[2],
+            v[1] / v[2]
+        );
+    }
+}
+
+/// FACETS=1: the bounces gather over a pyramid whose leaves of several facets (a carved scene's
+/// convex edges: an opening's rim) show each travel direction the light of the facets facing it,
+/// each facet's direct light its own (the runtime's, with the leaf's normal set to the facet's)
+/// instead of one light for all of them; FACETS=2: each facet also gathers on its own (from its
+/// surfels' centroid across its normal), and the leaf's light is its facets' mean.
+struct FacetLight {
+    /// Per facet rank k, the scene with each leaf of several facets given its k-th facet's
+    /// normal and centroid (its last where it has fewer).
+    scenes: Vec<SceneData>,
+    /// Leaf, its level-0 node, and its facets.
+    leaves: Vec<(usize, u32, Vec<Facet>)>,
+    own_gather: bool,
+}
+
+/// One facet of a leaf: its normal, direct light and surfel count.
+struct Facet {
+    normal: DVec3,
+    direct: [f32; 4],
+    surfels: f64,
+}
+
+impl FacetLight {
+    fn new(gpu: &Gpu, data: &SceneData, own_gather: bool) -> anyhow::Result<Self> {
+        let leaf_m = data.leaf_size_m;
+        let cell_leaf: std::collections::HashMap<IVec3, usize> =
+            data.leaves.iter().enumerate().map(|(i, l)| (l.cell(leaf_m), i)).collect();
+        let mut facets = std::collections::BTreeMap::<usize, Vec<(IVec3, Vec3, f32)>>::new();
+        for s in &data.surfels {
+            let p = Vec3::from_slice(&s.position_radius[..3]);
+            let n = Vec3::from_slice(&s.normal_spread[..3]);
+            let cell = ((p - n * 0.5 * leaf_m) / leaf_m).floor().as_ivec3();
+            if let Some(&i) = cell_leaf.get(&cell) {
+                let f = facets.entry(i).or_default();
+                let axis = n.round().as_ivec3();
+                match f.iter_mut().find(|(a, _, _)| *a == axis) {
+                    Some(e) => {
+                        e.1 += p;
+                        e.2 += 1.0;
+                    }
+                    None => f.push((axis, p, 1.0)),
+                }
+            }
+        }
+        facets.retain(|_, f| f.len() > 1);
+        let most = facets.values().map(Vec::len).max().unwrap_or(0);
+        let mut scenes = Vec::new();
+        let mut lit: Vec<Vec<LeafLightGpu>> = Vec::new();
+        for k in 0..most {
+            let mut one = data.clone();
+            for (&i, f) in &facets {
+                let (axis, sum, count) = f[k.min(f.len() - 1)];
+                let n = axis.as_vec3();
+                let lo = data.leaves[i].cell(leaf_m).as_vec3() * leaf_m;
+                let inset = Vec3::splat(0.01 * leaf_m);
+                let c = (sum / count).clamp(lo + inset, lo + Vec3::splat(leaf_m) - inset);
+                let l = &mut one.leaves[i];
+                l.normal_mean = [n.x, n.y, n.z, 0.0];
+                l.center_m = [c.x, c.y, c.z, l.center_m[3]];
+            }
+            lit.push(settled(gpu, &one, balanced_cut(0))?.read_leaf_light()?);
+            scenes.push(one);
+        }
+        let (order, ranges) = data.nodes_by_height();
+        let leaf_node: std::collections::HashMap<usize, u32> = ranges
+            .iter()
+            .filter(|r| r.height == 0)
+            .flat_map(|r| order[r.first as usize..(r.first + r.count) as usize].iter())
+            .map(|&n| (data.nodes[n as usize].first_child as usize, n))
+            .collect();
+        let leaves = facets
+            .iter()
+            .filter_map(|(&i, f)| {
+                let node = *leaf_node.get(&i)?;
+                let per = f.iter().enumerate().map(|(k, (n, _, c))| Facet {
+                    normal: n.as_dvec3(),
+                    direct: lit[k][i].out,
+                    surfels: f64::from(*c),
+                });
+                Some((i, node, per.collect()))
+            })
+            .collect();
+        Ok(Self { scenes, leaves, own_gather })
+    }
+
+    /// Each facet leaf's level-0 faces: per travel direction, the mean of `out` (per leaf, per
+    /// facet) over the facets that face it, each by its cosine; left as it is where none does.
+    fn apply(&self, data: &SceneData, cpu: &mut CpuScene<'_>, out: &[Vec<[f32; 4]>]) {
+        for ((i, node, facets), outs) in self.leaves.iter().zip(out) {
+            let a = f64::from(data.leaves[*i].albedo_opacity[3]);
+            for f in 0..6 {
+                let mut travel = DVec3::ZERO;
+                travel[f / 2] = if f % 2 == 0 { 1.0 } else { -1.0 };
+                let (mut sum, mut w) = ([0.0f64; 3], 0.0);
+                for (facet, o) in facets.iter().zip(outs) {
+                    let seen = (-facet.normal.dot(travel)).max(0.0);
+                    for k in 0..3 {
+                        sum[k] += seen * f64::from(o[k]);
+                    }
+                    w += seen;
+                }
+                if w > 0.0 {
+                    cpu.faces[*node as usize * 6 + f] = [sum[0] / w * a, sum[1] / w * a, sum[2] / w * a, a];
+                }
+            }
+        }
+    }
+}
+
 fn main() -> anyhow::Result<()> {
     let gpu = Gpu::new(&GpuOptions { prefer_software: true, ..Default::default() })?;
     let which = std::env::args().nth(1).unwrap_or_else(|| "colour-box".into());
@@ -366,37 +523,94 @@ fn main() -> anyhow::Result<()> {
     // Bounces on the CPU: each gathers over the pyramid of the one before, out = the direct light
     // (and emission) + albedo * gather, as propagate.wgsl.
     let mut cone_steps = 0u64;
-    let mut run = |rays: bool| {
+    let mut run = |rays: bool, facets: Option<&FacetLight>| {
         let mut light = light0.clone();
+        // Per leaf of several facets, per facet: its outgoing light (FACETS).
+        let mut facet_out: Vec<Vec<[f32; 4]>> = facets
+            .map(|f| f.leaves.iter().map(|(_, _, per)| per.iter().map(|x| x.direct).collect()).collect())
+            .unwrap_or_default();
         for _ in 0..bounces {
-            let cpu = CpuScene::mip(&data, &light);
-            let mut next = light0.clone();
-            for (i, leaf) in data.leaves.iter().enumerate() {
-                if !surface[i] {
-                    continue;
-                }
-                let g = if rays {
+            let mut cpu = CpuScene::mip(&data, &light);
+            if let Some(f) = facets {
+                f.apply(&data, &mut cpu, &facet_out);
+            }
+            let mut gather = |cpu: &CpuScene<'_>, i: usize| {
+                if rays {
                     cpu.gather_with(&p, i, |o, d, n, rise| {
                         // LIFT=k: the rays start k leaves off the surface instead of the cones' lift.
                         let o = lift.map_or(o, |k| o - n * (rise[0] - k * f64::from(data.leaf_size_m)));
-                        march.cone(&cpu, o, d, n)
+                        march.cone(cpu, o, d, n)
                     })
                 } else {
                     cpu.gather_with(&p, i, |o, d, _, rise| {
                         cpu.trace_cone_observed(&p, o, d, rise, |_| cone_steps += 1)
                     })
-                };
+                }
+            };
+            let mut next = light0.clone();
+            for (i, leaf) in data.leaves.iter().enumerate() {
+                if !surface[i] {
+                    continue;
+                }
+                let g = gather(&cpu, i);
                 for k in 0..3 {
                     next[i].gather[k] = g[k] as f32;
                     next[i].out[k] = light0[i].out[k] + leaf.albedo_opacity[k] * g[k] as f32;
+                }
+            }
+            if let Some(f) = facets {
+                for ((i, _, per), outs) in f.leaves.iter().zip(facet_out.iter_mut()) {
+                    let albedo = data.leaves[*i].albedo_opacity;
+                    let (mut mean, mut weight) = (DVec3::ZERO, 0.0);
+                    for (k, (facet, o)) in per.iter().zip(outs.iter_mut()).enumerate() {
+                        let g = if f.own_gather {
+                            let view = CpuScene { scene: &f.scenes[k], faces: cpu.faces.clone() };
+                            gather(&view, *i)
+                        } else {
+                            DVec3::from_array(std::array::from_fn(|c| f64::from(next[*i].gather[c])))
+                        };
+                        for c in 0..3 {
+                            o[c] = facet.direct[c] + albedo[c] * g[c] as f32;
+                        }
+                        mean += g * facet.surfels;
+                        weight += facet.surfels;
+                    }
+                    let g = mean / weight;
+                    for c in 0..3 {
+                        next[*i].gather[c] = g[c] as f32;
+                        next[*i].out[c] = light0[*i].out[c] + albedo[c] * g[c] as f32;
+                    }
                 }
             }
             light = next;
         }
         light
     };
-    let cone_light = run(false);
-    let ray_light = run(true);
+    let cone_light = run(false, None);
+    let ray_light = run(true, None);
+    if let Some(mode) = env::<u32>("FACETS") {
+        let facets = FacetLight::new(&gpu, &data, mode >= 2)?;
+        let cones = run(false, Some(&facets));
+        let rays = run(true, Some(&facets));
+        let (mut c, mut r, mut g) = (vec![0.0; names.len()], vec![0.0; names.len()], vec![0.0; names.len()]);
+        for (i, leaf) in data.leaves.iter().enumerate() {
+            let (Some(a), Some(b)) = (&f0[i], &fk[i]) else { continue };
+            let Some(f) = region_of[i].filter(|_| surface[i]) else { continue };
+            c[f] += lum(cones[i].shown(leaf)) - lum(light0[i].shown(leaf));
+            r[f] += lum(rays[i].shown(leaf)) - lum(light0[i].shown(leaf));
+            g[f] += lum(b.mean.to_array()) - lum(a.mean.to_array());
+        }
+        let what = if mode >= 2 { "direct light and gather" } else { "direct light" };
+        println!(
+            "| {} leaves of several facets, {what} per facet | {} |",
+            facets.leaves.len(),
+            names.join(" | ")
+        );
+        for (name, v) in [("CPU cones", &c), ("rays", &r)] {
+            let cells: Vec<String> = (0..names.len()).map(|f| format!("{:.3}", v[f] / g[f])).collect();
+            println!("| {name} | {} |", cells.join(" | "));
+        }
+    }
     if let Some(region) = env::<usize>("SLABS") {
         let lights = [&light_k, &cone_light, &ray_light];
         slabs(&data, &region_of, region, &light0, lights, (&f0, &fk));
@@ -414,6 +628,9 @@ fn main() -> anyhow::Result<()> {
         cone_sum[f] += added(&cone_light);
         ray_sum[f] += added(&ray_light);
         ref_sum[f] += lum(b.mean.to_array()) - lum(a.mean.to_array());
+    }
+    if std::env::var("BY_FACES").is_ok() {
+        by_faces(&data, &names, &region_of, &surface, &light0, [&light_k, &light_gpu_rays], (&f0, &fk));
     }
     println!("| {which}, {rays} rays, {bounces} bounces | {} |", names.join(" | "));
     let rows =
