@@ -31,7 +31,8 @@
 //! visit, and the bricks of 4x4x4 leaves the rays enter). `SLABS=r` adds region r leaf slab by leaf slab (`slabs`);
 //! `BY_FACES=1` each region's leaves by how many facets their surfels lie on (`by_faces`);
 //! `FACETS=1|2` the CPU bounces again with the leaves of several facets lit (and with 2, also
-//! gathering) facet by facet (`FacetLight`).
+//! gathering) facet by facet (`FacetLight`); `SPLAT=s` makes the reference's discs s times their
+//! surfels' radius instead of the runtime's splat scale (2).
 use glam::{DVec3, IVec3, Vec3};
 use grotto_fixtures::testscenes;
 use grotto_reference::accuracy::breakdown::{BreakdownScene, balanced_cut, luminance as lum, settled};
@@ -515,7 +516,13 @@ fn main() -> anyhow::Result<()> {
     // PLANE_OFFSET=0.25 LIFT=0.3` runs here.
     let light_gpu_rays =
         settled(&gpu, &data, Settings { cone_rays: true, ..balanced_cut(bounces) })?.read_leaf_light()?;
-    let scene = SurfelScene::from_scene(&data, Settings::preset(Quality::Balanced).splat_scale);
+    // SPLAT=s: the reference's discs s times their surfels' radius (the runtime's splat scale).
+    let splat = env("SPLAT").unwrap_or(Settings::preset(Quality::Balanced).splat_scale);
+    let mut scene = SurfelScene::from_scene(&data, splat);
+    // CLIP=1: the reference's discs cut to their leaf cells (no disc reaches into an opening).
+    if std::env::var("CLIP").is_ok() {
+        scene.clip_discs_to_cells(data.leaf_size_m);
+    }
     let full = PathSettings::for_scene(&data);
     let f0 = scene.leaf_radiance(&data, 256, &PathSettings { max_bounces: 0, ..full }, 2);
     let fk = scene.leaf_radiance(&data, 256, &PathSettings { max_bounces: bounces, ..full }, 3);

@@ -26,13 +26,24 @@ pub struct Disc {
     pub(crate) albedo: Vec3,
     /// Emitted radiance, W / (sr m^2).
     pub(crate) emission: Vec3,
+    /// The box a hit must lie in (`SurfelScene::clip_discs_to_cells`); unbounded by default.
+    clip_m: [Vec3; 2],
     node_index: usize,
 }
 
 impl Disc {
     /// A disc at `center_m` facing `normal`, of `radius_m`, with its albedo and emitted radiance.
     pub fn new(center_m: Vec3, normal: Vec3, radius_m: f32, albedo: Vec3, emission: Vec3) -> Self {
-        Self { center_m, normal: normal.normalize_or(Vec3::Z), radius_m, albedo, emission, node_index: 0 }
+        let clip_m = [Vec3::NEG_INFINITY, Vec3::INFINITY];
+        Self {
+            center_m,
+            normal: normal.normalize_or(Vec3::Z),
+            radius_m,
+            albedo,
+            emission,
+            clip_m,
+            node_index: 0,
+        }
     }
 
     /// The disc's centre, metres.
@@ -55,7 +66,9 @@ impl Disc {
         if !(t > t_min && t < t_max) {
             return None;
         }
-        ((o + d * t - self.center_m).length_squared() <= self.radius_m * self.radius_m).then_some(t)
+        let p = o + d * t;
+        let inside = p.cmpge(self.clip_m[0]).all() && p.cmple(self.clip_m[1]).all();
+        ((p - self.center_m).length_squared() <= self.radius_m * self.radius_m && inside).then_some(t)
     }
 }
 
@@ -429,6 +442,17 @@ impl SurfelScene {
             disc.albedo * self.trace(p + n * self.bounce_offset_m, d, settings, &mut rng)
         }));
         Estimate { mean: base + e.mean, std_err: e.std_err }
+    }
+
+    /// Cuts each disc to the leaf cell its surfel belongs to (a hair wider), so the discs tile
+    /// the surface the leaves do instead of standing past it: at an opening's rim a disc, enlarged
+    /// to close the gaps between samples, reaches into the opening and narrows it.
+    pub fn clip_discs_to_cells(&mut self, leaf_m: f32) {
+        let hair = Vec3::splat(1e-3 * leaf_m);
+        for d in &mut self.discs {
+            let lo = surface_cell(d.center_m, d.normal, leaf_m).as_vec3() * leaf_m;
+            d.clip_m = [lo - hair, lo + Vec3::splat(leaf_m) + hair];
+        }
     }
 
     /// Outgoing radiance per leaf of `scene` (the scene this was built from): the mean over the

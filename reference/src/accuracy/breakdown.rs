@@ -224,6 +224,9 @@ pub struct BreakdownOptions {
     pub cone_planes: bool,
     /// Every runtime configuration with [`Settings::cone_rays`] on.
     pub cone_rays: bool,
+    /// The reference's discs cut to their leaf cells (`SurfelScene::clip_discs_to_cells`; a
+    /// hand-built scene's carved faces; hand-built scenes only).
+    pub clip_discs: bool,
 }
 
 /// A renderer of `data` with `settings`, its light settled (for reading the leaves' light).
@@ -247,17 +250,17 @@ pub fn breakdown(
     options: BreakdownOptions,
     progress: impl Fn(&str),
 ) -> grotto_runtime::Result<Breakdown> {
-    let BreakdownOptions { paths, leaves_on_surfels, cone_planes, cone_rays } = options;
+    let BreakdownOptions { paths, leaves_on_surfels, cone_planes, cone_rays, clip_discs } = options;
     let mut data = which
         .data()
         .map_err(|problem| grotto_runtime::Error::Scene { package: which.name().into(), problem })?;
+    if which == BreakdownScene::Passage && (leaves_on_surfels || clip_discs) {
+        return Err(grotto_runtime::Error::Scene {
+            package: which.name().into(),
+            problem: "--leaves-on-surfels and --clip-discs are for the hand-built scenes, whose surfels lie one on each face of a rock cell; a package's leaves already lie on their surfels".into(),
+        });
+    }
     if leaves_on_surfels {
-        if which == BreakdownScene::Passage {
-            return Err(grotto_runtime::Error::Scene {
-                package: which.name().into(),
-                problem: "--leaves-on-surfels moves a hand-built scene's leaves; a package's already lie on their surfels".into(),
-            });
-        }
         testscenes::leaves_on_surfels(&mut data);
     }
     let regions = which.regions(&data);
@@ -267,7 +270,10 @@ pub fn breakdown(
         ..s
     };
     let base = planes(Settings::preset(Quality::Balanced));
-    let scene = SurfelScene::from_scene(&data, base.splat_scale);
+    let mut scene = SurfelScene::from_scene(&data, base.splat_scale);
+    if clip_discs {
+        scene.clip_discs_to_cells(data.leaf_size_m);
+    }
     let full_settings = PathSettings::for_scene(&data);
     progress("reference, full transport");
     let full = scene.leaf_radiance(&data, paths, &full_settings, 1);
