@@ -11,6 +11,9 @@ pub enum Error {
     Output { path: String, reason: String },
     #[error("{path}: unknown point format (use .ply or .las)")]
     Extension { path: String },
+    /// A scan given where a package is expected that could not be packed (cli/scan_input.rs).
+    #[error("{path}: {problem}")]
+    Scan { path: String, problem: String },
     #[error(
         "no GPU adapter found (tried {tried}); install a Vulkan driver (on Debian: apt-get install \
          mesa-vulkan-drivers libvulkan1 for the software rasteriser) or set WGPU_BACKEND=gl"

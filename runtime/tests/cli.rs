@@ -565,3 +565,65 @@ fn view_places_a_lamp_in_lighting_mode_and_saves_a_file_render_reads() {
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// `grotto-pack` beside the `grotto` under test (`cargo test --workspace` builds both; a run of this
+/// crate's tests alone builds it here).
+fn grotto_pack_beside_grotto() -> std::path::PathBuf {
+    let exe = std::path::Path::new(env!("CARGO_BIN_EXE_grotto"));
+    let pack = exe.with_file_name(format!("grotto-pack{}", std::env::consts::EXE_SUFFIX));
+    if !pack.is_file() {
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let built = Command::new(cargo)
+            .args(["build", "-p", "grotto-preprocess", "--bin", "grotto-pack"])
+            .status()
+            .unwrap();
+        assert!(built.success() && pack.is_file(), "grotto-pack not built at {}", pack.display());
+    }
+    pack
+}
+
+/// A user's first try: `grotto render scan.las` packs the scan with the grotto-pack beside it into
+/// the cache, renders it, and opens that package again the next time instead of packing again;
+/// without grotto-pack the error names the scan and the command that packs it.
+#[test]
+fn a_scan_given_to_render_is_packed_once_then_rendered() {
+    grotto_pack_beside_grotto();
+    let dir = tempfile::tempdir().unwrap();
+    let scan = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/las/laspy_simple.las");
+    let cache = dir.path().join("cache");
+    let png = dir.path().join("scan.png");
+    let render = |pack: Option<&str>| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_grotto"));
+        c.args(["render", scan, "--out", png.to_str().unwrap(), "--size", "64x48", "--quality", "fast"])
+            .args(["--software", "--json"])
+            .env("GROTTO_CACHE_DIR", &cache);
+        if let Some(p) = pack {
+            c.env("GROTTO_PACK", p);
+        }
+        c.output().unwrap()
+    };
+    let missing = render(Some("/nonexistent/grotto-pack"));
+    let err = String::from_utf8_lossy(&missing.stderr);
+    assert!(!missing.status.success(), "{err}");
+    assert!(
+        err.contains("laspy_simple.las") && err.contains("grotto-pack build FILE -o FILE.grotto"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+
+    let first = render(None);
+    let err = String::from_utf8_lossy(&first.stderr);
+    assert!(first.status.success(), "{err}");
+    assert!(err.contains("a LAS/LAZ scan; packing it"), "{err}");
+    let summary: serde_json::Value = serde_json::from_slice(&first.stdout).expect("stdout is the JSON alone");
+    assert!(summary["surfels"].as_u64().unwrap_or(0) > 0 || png.is_file(), "{summary}");
+    assert!(png.is_file());
+    let packed = || std::fs::read_dir(&cache).unwrap().filter_map(|e| e.ok()).count();
+    assert_eq!(packed(), 1, "one package in the cache");
+
+    let again = render(None);
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{err}");
+    assert!(err.contains("packed from it before"), "{err}");
+    assert_eq!(packed(), 1, "packed once");
+}

@@ -175,6 +175,7 @@ fn publish(a: PublishArgs) -> anyhow::Result<ExitCode> {
 
 #[derive(clap::Args, Debug)]
 struct RenderArgs {
+    /// The package (a LAS/LAZ, PLY or E57 scan is packed by grotto-pack first, once, into a cache).
     package: PathBuf,
     /// A camera or point of interest named in the package (default: its first camera; without
     /// one, a view framed on the data, printed so it can be reused with --eye/--look-at).
@@ -454,7 +455,7 @@ fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::Re
         _ => CameraChoice::Default,
     };
     Ok(RenderOptions {
-        package: a.package.clone(),
+        package: grotto_runtime::cli::scan_input::package_for(&a.package, |m| eprintln!("{m}"))?,
         camera,
         path: a.path.clone(),
         tour: a.tour.clone(),
