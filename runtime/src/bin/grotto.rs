@@ -141,7 +141,7 @@ fn publish(a: PublishArgs) -> anyhow::Result<ExitCode> {
         viewer_options.insert("exposure".into(), e.into());
     }
     let summary = publish::publish(&publish::PublishOptions {
-        package: a.package,
+        package: grotto_runtime::cli::scan_input::package_for(&a.package, |m| eprintln!("{m}"))?,
         out: a.out,
         bundle: a.bundle,
         title: a.title,

@@ -40,7 +40,7 @@ pub fn cache_dir() -> PathBuf {
 }
 
 /// The package to open for `path`: `path` itself unless it is a scan; a scan's package in
-/// [`cache_dir`], packed now by `grotto-pack build` unless the same scan (path, size, modification
+/// [`cache_dir`] (`KEY/NAME.grotto`), packed now by `grotto-pack build` unless the same scan (path, size, modification
 /// time) was packed by this version before. `say` gets a line for the user about what happened.
 pub fn package_for(path: &Path, mut say: impl FnMut(&str)) -> Result<PathBuf> {
     let Some(kind) = scan_kind(path)? else {
@@ -62,8 +62,9 @@ pub fn package_for(path: &Path, mut say: impl FnMut(&str)) -> Result<PathBuf> {
         key = (key ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
     }
     let stem = path.file_stem().map_or_else(|| "scan".into(), |s| s.to_string_lossy().into_owned());
-    let dir = cache_dir();
-    let out = dir.join(format!("{stem}-{key:016x}.grotto"));
+    // A folder per scan, so the package keeps the scan's name (`grotto publish` serves it by it).
+    let dir = cache_dir().join(format!("{key:016x}"));
+    let out = dir.join(format!("{stem}.grotto"));
     if out.is_file() {
         say(&format!(
             "{}: a {kind} scan; opening the package packed from it before, {}",
