@@ -122,18 +122,26 @@ impl Error {
 /// The format crate's result: [`Error`] names the package and what is wrong with it.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
-/// For a scan given where a package was expected (a user's first try, `grotto render scan.laz`):
-/// which scan format its first bytes name, and the command that makes a package of it.
-fn scan_hint(magic: &[u8; 8]) -> &'static str {
-    if magic.starts_with(b"LASF") {
-        "; it is a LAS/LAZ scan: make a package of it first with `grotto-pack build FILE -o FILE.grotto`"
-    } else if magic.starts_with(b"ply\n") || magic.starts_with(b"ply\r") {
-        "; it is a PLY scan: make a package of it first with `grotto-pack build FILE -o FILE.grotto`"
-    } else if magic == b"ASTM-E57" {
-        "; it is an E57 scan: make a package of it first with `grotto-pack build FILE -o FILE.grotto`"
+/// Which scan format a file's first bytes name ("LAS/LAZ", "PLY", "E57"), if any: for a scan
+/// given where a package was expected (a user's first try, `grotto render scan.laz`).
+pub fn scan_format(first_bytes: &[u8]) -> Option<&'static str> {
+    if first_bytes.starts_with(b"LASF") {
+        Some("LAS/LAZ")
+    } else if first_bytes.starts_with(b"ply\n") || first_bytes.starts_with(b"ply\r") {
+        Some("PLY")
+    } else if first_bytes.starts_with(b"ASTM-E57") {
+        Some("E57")
     } else {
-        ""
+        None
     }
+}
+
+/// The bad-magic message's tail for a scan: which format it is and the command that packs it.
+fn scan_hint(magic: &[u8; 8]) -> String {
+    scan_format(magic).map_or_else(String::new, |kind| {
+        let article = if kind == "E57" { "an" } else { "a" };
+        format!("; it is {article} {kind} scan: make a package of it first with `grotto-pack build FILE -o FILE.grotto`")
+    })
 }
 
 #[cfg(test)]

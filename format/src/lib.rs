@@ -31,7 +31,7 @@ mod validate;
 mod writer;
 
 pub use env_chain::{EnvChain, level_table};
-pub use error::{Error, Problem, Region, Result};
+pub use error::{Error, Problem, Region, Result, scan_format};
 pub use profile::{LightProfile, Profile};
 pub use reader::{CoarseData, Element, Package, SvoData, Tile};
 pub use scene::{

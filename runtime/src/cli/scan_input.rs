@@ -13,16 +13,7 @@ pub fn scan_kind(path: &Path) -> Result<Option<&'static str>> {
     let mut magic = [0u8; 8];
     let mut f = std::fs::File::open(path).map_err(|e| scan_error(path, format!("cannot read it: {e}")))?;
     let n = f.read(&mut magic).map_err(|e| scan_error(path, format!("cannot read it: {e}")))?;
-    let magic = &magic[..n];
-    Ok(if magic.starts_with(b"LASF") {
-        Some("LAS/LAZ")
-    } else if magic.starts_with(b"ply\n") || magic.starts_with(b"ply\r") {
-        Some("PLY")
-    } else if magic.starts_with(b"ASTM-E57") {
-        Some("E57")
-    } else {
-        None
-    })
+    Ok(grotto_format::scan_format(&magic[..n]))
 }
 
 fn scan_error(path: &Path, problem: String) -> Error {
