@@ -11,7 +11,7 @@ use glam::{DVec3, IVec3, Vec3};
 use grotto_fixtures::testscenes;
 use grotto_runtime::gpu::types::{LeafLightGpu, Params};
 use grotto_runtime::gpu::{Gpu, GpuOptions};
-use grotto_runtime::passes::cpu_ref::CpuScene;
+use grotto_runtime::passes::cpu_ref::{CpuScene, MarchStep};
 use grotto_runtime::render::Renderer;
 use grotto_runtime::scene::data::{SceneData, VoxelLeaf};
 use grotto_runtime::settings::Settings;
@@ -292,4 +292,67 @@ fn one_bounce_inside_a_lit_sphere_does_not_depend_on_where_the_grid_falls() {
     eprintln!("spread over shifts: {:.2}%", (hi - lo) * 100.0);
     // Stated tolerance: 1.5% of the answer between any two placements.
     assert!(hi - lo < 0.015, "the gather moves by {:.2}% with the grid", (hi - lo) * 100.0);
+}
+
+/// A lit floor of 8x8 leaves near the bottom of a 512-leaf cube, and a lit block 150 leaves away
+/// and 40 up: the box of the matter holds both and lies within the cube; a cone rising from the
+/// floor away from the block stops once its cross-section has left that box (it used to cross the empty cube to its top, reading only coarse levels' blur of the
+/// floor behind it), while a cone aimed at the block across the empty space still reaches it.
+#[test]
+fn a_cone_stops_once_its_cross_section_has_left_the_matter() {
+    let leaf = |cell, n: Vec3| VoxelLeaf {
+        cell,
+        albedo: Vec3::splat(0.5),
+        opacity: 1.0,
+        normal_mean: n,
+        emission: Vec3::ZERO,
+    };
+    let mut cells: Vec<VoxelLeaf> =
+        (100..108).flat_map(|y| (100..108).map(move |x| leaf(IVec3::new(x, y, 4), Vec3::Z))).collect();
+    for z in 40..56 {
+        for y in 96..112 {
+            for x in 250..266 {
+                cells.push(leaf(IVec3::new(x, y, z), Vec3::NEG_X));
+            }
+        }
+    }
+    let scene = SceneData::from_voxels("floor and block", LEAF_M, 9, &cells);
+    let (lo, hi) = scene.occupied_bounds_leaf();
+    let (tiles_lo, tiles_hi) = scene.bounds_leaf();
+    assert!(
+        lo.cmpge(tiles_lo).all() && hi.cmple(tiles_hi).all(),
+        "{lo} {hi} outside the tiles {tiles_lo} {tiles_hi}"
+    );
+    for l in &scene.leaves {
+        let c = l.cell(LEAF_M).as_vec3();
+        assert!(c.cmpge(lo).all() && (c + 1.0).cmple(hi).all(), "leaf {c} outside the box {lo} .. {hi}");
+    }
+    assert!(
+        hi.z < 100.0 && hi.x < 300.0,
+        "the box {lo} .. {hi} should end near the matter, not at the cube's 512"
+    );
+
+    let light = light_where(&scene, |_| 1.0);
+    let cpu = CpuScene::mip(&scene, &light);
+    let p = params(&scene, 0.5, 0.2);
+    let leaf_m = f64::from(LEAF_M);
+    let origin = DVec3::new(104.0, 104.0, 5.5) * leaf_m;
+    // Above the block's top (z 56) and a ball of 0.2 t around the axis clear of it: t = 68
+    // leaves; the cube's top is 530 leaves along this axis.
+    let mut farthest_leaf = 0.0f64;
+    let up =
+        cpu.trace_cone_observed(&p, origin, DVec3::new(-0.3, 0.0, 1.0).normalize(), [leaf_m, 0.95], |s| {
+            if let MarchStep::Sample { t_m, .. } = s {
+                farthest_leaf = farthest_leaf.max(t_m / leaf_m);
+            }
+        });
+    assert!(
+        (60.0..110.0).contains(&farthest_leaf),
+        "a cone rising from the floor sampled up to {farthest_leaf} leaves: {up:?}"
+    );
+    assert!(up[3] < 0.05, "nothing lies above the floor, yet the cone is {} opaque", up[3]);
+
+    let to_block = (DVec3::new(250.0, 104.0, 48.0) * leaf_m - origin).normalize();
+    let seen = cpu.trace_cone(&p, origin, to_block, [leaf_m, to_block.z]);
+    assert!(seen[3] > 0.9 && seen[0] > 0.9, "the cone toward the block across empty space saw {seen:?}");
 }

@@ -113,6 +113,8 @@ fn shared() -> Vec<(&'static str, RustLayout)> {
                 light_grid_min_m,
                 scene_min_leaf,
                 scene_max_leaf,
+                occupied_min_leaf,
+                occupied_max_leaf,
                 background,
                 camera_eye_m,
                 camera_forward,

@@ -216,6 +216,10 @@ pub struct Params {
     /// Scene bounds in leaf units (xyz), w unused.
     pub scene_min_leaf: [f32; 4],
     pub scene_max_leaf: [f32; 4],
+    /// Where matter is ([`crate::scene::data::SceneData::occupied_bounds_leaf`]), leaf units
+    /// (xyz), w unused: a march stops once its cone's cross-section has left this box.
+    pub occupied_min_leaf: [f32; 4],
+    pub occupied_max_leaf: [f32; 4],
     /// Background radiance (where a pixel sees nothing), w unused.
     pub background: [f32; 4],
     /// Camera for shade's position reconstruction: eye (w unused), forward (w = tan of half the
@@ -450,7 +454,7 @@ const _: () = {
     assert!(size_of::<LeafGpu>() == 64);
     assert!(size_of::<LeafLightGpu>() == 128);
     assert!(size_of::<LightGpu>() == 64);
-    assert!(size_of::<Params>() == 80 + 16 + 48 + 64 + 16 * MAX_CONES + 16 * 9 + 16 * 8 * 2 + 16 + 16 + 16);
+    assert!(size_of::<Params>() == 80 + 16 + 80 + 64 + 16 * MAX_CONES + 16 * 9 + 16 * 8 * 2 + 16 + 16 + 16);
     assert!(size_of::<MipRange>() == 16);
     assert!(size_of::<InjectBatch>() == 16);
     assert!(size_of::<ConeBatch>() == 16);

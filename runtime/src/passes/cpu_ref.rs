@@ -54,6 +54,15 @@ pub struct CpuScene<'a> {
     pub faces: Vec<[f64; 4]>,
 }
 
+/// `cone_left_matter` in shaders/svo.wgsl: whether the ball of `radius_leaf` about `q_leaf` lies
+/// wholly outside the box of the matter.
+fn left_matter(p: &Params, q_leaf: DVec3, radius_leaf: f64) -> bool {
+    let corner = |v: [f32; 4]| DVec3::new(v[0].into(), v[1].into(), v[2].into());
+    let (lo, hi) = (corner(p.occupied_min_leaf), corner(p.occupied_max_leaf));
+    let gap = (lo - q_leaf).max(q_leaf - hi).max(DVec3::ZERO);
+    gap.length_squared() > radius_leaf * radius_leaf
+}
+
 fn add(a: [f64; 4], b: [f64; 4], wb: f64) -> [f64; 4] {
     [a[0] + wb * b[0], a[1] + wb * b[1], a[2] + wb * b[2], a[3] + wb * b[3]]
 }
@@ -258,7 +267,10 @@ impl<'a> CpuScene<'a> {
                 }
             }
             let q = (origin_m + dir * t) / leaf;
-            if q.cmplt(lo).any() || q.cmpgt(hi).any() {
+            if q.cmplt(lo).any()
+                || q.cmpgt(hi).any()
+                || left_matter(p, q, leaf.max(2.0 * t * tan_half) / (2.0 * leaf))
+            {
                 break;
             }
             let clear = PLANE_CLEAR * (rise[0] + t * rise[1] - 0.5 * leaf);
@@ -397,7 +409,11 @@ impl CpuScene<'_> {
         let most = (1.732_050_8 * f64::from(p.max_distance_m) / leaf).ceil() as u32 + 4;
         for _ in 0..most {
             let q = (origin_m + d * t) / leaf;
-            if t > f64::from(p.max_distance_m) || q.cmplt(lo).any() || q.cmpgt(hi).any() {
+            if t > f64::from(p.max_distance_m)
+                || q.cmplt(lo).any()
+                || q.cmpgt(hi).any()
+                || left_matter(p, q, 0.0)
+            {
                 break;
             }
             let t_exit = t_start + t_next.min_element() * leaf;

@@ -93,6 +93,7 @@ pub(super) fn base_params(
 ) -> Params {
     let leaf = scene.leaf_size_m.max(1e-6);
     let (cones, tan_half) = cone_set(settings.cones, settings.cone_aperture_scale);
+    let (occupied_lo, occupied_hi) = scene.occupied_bounds_leaf();
     let mut cone_arr = [[0.0f32; 4]; MAX_CONES];
     cone_arr[..cones.len()].copy_from_slice(&cones);
     let (env_levels, env_chain) = env_levels(chain);
@@ -118,6 +119,8 @@ pub(super) fn base_params(
         light_grid_min_m: lights.grid.min_m.extend(lights.grid.cell_m).to_array(),
         scene_min_leaf: lo.extend(0.0).to_array(),
         scene_max_leaf: hi.extend(0.0).to_array(),
+        occupied_min_leaf: occupied_lo.extend(0.0).to_array(),
+        occupied_max_leaf: occupied_hi.extend(0.0).to_array(),
         background: Vec3::from_array(settings.background).extend(0.0).to_array(),
         camera_eye_m: [0.0; 4],
         camera_forward: [0.0, 0.0, -1.0, 1.0],

@@ -47,6 +47,10 @@ impl Renderer {
         }
         self.base_params.tile_count = self.pools.tiles().len() as u32;
         self.base_params.leaf_count = self.leaf_count;
+        // Tiles held in another form (coarse or fine) bound their matter by other cells.
+        let (occupied_lo, occupied_hi) = scene.occupied_bounds_leaf();
+        self.base_params.occupied_min_leaf = occupied_lo.extend(0.0).to_array();
+        self.base_params.occupied_max_leaf = occupied_hi.extend(0.0).to_array();
         // New tiles may hold brighter rock: the tail's trusted ratio follows the leaves held.
         self.base_params.tail_ratio_max = tail_ratio_max(&self.settings, &scene.leaves);
         let (_, specular_materials, specular_surfels) = material_slots(scene, &self.settings);

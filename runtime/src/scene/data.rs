@@ -406,6 +406,32 @@ impl SceneData {
         if self.tiles.is_empty() { (Vec3::ZERO, Vec3::ZERO) } else { (lo, hi) }
     }
 
+    /// Where matter is, in leaf units: the box around every leaf's cell (a coarse leaf's whole
+    /// cell) and every rock brick, grown by one leaf (cones start a leaf off their surface) and
+    /// cut to the tiles' cubes. A cone starts inside it, and a cone's cross-section that has left
+    /// it never meets it again (both are convex), so the march stops there
+    /// (`cone_left_matter` in shaders/svo.wgsl) instead of crossing the rest of the tiles' cubes,
+    /// where it would only read coarse levels' blur of matter behind it. `(0, 0)` when empty.
+    pub fn occupied_bounds_leaf(&self) -> (Vec3, Vec3) {
+        let leaf_m = self.leaf_size_m.max(1e-9);
+        let mut lo = Vec3::splat(f32::MAX);
+        let mut hi = Vec3::splat(f32::MIN);
+        for l in &self.leaves {
+            let edge = (l.center_m[3] / leaf_m).round().max(1.0);
+            let cell_lo = (Vec3::from_slice(&l.center_m[..3]) / (leaf_m * edge)).floor() * edge;
+            lo = lo.min(cell_lo);
+            hi = hi.max(cell_lo + edge);
+        }
+        if let Some((rock_lo, rock_hi)) = self.rock.bounds_leaf() {
+            (lo, hi) = (lo.min(rock_lo), hi.max(rock_hi));
+        }
+        if lo.cmpgt(hi).any() {
+            return (Vec3::ZERO, Vec3::ZERO);
+        }
+        let (tiles_lo, tiles_hi) = self.bounds_leaf();
+        ((lo - 1.0).max(tiles_lo), (hi + 1.0).min(tiles_hi))
+    }
+
     /// Deepest level every tile has: cones sample no coarser than this.
     pub(crate) fn max_lod(&self) -> u32 {
         self.tiles.iter().map(|t| t.depth).min().unwrap_or(0)

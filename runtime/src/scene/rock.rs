@@ -155,6 +155,19 @@ impl RockTable {
         false
     }
 
+    /// The box of every stored brick, in leaf units: (min, max); `None` without rock.
+    pub(crate) fn bounds_leaf(&self) -> Option<(Vec3, Vec3)> {
+        let shift = (BRICK_SHIFT + ROCK_LEVEL) as i32;
+        let entries = self.words.get(HEADER_WORDS..)?.chunks_exact(ENTRY_WORDS);
+        let bricks = entries
+            .filter(|e| e[0] != EMPTY_KEY as u32)
+            .map(|e| IVec3::new(e[0] as i32, e[1] as i32, e[2] as i32));
+        bricks.fold(None, |acc, b| {
+            let (b_lo, b_hi) = ((b << shift).as_vec3(), ((b + 1) << shift).as_vec3());
+            Some(acc.map_or((b_lo, b_hi), |(lo, hi): (Vec3, Vec3)| (lo.min(b_lo), hi.max(b_hi))))
+        })
+    }
+
     /// Bricks stored (the third header word).
     pub fn bricks(&self) -> u32 {
         self.words.get(2).copied().unwrap_or(0)

@@ -58,7 +58,7 @@ fn trace_cone(origin_m: vec3<f32>, dir: vec3<f32>, tan_half: f32, rise: vec2<f32
             return enter_rock(acc, sample_lod(q, max(log2(d / leaf) + 1.0, f32(ROCK_LEVEL + 1u)), dir), last);
         }
         let p_leaf = (origin_m + dir * t) / leaf;
-        if outside_scene(p_leaf) {
+        if outside_scene(p_leaf) || cone_left_matter(p_leaf, max(0.5 * leaf, t * tan_half) / leaf) {
             break;
         }
         let clear = PLANE_CLEAR * (rise.x + t * rise.y - 0.5 * leaf);

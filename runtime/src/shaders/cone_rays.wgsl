@@ -69,7 +69,8 @@ fn ray_hit(origin_m: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
     // A segment of n leaf edges crosses at most sqrt(3) n + 3 cells.
     let most = u32(ceil(1.7320508 * params.max_distance_m / leaf)) + 4u;
     for (var i = 0u; i < most; i++) {
-        if t > params.max_distance_m || outside_scene((origin_m + d * t) / leaf) {
+        let p_leaf = (origin_m + d * t) / leaf;
+        if t > params.max_distance_m || outside_scene(p_leaf) || cone_left_matter(p_leaf, 0.0) {
             break;
         }
         let found = find_leaf_or_gap(cell);

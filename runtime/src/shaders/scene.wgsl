@@ -36,6 +36,9 @@ struct Params {
     light_grid_min_m: vec4<f32>,
     scene_min_leaf: vec4<f32>,
     scene_max_leaf: vec4<f32>,
+    // Where matter is (leaves and rock, one leaf of slack), leaf units: SceneData::occupied_bounds_leaf.
+    occupied_min_leaf: vec4<f32>,
+    occupied_max_leaf: vec4<f32>,
     background: vec4<f32>,
     camera_eye_m: vec4<f32>,
     camera_forward: vec4<f32>,

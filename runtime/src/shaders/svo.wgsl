@@ -319,3 +319,12 @@ fn sample_lod_planes(p_leaf: vec3<f32>, lod: f32, dir: vec3<f32>, planes: bool) 
 fn outside_scene(p_leaf: vec3<f32>) -> bool {
     return any(p_leaf < params.scene_min_leaf.xyz) || any(p_leaf > params.scene_max_leaf.xyz);
 }
+
+// Whether a cone's cross-section, the ball of `radius_leaf` about `p_leaf` (leaf units), has left
+// the box of the matter (params.occupied_*): the cone started inside that box and both are convex,
+// so nothing ahead can meet it; only coarse levels' blur of what lies behind would (cpu_ref
+// mirrors this). Radius 0: a ray.
+fn cone_left_matter(p_leaf: vec3<f32>, radius_leaf: f32) -> bool {
+    let gap = max(max(params.occupied_min_leaf.xyz - p_leaf, p_leaf - params.occupied_max_leaf.xyz), vec3<f32>(0.0));
+    return dot(gap, gap) > radius_leaf * radius_leaf;
+}
