@@ -67,9 +67,19 @@ fn rock_bit(bits: vec2<u32>, cell: vec3<i32>, b: vec3<i32>) -> bool {
 fn rock_on_segment(origin_m: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32) -> f32 {
     let cell_m = params.leaf_size_m * f32(1u << ROCK_LEVEL);
     let n = min(u32(ceil((t1 - t0) / cell_m)), 64u);
+    // Probes one rock cell apart meet the same brick about three times in four: its bits are
+    // looked up in the hash table once (what `in_rock` would give, probe for probe).
+    var key = vec3<i32>(0x7fffffff);
+    var bits = vec2<u32>(0u);
     for (var k = 1u; k <= n; k++) {
         let t = t0 + (t1 - t0) * f32(k) / f32(n);
-        if in_rock((origin_m + dir * t) / params.leaf_size_m) {
+        let cell = vec3<i32>(floor((origin_m + dir * t) / params.leaf_size_m)) >> vec3<u32>(ROCK_LEVEL);
+        let b = cell >> vec3<u32>(ROCK_BRICK_SHIFT);
+        if any(b != key) {
+            key = b;
+            bits = rock_brick_bits(b);
+        }
+        if rock_bit(bits, cell, b) {
             return t;
         }
     }
