@@ -54,11 +54,15 @@ pub struct CpuScene<'a> {
     pub faces: Vec<[f64; 4]>,
 }
 
+/// The xyz of a `Params` vec4, in f64.
+fn xyz(v: [f32; 4]) -> DVec3 {
+    DVec3::new(v[0].into(), v[1].into(), v[2].into())
+}
+
 /// `cone_left_matter` in shaders/svo.wgsl: whether the ball of `radius_leaf` about `q_leaf` lies
 /// wholly outside the box of the matter.
 fn left_matter(p: &Params, q_leaf: DVec3, radius_leaf: f64) -> bool {
-    let corner = |v: [f32; 4]| DVec3::new(v[0].into(), v[1].into(), v[2].into());
-    let (lo, hi) = (corner(p.occupied_min_leaf), corner(p.occupied_max_leaf));
+    let (lo, hi) = (xyz(p.occupied_min_leaf), xyz(p.occupied_max_leaf));
     let gap = (lo - q_leaf).max(q_leaf - hi).max(DVec3::ZERO);
     gap.length_squared() > radius_leaf * radius_leaf
 }
@@ -239,10 +243,7 @@ impl<'a> CpuScene<'a> {
         mut observe: impl FnMut(MarchStep),
     ) -> [f64; 4] {
         let leaf = f64::from(p.leaf_size_m);
-        let lo =
-            DVec3::new(p.scene_min_leaf[0].into(), p.scene_min_leaf[1].into(), p.scene_min_leaf[2].into());
-        let hi =
-            DVec3::new(p.scene_max_leaf[0].into(), p.scene_max_leaf[1].into(), p.scene_max_leaf[2].into());
+        let (lo, hi) = (xyz(p.scene_min_leaf), xyz(p.scene_max_leaf));
         let mut acc = [0.0f64; 4];
         let mut last = [0.0f64; 3];
         let mut t = leaf;
@@ -394,8 +395,7 @@ impl CpuScene<'_> {
     /// Every cell, one at a time: the GPU crosses empty boxes whole, and is checked against this.
     pub fn ray_hit(&self, p: &Params, origin_m: DVec3, d: DVec3) -> RayEnd {
         let leaf = f64::from(p.leaf_size_m);
-        let corner = |v: [f32; 4]| DVec3::new(v[0].into(), v[1].into(), v[2].into());
-        let (lo, hi) = (corner(p.scene_min_leaf), corner(p.scene_max_leaf));
+        let (lo, hi) = (xyz(p.scene_min_leaf), xyz(p.scene_max_leaf));
         let t_start = leaf;
         let start = (origin_m + d * t_start) / leaf;
         let mut cell = start.floor().as_ivec3();
