@@ -554,6 +554,29 @@ fn skipped_passes_are_not_dispatched_and_change_nothing() {
 }
 
 #[test]
+fn a_frame_exposed_again_is_the_frame_drawn_at_that_exposure() {
+    use grotto_runtime::settings::ViewMode;
+    use grotto_runtime::view::camera::Camera;
+    let scene = testscenes::furnace_sphere(4, 5.0, 0.5, 1.0);
+    let cam =
+        Camera { eye_m: Vec3::splat(0.8), look_at_m: Vec3::new(1.2, 0.9, 0.7), up: Vec3::Z, fov_y_deg: 70.0 };
+    let mut r = Renderer::new(gpu(), &scene, Settings { exposure: 0.1, ..Default::default() }).unwrap();
+    r.settle(|_, _| {}).unwrap();
+    let (dim, _) = r.render(&cam, 64, 48).unwrap();
+    let shades = r.stats().dispatches.get(&Pass::Shade).copied();
+    let exposed = r.expose(0.4).unwrap();
+    assert_eq!(r.stats().dispatches.get(&Pass::Shade).copied(), shades, "exposing must not shade again");
+    let (drawn, _) = r.render(&cam, 64, 48).unwrap();
+    assert_eq!(exposed.hdr, drawn.hdr);
+    assert_eq!(exposed.ldr, drawn.ldr, "the tone map again must give the pixels a frame drawn at 0.4 has");
+    assert_ne!(exposed.ldr, dim.ldr);
+    // A view without light does not take the exposure: exposing it leaves its pixels.
+    r.set_view(ViewMode::Normals);
+    let (normals, _) = r.render(&cam, 64, 48).unwrap();
+    assert_eq!(r.expose(1.6).unwrap().ldr, normals.ldr);
+}
+
+#[test]
 fn lights_and_shadows_run_once_for_static_lights() {
     let scene = testscenes::dogleg();
     let mut r = Renderer::new(gpu(), &scene, Settings { bounces: 2, ..Default::default() }).unwrap();

@@ -10,6 +10,7 @@
 
 pub mod cpu_ref;
 pub mod env;
+pub mod expose;
 pub mod gbuffer;
 pub mod inject;
 pub mod mip;
@@ -220,6 +221,41 @@ pub(crate) fn compute_pipeline(
     });
     let own_layout = reflected.contains_key(&OWN_GROUP).then(|| layouts[OWN_GROUP as usize].clone());
     Ok(ComputePipeline { pipeline, own_layout, shared: bound })
+}
+
+/// A pipeline of its own over a frame's buffers (resolve, expose): `src` composed, its one bind
+/// group (group 0) reflected, entry point `entry`. Returns the pipeline and that group's layout.
+pub(crate) fn frame_pipeline(
+    gpu: &Gpu,
+    label: &'static str,
+    src: &str,
+    entry: &str,
+) -> Result<(wgpu::ComputePipeline, wgpu::BindGroupLayout)> {
+    let src = crate::shaders::compose(src)?;
+    let reflected = reflect_layouts(&src, wgpu::ShaderStages::COMPUTE)?;
+    let entries = reflected
+        .get(&0)
+        .ok_or_else(|| Error::Internal { what: label, message: "the WGSL declares no group 0".into() })?;
+    let layout =
+        gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries });
+    let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(src.into()),
+    });
+    let pl = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    let pipeline = gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&pl),
+        module: &module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    Ok((pipeline, layout))
 }
 
 /// A compute pass with one invocation per leaf, dispatched once per batch, each batch's uniform

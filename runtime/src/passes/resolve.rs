@@ -11,7 +11,7 @@
 
 use glam::{Mat4, Vec3};
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::gpu::Gpu;
 
 /// Samples a pixel a still frame gathers by default (`Settings::still_samples`).
@@ -79,31 +79,8 @@ pub(crate) struct Sums {
 
 impl Resolve {
     pub(crate) fn new(gpu: &Gpu) -> Result<Self> {
-        let src = crate::shaders::compose(crate::shaders::RESOLVE)?;
-        let reflected = super::reflect_layouts(&src, wgpu::ShaderStages::COMPUTE)?;
-        let entries = reflected
-            .get(&0)
-            .ok_or(Error::Internal { what: "resolve", message: "resolve.wgsl declares no group 0".into() })?;
-        let layout = gpu
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("resolve"), entries });
-        let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("resolve"),
-            source: wgpu::ShaderSource::Wgsl(src.into()),
-        });
-        let pl = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("resolve"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("resolve"),
-            layout: Some(&pl),
-            module: &module,
-            entry_point: Some("resolve_samples"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let (pipeline, layout) =
+            super::frame_pipeline(gpu, "resolve", crate::shaders::RESOLVE, "resolve_samples")?;
         Ok(Self { pipeline, layout })
     }
 

@@ -119,6 +119,31 @@ impl Renderer {
         Ok(Frame { width, height, hdr, ldr })
     }
 
+    /// Sets the exposure ([`Renderer::set_exposure`]) and returns the last frame at it, read back:
+    /// its pixels tonemapped again from their radiance (passes/expose.rs), the same pixels a frame
+    /// drawn at that exposure has, without drawing it again. What automatic exposure needs once
+    /// the first frame has measured the light. A frame the tone map alone does not make (a view
+    /// without light or on a fixed scale, a still frame's mean of several samples) is drawn again.
+    pub fn expose(&mut self, exposure: f32) -> Result<Frame> {
+        self.set_exposure(exposure);
+        let view = self.view("expose")?;
+        let (camera, width, height) = (view.camera, view.targets.width, view.targets.height);
+        let one_sample = self.stills.still.as_ref().is_none_or(|(_, samples)| *samples <= 1);
+        if !(self.settings.view.exposed() && one_sample) {
+            return Ok(self.render(&camera, width, height)?.0);
+        }
+        if self.stills.expose.is_none() {
+            let gpu = &self.gpu;
+            self.stills.expose = Some(gpu.scoped("expose", || crate::passes::expose::Expose::new(gpu))?);
+        }
+        if let Some(expose) = &self.stills.expose {
+            expose.run(&self.gpu, &self.view("expose")?.outputs.frame, width, height, exposure)?;
+        }
+        // A still frame begun at the old exposure no longer matches what the frame shows.
+        self.stills.still = None;
+        self.read_frame()
+    }
+
     /// Renders one frame as [`Renderer::render`] does, leaving it on the GPU ([`Renderer::ldr_output`])
     /// instead of reading it back: what a window presents.
     pub fn draw(&mut self, camera: &Camera, width: u32, height: u32) -> Result<EffectPlan> {

@@ -163,10 +163,12 @@ pub(super) struct LightRoom {
 
 /// Anti-aliasing at rest: the pass, the sub-pixel offset the next frame draws at, the still frame
 /// gathered so far (what it was gathered for, and its samples), and the next frame's place in it
-/// (sample, of) for the plan.
+/// (sample, of) for the plan. Beside it the other change to a finished frame, its exposure
+/// (made on first use: viewers never call it).
 #[derive(Debug)]
 pub(super) struct Stills {
     pub(super) resolve: passes::resolve::Resolve,
+    pub(super) expose: Option<passes::expose::Expose>,
     pub(super) jitter_px: [f32; 2],
     pub(super) still: Option<(StillKey, u32)>,
     pub(super) next: Option<(u32, u32)>,
@@ -175,7 +177,7 @@ pub(super) struct Stills {
 impl Stills {
     fn new(gpu: &Gpu) -> Result<Self> {
         let resolve = gpu.scoped("resolve", || passes::resolve::Resolve::new(gpu))?;
-        Ok(Self { resolve, jitter_px: [0.0; 2], still: None, next: None })
+        Ok(Self { resolve, expose: None, jitter_px: [0.0; 2], still: None, next: None })
     }
 }
 

@@ -43,6 +43,7 @@ pub(crate) const SPLAT: &str = include_str!("../passes/splat.wgsl");
 pub(crate) const PRESENT: &str = include_str!("../render/present.wgsl");
 pub(crate) const SHADE: &str = include_str!("../passes/shade.wgsl");
 pub(crate) const RESOLVE: &str = include_str!("../passes/resolve.wgsl");
+pub(crate) const EXPOSE: &str = include_str!("../passes/expose.wgsl");
 
 /// Constants shared with the Rust side, generated from it so the two cannot drift.
 pub(crate) fn constants() -> String {
@@ -149,8 +150,9 @@ pub fn compose(src: &str) -> Result<String> {
 }
 
 /// (name, source) of every shader module the runtime creates, before composing.
-pub(crate) const PASSES: [(&str, &str); 9] = [
+pub(crate) const PASSES: [(&str, &str); 10] = [
     ("env", ENV),
+    ("expose", EXPOSE),
     ("inject", INJECT),
     ("inject_tally", INJECT_TALLY),
     ("mip", MIP),
