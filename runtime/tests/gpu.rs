@@ -570,9 +570,12 @@ fn a_frame_exposed_again_is_the_frame_drawn_at_that_exposure() {
     assert_eq!(exposed.hdr, drawn.hdr);
     assert_eq!(exposed.ldr, drawn.ldr, "the tone map again must give the pixels a frame drawn at 0.4 has");
     assert_ne!(exposed.ldr, dim.ldr);
-    // A view without light does not take the exposure: exposing it leaves its pixels.
+    // A view without light does not take the exposure: exposing it leaves its pixels, also once
+    // the lit view is chosen again but not yet drawn (the frame is still the normals').
     r.set_view(ViewMode::Normals);
     let (normals, _) = r.render(&cam, 64, 48).unwrap();
+    assert_eq!(r.expose(1.6).unwrap().ldr, normals.ldr);
+    r.set_view(ViewMode::Lit);
     assert_eq!(r.expose(1.6).unwrap().ldr, normals.ldr);
 }
 

@@ -122,14 +122,17 @@ impl Renderer {
     /// Sets the exposure ([`Renderer::set_exposure`]) and returns the last frame at it, read back:
     /// its pixels tonemapped again from their radiance (passes/expose.rs), the same pixels a frame
     /// drawn at that exposure has, without drawing it again. What automatic exposure needs once
-    /// the first frame has measured the light. A frame the tone map alone does not make (a view
-    /// without light or on a fixed scale, a still frame's mean of several samples) is drawn again.
+    /// the first frame has measured the light. A frame of a view without light or on a fixed scale
+    /// (lux) is returned as it is (no exposure changes it); a still frame's mean of several
+    /// samples, which no tone map of its mean radiance gives, is drawn again at one sample.
     pub fn expose(&mut self, exposure: f32) -> Result<Frame> {
         self.set_exposure(exposure);
         let view = self.view("expose")?;
         let (camera, width, height) = (view.camera, view.targets.width, view.targets.height);
-        let one_sample = self.stills.still.as_ref().is_none_or(|(_, samples)| *samples <= 1);
-        if !(self.settings.view.exposed() && one_sample) {
+        if !view.shaded.exposed() {
+            return self.read_frame();
+        }
+        if self.stills.still.as_ref().is_some_and(|(_, samples)| *samples > 1) {
             return Ok(self.render(&camera, width, height)?.0);
         }
         if self.stills.expose.is_none() {
@@ -338,6 +341,7 @@ impl Renderer {
                 jitter_px: self.stills.jitter_px,
                 targets,
                 outputs,
+                shaded: self.settings.view,
                 sums: None,
             });
         } else if let Some(v) = self.view.as_mut() {
@@ -612,6 +616,12 @@ impl Renderer {
         }
         if ran.contains(&Pass::Gbuffer) {
             self.gbuffer_stale = false;
+        }
+        if ran.contains(&Pass::Shade) {
+            let mode = self.settings.view;
+            if let Some(v) = self.view.as_mut() {
+                v.shaded = mode;
+            }
         }
         if ran.contains(&Pass::Inject) || (self.point_lights + self.spot_lights == 0) {
             // Faces deferred to the next round of a budgeted catch-up keep the shadow pass going

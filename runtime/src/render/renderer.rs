@@ -465,6 +465,9 @@ pub(super) struct View {
     pub(super) jitter_px: [f32; 2],
     pub(super) targets: gbuffer::Targets,
     pub(super) outputs: shade::Outputs,
+    /// The view the frame's pixels were last shaded in ([`Renderer::expose`] re-tonemaps only a
+    /// lit one).
+    pub(super) shaded: ViewMode,
     /// Anti-aliasing's sums, from the first still frame of this size.
     pub(super) sums: Option<passes::resolve::Sums>,
 }
