@@ -617,10 +617,9 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         if opts.exposure.is_none() && i == 0 && settings.view.exposed() {
             // Auto exposure from the first frame, kept for the sequence so it does not flicker.
             exposure = auto_exposure(&frame.hdr);
+            r.set_exposure(exposure);
             if opts.samples == 1 {
                 frame = r.expose(exposure)?;
-            } else {
-                r.set_exposure(exposure);
             }
         }
         // The still frame draws its own first sample, at the exposure just set.
