@@ -564,7 +564,8 @@ fn a_frame_exposed_again_is_the_frame_drawn_at_that_exposure() {
     r.settle(|_, _| {}).unwrap();
     let (dim, _) = r.render(&cam, 64, 48).unwrap();
     let shades = r.stats().dispatches.get(&Pass::Shade).copied();
-    let exposed = r.expose(0.4).unwrap();
+    r.set_exposure(0.4);
+    let exposed = r.expose().unwrap();
     assert_eq!(r.stats().dispatches.get(&Pass::Shade).copied(), shades, "exposing must not shade again");
     let (drawn, _) = r.render(&cam, 64, 48).unwrap();
     assert_eq!(exposed.hdr, drawn.hdr);
@@ -574,9 +575,10 @@ fn a_frame_exposed_again_is_the_frame_drawn_at_that_exposure() {
     // the lit view is chosen again but not yet drawn (the frame is still the normals').
     r.set_view(ViewMode::Normals);
     let (normals, _) = r.render(&cam, 64, 48).unwrap();
-    assert_eq!(r.expose(1.6).unwrap().ldr, normals.ldr);
+    r.set_exposure(1.6);
+    assert_eq!(r.expose().unwrap().ldr, normals.ldr);
     r.set_view(ViewMode::Lit);
-    assert_eq!(r.expose(1.6).unwrap().ldr, normals.ldr);
+    assert_eq!(r.expose().unwrap().ldr, normals.ldr);
 }
 
 #[test]

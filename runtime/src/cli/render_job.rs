@@ -619,7 +619,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             exposure = auto_exposure(&frame.hdr);
             r.set_exposure(exposure);
             if opts.samples == 1 {
-                frame = r.expose(exposure)?;
+                frame = r.expose()?;
             }
         }
         // The still frame draws its own first sample, at the exposure just set.

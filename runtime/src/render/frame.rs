@@ -119,14 +119,14 @@ impl Renderer {
         Ok(Frame { width, height, hdr, ldr })
     }
 
-    /// Sets the exposure ([`Renderer::set_exposure`]) and returns the last frame at it, read back:
+    /// The last frame at the exposure now set ([`Renderer::set_exposure`]), read back:
     /// its pixels tonemapped again from their radiance (passes/expose.rs), the same pixels a frame
     /// drawn at that exposure has, without drawing it again. What automatic exposure needs once
     /// the first frame has measured the light. A frame of a view without light or on a fixed scale
     /// (lux) is returned as it is (no exposure changes it); a still frame's mean of several
     /// samples, which no tone map of its mean radiance gives, is drawn again at one sample.
-    pub fn expose(&mut self, exposure: f32) -> Result<Frame> {
-        self.set_exposure(exposure);
+    pub fn expose(&mut self) -> Result<Frame> {
+        let exposure = self.settings.exposure;
         let view = self.view("expose")?;
         let (camera, width, height) = (view.camera, view.targets.width, view.targets.height);
         if !view.shaded.exposed() {
