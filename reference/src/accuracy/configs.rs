@@ -134,6 +134,14 @@ pub fn configs() -> Vec<Config> {
     add("interleave", "no interleave".into(), Settings { cone_interleave: false, ..base.clone() });
     // Leaves as the half-spaces behind their surfaces at the finest levels (issue 47).
     add("cone planes", "cone planes".into(), Settings { cone_planes: true, ..base.clone() });
+    // With the fast and high presets too, to show whether presets with planes keep their order.
+    for q in [Quality::Fast, Quality::High] {
+        add(
+            "cone planes",
+            format!("{}, cone planes", q.name()),
+            Settings { cone_planes: true, ..Settings::preset(q) },
+        );
+    }
     // Each gather cone followed as rays that end at the first surface (issue 47); with the fast and
     // high presets too, to show whether presets with rays would keep their order.
     add("cone rays", "cone rays".into(), Settings { cone_rays: true, ..base.clone() });

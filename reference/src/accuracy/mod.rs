@@ -18,7 +18,7 @@ pub use report::{
     pareto, plot_svg, presets_monotone, report, with_truth,
 };
 pub use scenes::{
-    CARVED_SCENES, SweepScene, bunny, closed_scenes, demo_cave, scanned_passage, scene_named, scenes,
-    scenes_cached, shared_data,
+    CARVED_SCENES, SCANNED_CARVED_SCENES, SweepScene, bunny, closed_scenes, demo_cave, scanned_carved,
+    scanned_passage, scene_named, scenes, scenes_cached, shared_data,
 };
 pub use sweep::{SUPERSAMPLE, SUPERSAMPLE_CHECK, error_map, lights_sweep, sweep};

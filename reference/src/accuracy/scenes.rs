@@ -105,6 +105,13 @@ fn closed_scenes_named(only: Option<&str>) -> Vec<(&'static str, &'static str, S
         )),
         Some(Err(e)) => eprintln!("passage scene skipped: {e}"),
     }
+    // Built through the preprocessor only when asked for by name (`accuracy --scanned`).
+    if let Some(name) = SCANNED_CARVED_SCENES.into_iter().find(|s| only == Some(*s)) {
+        match scanned_carved(name) {
+            Ok((description, data)) => scenes.push((name, description, data)),
+            Err(e) => eprintln!("{name} scene skipped: {e}"),
+        }
+    }
     scenes.retain(|d| only.is_none_or(|o| o == d.0));
     scenes
 }
@@ -116,6 +123,54 @@ pub fn scanned_passage() -> Result<SceneData, String> {
     let out = grotto_fixtures::scanned_passage::passage_package(dir.path()).map_err(|e| e.to_string())?;
     let pkg = grotto_format::Package::open(&out).map_err(|e| e.to_string())?;
     SceneData::from_package(&pkg).map_err(|e| e.to_string())
+}
+
+/// The carved scenes as a survey would deliver them ([`scanned_carved`]), by report name.
+pub const SCANNED_CARVED_SCENES: [&str; 2] = ["colour box (scanned)", "dogleg (scanned)"];
+
+/// One of [`SCANNED_CARVED_SCENES`]: the carved scene's rock faces sampled by scans and built
+/// through the preprocessor (`grotto_fixtures::scanned_carved`), with its description.
+pub fn scanned_carved(name: &str) -> Result<(&'static str, SceneData), String> {
+    use glam::IVec3;
+    use grotto_fixtures::scanned_carved::{CarvedSurvey, carved_package};
+    let box_air =
+        |c: IVec3| c.cmpge(IVec3::ONE).all() && c.cmplt(IVec3::splat(testscenes::COLOUR_BOX_CELLS - 1)).all();
+    let dogleg_rooms = testscenes::DOGLEG_REGIONS.map(|r| (r.1, r.2));
+    let (description, survey) = match name {
+        "dogleg (scanned)" => (
+            "the dogleg's rock faces sampled every 5 cm (5 x 5 points a leaf face), one scan per room and corridor, built by grotto-pack with 0.25 m leaves (issue 47)",
+            CarvedSurvey {
+                name: "dogleg",
+                leaf_m: 0.25,
+                dims: IVec3::new(24, 42, 12),
+                air: &testscenes::dogleg_air,
+                albedo: &|_| Vec3::splat(0.8),
+                rooms: &dogleg_rooms,
+                points_per_edge: 5,
+                package_leaf_m: 0.25,
+                scene: testscenes::dogleg(),
+            },
+        ),
+        "colour box (scanned)" => (
+            "the colour box's faces sampled every 2 cm (5 x 5 points a 0.1 m cell face), one scan, built by grotto-pack with 0.125 m leaves (a package's leaf is a power of two of metres) (issue 47)",
+            CarvedSurvey {
+                name: "colour-box",
+                leaf_m: 0.1,
+                dims: IVec3::splat(testscenes::COLOUR_BOX_CELLS),
+                air: &box_air,
+                albedo: &testscenes::colour_box_albedo,
+                rooms: &[([1, 1, 1], [testscenes::COLOUR_BOX_CELLS - 1; 3])],
+                points_per_edge: 5,
+                package_leaf_m: 0.125,
+                scene: testscenes::colour_box(),
+            },
+        ),
+        other => return Err(format!("no scanned scene {other:?}")),
+    };
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let out = carved_package(dir.path(), &survey).map_err(|e| e.to_string())?;
+    let pkg = grotto_format::Package::open(&out).map_err(|e| e.to_string())?;
+    Ok((description, SceneData::from_package(&pkg).map_err(|e| e.to_string())?))
 }
 
 /// The built-in scenes: the furnace shell, the colour box, the hidden-chamber dogleg and the

@@ -139,7 +139,8 @@ struct LightsArgs {
 #[derive(clap::Args, Debug)]
 struct AccuracyArgs {
     /// The report to write (its JSON beside it, its plots in the folder of its name) [default:
-    /// docs/accuracy.md, or docs/accuracy-hand-built-on-surfels.md with --leaves-on-surfels].
+    /// docs/accuracy.md, docs/accuracy-hand-built-on-surfels.md with --leaves-on-surfels,
+    /// docs/accuracy-hand-built-scanned.md with --scanned].
     #[arg(long)]
     out: Option<PathBuf>,
     /// Image size WIDTHxHEIGHT.
@@ -174,6 +175,11 @@ struct AccuracyArgs {
     /// leaf behind the surface (what that half leaf adds to or hides in their error).
     #[arg(long)]
     leaves_on_surfels: bool,
+    /// Only the hand-built scenes (colour box, dogleg) as a survey of them would deliver them:
+    /// their rock faces sampled by scans and built by grotto-pack into packages (leaves on their
+    /// points, surfels the points'), against references traced on those surfels.
+    #[arg(long, conflicts_with = "leaves_on_surfels")]
+    scanned: bool,
 }
 
 /// Render a package's camera by path tracing its surfels (the runtime's scene, no voxels): linear
@@ -415,6 +421,21 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
             accuracy::CARVED_SCENES.join(", ")
         );
         scenes
+    } else if a.scanned {
+        let scanned: Vec<_> = accuracy::SCANNED_CARVED_SCENES
+            .into_iter()
+            .filter(|s| a.scene.as_deref().is_none_or(|o| o == *s || o == s.trim_end_matches(" (scanned)")))
+            .collect();
+        anyhow::ensure!(
+            !scanned.is_empty(),
+            "--scanned: no hand-built scene named {:?} (they are: {})",
+            a.scene.as_deref().unwrap_or_default(),
+            accuracy::CARVED_SCENES.join(", ")
+        );
+        scanned
+            .into_iter()
+            .flat_map(|s| accuracy::scenes_cached(w, h, a.spp, Some(s), a.reference_cache.as_deref()))
+            .collect()
     } else {
         accuracy::scenes_cached(w, h, a.spp, a.scene.as_deref(), a.reference_cache.as_deref())
     };
@@ -448,8 +469,11 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
         "cargo run --release -p grotto-reference -- accuracy --size {w}x{h} --spp {}{}{}",
         a.spp,
         if a.software { " --software" } else { "" },
-        if a.leaves_on_surfels { " --leaves-on-surfels" } else { "" }
+        if a.leaves_on_surfels { " --leaves-on-surfels" } else { "" },
     );
+    if a.scanned {
+        command.push_str(" --scanned");
+    }
     // A partial report says which part it is.
     for (flag, value) in
         a.scene.iter().map(|s| ("--scene", s)).chain(a.configs.iter().map(|c| ("--config", c)))
@@ -458,6 +482,8 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
     }
     let default_out = PathBuf::from(if a.leaves_on_surfels {
         "docs/accuracy-hand-built-on-surfels.md"
+    } else if a.scanned {
+        "docs/accuracy-hand-built-scanned.md"
     } else {
         "docs/accuracy.md"
     });
