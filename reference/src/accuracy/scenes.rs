@@ -125,7 +125,8 @@ pub fn scanned_passage() -> Result<SceneData, String> {
     SceneData::from_package(&pkg).map_err(|e| e.to_string())
 }
 
-/// The carved scenes as a survey would deliver them ([`scanned_carved`]), by report name.
+/// The carved scenes as a survey would deliver them ([`scanned_carved`]), by report name, in the
+/// order of [`CARVED_SCENES`].
 pub const SCANNED_CARVED_SCENES: [&str; 2] = ["colour box (scanned)", "dogleg (scanned)"];
 
 /// One of [`SCANNED_CARVED_SCENES`]: the carved scene's rock faces sampled by scans and built

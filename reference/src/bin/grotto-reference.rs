@@ -407,35 +407,31 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
     use grotto_reference::accuracy;
     let ((w, h), gpu) = size_and_gpu(&a.size, a.software)?;
     eprintln!("reference renders ({} spp, {w}x{h})...", a.spp);
-    let mut scenes = if a.leaves_on_surfels {
-        let carved =
-            accuracy::CARVED_SCENES.into_iter().filter(|s| a.scene.as_deref().is_none_or(|o| o == *s));
-        let mut scenes: Vec<_> = carved
-            .flat_map(|s| accuracy::scenes_cached(w, h, a.spp, Some(s), a.reference_cache.as_deref()))
+    let mut scenes = if a.leaves_on_surfels || a.scanned {
+        // The hand-built scenes alone: carved with their leaves moved, or scanned.
+        let picked: Vec<_> = accuracy::CARVED_SCENES
+            .into_iter()
+            .zip(accuracy::SCANNED_CARVED_SCENES)
+            .filter(|(carved, scanned)| a.scene.as_deref().is_none_or(|o| o == *carved || o == *scanned))
             .collect();
-        scenes.iter_mut().for_each(accuracy::SweepScene::put_leaves_on_surfels);
         anyhow::ensure!(
-            !scenes.is_empty(),
-            "--leaves-on-surfels: no hand-built scene named {:?} (they are: {})",
+            !picked.is_empty(),
+            "{}: no hand-built scene named {:?} (they are: {})",
+            if a.scanned { "--scanned" } else { "--leaves-on-surfels" },
             a.scene.as_deref().unwrap_or_default(),
             accuracy::CARVED_SCENES.join(", ")
         );
+        let mut scenes: Vec<_> = picked
+            .into_iter()
+            .flat_map(|(carved, scanned)| {
+                let name = if a.scanned { scanned } else { carved };
+                accuracy::scenes_cached(w, h, a.spp, Some(name), a.reference_cache.as_deref())
+            })
+            .collect();
+        if a.leaves_on_surfels {
+            scenes.iter_mut().for_each(accuracy::SweepScene::put_leaves_on_surfels);
+        }
         scenes
-    } else if a.scanned {
-        let scanned: Vec<_> = accuracy::SCANNED_CARVED_SCENES
-            .into_iter()
-            .filter(|s| a.scene.as_deref().is_none_or(|o| o == *s || o == s.trim_end_matches(" (scanned)")))
-            .collect();
-        anyhow::ensure!(
-            !scanned.is_empty(),
-            "--scanned: no hand-built scene named {:?} (they are: {})",
-            a.scene.as_deref().unwrap_or_default(),
-            accuracy::CARVED_SCENES.join(", ")
-        );
-        scanned
-            .into_iter()
-            .flat_map(|s| accuracy::scenes_cached(w, h, a.spp, Some(s), a.reference_cache.as_deref()))
-            .collect()
     } else {
         accuracy::scenes_cached(w, h, a.spp, a.scene.as_deref(), a.reference_cache.as_deref())
     };
