@@ -134,8 +134,6 @@ pub const SCANNED_CARVED_SCENES: [&str; 2] = ["colour box (scanned)", "dogleg (s
 pub fn scanned_carved(name: &str) -> Result<(&'static str, SceneData), String> {
     use glam::IVec3;
     use grotto_fixtures::scanned_carved::{CarvedSurvey, carved_package};
-    let box_air =
-        |c: IVec3| c.cmpge(IVec3::ONE).all() && c.cmplt(IVec3::splat(testscenes::COLOUR_BOX_CELLS - 1)).all();
     let dogleg_rooms = testscenes::DOGLEG_REGIONS.map(|r| (r.1, r.2));
     let (description, survey) = match name {
         "dogleg (scanned)" => (
@@ -143,7 +141,7 @@ pub fn scanned_carved(name: &str) -> Result<(&'static str, SceneData), String> {
             CarvedSurvey {
                 name: "dogleg",
                 leaf_m: 0.25,
-                dims: IVec3::new(24, 42, 12),
+                dims: testscenes::DOGLEG_DIMS,
                 air: &testscenes::dogleg_air,
                 albedo: &|_| Vec3::splat(0.8),
                 rooms: &dogleg_rooms,
@@ -158,7 +156,7 @@ pub fn scanned_carved(name: &str) -> Result<(&'static str, SceneData), String> {
                 name: "colour-box",
                 leaf_m: 0.1,
                 dims: IVec3::splat(testscenes::COLOUR_BOX_CELLS),
-                air: &box_air,
+                air: &testscenes::colour_box_air,
                 albedo: &testscenes::colour_box_albedo,
                 rooms: &[([1, 1, 1], [testscenes::COLOUR_BOX_CELLS - 1; 3])],
                 points_per_edge: 5,
