@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""CloudCompare's command-line normals on the same cloud grotto's bench-normals measures (issue 15).
+"""CloudCompare's command-line normals on the same cloud grotto's bench-normals measures.
 
     grotto-pack bench-normals --dir /tmp/bn --points 1000000 --k 16 --threads 2 --export /tmp/bn/cloud.ply
     python3 bench/cloudcompare_normals.py /tmp/bn/cloud.ply --k 16

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# grotto's normals against Open3D's and CloudCompare's on the same cloud, in one run (issue 15;
-# table in docs/benchmarks.md). Needs `pip install open3d numpy` and Debian's `cloudcompare`.
+# grotto's normals against Open3D's and CloudCompare's on the same cloud, in one run
+# (table in docs/benchmarks.md). Needs `pip install open3d numpy` and Debian's `cloudcompare`.
 #   bench/compare-normals.sh [POINTS] [DIR]
 set -euo pipefail
 cd "$(dirname "$0")/.."

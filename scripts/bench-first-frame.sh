@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Time to first frame under a GPU memory budget (issue 14): a synthetic cave of POINTS points
+# Time to first frame under a GPU memory budget: a synthetic cave of POINTS points
 # (LAS scans), built into one package (tiles of at most TILE_M metres when TILE_M is set, else the
 # build's default), rendered once from its `entrance` camera with --gpu-memory BUDGET (and
 # --point-budget POINT_BUDGET when given), 160x120, fast preset. Prints one row of the table in

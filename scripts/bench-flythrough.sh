@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A fly-through under a GPU memory budget (issue 14): a synthetic cave of POINTS points cut into
+# A fly-through under a GPU memory budget: a synthetic cave of POINTS points cut into
 # 4 m tiles (TILE_M, default 4), rendered along its entrance -> chamber path with --gpu-memory
 # BUDGET. Prints the per-frame table of docs/benchmarks.md (tile bytes, full, coarse and far
 # tiles, tiles loaded and evicted, surfels drawn, bounces, leaves whose light was carried over,

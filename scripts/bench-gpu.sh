@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
-# Every GPU figure the project states, in one go, for a machine with a GPU (issue 43): per-pass
+# Every GPU figure the project states, in one go, for a machine with a GPU: per-pass
 # times of the demo cave per preset at 640x480 and 1920x1080; the cave paper's 1.4 M-point
 # configurations (SVO depth 7 and 8) at 800x600 and 1600x900; a 10^7-point package at 1920x1080;
 # and a 10^8-point package streamed along its entrance -> chamber path at 1920x1080 under a GPU
 # memory budget, with per-frame times (median, p99, worst) and stalls (frames over 50 ms), as it
 # is and with --point-budget 1M and 5M, settled before each frame and as a viewer runs it (a
 # bounce a frame, shadow faces within 8 ms a frame); and, for the demo cave and the 10^7 package, the splat
-# passes' work counts (draws, surfels, vertex and fragment invocations) drawn as before issue 43
-# (--cull tiles --no-splat-lod) and as now; and the G-buffer with the front-most disc against
-# blended splats (issue 44). Prints one markdown table per part (also written to
+# passes' work counts (draws, surfels, vertex and fragment invocations) drawn whole
+# (--cull tiles --no-splat-lod) and as the viewers draw them; and the G-buffer with the front-most disc against
+# blended splats. Prints one markdown table per part (also written to
 # OUT/tables.md, part by part, so a run cut short keeps what it measured) and keeps the raw JSON
 # reports in OUT/json/.
 #
@@ -61,8 +61,8 @@ for f in files:
 PY
 }
 
-# A markdown table of per-pass work counts and times from `grotto bench --json` reports (issue 43:
-# draws, surfels drawn, vertex and fragment shader invocations from pipeline statistics queries).
+# A markdown table of per-pass work counts and times from `grotto bench --json` reports
+# (draws, surfels drawn, vertex and fragment shader invocations from pipeline statistics queries).
 work_table() {
     python3 - "$@" <<'PY'
 import json, sys
@@ -83,7 +83,7 @@ for f in files:
 PY
 }
 
-# The same package drawn as before issue 43 (whole tiles, every surfel) and as now.
+# The same package drawn whole (whole tiles, every surfel) and as the viewers draw it.
 work_pair() {
     local name=$1 pkg=$2 size=$3
     "$bin/grotto" bench "$pkg" --camera chamber --size "$size" --reps "$reps" --bounces 0 \
@@ -126,9 +126,9 @@ if [[ " $parts " == *" demo "* ]]; then
     done
     bench_table "The demo cave (grotto-pack demo), chamber camera" "${files[@]}" | tee -a "$tables"
     # shellcheck disable=SC2046
-    work_table "The demo cave's splat passes: whole tiles and every surfel (before issue 43) against chunks and level of detail" \
+    work_table "The demo cave's splat passes: whole tiles and every surfel against chunks and level of detail" \
         $(work_pair demo "$work/demo/demo.grotto" 1920x1080) | tee -a "$tables"
-    # Issue 44: the front-most disc (before) against blended splats (the default), and the resolve
+    # The front-most disc against blended splats (the default), and the resolve
     # pass a still frame's sample adds (anti-aliasing at rest), one run each.
     files=()
     for mode in front blend blend-aa; do
@@ -140,7 +140,7 @@ if [[ " $parts " == *" demo "* ]]; then
             --reps "$reps" "${extra[@]}" --json > "$f"
         files+=("$f")
     done
-    bench_table "The demo cave at 1920x1080: front-most disc against blended splats, and a still frame's resolve (issue 44)" "${files[@]}" | tee -a "$tables"
+    bench_table "The demo cave at 1920x1080: front-most disc against blended splats, and a still frame's resolve" "${files[@]}" | tee -a "$tables"
 fi
 
 if [[ " $parts " == *" paper "* ]]; then
@@ -180,7 +180,7 @@ if [[ " $parts " == *" 1e7 "* ]]; then
     "$bin/grotto" bench "$work/survey-10000000.grotto" --camera chamber --size 1920x1080 --reps "$reps" --json > "$f"
     bench_table "A 10^7-point survey (grotto-pack synth --points 10000000), every tile held" "$f" | tee -a "$tables"
     # shellcheck disable=SC2046
-    work_table "The 10^7 survey's splat passes: whole tiles and every surfel (before issue 43) against chunks and level of detail" \
+    work_table "The 10^7 survey's splat passes: whole tiles and every surfel against chunks and level of detail" \
         $(work_pair survey-1e7 "$work/survey-10000000.grotto" 1920x1080) | tee -a "$tables"
 fi
 
@@ -197,7 +197,7 @@ if [[ " $parts " == *" 1e8 "* ]]; then
         echo "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     } | tee -a "$tables"
     # Batch rows settle the light before each frame (what `grotto render --path` does for
-    # images); viewer rows run as the viewers do (issue 43): no bounce before a frame whose tiles
+    # images); viewer rows run as the viewers do: no bounce before a frame whose tiles
     # changed (one a frame after), shadow faces out of date drawn within 8 ms a frame.
     for run in none:batch 5000000:batch 1000000:batch 5000000:viewer 1000000:viewer; do
         budget=${run%%:*}; how=${run##*:}

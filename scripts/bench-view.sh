@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The viewer's frame loop at work (issue 18): opens PACKAGE in `grotto view` under Xvfb in a SIZE
+# The viewer's frame loop at work: opens PACKAGE in `grotto view` under Xvfb in a SIZE
 # window (drawn at --render-scale, default 0.5), lets the camera rest for WAIT_S seconds (default
 # 20: the light converges meanwhile), flies forward (W held through XTEST, as a person's key would
 # be) for MOVE_S seconds, then lets it rest until the light has converged; the viewer then writes

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Frame times of the browser viewer while moving (issue 43): publishes PACKAGE with the viewer
+# Frame times of the browser viewer while moving: publishes PACKAGE with the viewer
 # bundle (built here; GROTTO_WEB_BUNDLE names another, e.g. an older build), serves it, opens it
 # in headless Chromium on SwiftShader at SIZE (default 800x600), holds W for MOVE_S seconds
 # (default 60: on SwiftShader the first moving frame and a bounce slice before it take 10-40 s) after the first frames and prints a row: frames, median, p95 and worst

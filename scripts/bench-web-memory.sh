@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The browser viewer's memory over a long visit (issue 45): publishes PACKAGE with a tour through
+# The browser viewer's memory over a long visit: publishes PACKAGE with a tour through
 # its named cameras, opens it in headless Chromium (SwiftShader WebGPU) and plays the tour round
 # and round for MINUTES (default 30), sampling the JS heap, the viewer's wasm memory and the GPU
 # bytes every 10 s; prints the samples and the row of docs/web.md ("A long visit").

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Bytes a browser fetches before the viewer's first frame (issue 19): publishes PACKAGE with the
+# Bytes a browser fetches before the viewer's first frame: publishes PACKAGE with the
 # viewer bundle (built here), serves it on 127.0.0.1 with range requests, opens it in headless
 # Chromium (SwiftShader WebGPU, as the test suite does) at 320x240 and prints a row of the table in
 # docs/web.md: package bytes, bytes fetched before the first frame, requests, the site's other

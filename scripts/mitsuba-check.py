@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Checks grotto-reference against Mitsuba 3 (issue 17) and writes docs/reference-mitsuba.md.
+"""Checks grotto-reference against Mitsuba 3 and writes docs/reference-mitsuba.md.
 
 Renders each scene `grotto-reference mitsuba` wrote (SLUG.xml: the same discs, albedos, emission,
 point lights and camera) with Mitsuba 3's `scalar_rgb` path tracer, in two halves with different

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Memory soak of the viewer (issue 43): `grotto view PACKAGE` under Xvfb, flown by a script for
+# Memory soak of the viewer: `grotto view PACKAGE` under Xvfb, flown by a script for
 # MINUTES (default 30) in a loop (camera switch, forward, turn, forward, turn back, backward,
 # rest), with its resident set (VmRSS) and its data segment (VmData: heap and anonymous maps,
 # where a software adapter's GPU memory lives too) sampled every 10 s into OUT/memory.csv.

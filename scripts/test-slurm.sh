@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Issues 20 and 48: grotto's cluster steps on a real scheduler, across several nodes, one of them
+# grotto's cluster steps on a real scheduler, across several nodes, one of them
 # lost mid-build. Run as root; installs Debian's slurm-wlm and munge where missing.
 #
 # The cluster, made here and removed after: one `slurmctld` and NODES `slurmd`s, each node in its

@@ -25,7 +25,7 @@ export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-$(mktemp -d)}
 # Libraries, binaries and tests: not the examples (measurement tools that no test runs; clippy
 # --all-targets checks them in CI), each of which would link the whole dependency tree again.
 cargo test --workspace --locked --lib --bins --tests
-# The cluster steps on a real scheduler (issues 20, 48): plan, a build-tile job array and assemble
+# The cluster steps on a real scheduler: plan, a build-tile job array and assemble
 # on a 3-node Slurm cluster made here in namespaces, one node lost mid-build, against one build
 # (the one-node cluster where namespaces cannot be made). Skipped with a message where no scheduler
 # can start; a failed job or a different package fails.

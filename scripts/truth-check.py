@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
-"""The true-surface benchmark (issue 44): grotto's picture of the scanned points against the cave.
+"""The true-surface benchmark: grotto's picture of the scanned points against the cave.
 
 `grotto-reference truth` meshes the synthetic cave's exact surface and writes a Mitsuba 3 scene
 of it per camera and transport (DIR/CAMERA-direct.xml, DIR/CAMERA-full.xml, DIR/cameras.json).
 This renders them with Mitsuba (`scalar_rgb`, two halves with different seeds: their difference
 gives Mitsuba's own noise), renders the same cameras with `grotto render` from the package built
-from the scans, with the front-most disc (`--no-splat-blend`, the picture before issue 44) and with
+from the scans, with the front-most disc (`--no-splat-blend`) and with
 blended splats (the default), and compares each with Mitsuba over every pixel (silhouettes and
 holes included): FLIP (NVIDIA's flip-evaluator, LDR, both tonemapped as grotto shows them: ACES
 and sRGB at the truth's auto exposure) and relative RMSE of linear radiance. Writes the report

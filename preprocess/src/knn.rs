@@ -1,7 +1,7 @@
 //! Exact k nearest neighbours of a tile's points, cell by cell in Morton order.
 //!
 //! Written here rather than taken whole from kiddo: kiddo's per-query descent and result heap
-//! were 40% of a build's samples (`perf record` of a 10^7-point build, issue 15), while scan
+//! were 40% of a build's samples (`perf record` of a 10^7-point build), while scan
 //! points sorted by Morton code already sit grouped by cell at every level of an octree over
 //! the tile, which a general kd-tree cannot use. kiddo stays as the fallback for the queries
 //! this cannot prove (sparse points, a neighbourhood wider than its cells).

@@ -1,4 +1,4 @@
-//! The cluster steps killed with SIGKILL at any point (issue 20): a `build-tile` job killed while
+//! The cluster steps killed with SIGKILL at any point: a `build-tile` job killed while
 //! it writes tiles, and an `assemble` killed midway, leave nothing a rerun or a later assemble
 //! takes for finished. Tile packages and the output are written to a temp file and renamed into
 //! place (grotto-format's writer), and a tile counts as built only when a package with the plan's
@@ -171,7 +171,7 @@ fn a_killed_shard_and_a_killed_assemble_rerun_to_the_same_package() {
     assert!(std::fs::read(&out).unwrap() == want, "the rerun assemble differs from one build");
 }
 
-/// A work directory shared by nodes is not trusted (issue 48): a tile that is missing with only a
+/// A work directory shared by nodes is not trusted: a tile that is missing with only a
 /// dead job's partial file, one cut short by a copy, one from another plan, one built with other
 /// parameters and one with a flipped byte are each refused by `assemble`, in one list naming the
 /// tile and the reason; `build-tile` then builds exactly those again, and the package is byte for

@@ -1,4 +1,4 @@
-//! What one bounce carries to each face of the colour box (issue 47): per face, what the runtime's
+//! What one bounce carries to each face of the colour box: per face, what the runtime's
 //! first bounce adds to the leaves' light (bounces 1 minus bounces 0, no tail) over what the
 //! reference's does (cut after 1 minus cut after 0; 256 paths per surfel), 1 where the bounce is
 //! carried exactly. Leaves on their surfels, as packages have them. Variants of the light: `base`

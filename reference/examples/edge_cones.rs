@@ -1,6 +1,6 @@
 //! What the runtime's cones see, direction by direction, from three floor leaves of the dogleg's
 //! lit room (at the wall's edge, one leaf in, in the middle), against the path tracer's first hit
-//! (the direct light it sees), per band of elevation, cosine-weighted (issue 47: where the room's
+//! (the direct light it sees), per band of elevation, cosine-weighted (where the room's
 //! extra light per bounce comes from; docs/reference.md). The cones march the CPU reference
 //! (`cpu_ref`, the same march as the GPU's) over the pyramid of the direct light.
 //!

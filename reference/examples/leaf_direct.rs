@@ -1,6 +1,6 @@
 //! The leaves whose direct light (no bounce) the runtime gets most wrong against the reference's
 //! (mean over the leaf's surfels), with their surfels' normals, and for the worst three the discs
-//! that stand between each of their surfels and the lamp. Issue 47: this is how the carved long
+//! that stand between each of their surfels and the lamp. This is how the carved long
 //! passage's fins (discs standing past convex edges) and unit normals on edges showed up.
 //!
 //! `cargo run --release -p grotto-reference --example leaf_direct [passage|dogleg] [surfels]`

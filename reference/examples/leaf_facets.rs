@@ -1,4 +1,4 @@
-//! How many of a scene's leaves hold two facets (issue 47): surfels that split into two groups
+//! How many of a scene's leaves hold two facets: surfels that split into two groups
 //! of clearly different normals, as on a convex edge of rock (an opening's rim, a pillar, a
 //! ledge) or a thin sheet seen from both sides. Such a leaf has one mean normal and one light in
 //! the runtime, lit, gathered and seen as one surface across the diagonal between its facets;

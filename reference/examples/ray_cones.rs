@@ -1,4 +1,4 @@
-//! A cone march whose coverage counts rays, not steps (issue 47), tried on the CPU against the
+//! A cone march whose coverage counts rays, not steps, tried on the CPU against the
 //! runtime's march and the path tracer: what the first bounces carry to each region of the colour
 //! box, the dogleg (both with their leaves on their surfels, as packages have them) or the scanned
 //! passage, as a share of what the reference's carry (1 where the bounces are carried exactly).

@@ -3,7 +3,7 @@
 //! surface meeting an overlapping neighbour that stands in front of its start: scanned surfels are
 //! drawn at `splat_scale` times their radius so that they close, and where the surface bends
 //! away or its points are noisy a neighbour's plane passes in front of the front-most one), the
-//! share that meets a back face farther away, and the share that leaves every disc. Issue 47: a
+//! share that meets a back face farther away, and the share that leaves every disc: a
 //! check that the reference does not lose (or find) light between its own discs.
 //!
 //! `cargo run --release -p grotto-reference --example self_hits [scene ...]` (scenes: passage,

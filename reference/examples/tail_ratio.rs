@@ -1,6 +1,6 @@
-//! How well the bounce tail estimates the bounces not run (issue 47): the runtime's leaf light
-//! after k bounces (no tail) plus a tail extrapolated with a ratio per leaf (the tail before
-//! issue 47), per tile (over every leaf, or over the tile's settling leaves: passes/tail.wgsl),
+//! How well the bounce tail estimates the bounces not run: the runtime's leaf light
+//! after k bounces (no tail) plus a tail extrapolated with a ratio per leaf (the first tail
+//! the runtime had), per tile (over every leaf, or over the tile's settling leaves: passes/tail.wgsl),
 //! or one for the whole scene, against the same renderer after 16 bounces (what the tail
 //! stands for), as relative RMSE and bias over the leaves. The dogleg also per region.
 //!

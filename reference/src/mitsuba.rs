@@ -1,5 +1,5 @@
 //! The same scene for Mitsuba 3, so the reference can be checked by a renderer that shares none
-//! of its code (issue 17): every surfel as a Mitsuba shape (its disc, or for the hand-built
+//! of its code: every surfel as a Mitsuba shape (its disc, or for the hand-built
 //! scenes the voxel face it stands for), its albedo as a two-sided diffuse BSDF, its emission as
 //! an area emitter, the point lights as `point` emitters with the same intensity, the camera with
 //! the same eye, target, up and vertical field of view, and a box pixel filter (the reference

@@ -1,4 +1,4 @@
-//! The true-surface benchmark (issue 44): how close grotto's picture of the scanned points is to
+//! The true-surface benchmark: how close grotto's picture of the scanned points is to
 //! the cave itself. The synthetic cave (`grotto-pack synth`, preprocess/src/synth.rs) is an
 //! implicit function, so its true surface is known. This meshes it (Naive Surface Nets, the
 //! `fast-surface-nets` crate, on a grid far finer than a leaf) with the cave's own colours as

@@ -1,4 +1,4 @@
-//! What a bounce costs run whole and in slices (the viewer's light at rest, issue 18): opens a
+//! What a bounce costs run whole and in slices (the viewer's light at rest): opens a
 //! package, runs its first light update (shadow maps, injection, a bounce), times the next bounce
 //! whole, then the same bounce from a fresh renderer in slices of 4,096, 16,384 and 65,536 leaves.
 //! `cargo run --release -p grotto-runtime --example bench_slices -- PACKAGE [fast|balanced|high]`

@@ -47,14 +47,14 @@ pub struct Settings {
     /// Gather cones see each leaf of the two finest levels as the half-space behind its surface
     /// (the plane through its surfels' centroid across its mean normal) instead of a whole cube,
     /// so they stop where the surface is rather than up to a voxel before it, as they did in
-    /// concave corners (issue 47, docs/reference.md "Where the light goes wrong"). Off by
+    /// concave corners (docs/reference.md "Where the light goes wrong"). Off by
     /// default: it helps scans whose leaves sit on their surfels and hurts the hand-built
     /// scenes (docs/accuracy.md, knob "cone planes").
     pub cone_planes: bool,
     /// Gather cones are followed as seven rays spread evenly over each cone, each ending where it
     /// enters rock or goes behind a leaf's surface and bringing the radiance there; the cone is
     /// covered by the share of its rays that ended. The composited march counts a surface a
-    /// cone runs along at every step (the closed rooms' excess, issue 47). Off by default until
+    /// cone runs along at every step (the closed rooms' excess). Off by default until
     /// the accuracy report (knob "cone rays") shows it pays for its time.
     pub cone_rays: bool,
     pub shadows: bool,
@@ -98,7 +98,7 @@ pub struct Settings {
     /// range for culling (0: every light reaches everywhere).
     pub light_cutoff_w_m2: f32,
     /// Draw only the surfel chunks a shadow face or the camera may see (render/chunks.rs); off,
-    /// whole tiles by their boxes, as before issue 43 (the same image, more work: for measuring
+    /// whole tiles by their boxes (the same image, more work: for measuring
     /// the difference, `--cull tiles`).
     pub cull_chunks: bool,
     /// Thin far surfel chunks to every k-th surfel, grown to close the surface, where their discs
@@ -336,7 +336,7 @@ impl Settings {
         match q {
             Quality::Fast => Settings { cones: 4, step_scale: 1.0, bounces: 2, shadow_map_size: 256, ..d },
             // 8 interleaved cones: 10 were 0.0025 better on the demo cave, 20-30% slower, and put
-            // the colour box at the edge of the time issue 17 allows (docs/runtime.md).
+            // the colour box at the edge of its time budget (docs/runtime.md).
             Quality::Balanced => Settings {
                 cones: 8,
                 cone_aperture_scale: 0.5,
@@ -345,10 +345,10 @@ impl Settings {
                 shadow_map_size: 512,
                 ..d
             },
-            // Chosen from the measured front (docs/accuracy.md, issue 17): with interleaved cone
+            // Chosen from the measured front (docs/accuracy.md): with interleaved cone
             // sets the trilinear path's wide filter beat tricubic on the dogleg (0.194 against
             // 0.208); step 0.35 bought 0.0002 on the caves and 0.007 on the dogleg for 25-30%
-            // more time, which took the colour box within 2% of the time issue 17 allows.
+            // more time, which took the colour box within 2% of its time budget.
             Quality::High => Settings {
                 cones: 16,
                 cone_aperture_scale: 0.5,

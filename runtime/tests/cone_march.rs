@@ -1,4 +1,4 @@
-//! The cone march against answers known in closed form (issue 21): a cone through a slab of known
+//! The cone march against answers known in closed form: a cone through a slab of known
 //! opacity, a lit wall seen down an open corridor, and the inside of a closed sphere lit by one
 //! lamp, whose one-bounce gather is the same everywhere. Each at steps 0.1 to 1.0 and apertures
 //! 0.35 to 1.0; the CPU reference (`cpu_ref`) carries the known answers and the GPU pass is
@@ -247,8 +247,8 @@ fn one_bounce_inside_a_lit_sphere_is_the_same_everywhere_at_every_aperture() {
             eprintln!(
                 "sphere aperture {aperture} step {step}: gather / answer by height (bottom, middle, top) {ratio:.3?}"
             );
-            // Stated tolerance: every band within 6% of the answer (the march before issue 21:
-            // 30% low at the bottom and 39% high at the top at aperture 1).
+            // Stated tolerance: every band within 6% of the answer (an earlier march was 30% low
+            // at the bottom and 39% high at the top at aperture 1).
             for (k, v) in ratio.iter().enumerate() {
                 assert!(
                     (v - 1.0).abs() < 0.06,
@@ -265,8 +265,8 @@ fn one_bounce_inside_a_lit_sphere_is_the_same_everywhere_at_every_aperture() {
 }
 
 /// Where the leaf grid falls must not matter much: the lamp-lit sphere moved by fractions of a
-/// leaf (walls then cut leaves at other places) keeps its one-bounce gather. Issue 21 measured
-/// the high preset's bias moving from -7.3% to -5.2% when a room moved by a few centimetres.
+/// leaf (walls then cut leaves at other places) keeps its one-bounce gather. An earlier march had
+/// the high preset's bias move from -7.3% to -5.2% when a room moved by a few centimetres.
 #[test]
 fn one_bounce_inside_a_lit_sphere_does_not_depend_on_where_the_grid_falls() {
     let mut means = Vec::new();

@@ -174,7 +174,7 @@ fn cone_rays_cross_empty_space_where_the_cpu_walks_every_cell() {
 fn the_cone_march_is_step_invariant_where_every_surface_sends_the_same_light() {
     // Inside closed rock every cone ends on a surface, so with every leaf sending 1 the gather is 1
     // whatever the step (the rim of each cone's hemisphere leaks a little into the rock: 0.999).
-    // Issue 21: on lavapipe 16 cones at step 0.1 gathered 0.944 when one invocation traced them
+    // On lavapipe 16 cones at step 0.1 gathered 0.944 when one invocation traced them
     // all (its loop budget ran out; passes/propagate.rs); the CPU reference never lost it.
     let scene = testscenes::dogleg();
     let ones = vec![LeafLightGpu { out: [1.0, 1.0, 1.0, 0.0], ..Default::default() }; scene.leaves.len()];
@@ -362,8 +362,8 @@ fn furnace_at_albedo_099_stays_bounded() {
 
 /// The dogleg as a furnace: every surface leaf (one with a surfel) emits 1 with albedo 0.8 and no
 /// lamp, so after k bounces the exact radiance on the surface is sum 0.8^j, j <= k, in the room,
-/// the corridors and the chamber alike. Any other leaf stays dark: issue 47 found the hand-built
-/// scenes had the rock behind their walls as dark opaque leaves, which lost about 11% of every
+/// the corridors and the chamber alike. Any other leaf stays dark: hand-built scenes
+/// that had the rock behind their walls as dark opaque leaves lost about 11% of every
 /// gather (coarse voxels beside a wall mixed it with dark rock).
 #[test]
 fn the_dogleg_furnace_keeps_every_bounce_in_every_region() {

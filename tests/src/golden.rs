@@ -51,7 +51,7 @@ pub fn diff(a: &[[u8; 4]], b: &[[u8; 4]]) -> ImageDiff {
 /// colours differ; averaged over 2 x 2 blocks that noise falls under the tolerance (the browser
 /// test's chamber at 320x240, `cargo test -p grotto-tests --test browser -- --nocapture`: mean
 /// 1.55 and p99 16 per pixel, 1.27 and 10 per block), while a wrong pass still changes whole
-/// regions (the browser without bounces: mean 9.37 per block). With blended splats (issue 44)
+/// regions (the browser without bounces: mean 9.37 per block). With blended splats
 /// the ties no longer decide a pixel: mean 0.18 and p99 3 per pixel, 0.17 and 2 per block.
 pub fn block_mean(pixels: &[[u8; 4]], width: u32, height: u32, f: u32) -> Vec<[u8; 4]> {
     let (f, w) = (f.max(1) as usize, width as usize);

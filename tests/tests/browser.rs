@@ -1,4 +1,4 @@
-//! The browser viewer end to end (issue 19), in a real browser: a demo cave published with
+//! The browser viewer end to end, in a real browser: a demo cave published with
 //! `grotto publish` (the library call the command makes), served on 127.0.0.1 by a static server
 //! that answers range requests (tests/src/serve.rs), opened in headless Chromium on its software
 //! WebGPU adapter (SwiftShader) driven by chromedriver (WebDriver). The test waits for the ready
@@ -540,11 +540,11 @@ fn bytes_before_the_first_frame() {
     assert!(first * 10 < total, "the first frame waited for {first} of {total} bytes");
 }
 
-/// Frame times of the viewer while the camera moves (issue 43): PACKAGE (GROTTO_WEB_BENCH_PACKAGE)
+/// Frame times of the viewer while the camera moves: PACKAGE (GROTTO_WEB_BENCH_PACKAGE)
 /// published and opened at 800x600 (GROTTO_WEB_BENCH_SIZE) on SwiftShader; after its first frames
 /// W is held for GROTTO_WEB_BENCH_MOVE_S seconds (default 60) while the page's frames are timed
 /// (a timestamp each time the status counts a new frame). GROTTO_WEB_BENCH_QUERY adds to the
-/// page's query (e.g. `&target_fps=0`; a viewer older than issue 43 refuses that option). Prints
+/// page's query (e.g. `&target_fps=0`; a viewer without a frame-time target refuses that option). Prints
 /// a row: frames, median, p95 and worst milliseconds between frames, and what the frame-time
 /// target traded at the end.
 #[test]
@@ -614,7 +614,7 @@ fn link_numbers(link: &str) -> Vec<f64> {
     link.split(',').map(|v| v.parse().unwrap()).collect()
 }
 
-/// Issue 45 in the browser, on the scanned room of known size (grotto_fixtures::room): labels of
+/// Points of interest and tours in the browser, on the scanned room of known size (grotto_fixtures::room): labels of
 /// points of interest where the camera projects them, the one behind the pillar hidden; a
 /// measurement of the room's height by two clicks within a centimetre; the address's view link
 /// following the camera and a shared link restoring it to the centimetre; touch gestures (one
@@ -904,7 +904,7 @@ fn section_to_damage(package: &Path, finer: bool) -> std::ops::Range<u64> {
     s.offset..s.offset + s.stored_len
 }
 
-/// Issue 45's hostile web: a published room opened through a server that misbehaves after the
+/// A hostile web: a published room opened through a server that misbehaves after the
 /// page's first frame (ranges ignored, short bodies, a lying Content-Range, 404, a 500 that
 /// passes, a slow server, the package replaced mid-visit) and from packages damaged inside
 /// sections (a finer tile section, a far-level one). Each time the page says what happened in
@@ -1060,7 +1060,7 @@ fn a_page_survives_hostile_servers_and_damaged_packages() {
     drop(browser);
 }
 
-/// The page's memory over a long visit (issue 45): PACKAGE (GROTTO_WEB_BENCH_PACKAGE) published
+/// The page's memory over a long visit: PACKAGE (GROTTO_WEB_BENCH_PACKAGE) published
 /// with a tour through its named cameras (each held GROTTO_WEB_BENCH_DWELL_S, default 5 s),
 /// opened at GROTTO_WEB_BENCH_SIZE (default 320x240; GROTTO_WEB_BENCH_QUERY adds to the query,
 /// default `&bounces=1&samples=1`) on SwiftShader, the tour played round and round for
@@ -1164,7 +1164,7 @@ fn memory_over_a_tour_loop() {
     );
 }
 
-/// The screenshots of docs/web.md (issue 45): PACKAGE (GROTTO_WEB_BENCH_PACKAGE) published and
+/// The screenshots of docs/web.md: PACKAGE (GROTTO_WEB_BENCH_PACKAGE) published and
 /// opened at 640x480 with its panel, once at rest with its points of interest labelled
 /// (`web-pois.png`), once at its first tour's second stop with the caption (`web-tour.png`),
 /// and once on a 390x844 phone screen (`web-phone.png`), into GROTTO_WEB_DOCS_OUT.

@@ -1,4 +1,4 @@
-//! Where the leaf grid falls (issue 21): a scanned room built twice, once with its walls on leaf
+//! Where the leaf grid falls: a scanned room built twice, once with its walls on leaf
 //! boundaries and once moved by a fraction of a leaf, should give the same light. The issue
 //! measured the high preset's bias moving from -7.3% to -5.2% for such a move.
 //!

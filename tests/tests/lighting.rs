@@ -1,4 +1,4 @@
-//! Lighting files and photometry (issue 46), natively on lavapipe, against answers worked out by
+//! Lighting files and photometry, natively on lavapipe, against answers worked out by
 //! hand: a lamp of known lumens over a floor gives the inverse-square illuminance in the lux view,
 //! and an IES downlight's candela read back from the lit floor are the file's.
 

@@ -1,4 +1,4 @@
-//! A merged, registered cloud with no scanner positions (issue 16): the synthetic cave's scans
+//! A merged, registered cloud with no scanner positions: the synthetic cave's scans
 //! merged into one bare PLY at survey coordinates, its entrance opened to the outside, built with
 //! no manifest. Normals must face the open passage, against the cave's analytic surface, and as
 //! well at tile borders as inside tiles.

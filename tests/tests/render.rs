@@ -158,7 +158,7 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
         frames.push(pixels);
     }
     // Every pass (shadow maps, cone shadows, env, specular cones, shade) fits the limits a browser
-    // grants without asking (WebGPU's defaults: 8 storage buffers a stage, issue 19), and the
+    // grants without asking (WebGPU's defaults: 8 storage buffers a stage), and the
     // image does not depend on them.
     let out = dir.path().join("wet-webgpu-limits.png");
     let opts = RenderOptions {
@@ -204,7 +204,7 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
     }
 }
 
-/// Issue 43's culling draws the same image as drawing whole tiles, with less work: surfel chunks
+/// Culling by surfel chunks draws the same image as drawing whole tiles, with less work: surfel chunks
 /// culled per shadow face (frustum and the light's range) and per view give the same bytes; the
 /// level of detail (far chunks thinned) stays within the golden tolerance and draws fewer
 /// surfels. The counts come from the renderer's own counters (render/counters.rs).

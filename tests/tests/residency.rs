@@ -377,7 +377,7 @@ fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer()
     }
 }
 
-/// Issue 43: under a per-frame shadow budget the faces a change of tiles leaves out of date are
+/// Under a per-frame shadow budget the faces a change of tiles leaves out of date are
 /// drawn over several frames, one pass each; while they catch up the frames show the shadow maps
 /// as they were (no face of the new scene mixed in, the direct light not injected, the bounces
 /// held), and once the last is drawn the light settles to what a renderer made for the new scene

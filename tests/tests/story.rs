@@ -1,4 +1,4 @@
-//! Points of interest, tours and measuring (issue 45) on the scanned room of known size
+//! Points of interest, tours and measuring on the scanned room of known size
 //! (grotto_fixtures::room), natively on lavapipe: the manifest's story survives the package at
 //! survey coordinates; a label on the far wall in view shows and the one behind the pillar is
 //! hidden, decided from G-buffer distances read back without blocking (render/probe.rs, what the

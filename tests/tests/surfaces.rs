@@ -1,4 +1,4 @@
-//! Surfaces, not scales (issue 44): surfels sampled like a scan (random positions, normals a few
+//! Surfaces, not scales: surfels sampled like a scan (random positions, normals a few
 //! degrees off, a few millimetres of range noise) on walls with a known shape, rendered with
 //! direct light and compared with the exact shading of the true surface.
 //!

@@ -44,7 +44,7 @@ pub struct Options {
     /// 0: every face at once): the rest follow over the next frames (render/shadow_queue.rs).
     pub shadow_ms: Option<f32>,
     /// Blend the discs of the front surface at each pixel (default true, as natively; false:
-    /// the front-most disc alone, the picture before issue 44).
+    /// the front-most disc alone).
     pub splat_blend: Option<bool>,
     /// Samples a pixel gathered at rest, one a frame, each jittered within the pixel and
     /// averaged (anti-aliasing; default 8 as natively, 1: none).

@@ -1,4 +1,4 @@
-//! Where light carried through passages goes wrong (issue 47): the runtime's outgoing radiance
+//! Where light carried through passages goes wrong: the runtime's outgoing radiance
 //! per leaf against the reference's (path traced from each leaf's surfels), summed per region of
 //! the dogleg (the lit room, the three corridors, the hidden chamber) or of the long passage
 //! (stretches along it) and per bounce: each run with k bounces and no tail against the reference

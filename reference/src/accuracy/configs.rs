@@ -111,7 +111,7 @@ pub fn configs() -> Vec<Config> {
         add("step", format!("step {s}"), Settings { step_scale: s, ..base.clone() });
     }
     // The march alone: one bounce against the reference cut after one bounce, so the bounces not
-    // run do not hide what the step and the cone width do (issue 21). No tail: one bounce has none
+    // run do not hide what the step and the cone width do. No tail: one bounce has none
     // anyway (it needs two bounces' changes), and this says so.
     let one = Settings { bounces: 1, bounce_tail: false, ..base.clone() };
     for a in MARCH_APERTURES {
@@ -132,7 +132,7 @@ pub fn configs() -> Vec<Config> {
     add("tail", "no tail".into(), Settings { bounce_tail: false, ..base.clone() });
     // What interleaved cone sets buy: every leaf with the same set, as before they came.
     add("interleave", "no interleave".into(), Settings { cone_interleave: false, ..base.clone() });
-    // Leaves as the half-spaces behind their surfaces at the finest levels (issue 47).
+    // Leaves as the half-spaces behind their surfaces at the finest levels.
     add("cone planes", "cone planes".into(), Settings { cone_planes: true, ..base.clone() });
     // With the fast and high presets too, to show whether presets with planes keep their order.
     for q in [Quality::Fast, Quality::High] {
@@ -142,7 +142,7 @@ pub fn configs() -> Vec<Config> {
             Settings { cone_planes: true, ..Settings::preset(q) },
         );
     }
-    // Each gather cone followed as rays that end at the first surface (issue 47); with the fast and
+    // Each gather cone followed as rays that end at the first surface; with the fast and
     // high presets too, to show whether presets with rays would keep their order.
     add("cone rays", "cone rays".into(), Settings { cone_rays: true, ..base.clone() });
     for q in [Quality::Fast, Quality::High] {

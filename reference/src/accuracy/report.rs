@@ -75,7 +75,7 @@ pub fn knob_series(knob: &str) -> Vec<String> {
 /// one-bounce knobs), or None where a row is missing. For the step it is the relative RMSE. For the
 /// aperture it is |bias|: with the cone count fixed, a narrower cone covers less of the hemisphere
 /// (9 cones at `--aperture` 0.35 cover 12% of it), so its RMSE grows with the gaps between cones;
-/// what the aperture must not change is the energy (issue 21: "wide cones should blur, not darken").
+/// what the aperture must not change is the energy: wide cones should blur, not darken.
 pub fn knob_errors(rows: &[Row], knob: &str) -> Option<Vec<f64>> {
     let aperture = knob == "aperture" || knob == ONE_BOUNCE_APERTURE;
     knob_series(knob)
@@ -137,7 +137,7 @@ pub fn with_truth(report: &str, truth: &serde_json::Value) -> String {
          grotto's model of the surface. [accuracy-truth.md](accuracy-truth.md) compares grotto's picture of the scanned \
          points with Mitsuba 3 rendering the synthetic cave's exact surface (a mesh far finer than a leaf) with the same \
          lamps and cameras, over every pixel at 640x480: how close the picture is to the cave. Mean FLIP, before \
-         (front-most disc) and after blended splats (issue 44), and the truth's own noise:\n\n\
+         (front-most disc) and after blended splats, and the truth's own noise:\n\n\
          | camera | light | FLIP before | FLIP after | rel. RMSE before | rel. RMSE after | truth noise (FLIP) |\n\
          |---|---|---:|---:|---:|---:|---:|\n",
     );
@@ -189,7 +189,7 @@ fn report_intro(s: &mut String, device: &str, width: u32, height: u32, command: 
          colour codec, compact surfels) rebuild the scene's package and run the balanced preset on it, against the same \
          reference. Pareto-optimal rows (no other row is both faster and more accurate) are marked *. \
          Where the error sits, region by region and bounce by bounce (`breakdown`): the dogleg's \
-         [accuracy-passages.md](accuracy-passages.md) (and before issue 47 changed the hand-built scenes \
+         [accuracy-passages.md](accuracy-passages.md) (and from when the hand-built scenes' rock cells were dark leaves \
          [accuracy-passages-before.md](accuracy-passages-before.md)), the passage's stretches \
          [accuracy-passage-long.md](accuracy-passage-long.md), the colour box's faces \
          [accuracy-colour-box.md](accuracy-colour-box.md) (docs/reference.md, \"Where the light goes wrong\").\n"

@@ -100,7 +100,7 @@ fn closed_scenes_named(only: Option<&str>) -> Vec<(&'static str, &'static str, S
         None => {}
         Some(Ok(data)) => scenes.push((
             "passage",
-            "a 30 m tube of wandering width with a flat floor, 18 m straight then round a bend, lit by one 100 W lamp 1 m from its closed end; albedo 0.7; its smooth surface sampled every 5 cm by six scans at survey coordinates and built by grotto-pack with 0.25 m leaves (issue 47)",
+            "a 30 m tube of wandering width with a flat floor, 18 m straight then round a bend, lit by one 100 W lamp 1 m from its closed end; albedo 0.7; its smooth surface sampled every 5 cm by six scans at survey coordinates and built by grotto-pack with 0.25 m leaves",
             data,
         )),
         Some(Err(e)) => eprintln!("passage scene skipped: {e}"),
@@ -137,7 +137,7 @@ pub fn scanned_carved(name: &str) -> Result<(&'static str, SceneData), String> {
     let dogleg_rooms = testscenes::DOGLEG_REGIONS.map(|r| (r.1, r.2));
     let (description, survey) = match name {
         "dogleg (scanned)" => (
-            "the dogleg's rock faces sampled every 5 cm (5 x 5 points a leaf face), one scan per room and corridor, built by grotto-pack with 0.25 m leaves (issue 47)",
+            "the dogleg's rock faces sampled every 5 cm (5 x 5 points a leaf face), one scan per room and corridor, built by grotto-pack with 0.25 m leaves",
             CarvedSurvey {
                 name: "dogleg",
                 leaf_m: 0.25,
@@ -151,7 +151,7 @@ pub fn scanned_carved(name: &str) -> Result<(&'static str, SceneData), String> {
             },
         ),
         "colour box (scanned)" => (
-            "the colour box's faces sampled every 2 cm (5 x 5 points a 0.1 m cell face), one scan, built by grotto-pack with 0.125 m leaves (a package's leaf is a power of two of metres) (issue 47)",
+            "the colour box's faces sampled every 2 cm (5 x 5 points a 0.1 m cell face), one scan, built by grotto-pack with 0.125 m leaves (a package's leaf is a power of two of metres)",
             CarvedSurvey {
                 name: "colour-box",
                 leaf_m: 0.1,

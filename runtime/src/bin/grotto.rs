@@ -301,7 +301,7 @@ struct RenderArgs {
     #[arg(long)]
     light_cutoff: Option<f32>,
     /// What the splat passes cull by: "chunks" (default: runs of 1,024 surfels each shadow face
-    /// or the camera may see) or "tiles" (whole tiles by their boxes, the draws before issue 43;
+    /// or the camera may see) or "tiles" (whole tiles by their boxes, the coarser draws;
     /// the same image, for measuring the difference).
     #[arg(long, default_value = "chunks")]
     cull: String,
@@ -311,7 +311,7 @@ struct RenderArgs {
     no_splat_lod: bool,
     /// Show each pixel's front-most disc alone (each with its own normal and light: scales at
     /// grazing angles), not the blend of every disc of the front surface (the default where the
-    /// adapter can blend f16 targets; the image before issue 44, for comparing).
+    /// adapter can blend f16 targets; for comparing).
     #[arg(long)]
     no_splat_blend: bool,
     /// Anti-aliasing for `grotto render`: draw at N times the width and height (1..=4) and

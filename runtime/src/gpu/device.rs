@@ -210,8 +210,7 @@ impl Gpu {
         }
         let mut features = wgpu::Features::empty();
         // Software adapters are timed on the CPU: lavapipe's timestamps do not enclose a compute
-        // dispatch whose pipeline binds no texture (measured: propagate read 1.4 ms for a 20 s
-        // dispatch once its layout no longer held the shadow atlas; with it, 20.6 s).
+        // dispatch whose pipeline binds no texture (a 20 s propagate dispatch read as 1.4 ms).
         // In a browser the query results could only be read back a frame late; passes go
         // untimed there rather than blocking.
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY)

@@ -338,7 +338,7 @@ pub mod flags {
 }
 
 /// The ray march of `Settings::cone_rays` (shaders/cone_rays.wgsl, `CpuScene::trace_cone_rays`),
-/// the shell rule issue 47 measured best on the CPU (reference/examples/ray_cones.rs with
+/// the shell rule that measured best on the CPU (reference/examples/ray_cones.rs with
 /// `CELLS=1 PLANEHIT=1 PLANE_OFFSET=0.25 LIFT=0.3`, docs/reference.md "Where the light goes
 /// wrong"). Generated into WGSL as `RAY_*` (`shaders::constants`).
 pub mod cone_rays {

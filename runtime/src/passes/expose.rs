@@ -1,8 +1,7 @@
 //! Exposure after the fact (expose.wgsl): a frame's radiance tonemapped again at a new exposure,
 //! in place. Automatic exposure measures the first frame's light and then wants that same frame
 //! at the exposure it chose; drawing it again would repeat the G-buffer's and every pixel's light
-//! lookups (a second shade of 800x600 pixels took 1.5 s of a 36 s first try on lavapipe) for a
-//! change of one multiplier.
+//! lookups (on a software adapter, seconds at 800x600) for a change of one multiplier.
 //!
 //! Written here rather than taken from a crate: one small compute shader over grotto's own frame
 //! layout, calling the shade pass's own tone map.

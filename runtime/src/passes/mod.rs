@@ -128,9 +128,9 @@ impl ComputePipeline {
 }
 
 /// The settings baked into the passes as WGSL pipeline constants (`override`s), so a pass
-/// compiles without the code an unset one would skip (a uniform flag cost propagate 29-36% on
-/// lavapipe even where it was off: the branch kept the plane code in the march's inner loop,
-/// docs/runtime.md "Cone planes").
+/// compiles without the code an unset one would skip (a uniform flag kept the plane code in the
+/// march's inner loop and slowed propagate by a third even where it was off: docs/runtime.md
+/// "Cone planes").
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct PassConstants {
     /// `radiance_f16` (shaders/light_state.wgsl): the radiance pyramid's precision.
@@ -327,8 +327,8 @@ pub(crate) const CONES_PER_BATCH: u32 = 1;
 /// inject.rs). A cone's march loops over its steps, the rock probes of each step and the octree
 /// descents of each sample, so an invocation tracing all its cones at fine steps ran out: on the
 /// dogleg scene with every leaf sending 1, 16 cones at step 0.1 gathered 0.944 on lavapipe against
-/// 0.999 from the CPU reference (which is step-invariant there); 9 cones, or step >= 0.35, matched
-/// (issue 21). With one cone per dispatch the budget is per cone. Results are the same to the bit:
+/// 0.999 from the CPU reference (which is step-invariant there); 9 cones, or step >= 0.35,
+/// matched. With one cone per dispatch the budget is per cone. Results are the same to the bit:
 /// the running sums are kept in the leaf state and added to in the same order (the WGSL).
 pub(crate) fn cone_batched(
     gpu: &Gpu,

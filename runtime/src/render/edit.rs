@@ -79,9 +79,7 @@ impl Renderer {
             // Inject does not run without lights, so nothing would clear the old direct light.
             return Ok(None);
         }
-        if setup.grid.words.len() > self.light_room.grid_room as usize
-            || !setup.keep_slots(self.shadow.faces(), self.shadow.capacity())
-        {
+        if setup.grid.words.len() > self.light_room.grid_room as usize || !self.shadows.fits(&mut setup) {
             return Ok(None);
         }
         // Counted after the faces took their slots: holes are records too.
@@ -100,8 +98,7 @@ impl Renderer {
 
         self.gpu.queue.write_buffer(&self.light_room.buf, 0, bytemuck::cast_slice(&records));
         self.pools.write_lookup(&self.gpu, self.base_params.lookup_base[1], &setup.grid.words);
-        let redrawn = self.shadow.set_faces(&self.gpu, &setup.faces);
-        self.shadow_queue.resize(setup.faces.len());
+        let redrawn = self.shadows.set_faces(&self.gpu, &setup);
         self.mark_shadow_faces(|i, _| redrawn.contains(&i));
         let upload_bytes = (records.len() * size_of::<crate::gpu::types::LightGpu>()
             + 4 * setup.grid.words.len()
@@ -115,8 +112,6 @@ impl Renderer {
         self.inject.set_max_lights_per_cell(&self.gpu, self.lights_in_range.1)?;
         self.point_lights = setup.point_lights;
         self.spot_lights = setup.spot_lights;
-        self.shadowed = setup.shadowed;
-        self.shadow_faces = setup.faces.iter().filter(|f| !f.is_hole()).count();
         self.headlamp = scene.headlamp;
         self.light_room.mapped = setup.mapped;
         self.compat = Compat::of(scene);
@@ -141,7 +136,7 @@ impl Renderer {
             let before = self.light_edit.as_ref().map_or(0, |e| e.scope.lights);
             let scope = EditScope {
                 lights: before + scope.lights,
-                faces: self.shadow_queue.dirty_count(),
+                faces: self.shadows.dirty_count(),
                 tiles,
                 of_tiles: scope.of_tiles,
                 leaves,

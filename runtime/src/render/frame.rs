@@ -33,7 +33,7 @@ impl Renderer {
             point_lights: self.point_lights,
             spot_lights: self.spot_lights,
             shadows_enabled: self.settings.shadows,
-            shadowed: self.shadowed,
+            shadowed: self.shadows.shadowed(),
             shadow_budget: self.settings.shadowed_lights,
             fallback: self.settings.shadow_fallback.describe(),
             lights_in_range: self.lights_in_range,
@@ -217,10 +217,10 @@ impl Renderer {
         if self.light_edit.is_some() {
             f |= flags::INJECT_ACTIVE;
         }
-        if s.direct && s.shadows && self.shadowed < p.light_count as usize {
+        if s.direct && s.shadows && self.shadows.shadowed() < p.light_count as usize {
             f |= flags::FAR_LIGHTS;
         }
-        if s.shadows && self.shadow_faces > 0 {
+        if s.shadows && self.shadows.face_count() > 0 {
             f |= flags::SHADOWS;
         }
         match s.indirect {
@@ -388,10 +388,7 @@ impl Renderer {
         });
         match pass {
             Pass::Shadow => {
-                let b = &self.shadow_batch;
-                work.draws = b.faces.iter().map(|&i| self.shadow_queue.runs(i).len() as u64).sum();
-                work.surfels = b.surfels;
-                self.shadow.record(enc, &self.splats, b, |i| self.shadow_queue.runs(i), (render_ts, stats));
+                work = self.shadows.record(enc, &self.splats, (render_ts, stats));
             }
             Pass::Gbuffer => {
                 let v = self.view("gbuffer")?;
@@ -501,15 +498,6 @@ impl Renderer {
         self.gpu.wait()
     }
 
-    /// The shadow faces the pass about to run draws, and the staging atlas if they need it.
-    fn choose_shadow_batch(&mut self) -> Result<()> {
-        self.shadow_batch = self.shadow_queue.batch(self.settings.shadow_frame_ms);
-        if self.shadow_batch.staged {
-            self.static_bytes += self.shadow.ensure_staging(&self.gpu)?;
-        }
-        Ok(())
-    }
-
     /// Invocations (leaves) of the active tiles on the GPU (0 when none are written).
     fn active_items(&self) -> u32 {
         self.active_written.map_or(0, |(items, _)| items)
@@ -557,7 +545,7 @@ impl Renderer {
         self.stats_now.last_upload_bytes = size_of::<Params>() as u64;
         self.write_active(plan, slice);
         if plan.runs(Pass::Shadow) {
-            self.choose_shadow_batch()?;
+            self.static_bytes += self.shadows.choose_batch(&self.gpu, self.settings.shadow_frame_ms)?;
         }
         if let Some((camera, w, h)) = frame
             && plan.runs(Pass::Gbuffer)
@@ -607,12 +595,7 @@ impl Renderer {
             q.read(&self.gpu, &ran, &mut self.stats_now.work)?;
         }
         if ran.contains(&Pass::Shadow) {
-            let batch = std::mem::take(&mut self.shadow_batch);
-            self.shadow_drawn += batch.faces.len() as u64;
-            self.shadow_queue.drawn(&batch);
-            if let Some(&ms) = self.stats_now.last_ms.get(&Pass::Shadow) {
-                self.shadow_queue.timed(ms);
-            }
+            self.shadows.ran(self.stats_now.last_ms.get(&Pass::Shadow).copied());
         }
         if ran.contains(&Pass::Gbuffer) {
             self.gbuffer_stale = false;

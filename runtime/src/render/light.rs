@@ -90,10 +90,10 @@ impl Renderer {
     /// Marks the shadow faces `which` picks out of date, each with the surfel chunks it draws
     /// now; faces already out of date are marked again (the pools may have moved under them).
     pub(super) fn mark_shadow_faces(&mut self, which: impl Fn(usize, &Face) -> bool) {
-        let size = self.shadow.face_size();
+        let size = self.shadows.pass().face_size();
         let grow_ndc = Viewer::grow_for(size, size, self.settings.min_splat_px);
-        let marks: Vec<(usize, Vec<SplatRun>)> = (self.shadow.faces().iter().enumerate())
-            .filter(|(i, f)| !f.is_hole() && (which(*i, f) || self.shadow_queue.is_dirty(*i)))
+        let marks: Vec<(usize, Vec<SplatRun>)> = (self.shadows.face_slots())
+            .filter(|(i, f)| !f.is_hole() && (which(*i, f) || self.shadows.is_dirty(*i)))
             .map(|(i, f)| {
                 let viewer = Viewer {
                     view_proj: &f.view_proj,
@@ -105,14 +105,14 @@ impl Renderer {
             })
             .collect();
         for (i, runs) in marks {
-            self.shadow_queue.mark(i, runs);
+            self.shadows.mark(i, runs);
         }
     }
 
     /// Shadow faces out of date where shadow maps are in use (with shadows off, or no light
     /// given a map, faces stay marked but nothing waits for them).
     pub(super) fn shadow_faces_left(&self) -> usize {
-        if self.settings.shadows && self.shadowed > 0 { self.shadow_queue.dirty_count() } else { 0 }
+        self.shadows.faces_left(self.settings.shadows)
     }
 
     /// Shadow faces the next pass draws of those out of date, and the budget, where the budget
@@ -121,14 +121,13 @@ impl Renderer {
         if self.direct_valid || !self.settings.shadows || self.settings.shadow_frame_ms <= 0.0 {
             return None;
         }
-        let b = self.shadow_queue.batch(self.settings.shadow_frame_ms);
-        (!b.finishes).then(|| (b.faces.len(), self.shadow_queue.dirty_count(), self.settings.shadow_frame_ms))
+        self.shadows.catch_up(self.settings.shadow_frame_ms)
     }
 
     /// The last shadow pass took `ms` by a viewer's clock (a browser, where passes are not
     /// timed: the frame's time, which only overstates it): the next budgets use its rate.
     pub fn note_shadow_frame_ms(&mut self, ms: f64) {
-        self.shadow_queue.timed(ms);
+        self.shadows.timed(ms);
     }
 
     pub(super) fn set_all_active(&mut self, why: Why) {
@@ -249,61 +248,6 @@ impl Renderer {
         self.bounce_work.push(work);
         self.active_written = None;
         Ok(true)
-    }
-
-    /// Each leaf's light state (direct, gather, out), for tests and the reference comparison.
-    #[cfg(feature = "test-hooks")]
-    pub fn read_leaf_light(&self) -> Result<Vec<LeafLightGpu>> {
-        self.pools.read_light(&self.gpu, self.leaf_count)
-    }
-
-    /// Overwrites each leaf's light state (tests: a known radiance field before a mip or gather).
-    #[cfg(feature = "test-hooks")]
-    pub fn write_leaf_light(&mut self, state: &[LeafLightGpu]) -> Result<()> {
-        if state.len() != self.leaf_count as usize {
-            return Err(crate::Error::Setting {
-                name: "leaf light",
-                problem: "length differs from the leaf count".into(),
-            });
-        }
-        self.pools.write_light(&self.gpu, 0, state);
-        self.stats_now.last_change = None;
-        self.set_all_active(Why::Start);
-        Ok(())
-    }
-
-    /// The six anisotropic values of every node (after a mip pass).
-    #[cfg(feature = "test-hooks")]
-    pub fn read_faces(&self) -> Result<Vec<[f32; 4]>> {
-        let n = self.node_count as usize * 6;
-        if self.settings.radiance_f16 {
-            let bytes = self.gpu.read_buffer(&self.faces, n as u64 * 8)?;
-            let halves: Vec<half::f16> = bytemuck::pod_collect_to_vec(&bytes[..n * 8]);
-            return Ok(halves.chunks_exact(4).map(|c| [0, 1, 2, 3].map(|k| c[k].to_f32())).collect());
-        }
-        let bytes = self.gpu.read_buffer(&self.faces, n as u64 * 16)?;
-        Ok(bytemuck::pod_collect_to_vec(&bytes[..n * 16]))
-    }
-
-    /// Runs only the mip pass (tests).
-    #[cfg(feature = "test-hooks")]
-    pub fn run_mip(&mut self) -> Result<()> {
-        let p =
-            EffectPlan { steps: vec![plan::Step { pass: Pass::Mip, run: true, reason: "requested".into() }] };
-        self.execute(&p, None, None)
-    }
-
-    /// Runs only mip + propagate, i.e. one bounce over every tile regardless of the plan (tests).
-    #[cfg(feature = "test-hooks")]
-    pub fn run_bounce(&mut self) -> Result<()> {
-        self.set_all_active(Why::Verify);
-        let p = EffectPlan {
-            steps: vec![
-                plan::Step { pass: Pass::Mip, run: true, reason: "requested".into() },
-                plan::Step { pass: Pass::Propagate, run: true, reason: "requested".into() },
-            ],
-        };
-        self.execute(&p, None, None)
     }
 }
 

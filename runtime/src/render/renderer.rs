@@ -19,18 +19,17 @@ use crate::light::activity::{BounceWork, TileActivity};
 use crate::light::plan::Pass;
 use crate::light::setup::LightSetup;
 use crate::passes::inject::Inject;
-use crate::passes::{self, gbuffer, shade, shadow};
+use crate::passes::{self, gbuffer, shade};
 use crate::render::pool::{Placement, PoolCaps, Pools, surfel_owners};
 use crate::scene::data::{SceneData, SceneLight};
 use crate::view::camera::Camera;
 
-use crate::passes::shadow::Batch;
 use crate::render::counters::{PassWork, StatQueries};
 use crate::render::params::Lookup;
 use crate::render::params::base_params;
 use crate::render::params::material_slots;
 use crate::render::params::pass_queries;
-use crate::render::shadow_queue::ShadowQueue;
+use crate::render::shadow_atlas::ShadowAtlas;
 use crate::render::tiles::TilePools;
 use crate::render::tiles::Upload;
 use crate::settings::{ClipBox, Settings, ViewMode};
@@ -62,8 +61,6 @@ pub struct Renderer {
     pub(super) gpu: Gpu,
     pub(super) settings: Settings,
     pub(super) leaf_count: u32,
-    #[cfg(feature = "test-hooks")]
-    pub(super) node_count: u32,
     pub(super) leaf_size_m: f32,
     pub(super) scene_diag_m: f32,
     pub(super) base_params: Params,
@@ -71,10 +68,6 @@ pub struct Renderer {
     pub(super) spot_lights: usize,
     /// The scene's last light is a headlamp added for a lightless scene (the plan says so).
     pub(super) headlamp: bool,
-    /// Lights with shadow maps; the others are lit per leaf (light/setup.rs).
-    pub(super) shadowed: usize,
-    /// Shadow-atlas faces (six per point light with a map, one per spot light).
-    pub(super) shadow_faces: usize,
     /// Lights per light-grid cell: mean and largest.
     pub(super) lights_in_range: (f32, u32),
     /// Specular materials with surfels, and those surfels (0 when `Settings::specular` is off).
@@ -87,7 +80,7 @@ pub struct Renderer {
     pub(super) params: wgpu::Buffer,
     /// Bytes of every buffer and texture created at upload (the G-buffer is added per view).
     pub(super) static_bytes: u64,
-    #[cfg(feature = "test-hooks")]
+    /// Each node's six anisotropic values (read back by render/inspect.rs).
     pub(super) faces: wgpu::Buffer,
     /// The active tiles propagate reads, and what the bounce changed: its largest change (16
     /// bytes: the f32 bits, then padding), then each tile's (shaders/activity.wgsl `Changes`).
@@ -99,12 +92,8 @@ pub struct Renderer {
     pub(super) active_written: Option<(u32, u32)>,
     /// Bounces since the last [`Renderer::take_bounce_work`], with what each updated.
     pub(super) bounce_work: Vec<BounceWork>,
-    /// Shadow faces out of date (every face after a change of lights; after a change of tiles,
-    /// the faces that see one), the batch the pass under way draws, and how many were drawn
-    /// since the last [`Renderer::take_shadow_faces_drawn`].
-    pub(super) shadow_queue: ShadowQueue,
-    pub(super) shadow_batch: Batch,
-    pub(super) shadow_drawn: u64,
+    /// The shadow pass, which of its faces are out of date, and what it drew.
+    pub(super) shadows: ShadowAtlas,
     /// The camera's view-projection of the G-buffer (tiles outside it are not drawn), and whether
     /// the tiles changed since it was drawn.
     pub(super) camera_view_proj: Option<Mat4>,
@@ -120,7 +109,6 @@ pub struct Renderer {
     pub(super) env: passes::Batched,
     pub(super) mip: passes::mip::Mip,
     pub(super) propagate: passes::propagate::Propagate,
-    pub(super) shadow: shadow::Shadow,
     pub(super) gbuffer: gbuffer::Gbuffer,
     /// How both splat passes fetch the surfel pool (passes/splat.rs).
     pub(super) splats: passes::splat::Fetch,
@@ -261,13 +249,13 @@ impl Renderer {
         let (materials, specular_materials, specular_surfels) = material_slots(scene, &settings);
         let splat_layout = passes::splat::layout(gpu);
         let mut splats = passes::splat::Fetch::new(gpu, caps.surfels);
-        let shadow = shadow_pass(gpu, &splat_layout, &lights, &settings, &splats)?;
+        let shadows = ShadowAtlas::new(gpu, &splat_layout, &lights, &settings, &splats)?;
         let lookup = Lookup::new(scene, &lights)?;
         let base_params = base_params(
             scene,
             &settings,
             &lights,
-            &shadow,
+            shadows.pass(),
             (lo, hi),
             scene_diag_m,
             chain,
@@ -280,7 +268,7 @@ impl Renderer {
             caps,
             &lights,
             &lookup,
-            shadow.atlas(),
+            shadows.pass().atlas(),
             &base_params,
             f16,
             splats.pulls(),
@@ -300,30 +288,26 @@ impl Renderer {
             .scoped("gbuffer", || gbuffer::Gbuffer::new(gpu, &splat_layout, &splats, settings.splat_blend))?;
         splats.set_surfels(gpu, &up.surfels);
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, consts, chain))?;
-        let static_bytes = up.bytes + shadow.bytes() + shade.env_atlas_bytes();
+        let static_bytes = up.bytes + shadows.bytes() + shade.env_atlas_bytes();
         let room = LightRoom { buf: up.lights.clone(), grid_room: lookup.grid_room, mapped: lights.mapped };
         let mut r = Self {
             inject,
             env,
             mip,
             propagate,
-            shadow,
+            shadows,
             gbuffer,
             splats,
             shade,
             gpu: gpu.clone(),
             settings,
             leaf_count: scene.leaves.len() as u32,
-            #[cfg(feature = "test-hooks")]
-            node_count: scene.nodes.len() as u32,
             leaf_size_m: leaf,
             scene_diag_m,
             base_params,
             point_lights: lights.point_lights,
             spot_lights: lights.spot_lights,
             headlamp: scene.headlamp,
-            shadowed: lights.shadowed,
-            shadow_faces: lights.faces.len(),
             lights_in_range,
             specular_materials,
             specular_surfels,
@@ -332,16 +316,12 @@ impl Renderer {
             env_valid: false,
             params: up.params,
             static_bytes,
-            #[cfg(feature = "test-hooks")]
             faces: up.faces,
             active: up.active,
             changes: up.changes,
             activity: TileActivity::new(&scene.tiles),
             active_written: None,
             bounce_work: Vec::new(),
-            shadow_queue: ShadowQueue::new(lights.faces.len()),
-            shadow_batch: Batch::default(),
-            shadow_drawn: 0,
             camera_view_proj: None,
             gbuffer_stale: false,
             lod_detail: 1.0,
@@ -384,7 +364,7 @@ impl Renderer {
 
     /// Lights with shadow maps; the others are lit per leaf (light/setup.rs).
     pub fn shadowed_lights(&self) -> usize {
-        self.shadowed
+        self.shadows.shadowed()
     }
 
     /// Lights in range per light-grid cell: mean and largest.
@@ -448,13 +428,13 @@ impl Renderer {
 
     /// Faces of the shadow atlas (six per point light with a map, one per spot light).
     pub fn shadow_face_count(&self) -> usize {
-        self.shadow_faces
+        self.shadows.face_count()
     }
 
     /// Shadow faces drawn since the last call (a shadow pass draws the faces that see a change),
     /// drained like [`Renderer::take_bounce_work`].
     pub fn take_shadow_faces_drawn(&mut self) -> u64 {
-        std::mem::take(&mut self.shadow_drawn)
+        self.shadows.take_drawn()
     }
 }
 
@@ -490,31 +470,4 @@ fn fresh_pools(scene: &SceneData, caps: PoolCaps) -> Result<(Pools, Placement, b
         return Err(Error::Internal { what: "pools", message: "fresh pools moved a tile".into() });
     }
     Ok((pools, placed, cull_tiles))
-}
-
-/// The shadow pass for `lights`' faces.
-fn shadow_pass(
-    gpu: &Gpu,
-    splat_layout: &wgpu::BindGroupLayout,
-    lights: &LightSetup,
-    settings: &Settings,
-    splats: &passes::splat::Fetch,
-) -> Result<shadow::Shadow> {
-    gpu.scoped("shadow", || {
-        // Room for the faces of lights a designer adds, within the budget (render/edit.rs); the
-        // grid's spare cells are room too.
-        let budget_faces = 6 * settings.shadowed_lights as usize;
-        let room = if settings.shadows { settings.light_room_faces as usize } else { 0 };
-        let want = (lights.faces.len() + room).min(budget_faces.max(lights.faces.len()));
-        shadow::Shadow::new(
-            gpu,
-            splat_layout,
-            &lights.faces,
-            want,
-            settings.shadow_map_size,
-            settings.min_splat_px,
-            settings.splat_scale,
-            splats,
-        )
-    })
 }

@@ -112,7 +112,6 @@ impl TilePools {
     }
 
     /// Nodes in use (the end of the last node slot).
-    #[cfg(feature = "test-hooks")]
     pub(super) fn node_end(&self) -> u32 {
         self.slots.slots().values().map(|s| s.nodes.end).max().unwrap_or(0)
     }
@@ -147,8 +146,8 @@ impl TilePools {
     }
 
     /// The surfel ranges `viewer` may see, merged: by surfel chunks (chunks.rs), or with
-    /// `by_chunks` off by tile boxes only (where tiles can be culled: the draws before issue 43,
-    /// kept to measure against); every resident surfel without a viewer.
+    /// `by_chunks` off by tile boxes only (where tiles can be culled: the coarser draws, kept to
+    /// measure against); every resident surfel without a viewer.
     pub(super) fn runs_seen(
         &self,
         viewer: Option<&Viewer<'_>>,
@@ -331,9 +330,7 @@ pub(super) struct Upload {
     pub(super) lookup: wgpu::Buffer,
     /// The lights' records (light/setup.rs `records`), with room for more.
     pub(super) lights: wgpu::Buffer,
-    #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
     pub(super) leaf_light: wgpu::Buffer,
-    #[cfg_attr(not(feature = "test-hooks"), allow(dead_code))]
     pub(super) faces: wgpu::Buffer,
     pub(super) active: wgpu::Buffer,
     /// The bounce's largest change (16 bytes: the f32 bits, then padding), then each tile's.

@@ -31,7 +31,7 @@ impl Renderer {
         self.mark_shadow_faces(|_, face| {
             placed.changed.iter().any(|(lo, hi)| crate::view::camera::sees_box(&face.view_proj, *lo, *hi))
         });
-        update.shadow_faces = self.shadow_queue.dirty_count();
+        update.shadow_faces = self.shadows.dirty_count();
         self.follow_scene(scene, &placed.light_kept);
         Ok(Some(update))
     }
@@ -41,10 +41,6 @@ impl Renderer {
     /// the new tiles need redone.
     fn follow_scene(&mut self, scene: &SceneData, light_kept: &[bool]) {
         self.leaf_count = self.pools.leaf_end();
-        #[cfg(feature = "test-hooks")]
-        {
-            self.node_count = self.pools.node_end();
-        }
         self.base_params.tile_count = self.pools.tiles().len() as u32;
         self.base_params.leaf_count = self.leaf_count;
         // Tiles held in another form (coarse or fine) bound their matter by other cells.

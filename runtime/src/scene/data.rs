@@ -265,7 +265,7 @@ pub(crate) fn full_leaves(svo: &SvoData<'_>, depth: u32, origin_leaf: IVec3, lea
 /// evaluated, and cones start, at the surface the leaf holds, wherever the leaf grid falls: with
 /// the cell's centre a wall on a cell face had its leaf light taken half a leaf off the wall and
 /// its cones started half a leaf nearer to or farther from it than on a wall through the cell's
-/// middle (issue 21: moving a room by a fraction of a leaf changed its first bounce by 4%).
+/// middle (moving a room by a fraction of a leaf changed its first bounce by 4%).
 /// Leaves with no surfel (none in their cell) keep the cell's centre.
 pub(crate) fn move_leaves_to_surfels(
     leaves: &mut [LeafGpu],

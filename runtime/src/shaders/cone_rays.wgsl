@@ -1,4 +1,4 @@
-// A gather cone followed as rays (Settings::cone_rays, issue 47): the composited march (cone.wgsl)
+// A gather cone followed as rays (Settings::cone_rays): the composited march (cone.wgsl)
 // counts a surface a cone runs along at every step, and a cone whose axis enters rock takes the
 // colour it last sampled for all it had not seen, which gave closed rooms near a lamp 5-15% too
 // much of each bounce (docs/reference.md, "Where a wall's cones read too much"). Here the cone's
@@ -45,9 +45,9 @@ fn ray_colour(at_leaf: vec3<f32>, d: vec3<f32>, diameter_m: f32) -> vec4<f32> {
 // what it met (x: distance, y: 1 at a leaf, 2 at rock, 0 where it left the scene). A cell's rock
 // comes from its brick's 64 bits, looked up where the ray enters a new brick (8 leaves wide)
 // instead of once a cell: the same answers as in_rock, which cpu_ref::ray_hit asks cell by cell.
-// Doing the same for leaves (a block's node once a block, svo.wgsl `leaf_in_block`) made the pass
-// slower on lavapipe (colour box 1.99 times the cones' time against 1.46): the lanes of a SIMD group
-// enter new blocks at different cells, so the group pays the lookup on most steps anyway. Empty
+// Leaves are not looked up once a block (svo.wgsl `leaf_in_block`): the lanes of a SIMD group enter
+// new blocks at different cells, so the group pays the lookup on most steps anyway, and the pass
+// was slower that way (docs/reference.md). Empty
 // space is crossed a box at a time: the node the leaf lookup found missing, cut to the rock-free
 // brick or cell (cpu_ref::ray_hit walks every cell; the GPU-vs-CPU test holds the two equal).
 fn ray_hit(origin_m: vec3<f32>, d: vec3<f32>) -> vec2<f32> {

@@ -8,9 +8,8 @@ use serde::Serialize;
 
 /// Longest frame at rest: nothing on screen moves but the light, and a person who starts moving
 /// again waits at most this long for the first moving frame. What a rest frame adds to its draw is
-/// the light's share of the time: held to a 33 ms frame on lavapipe, the demo cave's light got
-/// about half of each frame and took 306 s to converge; at 100 ms it gets about two thirds and
-/// took 169 s, where its four bounces alone take about 110 s (docs/benchmarks.md).
+/// the light's share of the time: at 100 ms the light gets about two thirds of a frame on a
+/// software adapter, at 33 ms about half, and converges that much later (docs/benchmarks.md).
 pub(crate) const REST_FRAME_MS: f64 = 100.0;
 
 /// Leaves in the first slice, before a slice has been timed.
