@@ -12,41 +12,6 @@ use crate::light::edit::{self, EditScope, PendingEdit};
 use crate::render::renderer::{Compat, Renderer, light_setup};
 use crate::scene::data::SceneData;
 
-impl Renderer {
-    /// Inject ran for a pending edit: starts reading its tally back (natively, waits for it).
-    pub(super) fn start_edit_tally(&mut self) -> Result<()> {
-        let Some(edit) = self.light_edit.as_mut() else { return Ok(()) };
-        if !self.direct_valid {
-            // Shadow faces deferred to another round (tiles changed under them): that round's
-            // inject redoes every leaf, and every tile bounces, as for any change of lights.
-            self.light_edit = None;
-            self.set_all_active(Why::LightsChanged);
-            return Ok(());
-        }
-        let tiles = self.activity.tiles() as u64;
-        edit.tally = Some(self.gpu.start_read(&self.changes, 16 + 4 * tiles));
-        if !cfg!(target_arch = "wasm32") {
-            let gpu = self.gpu.clone();
-            gpu.wait_for("inject tally", || Ok(self.poll_light()?.then_some(())))?;
-        }
-        Ok(())
-    }
-
-    /// Where the tally of an edit's direct light has arrived: the tiles it changed start the
-    /// bounces (activity.rs `end_edit`). Returns whether none is pending any longer.
-    pub(super) fn poll_edit_tally(&mut self) -> Result<bool> {
-        let Some(read) = self.light_edit.as_ref().and_then(|e| e.tally.as_ref()) else { return Ok(true) };
-        let Some(bytes) = read.take() else { return Ok(false) };
-        let bytes = bytes?;
-        let tiles = self.activity.tiles();
-        let change: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[16..16 + 4 * tiles]);
-        self.activity.end_edit(&change, self.settings.convergence_tolerance);
-        self.active_written = None;
-        self.light_edit = None;
-        Ok(true)
-    }
-}
-
 /// What [`Renderer::edit_lights`] did.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct LightEdit {
@@ -109,7 +74,7 @@ impl Renderer {
         p.light_grid_dims = setup.grid.dims.to_array();
         p.light_grid_min_m = setup.grid.min_m.extend(setup.grid.cell_m).to_array();
         self.lights_in_range = setup.grid.occupancy();
-        self.inject.set_max_lights_per_cell(&self.gpu, self.lights_in_range.1)?;
+        self.light.inject.set_max_lights_per_cell(&self.gpu, self.lights_in_range.1)?;
         self.point_lights = setup.point_lights;
         self.spot_lights = setup.spot_lights;
         self.headlamp = scene.headlamp;
@@ -117,7 +82,7 @@ impl Renderer {
         self.compat = Compat::of(scene);
 
         // Direct light again, bounces counted afresh; the light elsewhere is the start.
-        let tiles = self.activity.tiles();
+        let tiles = self.light.activity.tiles();
         let scope = EditScope {
             lights: reach.len(),
             faces: redrawn.len(),
@@ -128,12 +93,12 @@ impl Renderer {
                 .map(|(t, _)| u64::from(t.leaf_count))
                 .sum(),
         };
-        if self.direct_valid || self.light_edit.is_some() {
+        if self.light.direct_valid || self.light.light_edit.is_some() {
             // Inject redoes the tiles in reach (with an earlier edit's still waiting), then
             // the bounces start from those whose direct light it changed (`end_edit`).
-            self.activity.begin_edit(&reached);
-            let (tiles, leaves) = self.activity.pending_tiles_leaves();
-            let before = self.light_edit.as_ref().map_or(0, |e| e.scope.lights);
+            self.light.activity.begin_edit(&reached);
+            let (tiles, leaves) = self.light.activity.pending_tiles_leaves();
+            let before = self.light.light_edit.as_ref().map_or(0, |e| e.scope.lights);
             let scope = EditScope {
                 lights: before + scope.lights,
                 faces: self.shadows.dirty_count(),
@@ -141,19 +106,16 @@ impl Renderer {
                 of_tiles: scope.of_tiles,
                 leaves,
             };
-            self.light_edit = Some(PendingEdit { scope, tally: None });
+            self.light.light_edit = Some(PendingEdit { scope, tally: None });
         } else {
             // Every leaf still waits for direct light (a new renderer, a change of tiles): it
             // all runs, as it would have.
-            self.set_all_active(Why::LightsChanged);
+            self.light.set_all_active(Why::LightsChanged);
         }
-        self.active_written = None;
-        self.direct_valid = false;
+        self.light.activity_changed();
+        self.light.restart();
         self.stats_now.last_change = None;
         self.stats_now.bounces_done = 0;
-        self.bounce_at = None;
-        // A bounce under the old lights still on its way back counts for nothing now.
-        self.bounce_readback = None;
         Ok(Some(LightEdit { scope, upload_bytes }))
     }
 }

@@ -4,8 +4,7 @@
 use web_time::Instant;
 
 use crate::error::{Error, Result};
-use crate::gpu::types::{ActiveTile, Params, SplatUniform, flags};
-use crate::light::activity::Why;
+use crate::gpu::types::{Params, SplatUniform, flags};
 use crate::light::plan::{self, EffectPlan, Pass, PlanInputs};
 use crate::view::camera::Camera;
 
@@ -42,17 +41,17 @@ impl Renderer {
             emissive_leaves: self.emissive,
             environment: self.environment,
             ambient: self.settings.background.iter().any(|&b| b > 0.0),
-            env_valid: self.env_valid,
-            direct_valid: self.direct_valid,
-            light_edit: self.light_edit.as_ref().map(|e| e.scope.clone()),
+            env_valid: self.light.env_valid,
+            direct_valid: self.light.direct_valid,
+            light_edit: self.light.light_edit.as_ref().map(|e| e.scope.clone()),
             shadow_catch_up: self.shadow_catch_up(),
             bounces_done: self.stats_now.bounces_done,
             bounce_budget: self.settings.bounces,
             last_change: self.stats_now.last_change,
             convergence_tolerance: self.settings.convergence_tolerance,
-            tiles_pending: self.activity.pending_tiles(),
-            tiles_total: self.activity.tiles(),
-            tiles_why: self.activity.pending_why(),
+            tiles_pending: self.light.activity.pending_tiles(),
+            tiles_total: self.light.activity.tiles(),
+            tiles_why: self.light.activity.pending_why(),
             frame: frame.is_some(),
             gbuffer_valid,
             splats: if self.gbuffer.blends() {
@@ -63,10 +62,8 @@ impl Renderer {
                 "front-most discs (splat blending off)"
             },
             plain_view: (!self.settings.view.shows_light()).then(|| self.settings.view.name()),
-            light_held: self.light_held.or_else(|| {
-                self.bounce_readback.is_some().then_some("the last bounce's change is on its way back")
-            }),
-            bounce_part: self.bounce_at.map(|next| (next, self.active_items())),
+            light_held: self.light.held_because(),
+            bounce_part: self.light.bounce_at.map(|next| (next, self.light.active_items())),
             still: self.stills.next.filter(|_| frame.is_some()),
         }
     }
@@ -208,13 +205,13 @@ impl Renderer {
         // Auto exposure sets it after the light has settled (`set_exposure`).
         p.exposure = s.exposure;
         let mut f = flags::EMISSION;
-        if !self.direct_valid || (self.environment && !self.env_valid) {
+        if !self.light.direct_valid || (self.environment && !self.light.env_valid) {
             f |= flags::NEW_SERIES;
         }
         if s.direct && p.light_count > 0 {
             f |= flags::DIRECT;
         }
-        if self.light_edit.is_some() {
+        if self.light.light_edit.is_some() {
             f |= flags::INJECT_ACTIVE;
         }
         if s.direct && s.shadows && self.shadows.shadowed() < p.light_count as usize {
@@ -422,18 +419,16 @@ impl Renderer {
                 match compute {
                     Pass::Inject => {
                         // After an edit in place, the active tiles' leaves (frame_params' flag).
-                        let edit = self.light_edit.is_some();
-                        let n = if edit { self.active_items() } else { self.leaf_count };
-                        self.inject.record(&mut cp, n, edit)
+                        let edit = self.light.light_edit.is_some();
+                        let n = if edit { self.light.active_items() } else { self.leaf_count };
+                        self.light.inject.record(&mut cp, n, edit)
                     }
-                    Pass::Env => self.env.record(&mut cp, self.leaf_count),
-                    Pass::Mip => self.mip.record(&mut cp),
+                    Pass::Env => self.light.env.record(&mut cp, self.leaf_count),
+                    Pass::Mip => self.light.mip.record(&mut cp),
                     Pass::Propagate => {
                         // The slice that ends the bounce ends it with the tail (propagate.rs).
-                        let (first, end) = self.slice_run;
-                        let finish =
-                            self.active_written.and_then(|(items, tiles)| (end >= items).then_some(tiles));
-                        self.propagate.record(&mut cp, end - first, finish)
+                        let (first, end) = self.light.slice_run;
+                        self.light.propagate.record(&mut cp, end - first, self.light.finishing_tiles())
                     }
                     Pass::Shade => {
                         let v = self.view("shade")?;
@@ -462,11 +457,8 @@ impl Renderer {
     /// no timestamp queries and each is timed on the CPU); `ran` collects the passes recorded.
     pub(super) fn record_frame(&mut self, plan: &EffectPlan, ran: &mut Vec<Pass>) -> Result<()> {
         let mut enc = self.encoder();
-        let tally = plan.runs(Pass::Inject) && self.light_edit.is_some();
-        if plan.runs(Pass::Propagate) && self.slice_run.0 == 0 || tally {
-            // A bounce starts: its changes are gathered over all its slices (or an edit's
-            // inject tallies what it changed).
-            enc.clear_buffer(&self.changes, 0, None);
+        if self.light.clears_changes(plan) {
+            enc.clear_buffer(&self.light.changes, 0, None);
         }
         for step in plan.steps.iter().filter(|s| s.run) {
             let recorded = Instant::now();
@@ -498,39 +490,6 @@ impl Renderer {
         self.gpu.wait()
     }
 
-    /// Invocations (leaves) of the active tiles on the GPU (0 when none are written).
-    fn active_items(&self) -> u32 {
-        self.active_written.map_or(0, |(items, _)| items)
-    }
-
-    /// Writes the active tiles where the plan propagates (or injects after a light edit) and
-    /// the slice of them this call runs.
-    fn write_active(&mut self, plan: &EffectPlan, slice: Option<u32>) {
-        let inject_active = self.light_edit.is_some() && plan.runs(Pass::Inject);
-        if plan.runs(Pass::Propagate) || inject_active {
-            if self.bounce_at.is_none() && self.activity.pending_tiles() == 0 {
-                // Forced past convergence: a bounce means every tile.
-                self.set_all_active(Why::Verify);
-            }
-            if self.active_written.is_none() {
-                let (tiles, items) = self.activity.active_tiles();
-                let header = [tiles.len() as u32, items];
-                self.gpu.queue.write_buffer(&self.active, 0, bytemuck::cast_slice(&header));
-                if !tiles.is_empty() {
-                    self.gpu.queue.write_buffer(&self.active, 16, bytemuck::cast_slice(&tiles));
-                }
-                self.stats_now.last_upload_bytes += 8 + (tiles.len() * size_of::<ActiveTile>()) as u64;
-                self.active_written = Some((items, tiles.len() as u32));
-            }
-            let items = self.active_items();
-            let first = self.bounce_at.unwrap_or(0).min(items);
-            let end = slice.map_or(items, |n| first.saturating_add(n).min(items));
-            self.slice_run = (first, end);
-            self.gpu.queue.write_buffer(&self.active, 8, bytemuck::cast_slice(&[first, end]));
-            self.stats_now.last_upload_bytes += 8;
-        }
-    }
-
     /// Runs `plan`; its propagation runs at most `slice` invocations of the bounce (None: the
     /// rest of it).
     pub(super) fn execute(
@@ -543,7 +502,7 @@ impl Renderer {
         self.gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         self.stats_now.last_submits = 0;
         self.stats_now.last_upload_bytes = size_of::<Params>() as u64;
-        self.write_active(plan, slice);
+        self.stats_now.last_upload_bytes += self.light.write_active(&self.gpu, plan, slice);
         if plan.runs(Pass::Shadow) {
             self.static_bytes += self.shadows.choose_batch(&self.gpu, self.settings.shadow_frame_ms)?;
         }
@@ -606,32 +565,10 @@ impl Renderer {
                 v.shaded = mode;
             }
         }
-        if ran.contains(&Pass::Inject) || (self.point_lights + self.spot_lights == 0) {
-            // Faces deferred to the next round of a budgeted catch-up keep the shadow pass going
-            // (and the next round ends in an inject of its own).
-            self.direct_valid = self.shadow_faces_left() == 0;
-            if ran.contains(&Pass::Inject) {
-                self.start_edit_tally()?;
-            }
-        }
-        if ran.contains(&Pass::Env) {
-            self.env_valid = true;
-        }
-        let end = self.slice_run.1;
-        let items = self.active_items();
-        if ran.contains(&Pass::Propagate) && end < items {
-            // Part of a bounce: the rest runs in later calls, from the same pyramid.
-            self.bounce_at = Some(end);
-        } else if ran.contains(&Pass::Propagate) {
-            self.bounce_at = None;
-            let tiles = self.activity.tiles();
-            self.bounce_readback = Some(self.gpu.start_read(&self.changes, 16 + 4 * tiles as u64));
-            // Natively the bounce ends here; a browser collects its change on a later frame
-            // (`poll_light`), and plans no light work until then.
-            if !cfg!(target_arch = "wasm32") {
-                let gpu = self.gpu.clone();
-                gpu.wait_for("propagate", || Ok(self.poll_light()?.then_some(())))?;
-            }
+        let lights = self.point_lights + self.spot_lights > 0;
+        let direct_done = self.shadow_faces_left() == 0;
+        if self.light.ran(&self.gpu, &ran, lights, direct_done) {
+            self.wait_for_light()?;
         }
         Ok(())
     }

@@ -25,7 +25,7 @@ impl Renderer {
         }
         self.pools.write_light(&self.gpu, 0, state);
         self.stats_now.last_change = None;
-        self.set_all_active(Why::Start);
+        self.light.set_all_active(Why::Start);
         Ok(())
     }
 
@@ -50,7 +50,7 @@ impl Renderer {
 
     /// Runs only mip + propagate: one bounce over every tile, whatever the plan says.
     pub fn run_bounce(&mut self) -> Result<()> {
-        self.set_all_active(Why::Verify);
+        self.light.set_all_active(Why::Verify);
         let p = EffectPlan {
             steps: vec![
                 plan::Step { pass: Pass::Mip, run: true, reason: "requested".into() },

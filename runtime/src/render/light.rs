@@ -21,7 +21,7 @@ impl Renderer {
     /// While held, frames run no bounces, and the plan gives `why`: a viewer holds the light while
     /// its camera moves, so light work is what yields to the frame rate.
     pub fn hold_light(&mut self, why: Option<&'static str>) {
-        self.light_held = why;
+        self.light.held = why;
     }
 
     /// A light update (as [`Renderer::update_light`]) whose propagation runs at most `max_leaves`
@@ -35,7 +35,7 @@ impl Renderer {
         if !p.runs(Pass::Propagate) {
             return Ok(0);
         }
-        Ok(self.slice_run.1 - self.slice_run.0)
+        Ok(self.light.slice_run.1 - self.light.slice_run.0)
     }
 
     /// Where the light stands: bounces done of the budget, the last change, and whether it has
@@ -51,7 +51,7 @@ impl Renderer {
             bounces_done: self.stats_now.bounces_done,
             bounce_budget: self.settings.bounces,
             last_change: self.stats_now.last_change,
-            converged: self.light_edit.is_none()
+            converged: self.light.light_edit.is_none()
                 && !(p.runs(Pass::Shadow)
                     || p.runs(Pass::Inject)
                     || p.runs(Pass::Env)
@@ -76,15 +76,12 @@ impl Renderer {
     /// Marks the lights changed: the next update re-renders shadow maps and re-injects, and the
     /// bounces are counted afresh (the light converges again from the new direct light).
     pub fn invalidate_lights(&mut self) {
-        self.direct_valid = false;
-        self.light_edit = None;
+        self.light.light_edit = None;
+        self.light.restart();
         self.mark_shadow_faces(|_, _| true);
         self.stats_now.last_change = None;
         self.stats_now.bounces_done = 0;
-        self.bounce_at = None;
-        // A bounce under the old lights still on its way back counts for nothing now.
-        self.bounce_readback = None;
-        self.set_all_active(Why::LightsChanged);
+        self.light.set_all_active(Why::LightsChanged);
     }
 
     /// Marks the shadow faces `which` picks out of date, each with the surfel chunks it draws
@@ -118,7 +115,7 @@ impl Renderer {
     /// Shadow faces the next pass draws of those out of date, and the budget, where the budget
     /// leaves some for later frames (the plan's `shadow_catch_up`).
     pub(super) fn shadow_catch_up(&self) -> Option<(usize, usize, f32)> {
-        if self.direct_valid || !self.settings.shadows || self.settings.shadow_frame_ms <= 0.0 {
+        if self.light.direct_valid || !self.settings.shadows || self.settings.shadow_frame_ms <= 0.0 {
             return None;
         }
         self.shadows.catch_up(self.settings.shadow_frame_ms)
@@ -130,14 +127,9 @@ impl Renderer {
         self.shadows.timed(ms);
     }
 
-    pub(super) fn set_all_active(&mut self, why: Why) {
-        self.activity.all(why);
-        self.active_written = None;
-    }
-
     /// What each propagation bounce since the last call updated, and why (drained).
     pub fn take_bounce_work(&mut self) -> Vec<BounceWork> {
-        std::mem::take(&mut self.bounce_work)
+        self.light.take_bounce_work()
     }
 
     /// Runs the light part of the plan (shadow, inject, one bounce); returns the plan it ran.
@@ -165,7 +157,7 @@ impl Renderer {
         let start = self.stats_now.bounces_done;
         loop {
             // Shadow faces under a frame budget catch up over the frames, as the bounces left do.
-            let direct_done = self.direct_valid || self.settings.shadow_frame_ms > 0.0;
+            let direct_done = self.light.direct_valid || self.settings.shadow_frame_ms > 0.0;
             if self.stats_now.bounces_done - start >= max_bounces && direct_done {
                 return Ok(self.stats_now.bounces_done - start);
             }
@@ -175,7 +167,7 @@ impl Renderer {
             // An edit's inject holds the bounces until its tally says where they start.
             if !(p.runs(Pass::Propagate)
                 || p.runs(Pass::Inject)
-                || p.runs(Pass::Shadow) && !self.direct_valid)
+                || p.runs(Pass::Shadow) && !self.light.direct_valid)
             {
                 return Ok(self.stats_now.bounces_done - start);
             }
@@ -219,8 +211,7 @@ impl Renderer {
         }
         if seeded > 0 {
             // Only the new tiles and what touches them need bounces (activity.rs).
-            self.activity.seed(&kept);
-            self.active_written = None;
+            self.light.seeded(&kept);
         }
         Ok(seeded)
     }
@@ -231,23 +222,21 @@ impl Renderer {
     /// calls it first, so in a browser a bounce that ended on an earlier frame is counted before
     /// the next plan.
     pub(super) fn poll_light(&mut self) -> Result<bool> {
-        if self.light_edit.is_some() {
-            return self.poll_edit_tally();
+        self.light.poll(&mut self.stats_now, self.settings.convergence_tolerance)
+    }
+
+    /// Natively, waits for what the last frame started reading back (an edit's tally, a
+    /// bounce's change) and finishes it; a browser, which cannot block, collects it on a later
+    /// frame (`poll_light`) and plans no light work until then.
+    pub(super) fn wait_for_light(&mut self) -> Result<()> {
+        if cfg!(target_arch = "wasm32") {
+            return Ok(());
         }
-        let Some(read) = &self.bounce_readback else { return Ok(true) };
-        let Some(bytes) = read.take() else { return Ok(false) };
-        self.bounce_readback = None;
-        let bytes = bytes?;
-        let tiles = self.activity.tiles();
-        let bits = u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
-        self.stats_now.last_change = Some(f32::from_bits(bits));
-        self.stats_now.bounces_done += 1;
-        let change: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[16..16 + 4 * tiles]);
-        let work = self.activity.finish(&change, self.settings.convergence_tolerance);
-        self.stats_now.propagated_leaves += work.leaves;
-        self.bounce_work.push(work);
-        self.active_written = None;
-        Ok(true)
+        let gpu = self.gpu.clone();
+        while let Some(what) = self.light.reading() {
+            gpu.wait_for(what, || Ok(self.poll_light()?.then_some(())))?;
+        }
+        Ok(())
     }
 }
 

@@ -16,6 +16,7 @@ mod shadow_atlas;
 pub(crate) mod shadow_queue;
 mod still;
 mod tiles;
+mod transport;
 mod update;
 
 pub use counters::PassWork;

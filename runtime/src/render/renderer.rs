@@ -15,12 +15,12 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::gpu::types::Params;
-use crate::light::activity::{BounceWork, TileActivity};
 use crate::light::plan::Pass;
 use crate::light::setup::LightSetup;
 use crate::passes::inject::Inject;
 use crate::passes::{self, gbuffer, shade};
 use crate::render::pool::{Placement, PoolCaps, Pools, surfel_owners};
+use crate::render::transport::LightTransport;
 use crate::scene::data::{SceneData, SceneLight};
 use crate::view::camera::Camera;
 
@@ -76,22 +76,11 @@ pub struct Renderer {
     pub(super) emissive: bool,
     /// An environment map lights the scene (it has SH coefficients and the setting allows it).
     pub(super) environment: bool,
-    pub(super) env_valid: bool,
     pub(super) params: wgpu::Buffer,
     /// Bytes of every buffer and texture created at upload (the G-buffer is added per view).
     pub(super) static_bytes: u64,
     /// Each node's six anisotropic values (read back by render/inspect.rs).
     pub(super) faces: wgpu::Buffer,
-    /// The active tiles propagate reads, and what the bounce changed: its largest change (16
-    /// bytes: the f32 bits, then padding), then each tile's (shaders/activity.wgsl `Changes`).
-    pub(super) active: wgpu::Buffer,
-    pub(super) changes: wgpu::Buffer,
-    pub(super) activity: TileActivity,
-    /// Invocations (leaves) of the active tiles on the GPU, and the tiles (the tail pass's
-    /// workgroups); `None` when the tiles changed since they were written.
-    pub(super) active_written: Option<(u32, u32)>,
-    /// Bounces since the last [`Renderer::take_bounce_work`], with what each updated.
-    pub(super) bounce_work: Vec<BounceWork>,
     /// The shadow pass, which of its faces are out of date, and what it drew.
     pub(super) shadows: ShadowAtlas,
     /// The camera's view-projection of the G-buffer (tiles outside it are not drawn), and whether
@@ -105,34 +94,18 @@ pub struct Renderer {
     pub(super) compat: Compat,
     /// The tile pools and where each resident tile form lives in them (tiles.rs).
     pub(super) pools: TilePools,
-    pub(super) inject: Inject,
-    pub(super) env: passes::Batched,
-    pub(super) mip: passes::mip::Mip,
-    pub(super) propagate: passes::propagate::Propagate,
+    /// The light passes and the state of the light between frames.
+    pub(super) light: LightTransport,
     pub(super) gbuffer: gbuffer::Gbuffer,
     /// How both splat passes fetch the surfel pool (passes/splat.rs).
     pub(super) splats: passes::splat::Fetch,
     pub(super) shade: shade::Shade,
     pub(super) view: Option<View>,
-    pub(super) direct_valid: bool,
     /// What an edit in place (render/edit.rs) writes and compares.
     pub(super) light_room: LightRoom,
-    /// A light edit whose direct light waits to be injected and tallied: inject then redoes
-    /// only the tiles its lights reach (the active tiles), and the bounces wait for the tally
-    /// of which tiles it changed (render/edit.rs).
-    pub(super) light_edit: Option<crate::light::edit::PendingEdit>,
     pub(super) forced: Vec<Pass>,
-    /// Why a viewer holds the bounces, if it does ([`Renderer::hold_light`]).
-    pub(super) light_held: Option<&'static str>,
-    /// The last bounce's change, read back without blocking (`poll_light`).
-    pub(super) bounce_readback: Option<crate::gpu::PendingRead>,
     /// The view's clip box ([`Renderer::set_clip`]).
     pub(super) clip: Option<ClipBox>,
-    /// A bounce under way in slices ([`Renderer::update_light_slice`]): its next invocation
-    /// (active leaf, of `active_written`); the pyramid stays as its mip left it until it ends.
-    pub(super) bounce_at: Option<u32>,
-    /// The invocations the last propagate dispatch ran.
-    pub(super) slice_run: (u32, u32),
     pub(super) stats_now: PassStats,
     pub(super) queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
     pub(super) stat_queries: Option<StatQueries>,
@@ -290,11 +263,9 @@ impl Renderer {
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, consts, chain))?;
         let static_bytes = up.bytes + shadows.bytes() + shade.env_atlas_bytes();
         let room = LightRoom { buf: up.lights.clone(), grid_room: lookup.grid_room, mapped: lights.mapped };
+        let light = LightTransport::new((inject, env, mip, propagate), up.active, up.changes, &scene.tiles);
         let mut r = Self {
-            inject,
-            env,
-            mip,
-            propagate,
+            light,
             shadows,
             gbuffer,
             splats,
@@ -313,30 +284,18 @@ impl Renderer {
             specular_surfels,
             emissive: scene.has_emission(),
             environment: environment_on,
-            env_valid: false,
             params: up.params,
             static_bytes,
             faces: up.faces,
-            active: up.active,
-            changes: up.changes,
-            activity: TileActivity::new(&scene.tiles),
-            active_written: None,
-            bounce_work: Vec::new(),
             camera_view_proj: None,
             gbuffer_stale: false,
             lod_detail: 1.0,
             compat: Compat::of(scene),
             pools: tile_pools,
             view: None,
-            direct_valid: false,
             light_room: room,
-            light_edit: None,
             forced: Vec::new(),
-            light_held: None,
-            bounce_readback: None,
             clip: None,
-            bounce_at: None,
-            slice_run: (0, 0),
             stats_now: PassStats::default(),
             queries: pass_queries(gpu),
             stat_queries: StatQueries::new(gpu),

@@ -100,17 +100,17 @@ impl Renderer {
         let (mut plan, mut progress) = self.draw_still(camera, width, height)?;
         // The rest of the samples see the light the first one ran (a frame runs at most one
         // bounce; more would start the samples again).
-        let held = self.light_held.replace("the first sample of this still frame ran the light");
+        let held = self.light.held.replace("the first sample of this still frame ran the light");
         while !progress.complete() {
             match self.draw_still(camera, width, height) {
                 Ok(next) => (plan, progress) = next,
                 Err(e) => {
-                    self.light_held = held;
+                    self.light.held = held;
                     return Err(e);
                 }
             }
         }
-        self.light_held = held;
+        self.light.held = held;
         Ok((self.read_frame()?, plan))
     }
 

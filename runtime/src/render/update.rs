@@ -3,7 +3,6 @@
 //! that see a change and settles the light from what it kept.
 
 use crate::error::Result;
-use crate::light::activity::TileActivity;
 use crate::render::params::{material_slots, tail_ratio_max};
 use crate::render::pool::PoolCaps;
 use crate::render::renderer::{Compat, PassStats, Renderer};
@@ -25,7 +24,7 @@ impl Renderer {
         let Some(placed) = self.pools.place(&self.gpu, scene, self.leaf_size_m)? else { return Ok(None) };
         let mut update = placed.update;
         let (by_height, ranges) = scene.nodes_by_height_at(self.pools.tiles());
-        self.mip.set_order(&self.gpu, &by_height, &ranges)?;
+        self.light.mip.set_order(&self.gpu, &by_height, &ranges)?;
         update.upload_bytes += 4 * by_height.len() as u64;
         // Shadow faces that see a tile form that came or went.
         self.mark_shadow_faces(|_, face| {
@@ -52,20 +51,16 @@ impl Renderer {
         let (_, specular_materials, specular_surfels) = material_slots(scene, &self.settings);
         (self.specular_materials, self.specular_surfels) = (specular_materials, specular_surfels);
         self.emissive = scene.has_emission();
-        self.activity = TileActivity::new(self.pools.tiles());
-        self.activity.seed(light_kept);
-        self.active_written = None;
+        self.light.new_tiles(self.pools.tiles(), light_kept);
         // Direct and environment light for the new leaves (and the faces drawn again), a new
-        // G-buffer, and bounces counted afresh as for a new renderer.
-        self.direct_valid = false;
+        // G-buffer, and bounces counted afresh as for a new renderer; a bounce over the old
+        // tiles, still on its way back, is not this scene's.
+        self.light.restart();
         // The new tiles need direct light wherever they are: inject runs over every leaf.
-        self.light_edit = None;
-        self.env_valid = false;
+        self.light.light_edit = None;
+        self.light.env_valid = false;
         self.gbuffer_stale = true;
         self.stats_now = PassStats::default();
-        self.bounce_at = None;
-        // The change of a bounce over the old tiles, still on its way back, is not this scene's.
-        self.bounce_readback = None;
     }
 
     /// Bytes of the tile pools (what `--gpu-memory` bounds: nodes, radiance pyramid, mip order,
