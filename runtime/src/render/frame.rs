@@ -12,21 +12,11 @@ use crate::passes::splat::SplatRun;
 use crate::render::chunks::{Lod, Viewer};
 use crate::render::counters::PassWork;
 use crate::render::renderer::Renderer;
-use crate::render::renderer::View;
 use crate::settings::{IndirectFilter, ViewMode};
 
 impl Renderer {
     pub(super) fn inputs(&self, frame: Option<(&Camera, u32, u32)>) -> PlanInputs {
-        let gbuffer_valid = match (frame, &self.view) {
-            (Some((c, w, h)), Some(v)) => {
-                !self.gbuffer_stale
-                    && v.camera == *c
-                    && v.jitter_px == self.stills.jitter_px
-                    && v.targets.width == w
-                    && v.targets.height == h
-            }
-            _ => false,
-        };
+        let gbuffer_valid = frame.is_some_and(|(c, w, h)| self.targets.shows(c, w, h));
         PlanInputs {
             headlamp: self.headlamp,
             point_lights: self.point_lights,
@@ -54,7 +44,7 @@ impl Renderer {
             tiles_why: self.light.activity.pending_why(),
             frame: frame.is_some(),
             gbuffer_valid,
-            splats: if self.gbuffer.blends() {
+            splats: if self.targets.gbuffer.blends() {
                 "blended splats: the front-most disc, then every disc within a radius behind it that faces as it does"
             } else if self.settings.splat_blend {
                 "front-most discs: the adapter cannot blend f16 targets"
@@ -64,7 +54,7 @@ impl Renderer {
             plain_view: (!self.settings.view.shows_light()).then(|| self.settings.view.name()),
             light_held: self.light.held_because(),
             bounce_part: self.light.bounce_at.map(|next| (next, self.light.active_items())),
-            still: self.stills.next.filter(|_| frame.is_some()),
+            still: self.targets.stills.next.filter(|_| frame.is_some()),
         }
     }
 
@@ -101,12 +91,12 @@ impl Renderer {
     /// its start) and its bytes there: what a browser reads back without blocking for its
     /// exposure.
     pub fn hdr_output(&self) -> Option<(&wgpu::Buffer, u64)> {
-        self.view.as_ref().map(|v| (&v.outputs.frame, v.outputs.hdr_bytes()))
+        self.targets.view.as_ref().map(|v| (&v.outputs.frame, v.outputs.hdr_bytes()))
     }
 
     /// The last frame [`Renderer::draw`] (or render) made, read back.
     pub(crate) fn read_frame(&self) -> Result<Frame> {
-        let view = self.view("shade")?;
+        let view = self.targets.get("shade")?;
         let (width, height) = (view.targets.width, view.targets.height);
         let pixels = u64::from(width) * u64::from(height);
         let bytes = self.gpu.read_buffer(&view.outputs.frame, view.outputs.frame.size())?;
@@ -124,23 +114,24 @@ impl Renderer {
     /// samples, which no tone map of its mean radiance gives, is drawn again at one sample.
     pub fn expose(&mut self) -> Result<Frame> {
         let exposure = self.settings.exposure;
-        let view = self.view("expose")?;
+        let view = self.targets.get("expose")?;
         let (camera, width, height) = (view.camera, view.targets.width, view.targets.height);
         if !view.shaded.exposed() {
             return self.read_frame();
         }
-        if self.stills.still.as_ref().is_some_and(|(_, samples)| *samples > 1) {
+        if self.targets.stills.still.as_ref().is_some_and(|(_, samples)| *samples > 1) {
             return Ok(self.render(&camera, width, height)?.0);
         }
-        if self.stills.expose.is_none() {
+        if self.targets.stills.expose.is_none() {
             let gpu = &self.gpu;
-            self.stills.expose = Some(gpu.scoped("expose", || crate::passes::expose::Expose::new(gpu))?);
+            self.targets.stills.expose =
+                Some(gpu.scoped("expose", || crate::passes::expose::Expose::new(gpu))?);
         }
-        if let Some(expose) = &self.stills.expose {
-            expose.run(&self.gpu, &self.view("expose")?.outputs.frame, width, height, exposure)?;
+        if let Some(expose) = &self.targets.stills.expose {
+            expose.run(&self.gpu, &self.targets.get("expose")?.outputs.frame, width, height, exposure)?;
         }
         // A still frame begun at the old exposure no longer matches what the frame shows.
-        self.stills.still = None;
+        self.targets.stills.still = None;
         self.read_frame()
     }
 
@@ -151,9 +142,9 @@ impl Renderer {
         Self::check_size(width, height)?;
         self.poll_light()?;
         // One sample a pixel at the centres: any still frame gathered so far is over.
-        self.stills.still = None;
-        self.stills.next = None;
-        self.stills.jitter_px = [0.0; 2];
+        self.targets.stills.still = None;
+        self.targets.stills.next = None;
+        self.targets.stills.jitter_px = [0.0; 2];
         let p = self.plan(Some((camera, width, height)));
         self.execute(&p, Some((camera, width, height)), None)?;
         Ok(p)
@@ -173,7 +164,7 @@ impl Renderer {
     /// The distance in metres from the eye to the surface at pixel `(x, y)` of the last frame
     /// (its own size, rows top to bottom); None where the background shows or outside the frame.
     pub fn distance_at(&self, x: u32, y: u32) -> Result<Option<f32>> {
-        let view = self.view("pick")?;
+        let view = self.targets.get("pick")?;
         if x >= view.targets.width || y >= view.targets.height {
             return Ok(None);
         }
@@ -191,7 +182,7 @@ impl Renderer {
     /// The last frame's tonemapped pixels (one packed RGBA8 u32 a pixel, rows top to bottom, from
     /// word `first_word` of `buffer`) and its size; `None` before the first frame.
     pub fn ldr_output(&self) -> Option<LdrOutput<'_>> {
-        self.view.as_ref().map(|v| LdrOutput {
+        self.targets.view.as_ref().map(|v| LdrOutput {
             buffer: &v.outputs.frame,
             first_word: v.outputs.ldr_first_word(),
             width: v.targets.width,
@@ -240,7 +231,7 @@ impl Renderer {
         if s.cone_rays {
             f |= flags::CONE_RAYS;
         }
-        if self.gbuffer.blends() {
+        if self.targets.gbuffer.blends() {
             f |= flags::BLEND;
         }
         f |= match s.view {
@@ -264,7 +255,7 @@ impl Renderer {
                 forward,
                 (right, up),
                 tan,
-                self.stills.jitter_px,
+                self.targets.stills.jitter_px,
                 (w, h),
             );
             p.camera_eye_m = c.eye_m.extend(0.0).to_array();
@@ -278,9 +269,9 @@ impl Renderer {
     /// The resolve's sums where the plan runs it; a change of light ends the still frame.
     fn prepare_still(&mut self, plan: &EffectPlan) -> Result<()> {
         if plan.runs(Pass::Resolve) {
-            let resolve = &self.stills.resolve;
+            let resolve = &self.targets.stills.resolve;
             let gpu = &self.gpu;
-            if let Some(v) = self.view.as_mut()
+            if let Some(v) = self.targets.view.as_mut()
                 && v.sums.is_none()
             {
                 v.sums = Some(resolve.sums(gpu, &v.outputs.frame, v.targets.width, v.targets.height)?);
@@ -289,7 +280,7 @@ impl Renderer {
         }
         if [Pass::Shadow, Pass::Inject, Pass::Mip, Pass::Env, Pass::Propagate].iter().any(|&p| plan.runs(p)) {
             // The light changes: a still frame gathered so far shows the old light.
-            self.stills.still = None;
+            self.targets.stills.still = None;
         }
         Ok(())
     }
@@ -305,7 +296,7 @@ impl Renderer {
         let far = (camera.eye_m.length() + self.scene_diag_m) * 2.0 + 1.0;
         let m = camera.view_proj(w, h, near, far);
         let u = SplatUniform {
-            view_proj: crate::passes::resolve::jittered_view_proj(m, self.stills.jitter_px, w, h)
+            view_proj: crate::passes::resolve::jittered_view_proj(m, self.targets.stills.jitter_px, w, h)
                 .to_cols_array_2d(),
             eye_m: camera.eye_m.extend(1.0).to_array(),
             viewport: [
@@ -320,36 +311,11 @@ impl Renderer {
                 0.0,
                 0.0,
             ],
-            clip_min_m: self.clip.map_or([0.0; 4], |c| c.min_m.extend(1.0).to_array()),
-            clip_max_m: self.clip.map_or([0.0; 4], |c| c.max_m.extend(1.0).to_array()),
+            clip_min_m: self.targets.clip().map_or([0.0; 4], |c| c.min_m.extend(1.0).to_array()),
+            clip_max_m: self.targets.clip().map_or([0.0; 4], |c| c.max_m.extend(1.0).to_array()),
             pad: [[0.0; 4]; 7],
         };
-        self.gbuffer.set_camera(&self.gpu, &u);
-        self.camera_view_proj = Some(m);
-        let reuse = self.view.as_ref().is_some_and(|v| v.targets.width == w && v.targets.height == h);
-        if !reuse {
-            // The largest per-view buffer first, before any target is allocated.
-            let pixels = u64::from(w) * u64::from(h);
-            self.gpu.check_buffer("shade hdr", pixels * 16, wgpu::BufferUsages::STORAGE)?;
-            let targets = self.gbuffer.targets(&self.gpu, w, h)?;
-            let outputs = self.shade.outputs(&self.gpu, &targets)?;
-            self.view = Some(View {
-                camera: *camera,
-                jitter_px: self.stills.jitter_px,
-                targets,
-                outputs,
-                shaded: self.settings.view,
-                sums: None,
-            });
-        } else if let Some(v) = self.view.as_mut() {
-            v.camera = *camera;
-            v.jitter_px = self.stills.jitter_px;
-        }
-        Ok(())
-    }
-
-    pub(super) fn view(&self, pass: &'static str) -> Result<&View> {
-        self.view.as_ref().ok_or(Error::Internal { what: pass, message: "no view was prepared".into() })
+        self.targets.prepare(&self.gpu, camera, (w, h), (&u, m), self.settings.view)
     }
 
     pub(super) fn encoder(&self) -> wgpu::CommandEncoder {
@@ -388,20 +354,20 @@ impl Renderer {
                 work = self.shadows.record(enc, &self.splats, (render_ts, stats));
             }
             Pass::Gbuffer => {
-                let v = self.view("gbuffer")?;
+                let v = self.targets.get("gbuffer")?;
                 let (w, h) = (v.targets.width, v.targets.height);
                 let focal_px = h as f32 * 0.5 / (v.camera.fov_y_deg.to_radians() * 0.5).tan();
-                let viewer = self.camera_view_proj.as_ref().map(|m| Viewer {
+                let viewer = self.targets.camera_view_proj.as_ref().map(|m| Viewer {
                     view_proj: m,
                     // Thinned discs grow up to the detail's floor, past the viewport's edge too.
-                    grow_ndc: Viewer::grow_for(w, h, self.settings.min_splat_px * self.lod_detail),
+                    grow_ndc: Viewer::grow_for(w, h, self.settings.min_splat_px * self.targets.lod_detail()),
                     light: None,
-                    lod: self.lod(v.camera.eye_m, focal_px, self.lod_detail),
+                    lod: self.lod(v.camera.eye_m, focal_px, self.targets.lod_detail()),
                 });
                 let runs = self.runs_seen(viewer.as_ref());
                 work.draws = runs.len() as u64;
                 work.surfels = runs.iter().map(SplatRun::drawn).sum();
-                self.gbuffer.record(enc, &v.targets, &self.splats, &runs, (render_ts, stats));
+                self.targets.gbuffer.record(enc, &v.targets, &self.splats, &runs, (render_ts, stats));
             }
             compute => {
                 let tw = ts.map(|(set, i)| wgpu::ComputePassTimestampWrites {
@@ -431,17 +397,17 @@ impl Renderer {
                         self.light.propagate.record(&mut cp, end - first, self.light.finishing_tiles())
                     }
                     Pass::Shade => {
-                        let v = self.view("shade")?;
-                        self.shade.record(&mut cp, &v.outputs, v.targets.width, v.targets.height);
+                        let v = self.targets.get("shade")?;
+                        self.targets.shade.record(&mut cp, &v.outputs, v.targets.width, v.targets.height);
                     }
                     Pass::Resolve => {
-                        let v = self.view("resolve")?;
+                        let v = self.targets.get("resolve")?;
                         let sums = v.sums.as_ref().ok_or(Error::Internal {
                             what: "resolve",
                             message: "no sums were made for the view".into(),
                         })?;
-                        let (sample, _) = self.stills.next.unwrap_or((0, 1));
-                        self.stills.resolve.record(&self.gpu, &mut cp, sums, sample);
+                        let (sample, _) = self.targets.stills.next.unwrap_or((0, 1));
+                        self.targets.stills.resolve.record(&self.gpu, &mut cp, sums, sample);
                     }
                     Pass::Shadow | Pass::Gbuffer => {}
                 }
@@ -556,15 +522,7 @@ impl Renderer {
         if ran.contains(&Pass::Shadow) {
             self.shadows.ran(self.stats_now.last_ms.get(&Pass::Shadow).copied());
         }
-        if ran.contains(&Pass::Gbuffer) {
-            self.gbuffer_stale = false;
-        }
-        if ran.contains(&Pass::Shade) {
-            let mode = self.settings.view;
-            if let Some(v) = self.view.as_mut() {
-                v.shaded = mode;
-            }
-        }
+        self.targets.ran(&ran, self.settings.view);
         let lights = self.point_lights + self.spot_lights > 0;
         let direct_done = self.shadow_faces_left() == 0;
         if self.light.ran(&self.gpu, &ran, lights, direct_done) {

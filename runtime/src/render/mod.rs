@@ -15,6 +15,7 @@ pub mod renderer;
 mod shadow_atlas;
 pub(crate) mod shadow_queue;
 mod still;
+mod targets;
 mod tiles;
 mod transport;
 mod update;

@@ -80,7 +80,7 @@ impl Renderer {
     /// Starts reading the last frame's distances at `pixels` (its own size; at most
     /// [`MAX_PROBE_PIXELS`], the rest are dropped). None before the first frame.
     pub fn start_probe(&self, pixels: &[(u32, u32)]) -> Result<Option<Probe>> {
-        let Some(view) = self.view.as_ref() else { return Ok(None) };
+        let Some(view) = self.targets.view.as_ref() else { return Ok(None) };
         let pixels = pixels[..pixels.len().min(MAX_PROBE_PIXELS)].to_vec();
         let (w, h) = (view.targets.width, view.targets.height);
         let inside: Vec<(u32, u32)> = pixels.iter().copied().filter(|&(x, y)| x < w && y < h).collect();

@@ -9,7 +9,7 @@
 
 use std::collections::BTreeMap;
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
@@ -20,9 +20,9 @@ use crate::light::setup::LightSetup;
 use crate::passes::inject::Inject;
 use crate::passes::{self, gbuffer, shade};
 use crate::render::pool::{Placement, PoolCaps, Pools, surfel_owners};
+use crate::render::targets::{Stills, ViewTargets};
 use crate::render::transport::LightTransport;
 use crate::scene::data::{SceneData, SceneLight};
-use crate::view::camera::Camera;
 
 use crate::render::counters::{PassWork, StatQueries};
 use crate::render::params::Lookup;
@@ -83,34 +83,22 @@ pub struct Renderer {
     pub(super) faces: wgpu::Buffer,
     /// The shadow pass, which of its faces are out of date, and what it drew.
     pub(super) shadows: ShadowAtlas,
-    /// The camera's view-projection of the G-buffer (tiles outside it are not drawn), and whether
-    /// the tiles changed since it was drawn.
-    pub(super) camera_view_proj: Option<Mat4>,
-    pub(super) gbuffer_stale: bool,
-    /// Multiplies the level of detail's pixel floor for the camera's view (a viewer trading
-    /// detail for time while moving: view/frame_target.rs).
-    pub(super) lod_detail: f32,
+    /// The G-buffer and shade passes, the view's targets, still frames, clip and detail.
+    pub(super) targets: ViewTargets,
     /// What a scene must share with this one to be swapped in place ([`Renderer::update_scene`]).
     pub(super) compat: Compat,
     /// The tile pools and where each resident tile form lives in them (tiles.rs).
     pub(super) pools: TilePools,
     /// The light passes and the state of the light between frames.
     pub(super) light: LightTransport,
-    pub(super) gbuffer: gbuffer::Gbuffer,
     /// How both splat passes fetch the surfel pool (passes/splat.rs).
     pub(super) splats: passes::splat::Fetch,
-    pub(super) shade: shade::Shade,
-    pub(super) view: Option<View>,
     /// What an edit in place (render/edit.rs) writes and compares.
     pub(super) light_room: LightRoom,
     pub(super) forced: Vec<Pass>,
-    /// The view's clip box ([`Renderer::set_clip`]).
-    pub(super) clip: Option<ClipBox>,
     pub(super) stats_now: PassStats,
     pub(super) queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
     pub(super) stat_queries: Option<StatQueries>,
-    /// Anti-aliasing at rest (passes/resolve.rs, render/still.rs).
-    pub(super) stills: Stills,
 }
 
 /// The lights' records (lights.wgsl) with room for more, the words the light grid may take in
@@ -120,38 +108,6 @@ pub(super) struct LightRoom {
     pub(super) buf: wgpu::Buffer,
     pub(super) grid_room: u32,
     pub(super) mapped: Vec<bool>,
-}
-
-/// Anti-aliasing at rest: the pass, the sub-pixel offset the next frame draws at, the still frame
-/// gathered so far (what it was gathered for, and its samples), and the next frame's place in it
-/// (sample, of) for the plan. Beside it the other change to a finished frame, its exposure
-/// (made on first use: viewers never call it).
-#[derive(Debug)]
-pub(super) struct Stills {
-    pub(super) resolve: passes::resolve::Resolve,
-    pub(super) expose: Option<passes::expose::Expose>,
-    pub(super) jitter_px: [f32; 2],
-    pub(super) still: Option<(StillKey, u32)>,
-    pub(super) next: Option<(u32, u32)>,
-}
-
-impl Stills {
-    fn new(gpu: &Gpu) -> Result<Self> {
-        let resolve = gpu.scoped("resolve", || passes::resolve::Resolve::new(gpu))?;
-        Ok(Self { resolve, expose: None, jitter_px: [0.0; 2], still: None, next: None })
-    }
-}
-
-/// What a still frame was gathered for: the same key, the same image.
-#[derive(Clone, Debug, PartialEq)]
-pub(super) struct StillKey {
-    pub(super) camera: Camera,
-    pub(super) size: (u32, u32),
-    pub(super) clip: Option<ClipBox>,
-    pub(super) detail_bits: u32,
-    pub(super) of: u32,
-    /// The frame's parameters without the jitter (bytes: they hold floats).
-    pub(super) params: Vec<u8>,
 }
 
 /// What two scenes must share for one to replace the other in a renderer's pools: the same lights,
@@ -264,12 +220,12 @@ impl Renderer {
         let static_bytes = up.bytes + shadows.bytes() + shade.env_atlas_bytes();
         let room = LightRoom { buf: up.lights.clone(), grid_room: lookup.grid_room, mapped: lights.mapped };
         let light = LightTransport::new((inject, env, mip, propagate), up.active, up.changes, &scene.tiles);
+        let targets = ViewTargets::new(gbuffer, shade, Stills::new(gpu)?);
         let mut r = Self {
+            targets,
             light,
             shadows,
-            gbuffer,
             splats,
-            shade,
             gpu: gpu.clone(),
             settings,
             leaf_count: scene.leaves.len() as u32,
@@ -287,19 +243,13 @@ impl Renderer {
             params: up.params,
             static_bytes,
             faces: up.faces,
-            camera_view_proj: None,
-            gbuffer_stale: false,
-            lod_detail: 1.0,
             compat: Compat::of(scene),
             pools: tile_pools,
-            view: None,
             light_room: room,
             forced: Vec::new(),
-            clip: None,
             stats_now: PassStats::default(),
             queries: pass_queries(gpu),
             stat_queries: StatQueries::new(gpu),
-            stills: Stills::new(gpu)?,
         };
         r.mark_shadow_faces(|_, _| true);
         gpu.check("upload")?;
@@ -314,11 +264,7 @@ impl Renderer {
     /// GPU memory the renderer holds: scene buffers, radiance pyramid, shadow atlas (distance +
     /// depth), and the current view's G-buffer and outputs.
     pub fn gpu_bytes(&self) -> u64 {
-        let view = self.view.as_ref().map_or(0, |v| {
-            let px = u64::from(v.targets.width) * u64::from(v.targets.height);
-            px * 4 * 4 + v.outputs.frame.size() + v.sums.as_ref().map_or(0, |s| s.bytes())
-        });
-        self.static_bytes + view
+        self.static_bytes + self.targets.bytes()
     }
 
     /// Lights with shadow maps; the others are lit per leaf (light/setup.rs).
@@ -350,11 +296,7 @@ impl Renderer {
     /// Thins far surfels for the camera's view as if the pixel floor were `detail` times larger
     /// (at least 1; 1: the level of detail the settings give). Shadow maps keep theirs.
     pub fn set_lod_detail(&mut self, detail: f32) {
-        let detail = if detail.is_finite() { detail.max(1.0) } else { 1.0 };
-        if detail != self.lod_detail {
-            self.lod_detail = detail;
-            self.gbuffer_stale = true;
-        }
+        self.targets.set_lod_detail(detail);
     }
 
     /// Exposure of the next shade (the light state and G-buffer are kept).
@@ -365,24 +307,18 @@ impl Renderer {
     /// Shows `view` from the next frame on (the light state stays: back to a lit view, the light
     /// passes run only where they had not).
     pub fn set_view(&mut self, view: ViewMode) {
-        // The scan view colours the G-buffer's albedo; the others only shade it differently.
-        if (view == ViewMode::Scan) != (self.settings.view == ViewMode::Scan) {
-            self.gbuffer_stale = true;
-        }
+        self.targets.change_mode(self.settings.view, view);
         self.settings.view = view;
     }
 
     /// Cuts the view to a box (frame metres), or not (`None`): see [`ClipBox`].
     pub fn set_clip(&mut self, clip: Option<ClipBox>) {
-        if clip != self.clip {
-            self.gbuffer_stale = true;
-        }
-        self.clip = clip;
+        self.targets.set_clip(clip);
     }
 
     /// The view's clip box, if it has one.
     pub fn clip(&self) -> Option<ClipBox> {
-        self.clip
+        self.targets.clip()
     }
 
     /// Faces of the shadow atlas (six per point light with a map, one per spot light).
@@ -395,20 +331,6 @@ impl Renderer {
     pub fn take_shadow_faces_drawn(&mut self) -> u64 {
         self.shadows.take_drawn()
     }
-}
-
-#[derive(Debug)]
-pub(super) struct View {
-    pub(super) camera: Camera,
-    /// The sub-pixel offset the G-buffer was drawn at (anti-aliasing at rest).
-    pub(super) jitter_px: [f32; 2],
-    pub(super) targets: gbuffer::Targets,
-    pub(super) outputs: shade::Outputs,
-    /// The view the frame's pixels were last shaded in ([`Renderer::expose`] re-tonemaps only a
-    /// lit one).
-    pub(super) shaded: ViewMode,
-    /// Anti-aliasing's sums, from the first still frame of this size.
-    pub(super) sums: Option<passes::resolve::Sums>,
 }
 
 /// The scene's light setup, its light grid over the scene with one leaf of slack on every side.

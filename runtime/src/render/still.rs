@@ -7,7 +7,8 @@
 use crate::error::Result;
 use crate::light::plan::{EffectPlan, Pass};
 use crate::passes::resolve::jitter_px;
-use crate::render::renderer::{Renderer, StillKey};
+use crate::render::renderer::Renderer;
+use crate::render::targets::StillKey;
 use crate::view::camera::Camera;
 
 /// Where a still frame stands: samples a pixel gathered, of how many.
@@ -39,18 +40,18 @@ impl Renderer {
         Self::check_size(width, height)?;
         self.poll_light()?;
         let of = self.settings.still_samples.max(1);
-        self.stills.jitter_px = [0.0; 2];
+        self.targets.stills.jitter_px = [0.0; 2];
         let key = StillKey {
             camera: *camera,
             size: (width, height),
-            clip: self.clip,
-            detail_bits: self.lod_detail.to_bits(),
+            clip: self.targets.clip(),
+            detail_bits: self.targets.lod_detail().to_bits(),
             of,
             params: bytemuck::bytes_of(&self.frame_params(Some((camera, width, height)))).to_vec(),
         };
-        let mut sample = match &self.stills.still {
+        let mut sample = match &self.targets.stills.still {
             // Tiles swapped in since: the samples so far show the old ones.
-            Some((k, samples)) if *k == key && !self.gbuffer_stale => *samples,
+            Some((k, samples)) if *k == key && !self.targets.is_stale() => *samples,
             _ => 0,
         };
         if sample >= of {
@@ -75,16 +76,16 @@ impl Renderer {
             plan = self.still_plan(0, of, frame);
         }
         self.execute(&plan, frame, None)?;
-        self.stills.still = Some((key, sample + 1));
-        self.stills.next = None;
-        self.stills.jitter_px = [0.0; 2];
+        self.targets.stills.still = Some((key, sample + 1));
+        self.targets.stills.next = None;
+        self.targets.stills.jitter_px = [0.0; 2];
         Ok((plan, StillProgress { samples: sample + 1, of }))
     }
 
     /// Where the still frame the last [`Renderer::draw_still`] drew stands; None after a
     /// [`Renderer::draw`] or a change of light.
     pub fn still_progress(&self) -> Option<StillProgress> {
-        self.stills.still.as_ref().map(|(k, samples)| StillProgress { samples: *samples, of: k.of })
+        self.targets.stills.still.as_ref().map(|(k, samples)| StillProgress { samples: *samples, of: k.of })
     }
 
     /// Draws a still frame with every sample (`Settings::still_samples`) and reads it back: what
@@ -96,7 +97,7 @@ impl Renderer {
         width: u32,
         height: u32,
     ) -> Result<(super::frame::Frame, EffectPlan)> {
-        self.stills.still = None;
+        self.targets.stills.still = None;
         let (mut plan, mut progress) = self.draw_still(camera, width, height)?;
         // The rest of the samples see the light the first one ran (a frame runs at most one
         // bounce; more would start the samples again).
@@ -115,8 +116,8 @@ impl Renderer {
     }
 
     fn still_plan(&mut self, sample: u32, of: u32, frame: Option<(&Camera, u32, u32)>) -> EffectPlan {
-        self.stills.jitter_px = jitter_px(sample);
-        self.stills.next = Some((sample, of));
+        self.targets.stills.jitter_px = jitter_px(sample);
+        self.targets.stills.next = Some((sample, of));
         self.plan(frame)
     }
 }

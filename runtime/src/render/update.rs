@@ -59,7 +59,7 @@ impl Renderer {
         // The new tiles need direct light wherever they are: inject runs over every leaf.
         self.light.light_edit = None;
         self.light.env_valid = false;
-        self.gbuffer_stale = true;
+        self.targets.invalidate();
         self.stats_now = PassStats::default();
     }
 
