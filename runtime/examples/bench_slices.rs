@@ -15,7 +15,7 @@ fn main() -> anyhow::Result<()> {
     let path = args.next().ok_or_else(|| anyhow::anyhow!("usage: bench_slices PACKAGE [QUALITY]"))?;
     let quality = args.next().and_then(|q| Quality::parse(&q)).unwrap_or(Quality::Balanced);
     let gpu = Gpu::new(&GpuOptions::default())?;
-    let scene = grotto_runtime::cli::render_job::load_scene(std::path::Path::new(&path))?;
+    let scene = grotto_runtime::engine::load_scene(std::path::Path::new(&path))?;
     let settings = Settings { bounces: 2, convergence_tolerance: 0.0, ..Settings::preset(quality) };
     println!("{path} on {}: {} leaves, {} preset", gpu.describe(), scene.leaves.len(), quality.name());
     let mut r = Renderer::new(&gpu, &scene, settings.clone())?;

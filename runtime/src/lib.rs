@@ -37,6 +37,10 @@ pub mod render;
 pub mod stream;
 /// A viewer's story and tools (labels, flights, tours, measuring), the window's and the page's.
 pub mod guide;
+/// Opening a package for rendering: the options, the scene under the budgets, the cameras, the
+/// story and lighting files.
+#[cfg(not(target_arch = "wasm32"))]
+pub mod engine;
 /// The command line's jobs: render and bench, inspect and verify, export, images, publish.
 #[cfg(not(target_arch = "wasm32"))]
 pub mod cli;

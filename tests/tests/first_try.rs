@@ -10,7 +10,8 @@ use std::time::Instant;
 
 use grotto_preprocess::build::{self, BuildParams};
 use grotto_preprocess::manifest::Manifest;
-use grotto_runtime::cli::render_job::{self, RenderOptions};
+use grotto_runtime::cli::render_job;
+use grotto_runtime::engine::RenderOptions;
 use grotto_tests::shared_data_dir;
 
 /// Files no reader accepts, and why (the build must fail with an error naming the file).

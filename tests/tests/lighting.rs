@@ -208,7 +208,7 @@ fn switching_a_circuit_converges_to_a_fresh_render_of_that_lighting() {
 
 #[test]
 fn circuits_switch_from_the_command_line_and_unknown_ones_are_named() {
-    use grotto_runtime::cli::lighting_file::{parse_switch, with_circuits};
+    use grotto_runtime::engine::lighting_file::{parse_switch, with_circuits};
     assert_eq!(parse_switch("work=on"), Ok(("work".into(), true)));
     assert_eq!(parse_switch("a=b=off"), Ok(("a=b".into(), false)));
     assert!(parse_switch("work").unwrap_err().contains("NAME=on"));

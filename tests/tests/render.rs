@@ -4,7 +4,8 @@
 
 use std::path::Path;
 
-use grotto_runtime::cli::render_job::{self, RenderOptions};
+use grotto_runtime::cli::render_job;
+use grotto_runtime::engine::RenderOptions;
 use grotto_runtime::gpu::GpuOptions;
 use grotto_runtime::settings::Settings;
 use grotto_runtime::view::framing::CameraChoice;
@@ -175,7 +176,11 @@ fn wet_demo_cave_under_a_sky_with_a_lamp_string_matches_its_golden_images() {
     if std::env::var_os("GROTTO_BLESS").is_none() {
         let gpu = grotto_runtime::gpu::Gpu::new(&grotto_tests::lavapipe()).unwrap();
         let mut scene = scene;
-        scene.lights = scene.lamp_string(64, render_job::STRING_LAMP_W, render_job::STRING_LAMP_LIFT_M);
+        scene.lights = scene.lamp_string(
+            64,
+            grotto_runtime::engine::STRING_LAMP_W,
+            grotto_runtime::engine::STRING_LAMP_LIFT_M,
+        );
         let cam = grotto_runtime::view::framing::resolve_camera(
             &scene,
             &CameraChoice::Named("chamber".into()),

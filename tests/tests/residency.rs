@@ -9,7 +9,8 @@ use std::sync::OnceLock;
 
 use glam::Vec3;
 use grotto_format::Package;
-use grotto_runtime::cli::render_job::{self, RenderOptions};
+use grotto_runtime::cli::render_job;
+use grotto_runtime::engine::RenderOptions;
 use grotto_runtime::gpu::Gpu;
 use grotto_runtime::render::Renderer;
 use grotto_runtime::render::pool::PoolCaps;

@@ -119,7 +119,8 @@ fn a_camera_of_a_view_link_renders_what_the_named_camera_does() {
 
 #[test]
 fn grotto_render_draws_a_tour_a_frame_a_stop_or_as_a_film() {
-    use grotto_runtime::cli::render_job::{self, RenderOptions};
+    use grotto_runtime::cli::render_job;
+    use grotto_runtime::engine::RenderOptions;
     let dir = tempfile::tempdir().unwrap();
     let package = room::room_package(dir.path()).unwrap();
     let render = |fps: Option<f32>, out: &str| {
@@ -194,7 +195,8 @@ fn grotto_render_draws_a_tour_a_frame_a_stop_or_as_a_film() {
 
 #[test]
 fn grotto_render_draws_the_labels_rock_does_not_hide() {
-    use grotto_runtime::cli::render_job::{self, RenderOptions};
+    use grotto_runtime::cli::render_job;
+    use grotto_runtime::engine::RenderOptions;
     let dir = tempfile::tempdir().unwrap();
     let package = room::room_package(dir.path()).unwrap();
     let opts = |labels: bool, supersample: u32, out: &str| RenderOptions {

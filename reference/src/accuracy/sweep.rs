@@ -281,7 +281,7 @@ pub fn lights_sweep(
     spp: u32,
     mut progress: impl FnMut(&str),
 ) -> Result<(SweepScene, Vec<Row>), String> {
-    use grotto_runtime::cli::render_job::{STRING_LAMP_LIFT_M, STRING_LAMP_W};
+    use grotto_runtime::engine::{STRING_LAMP_LIFT_M, STRING_LAMP_W};
     use grotto_runtime::settings::ShadowFallback;
     let mut data = demo_cave(ColorCodec::Raw, SurfelCodec::Full, 0.25, None, true)?;
     data.lights = data.lamp_string(lamps, STRING_LAMP_W, STRING_LAMP_LIFT_M);

@@ -221,7 +221,7 @@ struct RenderArgs {
     #[arg(long)]
     lights: Option<PathBuf>,
     /// Circuits switched on or off, NAME=on|off[,...] (the lighting file's or the package's).
-    #[arg(long, value_delimiter = ',', value_parser = grotto_runtime::cli::lighting_file::parse_switch)]
+    #[arg(long, value_delimiter = ',', value_parser = grotto_runtime::engine::lighting_file::parse_switch)]
     circuits: Vec<(String, bool)>,
     /// grotto render: draw the labels of the points of interest in view (not those rock hides) into the
     /// image, as the published page shows them (.png and .jpg). grotto view always shows them.
@@ -403,8 +403,8 @@ fn parse_box(s: &str) -> Result<[[f64; 3]; 2], String> {
     Ok([[x0, y0, z0], [x1, y1, z1]])
 }
 
-fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::cli::render_job::RenderOptions> {
-    use grotto_runtime::cli::render_job::{Headlamp, RenderOptions};
+fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::engine::RenderOptions> {
+    use grotto_runtime::engine::{Headlamp, RenderOptions};
     use grotto_runtime::settings::{IndirectFilter, Quality, Settings, ShadowFallback};
     use grotto_runtime::view::framing::CameraChoice;
     let quality = Quality::parse(&a.quality)
@@ -638,7 +638,7 @@ fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
 }
 
 fn bench_edits(
-    opts: &grotto_runtime::cli::render_job::RenderOptions,
+    opts: &grotto_runtime::engine::RenderOptions,
     file: &std::path::Path,
     (json, explain): (bool, bool),
 ) -> anyhow::Result<ExitCode> {
@@ -799,7 +799,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Inspect { package, gpu_memory: true, json, .. } => {
             let t0 = std::time::Instant::now();
-            let scene = grotto_runtime::cli::render_job::load_scene(&package)?;
+            let scene = grotto_runtime::engine::load_scene(&package)?;
             let bytes = scene.buffer_bytes(false);
             let load_s = t0.elapsed().as_secs_f64();
             if json {

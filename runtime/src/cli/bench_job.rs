@@ -3,7 +3,7 @@
 
 use serde::Serialize;
 
-use crate::cli::render_job::{Prepared, RenderOptions, prepare};
+use crate::engine::{Opened, RenderOptions};
 use crate::error::Result;
 use crate::gpu::{Gpu, GpuOptions};
 use crate::render::Renderer;
@@ -55,7 +55,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
     use crate::light::plan::Pass;
     let gpu = Gpu::new(&GpuOptions { work_counters: true, ..opts.gpu.clone() })?;
-    let Prepared { scene, cameras, residency, .. } = prepare(opts, &gpu)?;
+    let Opened { scene, cameras, residency, .. } = crate::engine::open(opts, &gpu)?;
     let cam = cameras[0];
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
@@ -159,7 +159,7 @@ pub struct EditBench {
 pub fn bench_light_edits(opts: &RenderOptions, edits: &std::path::Path) -> Result<EditBench> {
     use web_time::Instant;
     let gpu = Gpu::new(&opts.gpu)?;
-    let Prepared { mut scene, .. } = prepare(opts, &gpu)?;
+    let Opened { mut scene, .. } = crate::engine::open(opts, &gpu)?;
     // The scene's lighting (a lighting file's, or the package's own lights).
     let base = match scene.lighting.clone() {
         Some(l) => l,
@@ -168,7 +168,7 @@ pub fn bench_light_edits(opts: &RenderOptions, edits: &std::path::Path) -> Resul
             crate::scene::lighting::Relight::of_package(&world.lights, &world.circuits)
         }
     };
-    let edit_file = crate::cli::lighting_file::relight_of(&grotto_format::Scene::default(), edits)?;
+    let edit_file = crate::engine::lighting_file::relight_of(&grotto_format::Scene::default(), edits)?;
     let mut r = Renderer::new(&gpu, &scene, opts.settings.clone())?;
     let settle = |r: &mut Renderer, t: Instant, what: String, relit: Option<crate::stream::Relit>| {
         // Light updates to convergence, as `settle` runs them, each pass's time summed; the

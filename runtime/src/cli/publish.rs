@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 
 use grotto_format::Package;
 
-use crate::cli::render_job::{self, RenderOptions};
+use crate::cli::render_job;
+use crate::engine::RenderOptions;
 use crate::view::framing::CameraChoice;
 use grotto_format::{Poi, Tour};
 use serde::Serialize;
@@ -31,7 +32,7 @@ pub struct PublishOptions {
     pub title: Option<String>,
     /// The viewer's defaults (web crate `Options`: camera, preset, bounces...), as JSON.
     pub viewer_options: serde_json::Map<String, serde_json::Value>,
-    /// Points of interest and tours (TOML) added to the package's: [`crate::cli::story_file::story_of`].
+    /// Points of interest and tours (TOML) added to the package's: [`crate::engine::story_file::story_of`].
     pub story: Option<PathBuf>,
     /// The still picture a browser without WebGPU shows (None: none).
     pub picture: Option<Picture>,
@@ -161,9 +162,9 @@ pub fn publish(opts: &PublishOptions) -> Result<PublishSummary> {
     }
     let package_bytes = pkg.file_size();
     let world = pkg.scene()?;
-    let (pois, tours) = crate::cli::story_file::story_of(&world, opts.story.as_deref())?;
+    let (pois, tours) = crate::engine::story_file::story_of(&world, opts.story.as_deref())?;
     let relight =
-        opts.lights.as_ref().map(|p| crate::cli::lighting_file::relight_of(&world, p)).transpose()?;
+        opts.lights.as_ref().map(|p| crate::engine::lighting_file::relight_of(&world, p)).transpose()?;
     drop(pkg);
     let bundle = opts.bundle.clone().or_else(default_bundle).ok_or_else(|| {
         output(

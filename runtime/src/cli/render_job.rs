@@ -5,232 +5,22 @@
 use std::path::{Path, PathBuf};
 use web_time::Instant;
 
-use glam::{DVec3, Vec3};
-use grotto_format::Package;
 use serde::Serialize;
 
-use crate::cli::{image_out, labels, lighting_file};
+use crate::cli::{image_out, labels};
+use crate::engine::{Opened, RenderOptions};
 use crate::error::{Error, Result};
-use crate::gpu::{Gpu, GpuOptions};
+use crate::gpu::Gpu;
 use crate::light::plan::EffectPlan;
 use crate::render::{Frame, SceneUpdate};
 use crate::render::{PassStats, Renderer};
 use crate::scene::data::{SceneData, TileMode};
-use crate::settings::{ClipBox, Settings};
-use crate::stream::Streaming;
-use crate::stream::residency::{self, Budget, Residency};
-use crate::view::camera::{self, Camera};
-use crate::view::framing::Framing;
-
-/// Whether to light the view with a headlamp at the camera.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Headlamp {
-    /// Only when the scene has no light of its own (no lights, emission or environment map).
-    Auto,
-    On,
-    Off,
-}
-
-impl Headlamp {
-    /// The headlamp setting `--headlamp` names, if it names one.
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "auto" => Some(Headlamp::Auto),
-            "on" => Some(Headlamp::On),
-            "off" => Some(Headlamp::Off),
-            _ => None,
-        }
-    }
-}
-
-/// Everything `grotto render` can be asked.
-#[derive(Clone, Debug)]
-pub struct RenderOptions {
-    pub package: PathBuf,
-    pub camera: CameraChoice,
-    /// Named cameras to fly through; with `frames`, renders a sequence.
-    pub path: Vec<String>,
-    /// A tour of the package (`--tour NAME`): an image a stop, or with `tour_fps` the tour as a
-    /// film (view/story.rs [`crate::view::story::tour_cameras`]).
-    pub tour: Option<String>,
-    pub tour_fps: Option<f32>,
-    /// Points of interest and tours added to the package's (`--story FILE`, cli/story_file.rs).
-    pub story: Option<PathBuf>,
-    /// A lighting file changing the package's lights (`--lights FILE`, cli/lighting_file.rs).
-    pub lights: Option<PathBuf>,
-    /// Circuits switched on or off (`--circuits NAME=on|off`), the lighting file's or the
-    /// package's.
-    pub circuits: Vec<(String, bool)>,
-    pub frames: u32,
-    pub width: u32,
-    pub height: u32,
-    pub out: PathBuf,
-    pub settings: Settings,
-    /// `None`: automatic exposure (mean log luminance to middle grey).
-    pub exposure: Option<f32>,
-    pub gpu: GpuOptions,
-    /// Replace the package's lights by a lamp string of this many 8 W lamps
-    /// ([`SceneData::lamp_string`]): how cost and error grow with the number of lights.
-    pub lamp_string: Option<u32>,
-    /// A headlamp at the (first) camera ([`crate::view::framing::headlamp`]).
-    pub headlamp: Headlamp,
-    /// GPU bytes for tiles (`--gpu-memory`); `None`: [`default_gpu_memory`].
-    pub gpu_memory: Option<u64>,
-    /// Most surfels drawn (`--point-budget`); `None`: no limit.
-    pub point_budget: Option<u64>,
-    /// Along a path, most bounces run before a frame whose tiles changed (`--frame-bounces`);
-    /// the rest runs one bounce per frame, so light converges over frames. `None`: settle.
-    pub frame_bounces: Option<u32>,
-    /// Along a path, most tile bytes uploaded before a frame (`--upload-per-frame`,
-    /// [`residency::limit_uploads`]); `None`: no limit.
-    pub upload_per_frame: Option<u64>,
-    /// Cut the view to this box, world metres `[min, max]` (`--clip`): see [`ClipBox`].
-    pub clip_world_m: Option<[[f64; 3]; 2]>,
-    /// Render at this many times the width and height and average each block (`--supersample`,
-    /// 1..=4): anti-aliased edges and silhouettes at its square in G-buffer and shade work.
-    pub supersample: u32,
-    /// Samples a pixel, each jittered within it, averaged (`--samples`, anti-aliasing as the
-    /// viewers do at rest: passes/resolve.rs): anti-aliased at that many frames' G-buffer and
-    /// shade work, no more memory. 1: the pixel centres.
-    pub samples: u32,
-    /// Draw the labels of the points of interest in view into the image (`--labels`, as the
-    /// page shows them; cli/labels.rs). PNG and JPEG only.
-    pub labels: bool,
-}
-
-/// A box in world metres `[min, max]` in a scene's frame; an error where it is empty or not
-/// finite.
-pub(crate) fn clip_in_frame(world_m: [[f64; 3]; 2], frame_origin_m: [f64; 3]) -> Result<ClipBox> {
-    let [lo, hi] = world_m;
-    if !lo.iter().chain(&hi).all(|v| v.is_finite()) || (0..3).any(|a| lo[a] > hi[a]) {
-        return Err(Error::Setting {
-            name: "clip",
-            problem: format!(
-                "the box {lo:?} .. {hi:?} is empty or not finite: give min x,y,z then max x,y,z"
-            ),
-        });
-    }
-    let frame = DVec3::from_array(frame_origin_m);
-    Ok(ClipBox {
-        min_m: (DVec3::from_array(lo) - frame).as_vec3(),
-        max_m: (DVec3::from_array(hi) - frame).as_vec3(),
-    })
-}
-
-impl RenderOptions {
-    /// `grotto render PACKAGE -o OUT` with every other option at its command-line default: the
-    /// package's first camera or a framed view, 800x600, the balanced preset, automatic exposure
-    /// and headlamp, the best adapter.
-    pub fn defaults(package: PathBuf, out: PathBuf) -> Self {
-        RenderOptions {
-            package,
-            camera: CameraChoice::Default,
-            path: Vec::new(),
-            tour: None,
-            tour_fps: None,
-            story: None,
-            lights: None,
-            circuits: Vec::new(),
-            frames: 30,
-            width: 800,
-            height: 600,
-            out,
-            settings: Settings::preset(crate::settings::Quality::Balanced),
-            exposure: None,
-            gpu: GpuOptions::default(),
-            lamp_string: None,
-            headlamp: Headlamp::Auto,
-            gpu_memory: None,
-            point_budget: None,
-            frame_bounces: None,
-            upload_per_frame: None,
-            clip_world_m: None,
-            supersample: 1,
-            samples: 1,
-            labels: false,
-        }
-    }
-}
+use crate::settings::Settings;
+use crate::stream::residency::Residency;
 
 /// Largest `--supersample`: 16 samples a pixel; beyond, the G-buffer of a 1080p frame outgrows
 /// what most adapters allow in one texture.
 pub const MAX_SUPERSAMPLE: u32 = 4;
-
-/// Watts of one lamp of `--lamps` (the synthetic cave's lamp string uses the same).
-pub const STRING_LAMP_W: f32 = 8.0;
-/// Height of a `--lamps` lamp above its floor, metres.
-pub const STRING_LAMP_LIFT_M: f32 = 0.6;
-
-use crate::gpu::default_gpu_memory;
-use crate::view::framing::{CameraChoice, resolve_camera};
-
-/// `--lamps`: the lights replaced by a lamp string.
-fn apply_lamps(opts: &RenderOptions, scene: &mut SceneData) {
-    if let Some(n) = opts.lamp_string {
-        scene.lights = scene.lamp_string(n as usize, STRING_LAMP_W, STRING_LAMP_LIFT_M);
-    }
-}
-
-/// A scene with no voxels is an error (nothing to render).
-fn non_empty(scene: SceneData) -> Result<SceneData> {
-    if scene.leaves.is_empty() {
-        return Err(Error::Scene {
-            package: scene.name.clone(),
-            problem: "no voxels to render (empty package)".into(),
-        });
-    }
-    Ok(scene)
-}
-
-/// The package opened under the job's budgets, with `--lamps` applied: the whole scene where it
-/// fits (no [`Streaming`]); else every tile at its far level, the scene cameras are resolved (and
-/// a view framed) on before [`prepare`] chooses each tile's level, so a package over budget is
-/// never loaded whole.
-fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Streaming>)> {
-    let pkg = Package::open(&opts.package)?;
-    let world = pkg.scene()?;
-    // A story file amends the package's points of interest and tours (`--story`).
-    let story = match &opts.story {
-        Some(path) => {
-            let (pois, tours) = crate::cli::story_file::story_of(&world, Some(path))?;
-            Some((pois, tours, world.cameras.clone()))
-        }
-        None => None,
-    };
-    let relight = opts.lights.as_ref().map(|p| lighting_file::relight_of(&world, p)).transpose()?;
-    let relight = lighting_file::with_circuits(&world, relight, &opts.circuits)?;
-    let with_story = |mut scene: SceneData| {
-        if let Some((pois, tours, cameras)) = &story {
-            (scene.pois, scene.tours) =
-                crate::scene::story::in_frame(scene.frame_origin_m, pois, tours, cameras);
-        }
-        scene
-    };
-    // The lighting file first; `--lamps`, a measurement's stand-in, replaces whatever is lit.
-    let lights = |s: &mut SceneData| {
-        if let Some(r) = &relight {
-            r.apply(s);
-        }
-        apply_lamps(opts, s);
-    };
-    let budget = Budget {
-        gpu_bytes: opts.gpu_memory.unwrap_or_else(|| default_gpu_memory(gpu)),
-        points: opts.point_budget.unwrap_or(u64::MAX),
-        pools: None,
-    };
-    let tiles = residency::footprints(&pkg, opts.settings.radiance_f16)?;
-    let full_bytes: u64 = tiles.iter().map(|t| t.full.bytes).sum();
-    let full_surfels: u64 = tiles.iter().map(|t| t.full.surfels).sum();
-    if full_bytes <= budget.gpu_bytes && full_surfels <= budget.points {
-        let mut scene = with_story(non_empty(SceneData::from_package(&pkg)?)?);
-        lights(&mut scene);
-        return Ok((scene, None));
-    }
-    let aspect = opts.width as f32 / opts.height.max(1) as f32;
-    let (coarse, streaming) = Streaming::far_first(pkg, tiles, budget, aspect, &opts.settings, lights)?;
-    Ok((with_story(non_empty(coarse)?), Some(streaming)))
-}
 
 /// One frame of a job, for `--json` and the fly-through tables.
 #[derive(Clone, Debug, Serialize)]
@@ -334,138 +124,6 @@ pub enum Progress {
     Frame { done: u32, total: u32 },
 }
 
-/// What `framing` chose, in world coordinates a user can pass back as options.
-fn framing_note(scene: &SceneData, f: &Framing) -> String {
-    let frame = DVec3::from_array(scene.frame_origin_m);
-    let world = |p: Vec3| (p.as_dvec3() + frame).to_array().map(|v| format!("{v:.3}")).join(",");
-    format!(
-        "camera: the package has none; framed from {} the data (about {:.0}% of the image \
-         sees a surface, median distance {:.2} m): --eye={} --look-at={} --up={}",
-        f.kind,
-        f.estimate.coverage * 100.0,
-        f.estimate.median_distance_m,
-        world(f.camera.eye_m),
-        world(f.camera.look_at_m),
-        [f.camera.up.x, f.camera.up.y, f.camera.up.z].map(|v| format!("{v}")).join(","),
-    )
-}
-
-/// The scene and cameras a job renders: the package's scene (with `--lamps` applied), the cameras
-/// of the choice or path, and a headlamp at the first camera where the options or a lightless
-/// scene call for one; with notes saying what was chosen.
-pub(crate) fn prepare(opts: &RenderOptions, gpu: &Gpu) -> Result<Prepared> {
-    let (mut scene, streaming) = open_scene(opts, gpu)?;
-    let aspect = opts.width as f32 / opts.height.max(1) as f32;
-    let splat = opts.settings.splat_scale;
-    let mut notes = Vec::new();
-    let mut framed = None;
-    let cameras: Vec<Camera> = if let Some(name) = &opts.tour {
-        let tour = scene.tours.iter().find(|t| &t.name == name).ok_or_else(|| {
-            let names: Vec<&str> = scene.tours.iter().map(|t| t.name.as_str()).collect();
-            Error::Camera(format!(
-                "no tour named {name:?} in {} (it has: {})",
-                scene.name,
-                if names.is_empty() { "none".into() } else { names.join(", ") }
-            ))
-        })?;
-        crate::view::story::tour_cameras(tour, opts.tour_fps)
-    } else if opts.path.is_empty() {
-        let (c, f) = resolve_camera(&scene, &opts.camera, aspect, splat)?;
-        notes.extend(f.as_ref().map(|f| framing_note(&scene, f)));
-        framed = f;
-        vec![c]
-    } else if camera::path_file::is_file(&opts.path) {
-        // A path recorded by `grotto view` (or written by hand): keyframes in world metres.
-        let keys = camera::path_file::read(Path::new(&opts.path[0]), scene.frame_origin_m)?;
-        camera::path(&keys, opts.frames.max(1))
-    } else {
-        let keys = opts
-            .path
-            .iter()
-            .map(|n| resolve_camera(&scene, &CameraChoice::Named(n.clone()), aspect, splat).map(|c| c.0))
-            .collect::<Result<Vec<_>>>()?;
-        camera::path(&keys, opts.frames.max(1))
-    };
-    for c in &cameras {
-        c.validate()?;
-    }
-    let clip = opts.clip_world_m.map(|b| clip_in_frame(b, scene.frame_origin_m)).transpose()?;
-    // Over budget: the tiles the first camera needs in full, the others stay coarse.
-    let residency = match &streaming {
-        Some(st) => {
-            let r = st.choose(&cameras[0], clip)?;
-            // The story as opened (a story file's amendments included) stays.
-            let story = (std::mem::take(&mut scene.pois), std::mem::take(&mut scene.tours));
-            scene = st.load(&r, std::mem::take(&mut scene.lights), false)?;
-            (scene.pois, scene.tours) = story;
-            Some(r)
-        }
-        None => None,
-    };
-    let want = match opts.headlamp {
-        Headlamp::On => true,
-        Headlamp::Off => false,
-        Headlamp::Auto => !scene.has_own_light(),
-    };
-    if want {
-        let first = cameras[0];
-        // A framed view was estimated already; a given one is estimated here.
-        let seen = framed.as_ref().map(|f| f.estimate);
-        let lamp = crate::view::framing::scene_headlamp(&scene, &first, aspect, splat, seen);
-        let distance_m = lamp.sized_for_m;
-        let lamp = lamp.light;
-        notes.push(format!(
-            "light: {}; a headlamp at the camera, {:.3} W/sr (1 W/m^2 at {distance_m:.2} m){}",
-            if scene.has_own_light() {
-                "--headlamp on"
-            } else {
-                "the scene has no lights, emission or environment map (--headlamp off for none)"
-            },
-            lamp.intensity_w_sr.max_element(),
-            if cameras.len() > 1 { ", fixed at the path's first camera" } else { "" }
-        ));
-        scene.lights.push(lamp);
-        scene.headlamp = true;
-    }
-    if let Some(r) = &residency {
-        notes.push(format!(
-            "residency: {} of {} tiles in full, {} at their coarse level, {} at their far level; {} of \
-             tile data (budget {}: --gpu-memory less the pools' headroom), {} surfels drawn{}",
-            r.totals.full_tiles,
-            r.decisions.len(),
-            r.totals.coarse_tiles,
-            r.totals.far_tiles,
-            crate::gpu::human_bytes(r.totals.resident_bytes),
-            crate::gpu::human_bytes(r.totals.budget.gpu_bytes),
-            r.totals.surfels,
-            if r.totals.visible_coarse > 0 {
-                format!(
-                    "; {} tiles in view not held in full (raise --gpu-memory or --point-budget)",
-                    r.totals.visible_coarse
-                )
-            } else {
-                String::new()
-            }
-        ));
-    }
-    Ok(Prepared { scene, cameras, notes, residency, streaming, clip })
-}
-
-/// What [`prepare`] gives a job.
-#[derive(Debug)]
-pub(crate) struct Prepared {
-    pub(crate) scene: SceneData,
-    pub(crate) cameras: Vec<Camera>,
-    /// What was chosen on the user's behalf (framing, headlamp, residency).
-    pub(crate) notes: Vec<String>,
-    /// `None` where the whole package fits the budgets.
-    pub(crate) residency: Option<Residency>,
-    /// Where it did not: how to choose again for another camera.
-    pub(crate) streaming: Option<Streaming>,
-    /// `--clip` in the scene's frame.
-    pub(crate) clip: Option<ClipBox>,
-}
-
 /// Pixels at most this bright (max of sRGB channels, 0..=255) count as black: no light at all,
 /// not a dark corner (the demo's entrance passage, dark by design, has 8% of its pixels at <= 1
 /// and 52% at <= 4).
@@ -526,11 +184,6 @@ pub(crate) fn frame_path(out: &Path, i: u32, n: u32) -> PathBuf {
 
 use crate::render::auto_exposure;
 
-/// Opens a package and reads its scene; an empty package is an error (nothing to render).
-pub fn load_scene(package: &Path) -> Result<SceneData> {
-    non_empty(SceneData::from_package(&Package::open(package)?)?)
-}
-
 /// A bad `still_samples` is the command line's `--samples`.
 fn as_samples(e: Error) -> Error {
     match e {
@@ -564,7 +217,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let (w_px, h_px) = (opts.width * opts.supersample, opts.height * opts.supersample);
     let gpu = Gpu::new(&opts.gpu)?;
     let t_load = Instant::now();
-    let Prepared { mut scene, cameras, notes, residency, streaming, clip } = prepare(opts, &gpu)?;
+    let Opened { mut scene, cameras, notes, residency, streaming, clip } = crate::engine::open(opts, &gpu)?;
     let load_s = t_load.elapsed().as_secs_f64();
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
@@ -678,26 +331,6 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         stats: r.stats().clone(),
         settings: r.settings().clone(),
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_clip_box_at_survey_coordinates_reaches_the_frame_exactly_and_an_empty_one_is_refused() {
-        let frame = [512_300.0, 5_123_400.0, 300.0];
-        let c = clip_in_frame([[512_310.25, 5_123_401.5, 299.0], [512_320.0, 5_123_410.0, 305.125]], frame)
-            .unwrap();
-        assert_eq!(c.min_m, Vec3::new(10.25, 1.5, -1.0));
-        assert_eq!(c.max_m, Vec3::new(20.0, 10.0, 5.125));
-        let (inside, above) = (Vec3::new(15.0, 5.0, 0.0), Vec3::new(15.0, 5.0, 6.0));
-        assert!(c.meets(inside, inside) && !c.meets(above, above));
-        for bad in [[[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]], [[f64::NAN, 0.0, 0.0], [1.0, 1.0, 1.0]]] {
-            let e = clip_in_frame(bad, frame).unwrap_err();
-            assert!(matches!(e, Error::Setting { name: "clip", .. }), "{e}");
-        }
-    }
 }
 
 /// What the tiles' loader brought before a frame, and what the renderer did with it.

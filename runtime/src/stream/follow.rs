@@ -18,7 +18,7 @@ use crate::view::camera::Camera;
 
 /// The renderer for a job's first scene ([`streaming::renderer_for`]), and the loader that keeps its
 /// tiles following the camera where the package is over budget (`streaming` and the `first`
-/// residency it was chosen with, from [`crate::cli::render_job::prepare`]).
+/// residency it was chosen with, from [`crate::engine::open`]).
 pub(crate) fn start(
     gpu: &Gpu,
     scene: &SceneData,

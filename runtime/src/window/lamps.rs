@@ -287,7 +287,7 @@ fn set(r: &mut Relight, name: &str, f: impl FnOnce(&mut Light)) {
 /// since a profile shapes the beam itself). Saved as `ies = "path"`, which a lighting file reads
 /// relative to its own folder.
 fn profiled(l: &mut Light, path: &Path) -> std::result::Result<(), String> {
-    let text = crate::cli::lighting_file::read_ies(path)?;
+    let text = crate::engine::lighting_file::read_ies(path)?;
     let ies = grotto_format::ies::parse(&text).map_err(|e| format!("line {}: {}", e.line, e.problem))?;
     let (profile, _lumens) = ies.profile()?;
     let (position_m, aim) = match l.shape {

@@ -1,5 +1,5 @@
 //! `grotto view`: a window (winit) on the same renderer `grotto render` uses. A thin shell: it
-//! opens the package as a render job does ([`render_job::prepare`]), keeps the resident tiles
+//! opens the package as a render job does ([`crate::engine::open`]), keeps the resident tiles
 //! following the camera on a loader thread ([`Follow`]: flying never waits for the disk), renders
 //! each frame with [`Renderer::draw`] (at rest, once the light is in, [`Renderer::draw_still`]:
 //! a sample a pixel more each frame, anti-aliasing the still image) and presents the tonemapped output through a small blit
@@ -41,7 +41,7 @@ use winit::window::{Fullscreen, Window, WindowId};
 pub use pace::{FrameLog, Pacer};
 
 use crate::cli::image_out;
-use crate::cli::render_job::{self, RenderOptions};
+use crate::engine::RenderOptions;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::render::present::{Bar, Blit, Target};
@@ -272,7 +272,7 @@ impl App {
         };
         surface.configure(&gpu.device, &config);
         let blit = Blit::new(&gpu, format)?;
-        let prepared = render_job::prepare(o, &gpu)?;
+        let prepared = crate::engine::open(o, &gpu)?;
         let mut settings = o.settings.clone();
         settings.exposure = o.exposure.unwrap_or(1.0);
         let (mut renderer, follow) = follow::start(
