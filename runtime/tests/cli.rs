@@ -627,3 +627,65 @@ fn a_scan_given_to_render_is_packed_once_then_rendered() {
     assert!(err.contains("packed from it before"), "{err}");
     assert_eq!(packed(), 1, "packed once");
 }
+
+/// The subcommands `help` lists (the lines under "Commands:", `help` itself left out).
+fn subcommands(help: &str) -> Vec<String> {
+    help.lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| !l.trim().is_empty())
+        .filter_map(|l| l.split_whitespace().next())
+        .filter(|name| *name != "help")
+        .map(str::to_owned)
+        .collect()
+}
+
+/// `program`'s reference in markdown: its help, then each subcommand's, as the program prints them.
+fn help_reference(program: &std::path::Path, name: &str) -> String {
+    let help = |args: &[&str]| {
+        let out = Command::new(program).args(args).arg("--help").output().unwrap();
+        assert!(out.status.success(), "{name} {args:?} --help: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let top = help(&[]);
+    let mut md = format!("## {name}\n\n```text\n{}\n```\n", top.trim_end());
+    for sub in subcommands(&top) {
+        md += &format!("\n### {name} {sub}\n\n```text\n{}\n```\n", help(&[&sub]).trim_end());
+    }
+    md
+}
+
+/// docs/cli.md is the commands' own help, generated: it cannot drift from the definitions. With
+/// `GROTTO_BLESS=1` the test writes it again instead of comparing.
+#[test]
+fn the_command_line_reference_is_the_commands_own_help() {
+    let pack = grotto_pack_beside_grotto();
+    let grotto = std::path::Path::new(env!("CARGO_BIN_EXE_grotto"));
+    let listed = |program: &std::path::Path| {
+        subcommands(&String::from_utf8(Command::new(program).arg("--help").output().unwrap().stdout).unwrap())
+    };
+    let (of_grotto, of_pack) = (listed(grotto), listed(&pack));
+    for (list, sub) in
+        [(&of_grotto, "render"), (&of_grotto, "view"), (&of_grotto, "publish"), (&of_pack, "build")]
+    {
+        assert!(list.iter().any(|s| s == sub), "no {sub} in {list:?}");
+    }
+    let want = format!(
+        "# Command-line reference\n\nEvery command and option of `grotto` and `grotto-pack`, as their \
+         `--help` prints them. Generated: `GROTTO_BLESS=1 cargo test -p grotto-runtime --test cli \
+         the_command_line_reference` writes it again, and the test fails while it differs from the \
+         commands. Do not edit by hand; the user's guide (guide.md) says when to use which.\n\n{}\n{}",
+        help_reference(grotto, "grotto"),
+        help_reference(&pack, "grotto-pack"),
+    );
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/cli.md");
+    if std::env::var_os("GROTTO_BLESS").is_some() {
+        std::fs::write(path, &want).unwrap();
+    }
+    let have = std::fs::read_to_string(path).unwrap_or_default();
+    assert!(
+        have == want,
+        "docs/cli.md differs from the commands' help: run GROTTO_BLESS=1 cargo test -p grotto-runtime \
+         --test cli the_command_line_reference, and commit it"
+    );
+}

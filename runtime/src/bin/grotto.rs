@@ -51,8 +51,9 @@ enum Command {
     /// Explore a package in a window with a panel (quality, bounces, exposure, shadows, view; the
     /// effect plan, fps and pass times, resident tiles). Mouse drag looks, WASD flies (Q/E
     /// down/up), the wheel sets the speed; a right click orbits the point under the cursor, O the
-    /// centre (O again: fly); Tab next named camera, R the first; 1-5 views (lit, albedo, normals,
-    /// light, level); H panel; K records a camera path; P screenshot; F11 full screen; Esc quits.
+    /// centre (O again: fly); Tab next named camera, R the first; 1-7 views (lit, albedo, normals,
+    /// light, level, scan, lux); C clip box; M measure; G / N / B tours; L lighting mode; H panel;
+    /// K records a camera path; P screenshot; F11 full screen; Esc quits.
     /// Tiles follow the camera; the light waits while it moves and converges when it rests. Takes
     /// the render options (--size is the window's size).
     View(Box<ViewArgs>),
