@@ -35,6 +35,9 @@ pub mod light;
 pub mod render;
 /// Residency, streaming for every shell, and the loader thread.
 pub mod stream;
+/// The frame both viewers draw: light first within the shell's pacing, then the frame, a still
+/// sample at rest.
+pub mod viewer;
 /// A viewer's story and tools (labels, flights, tours, measuring), the window's and the page's.
 pub mod guide;
 /// Opening a package for rendering: the options, the scene under the budgets, the cameras, the

@@ -40,6 +40,7 @@ use grotto_runtime::stream::{self, Streaming};
 use grotto_runtime::view::camera::{Camera, Nav};
 use grotto_runtime::view::frame_target::FrameTarget;
 use grotto_runtime::view::framing::{CameraChoice, resolve_camera, scene_headlamp};
+use grotto_runtime::viewer::{LightPacing, REST_FRAME_MS, light_then_draw};
 use story::story_for;
 use wasm_bindgen::prelude::*;
 use web_time::Instant;
@@ -108,9 +109,45 @@ struct State {
     health: health::Health,
 }
 
-/// Longest frame at rest, as the window viewer's (window/pace.rs `REST_FRAME_MS`), unless the
-/// page's `rest_ms` says otherwise.
-const REST_FRAME_MS: f64 = 100.0;
+/// What the page's readiness asks of its own state; the renderer's part is asked apart, so a
+/// frame can ask it once its light has run ([`light_then_draw`]).
+#[derive(Clone, Copy)]
+struct Ready {
+    /// No step of tiles on its way, the view settled, no exposure read-back pending, a frame
+    /// shown.
+    idle: bool,
+    exposure_final: bool,
+}
+
+impl Ready {
+    fn of(s: &State) -> Self {
+        Self {
+            idle: s.step.is_none() && s.settled && s.exposure_read.is_none() && s.frames > 0,
+            exposure_final: s.exposure_final,
+        }
+    }
+
+    /// At rest with the light in and the exposure final.
+    fn holds(self, renderer: &Renderer, moving: bool) -> bool {
+        // A view without light (normals, albedo...) waits for neither the light nor the exposure.
+        let view = renderer.settings().view;
+        (renderer.light_progress().converged || !view.shows_light())
+            && !moving
+            && self.idle
+            && (self.exposure_final || !view.exposed())
+    }
+}
+
+/// The page's light for one frame: one slice, sized from the last frame's time ([`State::pace`]).
+struct OneSlice(Option<u32>);
+
+impl LightPacing for OneSlice {
+    fn next_slice(&mut self) -> Option<u32> {
+        self.0.take()
+    }
+
+    fn slice_ran(&mut self, _leaves: u32) {}
+}
 
 /// A frame recorded: when, the leaves its light slice propagated, and whether it was a plain
 /// draw (no shadow maps or injection, which a frame does not usually pay for).
@@ -510,26 +547,6 @@ impl State {
         // the bounce.
         let submitted = Instant::now();
         *self.frame_done.lock().map_err(|_| Error::Setting("frame timing poisoned".into()))? = None;
-        self.renderer.hold_light(None);
-        let light_plan = self.renderer.plan(None);
-        self.light_plan = light_plan
-            .steps
-            .iter()
-            .find(|s| s.pass == Pass::Propagate)
-            .map(|s| s.reason.clone())
-            .unwrap_or_default();
-        let mut leaves = 0;
-        let light = !moving
-            && self.renderer.settings().view.shows_light()
-            && !self.renderer.light_progress().converged;
-        if light {
-            leaves = self.renderer.update_light_slice(self.slice_leaves)?;
-        }
-        self.renderer.hold_light(Some(if moving {
-            "the camera is moving"
-        } else {
-            "this frame's light ran before it, within the frame budget"
-        }));
         // Moving, the frame-time target trades scale and detail; at rest they come back.
         let (scale, detail) = self.target.as_ref().map_or((1.0, 1.0), |t| t.for_frame(moving));
         self.renderer.set_lod_detail(detail);
@@ -537,11 +554,15 @@ impl State {
             (((self.width as f32 * scale) as u32).max(1), ((self.height as f32 * scale) as u32).max(1));
         // Ready, each frame adds a sample a pixel jittered within it (anti-aliasing at rest,
         // passes/resolve.rs); the page rests once the still frame is complete.
-        let plan = if self.ready(moving) {
-            self.renderer.draw_still(&camera, w, h)?.0
-        } else {
-            self.renderer.draw(&camera, w, h)?
-        };
+        let ready = Ready::of(self);
+        let mut pacing = OneSlice(Some(self.slice_leaves));
+        let drawn = light_then_draw(&mut self.renderer, &camera, (w, h), moving, &mut pacing, |r| {
+            ready.holds(r, moving)
+        })?;
+        self.light_plan = (drawn.light_plan.steps.iter())
+            .find(|s| s.pass == Pass::Propagate)
+            .map(|s| s.reason.clone())
+            .unwrap_or_default();
         self.present(moving)?;
         self.story.drawn(&self.renderer, &camera, (self.width, self.height), (w, h))?;
         self.frames += 1;
@@ -552,10 +573,8 @@ impl State {
             self.first_frame_ms = self.opened.elapsed().as_secs_f64() * 1e3;
         }
         // Direct light (after a change of lights or tiles) is not what a frame costs.
-        let direct =
-            |p: &grotto_runtime::light::plan::EffectPlan| p.runs(Pass::Shadow) || p.runs(Pass::Inject);
-        let plain = !(direct(&plan) || light && direct(&light_plan));
-        let shadow = plan.runs(Pass::Shadow) || light && light_plan.runs(Pass::Shadow);
+        let (plain, shadow) = (!drawn.direct_light(), drawn.shadow());
+        let leaves = drawn.leaves as u32;
         self.last = Some(LastFrame { submitted, leaves, plain, moving, shadow });
         let frame_done = self.frame_done.clone();
         self.gpu.queue.on_submitted_work_done(move || {
@@ -731,15 +750,7 @@ impl State {
     /// The light has converged, the tiles the view wants are resident, the exposure is final
     /// and the camera rests.
     fn ready(&self, moving: bool) -> bool {
-        // A view without light (normals, albedo...) waits for neither the light nor the exposure.
-        let lit = self.renderer.settings().view.shows_light();
-        (self.renderer.light_progress().converged || !lit)
-            && !moving
-            && self.step.is_none()
-            && self.settled
-            && (self.exposure_final || !self.renderer.settings().view.exposed())
-            && self.exposure_read.is_none()
-            && self.frames > 0
+        Ready::of(self).holds(&self.renderer, moving)
     }
 
     /// Ready, and the still frame's anti-aliasing samples all in: the image will not change.

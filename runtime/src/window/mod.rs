@@ -391,13 +391,17 @@ impl App {
             ((s.config.height as f32 * scale) as u32).max(1),
         );
         let bounces_before = s.renderer.stats().bounces_done;
-        light_first(s, moving)?;
-        let t = Instant::now();
         // At rest with the light in, each frame adds a sample a pixel jittered within it
         // (anti-aliasing at rest, passes/resolve.rs) until the still frame is complete.
-        let settled = s.renderer.light_progress().converged || !s.renderer.settings().view.shows_light();
-        let still = !moving && settled && s.follow.as_ref().is_none_or(|f| !f.busy());
-        let plan = if still { s.renderer.draw_still(&cam, w, h)?.0 } else { s.renderer.draw(&cam, w, h)? };
+        let loading = s.follow.as_ref().is_some_and(|f| f.busy());
+        let still = |r: &Renderer| {
+            let settled = r.light_progress().converged || !r.settings().view.shows_light();
+            !moving && settled && !loading
+        };
+        let mut pacing = pace::TimedSlices::new(&mut s.pacer, moving);
+        let drawn =
+            crate::viewer::light_then_draw(&mut s.renderer, &cam, (w, h), moving, &mut pacing, still)?;
+        let (plan, t) = (drawn.plan, drawn.draw_started);
         s.story.drawn(&s.renderer, &cam, (s.config.width, s.config.height), (w, h))?;
         if !(plan.runs(crate::light::plan::Pass::Shadow) || plan.runs(crate::light::plan::Pass::Inject)) {
             // Direct light (after a change of lights or tiles) is not what a frame costs.
@@ -682,31 +686,6 @@ fn model(
             _ => Vec::new(),
         },
     }
-}
-
-/// Light first, in slices of a bounce, for as long as the pacer gives it (none while `moving`);
-/// then the light is held so that the frame drawn after it adds none.
-fn light_first(s: &mut State, moving: bool) -> Result<()> {
-    let light_ms = s.pacer.light_ms(moving);
-    // Views without light (albedo, normals, level) leave the light as it is.
-    let shows_light = s.renderer.settings().view.shows_light();
-    let t_light = Instant::now();
-    s.renderer.hold_light(None);
-    for _ in 0..64 {
-        let left_ms = light_ms - t_light.elapsed().as_secs_f64() * 1e3;
-        if moving || left_ms <= 0.0 || s.renderer.light_progress().converged || !shows_light {
-            break;
-        }
-        let t = Instant::now();
-        let leaves = s.renderer.update_light_slice(s.pacer.slice_leaves(left_ms))?;
-        s.pacer.record_slice(t.elapsed().as_secs_f64() * 1e3, leaves);
-    }
-    s.renderer.hold_light(Some(if moving {
-        "the camera is moving"
-    } else {
-        "this frame's light ran before it, within the frame budget"
-    }));
-    Ok(())
 }
 
 /// Applies what the panel changed.

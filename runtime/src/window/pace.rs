@@ -5,12 +5,9 @@
 //! frame. Pure bookkeeping, tested without a window.
 
 use serde::Serialize;
+use web_time::Instant;
 
-/// Longest frame at rest: nothing on screen moves but the light, and a person who starts moving
-/// again waits at most this long for the first moving frame. What a rest frame adds to its draw is
-/// the light's share of the time: at 100 ms the light gets about two thirds of a frame on a
-/// software adapter, at 33 ms about half, and converges that much later (docs/benchmarks.md).
-pub(crate) const REST_FRAME_MS: f64 = 100.0;
+use crate::viewer::{LightPacing, REST_FRAME_MS};
 
 /// Leaves in the first slice, before a slice has been timed.
 pub(crate) const FIRST_SLICE_LEAVES: u32 = 4096;
@@ -65,6 +62,35 @@ impl Pacer {
     }
 }
 
+/// The window's light for one frame: slices timed on the CPU for as long as the pacer gives the
+/// light ([`Pacer::light_ms`]), each sized to the time left at the last measured rate.
+pub(crate) struct TimedSlices<'a> {
+    pacer: &'a mut Pacer,
+    light_ms: f64,
+    started: Instant,
+    slice: Instant,
+}
+
+impl<'a> TimedSlices<'a> {
+    pub(crate) fn new(pacer: &'a mut Pacer, moving: bool) -> Self {
+        let light_ms = pacer.light_ms(moving);
+        let now = Instant::now();
+        Self { pacer, light_ms, started: now, slice: now }
+    }
+}
+
+impl LightPacing for TimedSlices<'_> {
+    fn next_slice(&mut self) -> Option<u32> {
+        let left_ms = self.light_ms - self.started.elapsed().as_secs_f64() * 1e3;
+        self.slice = Instant::now();
+        (left_ms > 0.0).then(|| self.pacer.slice_leaves(left_ms))
+    }
+
+    fn slice_ran(&mut self, leaves: u32) {
+        self.pacer.record_slice(self.slice.elapsed().as_secs_f64() * 1e3, leaves);
+    }
+}
+
 /// What the frames of a viewing session cost (`grotto view --json`, docs/benchmarks.md).
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct FrameLog {
@@ -82,7 +108,7 @@ pub struct FrameLog {
     /// Frames and time since the camera came to rest, and whether this rest's convergence was
     /// counted.
     #[serde(skip)]
-    resting: Option<(u32, std::time::Instant, bool)>,
+    resting: Option<(u32, Instant, bool)>,
 }
 
 impl FrameLog {
@@ -95,7 +121,7 @@ impl FrameLog {
         }
         self.rest_ms.push(ms);
         self.rest_bounces += u64::from(bounces);
-        let (frames, since, counted) = self.resting.get_or_insert((0, std::time::Instant::now(), false));
+        let (frames, since, counted) = self.resting.get_or_insert((0, Instant::now(), false));
         *frames += 1;
         // Once per rest, and only where there was light work to wait for.
         if converged && !*counted {
