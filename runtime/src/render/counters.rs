@@ -4,6 +4,8 @@
 //! the shader invocations the GPU ran (vertices, primitives out of clipping, fragments, compute
 //! invocations). `grotto bench --json` reports them; docs/benchmarks.md tabulates them.
 
+use std::collections::BTreeMap;
+
 use serde::Serialize;
 
 use crate::error::Result;
@@ -74,12 +76,7 @@ impl StatQueries {
     }
 
     /// Reads the counts of the passes `ran` back into `work`.
-    pub(super) fn read(
-        &self,
-        gpu: &Gpu,
-        ran: &[Pass],
-        work: &mut std::collections::BTreeMap<Pass, PassWork>,
-    ) -> Result<()> {
+    pub(super) fn read(&self, gpu: &Gpu, ran: &[Pass], work: &mut BTreeMap<Pass, PassWork>) -> Result<()> {
         let bytes = gpu.read_buffer(&self.resolved, STRIDE * Pass::ALL.len() as u64)?;
         for &p in ran {
             let at = (u64::from(index(p)) * STRIDE) as usize;
@@ -96,4 +93,25 @@ impl StatQueries {
 
 fn index(pass: Pass) -> u32 {
     Pass::ALL.iter().position(|p| *p == pass).unwrap_or(0) as u32
+}
+
+/// Per-pass counters and the last measured GPU time.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PassStats {
+    /// How many times each pass was recorded (a skipped pass stays at zero).
+    pub dispatches: BTreeMap<Pass, u64>,
+    /// GPU milliseconds of each pass's last run (timestamp queries), or, where the adapter has
+    /// none, CPU wall time from recording the pass to the end of its own blocking submit.
+    pub last_ms: BTreeMap<Pass, f64>,
+    pub bounces_done: u32,
+    pub last_change: Option<f32>,
+    /// Leaves updated by all propagation bounces so far (a bounce updates only the tiles whose
+    /// light may still change: activity.rs).
+    pub propagated_leaves: u64,
+    /// What each pass's last run did (render/counters.rs).
+    pub work: BTreeMap<Pass, PassWork>,
+    /// Command buffers submitted and bytes written to GPU buffers by the last frame (a call of
+    /// `render` or a light update; scene updates count their own bytes).
+    pub last_submits: u64,
+    pub last_upload_bytes: u64,
 }

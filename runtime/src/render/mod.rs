@@ -20,11 +20,12 @@ mod tiles;
 mod transport;
 mod update;
 
+pub use counters::PassStats;
 pub use counters::PassWork;
 pub use edit::LightEdit;
 pub use frame::{Frame, LdrOutput};
 pub use light::{CarriedLight, LightProgress};
 pub use params::{auto_exposure, cone_set};
-pub use renderer::{PassStats, Renderer};
+pub use renderer::Renderer;
 pub use still::StillProgress;
 pub use tiles::SceneUpdate;

@@ -7,10 +7,7 @@
 //! `out_(k+1) = emission + direct + albedo * gather(out_k)`, so with albedo < 1 the radiance stays
 //! bounded and converges to the fixed point.
 
-use std::collections::BTreeMap;
-
 use glam::Vec3;
-use serde::Serialize;
 
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
@@ -24,7 +21,7 @@ use crate::render::targets::{Stills, ViewTargets};
 use crate::render::transport::LightTransport;
 use crate::scene::data::{SceneData, SceneLight};
 
-use crate::render::counters::{PassWork, StatQueries};
+use crate::render::counters::{PassStats, StatQueries};
 use crate::render::params::Lookup;
 use crate::render::params::base_params;
 use crate::render::params::material_slots;
@@ -33,27 +30,6 @@ use crate::render::shadow_atlas::ShadowAtlas;
 use crate::render::tiles::TilePools;
 use crate::render::tiles::Upload;
 use crate::settings::{ClipBox, Settings, ViewMode};
-
-/// Per-pass counters and the last measured GPU time.
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct PassStats {
-    /// How many times each pass was recorded (a skipped pass stays at zero).
-    pub dispatches: BTreeMap<Pass, u64>,
-    /// GPU milliseconds of each pass's last run (timestamp queries), or, where the adapter has
-    /// none, CPU wall time from recording the pass to the end of its own blocking submit.
-    pub last_ms: BTreeMap<Pass, f64>,
-    pub bounces_done: u32,
-    pub last_change: Option<f32>,
-    /// Leaves updated by all propagation bounces so far (a bounce updates only the tiles whose
-    /// light may still change: activity.rs).
-    pub propagated_leaves: u64,
-    /// What each pass's last run did (render/counters.rs).
-    pub work: BTreeMap<Pass, PassWork>,
-    /// Command buffers submitted and bytes written to GPU buffers by the last frame (a call of
-    /// `render` or a light update; scene updates count their own bytes).
-    pub last_submits: u64,
-    pub last_upload_bytes: u64,
-}
 
 /// Uploaded scene, passes and light state.
 #[derive(Debug)]

@@ -12,7 +12,7 @@ use crate::light::edit::PendingEdit;
 use crate::light::plan::{EffectPlan, Pass};
 use crate::passes;
 use crate::passes::inject::Inject;
-use crate::render::renderer::PassStats;
+use crate::render::counters::PassStats;
 
 /// The light passes and the state of the light between frames.
 #[derive(Debug)]

@@ -3,9 +3,10 @@
 //! that see a change and settles the light from what it kept.
 
 use crate::error::Result;
+use crate::render::counters::PassStats;
 use crate::render::params::{material_slots, tail_ratio_max};
 use crate::render::pool::PoolCaps;
-use crate::render::renderer::{Compat, PassStats, Renderer};
+use crate::render::renderer::{Compat, Renderer};
 use crate::render::tiles::SceneUpdate;
 use crate::scene::data::SceneData;
 
