@@ -36,7 +36,7 @@ pub struct PublishOptions {
     pub story: Option<PathBuf>,
     /// The still picture a browser without WebGPU shows (None: none).
     pub picture: Option<Picture>,
-    /// A lighting file changing the package's lights (cli/lighting_file.rs): the page and its
+    /// A lighting file changing the package's lights (engine/lighting_file.rs): the page and its
     /// picture are lit by it.
     pub lights: Option<PathBuf>,
 }

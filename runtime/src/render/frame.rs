@@ -1,5 +1,6 @@
-//! The per-frame order of passes: what the plan asks a frame for, the view's targets, recording
-//! each pass in its own command buffer and error scope, and reading the frame back.
+//! The frame scheduler: the plan's inputs gathered from the renderer's parts, the passes recorded
+//! in one command buffer and error scope (a failing frame records each alone to name it), each
+//! part told which passes ran, and the frame read back.
 
 use web_time::Instant;
 

@@ -1,7 +1,8 @@
 //! Reading and writing the light state and running single passes: how the GPU-vs-CPU tests and
 //! the reference's breakdown check the light transport. Part of the public API because checking
 //! a pass needs the same renderer a frame uses, not a build of it with extra hooks; nothing here
-//! runs in a frame, and what it keeps (the node count, a handle on the faces buffer) is a few bytes.
+//! runs in a frame, and all it keeps is a handle on the faces buffer (the node count comes from
+//! the pools).
 
 use crate::error::Result;
 use crate::gpu::types::LeafLightGpu;

@@ -5,9 +5,10 @@
 //! a sample a pixel more each frame, anti-aliasing the still image) and presents the tonemapped output through a small blit
 //! (present.rs) with the panel (egui, [`panel`]) over it.
 //!
-//! Light yields to the frame rate ([`pace`]): while the camera moves the renderer holds its
-//! bounces (the plan says so); at rest the light converges with as many bounces a frame as fit
-//! in the frame budget. A bar along the bottom shows the convergence (grey: waiting for the
+//! Light yields to the frame rate ([`pace`], through the frame both viewers draw:
+//! [`crate::viewer::light_then_draw`]): while the camera moves the renderer holds its bounces (the
+//! plan says so); at rest the light converges in as many slices of a bounce a frame as fit in the
+//! frame budget. A bar along the bottom shows the convergence (grey: waiting for the
 //! camera to rest, amber: converging, green: converged).
 //!
 //! Controls: mouse drag looks around (in orbit, turns around the pivot), WASD flies (Q/E
