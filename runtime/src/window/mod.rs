@@ -212,6 +212,8 @@ struct State {
     shot: Option<PathBuf>,
     quit_after_shot: bool,
     frame_ms: f64,
+    /// GROTTO_VIEW_TRACE: each frame's state on stderr where it changed.
+    trace: Option<pace::Trace>,
     story: story::StoryUi,
     lamps: lamps::LampEditor,
 }
@@ -351,6 +353,7 @@ impl App {
             shot: None,
             quit_after_shot: false,
             frame_ms: 0.0,
+            trace: std::env::var_os("GROTTO_VIEW_TRACE").map(|_| pace::Trace::default()),
             story,
             lamps,
         });
@@ -435,11 +438,13 @@ impl App {
         if moving {
             s.log.moving_traded.push((scale, detail));
         }
-        if std::env::var_os("GROTTO_VIEW_TRACE").is_some() {
-            eprintln!(
-                "frame {} {frame_ms:.1} ms moving {moving} bounces {bounces} {progress:?}",
-                self.summary.frames
+        if let Some(trace) = &mut s.trace {
+            let state = format!(
+                "moving {moving} bounces {bounces} {progress:?} view {} shot pending {} loading {loading}",
+                s.renderer.settings().view.name(),
+                s.shot.is_some(),
             );
+            trace.frame(self.summary.frames, frame_ms, &state, &drawn.light_plan);
         }
         self.summary.frames += 1;
         if let Some(keys) = &mut s.recording

@@ -7,6 +7,7 @@
 use serde::Serialize;
 use web_time::Instant;
 
+use crate::light::plan::EffectPlan;
 use crate::viewer::{LightPacing, REST_FRAME_MS};
 
 /// Leaves in the first slice, before a slice has been timed.
@@ -142,6 +143,29 @@ impl FrameLog {
         s.sort_by(f64::total_cmp);
         let at = |q: f64| s[((s.len() - 1) as f64 * q).round() as usize];
         Some((at(0.5), at(0.95)))
+    }
+}
+
+/// `GROTTO_VIEW_TRACE`: a line for each frame whose state differs from the last frame's (and
+/// every hundredth), and the light's plan where the passes it runs changed, so that a stuck
+/// light says why without a line for each of thousands of frames that all say the same.
+#[derive(Default)]
+pub(crate) struct Trace {
+    state: String,
+    runs: Vec<bool>,
+}
+
+impl Trace {
+    pub(crate) fn frame(&mut self, n: u32, ms: f64, state: &str, light_plan: &EffectPlan) {
+        if state != self.state || n.is_multiple_of(100) {
+            eprintln!("frame {n} {ms:.1} ms {state}");
+            state.clone_into(&mut self.state);
+        }
+        let runs: Vec<bool> = light_plan.steps.iter().map(|s| s.run).collect();
+        if runs != self.runs {
+            eprintln!("light plan at frame {n}:\n{}", light_plan.explain());
+            self.runs = runs;
+        }
     }
 }
 
