@@ -42,7 +42,6 @@ pub mod viewer;
 pub mod guide;
 /// Opening a package for rendering: the options, the scene under the budgets, the cameras, the
 /// story and lighting files.
-#[cfg(not(target_arch = "wasm32"))]
 pub mod engine;
 /// The command line's jobs: render and bench, inspect and verify, export, images, publish.
 #[cfg(not(target_arch = "wasm32"))]

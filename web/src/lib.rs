@@ -28,6 +28,7 @@ use std::cell::RefCell;
 use std::rc::Rc;
 use std::sync::{Arc, Mutex};
 
+use grotto_runtime::engine::{self, Load, SceneRequest};
 use grotto_runtime::gpu::{Gpu, GpuOptions, PendingRead, default_gpu_memory};
 use grotto_runtime::guide::{Guide, PickFor};
 use grotto_runtime::light::plan::Pass;
@@ -39,9 +40,8 @@ use grotto_runtime::stream::residency::{self, Budget, Residency};
 use grotto_runtime::stream::{self, Streaming};
 use grotto_runtime::view::camera::{Camera, Nav};
 use grotto_runtime::view::frame_target::FrameTarget;
-use grotto_runtime::view::framing::{CameraChoice, resolve_camera, scene_headlamp};
+use grotto_runtime::view::framing::{CameraChoice, resolve_camera};
 use grotto_runtime::viewer::{LightPacing, REST_FRAME_MS, light_then_draw};
-use story::story_for;
 use wasm_bindgen::prelude::*;
 use web_time::Instant;
 
@@ -211,10 +211,6 @@ impl Viewer {
         let fetched = fetch_all(url.clone(), ranges, source.expect.clone()).await?;
         insert(&mut pkg, &mut source, &fetched)?;
         let world_scene = pkg.scene()?;
-        let tiles = residency::footprints(&pkg, settings.radiance_f16)?;
-        let gpu_bytes = o.gpu_memory_mb.map_or_else(|| default_gpu_memory(&gpu), |mb| mb << 20);
-        let budget = Budget { gpu_bytes, points: u64::MAX, pools: None };
-        let aspect = width as f32 / height as f32;
         let relight = match &o.lighting {
             Some(v) => {
                 let r: grotto_runtime::scene::lighting::Relight = serde_json::from_value(v.clone())
@@ -224,14 +220,26 @@ impl Viewer {
             }
             None => None,
         };
-        let (mut far, mut streaming) = Streaming::far_first(pkg, tiles, budget, aspect, &settings, |s| {
-            if let Some(r) = &relight {
-                r.apply(s);
-            }
+        let request = SceneRequest {
+            settings: &settings,
+            aspect: width as f32 / height as f32,
+            budget: Budget {
+                gpu_bytes: o.gpu_memory_mb.map_or_else(|| default_gpu_memory(&gpu), |mb| mb << 20),
+                points: u64::MAX,
+                pools: None,
+            },
+            relight,
+            lamp_string: None,
+            story: story::given(&world_scene, o.story.as_ref())?,
+            load: Load::FarFirst,
+        };
+        let aspect = request.aspect;
+        let (mut far, streaming) = engine::open_scene(pkg, &request).map_err(|e| match e {
+            grotto_runtime::Error::Scene { problem, .. } => Error::Setting(format!("{url}: {problem}")),
+            e => e.into(),
         })?;
-        if far.leaves.is_empty() {
-            return Err(Error::Setting(format!("{url}: no voxels to show (empty package)")));
-        }
+        let mut streaming = streaming
+            .ok_or_else(|| Error::Setting(format!("{url}: the package opened whole, not far-first")))?;
 
         // The first camera as `grotto render` resolves it (named, the package's first, or
         // framed on the data); Tab goes through the package's named cameras after it.
@@ -241,12 +249,11 @@ impl Viewer {
             camera = grotto_runtime::view::story::parse_view_link(at, far.frame_origin_m)
                 .map_err(Error::Setting)?;
         }
-        let story = story_for(&far, &world_scene, o.story.as_ref())?;
+        let story = Guide::new(far.pois.clone(), far.tours.clone(), far.frame_origin_m);
         let cameras = camera_list(&far, o.camera.clone(), camera);
         if !far.has_own_light() {
             let seen = framed.map(|f| f.estimate);
-            far.lights.push(scene_headlamp(&far, &camera, aspect, settings.splat_scale, seen).light);
-            far.headlamp = true;
+            engine::add_headlamp(&mut far, &camera, aspect, settings.splat_scale, seen);
         }
         // The pools are sized for the tiles this view wants, which arrive after the first frame.
         let want = streaming.choose(&camera, None)?;

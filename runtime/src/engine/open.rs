@@ -9,81 +9,45 @@ use glam::{DVec3, Vec3};
 use grotto_format::Package;
 
 use crate::engine::lighting_file;
-use crate::engine::options::{Headlamp, RenderOptions, STRING_LAMP_LIFT_M, STRING_LAMP_W, clip_in_frame};
+use crate::engine::options::{Headlamp, RenderOptions, clip_in_frame};
+use crate::engine::scene::{self, Load, SceneRequest, non_empty};
 use crate::error::{Error, Result};
 use crate::gpu::{Gpu, default_gpu_memory};
 use crate::scene::data::SceneData;
 use crate::settings::ClipBox;
 use crate::stream::Streaming;
-use crate::stream::residency::{self, Budget, Residency};
+use crate::stream::residency::{Budget, Residency};
 use crate::view::camera::{self, Camera};
 use crate::view::framing::{CameraChoice, Framing, resolve_camera};
 
-/// `--lamps`: the lights replaced by a lamp string.
-fn apply_lamps(opts: &RenderOptions, scene: &mut SceneData) {
-    if let Some(n) = opts.lamp_string {
-        scene.lights = scene.lamp_string(n as usize, STRING_LAMP_W, STRING_LAMP_LIFT_M);
-    }
-}
-
-/// A scene with no voxels is an error (nothing to render).
-fn non_empty(scene: SceneData) -> Result<SceneData> {
-    if scene.leaves.is_empty() {
-        return Err(Error::Scene {
-            package: scene.name.clone(),
-            problem: "no voxels to render (empty package)".into(),
-        });
-    }
-    Ok(scene)
-}
-
-/// The package opened under the job's budgets, with `--lamps` applied: the whole scene where it
-/// fits (no [`Streaming`]); else every tile at its far level, the scene cameras are resolved (and
-/// a view framed) on before [`open`] chooses each tile's level, so a package over budget is
-/// never loaded whole.
+/// The package file opened under the job's budgets with its story and lighting files read
+/// ([`scene::open_scene`]: whole where it fits, else far-first; the cameras are resolved on the
+/// far scene before [`open`] chooses each tile's level, so a package over budget is never
+/// loaded whole).
 fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Streaming>)> {
     let pkg = Package::open(&opts.package)?;
     let world = pkg.scene()?;
     // A story file amends the package's points of interest and tours (`--story`).
     let story = match &opts.story {
-        Some(path) => {
-            let (pois, tours) = crate::engine::story_file::story_of(&world, Some(path))?;
-            Some((pois, tours, world.cameras.clone()))
-        }
+        Some(path) => Some(crate::engine::story_file::story_of(&world, Some(path))?),
         None => None,
     };
     let relight = opts.lights.as_ref().map(|p| lighting_file::relight_of(&world, p)).transpose()?;
     let relight = lighting_file::with_circuits(&world, relight, &opts.circuits)?;
-    let with_story = |mut scene: SceneData| {
-        if let Some((pois, tours, cameras)) = &story {
-            (scene.pois, scene.tours) =
-                crate::scene::story::in_frame(scene.frame_origin_m, pois, tours, cameras);
-        }
-        scene
+    let request = SceneRequest {
+        settings: &opts.settings,
+        aspect: opts.width as f32 / opts.height.max(1) as f32,
+        budget: Budget {
+            gpu_bytes: opts.gpu_memory.unwrap_or_else(|| default_gpu_memory(gpu)),
+            points: opts.point_budget.unwrap_or(u64::MAX),
+            pools: None,
+        },
+        relight,
+        lamp_string: opts.lamp_string,
+        story,
+        load: Load::WholeWhereItFits,
     };
-    // The lighting file first; `--lamps`, a measurement's stand-in, replaces whatever is lit.
-    let lights = |s: &mut SceneData| {
-        if let Some(r) = &relight {
-            r.apply(s);
-        }
-        apply_lamps(opts, s);
-    };
-    let budget = Budget {
-        gpu_bytes: opts.gpu_memory.unwrap_or_else(|| default_gpu_memory(gpu)),
-        points: opts.point_budget.unwrap_or(u64::MAX),
-        pools: None,
-    };
-    let tiles = residency::footprints(&pkg, opts.settings.radiance_f16)?;
-    let full_bytes: u64 = tiles.iter().map(|t| t.full.bytes).sum();
-    let full_surfels: u64 = tiles.iter().map(|t| t.full.surfels).sum();
-    if full_bytes <= budget.gpu_bytes && full_surfels <= budget.points {
-        let mut scene = with_story(non_empty(SceneData::from_package(&pkg)?)?);
-        lights(&mut scene);
-        return Ok((scene, None));
-    }
-    let aspect = opts.width as f32 / opts.height.max(1) as f32;
-    let (coarse, streaming) = Streaming::far_first(pkg, tiles, budget, aspect, &opts.settings, lights)?;
-    Ok((with_story(non_empty(coarse)?), Some(streaming)))
+    scene::open_scene(pkg, &request)
 }
 
 /// What `framing` chose, in world coordinates a user can pass back as options.
@@ -160,24 +124,19 @@ pub fn open(opts: &RenderOptions, gpu: &Gpu) -> Result<Opened> {
         Headlamp::Auto => !scene.has_own_light(),
     };
     if want {
-        let first = cameras[0];
         // A framed view was estimated already; a given one is estimated here.
         let seen = framed.as_ref().map(|f| f.estimate);
-        let lamp = crate::view::framing::scene_headlamp(&scene, &first, aspect, splat, seen);
-        let distance_m = lamp.sized_for_m;
-        let lamp = lamp.light;
+        let own_light = scene.has_own_light();
+        let (intensity_w_sr, distance_m) = scene::add_headlamp(&mut scene, &cameras[0], aspect, splat, seen);
         notes.push(format!(
-            "light: {}; a headlamp at the camera, {:.3} W/sr (1 W/m^2 at {distance_m:.2} m){}",
-            if scene.has_own_light() {
+            "light: {}; a headlamp at the camera, {intensity_w_sr:.3} W/sr (1 W/m^2 at {distance_m:.2} m){}",
+            if own_light {
                 "--headlamp on"
             } else {
                 "the scene has no lights, emission or environment map (--headlamp off for none)"
             },
-            lamp.intensity_w_sr.max_element(),
             if cameras.len() > 1 { ", fixed at the path's first camera" } else { "" }
         ));
-        scene.lights.push(lamp);
-        scene.headlamp = true;
     }
     if let Some(r) = &residency {
         notes.push(format!(

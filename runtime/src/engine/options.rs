@@ -142,11 +142,6 @@ impl RenderOptions {
     }
 }
 
-/// Watts of one lamp of `--lamps` (the synthetic cave's lamp string uses the same).
-pub const STRING_LAMP_W: f32 = 8.0;
-/// Height of a `--lamps` lamp above its floor, metres.
-pub const STRING_LAMP_LIFT_M: f32 = 0.6;
-
 #[cfg(test)]
 mod tests {
     use glam::Vec3;
