@@ -8,7 +8,6 @@ use clap::Parser;
 use glam::Vec3;
 use grotto_reference::{PathSettings, SurfelScene};
 use grotto_runtime::render::Frame;
-use grotto_runtime::scene::data::SceneData;
 use grotto_runtime::view::camera::Camera;
 
 /// Ground truth for grotto: path-traced reference renders, and the accuracy-vs-time sweep.
@@ -514,8 +513,8 @@ fn accuracy(a: AccuracyArgs) -> anyhow::Result<()> {
 fn render(cli: RenderArgs) -> anyhow::Result<()> {
     let (w, h) = grotto_runtime::cli::render_job::parse_size(&cli.size).map_err(anyhow::Error::msg)?;
     grotto_runtime::cli::image_out::kind_of(&cli.out)?;
-    let pkg = grotto_format::Package::open(&cli.package)?;
-    let scene_data = SceneData::from_package(&pkg)?;
+    let scene_data = grotto_runtime::engine::load_scene(&cli.package)
+        .with_context(|| cli.package.display().to_string())?;
     let cam = match &cli.camera {
         Some(name) => scene_data
             .cameras
@@ -594,8 +593,8 @@ fn truth(a: TruthArgs) -> anyhow::Result<()> {
         .with_context(|| format!("{}: no synth.json (build it with grotto-pack synth)", a.synth.display()))?;
     let params: grotto_preprocess::synth::SynthParams =
         serde_json::from_str(&json).with_context(|| format!("{}/synth.json", a.synth.display()))?;
-    let pkg = grotto_format::Package::open(&a.package).with_context(|| a.package.display().to_string())?;
-    let scene = SceneData::from_package(&pkg)?;
+    let scene =
+        grotto_runtime::engine::load_scene(&a.package).with_context(|| a.package.display().to_string())?;
     let frame = glam::DVec3::from_array(scene.frame_origin_m);
     let frame_from_local = glam::DVec3::from_array(params.offset_m) - frame;
     let cave = grotto_preprocess::synth::SynthCave::new(&params);
