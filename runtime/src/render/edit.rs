@@ -40,28 +40,27 @@ impl Renderer {
             return Ok(None);
         }
         let mut setup = light_setup(scene, &self.settings, self.scene_diag_m);
-        if setup.lights.is_empty() && !self.compat.lights.is_empty() {
-            // Inject does not run without lights, so nothing would clear the old direct light.
+        if setup.lights.is_empty() {
+            // Inject does not run without lights: nothing would clear the old direct light, nor
+            // end the edit (its tally is taken after an inject).
             return Ok(None);
         }
-        if setup.grid.words.len() > self.light_room.grid_room as usize || !self.shadows.fits(&mut setup) {
+        if !self.shadows.fits(&mut setup) {
             return Ok(None);
         }
         // Counted after the faces took their slots: holes are records too.
         let records = setup.records();
-        let room = self.light_room.buf.size() / size_of::<crate::gpu::types::LightGpu>() as u64;
-        if records.len() as u64 > room {
+        if !self.lights.fits(&setup, &records) {
             return Ok(None);
         }
         // Which lights changed, before the renderer forgets the old ones.
         let reach = edit::changed(
-            &edit::lit_by(&self.compat.lights, &self.light_room.mapped),
+            &edit::lit_by(&self.compat.lights, &self.lights.mapped),
             &edit::lit_by(&scene.lights, &setup.mapped),
             self.settings.light_cutoff_w_m2,
         );
         let reached = edit::tiles_reached(self.pools.tiles(), self.leaf_size_m, &reach);
 
-        self.gpu.queue.write_buffer(&self.light_room.buf, 0, bytemuck::cast_slice(&records));
         self.pools.write_lookup(&self.gpu, self.base_params.lookup_base[1], &setup.grid.words);
         let redrawn = self.shadows.set_faces(&self.gpu, &setup);
         self.mark_shadow_faces(|i, _| redrawn.contains(&i));
@@ -73,12 +72,8 @@ impl Renderer {
         p.light_count = setup.lights.len() as u32;
         p.light_grid_dims = setup.grid.dims.to_array();
         p.light_grid_min_m = setup.grid.min_m.extend(setup.grid.cell_m).to_array();
-        self.lights_in_range = setup.grid.occupancy();
-        self.light.inject.set_max_lights_per_cell(&self.gpu, self.lights_in_range.1)?;
-        self.point_lights = setup.point_lights;
-        self.spot_lights = setup.spot_lights;
-        self.headlamp = scene.headlamp;
-        self.light_room.mapped = setup.mapped;
+        self.lights.take(&self.gpu, setup, &records, scene.headlamp);
+        self.light.inject.set_max_lights_per_cell(&self.gpu, self.lights.in_range.1)?;
         self.compat = Compat::of(scene);
 
         // Direct light again, bounces counted afresh; the light elsewhere is the start.

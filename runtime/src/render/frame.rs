@@ -19,14 +19,14 @@ impl Renderer {
     pub(super) fn inputs(&self, frame: Option<(&Camera, u32, u32)>) -> PlanInputs {
         let gbuffer_valid = frame.is_some_and(|(c, w, h)| self.targets.shows(c, w, h));
         PlanInputs {
-            headlamp: self.headlamp,
-            point_lights: self.point_lights,
-            spot_lights: self.spot_lights,
+            headlamp: self.lights.headlamp,
+            point_lights: self.lights.point,
+            spot_lights: self.lights.spot,
             shadows_enabled: self.settings.shadows,
             shadowed: self.shadows.shadowed(),
             shadow_budget: self.settings.shadowed_lights,
             fallback: self.settings.shadow_fallback.describe(),
-            lights_in_range: self.lights_in_range,
+            lights_in_range: self.lights.in_range,
             specular_materials: self.specular_materials,
             specular_surfels: self.specular_surfels,
             emissive_leaves: self.emissive,
@@ -524,7 +524,7 @@ impl Renderer {
             self.shadows.ran(self.stats_now.last_ms.get(&Pass::Shadow).copied());
         }
         self.targets.ran(&ran, self.settings.view);
-        let lights = self.point_lights + self.spot_lights > 0;
+        let lights = self.lights.analytic() > 0;
         let direct_done = self.shadow_faces_left() == 0;
         if self.light.ran(&self.gpu, &ran, lights, direct_done) {
             self.wait_for_light()?;

@@ -12,6 +12,7 @@ pub mod pool;
 pub mod present;
 pub mod probe;
 pub mod renderer;
+mod scene_lights;
 mod shadow_atlas;
 pub(crate) mod shadow_queue;
 mod still;

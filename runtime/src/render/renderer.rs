@@ -26,6 +26,7 @@ use crate::render::params::Lookup;
 use crate::render::params::base_params;
 use crate::render::params::material_slots;
 use crate::render::params::pass_queries;
+use crate::render::scene_lights::SceneLights;
 use crate::render::shadow_atlas::ShadowAtlas;
 use crate::render::tiles::TilePools;
 use crate::render::tiles::Upload;
@@ -40,12 +41,8 @@ pub struct Renderer {
     pub(super) leaf_size_m: f32,
     pub(super) scene_diag_m: f32,
     pub(super) base_params: Params,
-    pub(super) point_lights: usize,
-    pub(super) spot_lights: usize,
-    /// The scene's last light is a headlamp added for a lightless scene (the plan says so).
-    pub(super) headlamp: bool,
-    /// Lights per light-grid cell: mean and largest.
-    pub(super) lights_in_range: (f32, u32),
+    /// The scene's lights: their records, counts and room for an edit in place.
+    pub(super) lights: SceneLights,
     /// Specular materials with surfels, and those surfels (0 when `Settings::specular` is off).
     pub(super) specular_materials: usize,
     pub(super) specular_surfels: usize,
@@ -69,21 +66,10 @@ pub struct Renderer {
     pub(super) light: LightTransport,
     /// How both splat passes fetch the surfel pool (passes/splat.rs).
     pub(super) splats: passes::splat::Fetch,
-    /// What an edit in place (render/edit.rs) writes and compares.
-    pub(super) light_room: LightRoom,
     pub(super) forced: Vec<Pass>,
     pub(super) stats_now: PassStats,
     pub(super) queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
     pub(super) stat_queries: Option<StatQueries>,
-}
-
-/// The lights' records (lights.wgsl) with room for more, the words the light grid may take in
-/// the lookup buffer, and whether each scene light has a shadow map.
-#[derive(Debug)]
-pub(super) struct LightRoom {
-    pub(super) buf: wgpu::Buffer,
-    pub(super) grid_room: u32,
-    pub(super) mapped: Vec<bool>,
 }
 
 /// What two scenes must share for one to replace the other in a renderer's pools: the same lights,
@@ -194,7 +180,7 @@ impl Renderer {
         splats.set_surfels(gpu, &up.surfels);
         let shade = gpu.scoped("shade", || shade::Shade::new(gpu, shared, consts, chain))?;
         let static_bytes = up.bytes + shadows.bytes() + shade.env_atlas_bytes();
-        let room = LightRoom { buf: up.lights.clone(), grid_room: lookup.grid_room, mapped: lights.mapped };
+        let scene_lights = SceneLights::new(up.lights.clone(), lookup.grid_room, &lights, scene.headlamp);
         let light = LightTransport::new((inject, env, mip, propagate), up.active, up.changes, &scene.tiles);
         let targets = ViewTargets::new(gbuffer, shade, Stills::new(gpu)?);
         let mut r = Self {
@@ -208,10 +194,7 @@ impl Renderer {
             leaf_size_m: leaf,
             scene_diag_m,
             base_params,
-            point_lights: lights.point_lights,
-            spot_lights: lights.spot_lights,
-            headlamp: scene.headlamp,
-            lights_in_range,
+            lights: scene_lights,
             specular_materials,
             specular_surfels,
             emissive: scene.has_emission(),
@@ -221,7 +204,6 @@ impl Renderer {
             faces: up.faces,
             compat: Compat::of(scene),
             pools: tile_pools,
-            light_room: room,
             forced: Vec::new(),
             stats_now: PassStats::default(),
             queries: pass_queries(gpu),
@@ -250,7 +232,7 @@ impl Renderer {
 
     /// Lights in range per light-grid cell: mean and largest.
     pub fn lights_in_range(&self) -> (f32, u32) {
-        self.lights_in_range
+        self.lights.in_range
     }
 
     /// Whether the splat passes pull their surfels from the pool (one non-instanced draw of six
