@@ -20,7 +20,7 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 # No session bus or display here; wgpu's GL backend only needs a writable runtime dir for EGL.
 export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-$(mktemp -d)}
-# The browser viewer the browser test publishes (tests/tests/browser.rs).
+# The browser viewer the browser test publishes (tests/tests/browser/).
 ./scripts/build-web.sh > /dev/null
 # Libraries, binaries and tests: not the examples (measurement tools that no test runs; clippy
 # --all-targets checks them in CI), each of which would link the whole dependency tree again.

@@ -3,7 +3,7 @@
 //! survey coordinates; a label on the far wall in view shows and the one behind the pillar is
 //! hidden, decided from G-buffer distances read back without blocking (render/probe.rs, what the
 //! browser does); a floor and a ceiling point picked that way are 2.5 m apart in height within a
-//! centimetre, each on its plane. The browser's own checks of the same are in browser.rs.
+//! centimetre, each on its plane. The browser's own checks of the same are in tests/tests/browser/room.rs.
 
 use glam::{DVec3, Vec2};
 use grotto_fixtures::room;
