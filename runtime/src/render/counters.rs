@@ -2,7 +2,9 @@
 //! surfels drawn (counted as the passes are recorded), and, where the adapter has pipeline
 //! statistics queries and the caller asked for them ([`crate::gpu::GpuOptions::work_counters`]),
 //! the shader invocations the GPU ran (vertices, primitives out of clipping, fragments, compute
-//! invocations). `grotto bench --json` reports them; docs/benchmarks.md tabulates them.
+//! invocations). `grotto bench --json` reports them; docs/benchmarks.md tabulates them. Beside
+//! them, each pass's GPU time from timestamp queries where the adapter has them
+//! ([`PassCounters`] holds both query sets for the scheduler, render/frame.rs).
 
 use std::collections::BTreeMap;
 
@@ -38,14 +40,14 @@ const STRIDE: u64 = wgpu::QUERY_RESOLVE_BUFFER_ALIGNMENT;
 
 /// One pipeline statistics query per pass.
 #[derive(Debug)]
-pub(super) struct StatQueries {
+struct StatQueries {
     set: wgpu::QuerySet,
     resolved: wgpu::Buffer,
 }
 
 impl StatQueries {
     /// The queries, where the device has the feature (asked for by `work_counters`).
-    pub(super) fn new(gpu: &Gpu) -> Option<Self> {
+    fn new(gpu: &Gpu) -> Option<Self> {
         gpu.pipeline_statistics.then(|| {
             let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
                 label: Some("pass work"),
@@ -63,12 +65,12 @@ impl StatQueries {
     }
 
     /// The query set and index that `pass` counts into.
-    pub(super) fn slot(&self, pass: Pass) -> (&wgpu::QuerySet, u32) {
+    fn slot(&self, pass: Pass) -> (&wgpu::QuerySet, u32) {
         (&self.set, index(pass))
     }
 
     /// Resolves the queries of the passes `ran` into the readback buffer.
-    pub(super) fn resolve(&self, enc: &mut wgpu::CommandEncoder, ran: &[Pass]) {
+    fn resolve(&self, enc: &mut wgpu::CommandEncoder, ran: &[Pass]) {
         for &p in ran {
             let i = index(p);
             enc.resolve_query_set(&self.set, i..i + 1, &self.resolved, u64::from(i) * STRIDE);
@@ -76,7 +78,7 @@ impl StatQueries {
     }
 
     /// Reads the counts of the passes `ran` back into `work`.
-    pub(super) fn read(&self, gpu: &Gpu, ran: &[Pass], work: &mut BTreeMap<Pass, PassWork>) -> Result<()> {
+    fn read(&self, gpu: &Gpu, ran: &[Pass], work: &mut BTreeMap<Pass, PassWork>) -> Result<()> {
         let bytes = gpu.read_buffer(&self.resolved, STRIDE * Pass::ALL.len() as u64)?;
         for &p in ran {
             let at = (u64::from(index(p)) * STRIDE) as usize;
@@ -86,6 +88,95 @@ impl StatQueries {
             w.primitives_out = Some(v[1]);
             w.fragment_invocations = Some(v[2]);
             w.compute_invocations = Some(v[3]);
+        }
+        Ok(())
+    }
+}
+
+/// Timestamp queries around each pass, where the adapter has them.
+#[derive(Debug)]
+struct PassTimes {
+    set: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+}
+
+impl PassTimes {
+    fn new(gpu: &Gpu) -> Option<Self> {
+        gpu.timestamps.then(|| {
+            let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("pass times"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2 * Pass::ALL.len() as u32,
+            });
+            let resolved = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pass times"),
+                size: 16 * Pass::ALL.len() as u64,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            Self { set, resolved }
+        })
+    }
+}
+
+/// The queries a frame's passes write into: their GPU times and, where asked for, their work.
+#[derive(Debug)]
+pub(super) struct PassCounters {
+    times: Option<PassTimes>,
+    work: Option<StatQueries>,
+}
+
+impl PassCounters {
+    pub(super) fn new(gpu: &Gpu) -> Self {
+        Self { times: PassTimes::new(gpu), work: StatQueries::new(gpu) }
+    }
+
+    /// Whether the GPU times the passes itself; without, the scheduler times each pass on the
+    /// CPU, each in a blocking submit of its own.
+    pub(super) fn timed_on_gpu(&self) -> bool {
+        self.times.is_some()
+    }
+
+    /// The timestamp query set and the first of the two indices `pass` writes.
+    pub(super) fn time_pair(&self, pass: Pass) -> Option<(&wgpu::QuerySet, u32)> {
+        self.times.as_ref().map(|t| (&t.set, 2 * index(pass)))
+    }
+
+    /// The statistics query set and index `pass` counts into.
+    pub(super) fn work_slot(&self, pass: Pass) -> Option<(&wgpu::QuerySet, u32)> {
+        self.work.as_ref().map(|q| q.slot(pass))
+    }
+
+    /// Resolves the queries of the passes `ran` at the end of the frame's commands.
+    pub(super) fn resolve(&self, enc: &mut wgpu::CommandEncoder, ran: &[Pass]) {
+        if ran.is_empty() {
+            return;
+        }
+        if let Some(t) = &self.times {
+            enc.resolve_query_set(&t.set, 0..2 * Pass::ALL.len() as u32, &t.resolved, 0);
+        }
+        if let Some(q) = &self.work {
+            q.resolve(enc, ran);
+        }
+    }
+
+    /// Reads the times and work of the passes `ran` into `stats` (after the frame's submit).
+    pub(super) fn read(&self, gpu: &Gpu, ran: &[Pass], stats: &mut PassStats) -> Result<()> {
+        if ran.is_empty() {
+            return Ok(());
+        }
+        if let Some(t) = &self.times {
+            let bytes = gpu.read_buffer(&t.resolved, 16 * Pass::ALL.len() as u64)?;
+            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
+            let period = f64::from(gpu.queue.get_timestamp_period());
+            for &pass in ran {
+                let i = index(pass) as usize;
+                let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period / 1e6;
+                stats.last_ms.insert(pass, dt);
+            }
+        }
+        if let Some(q) = &self.work {
+            q.read(gpu, ran, &mut stats.work)?;
         }
         Ok(())
     }

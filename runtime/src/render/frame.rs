@@ -287,8 +287,7 @@ impl Renderer {
     }
 
     pub(super) fn timestamp_pair(&self, pass: Pass) -> Option<(&wgpu::QuerySet, u32)> {
-        let i = Pass::ALL.iter().position(|p| *p == pass).unwrap_or(0) as u32;
-        self.queries.as_ref().map(|(set, _)| (set, 2 * i))
+        self.counters.time_pair(pass)
     }
 
     /// Writes the camera's splat uniform and (re)makes the view's targets when the size changed.
@@ -343,7 +342,7 @@ impl Renderer {
     /// Records one pass into `enc`; returns its draw calls and surfels drawn (splat passes).
     pub(super) fn record(&self, enc: &mut wgpu::CommandEncoder, pass: Pass) -> Result<PassWork> {
         let ts = self.timestamp_pair(pass);
-        let stats = self.stat_queries.as_ref().map(|q| q.slot(pass));
+        let stats = self.counters.work_slot(pass);
         let mut work = PassWork::default();
         let render_ts = ts.map(|(set, i)| wgpu::RenderPassTimestampWrites {
             query_set: set,
@@ -433,7 +432,7 @@ impl Renderer {
             self.stats_now.work.insert(step.pass, work);
             *self.stats_now.dispatches.entry(step.pass).or_default() += 1;
             ran.push(step.pass);
-            if self.queries.is_none() && !cfg!(target_arch = "wasm32") {
+            if !self.counters.timed_on_gpu() && !cfg!(target_arch = "wasm32") {
                 // No timestamp queries: time each pass on the CPU, recording to completion of its
                 // own blocking submit (not in a browser, which cannot block).
                 let done = std::mem::replace(&mut enc, self.encoder());
@@ -444,14 +443,7 @@ impl Renderer {
                 self.stats_now.last_ms.insert(step.pass, ms);
             }
         }
-        if let Some((set, buf)) = &self.queries
-            && !ran.is_empty()
-        {
-            enc.resolve_query_set(set, 0..2 * Pass::ALL.len() as u32, buf, 0);
-        }
-        if let Some(q) = &self.stat_queries {
-            q.resolve(&mut enc, ran);
-        }
+        self.counters.resolve(&mut enc, ran);
         self.gpu.queue.submit([enc.finish()]);
         self.stats_now.last_submits += 1;
         self.gpu.wait()
@@ -503,23 +495,7 @@ impl Renderer {
         }
         outcome?;
         self.gpu.check("frame")?;
-        if let Some((_, buf)) = &self.queries
-            && !ran.is_empty()
-        {
-            let bytes = self.gpu.read_buffer(buf, 16 * Pass::ALL.len() as u64)?;
-            let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes);
-            let period = f64::from(self.gpu.queue.get_timestamp_period());
-            for pass in &ran {
-                let i = Pass::ALL.iter().position(|p| p == pass).unwrap_or(0);
-                let dt = ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period / 1e6;
-                self.stats_now.last_ms.insert(*pass, dt);
-            }
-        }
-        if let Some(q) = &self.stat_queries
-            && !ran.is_empty()
-        {
-            q.read(&self.gpu, &ran, &mut self.stats_now.work)?;
-        }
+        self.counters.read(&self.gpu, &ran, &mut self.stats_now)?;
         if ran.contains(&Pass::Shadow) {
             self.shadows.ran(self.stats_now.last_ms.get(&Pass::Shadow).copied());
         }

@@ -4,9 +4,7 @@
 use glam::Vec3;
 
 use crate::error::Result;
-use crate::gpu::Gpu;
 use crate::gpu::types::{LeafGpu, MAX_CONES, Params, TileGpu};
-use crate::light::plan::Pass;
 use crate::light::setup::LightSetup;
 use crate::passes::shadow;
 use crate::scene::data::{EnvChain, MAX_ENV_LEVELS, MAX_MATERIALS, SceneData};
@@ -202,22 +200,4 @@ pub(super) fn tile_box(t: &TileGpu, leaf_m: f32) -> (Vec3, Vec3) {
     let edge = (1u64 << t.depth.min(40)) as f32 * leaf_m;
     let margin = ((1u64 << t.leaf_lod.min(40)) as f32 + 2.0) * leaf_m;
     (lo - Vec3::splat(margin), lo + Vec3::splat(edge + margin))
-}
-
-/// Timestamp queries for every pass, where the adapter has them.
-pub(super) fn pass_queries(gpu: &Gpu) -> Option<(wgpu::QuerySet, wgpu::Buffer)> {
-    gpu.timestamps.then(|| {
-        let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-            label: Some("pass times"),
-            ty: wgpu::QueryType::Timestamp,
-            count: 2 * Pass::ALL.len() as u32,
-        });
-        let buf = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("pass times"),
-            size: 16 * Pass::ALL.len() as u64,
-            usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        (set, buf)
-    })
 }

@@ -21,11 +21,10 @@ use crate::render::targets::{Stills, ViewTargets};
 use crate::render::transport::LightTransport;
 use crate::scene::data::{SceneData, SceneLight};
 
-use crate::render::counters::{PassStats, StatQueries};
+use crate::render::counters::{PassCounters, PassStats};
 use crate::render::params::Lookup;
 use crate::render::params::base_params;
 use crate::render::params::material_slots;
-use crate::render::params::pass_queries;
 use crate::render::scene_lights::SceneLights;
 use crate::render::shadow_atlas::ShadowAtlas;
 use crate::render::tiles::TilePools;
@@ -68,8 +67,8 @@ pub struct Renderer {
     pub(super) splats: passes::splat::Fetch,
     pub(super) forced: Vec<Pass>,
     pub(super) stats_now: PassStats,
-    pub(super) queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
-    pub(super) stat_queries: Option<StatQueries>,
+    /// The queries each pass writes its GPU time and work into.
+    pub(super) counters: PassCounters,
 }
 
 /// What two scenes must share for one to replace the other in a renderer's pools: the same lights,
@@ -206,8 +205,7 @@ impl Renderer {
             pools: tile_pools,
             forced: Vec::new(),
             stats_now: PassStats::default(),
-            queries: pass_queries(gpu),
-            stat_queries: StatQueries::new(gpu),
+            counters: PassCounters::new(gpu),
         };
         r.mark_shadow_faces(|_, _| true);
         gpu.check("upload")?;
