@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The pictures of docs/runtime.md's "Lighting a cave": the demo cave's chamber as its package
+# The pictures of docs/lighting.md: the demo cave's chamber as its package
 # lights it, then with docs/examples/show-lighting.toml (a spot on the column, an IES downlight),
 # and that lighting in the lux view. Needs out/demo.grotto (scripts/demo.sh).
 # Usage: scripts/lighting-walkthrough.sh [PACKAGE]

@@ -1,5 +1,5 @@
 //! Lighting files: a package's lights changed without a rebuild (`--lights FILE.toml` of
-//! `grotto render`, `view` and `publish`; docs/runtime.md "Lighting a cave"). The syntax is the
+//! `grotto render`, `view` and `publish`; docs/lighting.md). The syntax is the
 //! manifest's `[[light]]` grown by what a lighting designer writes: power in watts or luminous
 //! flux in lumens, colour as linear RGB or a colour temperature, a spot's cone and softness, an
 //! IES LM-63 profile aimed and turned, and circuits switched together:
@@ -379,7 +379,7 @@ pub fn to_toml(lighting: &Lighting) -> String {
     let v3 = |v: [f64; 3]| format!("[{:?}, {:?}, {:?}]", v[0], v[1], v[2]);
     let f3 = |v: [f32; 3]| v3(v.map(f64::from));
     let q = |s: &str| toml::Value::String(s.to_string()).to_string();
-    let mut out = String::from("# grotto lighting file (docs/runtime.md, \"Lighting a cave\")\n");
+    let mut out = String::from("# grotto lighting file (docs/lighting.md)\n");
     let _ = writeln!(out, "replace = {}", lighting.replace);
     if !lighting.remove.is_empty() {
         let names: Vec<String> = lighting.remove.iter().map(|n| q(n)).collect();

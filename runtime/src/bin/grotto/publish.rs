@@ -32,7 +32,7 @@ pub(crate) struct PublishArgs {
     /// manifest, docs/manifest.md); one named as one of the package's replaces it.
     #[arg(long)]
     pub(crate) story: Option<PathBuf>,
-    /// A lighting file changing the package's lights ([[light]], [[circuit]]; docs/runtime.md):
+    /// A lighting file changing the package's lights ([[light]], [[circuit]]; docs/lighting.md):
     /// the page and its picture are lit by it.
     #[arg(long)]
     pub(crate) lights: Option<PathBuf>,

@@ -48,7 +48,7 @@ pub(crate) struct RenderArgs {
     #[arg(long)]
     pub(crate) story: Option<PathBuf>,
     /// A lighting file (TOML: [[light]] and [[circuit]] in watts or lumens, RGB or kelvin, IES
-    /// profiles) changing the package's lights without a rebuild (docs/runtime.md).
+    /// profiles) changing the package's lights without a rebuild (docs/lighting.md).
     #[arg(long)]
     pub(crate) lights: Option<PathBuf>,
     /// Circuits switched on or off, NAME=on|off[,...] (the lighting file's or the package's).
