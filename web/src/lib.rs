@@ -211,15 +211,6 @@ impl Viewer {
         let fetched = fetch_all(url.clone(), ranges, source.expect.clone()).await?;
         insert(&mut pkg, &mut source, &fetched)?;
         let world_scene = pkg.scene()?;
-        let relight = match &o.lighting {
-            Some(v) => {
-                let r: grotto_runtime::scene::lighting::Relight = serde_json::from_value(v.clone())
-                    .map_err(|e| Error::Setting(format!("viewer.json lighting: {e}")))?;
-                r.check().map_err(|e| Error::Setting(format!("viewer.json lighting: {e}")))?;
-                Some(r)
-            }
-            None => None,
-        };
         let request = SceneRequest {
             settings: &settings,
             aspect: width as f32 / height as f32,
@@ -228,7 +219,7 @@ impl Viewer {
                 points: u64::MAX,
                 pools: None,
             },
-            relight,
+            relight: page::relight_of(&o)?,
             lamp_string: None,
             story: story::given(&world_scene, o.story.as_ref())?,
             load: Load::FarFirst,

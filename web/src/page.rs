@@ -2,6 +2,7 @@
 //! under the address's query and hash) and the status each frame hands back (the panel, the
 //! ready marker, a test's checks).
 
+use grotto_runtime::scene::lighting::Relight;
 use grotto_runtime::settings::{Quality, Settings, ViewMode};
 use grotto_runtime::view::frame_target::Traded;
 use serde::{Deserialize, Serialize};
@@ -141,6 +142,16 @@ pub(crate) fn rest_ms_of(o: &Options, default_ms: f64) -> Result<f64, Error> {
             "rest_ms {ms}: the longest frame at rest must be a positive number of milliseconds"
         ))),
     }
+}
+
+/// viewer.json's lighting (what `grotto publish --lights` writes: the package's lights and
+/// circuits merged with the lighting file), checked; None where it has none.
+pub(crate) fn relight_of(o: &Options) -> Result<Option<Relight>, Error> {
+    let Some(v) = &o.lighting else { return Ok(None) };
+    let r: Relight = serde_json::from_value(v.clone())
+        .map_err(|e| Error::Setting(format!("viewer.json lighting: {e}")))?;
+    r.check().map_err(|e| Error::Setting(format!("viewer.json lighting: {e}")))?;
+    Ok(Some(r))
 }
 
 pub(crate) fn settings_of(o: &Options) -> Result<Settings, Error> {
