@@ -27,5 +27,5 @@ pub(crate) fn given(
         serde_json::from_value(v.clone()).map_err(|e| Error::Setting(format!("viewer.json story: {e}")))?;
     grotto_format::story::check(&g.pois, &g.tours, &scene.camera_names())
         .map_err(|e| Error::Setting(format!("viewer.json story: {e}")))?;
-    Ok(Some((g.pois, g.tours)))
+    Ok(Some(Story { pois: g.pois, tours: g.tours, cameras: scene.cameras.clone() }))
 }

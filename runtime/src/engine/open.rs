@@ -10,7 +10,7 @@ use grotto_format::Package;
 
 use crate::engine::lighting_file;
 use crate::engine::options::{Headlamp, RenderOptions, clip_in_frame};
-use crate::engine::scene::{self, Load, SceneRequest, non_empty};
+use crate::engine::scene::{self, Load, SceneRequest, Story, non_empty};
 use crate::error::{Error, Result};
 use crate::gpu::{Gpu, default_gpu_memory};
 use crate::scene::data::SceneData;
@@ -29,7 +29,10 @@ fn open_scene(opts: &RenderOptions, gpu: &Gpu) -> Result<(SceneData, Option<Stre
     let world = pkg.scene()?;
     // A story file amends the package's points of interest and tours (`--story`).
     let story = match &opts.story {
-        Some(path) => Some(crate::engine::story_file::story_of(&world, Some(path))?),
+        Some(path) => {
+            let (pois, tours) = crate::engine::story_file::story_of(&world, Some(path))?;
+            Some(Story { pois, tours, cameras: world.cameras.clone() })
+        }
         None => None,
     };
     let relight = opts.lights.as_ref().map(|p| lighting_file::relight_of(&world, p)).transpose()?;

@@ -3,7 +3,7 @@
 //! and story the shell was given, and the headlamp a lightless view gets. [`super::open`] reads
 //! its files and its options into a [`SceneRequest`]; the browser's viewer reads viewer.json.
 
-use grotto_format::{Package, Poi, Tour};
+use grotto_format::{Camera as WorldCamera, Package, Poi, Tour};
 
 use crate::error::{Error, Result};
 use crate::scene::data::SceneData;
@@ -19,9 +19,15 @@ pub const STRING_LAMP_W: f32 = 8.0;
 /// Height of a `--lamps` lamp above its floor, metres.
 pub const STRING_LAMP_LIFT_M: f32 = 0.6;
 
-/// Points of interest and tours, as a package, a story file or viewer.json gives them (world
-/// coordinates; the scene's frame is applied when the scene is made).
-pub type Story = (Vec<Poi>, Vec<Tour>);
+/// Points of interest and tours in place of a package's, as a story file or viewer.json gives
+/// them (world coordinates; the scene's frame is applied when the scene is made), with the
+/// package's cameras their tours may stop at.
+#[derive(Clone, Debug)]
+pub struct Story {
+    pub pois: Vec<Poi>,
+    pub tours: Vec<Tour>,
+    pub cameras: Vec<WorldCamera>,
+}
 
 /// How much of the package the shell has, and so how its scene is first made.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -56,14 +62,10 @@ pub struct SceneRequest<'a> {
 /// its story replaced, held whole or far-first (see [`Load`]). An empty package is an error
 /// naming it (nothing to render).
 pub fn open_scene(pkg: Package, req: &SceneRequest<'_>) -> Result<(SceneData, Option<Streaming>)> {
-    let story = match &req.story {
-        Some((pois, tours)) => Some((pois.clone(), tours.clone(), pkg.scene()?.cameras)),
-        None => None,
-    };
     let with_story = |mut scene: SceneData| {
-        if let Some((pois, tours, cameras)) = &story {
+        if let Some(s) = &req.story {
             (scene.pois, scene.tours) =
-                crate::scene::story::in_frame(scene.frame_origin_m, pois, tours, cameras);
+                crate::scene::story::in_frame(scene.frame_origin_m, &s.pois, &s.tours, &s.cameras);
         }
         scene
     };

@@ -49,17 +49,8 @@ impl StatQueries {
     /// The queries, where the device has the feature (asked for by `work_counters`).
     fn new(gpu: &Gpu) -> Option<Self> {
         gpu.pipeline_statistics.then(|| {
-            let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("pass work"),
-                ty: wgpu::QueryType::PipelineStatistics(STATS),
-                count: Pass::ALL.len() as u32,
-            });
-            let resolved = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("pass work"),
-                size: STRIDE * Pass::ALL.len() as u64,
-                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
+            let ty = wgpu::QueryType::PipelineStatistics(STATS);
+            let (set, resolved) = query_set(gpu, "pass work", ty, Pass::ALL.len() as u32, STRIDE);
             Self { set, resolved }
         })
     }
@@ -103,17 +94,8 @@ struct PassTimes {
 impl PassTimes {
     fn new(gpu: &Gpu) -> Option<Self> {
         gpu.timestamps.then(|| {
-            let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("pass times"),
-                ty: wgpu::QueryType::Timestamp,
-                count: 2 * Pass::ALL.len() as u32,
-            });
-            let resolved = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("pass times"),
-                size: 16 * Pass::ALL.len() as u64,
-                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
+            let count = 2 * Pass::ALL.len() as u32;
+            let (set, resolved) = query_set(gpu, "pass times", wgpu::QueryType::Timestamp, count, 8);
             Self { set, resolved }
         })
     }
@@ -180,6 +162,24 @@ impl PassCounters {
         }
         Ok(())
     }
+}
+
+/// `count` queries of type `ty` and the buffer they resolve into, `stride` bytes each.
+fn query_set(
+    gpu: &Gpu,
+    label: &'static str,
+    ty: wgpu::QueryType,
+    count: u32,
+    stride: u64,
+) -> (wgpu::QuerySet, wgpu::Buffer) {
+    let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor { label: Some(label), ty, count });
+    let resolved = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: stride * u64::from(count),
+        usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    (set, resolved)
 }
 
 fn index(pass: Pass) -> u32 {
