@@ -179,7 +179,7 @@ fn switching_a_circuit_converges_to_a_fresh_render_of_that_lighting() {
     let before = pixels(&r.render(&cam, W, H).unwrap().0);
     assert!(scene.switch_circuit("side", true).unwrap());
     assert_eq!(scene.lights.len(), 2);
-    let relit = grotto_runtime::stream::relit(&gpu, &mut r, &scene).unwrap();
+    let relit = grotto_runtime::stream::relit(&gpu, &mut r, &mut scene, |_| Ok(())).unwrap();
     let grotto_runtime::stream::Relit::InPlace(edit) = relit else { panic!("not in place: {relit:?}") };
     // The spot added: one light, its one face, and the tiles its light reaches.
     assert_eq!((edit.scope.lights, edit.scope.faces), (1, 1), "{edit:?}");
@@ -199,7 +199,7 @@ fn switching_a_circuit_converges_to_a_fresh_render_of_that_lighting() {
     // The switch changed the picture (the spot lights the floor), and switching back restores it.
     assert!(!golden::within_tolerance(&golden::diff(&before, &want)), "the side spot shows");
     assert!(scene.switch_circuit("side", false).unwrap());
-    grotto_runtime::stream::relit(&gpu, &mut r, &scene).unwrap();
+    grotto_runtime::stream::relit(&gpu, &mut r, &mut scene, |_| Ok(())).unwrap();
     r.settle(|_, _| {}).unwrap();
     let back = pixels(&r.render(&cam, W, H).unwrap().0);
     assert!(golden::within_tolerance(&golden::diff(&back, &before)), "switched off again");
@@ -294,7 +294,7 @@ fn each_kind_of_edit_converges_to_a_fresh_render_of_the_saved_lighting_file() {
     for (what, edit) in edits {
         edit(&mut lighting);
         scene.relight(&lighting.lights, &lighting.circuits, &lighting.baked);
-        let how = grotto_runtime::stream::relit(&gpu, &mut r, &scene).unwrap();
+        let how = grotto_runtime::stream::relit(&gpu, &mut r, &mut scene, |_| Ok(())).unwrap();
         // In place while some light is left (with none, a new renderer clears the direct light).
         let in_place = matches!(how, grotto_runtime::stream::Relit::InPlace(_));
         assert_eq!(in_place, !scene.lights.is_empty(), "{what}: {how:?}");
@@ -349,7 +349,9 @@ fn a_lamp_edit_costs_less_than_a_full_relight_and_ends_at_the_same_light() {
     let before = std::mem::take(&mut scene.lights);
     scene.relight(&lights, &world.circuits, &[]);
     let after = scene.lights.clone();
-    let Relit::InPlace(edit) = relit(&gpu, &mut r, &scene).unwrap() else { panic!("not in place") };
+    let Relit::InPlace(edit) = relit(&gpu, &mut r, &mut scene, |_| Ok(())).unwrap() else {
+        panic!("not in place")
+    };
     assert_eq!((edit.scope.lights, edit.scope.faces), (2, 6), "{edit:?}");
     r.settle(|_, _| {}).unwrap();
     let edited = r.take_bounce_work();
@@ -357,10 +359,10 @@ fn a_lamp_edit_costs_less_than_a_full_relight_and_ends_at_the_same_light() {
     // The lamp back, then the same edit as every edit was before: every light's shadow faces,
     // every leaf injected, every tile bouncing, from the same start.
     scene.lights = before;
-    relit(&gpu, &mut r, &scene).unwrap();
+    relit(&gpu, &mut r, &mut scene, |_| Ok(())).unwrap();
     r.settle(|_, _| {}).unwrap();
     scene.lights = after;
-    relit(&gpu, &mut r, &scene).unwrap();
+    relit(&gpu, &mut r, &mut scene, |_| Ok(())).unwrap();
     r.invalidate_lights();
     r.take_bounce_work();
     r.settle(|_, _| {}).unwrap();

@@ -692,3 +692,32 @@ fn the_sections_a_residency_reads_are_enough_to_load_it_from_byte_ranges() {
         same_scene(name, &loaded, &expected);
     }
 }
+
+#[test]
+fn a_scene_that_let_go_of_its_tiles_makes_no_renderer_until_it_takes_them_back() {
+    // A viewer's scene lets go of its nodes, leaves and surfels once its renderer holds them.
+    let pkg = Package::open(small_tiles_cave()).unwrap();
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
+    let mut scene = full_first(&pkg, 3);
+    let cam = chamber(&scene);
+    let (before, _, _) = render(&gpu, &scene, &cam);
+    let (counts, lit, occupied, bytes) =
+        (scene.counts(), scene.has_own_light(), scene.occupied_bounds_leaf(), scene.tile_bytes(true));
+    scene.release_tile_data();
+    assert!(scene.leaves.is_empty() && scene.surfels.is_empty() && scene.nodes.is_empty());
+    assert_eq!(scene.counts(), counts, "counts stay known");
+    assert_eq!(
+        (scene.has_own_light(), scene.occupied_bounds_leaf(), scene.tile_bytes(true)),
+        (lit, occupied, bytes)
+    );
+    let refused = Renderer::new(&gpu, &scene, settings()).unwrap_err().to_string();
+    assert!(refused.contains("let go"), "{refused}");
+    // Another residency's scene is not this one's data.
+    let other = full_first(&pkg, 1);
+    assert!(scene.restore_tile_data(other).is_err());
+    assert!(scene.released.is_some(), "a refused restore leaves the scene as it was");
+    scene.restore_tile_data(full_first(&pkg, 3)).unwrap();
+    assert_eq!(scene.counts(), counts);
+    let (after, _, _) = render(&gpu, &scene, &cam);
+    assert!(before == after, "the restored scene renders the image it rendered before");
+}

@@ -388,7 +388,9 @@ impl Viewer {
     pub fn switch_circuit(&mut self, name: &str, on: bool) -> Result<(), JsError> {
         let s = &mut self.state;
         if s.scene.switch_circuit(name, on).map_err(|e| JsError::new(&e))? {
-            stream::relit(&s.gpu, &mut s.renderer, &s.scene).map_err(|e| JsError::new(&e.to_string()))?;
+            // The page keeps its scene's tile data: nothing to load again.
+            stream::relit(&s.gpu, &mut s.renderer, &mut s.scene, |_| Ok(()))
+                .map_err(|e| JsError::new(&e.to_string()))?;
             s.shown_at_rest = None;
         }
         Ok(())

@@ -210,7 +210,7 @@ pub fn bench_light_edits(opts: &RenderOptions, edits: &std::path::Path) -> Resul
             }
             scene.relight(&lights, &base.circuits, &base.baked);
             let t = Instant::now();
-            let relit = crate::stream::relit(&gpu, &mut r, &scene)?;
+            let relit = crate::stream::relit(&gpu, &mut r, &mut scene, |_| Ok(()))?;
             let what = format!("{what} {}", light.name);
             runs.push(if whole {
                 r.invalidate_lights();
@@ -220,7 +220,7 @@ pub fn bench_light_edits(opts: &RenderOptions, edits: &std::path::Path) -> Resul
             });
         }
         scene.relight(&base.lights, &base.circuits, &base.baked);
-        crate::stream::relit(&gpu, &mut r, &scene)?;
+        crate::stream::relit(&gpu, &mut r, &mut scene, |_| Ok(()))?;
         r.settle(|_, _| {})?;
         r.take_bounce_work();
         r.take_shadow_faces_drawn();

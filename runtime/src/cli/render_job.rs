@@ -232,6 +232,8 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         opts.upload_per_frame,
     )?;
     r.set_clip(clip);
+    // The GPU holds the tiles now; a change of tiles brings a scene loaded anew.
+    scene.release_tile_data();
     let first_plan = r.plan(Some((&cameras[0], w_px, h_px)));
     let t0 = Instant::now();
     let budget = settings.bounces;
@@ -268,12 +270,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         last_plan = plan;
         // Views without light are not exposed.
         if opts.exposure.is_none() && i == 0 && settings.view.exposed() {
-            // Auto exposure from the first frame, kept for the sequence so it does not flicker.
-            exposure = auto_exposure(&frame.hdr);
-            r.set_exposure(exposure);
-            if opts.samples == 1 {
-                frame = r.expose()?;
-            }
+            exposure = expose_from(&mut r, &mut frame, opts.samples)?;
         }
         // The still frame draws its own first sample, at the exposure just set.
         if opts.samples > 1 {
@@ -304,8 +301,8 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         images,
         width: opts.width,
         height: opts.height,
-        leaves: scene.leaves.len(),
-        surfels: scene.surfels.len(),
+        leaves: scene.counts().leaves,
+        surfels: scene.counts().surfels,
         tiles: scene.tiles.len(),
         bounces: r.stats().bounces_done,
         last_change: r.stats().last_change,
@@ -331,6 +328,17 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         stats: r.stats().clone(),
         settings: r.settings().clone(),
     })
+}
+
+/// Auto exposure from `frame`, the first, kept for the sequence so it does not flicker; a frame of
+/// one sample is exposed again at once (a still frame draws its own first sample).
+fn expose_from(r: &mut Renderer, frame: &mut Frame, samples: u32) -> Result<f32> {
+    let exposure = auto_exposure(&frame.hdr);
+    r.set_exposure(exposure);
+    if samples == 1 {
+        *frame = r.expose()?;
+    }
+    Ok(exposure)
 }
 
 /// What the tiles' loader brought before a frame, and what the renderer did with it.
@@ -370,6 +378,7 @@ fn follow_tiles(
         change.loaded = after.difference(&before).count();
         change.evicted = before.difference(&after).count();
         let swapped = crate::stream::swap_tiles(gpu, r, scene, new_scene)?;
+        scene.release_tile_data();
         (change.update, change.made_anew, change.carried_leaves) =
             (swapped.update, swapped.made_anew, swapped.carried_leaves);
         let budget = r.settings().bounces;
@@ -414,7 +423,7 @@ fn frame_report(
         far_tiles: current.map_or(0, |r| r.totals.far_tiles),
         loaded: change.loaded,
         evicted: change.evicted,
-        surfels: scene.surfels.len(),
+        surfels: scene.counts().surfels,
         bounces: change.bounces,
         carried_leaves: change.carried_leaves,
         propagated_tiles: bounce_work.iter().map(|w| w.tiles).sum(),

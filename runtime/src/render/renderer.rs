@@ -125,6 +125,7 @@ impl Renderer {
     /// A renderer whose tile pools hold `caps` elements (at least what `scene` needs), so later
     /// scenes of other tile forms can replace this one in place ([`Renderer::update_scene`]).
     pub fn with_pools(gpu: &Gpu, scene: &SceneData, settings: Settings, caps: PoolCaps) -> Result<Self> {
+        scene.check_held("a renderer made")?;
         settings.validate()?;
         let caps = caps.at_least(PoolCaps::of(scene));
         let (pools, placed, cull_tiles) = fresh_pools(scene, caps)?;

@@ -11,6 +11,7 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::gpu::types::{ActiveTile, LeafGpu, LeafLightGpu, NodeGpu, Params, SurfelGpu, TileGpu};
+use crate::gpu::upload::Uploader;
 use crate::light::setup::LightSetup;
 use crate::passes::splat::SplatRun;
 use crate::passes::{self};
@@ -215,7 +216,7 @@ impl TilePools {
         } else {
             HashMap::new()
         };
-        let (update, light_kept) = self.write_tiles(gpu, scene, &owners, &placed, &moved, &index);
+        let (update, light_kept) = self.write_tiles(gpu, scene, &owners, &placed, &moved, &index)?;
         // Tile forms that came or went.
         let new_keys: HashSet<TileKey> = placed.tiles.iter().map(key).collect();
         let changed: Vec<(Vec3, Vec3)> = self
@@ -250,13 +251,8 @@ impl TilePools {
         placed: &Placement,
         moved: &HashMap<TileKey, Vec<LeafLightGpu>>,
         index: &crate::scene::tile_index::TileIndex,
-    ) -> (SceneUpdate, Vec<bool>) {
-        let write = |buf: &wgpu::Buffer, at: u64, bytes: &[u8]| {
-            if !bytes.is_empty() {
-                gpu.queue.write_buffer(buf, at, bytes);
-            }
-            bytes.len() as u64
-        };
+    ) -> Result<(SceneUpdate, Vec<bool>)> {
+        let mut up = Uploader::new(gpu);
         let mut update =
             SceneUpdate { repacked: placed.repacked, freed_tiles: placed.freed, ..Default::default() };
         let mut light_kept = placed.kept.clone();
@@ -293,27 +289,31 @@ impl TilePools {
             };
             let surfels = &scene.surfels[owners[i].start as usize..owners[i].end as usize];
             let slot = &placed.slots[i];
-            update.upload_bytes += write(
+            up.write(
                 &self.nodes_buf,
                 u64::from(at.node_offset) * size_of::<NodeGpu>() as u64,
                 bytemuck::cast_slice(&nodes),
-            ) + write(
+            )?;
+            up.write(
                 &self.leaves_buf,
                 u64::from(at.leaf_offset) * size_of::<LeafGpu>() as u64,
                 bytemuck::cast_slice(leaves),
-            ) + write(
+            )?;
+            up.write(
                 &self.leaf_light,
                 u64::from(at.leaf_offset) * size_of::<LeafLightGpu>() as u64,
                 bytemuck::cast_slice(&light),
-            ) + write(
+            )?;
+            up.write(
                 &self.surfels,
                 u64::from(slot.surfels.start) * size_of::<SurfelGpu>() as u64,
                 bytemuck::cast_slice(surfels),
-            );
+            )?;
         }
-        update.upload_bytes += write(&self.tiles_buf, 0, bytemuck::cast_slice(&placed.tiles))
-            + write(&self.lookup, self.index_bytes.start, bytemuck::cast_slice(&index.words));
-        (update, light_kept)
+        up.write(&self.tiles_buf, 0, bytemuck::cast_slice(&placed.tiles))?;
+        up.write(&self.lookup, self.index_bytes.start, bytemuck::cast_slice(&index.words))?;
+        update.upload_bytes = up.written;
+        Ok((update, light_kept))
     }
 }
 
@@ -361,8 +361,10 @@ impl Upload {
             bytemuck::bytes_of(base_params),
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         )?;
+        let mut up = Uploader::new(gpu);
         // A pool: `n` elements of `T`, the first ones written from `data`.
         fn pool<T: bytemuck::Pod>(
+            up: &mut Uploader<'_>,
             gpu: &Gpu,
             label: &str,
             n: u64,
@@ -370,12 +372,11 @@ impl Upload {
             usage: wgpu::BufferUsages,
         ) -> Result<wgpu::Buffer> {
             let b = gpu.buffer(label, n.max(data.len() as u64).max(1) * size_of::<T>() as u64, usage)?;
-            if !data.is_empty() {
-                gpu.queue.write_buffer(&b, 0, bytemuck::cast_slice(data));
-            }
+            up.write(&b, 0, bytemuck::cast_slice(data))?;
             Ok(b)
         }
-        let leaf_light = pool(gpu, "leaf light", caps.leaves, &initial_light(&scene.leaves), STORAGE)?;
+        let leaf_light =
+            pool(&mut up, gpu, "leaf light", caps.leaves, &initial_light(&scene.leaves), STORAGE)?;
         let face_bytes = if f16 { 8 } else { 16 };
         let faces = gpu.buffer("faces", caps.nodes.max(1) * 6 * face_bytes, STORAGE)?;
         // A 16-byte header, then at most every tile.
@@ -393,17 +394,15 @@ impl Upload {
         let n_surfels = caps.surfels.max(scene.surfels.len() as u64).max(1);
         let surfels =
             gpu.windowed_buffer("surfels", n_surfels * size_of::<SurfelGpu>() as u64, surfel_usage)?;
-        if !scene.surfels.is_empty() {
-            gpu.queue.write_buffer(&surfels, 0, bytemuck::cast_slice(&scene.surfels));
-        }
-        let tiles = pool(gpu, "tiles", caps.tiles, &scene.tiles, STORAGE)?;
-        let nodes = pool(gpu, "nodes", caps.nodes, &scene.nodes, STORAGE)?;
-        let leaves = pool(gpu, "leaves", caps.leaves, &scene.leaves, STORAGE)?;
+        up.write(&surfels, 0, bytemuck::cast_slice(&scene.surfels))?;
+        let tiles = pool(&mut up, gpu, "tiles", caps.tiles, &scene.tiles, STORAGE)?;
+        let nodes = pool(&mut up, gpu, "nodes", caps.nodes, &scene.nodes, STORAGE)?;
+        let leaves = pool(&mut up, gpu, "leaves", caps.leaves, &scene.leaves, STORAGE)?;
         // Room for the records of edited lights (`Renderer::edit_lights`): as many again, and
         // two asymmetric profiles' worth.
         let records = lights.records();
         let room = records.len() + records.len().max(256) + 2048;
-        let lights_buf = pool(gpu, "lights", room as u64, &records, STORAGE)?;
+        let lights_buf = pool(&mut up, gpu, "lights", room as u64, &records, STORAGE)?;
         let static_buffers = [
             (0, params.clone()),
             (1, tiles.clone()),

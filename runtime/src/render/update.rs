@@ -19,6 +19,7 @@ impl Renderer {
     /// scene cannot replace this one in place (other lights or bounds, over the pools, tiles put
     /// together by hand): make a new renderer then. Nothing is changed in that case.
     pub fn update_scene(&mut self, scene: &SceneData) -> Result<Option<SceneUpdate>> {
+        scene.check_held("a renderer's tiles updated")?;
         if Compat::of(scene) != self.compat {
             return Ok(None);
         }

@@ -111,6 +111,25 @@ pub struct SceneData {
     /// The lights before their circuits were switched, where there are circuits to switch (the
     /// package's, or a lighting file's: scene/lighting.rs): `lights` is made from it.
     pub lighting: Option<Relight>,
+    /// Set once the tile data (nodes, leaves, surfels) went to a renderer and was let go
+    /// ([`SceneData::release_tile_data`]): what the scene still says about it.
+    pub released: Option<Released>,
+}
+
+/// What a scene whose tile data was let go still knows of it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Released {
+    pub counts: SceneCounts,
+    emission: bool,
+    occupied_leaf: (Vec3, Vec3),
+}
+
+/// How many nodes, leaves and surfels a scene's tiles hold.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct SceneCounts {
+    pub nodes: usize,
+    pub leaves: usize,
+    pub surfels: usize,
 }
 
 /// A package's lights with a lighting file's merged in (scene/lighting.rs `merged`), as a scene takes them
@@ -413,6 +432,9 @@ impl SceneData {
     /// (`cone_left_matter` in shaders/svo.wgsl) instead of crossing the rest of the tiles' cubes,
     /// where it would only read coarse levels' blur of matter behind it. `(0, 0)` when empty.
     pub fn occupied_bounds_leaf(&self) -> (Vec3, Vec3) {
+        if let Some(r) = &self.released {
+            return r.occupied_leaf;
+        }
         let leaf_m = self.leaf_size_m.max(1e-9);
         let mut lo = Vec3::splat(f32::MAX);
         let mut hi = Vec3::splat(f32::MIN);
@@ -533,12 +555,13 @@ impl SceneData {
     /// Lights, shadow atlas and image buffers follow the settings and are not counted.
     pub fn buffer_bytes(&self, radiance_f16: bool) -> SceneBytes {
         let len = |n: usize| n as u64;
+        let counts = self.counts();
         SceneBytes {
             tile_buffers: TileBufferBytes::of(
                 len(self.tiles.len()),
-                len(self.nodes.len()),
-                len(self.leaves.len()),
-                len(self.surfels.len()),
+                len(counts.nodes),
+                len(counts.leaves),
+                len(counts.surfels),
                 radiance_f16,
             ),
             rock: len(self.rock.words.len()) * 4,
@@ -554,7 +577,70 @@ impl SceneData {
 
     /// True when any leaf emits.
     pub(crate) fn has_emission(&self) -> bool {
-        self.leaves.iter().any(|l| l.emission[..3].iter().any(|&e| e > 0.0))
+        match &self.released {
+            Some(r) => r.emission,
+            None => self.leaves.iter().any(|l| l.emission[..3].iter().any(|&e| e > 0.0)),
+        }
+    }
+
+    /// The nodes, leaves and surfels of the tiles, held or let go.
+    pub fn counts(&self) -> SceneCounts {
+        match &self.released {
+            Some(r) => r.counts,
+            None => SceneCounts {
+                nodes: self.nodes.len(),
+                leaves: self.leaves.len(),
+                surfels: self.surfels.len(),
+            },
+        }
+    }
+
+    /// An error where the tile data was let go: `what` (a renderer made or updated) needs it.
+    pub(crate) fn check_held(&self, what: &'static str) -> Result<()> {
+        match self.released {
+            Some(_) => Err(crate::error::Error::Internal {
+                what,
+                message: "the scene's tile data was let go once a renderer held it: load the scene again"
+                    .into(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Takes back the tile data `from` holds (the same tiles in the same forms, loaded again),
+    /// keeping this scene's lights, story and everything else that is not its tiles.
+    pub fn restore_tile_data(&mut self, from: SceneData) -> Result<()> {
+        let same = from.tiles.len() == self.tiles.len()
+            && from.tiles.iter().zip(&self.tiles).all(|(a, b)| {
+                (a.origin_leaf, a.depth, a.leaf_lod, a.node_count, a.leaf_count)
+                    == (b.origin_leaf, b.depth, b.leaf_lod, b.node_count, b.leaf_count)
+            });
+        if !same {
+            return Err(crate::error::Error::Internal {
+                what: "restore_tile_data",
+                message: "the scene loaded again holds other tiles".into(),
+            });
+        }
+        (self.nodes, self.leaves, self.surfels, self.tile_surfels) =
+            (from.nodes, from.leaves, from.surfels, from.tile_surfels);
+        self.released = None;
+        Ok(())
+    }
+
+    /// Lets go of the tiles' nodes, leaves and surfels once a renderer holds them: a viewer keeps
+    /// on the CPU nothing its GPU holds. Counts, emission and where matter is stay known; a new
+    /// renderer or a change of tiles needs a scene loaded again (the renderer refuses this one).
+    pub fn release_tile_data(&mut self) {
+        if self.released.is_some() {
+            return;
+        }
+        let released = Released {
+            counts: self.counts(),
+            emission: self.has_emission(),
+            occupied_leaf: self.occupied_bounds_leaf(),
+        };
+        (self.nodes, self.leaves, self.surfels) = (Vec::new(), Vec::new(), Vec::new());
+        self.released = Some(released);
     }
 
     /// Node indices ordered by height (0 = leaves) and the range of each height, for the mip pass.

@@ -113,6 +113,17 @@ impl Follow {
         Ok(Some(arrived))
     }
 
+    /// Gives `scene` (the renderer's, its tile data let go) its tile data again, read from the
+    /// package for the residency the renderer holds: for a renderer made anew (another preset,
+    /// lights that do not fit in place). Nothing to do where the scene holds its data.
+    pub(crate) fn reload_into(&self, scene: &mut SceneData) -> Result<()> {
+        if scene.released.is_none() {
+            return Ok(());
+        }
+        let again = self.streaming.load(&self.current, Vec::new(), false)?;
+        scene.restore_tile_data(again)
+    }
+
     /// The renderer now holds `r` (its scene swapped in, or unchanged).
     pub(crate) fn accept(&mut self, r: Residency) {
         self.current = r;

@@ -290,11 +290,18 @@ fn anew(gpu: &Gpu, r: &mut Renderer, old: &SceneData, new: &SceneData, carry: bo
 /// shadow faces or light records than the renderer has room for, no light left), a renderer for
 /// the new lights in the same pools: natively every leaf's light is carried over as the start
 /// (a browser cannot block on the read-back and starts from darkness), shadow maps and direct
-/// light are made again for every light. Says which it did.
-pub fn relit(gpu: &Gpu, r: &mut Renderer, scene: &SceneData) -> Result<Relit> {
+/// light are made again for every light. Says which it did. `reload` gives a scene whose tile
+/// data was let go ([`SceneData::release_tile_data`]) its data again, for the new renderer.
+pub fn relit(
+    gpu: &Gpu,
+    r: &mut Renderer,
+    scene: &mut SceneData,
+    reload: impl FnOnce(&mut SceneData) -> Result<()>,
+) -> Result<Relit> {
     if let Some(edit) = r.edit_lights(scene)? {
         return Ok(Relit::InPlace(edit));
     }
+    reload(scene)?;
     // The tiles are the same; only the lights changed. Nothing lights the scene now: nothing
     // propagates, so nothing may be carried (the old light would stay on the walls).
     let carried = anew(gpu, r, scene, scene, !cfg!(target_arch = "wasm32") && scene.has_own_light())?;

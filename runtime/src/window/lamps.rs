@@ -340,7 +340,12 @@ pub(super) fn update(s: &mut State, panel_edit: Option<PanelEdit>) -> Result<()>
 
 /// The renderer takes the scene's new lights; the panel says how much the edit redoes.
 fn relit(s: &mut State) -> Result<()> {
-    let how = crate::stream::relit(&s.gpu, &mut s.renderer, &s.scene)?;
+    let follow = &s.follow;
+    let how = crate::stream::relit(&s.gpu, &mut s.renderer, &mut s.scene, |scene| match follow {
+        Some(f) => f.reload_into(scene),
+        None => Ok(()),
+    })?;
+    super::let_go_of_tiles(s);
     let redo = match how {
         crate::stream::Relit::InPlace(e) => format!(
             "in place: {} light(s) changed, {} shadow face(s), direct light in {} of {} tiles",

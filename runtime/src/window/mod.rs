@@ -357,6 +357,9 @@ impl App {
             story,
             lamps,
         });
+        if let Some(s) = &mut self.state {
+            let_go_of_tiles(s);
+        }
         Ok(())
     }
 
@@ -375,6 +378,7 @@ impl App {
             if let Some(arrived) = f.poll()? {
                 if let Some(new_scene) = arrived.scene {
                     crate::stream::swap_tiles(&s.gpu, &mut s.renderer, &mut s.scene, new_scene)?;
+                    s.scene.release_tile_data();
                     self.summary.tile_swaps += 1;
                 }
                 f.accept(arrived.residency);
@@ -675,7 +679,7 @@ fn model(
         tile_bytes: s.scene.tile_bytes(r.settings().radiance_f16),
         pool_bytes: r.pool_bytes(),
         gpu_bytes: r.gpu_bytes(),
-        surfels: s.scene.surfels.len(),
+        surfels: s.scene.counts().surfels,
         recording: s.recording.as_ref().map(Vec::len),
         orbit: s.nav.orbit.is_some(),
         speed_m_s: s.nav.speed_m_s,
@@ -694,6 +698,16 @@ fn model(
     }
 }
 
+/// Where tiles stream, the scene lets go of its tile data once the renderer holds it: the loader
+/// reads a scene for each change of tiles, and a renderer made anew has it read again
+/// ([`follow::Follow::reload_into`]). A package that fits keeps its scene: a new renderer is made
+/// from it as it is.
+fn let_go_of_tiles(s: &mut State) {
+    if s.follow.is_some() {
+        s.scene.release_tile_data();
+    }
+}
+
 /// Applies what the panel changed.
 fn apply_knobs(s: &mut State, k: panel::PanelKnobs) -> Result<()> {
     let old = s.ui.knobs;
@@ -703,10 +717,14 @@ fn apply_knobs(s: &mut State, k: panel::PanelKnobs) -> Result<()> {
         // The march's constants are baked into the passes: a new renderer, its light from dark.
         let settings = s.renderer.settings().with_preset(q);
         let caps = s.renderer.pool_caps();
-        s.renderer = match s.follow {
-            Some(_) => Renderer::with_pools(&s.gpu, &s.scene, settings, caps)?,
+        s.renderer = match &s.follow {
+            Some(f) => {
+                f.reload_into(&mut s.scene)?;
+                Renderer::with_pools(&s.gpu, &s.scene, settings, caps)?
+            }
             None => Renderer::new(&s.gpu, &s.scene, settings)?,
         };
+        let_go_of_tiles(s);
         s.renderer.set_clip(k.clip);
         s.ui.knobs = panel::PanelKnobs { quality: k.quality, bounces: s.renderer.settings().bounces, ..k };
         return Ok(());

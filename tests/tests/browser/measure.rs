@@ -1,13 +1,22 @@
-//! Measurements run by the bench scripts, ignored in the suite: bytes before the first frame,
-//! frame times while moving, memory over a tour loop, and the docs' screenshots.
+//! Measurements run by `cargo xtask bench web|web-frames|web-memory`, ignored in the suite:
+//! bytes before the first frame, frame times while moving, memory over a tour loop, and the
+//! docs' screenshots. Each prints its table and writes its figures as JSON where
+//! `GROTTO_BENCH_JSON` names a file (the harness reads them from there).
 
 use super::*;
 
+/// Writes `figures` where the harness asked for them.
+fn report(figures: &Value) {
+    if let Some(path) = std::env::var_os("GROTTO_BENCH_JSON") {
+        std::fs::write(&path, serde_json::to_vec_pretty(figures).unwrap()).unwrap();
+    }
+}
+
 /// What the page fetched before its first frame, on a package of your choice: the figures in
-/// docs/web.md ("What a visitor downloads"). Run by `scripts/bench-web.sh PACKAGE`; ignored in
-/// the suite (it needs a large package).
+/// docs/web.md ("What a visitor downloads"). Run by `cargo xtask bench web`; ignored in the
+/// suite.
 #[test]
-#[ignore = "a measurement: scripts/bench-web.sh PACKAGE"]
+#[ignore = "a measurement: cargo xtask bench web"]
 fn bytes_before_the_first_frame() {
     let Some((chromium, driver, bundle)) = tools() else { return };
     let package =
@@ -34,6 +43,11 @@ fn bytes_before_the_first_frame() {
         summary.wasm_bytes,
         status["first_frame_ms"].as_f64().unwrap_or(0.0) / 1e3
     );
+    report(&json!({
+        "package": name, "package_bytes": total, "first_frame_bytes": first,
+        "requests": status["requests"], "site_bytes": site_bytes, "wasm_bytes": summary.wasm_bytes,
+        "first_frame_ms": status["first_frame_ms"],
+    }));
     assert!(first * 10 < total, "the first frame waited for {first} of {total} bytes");
 }
 
@@ -45,7 +59,7 @@ fn bytes_before_the_first_frame() {
 /// a row: frames, median, p95 and worst milliseconds between frames, and what the frame-time
 /// target traded at the end.
 #[test]
-#[ignore = "a measurement: scripts/bench-web-frames.sh PACKAGE"]
+#[ignore = "a measurement: cargo xtask bench web-frames"]
 fn frame_times_while_moving() {
     let Some((chromium, driver, bundle)) = tools() else { return };
     let package =
@@ -103,6 +117,11 @@ fn frame_times_while_moving() {
         gaps.last().copied().unwrap_or(0.0),
         status.get("traded").map_or_else(|| "-".into(), Value::to_string)
     );
+    report(&json!({
+        "package": name, "size": size, "query": query, "move_s": move_s, "frames": times.len(),
+        "median_ms": at(0.5), "p95_ms": at(0.95), "worst_ms": gaps.last().copied().unwrap_or(0.0),
+        "traded": status.get("traded").cloned().unwrap_or(Value::Null),
+    }));
     assert!(times.len() >= 2, "no frames while moving");
 }
 
@@ -114,7 +133,7 @@ fn frame_times_while_moving() {
 /// `Runtime.getHeapUsage`), the viewer's wasm memory and the renderer's GPU bytes. Prints every
 /// sample, then a row: each figure at the end of the first loop and the largest after it.
 #[test]
-#[ignore = "a measurement: scripts/bench-web-memory.sh PACKAGE"]
+#[ignore = "a measurement: cargo xtask bench web-memory"]
 fn memory_over_a_tour_loop() {
     let Some((chromium, driver, bundle)) = tools() else { return };
     let package =
@@ -208,6 +227,13 @@ fn memory_over_a_tour_loop() {
         at.4,
         max(|s| s.4)
     );
+    let pair = |first: f64, largest: f64| json!({"first_loop": first, "largest_after": largest});
+    report(&json!({
+        "package": name, "minutes": minutes, "loops": samples.last().map_or(0, |s| s.1),
+        "js_heap_mb": pair(at.2, max(|s| s.2)), "wasm_mb": pair(at.3, max(|s| s.3)),
+        "gpu_mb": pair(at.4, max(|s| s.4)),
+        "samples": samples.iter().map(|s| json!([s.0, s.1, s.2, s.3, s.4])).collect::<Vec<_>>(),
+    }));
 }
 
 /// The screenshots of docs/web.md: PACKAGE (GROTTO_WEB_BENCH_PACKAGE) published and
