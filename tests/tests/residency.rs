@@ -721,3 +721,25 @@ fn a_scene_that_let_go_of_its_tiles_makes_no_renderer_until_it_takes_them_back()
     let (after, _, _) = render(&gpu, &scene, &cam);
     assert!(before == after, "the restored scene renders the image it rendered before");
 }
+
+#[test]
+fn lights_that_do_not_fit_in_place_load_a_let_go_scene_again_for_the_new_renderer() {
+    let pkg = Package::open(small_tiles_cave()).unwrap();
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
+    let mut scene = full_first(&pkg, 3);
+    assert!(!scene.lights.is_empty(), "the small cave has lamps");
+    let mut r = Renderer::new(&gpu, &scene, settings()).unwrap();
+    scene.release_tile_data();
+    // No light left: no edit in place ends that, so the lights take a new renderer.
+    scene.lights.clear();
+    let err = grotto_runtime::stream::relit(&gpu, &mut r, &mut scene, |_| Ok(())).unwrap_err();
+    assert!(err.to_string().contains("let go"), "{err}");
+    let how =
+        grotto_runtime::stream::relit(&gpu, &mut r, &mut scene, |s| s.restore_tile_data(full_first(&pkg, 3)))
+            .unwrap();
+    assert!(matches!(how, grotto_runtime::stream::Relit::Anew { .. }), "{how:?}");
+    assert!(scene.released.is_none(), "the scene holds its tiles again");
+    r.settle(|_, _| {}).unwrap();
+    let frame = r.render(&chamber(&scene), W, H).unwrap().0;
+    assert!(frame.hdr.iter().all(|p| p.iter().all(|c| c.is_finite())));
+}

@@ -100,8 +100,8 @@ pub(crate) const SUITES: &[Suite] = &[
     },
     Suite {
         name: "memory",
-        about: "grotto render's process peak on 10^7 points under 256 MiB",
-        needs: Needs::Binaries,
+        about: "grotto render's and view's process peak, 10^7 points under 256 MiB",
+        needs: Needs::Display,
         dev_time: "10 min",
         run: memory::render,
     },

@@ -139,8 +139,9 @@ pub(crate) fn view(ctx: &Ctx) -> Result<Vec<Figure>> {
         bail!("grotto view failed ({status}); see {}", ctx.out.join("view.err").display());
     }
     let r = report(ctx, "view")?;
+    // `grotto view --json`: the session, its frames under `log`.
     let ms = |k: &str| -> Vec<f64> {
-        r[k].as_array().map(|a| a.iter().filter_map(Value::as_f64).collect()).unwrap_or_default()
+        r["log"][k].as_array().map(|a| a.iter().filter_map(Value::as_f64).collect()).unwrap_or_default()
     };
     let (moving, rest) = (ms("moving_ms"), ms("rest_ms"));
     let (median, p95) = quantiles(&moving, 0.95).context("no moving frames")?;
@@ -168,6 +169,57 @@ pub(crate) fn view(ctx: &Ctx) -> Result<Vec<Figure>> {
         ));
     }
     Ok(figures)
+}
+
+/// `grotto view PACKAGE ARGS` flown for about 40 s (forward 20 s, a turn, forward 10 s, back 10 s)
+/// and closed: its frame log and the process's peak resident memory in bytes (`VmHWM`, read
+/// every 20 ms until it exits).
+pub(super) fn flight_peak(ctx: &Ctx, pkg: &Path, name: &str, extra: &[&str]) -> Result<(Value, u64)> {
+    let x = Xvfb::start()?;
+    let mut child = viewer(ctx, &x, pkg, name, extra)?;
+    let wid = x.focus_viewer()?;
+    let pid = child.id();
+    let peak = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let sampler = {
+        let peak = peak.clone();
+        std::thread::spawn(move || {
+            while let Ok(status) = std::fs::read_to_string(format!("/proc/{pid}/status")) {
+                let hwm = status.lines().find(|l| l.starts_with("VmHWM:"));
+                if let Some(kib) = hwm.and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok()) {
+                    peak.fetch_max(kib * 1024, std::sync::atomic::Ordering::Relaxed);
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        })
+    };
+    let (cx, cy) = ((SIZE.0 / 2).to_string(), (SIZE.1 / 2).to_string());
+    x.xdotool(&["keydown", "w", "sleep", "20", "keyup", "w"]);
+    x.xdotool(&[
+        "mousemove",
+        &cx,
+        &cy,
+        "mousedown",
+        "1",
+        "mousemove_relative",
+        "--",
+        "300",
+        "0",
+        "mouseup",
+        "1",
+    ]);
+    x.xdotool(&["keydown", "w", "sleep", "10", "keyup", "w", "keydown", "s", "sleep", "10", "keyup", "s"]);
+    // Escape until the viewer has gone: a frame can be long on a software adapter.
+    while child.try_wait()?.is_none() {
+        x.xdotool(&["windowfocus", &wid]);
+        x.xdotool(&["key", "Escape"]);
+        std::thread::sleep(Duration::from_secs(2));
+    }
+    let status = child.wait()?;
+    let _ = sampler.join();
+    if !status.success() {
+        bail!("grotto view failed ({status}); see {}", ctx.out.join(format!("{name}.err")).display());
+    }
+    Ok((report(ctx, name)?, peak.load(std::sync::atomic::Ordering::Relaxed)))
 }
 
 /// The process's resident and data memory in MiB, from /proc.
