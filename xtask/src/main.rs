@@ -93,7 +93,10 @@ fn main() -> Result<()> {
                     if !status.success() {
                         bail!("cargo build --release failed");
                     }
-                    figures::root().join("target/release")
+                    // Where cargo put them: CARGO_TARGET_DIR, as cargo reads it, else target/.
+                    let target = std::env::var_os("CARGO_TARGET_DIR")
+                        .map_or_else(|| figures::root().join("target"), PathBuf::from);
+                    target.join("release")
                 }
             };
             let machine = machine.unwrap_or_else(gpu_name);
