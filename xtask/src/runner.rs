@@ -90,24 +90,15 @@ impl Ctx {
             .stderr(Stdio::inherit())
             .spawn()
             .with_context(|| format!("starting {shown}"))?;
-        let mut peak_kib = 0u64;
-        let status = loop {
-            if let Some(s) = child.try_wait()? {
-                break s;
-            }
-            let status = std::fs::read_to_string(format!("/proc/{}/status", child.id())).unwrap_or_default();
-            let hwm = status.lines().find(|l| l.starts_with("VmHWM:"));
-            if let Some(kib) = hwm.and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok()) {
-                peak_kib = peak_kib.max(kib);
-            }
-            std::thread::sleep(std::time::Duration::from_millis(20));
-        };
+        let sampler = PeakSampler::start(child.id());
+        let status = child.wait()?;
+        let peak = sampler.finish();
         if !status.success() {
             bail!("{shown} failed ({status})");
         }
         let v = serde_json::from_slice(&std::fs::read(&path)?)
             .with_context(|| format!("{shown}: its output is not JSON"))?;
-        Ok((v, peak_kib * 1024))
+        Ok((v, peak))
     }
 
     /// Runs `cmd` and returns its wall time in seconds.
@@ -240,6 +231,46 @@ impl Ctx {
     }
 }
 
+/// Fields of a process's `/proc/PID/status` in KiB (`VmHWM:`, `VmRSS:`...), `None` once it is gone.
+pub(crate) fn proc_kib(pid: u32, fields: &[&str]) -> Option<Vec<u64>> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let field = |name: &str| -> Option<u64> {
+        status.lines().find(|l| l.starts_with(name))?.split_whitespace().nth(1)?.parse().ok()
+    };
+    fields.iter().map(|f| field(f)).collect()
+}
+
+/// A process's peak resident memory: its `VmHWM`, read every 20 ms on a thread of its own until
+/// the process has gone (the peak it reached before the last read).
+#[derive(Debug)]
+pub(crate) struct PeakSampler {
+    peak_kib: std::sync::Arc<std::sync::atomic::AtomicU64>,
+    thread: std::thread::JoinHandle<()>,
+}
+
+impl PeakSampler {
+    pub(crate) fn start(pid: u32) -> Self {
+        let peak_kib = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+        let seen = peak_kib.clone();
+        let thread = std::thread::spawn(move || {
+            // A process that has exited but is not yet waited for has no VmHWM line.
+            while Path::new(&format!("/proc/{pid}")).exists() {
+                if let Some(v) = proc_kib(pid, &["VmHWM:"]) {
+                    seen.fetch_max(v[0], std::sync::atomic::Ordering::Relaxed);
+                }
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+        });
+        Self { peak_kib, thread }
+    }
+
+    /// The peak in bytes, once the process has been waited for.
+    pub(crate) fn finish(self) -> u64 {
+        let _ = self.thread.join();
+        self.peak_kib.load(std::sync::atomic::Ordering::Relaxed) * 1024
+    }
+}
+
 /// The field `key` of a report as a number (0 where absent: a pass that did not run).
 pub(crate) fn num(v: &Value, key: &str) -> f64 {
     key.split('.').fold(v, |v, k| &v[k]).as_f64().unwrap_or(0.0)
@@ -309,6 +340,16 @@ fn commit() -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_peak_of_a_process_is_read_until_it_has_gone() {
+        let mut child = Command::new("sleep").arg("0.3").spawn().unwrap();
+        let sampler = PeakSampler::start(child.id());
+        assert!(child.wait().unwrap().success());
+        let peak = sampler.finish();
+        assert!(peak > 0 && peak < 1 << 30, "{peak} bytes for `sleep`");
+        assert_eq!(proc_kib(child.id(), &["VmHWM:"]), None, "gone");
+    }
 
     #[test]
     fn counts_and_quantiles_read_as_the_docs_write_them() {

@@ -9,7 +9,7 @@ use anyhow::{Context, Result, bail};
 use serde_json::Value;
 
 use crate::figures::Figure;
-use crate::runner::{Ctx, quantiles};
+use crate::runner::{Ctx, PeakSampler, proc_kib, quantiles};
 
 const SIZE: (u32, u32) = (640, 480);
 const SOFTWARE: &str = "software";
@@ -189,19 +189,7 @@ pub(super) fn flight_peak(ctx: &Ctx, pkg: &Path, name: &str, extra: &[&str]) -> 
     let mut child = viewer(ctx, &x, pkg, name, extra)?;
     let wid = x.focus_viewer()?;
     let pid = child.id();
-    let peak = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
-    let sampler = {
-        let peak = peak.clone();
-        std::thread::spawn(move || {
-            while let Ok(status) = std::fs::read_to_string(format!("/proc/{pid}/status")) {
-                let hwm = status.lines().find(|l| l.starts_with("VmHWM:"));
-                if let Some(kib) = hwm.and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok()) {
-                    peak.fetch_max(kib * 1024, std::sync::atomic::Ordering::Relaxed);
-                }
-                std::thread::sleep(Duration::from_millis(20));
-            }
-        })
-    };
+    let sampler = PeakSampler::start(pid);
     let (cx, cy) = ((SIZE.0 / 2).to_string(), (SIZE.1 / 2).to_string());
     x.xdotool(&["keydown", "w", "sleep", "20", "keyup", "w"]);
     x.xdotool(&[
@@ -225,21 +213,17 @@ pub(super) fn flight_peak(ctx: &Ctx, pkg: &Path, name: &str, extra: &[&str]) -> 
         std::thread::sleep(Duration::from_secs(2));
     }
     let status = child.wait()?;
-    let _ = sampler.join();
+    let peak = sampler.finish();
     if !status.success() {
         bail!("grotto view failed ({status}); see {}", ctx.out.join(format!("{name}.err")).display());
     }
-    Ok((report(ctx, name)?, peak.load(std::sync::atomic::Ordering::Relaxed)))
+    Ok((report(ctx, name)?, peak))
 }
 
 /// The process's resident and data memory in MiB, from /proc.
 fn memory_mib(pid: u32) -> Option<(u64, u64)> {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    let field = |name: &str| -> Option<u64> {
-        let line = status.lines().find(|l| l.starts_with(name))?;
-        line.split_whitespace().nth(1)?.parse::<u64>().ok().map(|kib| kib / 1024)
-    };
-    Some((field("VmRSS:")?, field("VmData:")?))
+    let v = proc_kib(pid, &["VmRSS:", "VmData:"])?;
+    Some((v[0] / 1024, v[1] / 1024))
 }
 
 /// The demo cave in the window for 30 minutes of a scripted flight in a loop (camera switch,
