@@ -69,18 +69,11 @@ impl Ctx {
 
     /// Runs `cmd` and parses its standard output as JSON, kept as `json/NAME.json`.
     pub(crate) fn json(&self, name: &str, cmd: &mut Command) -> Result<Value> {
-        let shown = self.log_command(cmd)?;
-        let out = cmd.stderr(Stdio::inherit()).output().with_context(|| format!("starting {shown}"))?;
-        if !out.status.success() {
-            bail!("{shown} failed ({})", out.status);
-        }
-        let path = self.out.join("json").join(format!("{name}.json"));
-        std::fs::write(&path, &out.stdout)?;
-        serde_json::from_slice(&out.stdout).with_context(|| format!("{shown}: its output is not JSON"))
+        Ok(self.json_peak(name, cmd)?.0)
     }
 
-    /// Runs `cmd` like [`Ctx::json`] and also returns the process's peak resident memory in
-    /// bytes (its `VmHWM`, read every 20 ms while it runs: the peak it reached before the last
+    /// Runs `cmd` and parses its standard output as JSON, kept as `json/NAME.json`; also returns
+    /// the process's peak resident memory in bytes (its `VmHWM`, read every 20 ms while it runs: the peak it reached before the last
     /// read).
     pub(crate) fn json_peak(&self, name: &str, cmd: &mut Command) -> Result<(Value, u64)> {
         let shown = self.log_command(cmd)?;
@@ -108,7 +101,8 @@ impl Ctx {
         Ok(t.elapsed().as_secs_f64())
     }
 
-    fn log_command(&self, cmd: &Command) -> Result<String> {
+    /// Logs `cmd` (stderr and `commands.txt`) as a shell would run it; returns that text.
+    pub(crate) fn log_command(&self, cmd: &Command) -> Result<String> {
         let mut shown = cmd.get_program().to_string_lossy().into_owned();
         for a in cmd.get_args() {
             let a = a.to_string_lossy();
@@ -200,21 +194,7 @@ impl Ctx {
 
     /// Builds the demo package afresh and returns its build summary (`json/build-demo.json`).
     pub(crate) fn demo_summary(&self) -> Result<Value> {
-        let mut cmd = self.pack();
-        cmd.args(["demo", "--json", "--out"]).arg(self.work.join("demo"));
-        let shown = self.log_command(&cmd)?;
-        let out = cmd.stderr(Stdio::inherit()).output().with_context(|| format!("starting {shown}"))?;
-        if !out.status.success() {
-            bail!("{shown} failed ({})", out.status);
-        }
-        // The synthesis's summary, then the build's.
-        let last = serde_json::Deserializer::from_slice(&out.stdout)
-            .into_iter::<Value>()
-            .last()
-            .with_context(|| format!("{shown}: printed no summary"))?
-            .with_context(|| format!("{shown}: its output is not JSON"))?;
-        std::fs::write(self.out.join("json/build-demo.json"), serde_json::to_vec_pretty(&last)?)?;
-        Ok(last)
+        self.json("build-demo", self.pack().args(["demo", "--json", "--out"]).arg(self.work.join("demo")))
     }
 
     /// `grotto bench PACKAGE --camera chamber --reps REPS --json ARGS`, kept as `json/NAME.json`.

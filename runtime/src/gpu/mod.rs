@@ -1,5 +1,6 @@
 //! GPU plumbing: the device and its limits, checked buffer and texture creation, error scopes and
-//! read-backs ([`device`]), uploads in bounded pieces ([`upload`]), and the structs shared with WGSL, byte for byte ([`types`]).
+//! read-backs ([`device`]), uploads in bounded pieces ([`upload`]), and the structs shared with
+//! WGSL, byte for byte ([`types`]).
 
 mod device;
 pub mod types;

@@ -57,8 +57,9 @@ pub(crate) fn bytes(ctx: &Ctx) -> Result<Vec<Figure>> {
     let pkg = ctx.demo()?;
     let r = measure(ctx, "bytes_before_the_first_frame", &pkg, &[])?;
     let (first, total) = (num(&r, "first_frame_bytes"), num(&r, "package_bytes"));
-    let wasm =
-        std::fs::read(root().join("target/web/grotto_web_bg.wasm")).context("the built bundle's wasm")?;
+    let wasm_bytes = std::fs::metadata(root().join("target/web/grotto_web_bg.wasm"))
+        .context("the built bundle's wasm")?
+        .len();
     let bundle: u64 = std::fs::read_dir(root().join("target/web"))?
         .filter_map(|e| e.ok()?.metadata().ok())
         .filter(|m| m.is_file())
@@ -77,7 +78,7 @@ pub(crate) fn bytes(ctx: &Ctx) -> Result<Vec<Figure>> {
         r["requests"],
         num(&r, "first_frame_ms") / 1e3,
         thousands(bundle),
-        thousands(wasm.len() as u64),
+        thousands(wasm_bytes),
         thousands(gz as u64)
     ))?;
     Ok(vec![

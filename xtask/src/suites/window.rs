@@ -100,16 +100,8 @@ fn viewer(ctx: &Ctx, x: &Xvfb, pkg: &Path, name: &str, extra: &[&str]) -> Result
     let err = std::fs::File::create(ctx.out.join(format!("{name}.err")))?;
     let mut cmd = ctx.grotto();
     cmd.arg("view").arg(pkg).args(["--size", &size, "--json"]).args(extra).env("DISPLAY", &x.display);
-    ctx.table(&format!("`DISPLAY={} {}`", x.display, shown(&cmd)))?;
+    ctx.log_command(&cmd)?;
     Ok(cmd.stdout(json).stderr(err).spawn()?)
-}
-
-fn shown(cmd: &Command) -> String {
-    std::iter::once(cmd.get_program())
-        .chain(cmd.get_args())
-        .map(|a| a.to_string_lossy())
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 fn report(ctx: &Ctx, name: &str) -> Result<Value> {
