@@ -378,6 +378,64 @@ fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer()
     }
 }
 
+#[test]
+fn a_change_of_tiles_reads_only_the_forms_the_renderer_lacks_and_repacks_on_the_gpu() {
+    // A streaming step reads only the tile forms new to the renderer; the others are in the scene
+    // as their summaries, so a step's memory follows the change, not the residency. Swapped in,
+    // and through a forced repack (the forms that stay then move on the GPU, and only their
+    // nodes are read back to be re-indexed), it settles to what a renderer made for the whole
+    // scene renders.
+    let pkg = Package::open(small_tiles_cave()).unwrap();
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
+    let n = pkg.tile_count() as usize;
+    let (half, most) = (full_first(&pkg, n / 2), full_first(&pkg, 3 * n / 4));
+    let cam = chamber(&most);
+    let settings = Settings { bounces: 40, shadow_map_size: 128, exposure: 8.0, ..Settings::default() };
+    let batch = |s: &SceneData| {
+        let mut r = Renderer::new(&gpu, s, settings.clone()).unwrap();
+        r.settle(|_, _| {}).unwrap();
+        r.render(&cam, W, H).unwrap().0.ldr
+    };
+    let (batch_half, batch_most) = (batch(&half), batch(&most));
+    let caps = PoolCaps::filling(PoolCaps::of(&most), PoolCaps::of(&most).bytes(false) * 5 / 4, false);
+    let mut scene = half.clone();
+    let mut r = Renderer::with_pools(&gpu, &scene, settings.clone(), caps).unwrap();
+    r.settle(|_, _| {}).unwrap();
+    scene.release_tile_data();
+    for (full, batch, repack) in
+        [(3 * n / 4, &batch_most, false), (n / 2, &batch_half, false), (3 * n / 4, &batch_most, true)]
+    {
+        let modes = |i: usize| if i < full { TileMode::Full } else { TileMode::Coarse };
+        let next =
+            SceneData::from_package_with_held(&pkg, modes, scene.rock.clone(), &scene.held_tiles()).unwrap();
+        let whole = full_first(&pkg, full);
+        assert_eq!((next.tiles.len(), next.counts()), (whole.tiles.len(), whole.counts()));
+        let read = next.absent.iter().filter(|a| a.is_none()).count();
+        assert!(
+            read > 0 && read < whole.tiles.len(),
+            "{full} full: {read} of {} tiles read",
+            whole.tiles.len()
+        );
+        assert!(next.surfels.len() < whole.surfels.len(), "the forms held are not read");
+        assert_eq!(next.held_tiles(), whole.held_tiles(), "summaries kept are those of the data");
+        if repack {
+            r.repack_next_update();
+        }
+        let swapped = grotto_runtime::stream::swap_tiles(&gpu, &mut r, &mut scene, next, || {
+            panic!("the same lights and bounds: swapped in place")
+        })
+        .unwrap();
+        let u = swapped.update.expect("in place");
+        assert_eq!(u.repacked, repack, "{u:?}");
+        assert_eq!(u.uploaded_tiles, read, "only what was read is written: {u:?}");
+        assert!(!repack || u.moved_bytes > 0, "a repack moves the forms that stay: {u:?}");
+        scene.release_tile_data();
+        r.settle(|_, _| {}).unwrap();
+        let d = golden::diff(batch, &r.render(&cam, W, H).unwrap().0.ldr);
+        assert!(golden::within_tolerance(&d), "{full} full, repack {repack}: {d:?}");
+    }
+}
+
 /// Under a per-frame shadow budget the faces a change of tiles leaves out of date are
 /// drawn over several frames, one pass each; while they catch up the frames show the shadow maps
 /// as they were (no face of the new scene mixed in, the direct light not injected, the bounces
@@ -715,7 +773,7 @@ fn a_scene_that_let_go_of_its_tiles_makes_no_renderer_until_it_takes_them_back()
     // Another residency's scene is not this one's data.
     let other = full_first(&pkg, 1);
     assert!(scene.restore_tile_data(other).is_err());
-    assert!(scene.released.is_some(), "a refused restore leaves the scene as it was");
+    assert!(!scene.holds_all_tiles(), "a refused restore leaves the scene as it was");
     scene.restore_tile_data(full_first(&pkg, 3)).unwrap();
     assert_eq!(scene.counts(), counts);
     let (after, _, _) = render(&gpu, &scene, &cam);
@@ -738,7 +796,7 @@ fn lights_that_do_not_fit_in_place_load_a_let_go_scene_again_for_the_new_rendere
         grotto_runtime::stream::relit(&gpu, &mut r, &mut scene, |s| s.restore_tile_data(full_first(&pkg, 3)))
             .unwrap();
     assert!(matches!(how, grotto_runtime::stream::Relit::Anew { .. }), "{how:?}");
-    assert!(scene.released.is_none(), "the scene holds its tiles again");
+    assert!(scene.holds_all_tiles(), "the scene holds its tiles again");
     r.settle(|_, _| {}).unwrap();
     let frame = r.render(&chamber(&scene), W, H).unwrap().0;
     assert!(frame.hdr.iter().all(|p| p.iter().all(|c| c.is_finite())));

@@ -680,7 +680,9 @@ impl State {
             }
             Err(e) => return Err(e.into()),
         };
-        stream::swap_tiles(&self.gpu, &mut self.renderer, &mut self.scene, scene)?;
+        // The scene read here holds every tile, so nothing needs reading again.
+        let whole = || self.streaming.load(&next, Vec::new(), false);
+        stream::swap_tiles(&self.gpu, &mut self.renderer, &mut self.scene, scene, whole)?;
         self.current = next;
         // Choose again: the step may have been one of several.
         self.chosen_for = None;

@@ -55,7 +55,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 pub fn bench(opts: &RenderOptions, reps: u32) -> Result<PassBench> {
     use crate::light::plan::Pass;
     let gpu = Gpu::new(&GpuOptions { work_counters: true, ..opts.gpu.clone() })?;
-    let Opened { scene, cameras, residency, .. } = crate::engine::open(opts, &gpu)?;
+    let Opened { scene, cameras, residency, .. } = crate::engine::open(opts, &gpu)?.into_whole()?;
     let cam = cameras[0];
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
@@ -159,7 +159,7 @@ pub struct EditBench {
 pub fn bench_light_edits(opts: &RenderOptions, edits: &std::path::Path) -> Result<EditBench> {
     use web_time::Instant;
     let gpu = Gpu::new(&opts.gpu)?;
-    let Opened { mut scene, .. } = crate::engine::open(opts, &gpu)?;
+    let Opened { mut scene, .. } = crate::engine::open(opts, &gpu)?.into_whole()?;
     // The scene's lighting (a lighting file's, or the package's own lights).
     let base = match scene.lighting.clone() {
         Some(l) => l,

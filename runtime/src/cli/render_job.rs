@@ -225,7 +225,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     settings.validate().map_err(as_samples)?;
     let (mut r, mut follow) = crate::stream::follow::start(
         &gpu,
-        &scene,
+        &mut scene,
         settings.clone(),
         streaming,
         residency,
@@ -258,7 +258,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             change = follow_tiles(f, &gpu, &mut r, &mut scene, opts.frame_bounces, &mut progress)?;
         }
         if let (Some(f), Some(next_cam)) = (&mut follow, cameras.get(i + 1)) {
-            f.request(next_cam, clip, scene.lights.clone(), scene.headlamp);
+            f.request(next_cam, clip, (scene.lights.clone(), scene.headlamp), scene.held_tiles());
         }
         let current = follow.as_ref().map(|f| f.current());
         let before_render = r.stats().bounces_done;
@@ -377,7 +377,8 @@ fn follow_tiles(
         let (before, after) = (full(f.current()), full(&arrived.residency));
         change.loaded = after.difference(&before).count();
         change.evicted = before.difference(&after).count();
-        let swapped = crate::stream::swap_tiles(gpu, r, scene, new_scene)?;
+        let swapped =
+            crate::stream::swap_tiles(gpu, r, scene, new_scene, || f.load_whole(&arrived.residency))?;
         scene.release_tile_data();
         (change.update, change.made_anew, change.carried_leaves) =
             (swapped.update, swapped.made_anew, swapped.carried_leaves);

@@ -109,16 +109,11 @@ pub fn open(opts: &RenderOptions, gpu: &Gpu) -> Result<Opened> {
         c.validate()?;
     }
     let clip = opts.clip_world_m.map(|b| clip_in_frame(b, scene.frame_origin_m)).transpose()?;
-    // Over budget: the tiles the first camera needs in full, the others stay coarse.
+    // Over budget: the tiles the first camera needs in full, the others stay coarse. The scene
+    // stays the far one: the renderer reads the residency's tiles a few at a time
+    // (stream::follow::start), or `Opened::into_whole` reads them at once.
     let residency = match &streaming {
-        Some(st) => {
-            let r = st.choose(&cameras[0], clip)?;
-            // The story as opened (a story file's amendments included) stays.
-            let story = (std::mem::take(&mut scene.pois), std::mem::take(&mut scene.tours));
-            scene = st.load(&r, std::mem::take(&mut scene.lights), false)?;
-            (scene.pois, scene.tours) = story;
-            Some(r)
-        }
+        Some(st) => Some(st.choose(&cameras[0], clip)?),
         None => None,
     };
     let want = match opts.headlamp {
@@ -127,8 +122,16 @@ pub fn open(opts: &RenderOptions, gpu: &Gpu) -> Result<Opened> {
         Headlamp::Auto => !scene.has_own_light(),
     };
     if want {
-        // A framed view was estimated already; a given one is estimated here.
-        let seen = framed.as_ref().map(|f| f.estimate);
+        // A framed view was estimated already; a given one is estimated here, from the surfels
+        // the first camera sees in full (read for that alone, then let go).
+        let seen = match (&framed, &streaming, &residency) {
+            (Some(f), _, _) => Some(f.estimate),
+            (None, Some(st), Some(r)) => {
+                let whole = st.load(r, Vec::new(), false)?;
+                crate::view::framing::estimate(&whole, &cameras[0], aspect, splat)
+            }
+            _ => None,
+        };
         let own_light = scene.has_own_light();
         let (intensity_w_sr, distance_m) = scene::add_headlamp(&mut scene, &cameras[0], aspect, splat, seen);
         notes.push(format!(
@@ -163,6 +166,23 @@ pub fn open(opts: &RenderOptions, gpu: &Gpu) -> Result<Opened> {
         ));
     }
     Ok(Opened { scene, cameras, notes, residency, streaming, clip })
+}
+
+impl Opened {
+    /// The opened scene with the first residency's tiles read at once, where [`open`] left the
+    /// far scene for the renderer to fill a few tiles at a time: for jobs that need the scene's
+    /// data whole (pass and light-edit benchmarks).
+    pub fn into_whole(mut self) -> Result<Self> {
+        if let (Some(st), Some(r)) = (&self.streaming, &self.residency) {
+            let lights = std::mem::take(&mut self.scene.lights);
+            let mut whole = st.load(r, lights, self.scene.headlamp)?;
+            (whole.pois, whole.tours) =
+                (std::mem::take(&mut self.scene.pois), std::mem::take(&mut self.scene.tours));
+            whole.lighting = self.scene.lighting.take();
+            self.scene = whole;
+        }
+        Ok(self)
+    }
 }
 
 /// What [`open`] gives a job or a viewer.

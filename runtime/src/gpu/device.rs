@@ -81,6 +81,12 @@ pub struct GpuOptions {
     /// Ask for pipeline statistics queries where the adapter has them, so the renderer counts
     /// each pass's shader invocations (`grotto bench`; render/counters.rs).
     pub work_counters: bool,
+    /// Favour memory over speed in the driver's allocator (`wgpu::MemoryHints::MemoryUsage`:
+    /// memory blocks of 4-64 MiB instead of 64-256 MiB), where a memory budget is given: a
+    /// transient buffer (an upload's staging, a repack's scratch) then takes a small block, not
+    /// a new large one whose pages it touches bit by bit. On a software adapter, and on a
+    /// phone's shared memory, those blocks are the process's memory.
+    pub lean_memory: bool,
 }
 
 /// A device and queue ready for grotto's passes.
@@ -230,6 +236,11 @@ impl Gpu {
                 label: Some("grotto"),
                 required_features: features,
                 required_limits: limits,
+                memory_hints: if opts.lean_memory {
+                    wgpu::MemoryHints::MemoryUsage
+                } else {
+                    wgpu::MemoryHints::Performance
+                },
                 ..Default::default()
             })
             .await
@@ -421,6 +432,11 @@ impl Gpu {
     /// waiting: [`PendingRead::take`] has them once the GPU is done. The only read-back a browser
     /// can do (it cannot block on the GPU; the map completes between its frames).
     pub fn start_read(&self, buffer: &wgpu::Buffer, size: u64) -> PendingRead {
+        self.start_read_at(buffer, 0, size)
+    }
+
+    /// As [`Gpu::start_read`], from byte `offset` (a multiple of 4) of `buffer`.
+    fn start_read_at(&self, buffer: &wgpu::Buffer, offset: u64, size: u64) -> PendingRead {
         let size = size.max(4).next_multiple_of(4);
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
@@ -429,7 +445,7 @@ impl Gpu {
             mapped_at_creation: false,
         });
         let mut enc = self.device.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+        enc.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
         self.queue.submit([enc.finish()]);
         let state: Arc<Mutex<Option<std::result::Result<(), String>>>> = Arc::new(Mutex::new(None));
         let sink = state.clone();
@@ -445,6 +461,11 @@ impl Gpu {
     /// browser, which cannot block on the GPU: there it is an error naming what asked
     /// ([`Gpu::start_read`] is what a browser can do).
     pub fn read_buffer(&self, buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
+        self.read_range(buffer, 0, size)
+    }
+
+    /// As [`Gpu::read_buffer`], `size` bytes from byte `offset` (a multiple of 4).
+    pub fn read_range(&self, buffer: &wgpu::Buffer, offset: u64, size: u64) -> Result<Vec<u8>> {
         if cfg!(target_arch = "wasm32") {
             return Err(Error::Unsupported {
                 adapter: self.describe(),
@@ -452,7 +473,7 @@ impl Gpu {
                 hint: "a browser cannot wait for the GPU".into(),
             });
         }
-        let read = self.start_read(buffer, size);
+        let read = self.start_read_at(buffer, offset, size);
         self.wait_for("readback", || read.take().transpose())
     }
 

@@ -51,6 +51,56 @@ impl<'g> Uploader<'g> {
     }
 }
 
+/// A move of `len` bytes within one buffer, from byte `from` to byte `to` (`to <= from`; all
+/// three multiples of 4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Move {
+    pub(crate) from: u64,
+    pub(crate) to: u64,
+    pub(crate) len: u64,
+}
+
+/// Moves ranges of `buffer` toward its start on the GPU (a pool compacted: render/pool.rs), with
+/// nothing read back. A copy may not read and write one buffer, so each piece goes through a
+/// scratch buffer of at most [`UPLOAD_PIECE_BYTES`]. Done in `moves`' order, front to back; that is
+/// safe where each move goes toward the start and lands before the next move's source (a
+/// compaction in the order the ranges lay), because a piece then only overwrites bytes already
+/// read: anything else is refused before a copy is made. Returns the bytes moved.
+pub(crate) fn move_within(gpu: &Gpu, buffer: &wgpu::Buffer, moves: &[Move]) -> Result<u64> {
+    let bad = |why: String| crate::error::Error::Internal { what: "GPU move", message: why };
+    for (k, m) in moves.iter().enumerate() {
+        if m.to > m.from || (m.from | m.to | m.len) % 4 != 0 || m.from + m.len > buffer.size() {
+            return Err(bad(format!("{m:?} does not move toward the start within {} bytes", buffer.size())));
+        }
+        if let Some(next) = moves.get(k + 1)
+            && (next.from < m.from + m.len || m.to + m.len > next.from)
+        {
+            return Err(bad(format!("{m:?} then {next:?} are not in the order they lay")));
+        }
+    }
+    let largest = moves.iter().filter(|m| m.to != m.from).map(|m| m.len).max().unwrap_or(0);
+    if largest == 0 {
+        return Ok(0);
+    }
+    let piece = largest.min(UPLOAD_PIECE_BYTES as u64);
+    let scratch =
+        gpu.buffer("move scratch", piece, wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST)?;
+    let mut enc = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("move") });
+    let mut moved = 0;
+    for m in moves.iter().filter(|m| m.to != m.from) {
+        let mut done = 0;
+        while done < m.len {
+            let n = (m.len - done).min(piece);
+            enc.copy_buffer_to_buffer(buffer, m.from + done, &scratch, 0, n);
+            enc.copy_buffer_to_buffer(&scratch, 0, buffer, m.to + done, n);
+            done += n;
+        }
+        moved += m.len;
+    }
+    gpu.queue.submit([enc.finish()]);
+    Ok(moved)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -78,5 +128,18 @@ mod tests {
         let back: Vec<u32> = bytemuck::pod_collect_to_vec(&gpu.read_buffer(&buffer, size).unwrap());
         assert_eq!(&back[2..2 + words], &data[..], "the pieces land where the whole would");
         assert_eq!(&back[2 + words..], &[7, 8, 9]);
+
+        // Compacted toward the start: overlapping moves of more than a piece, front to back.
+        let (a, b) = (4 * 1000u64, 4 * (words as u64 / 2));
+        let moves = [Move { from: 8, to: 0, len: a }, Move { from: 8 + a + 64, to: a, len: b }];
+        assert_eq!(move_within(&gpu, &buffer, &moves).unwrap(), a + b);
+        let moved: Vec<u32> = bytemuck::pod_collect_to_vec(&gpu.read_buffer(&buffer, size).unwrap());
+        let (a, b) = (a as usize / 4, b as usize / 4);
+        assert_eq!(&moved[..a], &data[..a], "the first range moved whole");
+        assert_eq!(&moved[a..a + b], &data[a + 16..a + 16 + b], "the second, over its own old place");
+        let backwards = [Move { from: 0, to: 8, len: 16 }];
+        assert!(move_within(&gpu, &buffer, &backwards).is_err(), "a move away from the start is refused");
+        let crossing = [Move { from: 64, to: 0, len: 64 }, Move { from: 32, to: 16, len: 8 }];
+        assert!(move_within(&gpu, &buffer, &crossing).is_err(), "moves out of order are refused");
     }
 }

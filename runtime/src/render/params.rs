@@ -4,7 +4,7 @@
 use glam::Vec3;
 
 use crate::error::Result;
-use crate::gpu::types::{LeafGpu, MAX_CONES, Params, TileGpu};
+use crate::gpu::types::{MAX_CONES, Params, TileGpu};
 use crate::light::setup::LightSetup;
 use crate::passes::shadow;
 use crate::scene::data::{EnvChain, MAX_ENV_LEVELS, MAX_MATERIALS, SceneData};
@@ -133,27 +133,19 @@ pub(super) fn base_params(
         env_levels,
         env_chain,
         lookup_base: lookup.base,
-        tail_ratio_max: tail_ratio_max(settings, &scene.leaves),
+        tail_ratio_max: tail_ratio_max(settings, scene),
     }
 }
 
 /// The largest bounce ratio the tail estimate trusts, per channel: the spectral radius of one
 /// bounce is at most the largest albedo (the cone weights sum to 1 and opacity only loses
 /// light), so a leaf whose change grew by more is still filling with light, not converging.
-pub(super) fn tail_ratio_max(settings: &Settings, leaves: &[LeafGpu]) -> [f32; 4] {
+pub(super) fn tail_ratio_max(settings: &Settings, scene: &SceneData) -> [f32; 4] {
     if !settings.bounce_tail {
         return [0.0; 4];
     }
-    let mut m = [0.0f32; 4];
-    for l in leaves {
-        for (k, v) in m.iter_mut().take(3).enumerate() {
-            let a = l.albedo_opacity[k];
-            if a.is_finite() {
-                *v = v.max(a);
-            }
-        }
-    }
-    m.map(|v| v.min(crate::gpu::types::TAIL_RATIO_MAX))
+    let [r, g, b] = scene.albedo_max();
+    [r, g, b, 0.0].map(|v| v.min(crate::gpu::types::TAIL_RATIO_MAX))
 }
 
 /// The one lookup buffer's contents (lookup.wgsl): the rock table, the tile index and the light

@@ -8,8 +8,9 @@
 //! Slots are contiguous ranges (a tile's nodes index its own nodes and leaves by offset, and
 //! propagation walks a tile's leaves as one range), allocated best-fit (`range-alloc`, the
 //! allocator wgpu-hal uses). When the free space is enough but too fragmented for a new form, the
-//! placement repacks: every tile gets a new slot, in scene order, and the renderer carries the light
-//! of the forms that stayed through a read-back ([`Placement::repacked`]).
+//! placement repacks: the forms that stayed are compacted toward each pool's start in the order
+//! they lay, and the renderer moves their data and light there on the GPU, with no read-back
+//! ([`Placement::moved`]); the new forms follow.
 //!
 //! Pure bookkeeping, no GPU, so the policy is unit-tested here.
 
@@ -29,14 +30,7 @@ use crate::scene::data::SceneData;
 /// docs/benchmarks.md).
 pub(crate) const POOL_HEADROOM: f64 = 0.1;
 
-/// A tile form: where the tile is (its corner in frame leaves), its SVO depth, and the level it is
-/// held at. Two scenes holding the same key hold the same nodes, leaves and surfels.
-pub(crate) type TileKey = ([i32; 3], u32, u32);
-
-/// The key of a placed or loaded tile.
-pub(crate) fn key(t: &TileGpu) -> TileKey {
-    (t.origin_leaf, t.depth, t.leaf_lod)
-}
+pub(crate) use crate::scene::data::{TileKey, key};
 
 /// Elements each pool holds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -52,11 +46,12 @@ pub struct PoolCaps {
 impl PoolCaps {
     /// What `scene` uses.
     pub fn of(scene: &SceneData) -> Self {
+        let counts = scene.counts();
         Self {
             tiles: scene.tiles.len() as u64,
-            nodes: scene.nodes.len() as u64,
-            leaves: scene.leaves.len() as u64,
-            surfels: scene.surfels.len() as u64,
+            nodes: counts.nodes as u64,
+            leaves: counts.leaves as u64,
+            surfels: counts.surfels as u64,
         }
     }
 
@@ -125,6 +120,25 @@ pub(crate) struct Slot {
     pub(crate) surfels: Range<u32>,
 }
 
+impl Slot {
+    /// Its range in pool 0 (nodes), 1 (leaves) or 2 (surfels).
+    pub(crate) fn range(&self, pool: usize) -> &Range<u32> {
+        match pool {
+            0 => &self.nodes,
+            1 => &self.leaves,
+            _ => &self.surfels,
+        }
+    }
+
+    fn range_mut(&mut self, pool: usize) -> &mut Range<u32> {
+        match pool {
+            0 => &mut self.nodes,
+            1 => &mut self.leaves,
+            _ => &mut self.surfels,
+        }
+    }
+}
+
 /// What [`Pools::place`] decided for a scene.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Placement {
@@ -134,8 +148,11 @@ pub(crate) struct Placement {
     pub(crate) slots: Vec<Slot>,
     /// Each scene tile: it was resident before in this form and kept its slot (nothing to upload).
     pub(crate) kept: Vec<bool>,
-    /// Every slot was reallocated (the free space was fragmented): everything is uploaded again,
-    /// and the forms resident before lost their place (their light is carried by the caller).
+    /// Each scene tile whose form stayed resident through a repack: its slot before (its data
+    /// and light are moved on the GPU to its new slot).
+    pub(crate) moved: Vec<Option<Slot>>,
+    /// Every slot was reallocated (the free space was fragmented): the forms that stayed moved
+    /// toward the pools' starts ([`Placement::moved`]), the new forms follow.
     pub(crate) repacked: bool,
     /// Slots freed (forms that left).
     pub(crate) freed: usize,
@@ -167,30 +184,9 @@ pub(crate) fn merge_runs(mut r: Vec<Range<u32>>) -> Vec<Range<u32>> {
     out
 }
 
-/// Each tile's surfels: `scene.tile_surfels` where it covers the surfels exactly, tile after tile;
-/// else (a scene put together by hand) every surfel counted as the first tile's. Either way each
-/// surfel has one owner, so a slot holds whole tiles. The flag: the ranges were the scene's own
-/// (each tile's surfels lie in its box).
+/// Each tile's surfels ([`SceneData::surfel_owners`]).
 pub(crate) fn surfel_owners(scene: &SceneData) -> (Vec<Range<u32>>, bool) {
-    let n = scene.surfels.len() as u32;
-    let mut next = 0;
-    let exact = scene.tile_surfels.len() == scene.tiles.len()
-        && scene.tile_surfels.iter().all(|r| {
-            let ok = r.start == next && r.end >= r.start;
-            next = r.end;
-            ok
-        })
-        && next == n;
-    if exact {
-        return (scene.tile_surfels.clone(), true);
-    }
-    ((0..scene.tiles.len()).map(|t| if t == 0 { 0..n } else { n..n }).collect(), false)
-}
-
-/// Elements of each kind a scene tile holds: (nodes, leaves, surfels).
-fn tile_counts(scene: &SceneData, owners: &[Range<u32>], t: usize) -> (u32, u32, u32) {
-    let tile = &scene.tiles[t];
-    (tile.node_count, tile.leaf_count, owners.get(t).map_or(0, |r| r.len() as u32))
+    scene.surfel_owners()
 }
 
 impl Pools {
@@ -293,7 +289,7 @@ impl Pools {
             .iter()
             .filter(|(k, s)| {
                 wanted.get(*k).is_none_or(|&t| {
-                    let (n, l, su) = tile_counts(scene, owners, t);
+                    let (n, l, su) = scene.tile_elements(owners, t);
                     (s.nodes.len() as u32, s.leaves.len() as u32, s.surfels.len() as u32) != (n, l, su)
                 })
             })
@@ -310,7 +306,7 @@ impl Pools {
         let mut new: Vec<usize> = (0..keys.len()).filter(|&t| !kept[t]).collect();
         if !self.slots.is_empty() {
             new.sort_by_key(|&t| {
-                let (n, l, s) = tile_counts(scene, owners, t);
+                let (n, l, s) = scene.tile_elements(owners, t);
                 std::cmp::Reverse((l, n, s))
             });
         }
@@ -319,7 +315,7 @@ impl Pools {
             if repacked {
                 break;
             }
-            match self.alloc_slot(tile_counts(scene, owners, t)) {
+            match self.alloc_slot(scene.tile_elements(owners, t)) {
                 Some(slot) => {
                     self.slots.insert(keys[t], slot);
                 }
@@ -329,16 +325,9 @@ impl Pools {
                 }
             }
         }
+        let mut moved: Vec<Option<Slot>> = vec![None; keys.len()];
         if repacked {
-            // Fragmented: start over, every tile in scene order (it fits: checked above).
-            *self = Self::new(self.caps)?;
-            for (t, k) in keys.iter().enumerate() {
-                let slot = self.alloc_slot(tile_counts(scene, owners, t)).ok_or_else(|| Error::Internal {
-                    what: "pools",
-                    message: "a checked scene did not fit empty pools".into(),
-                })?;
-                self.slots.insert(*k, slot);
-            }
+            moved = self.repack(scene, owners, &keys, &kept)?;
             kept.fill(false);
         }
         let slots: Vec<Slot> = keys.iter().map(|k| self.slots[k].clone()).collect();
@@ -348,7 +337,46 @@ impl Pools {
             .zip(&slots)
             .map(|(t, s)| TileGpu { node_offset: s.nodes.start, leaf_offset: s.leaves.start, ..*t })
             .collect();
-        Ok(Placement { tiles, slots, kept, repacked, freed })
+        Ok(Placement { tiles, slots, kept, moved, repacked, freed })
+    }
+
+    /// Starts over (the free space was fragmented; the scene fits: checked by the caller). In
+    /// each pool the forms that stay (`stay`, per scene tile) come first, in the order they lay,
+    /// so each moves toward the pool's start and the GPU can move them in place, front to back
+    /// (`gpu::upload::move_within`); the new forms follow in scene order. Returns, per scene
+    /// tile, the slot a form that stayed had before.
+    fn repack(
+        &mut self,
+        scene: &SceneData,
+        owners: &[Range<u32>],
+        keys: &[TileKey],
+        stay: &[bool],
+    ) -> Result<Vec<Option<Slot>>> {
+        let old = std::mem::take(&mut self.slots);
+        *self = Self::new(self.caps)?;
+        let before: Vec<Option<Slot>> =
+            keys.iter().zip(stay).map(|(k, &s)| if s { old.get(k).cloned() } else { None }).collect();
+        let mut slots: Vec<Slot> = vec![Slot::default(); keys.len()];
+        let lost =
+            || Error::Internal { what: "pools", message: "a checked scene did not fit empty pools".into() };
+        for pool in 0..3 {
+            let mut order: Vec<usize> = (0..keys.len()).filter(|&t| before[t].is_some()).collect();
+            order.sort_by_key(|&t| before[t].as_ref().map_or(0, |s| s.range(pool).start));
+            let rest = (0..keys.len()).filter(|&t| before[t].is_none());
+            for t in order.into_iter().chain(rest) {
+                let (n, l, su) = scene.tile_elements(owners, t);
+                let (allocator, len) = match pool {
+                    0 => (&mut self.nodes, n),
+                    1 => (&mut self.leaves, l),
+                    _ => (&mut self.surfels, su),
+                };
+                *slots[t].range_mut(pool) = Self::alloc(allocator, len).ok_or_else(lost)?;
+            }
+        }
+        for (k, slot) in keys.iter().zip(slots) {
+            self.slots.insert(*k, slot);
+        }
+        Ok(before)
     }
 }
 
@@ -461,6 +489,45 @@ mod tests {
         assert_eq!(placed.kept, vec![false, false]);
         assert_eq!(p.leaf_end(), 6);
         sound(&p);
+        // The tile that stayed moves to the start, where the GPU can move it in place; the new
+        // one follows.
+        let was = placed.moved[0].clone().expect("the tile that stayed is moved, not uploaded");
+        assert_eq!(was.leaves, 2..4);
+        assert_eq!(placed.slots[0].leaves, 0..2);
+        assert_eq!(placed.moved[1], None);
+        assert_eq!(placed.slots[1].leaves, 2..6);
+    }
+
+    #[test]
+    fn a_repack_moves_every_form_that_stays_toward_the_start_in_the_order_they_lay() {
+        let mut p = Pools::new(caps(40)).unwrap();
+        // Five tiles of different sizes in each pool.
+        let first = scene(&[(0, 3, 5, 1), (1, 4, 2, 6), (2, 2, 3, 2), (3, 5, 4, 3), (4, 1, 1, 1)]);
+        place(&mut p, &first).unwrap();
+        p.repack_next();
+        // Tiles 1 and 3 leave; 5 arrives; 4, 0 and 2 stay, listed in another order.
+        let next = scene(&[(4, 1, 1, 1), (5, 6, 6, 6), (0, 3, 5, 1), (2, 2, 3, 2)]);
+        let placed = place(&mut p, &next).unwrap();
+        assert!(placed.repacked);
+        sound(&p);
+        let stayed: Vec<usize> = (0..4).filter(|&t| placed.moved[t].is_some()).collect();
+        assert_eq!(stayed, vec![0, 2, 3]);
+        for pool in 0..3 {
+            // (start before, range now), in the order the forms lay before.
+            let mut moves: Vec<(u32, Range<u32>)> = stayed
+                .iter()
+                .map(|&t| {
+                    (placed.moved[t].as_ref().unwrap().range(pool).start, placed.slots[t].range(pool).clone())
+                })
+                .collect();
+            moves.sort_by_key(|m| m.0);
+            let mut end = 0;
+            for (from, to) in moves {
+                assert!(to.start <= from, "pool {pool}: a form moves toward the start ({from} -> {to:?})");
+                assert_eq!(to.start, end, "pool {pool}: packed in the order they lay");
+                end = to.end;
+            }
+        }
     }
 
     #[test]

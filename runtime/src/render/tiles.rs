@@ -1,7 +1,7 @@
 //! The tile pools on the GPU and the uploads into them: a scene's tiles written in place of
 //! another's, only the forms new to the pools, the light of those that stay kept.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashSet;
 use std::ops::Range;
 use std::sync::Arc;
 
@@ -11,7 +11,7 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::gpu::types::{ActiveTile, LeafGpu, LeafLightGpu, NodeGpu, Params, SurfelGpu, TileGpu};
-use crate::gpu::upload::Uploader;
+use crate::gpu::upload::{Move, Uploader, move_within};
 use crate::light::setup::LightSetup;
 use crate::passes::splat::SplatRun;
 use crate::passes::{self};
@@ -21,7 +21,7 @@ use crate::scene::data::SceneData;
 use crate::render::chunks::{Chunk, ChunkCache, Viewer};
 use crate::render::params::Lookup;
 use crate::render::params::tile_box;
-use crate::render::pool::Placement;
+use crate::render::pool::{Placement, Slot};
 
 /// The tile pools on the GPU (tile records, nodes, leaves, leaf light, surfels, and the tile
 /// index in the lookup buffer) and where each resident tile form lives in them ([`Pools`]).
@@ -194,29 +194,16 @@ impl TilePools {
         if !exact || !self.cull_tiles || !self.slots.caps().holds(&PoolCaps::of(scene)) {
             return Ok(None);
         }
+        self.check_absent_resident(scene)?;
         let index = crate::scene::tile_index::TileIndex::build(&scene.name, &scene.tiles)?;
         if 4 * index.words.len() as u64 > self.index_bytes.end - self.index_bytes.start {
             return Ok(None);
         }
         let old_slots = self.slots.slots().clone();
-        let old_leaf_end = self.slots.leaf_end();
         let placed = self.slots.place(scene, &owners)?;
-        // The light of the forms that stayed, where a repack moved them: read back before
-        // anything is written.
-        let moved: HashMap<TileKey, Vec<LeafLightGpu>> = if placed.repacked {
-            let state = self.read_light(gpu, old_leaf_end)?;
-            placed
-                .tiles
-                .iter()
-                .filter_map(|t| {
-                    let s = old_slots.get(&key(t))?;
-                    Some((key(t), state.get(s.leaves.start as usize..s.leaves.end as usize)?.to_vec()))
-                })
-                .collect()
-        } else {
-            HashMap::new()
-        };
-        let (update, light_kept) = self.write_tiles(gpu, scene, &owners, &placed, &moved, &index)?;
+        let moved_bytes = self.move_stayed(gpu, scene, &placed)?;
+        let (mut update, light_kept) = self.write_tiles(gpu, scene, &owners, &placed, &index)?;
+        update.moved_bytes = moved_bytes;
         // Tile forms that came or went.
         let new_keys: HashSet<TileKey> = placed.tiles.iter().map(key).collect();
         let changed: Vec<(Vec3, Vec3)> = self
@@ -240,16 +227,104 @@ impl TilePools {
         Ok(Some(PlacedScene { update, light_kept, changed }))
     }
 
+    /// An error unless every tile whose data `scene` does not hold is resident in that form: a
+    /// change of tiles leaves out only what the renderer holds.
+    fn check_absent_resident(&self, scene: &SceneData) -> Result<()> {
+        for (t, tile) in scene.tiles.iter().enumerate() {
+            let Some(s) = scene.absent_tile(t) else { continue };
+            let resident = self.slots.slots().get(&key(tile)).is_some_and(|slot| {
+                (slot.nodes.len(), slot.leaves.len(), slot.surfels.len())
+                    == (tile.node_count as usize, s.leaves as usize, s.surfels as usize)
+            });
+            if !resident {
+                return Err(Error::Internal {
+                    what: "tile pools",
+                    message: format!(
+                        "tile {t} of the new scene is neither loaded nor resident in the renderer"
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// After a repack: the forms that stayed move to their new slots on the GPU (nodes, leaves,
+    /// their light, surfels: `gpu::upload::move_within`), and their nodes, which index their
+    /// tile's nodes and leaves by pool position, are re-indexed: from the scene where it holds
+    /// them, else read back (natively; a browser's scenes hold every tile). Returns the bytes
+    /// moved.
+    fn move_stayed(&self, gpu: &Gpu, scene: &SceneData, placed: &Placement) -> Result<u64> {
+        let stayed: Vec<(usize, &Slot)> =
+            placed.moved.iter().enumerate().filter_map(|(t, m)| Some((t, m.as_ref()?))).collect();
+        if stayed.is_empty() {
+            return Ok(0);
+        }
+        let pools: [(usize, Vec<(&wgpu::Buffer, u64)>); 3] = [
+            (0, vec![(&self.nodes_buf, size_of::<NodeGpu>() as u64)]),
+            (
+                1,
+                vec![
+                    (&self.leaves_buf, size_of::<LeafGpu>() as u64),
+                    (&self.leaf_light, size_of::<LeafLightGpu>() as u64),
+                ],
+            ),
+            (2, vec![(&self.surfels, size_of::<SurfelGpu>() as u64)]),
+        ];
+        let mut bytes = 0;
+        for (pool, buffers) in pools {
+            let mut ranges: Vec<(Range<u32>, u32)> = stayed
+                .iter()
+                .map(|(t, old)| (old.range(pool).clone(), placed.slots[*t].range(pool).start))
+                .filter(|(r, _)| !r.is_empty())
+                .collect();
+            ranges.sort_by_key(|(r, _)| r.start);
+            for (buffer, size) in buffers {
+                let moves: Vec<Move> = ranges
+                    .iter()
+                    .map(|(r, to)| Move {
+                        from: u64::from(r.start) * size,
+                        to: u64::from(*to) * size,
+                        len: r.len() as u64 * size,
+                    })
+                    .collect();
+                bytes += move_within(gpu, buffer, &moves)?;
+            }
+        }
+        let mut up = Uploader::new(gpu);
+        for (t, old) in stayed {
+            let (tile, at) = (&scene.tiles[t], &placed.tiles[t]);
+            let n = tile.node_count as usize;
+            let (nodes, from) = if scene.absent_tile(t).is_some() {
+                let bytes = gpu.read_range(
+                    &self.nodes_buf,
+                    u64::from(at.node_offset) * size_of::<NodeGpu>() as u64,
+                    (n * size_of::<NodeGpu>()) as u64,
+                )?;
+                let nodes: Vec<NodeGpu> = bytemuck::pod_collect_to_vec(&bytes[..n * size_of::<NodeGpu>()]);
+                (nodes, (old.nodes.start, old.leaves.start))
+            } else {
+                let first = tile.node_offset as usize;
+                (scene.nodes[first..first + n].to_vec(), (tile.node_offset, tile.leaf_offset))
+            };
+            let nodes = rebased(&nodes, tile.depth - tile.leaf_lod, from, (at.node_offset, at.leaf_offset));
+            up.write(
+                &self.nodes_buf,
+                u64::from(at.node_offset) * size_of::<NodeGpu>() as u64,
+                bytemuck::cast_slice(&nodes),
+            )?;
+        }
+        Ok(bytes)
+    }
+
     /// Writes the forms new to the pools (their nodes re-indexed to their slots, leaves, light and
     /// surfels), then the tile records and the tile index; returns what was written and, per tile,
-    /// whether its light was kept.
+    /// whether its light was kept (in place, or moved with it).
     fn write_tiles(
         &self,
         gpu: &Gpu,
         scene: &SceneData,
         owners: &[Range<u32>],
         placed: &Placement,
-        moved: &HashMap<TileKey, Vec<LeafLightGpu>>,
         index: &crate::scene::tile_index::TileIndex,
     ) -> Result<(SceneUpdate, Vec<bool>)> {
         let mut up = Uploader::new(gpu);
@@ -257,36 +332,28 @@ impl TilePools {
             SceneUpdate { repacked: placed.repacked, freed_tiles: placed.freed, ..Default::default() };
         let mut light_kept = placed.kept.clone();
         for (i, (t, at)) in scene.tiles.iter().zip(&placed.tiles).enumerate() {
-            if placed.kept[i] {
+            if placed.kept[i] || placed.moved[i].is_some() {
+                light_kept[i] = true;
                 update.kept_tiles += 1;
                 update.carried_leaves += t.leaf_count as usize;
                 continue;
             }
+            if scene.absent_tile(i).is_some() {
+                return Err(Error::Internal {
+                    what: "tile pools",
+                    message: format!("tile {i} is new to the pools but its data was not loaded"),
+                });
+            }
             update.uploaded_tiles += 1;
             let (n0, l0) = (t.node_offset as usize, t.leaf_offset as usize);
-            let leaf_level = t.depth - t.leaf_lod;
-            // Indices inside the tile move with it: to its nodes for inner nodes, to its leaves
-            // for the nodes at its leaf level.
-            let nodes: Vec<NodeGpu> = scene.nodes[n0..n0 + t.node_count as usize]
-                .iter()
-                .map(|n| {
-                    let first_child = if n.level() == leaf_level {
-                        n.first_child.wrapping_sub(t.leaf_offset).wrapping_add(at.leaf_offset)
-                    } else {
-                        n.first_child.wrapping_sub(t.node_offset).wrapping_add(at.node_offset)
-                    };
-                    NodeGpu { first_child, ..*n }
-                })
-                .collect();
+            let nodes = rebased(
+                &scene.nodes[n0..n0 + t.node_count as usize],
+                t.depth - t.leaf_lod,
+                (t.node_offset, t.leaf_offset),
+                (at.node_offset, at.leaf_offset),
+            );
             let leaves = &scene.leaves[l0..l0 + t.leaf_count as usize];
-            let light = match moved.get(&key(t)) {
-                Some(l) if l.len() == leaves.len() => {
-                    light_kept[i] = true;
-                    update.carried_leaves += l.len();
-                    l.clone()
-                }
-                _ => initial_light(leaves),
-            };
+            let light = initial_light(leaves);
             let surfels = &scene.surfels[owners[i].start as usize..owners[i].end as usize];
             let slot = &placed.slots[i];
             up.write(
@@ -315,6 +382,22 @@ impl TilePools {
         update.upload_bytes = up.written;
         Ok((update, light_kept))
     }
+}
+
+/// A tile's nodes moved from node and leaf offsets `from` to `to`: the indices inside the tile
+/// move with it, to its nodes for inner nodes and to its leaves for the nodes at its leaf level.
+fn rebased(nodes: &[NodeGpu], leaf_level: u32, from: (u32, u32), to: (u32, u32)) -> Vec<NodeGpu> {
+    nodes
+        .iter()
+        .map(|n| {
+            let first_child = if n.level() == leaf_level {
+                n.first_child.wrapping_sub(from.1).wrapping_add(to.1)
+            } else {
+                n.first_child.wrapping_sub(from.0).wrapping_add(to.0)
+            };
+            NodeGpu { first_child, ..*n }
+        })
+        .collect()
 }
 
 pub(super) const STORAGE: wgpu::BufferUsages =
@@ -390,7 +473,7 @@ impl Upload {
             wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST
         } else {
             wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST
-        };
+        } | wgpu::BufferUsages::COPY_SRC;
         let n_surfels = caps.surfels.max(scene.surfels.len() as u64).max(1);
         let surfels =
             gpu.windowed_buffer("surfels", n_surfels * size_of::<SurfelGpu>() as u64, surfel_usage)?;
@@ -454,9 +537,11 @@ pub struct SceneUpdate {
     pub kept_tiles: usize,
     /// Tile forms that left the pools.
     pub freed_tiles: usize,
-    /// The free space was too fragmented for the new forms: every tile was written again, the
-    /// light of those that stayed read back and carried to their new slots.
+    /// The free space was too fragmented for the new forms: the forms that stayed were moved,
+    /// with their light, toward the pools' starts on the GPU, and the new ones written after.
     pub repacked: bool,
+    /// Bytes a repack moved within the pools on the GPU.
+    pub moved_bytes: u64,
     /// Bytes written to the GPU: the new forms' nodes, leaves, light and surfels, the tile table,
     /// tile index and mip order.
     pub upload_bytes: u64,

@@ -17,9 +17,10 @@ impl Renderer {
     /// faces that see a changed tile are drawn again; the light is then settled from the kept
     /// light, starting with the new tiles and their neighbours (activity.rs). `None` when the
     /// scene cannot replace this one in place (other lights or bounds, over the pools, tiles put
-    /// together by hand): make a new renderer then. Nothing is changed in that case.
+    /// together by hand): make a new renderer then. Nothing is changed in that case. The scene may
+    /// leave out the tile forms this renderer holds ([`SceneData::absent`]); a form it leaves out
+    /// that the renderer does not hold is an error.
     pub fn update_scene(&mut self, scene: &SceneData) -> Result<Option<SceneUpdate>> {
-        scene.check_held("a renderer's tiles updated")?;
         if Compat::of(scene) != self.compat {
             return Ok(None);
         }
@@ -49,7 +50,7 @@ impl Renderer {
         self.base_params.occupied_min_leaf = occupied_lo.extend(0.0).to_array();
         self.base_params.occupied_max_leaf = occupied_hi.extend(0.0).to_array();
         // New tiles may hold brighter rock: the tail's trusted ratio follows the leaves held.
-        self.base_params.tail_ratio_max = tail_ratio_max(&self.settings, &scene.leaves);
+        self.base_params.tail_ratio_max = tail_ratio_max(&self.settings, scene);
         let (_, specular_materials, specular_surfels) = material_slots(scene, &self.settings);
         (self.specular_materials, self.specular_surfels) = (specular_materials, specular_surfels);
         self.emissive = scene.has_emission();

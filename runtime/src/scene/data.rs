@@ -111,17 +111,52 @@ pub struct SceneData {
     /// The lights before their circuits were switched, where there are circuits to switch (the
     /// package's, or a lighting file's: scene/lighting.rs): `lights` is made from it.
     pub lighting: Option<Relight>,
-    /// Set once the tile data (nodes, leaves, surfels) went to a renderer and was let go
-    /// ([`SceneData::release_tile_data`]): what the scene still says about it.
-    pub released: Option<Released>,
+    /// Per tile (empty: the scene holds every tile), where the scene does not hold the tile's
+    /// nodes, leaves and surfels because a renderer does: what it knows of the tile instead.
+    /// Such a tile takes no room in `nodes`, `leaves` and `surfels` (its offsets there and its
+    /// `tile_surfels` range are empty). A change of tiles reads only the tiles that change
+    /// ([`SceneData::from_package_with_held`]); a scene lets go of all once a renderer holds them
+    /// ([`SceneData::release_tile_data`]).
+    pub absent: Vec<Option<TileSummary>>,
 }
 
-/// What a scene whose tile data was let go still knows of it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Released {
-    pub counts: SceneCounts,
-    emission: bool,
-    occupied_leaf: (Vec3, Vec3),
+/// A tile form: where the tile is (its corner in frame leaves), its SVO depth, and the level it
+/// is held at. Two scenes holding the same key hold the same nodes, leaves and surfels.
+pub type TileKey = ([i32; 3], u32, u32);
+
+/// The key of a tile record.
+pub(crate) fn key(t: &TileGpu) -> TileKey {
+    (t.origin_leaf, t.depth, t.leaf_lod)
+}
+
+/// Summaries of the tile forms a renderer holds, by key: what a load leaves out.
+pub type HeldTiles = std::collections::HashMap<TileKey, TileSummary>;
+
+/// What the renderer needs of a tile it holds without the scene holding its data: its element
+/// counts, the shape of its node tree (for the mip order), and what the light's parameters are
+/// made from.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TileSummary {
+    /// Nodes at each level from the tile's root down to the level it is held at. Nodes are
+    /// breadth-first, so each level's nodes follow the level above's.
+    pub(crate) nodes_by_level: Vec<u32>,
+    pub(crate) leaves: u32,
+    pub(crate) surfels: u32,
+    /// Whether any of its leaves emits.
+    pub(crate) emission: bool,
+    /// The box around its leaves' cells in frame leaves (a coarse leaf's whole cell); None
+    /// without leaves.
+    pub(crate) occupied_leaf: Option<(Vec3, Vec3)>,
+    /// Its leaves' largest finite albedo per channel.
+    pub(crate) albedo_max: [f32; 3],
+    /// Its surfels assigned to each specular material slot (1..=7, at 0..=6).
+    pub(crate) material_surfels: [u32; MAX_MATERIALS],
+}
+
+impl TileSummary {
+    pub(crate) fn nodes(&self) -> u32 {
+        self.nodes_by_level.iter().sum()
+    }
 }
 
 /// How many nodes, leaves and surfels a scene's tiles hold.
@@ -432,17 +467,10 @@ impl SceneData {
     /// (`cone_left_matter` in shaders/svo.wgsl) instead of crossing the rest of the tiles' cubes,
     /// where it would only read coarse levels' blur of matter behind it. `(0, 0)` when empty.
     pub fn occupied_bounds_leaf(&self) -> (Vec3, Vec3) {
-        if let Some(r) = &self.released {
-            return r.occupied_leaf;
-        }
-        let leaf_m = self.leaf_size_m.max(1e-9);
-        let mut lo = Vec3::splat(f32::MAX);
-        let mut hi = Vec3::splat(f32::MIN);
-        for l in &self.leaves {
-            let edge = (l.center_m[3] / leaf_m).round().max(1.0);
-            let cell_lo = (Vec3::from_slice(&l.center_m[..3]) / (leaf_m * edge)).floor() * edge;
-            lo = lo.min(cell_lo);
-            hi = hi.max(cell_lo + edge);
+        let (mut lo, mut hi) = cells_box(self.leaf_size_m, &self.leaves)
+            .unwrap_or((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)));
+        for (a, b) in self.absent.iter().flatten().filter_map(|s| s.occupied_leaf) {
+            (lo, hi) = (lo.min(a), hi.max(b));
         }
         if let Some((rock_lo, rock_hi)) = self.rock.bounds_leaf() {
             (lo, hi) = (lo.min(rock_lo), hi.max(rock_hi));
@@ -577,70 +605,157 @@ impl SceneData {
 
     /// True when any leaf emits.
     pub(crate) fn has_emission(&self) -> bool {
-        match &self.released {
-            Some(r) => r.emission,
-            None => self.leaves.iter().any(|l| l.emission[..3].iter().any(|&e| e > 0.0)),
-        }
+        self.leaves.iter().any(|l| l.emission[..3].iter().any(|&e| e > 0.0))
+            || self.absent.iter().flatten().any(|s| s.emission)
     }
 
-    /// The nodes, leaves and surfels of the tiles, held or let go.
+    /// The largest finite albedo of any leaf, per channel (the bounce tail's trusted ratio).
+    pub(crate) fn albedo_max(&self) -> [f32; 3] {
+        let mut m = albedo_max(&self.leaves);
+        for s in self.absent.iter().flatten() {
+            m = std::array::from_fn(|k| m[k].max(s.albedo_max[k]));
+        }
+        m
+    }
+
+    /// The nodes, leaves and surfels of the tiles, held here or not.
     pub fn counts(&self) -> SceneCounts {
-        match &self.released {
-            Some(r) => r.counts,
-            None => SceneCounts {
-                nodes: self.nodes.len(),
-                leaves: self.leaves.len(),
-                surfels: self.surfels.len(),
-            },
+        let absent = self.absent.iter().flatten();
+        SceneCounts {
+            nodes: self.nodes.len() + absent.clone().map(|s| s.nodes() as usize).sum::<usize>(),
+            leaves: self.leaves.len() + absent.clone().map(|s| s.leaves as usize).sum::<usize>(),
+            surfels: self.surfels.len() + absent.map(|s| s.surfels as usize).sum::<usize>(),
         }
     }
 
-    /// An error where the tile data was let go: `what` (a renderer made or updated) needs it.
+    /// What the scene knows of tile `t` where it does not hold its data.
+    pub(crate) fn absent_tile(&self, t: usize) -> Option<&TileSummary> {
+        self.absent.get(t).and_then(Option::as_ref)
+    }
+
+    /// Whether the scene holds every tile's data (a renderer can be made from it).
+    pub fn holds_all_tiles(&self) -> bool {
+        self.absent.iter().all(Option::is_none)
+    }
+
+    /// An error where some tile's data is not held here: `what` (a renderer made) needs it.
     pub(crate) fn check_held(&self, what: &'static str) -> Result<()> {
-        match self.released {
-            Some(_) => Err(crate::error::Error::Internal {
-                what,
-                message: "the scene's tile data was let go once a renderer held it: load the scene again"
-                    .into(),
-            }),
-            None => Ok(()),
+        if self.holds_all_tiles() {
+            return Ok(());
+        }
+        Err(crate::error::Error::Internal {
+            what,
+            message: "the scene's tile data was let go once a renderer held it: load the scene again".into(),
+        })
+    }
+
+    /// Each tile's surfels: `tile_surfels` where it covers the surfels exactly, tile after tile;
+    /// else (a scene put together by hand) every surfel counted as the first tile's. Either way
+    /// each surfel has one owner, so a slot holds whole tiles. The flag: the ranges were the
+    /// scene's own (each tile's surfels lie in its box). A tile not held here owns an empty range.
+    pub(crate) fn surfel_owners(&self) -> (Vec<std::ops::Range<u32>>, bool) {
+        let n = self.surfels.len() as u32;
+        let mut next = 0;
+        let exact = self.tile_surfels.len() == self.tiles.len()
+            && self.tile_surfels.iter().all(|r| {
+                let ok = r.start == next && r.end >= r.start;
+                next = r.end;
+                ok
+            })
+            && next == n;
+        if exact {
+            return (self.tile_surfels.clone(), true);
+        }
+        ((0..self.tiles.len()).map(|t| if t == 0 { 0..n } else { n..n }).collect(), false)
+    }
+
+    /// Nodes, leaves and surfels tile `t` holds, whether the scene holds them or not (`owners`:
+    /// [`SceneData::surfel_owners`]).
+    pub(crate) fn tile_elements(&self, owners: &[std::ops::Range<u32>], t: usize) -> (u32, u32, u32) {
+        let tile = &self.tiles[t];
+        let surfels = match self.absent_tile(t) {
+            Some(s) => s.surfels,
+            None => owners.get(t).map_or(0, |r| r.len() as u32),
+        };
+        (tile.node_count, tile.leaf_count, surfels)
+    }
+
+    /// What the scene knows of tile `t`, from its data where it holds it.
+    pub(crate) fn summary(&self, owners: &[std::ops::Range<u32>], t: usize) -> TileSummary {
+        if let Some(s) = self.absent_tile(t) {
+            return s.clone();
+        }
+        let tile = &self.tiles[t];
+        let nodes = &self.nodes[tile.node_offset as usize..(tile.node_offset + tile.node_count) as usize];
+        let mut nodes_by_level = vec![0u32; (tile.depth - tile.leaf_lod) as usize + 1];
+        for n in nodes {
+            if let Some(c) = nodes_by_level.get_mut(n.level() as usize) {
+                *c += 1;
+            }
+        }
+        let leaves = &self.leaves[tile.leaf_offset as usize..(tile.leaf_offset + tile.leaf_count) as usize];
+        let surfels = owners.get(t).map_or(&[][..], |r| &self.surfels[r.start as usize..r.end as usize]);
+        let mut material_surfels = [0u32; MAX_MATERIALS];
+        for s in surfels {
+            if let Some(c) = usize::from(s.color[3]).checked_sub(1).and_then(|k| material_surfels.get_mut(k))
+            {
+                *c += 1;
+            }
+        }
+        TileSummary {
+            nodes_by_level,
+            leaves: tile.leaf_count,
+            surfels: surfels.len() as u32,
+            emission: leaves.iter().any(|l| l.emission[..3].iter().any(|&e| e > 0.0)),
+            occupied_leaf: cells_box(self.leaf_size_m, leaves),
+            albedo_max: albedo_max(leaves),
+            material_surfels,
         }
     }
 
-    /// Takes back the tile data `from` holds (the same tiles in the same forms, loaded again),
-    /// keeping this scene's lights, story and everything else that is not its tiles.
+    /// The summary of every tile form, by key: what a load for another residency may leave out
+    /// ([`SceneData::from_package_with_held`]).
+    pub fn held_tiles(&self) -> HeldTiles {
+        let (owners, _) = self.surfel_owners();
+        self.tiles.iter().enumerate().map(|(t, tile)| (key(tile), self.summary(&owners, t))).collect()
+    }
+
+    /// Gives a scene whose tile data was let go its data again, from `from`: the same package's
+    /// tiles loaded again in the same forms (an error, nothing changed, otherwise).
     pub fn restore_tile_data(&mut self, from: SceneData) -> Result<()> {
-        let same = from.tiles.len() == self.tiles.len()
-            && from.tiles.iter().zip(&self.tiles).all(|(a, b)| {
-                (a.origin_leaf, a.depth, a.leaf_lod, a.node_count, a.leaf_count)
-                    == (b.origin_leaf, b.depth, b.leaf_lod, b.node_count, b.leaf_count)
-            });
+        let same =
+            from.holds_all_tiles()
+                && from.tiles.len() == self.tiles.len()
+                && from.tiles.iter().zip(&self.tiles).all(|(a, b)| {
+                    (key(a), a.node_count, a.leaf_count) == (key(b), b.node_count, b.leaf_count)
+                });
         if !same {
             return Err(crate::error::Error::Internal {
                 what: "restore_tile_data",
                 message: "the scene loaded again holds other tiles".into(),
             });
         }
-        (self.nodes, self.leaves, self.surfels, self.tile_surfels) =
-            (from.nodes, from.leaves, from.surfels, from.tile_surfels);
-        self.released = None;
+        (self.tiles, self.nodes, self.leaves, self.surfels, self.tile_surfels) =
+            (from.tiles, from.nodes, from.leaves, from.surfels, from.tile_surfels);
+        self.absent = Vec::new();
         Ok(())
     }
 
     /// Lets go of the tiles' nodes, leaves and surfels once a renderer holds them: a viewer keeps
-    /// on the CPU nothing its GPU holds. Counts, emission and where matter is stay known; a new
-    /// renderer or a change of tiles needs a scene loaded again (the renderer refuses this one).
+    /// on the CPU nothing its GPU holds. Each tile's summary stays ([`TileSummary`]); a new
+    /// renderer needs the scene loaded again (it refuses this one), a change of tiles only the
+    /// tiles that change.
     pub fn release_tile_data(&mut self) {
-        if self.released.is_some() {
+        let (owners, exact) = self.surfel_owners();
+        // A scene put together by hand has no surfels by tile to account for.
+        if !exact {
             return;
         }
-        let released = Released {
-            counts: self.counts(),
-            emission: self.has_emission(),
-            occupied_leaf: self.occupied_bounds_leaf(),
-        };
+        self.absent = (0..self.tiles.len()).map(|t| Some(self.summary(&owners, t))).collect();
+        for (t, r) in self.tiles.iter_mut().zip(&mut self.tile_surfels) {
+            (t.node_offset, t.leaf_offset, *r) = (0, 0, 0..0);
+        }
         (self.nodes, self.leaves, self.surfels) = (Vec::new(), Vec::new(), Vec::new());
-        self.released = Some(released);
     }
 
     /// Node indices ordered by height (0 = leaves) and the range of each height, for the mip pass.
@@ -652,7 +767,20 @@ impl SceneData {
     /// node offsets (the renderer's pools, pool.rs).
     pub(crate) fn nodes_by_height_at(&self, placed: &[TileGpu]) -> (Vec<u32>, Vec<MipRange>) {
         let mut buckets: Vec<Vec<u32>> = Vec::new();
-        for (t, at) in self.tiles.iter().zip(placed) {
+        for (k, (t, at)) in self.tiles.iter().zip(placed).enumerate() {
+            if let Some(s) = self.absent_tile(k) {
+                // Breadth-first: level `l`'s nodes follow the levels above.
+                let mut first = at.node_offset;
+                for (l, &n) in s.nodes_by_level.iter().enumerate() {
+                    let h = (t.depth - t.leaf_lod).saturating_sub(l as u32) as usize;
+                    if buckets.len() <= h {
+                        buckets.resize(h + 1, Vec::new());
+                    }
+                    buckets[h].extend(first..first + n);
+                    first += n;
+                }
+                continue;
+            }
             for i in 0..t.node_count {
                 let n = t.node_offset + i;
                 // Height above the tile's own leaves (a coarse tile's are 2^leaf_lod wide).
@@ -663,7 +791,7 @@ impl SceneData {
                 buckets[h].push(at.node_offset + i);
             }
         }
-        let mut order = Vec::with_capacity(self.nodes.len());
+        let mut order = Vec::with_capacity(self.counts().nodes);
         let mut ranges = Vec::with_capacity(buckets.len());
         for (h, b) in buckets.into_iter().enumerate() {
             ranges.push(MipRange {
@@ -687,7 +815,7 @@ impl SceneData {
     /// the loaded tiles' stored rock, or else classified from every loaded tile's full leaves, so
     /// a coarse tile keeps the rock behind its walls.
     pub fn from_package_with(pkg: &Package, mode_of: impl Fn(usize) -> TileMode) -> Result<Self> {
-        Self::load(pkg, mode_of, None)
+        Self::load(pkg, mode_of, None, None)
     }
 
     /// As [`SceneData::from_package_with`], with the rock already classified for these tiles: it
@@ -698,7 +826,19 @@ impl SceneData {
         mode_of: impl Fn(usize) -> TileMode,
         rock: crate::scene::rock::RockTable,
     ) -> Result<Self> {
-        Self::load(pkg, mode_of, Some(rock))
+        Self::load(pkg, mode_of, Some(rock), None)
+    }
+
+    /// As [`SceneData::from_package_with_rock`], leaving out the tile forms in `held` (a
+    /// renderer holds them: [`SceneData::held_tiles`] of its scene): only the tiles that change
+    /// are read and decoded, and those left out take no memory here ([`SceneData::absent`]).
+    pub fn from_package_with_held(
+        pkg: &Package,
+        mode_of: impl Fn(usize) -> TileMode,
+        rock: crate::scene::rock::RockTable,
+        held: &HeldTiles,
+    ) -> Result<Self> {
+        Self::load(pkg, mode_of, Some(rock), Some(held))
     }
 
     /// Builds tiles of `2^tile_depth` leaves from explicit leaf cells (global leaf coordinates,
@@ -756,4 +896,32 @@ pub(crate) fn tile_colors(tile: &grotto_format::Tile<'_>, n: usize) -> Result<Ve
         return Ok(raw.iter().take(n).map(|c| [c.0[0], c.0[1], c.0[2]]).collect());
     }
     Ok(vec![[180; 3]; n])
+}
+
+/// The box around `leaves`' cells in frame leaves (a coarse leaf's whole cell); None when empty.
+fn cells_box(leaf_size_m: f32, leaves: &[LeafGpu]) -> Option<(Vec3, Vec3)> {
+    let leaf_m = leaf_size_m.max(1e-9);
+    let mut lo = Vec3::splat(f32::MAX);
+    let mut hi = Vec3::splat(f32::MIN);
+    for l in leaves {
+        let edge = (l.center_m[3] / leaf_m).round().max(1.0);
+        let cell_lo = (Vec3::from_slice(&l.center_m[..3]) / (leaf_m * edge)).floor() * edge;
+        lo = lo.min(cell_lo);
+        hi = hi.max(cell_lo + edge);
+    }
+    (!leaves.is_empty()).then_some((lo, hi))
+}
+
+/// The largest finite albedo of `leaves` per channel.
+fn albedo_max(leaves: &[LeafGpu]) -> [f32; 3] {
+    let mut m = [0.0f32; 3];
+    for l in leaves {
+        for (k, v) in m.iter_mut().enumerate() {
+            let a = l.albedo_opacity[k];
+            if a.is_finite() {
+                *v = v.max(a);
+            }
+        }
+    }
+    m
 }

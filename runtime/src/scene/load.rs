@@ -9,8 +9,8 @@ use crate::error::{Error, Result};
 use crate::gpu::types::{LeafGpu, SurfelGpu, TileGpu};
 use crate::scene::coarse::{CoarseLevel, coarse_level, gpu_tile};
 use crate::scene::data::{
-    MAX_MATERIALS, SceneCamera, SceneData, SceneMaterial, TileMode, frame_of, full_leaves,
-    move_leaves_to_surfels, read_env_chain, tile_colors, tile_scans,
+    HeldTiles, MAX_MATERIALS, SceneCamera, SceneData, SceneMaterial, TileKey, TileMode, TileSummary,
+    frame_of, full_leaves, move_leaves_to_surfels, read_env_chain, tile_colors, tile_scans,
 };
 use crate::scene::rock::RockTable;
 
@@ -21,10 +21,13 @@ type LoadedTile<'a> = (Tile<'a>, TileMode, IVec3);
 type RockBricks = Vec<(IVec3, u64)>;
 
 impl SceneData {
+    /// `held`: tile forms a renderer holds already, left out (with the rock given: it is
+    /// classified from every tile's leaves otherwise).
     pub(crate) fn load(
         pkg: &Package,
         mode_of: impl Fn(usize) -> TileMode,
         rock: Option<RockTable>,
+        held: Option<&HeldTiles>,
     ) -> Result<Self> {
         let name = pkg.path().display().to_string();
         let scene = pkg.scene()?;
@@ -43,8 +46,20 @@ impl SceneData {
         let (loaded, stored_rock) = out.tiles_to_load(pkg, &mode_of, leaf_size, rock.is_none())?;
         let classify_rock = rock.is_none() && stored_rock.is_none();
         let mut hidden_leaves: Vec<LeafGpu> = Vec::new();
+        let mut absent = Vec::new();
         for (tile, mode, origin_leaf) in loaded {
+            let key = (origin_leaf.to_array(), tile.depth(), mode.leaf_lod(tile.depth()));
+            if let Some(summary) = held.and_then(|h| h.get(&key)) {
+                out.push_absent(key, summary);
+                absent.push(Some(summary.clone()));
+                continue;
+            }
+            let before = out.tiles.len();
             out.push_tile(&tile, mode, origin_leaf, classify_rock, &mut hidden_leaves, &scene)?;
+            absent.extend((before..out.tiles.len()).map(|_| None));
+        }
+        if absent.iter().any(Option::is_some) {
+            out.absent = absent;
         }
         out.push_lights(&scene);
         out.push_environment(pkg, &scene)?;
@@ -181,6 +196,22 @@ impl SceneData {
         Ok(())
     }
 
+    /// A tile form the renderer holds: its record, with no nodes, leaves or surfels here.
+    fn push_absent(&mut self, (origin_leaf, depth, leaf_lod): TileKey, summary: &TileSummary) {
+        let surfels = self.surfels.len() as u32;
+        self.tiles.push(TileGpu {
+            origin_leaf,
+            depth,
+            node_offset: self.nodes.len() as u32,
+            leaf_offset: self.leaves.len() as u32,
+            node_count: summary.nodes(),
+            leaf_count: summary.leaves,
+            leaf_lod,
+            pad: [0; 3],
+        });
+        self.tile_surfels.push(surfels..surfels);
+    }
+
     /// A full tile's leaves (moved to where its surfels lie) and its surfels: tile-local f32 to
     /// frame f32 through the f64 tile offset, with their colours and scans.
     fn push_full_leaves_and_surfels(
@@ -283,10 +314,15 @@ impl SceneData {
                 surfels: 0,
             });
         }
-        // Counted once every region is applied.
+        // Counted once every region is applied, with those of the tiles the renderer holds.
         for s in &self.surfels {
             if let Some(m) = usize::from(s.color[3]).checked_sub(1).and_then(|k| self.materials.get_mut(k)) {
                 m.surfels += 1;
+            }
+        }
+        for held in self.absent.iter().flatten() {
+            for (m, n) in self.materials.iter_mut().zip(held.material_surfels) {
+                m.surfels += n as usize;
             }
         }
         Ok(())

@@ -10,7 +10,7 @@ use std::thread::JoinHandle;
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::render::Renderer;
-use crate::scene::data::{SceneData, SceneLight};
+use crate::scene::data::{HeldTiles, SceneData, SceneLight, TileMode};
 use crate::settings::{ClipBox, Settings};
 use crate::stream::residency::{self, Residency};
 use crate::stream::streaming::{self, Streaming};
@@ -18,10 +18,14 @@ use crate::view::camera::Camera;
 
 /// The renderer for a job's first scene ([`streaming::renderer_for`]), and the loader that keeps its
 /// tiles following the camera where the package is over budget (`streaming` and the `first`
-/// residency it was chosen with, from [`crate::engine::open`]).
+/// residency it was chosen with, from [`crate::engine::open`]). Over budget, `scene` is the far
+/// scene [`crate::engine::open`] gives: the renderer is made from it, with pools for `first`, and
+/// `first`'s tiles are then read and written a few at a time ([`Follow::fill`]), so the first
+/// residency is never held whole on the CPU. `scene` ends as the first residency's, its tile
+/// data let go.
 pub(crate) fn start(
     gpu: &Gpu,
-    scene: &SceneData,
+    scene: &mut SceneData,
     settings: Settings,
     streaming: Option<Streaming>,
     first: Option<Residency>,
@@ -29,12 +33,20 @@ pub(crate) fn start(
 ) -> Result<(Renderer, Option<Follow>)> {
     match (streaming, first) {
         (Some(mut st), Some(first)) => {
-            let r = streaming::renderer_for(gpu, scene, settings, Some((&mut st, &first)))?;
-            Ok((r, Some(Follow::new(st, first, upload_per_frame))))
+            let far = st.far_residency();
+            let mut r = streaming::renderer_for(gpu, scene, settings, Some((&mut st, &first)))?;
+            scene.release_tile_data();
+            let mut follow = Follow::new(st, far, upload_per_frame);
+            follow.fill(gpu, &mut r, scene, &first)?;
+            Ok((r, Some(follow)))
         }
         _ => Ok((streaming::renderer_for(gpu, scene, settings, None)?, None)),
     }
 }
+
+/// Tile bytes (as residency counts them) one step of [`Follow::fill`] reads at most, but for a
+/// single tile larger than this: what the CPU holds of a residency while it is written.
+pub(crate) const FILL_STEP_BYTES: u64 = 64 << 20;
 
 /// A residency chosen on the loader thread: the scene to swap in where the tiles' forms changed,
 /// and the changes `--upload-per-frame` left for later.
@@ -70,13 +82,14 @@ impl Follow {
     }
 
     /// Starts choosing and reading the tiles of `cam` (lit by `lights`, which every load keeps),
-    /// unless a load is under way already.
+    /// unless a load is under way already. Only the forms not in `held` (what the renderer holds:
+    /// [`SceneData::held_tiles`]) are read.
     pub(crate) fn request(
         &mut self,
         cam: &Camera,
         clip: Option<ClipBox>,
-        lights: Vec<SceneLight>,
-        headlamp: bool,
+        (lights, headlamp): (Vec<SceneLight>, bool),
+        held: HeldTiles,
     ) {
         if self.loading.is_some() {
             return;
@@ -89,8 +102,11 @@ impl Follow {
             if let Some(max) = limit {
                 (next, deferred) = residency::limit_uploads(st.tiles(), &now, next, max);
             }
-            let scene =
-                if next.modes() == now.modes() { None } else { Some(st.load(&next, lights, headlamp)?) };
+            let scene = if next.modes() == now.modes() {
+                None
+            } else {
+                Some(st.load_changes(&next, lights, headlamp, &held)?)
+            };
             Ok(Arrived { residency: next, scene, deferred })
         }));
     }
@@ -117,11 +133,57 @@ impl Follow {
     /// package for the residency the renderer holds: for a renderer made anew (another preset,
     /// lights that do not fit in place). Nothing to do where the scene holds its data.
     pub(crate) fn reload_into(&self, scene: &mut SceneData) -> Result<()> {
-        if scene.released.is_none() {
+        if scene.holds_all_tiles() {
             return Ok(());
         }
         let again = self.streaming.load(&self.current, Vec::new(), false)?;
         scene.restore_tile_data(again)
+    }
+
+    /// Reads residency `r` whole (for [`streaming::swap_tiles`] where the renderer must be made
+    /// anew).
+    pub(crate) fn load_whole(&self, r: &Residency) -> Result<SceneData> {
+        self.streaming.load(r, Vec::new(), false)
+    }
+
+    /// Brings the renderer from the residency it holds to `target`, reading and writing a few
+    /// tiles at a time (at most [`FILL_STEP_BYTES`] a step, but for one larger tile): each step's
+    /// tiles take their forms in `target`, the others keep theirs, so every step's residency is
+    /// within `target`'s pools (a tile held coarser costs no more). `scene` is the renderer's,
+    /// with its tile data let go; it ends as `target`'s, its story kept. The light is not
+    /// settled here.
+    pub(crate) fn fill(
+        &mut self,
+        gpu: &Gpu,
+        r: &mut Renderer,
+        scene: &mut SceneData,
+        target: &Residency,
+    ) -> Result<()> {
+        let story = (std::mem::take(&mut scene.pois), std::mem::take(&mut scene.tours));
+        let mut step = self.current.clone();
+        let mut pending = 0u64;
+        let changes: Vec<&residency::Decision> = target
+            .decisions
+            .iter()
+            .filter(|d| step.modes().get(d.tile).copied().unwrap_or(TileMode::Skip) != d.mode)
+            .collect();
+        for (k, d) in changes.iter().enumerate() {
+            if let Some(mine) = step.decisions.iter_mut().find(|m| m.tile == d.tile) {
+                mine.mode = d.mode;
+            }
+            let footprint = self.streaming.tiles().iter().find(|t| t.index == d.tile);
+            pending += footprint.map_or(0, |t| t.cost(d.mode).bytes);
+            if pending < FILL_STEP_BYTES && k + 1 < changes.len() {
+                continue;
+            }
+            pending = 0;
+            let next = self.streaming.load_changes(&step, Vec::new(), false, &scene.held_tiles())?;
+            streaming::swap_tiles(gpu, r, scene, next, || self.streaming.load(&step, Vec::new(), false))?;
+            scene.release_tile_data();
+        }
+        self.current = target.clone();
+        (scene.pois, scene.tours) = story;
+        Ok(())
     }
 
     /// The renderer now holds `r` (its scene swapped in, or unchanged).

@@ -12,7 +12,7 @@ use crate::error::Result;
 use crate::gpu::Gpu;
 use crate::render::pool::{POOL_HEADROOM, PoolCaps};
 use crate::render::{Renderer, SceneUpdate};
-use crate::scene::data::{SceneData, SceneLight, TileMode};
+use crate::scene::data::{HeldTiles, SceneData, SceneLight, TileMode};
 use crate::scene::rock::RockTable;
 use crate::settings::{ClipBox, Settings};
 use crate::stream::residency::{self, Budget, Residency, TileFootprint};
@@ -148,6 +148,21 @@ impl Streaming {
         (scene.lights, scene.headlamp) = (lights, headlamp);
         Ok(scene)
     }
+
+    /// As [`Streaming::load`], reading only the tile forms the renderer does not hold (`held`:
+    /// [`SceneData::held_tiles`] of its scene); the others are in the scene as summaries
+    /// ([`SceneData::absent`]). Memory then follows the change, not the residency.
+    pub fn load_changes(
+        &self,
+        r: &Residency,
+        lights: Vec<SceneLight>,
+        headlamp: bool,
+        held: &HeldTiles,
+    ) -> Result<SceneData> {
+        let mut scene = SceneData::from_package_with_held(&self.pkg, r.mode_of(), self.rock.clone(), held)?;
+        (scene.lights, scene.headlamp) = (lights, headlamp);
+        Ok(scene)
+    }
 }
 
 /// The sections reading `pkg`'s tiles in these modes (indexed by tile; missing: skipped) reads,
@@ -247,22 +262,31 @@ pub struct Swapped {
 }
 
 /// Puts `new_scene` into the renderer in place of `scene` (which it replaces): only the new tile
-/// forms are written; tiles resident before and after keep their place and light. The light is
-/// not settled here: the caller decides how many bounces to spend.
+/// forms are written; tiles resident before and after keep their place and light. `new_scene`
+/// may leave out the forms the renderer holds ([`Streaming::load_changes`]); where the renderer
+/// must be made anew after all, `reload` reads the residency whole. The light is not settled
+/// here: the caller decides how many bounces to spend.
 pub fn swap_tiles(
     gpu: &Gpu,
     r: &mut Renderer,
     scene: &mut SceneData,
     mut new_scene: SceneData,
+    reload: impl FnOnce() -> Result<SceneData>,
 ) -> Result<Swapped> {
     // The lights are the scene's as they are now, with their circuits' state: a residency asked
     // for before a circuit was switched arrives with the lights of then.
     new_scene.lighting = scene.lighting.take();
     new_scene.lights.clone_from(&scene.lights);
     new_scene.headlamp = scene.headlamp;
+    // So is the story (a story file's amendments, where the package's was replaced).
+    (new_scene.pois, new_scene.tours) = (std::mem::take(&mut scene.pois), std::mem::take(&mut scene.tours));
     if let Some(u) = r.update_scene(&new_scene)? {
         *scene = new_scene;
         return Ok(Swapped { carried_leaves: u.carried_leaves, update: Some(u), made_anew: false });
+    }
+    if !new_scene.holds_all_tiles() {
+        let whole = reload()?;
+        new_scene.restore_tile_data(whole)?;
     }
     let carried_leaves = anew(gpu, r, scene, &new_scene, !cfg!(target_arch = "wasm32"))?;
     *scene = new_scene;

@@ -275,12 +275,12 @@ impl App {
         };
         surface.configure(&gpu.device, &config);
         let blit = Blit::new(&gpu, format)?;
-        let prepared = crate::engine::open(o, &gpu)?;
+        let mut prepared = crate::engine::open(o, &gpu)?;
         let mut settings = o.settings.clone();
         settings.exposure = o.exposure.unwrap_or(1.0);
         let (mut renderer, follow) = follow::start(
             &gpu,
-            &prepared.scene,
+            &mut prepared.scene,
             settings.clone(),
             prepared.streaming,
             prepared.residency,
@@ -377,7 +377,8 @@ impl App {
         if let Some(f) = &mut s.follow {
             if let Some(arrived) = f.poll()? {
                 if let Some(new_scene) = arrived.scene {
-                    crate::stream::swap_tiles(&s.gpu, &mut s.renderer, &mut s.scene, new_scene)?;
+                    let whole = || f.load_whole(&arrived.residency);
+                    crate::stream::swap_tiles(&s.gpu, &mut s.renderer, &mut s.scene, new_scene, whole)?;
                     s.scene.release_tile_data();
                     self.summary.tile_swaps += 1;
                 }
@@ -385,7 +386,7 @@ impl App {
             }
             let want = (cam, s.renderer.clip());
             if s.chosen_for != Some(want) && !f.busy() {
-                f.request(&cam, want.1, s.scene.lights.clone(), s.scene.headlamp);
+                f.request(&cam, want.1, (s.scene.lights.clone(), s.scene.headlamp), s.scene.held_tiles());
                 s.chosen_for = Some(want);
             }
         }

@@ -286,7 +286,11 @@ pub(crate) fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::engine::
         out: a.out.clone(),
         settings,
         exposure: a.exposure,
-        gpu: grotto_runtime::gpu::GpuOptions { prefer_software: a.software, ..Default::default() },
+        gpu: grotto_runtime::gpu::GpuOptions {
+            prefer_software: a.software,
+            lean_memory: a.gpu_memory.is_some(),
+            ..Default::default()
+        },
         lamp_string: a.lamps,
         headlamp: Headlamp::parse(&a.headlamp)
             .ok_or_else(|| anyhow::anyhow!("--headlamp {:?}: use auto, on or off", a.headlamp))?,
