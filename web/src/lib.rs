@@ -249,6 +249,7 @@ impl Viewer {
         // The pools are sized for the tiles this view wants, which arrive after the first frame.
         let want = streaming.choose(&camera, None)?;
         let renderer = stream::renderer_for(&gpu, &far, settings, Some((&mut streaming, &want)))?;
+        far.release_tile_data();
         let current = streaming.far_residency();
 
         let (config, format) = configure_surface(&surface, &gpu, width, height)?;
@@ -388,8 +389,16 @@ impl Viewer {
     pub fn switch_circuit(&mut self, name: &str, on: bool) -> Result<(), JsError> {
         let s = &mut self.state;
         if s.scene.switch_circuit(name, on).map_err(|e| JsError::new(&e))? {
-            // The page keeps its scene's tile data: nothing to load again.
-            stream::relit(&s.gpu, &mut s.renderer, &mut s.scene, |_| Ok(()))
+            // A renderer made anew needs the tiles the page let go: their sections were
+            // fetched, and stay.
+            let (streaming, current) = (&s.streaming, &s.current);
+            let reload = |scene: &mut SceneData| {
+                if scene.holds_all_tiles() {
+                    return Ok(());
+                }
+                scene.restore_tile_data(streaming.load(current, Vec::new(), false)?)
+            };
+            stream::relit(&s.gpu, &mut s.renderer, &mut s.scene, reload)
                 .map_err(|e| JsError::new(&e.to_string()))?;
             s.shown_at_rest = None;
         }
@@ -669,20 +678,24 @@ impl State {
     }
 
     fn swap(&mut self, next: Residency) -> Result<(), Error> {
-        let scene = match self.streaming.load(&next, self.scene.lights.clone(), self.scene.headlamp) {
-            Ok(scene) => scene,
-            // Damaged sections: their tiles stay as they are (health.rs), the rest stream on.
-            Err(grotto_runtime::Error::Package(e)) => {
-                let e = Error::Package(e);
-                self.health.damaged_step(self.streaming.package(), &self.current, &next, &e);
-                self.chosen_for = None;
-                return Ok(());
-            }
-            Err(e) => return Err(e.into()),
-        };
-        // The scene read here holds every tile, so nothing needs reading again.
+        // Only the tile forms the renderer lacks are decoded; the page keeps none once its GPU
+        // holds them (wasm memory never shrinks back from a peak).
+        let held = self.scene.held_tiles();
+        let scene =
+            match self.streaming.load_changes(&next, self.scene.lights.clone(), self.scene.headlamp, &held) {
+                Ok(scene) => scene,
+                // Damaged sections: their tiles stay as they are (health.rs), the rest stream on.
+                Err(grotto_runtime::Error::Package(e)) => {
+                    let e = Error::Package(e);
+                    self.health.damaged_step(self.streaming.package(), &self.current, &next, &e);
+                    self.chosen_for = None;
+                    return Ok(());
+                }
+                Err(e) => return Err(e.into()),
+            };
         let whole = || self.streaming.load(&next, Vec::new(), false);
         stream::swap_tiles(&self.gpu, &mut self.renderer, &mut self.scene, scene, whole)?;
+        self.scene.release_tile_data();
         self.current = next;
         // Choose again: the step may have been one of several.
         self.chosen_for = None;
