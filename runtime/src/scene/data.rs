@@ -120,45 +120,6 @@ pub struct SceneData {
     pub absent: Vec<Option<TileSummary>>,
 }
 
-/// A tile form: where the tile is (its corner in frame leaves), its SVO depth, and the level it
-/// is held at. Two scenes holding the same key hold the same nodes, leaves and surfels.
-pub type TileKey = ([i32; 3], u32, u32);
-
-/// The key of a tile record.
-pub(crate) fn key(t: &TileGpu) -> TileKey {
-    (t.origin_leaf, t.depth, t.leaf_lod)
-}
-
-/// Summaries of the tile forms a renderer holds, by key: what a load leaves out.
-pub type HeldTiles = std::collections::HashMap<TileKey, TileSummary>;
-
-/// What the renderer needs of a tile it holds without the scene holding its data: its element
-/// counts, the shape of its node tree (for the mip order), and what the light's parameters are
-/// made from.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct TileSummary {
-    /// Nodes at each level from the tile's root down to the level it is held at. Nodes are
-    /// breadth-first, so each level's nodes follow the level above's.
-    pub(crate) nodes_by_level: Vec<u32>,
-    pub(crate) leaves: u32,
-    pub(crate) surfels: u32,
-    /// Whether any of its leaves emits.
-    pub(crate) emission: bool,
-    /// The box around its leaves' cells in frame leaves (a coarse leaf's whole cell); None
-    /// without leaves.
-    pub(crate) occupied_leaf: Option<(Vec3, Vec3)>,
-    /// Its leaves' largest finite albedo per channel.
-    pub(crate) albedo_max: [f32; 3],
-    /// Its surfels assigned to each specular material slot (1..=7, at 0..=6).
-    pub(crate) material_surfels: [u32; MAX_MATERIALS],
-}
-
-impl TileSummary {
-    pub(crate) fn nodes(&self) -> u32 {
-        self.nodes_by_level.iter().sum()
-    }
-}
-
 /// How many nodes, leaves and surfels a scene's tiles hold.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct SceneCounts {
@@ -221,8 +182,9 @@ impl TileMode {
     }
 }
 
-/// Most specular materials a scene may assign (slots 1..=7 of the surfel colour's alpha).
-pub(crate) const MAX_MATERIALS: usize = 7;
+pub use crate::scene::summary::{HeldTiles, TileKey, TileSummary};
+pub(crate) use crate::scene::summary::{MAX_MATERIALS, key};
+use crate::scene::summary::{albedo_max, cells_box};
 
 /// A specular material as shade uses it.
 #[derive(Clone, Debug, PartialEq)]
@@ -687,30 +649,9 @@ impl SceneData {
         }
         let tile = &self.tiles[t];
         let nodes = &self.nodes[tile.node_offset as usize..(tile.node_offset + tile.node_count) as usize];
-        let mut nodes_by_level = vec![0u32; (tile.depth - tile.leaf_lod) as usize + 1];
-        for n in nodes {
-            if let Some(c) = nodes_by_level.get_mut(n.level() as usize) {
-                *c += 1;
-            }
-        }
         let leaves = &self.leaves[tile.leaf_offset as usize..(tile.leaf_offset + tile.leaf_count) as usize];
         let surfels = owners.get(t).map_or(&[][..], |r| &self.surfels[r.start as usize..r.end as usize]);
-        let mut material_surfels = [0u32; MAX_MATERIALS];
-        for s in surfels {
-            if let Some(c) = usize::from(s.color[3]).checked_sub(1).and_then(|k| material_surfels.get_mut(k))
-            {
-                *c += 1;
-            }
-        }
-        TileSummary {
-            nodes_by_level,
-            leaves: tile.leaf_count,
-            surfels: surfels.len() as u32,
-            emission: leaves.iter().any(|l| l.emission[..3].iter().any(|&e| e > 0.0)),
-            occupied_leaf: cells_box(self.leaf_size_m, leaves),
-            albedo_max: albedo_max(leaves),
-            material_surfels,
-        }
+        TileSummary::of(tile.depth - tile.leaf_lod, nodes, leaves, surfels, self.leaf_size_m)
     }
 
     /// The summary of every tile form, by key: what a load for another residency may leave out
@@ -896,32 +837,4 @@ pub(crate) fn tile_colors(tile: &grotto_format::Tile<'_>, n: usize) -> Result<Ve
         return Ok(raw.iter().take(n).map(|c| [c.0[0], c.0[1], c.0[2]]).collect());
     }
     Ok(vec![[180; 3]; n])
-}
-
-/// The box around `leaves`' cells in frame leaves (a coarse leaf's whole cell); None when empty.
-fn cells_box(leaf_size_m: f32, leaves: &[LeafGpu]) -> Option<(Vec3, Vec3)> {
-    let leaf_m = leaf_size_m.max(1e-9);
-    let mut lo = Vec3::splat(f32::MAX);
-    let mut hi = Vec3::splat(f32::MIN);
-    for l in leaves {
-        let edge = (l.center_m[3] / leaf_m).round().max(1.0);
-        let cell_lo = (Vec3::from_slice(&l.center_m[..3]) / (leaf_m * edge)).floor() * edge;
-        lo = lo.min(cell_lo);
-        hi = hi.max(cell_lo + edge);
-    }
-    (!leaves.is_empty()).then_some((lo, hi))
-}
-
-/// The largest finite albedo of `leaves` per channel.
-fn albedo_max(leaves: &[LeafGpu]) -> [f32; 3] {
-    let mut m = [0.0f32; 3];
-    for l in leaves {
-        for (k, v) in m.iter_mut().enumerate() {
-            let a = l.albedo_opacity[k];
-            if a.is_finite() {
-                *v = v.max(a);
-            }
-        }
-    }
-    m
 }

@@ -373,23 +373,7 @@ impl App {
         let moving = flying || s.last_camera.is_some_and(|c| c != cam);
         s.last_camera = Some(cam);
 
-        // Tiles follow the camera: take what the loader has ready, ask for the view now.
-        if let Some(f) = &mut s.follow {
-            if let Some(arrived) = f.poll()? {
-                if let Some(new_scene) = arrived.scene {
-                    let whole = || f.load_whole(&arrived.residency);
-                    crate::stream::swap_tiles(&s.gpu, &mut s.renderer, &mut s.scene, new_scene, whole)?;
-                    s.scene.release_tile_data();
-                    self.summary.tile_swaps += 1;
-                }
-                f.accept(arrived.residency);
-            }
-            let want = (cam, s.renderer.clip());
-            if s.chosen_for != Some(want) && !f.busy() {
-                f.request(&cam, want.1, (s.scene.lights.clone(), s.scene.headlamp), s.scene.held_tiles());
-                s.chosen_for = Some(want);
-            }
-        }
+        self.summary.tile_swaps += u32::from(follow_camera(s, cam)?);
 
         // Moving, the frame-time target trades scale and detail; at rest they come back.
         let (t_scale, detail) = s.target.as_ref().map_or((1.0, 1.0), |t| t.for_frame(moving));
@@ -707,6 +691,28 @@ fn let_go_of_tiles(s: &mut State) {
     if s.follow.is_some() {
         s.scene.release_tile_data();
     }
+}
+
+/// Tiles follow the camera: takes what the loader has ready (true where the tiles changed), and
+/// asks for the view now.
+fn follow_camera(s: &mut State, cam: Camera) -> Result<bool> {
+    let Some(f) = &mut s.follow else { return Ok(false) };
+    let mut swapped = false;
+    if let Some(arrived) = f.poll()? {
+        if let Some(new_scene) = arrived.scene {
+            let whole = || f.load_whole(&arrived.residency);
+            crate::stream::swap_tiles(&s.gpu, &mut s.renderer, &mut s.scene, new_scene, whole)?;
+            s.scene.release_tile_data();
+            swapped = true;
+        }
+        f.accept(arrived.residency);
+    }
+    let want = (cam, s.renderer.clip());
+    if s.chosen_for != Some(want) && !f.busy() {
+        f.request(&cam, want.1, (s.scene.lights.clone(), s.scene.headlamp), s.scene.held_tiles());
+        s.chosen_for = Some(want);
+    }
+    Ok(swapped)
 }
 
 /// Applies what the panel changed.

@@ -98,7 +98,8 @@ fn main() -> ExitCode {
 /// that allocates gets an arena of its own (the tile loaders decode in threads), whose freed
 /// middle stays resident, and a freed large block raises the size below which blocks come from
 /// those arenas instead of their own pages. A viewer frees a decoded scene once its GPU holds it
-/// (docs/benchmarks.md, "A viewer's process memory": 828 -> 754 MiB along the measured path).
+/// (docs/benchmarks.md, "A viewer's process memory": 828 -> 754 MiB along the measured path with
+/// these settings given through glibc's environment).
 /// Two arenas, and a fixed 128 KiB above which a block has its own pages and goes back when
 /// freed.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
