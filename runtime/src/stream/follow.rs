@@ -150,8 +150,8 @@ impl Follow {
     /// tiles at a time (at most [`FILL_STEP_BYTES`] a step, but for one larger tile): each step's
     /// tiles take their forms in `target`, the others keep theirs, so every step's residency is
     /// within `target`'s pools (a tile held coarser costs no more). `scene` is the renderer's,
-    /// with its tile data let go; it ends as `target`'s, its story kept. The light is not
-    /// settled here.
+    /// with its tile data let go; it ends as `target`'s (its lights and story kept:
+    /// [`streaming::swap_tiles`]). The light is not settled here.
     pub(crate) fn fill(
         &mut self,
         gpu: &Gpu,
@@ -159,13 +159,13 @@ impl Follow {
         scene: &mut SceneData,
         target: &Residency,
     ) -> Result<()> {
-        let story = (std::mem::take(&mut scene.pois), std::mem::take(&mut scene.tours));
         let mut step = self.current.clone();
+        let held = step.modes();
         let mut pending = 0u64;
         let changes: Vec<&residency::Decision> = target
             .decisions
             .iter()
-            .filter(|d| step.modes().get(d.tile).copied().unwrap_or(TileMode::Skip) != d.mode)
+            .filter(|d| held.get(d.tile).copied().unwrap_or(TileMode::Skip) != d.mode)
             .collect();
         for (k, d) in changes.iter().enumerate() {
             if let Some(mine) = step.decisions.iter_mut().find(|m| m.tile == d.tile) {
@@ -182,7 +182,6 @@ impl Follow {
             scene.release_tile_data();
         }
         self.current = target.clone();
-        (scene.pois, scene.tours) = story;
         Ok(())
     }
 
