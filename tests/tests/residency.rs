@@ -325,25 +325,49 @@ fn chamber(scene: &SceneData) -> Camera {
     Camera::from_scene(scene.cameras.iter().find(|c| c.name == "chamber").unwrap())
 }
 
+/// What the swap tests start from: the small cave with its first half and its first three
+/// quarters of tiles full (the others coarse), its chamber camera, and the settings they render
+/// with.
+struct Halves {
+    pkg: Package,
+    gpu: Gpu,
+    n: usize,
+    half: SceneData,
+    most: SceneData,
+    cam: Camera,
+    settings: Settings,
+}
+
+fn halves() -> Halves {
+    let pkg = Package::open(small_tiles_cave()).unwrap();
+    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
+    let n = pkg.tile_count() as usize;
+    let (half, most) = (full_first(&pkg, n / 2), full_first(&pkg, 3 * n / 4));
+    let cam = chamber(&most);
+    let settings = Settings { bounces: 40, shadow_map_size: 128, exposure: 8.0, ..Settings::default() };
+    Halves { pkg, gpu, n, half, most, cam, settings }
+}
+
+impl Halves {
+    /// `scene` rendered by a renderer made for it, its light settled.
+    fn batch(&self, scene: &SceneData) -> Vec<[u8; 4]> {
+        let mut r = Renderer::new(&self.gpu, scene, self.settings.clone()).unwrap();
+        r.settle(|_, _| {}).unwrap();
+        r.render(&self.cam, W, H).unwrap().0.ldr
+    }
+}
+
 #[test]
 fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer() {
     // The tiles the view wants change: the renderer keeps the forms that stay in their pool slots
     // with their light, writes only the new ones, redraws only the shadow faces that see a changed
     // tile, and settles to what a renderer made for the new scene renders. Back to the first scene
     // (holes reused) and through a forced repack (light read back and moved), the same.
-    let pkg = Package::open(small_tiles_cave()).unwrap();
-    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
-    let n = pkg.tile_count() as usize;
-    let scene = |full: usize| full_first(&pkg, full);
-    let (half, most) = (scene(n / 2), scene(3 * n / 4));
-    let cam = chamber(&most);
-    let settings = Settings { bounces: 40, shadow_map_size: 128, exposure: 8.0, ..Settings::default() };
-    let batch = |s: &SceneData| {
-        let mut r = Renderer::new(&gpu, s, settings.clone()).unwrap();
-        r.settle(|_, _| {}).unwrap();
-        r.render(&cam, W, H).unwrap().0.ldr
-    };
-    let (batch_half, batch_most) = (batch(&half), batch(&most));
+    let h = halves();
+    let Halves { pkg, gpu, n, half, most, cam, settings } = &h;
+    let (n, cam) = (*n, *cam);
+    let scene = |full: usize| full_first(pkg, full);
+    let (batch_half, batch_most) = (h.batch(half), h.batch(most));
     // Pools with room to spare, as streaming makes them (pool.rs, POOL_HEADROOM).
     let caps = PoolCaps::filling(PoolCaps::of(&most), PoolCaps::of(&most).bytes(false) * 5 / 4, false);
     let mut r = Renderer::with_pools(&gpu, &half, settings.clone(), caps).unwrap();
@@ -385,18 +409,10 @@ fn a_change_of_tiles_reads_only_the_forms_the_renderer_lacks_and_repacks_on_the_
     // and through a forced repack (the forms that stay then move on the GPU, and only their
     // nodes are read back to be re-indexed), it settles to what a renderer made for the whole
     // scene renders.
-    let pkg = Package::open(small_tiles_cave()).unwrap();
-    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
-    let n = pkg.tile_count() as usize;
-    let (half, most) = (full_first(&pkg, n / 2), full_first(&pkg, 3 * n / 4));
-    let cam = chamber(&most);
-    let settings = Settings { bounces: 40, shadow_map_size: 128, exposure: 8.0, ..Settings::default() };
-    let batch = |s: &SceneData| {
-        let mut r = Renderer::new(&gpu, s, settings.clone()).unwrap();
-        r.settle(|_, _| {}).unwrap();
-        r.render(&cam, W, H).unwrap().0.ldr
-    };
-    let (batch_half, batch_most) = (batch(&half), batch(&most));
+    let h = halves();
+    let Halves { pkg, gpu, n, half, most, cam, settings } = &h;
+    let (n, cam) = (*n, *cam);
+    let (batch_half, batch_most) = (h.batch(half), h.batch(most));
     let caps = PoolCaps::filling(PoolCaps::of(&most), PoolCaps::of(&most).bytes(false) * 5 / 4, false);
     let mut scene = half.clone();
     let mut r = Renderer::with_pools(&gpu, &scene, settings.clone(), caps).unwrap();
@@ -444,18 +460,15 @@ fn a_change_of_tiles_reads_only_the_forms_the_renderer_lacks_and_repacks_on_the_
 #[test]
 fn a_shadow_budget_spreads_the_redraw_over_frames_and_shows_it_whole() {
     use grotto_runtime::light::plan::Pass;
-    let pkg = Package::open(small_tiles_cave()).unwrap();
-    let gpu = Gpu::new(&grotto_tests::lavapipe()).unwrap();
-    let n = pkg.tile_count() as usize;
-    let (half, most) = (full_first(&pkg, n / 2), full_first(&pkg, 3 * n / 4));
-    let cam = chamber(&most);
-    let whole = Settings { bounces: 40, shadow_map_size: 128, exposure: 8.0, ..Settings::default() };
+    let h = halves();
+    let Halves { gpu, half, most, cam, settings: whole, .. } = &h;
+    let cam = *cam;
     let mut batch = Renderer::new(&gpu, &most, whole.clone()).unwrap();
     batch.settle(|_, _| {}).unwrap();
     let batch_most = batch.render(&cam, W, H).unwrap().0.ldr;
 
     // A budget far under one face's time: each pass draws the one face it must.
-    let budgeted = Settings { shadow_frame_ms: 1e-3, ..whole };
+    let budgeted = Settings { shadow_frame_ms: 1e-3, ..whole.clone() };
     let caps = PoolCaps::filling(PoolCaps::of(&most), PoolCaps::of(&most).bytes(false) * 5 / 4, false);
     let mut r = Renderer::with_pools(&gpu, &half, budgeted, caps).unwrap();
     r.settle(|_, _| {}).unwrap();
