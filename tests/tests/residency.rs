@@ -369,8 +369,8 @@ fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer()
     let scene = |full: usize| full_first(pkg, full);
     let (batch_half, batch_most) = (h.batch(half), h.batch(most));
     // Pools with room to spare, as streaming makes them (pool.rs, POOL_HEADROOM).
-    let caps = PoolCaps::filling(PoolCaps::of(&most), PoolCaps::of(&most).bytes(false) * 5 / 4, false);
-    let mut r = Renderer::with_pools(&gpu, &half, settings.clone(), caps).unwrap();
+    let caps = PoolCaps::filling(PoolCaps::of(most), PoolCaps::of(most).bytes(false) * 5 / 4, false);
+    let mut r = Renderer::with_pools(gpu, half, settings.clone(), caps).unwrap();
     r.settle(|_, _| {}).unwrap();
     let faces = r.shadowed_lights();
     let check = |r: &mut Renderer, to: &SceneData, batch: &[[u8; 4]], what: &str| {
@@ -383,14 +383,14 @@ fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer()
         assert!(r.pool_bytes() <= caps.bytes(false));
         u
     };
-    let u = check(&mut r, &most, &batch_most, "half -> most");
+    let u = check(&mut r, most, &batch_most, "half -> most");
     assert!(!u.repacked && u.kept_tiles > 0 && u.uploaded_tiles < most.tiles.len(), "{u:?}");
     assert!(u.carried_leaves > 0);
     assert!(u.upload_bytes < most.tile_bytes(false), "only the new forms are written: {u:?}");
-    let u = check(&mut r, &half, &batch_half, "most -> half");
+    let u = check(&mut r, half, &batch_half, "most -> half");
     assert!(u.freed_tiles > 0 && u.kept_tiles > 0, "{u:?}");
     r.repack_next_update();
-    let u = check(&mut r, &most, &batch_most, "half -> most, repacked");
+    let u = check(&mut r, most, &batch_most, "half -> most, repacked");
     assert!(u.repacked && u.carried_leaves > 0, "a repack carries the light of the forms that stay: {u:?}");
     assert!(faces > 0);
     // A scene the pools cannot hold is refused in place, and the renderer is untouched.
@@ -413,9 +413,9 @@ fn a_change_of_tiles_reads_only_the_forms_the_renderer_lacks_and_repacks_on_the_
     let Halves { pkg, gpu, n, half, most, cam, settings } = &h;
     let (n, cam) = (*n, *cam);
     let (batch_half, batch_most) = (h.batch(half), h.batch(most));
-    let caps = PoolCaps::filling(PoolCaps::of(&most), PoolCaps::of(&most).bytes(false) * 5 / 4, false);
+    let caps = PoolCaps::filling(PoolCaps::of(most), PoolCaps::of(most).bytes(false) * 5 / 4, false);
     let mut scene = half.clone();
-    let mut r = Renderer::with_pools(&gpu, &scene, settings.clone(), caps).unwrap();
+    let mut r = Renderer::with_pools(gpu, &scene, settings.clone(), caps).unwrap();
     r.settle(|_, _| {}).unwrap();
     scene.release_tile_data();
     for (full, batch, repack) in
@@ -423,8 +423,8 @@ fn a_change_of_tiles_reads_only_the_forms_the_renderer_lacks_and_repacks_on_the_
     {
         let modes = |i: usize| if i < full { TileMode::Full } else { TileMode::Coarse };
         let next =
-            SceneData::from_package_with_held(&pkg, modes, scene.rock.clone(), &scene.held_tiles()).unwrap();
-        let whole = full_first(&pkg, full);
+            SceneData::from_package_with_held(pkg, modes, scene.rock.clone(), &scene.held_tiles()).unwrap();
+        let whole = full_first(pkg, full);
         assert_eq!((next.tiles.len(), next.counts()), (whole.tiles.len(), whole.counts()));
         let read = next.absent.iter().filter(|a| a.is_none()).count();
         assert!(
@@ -437,7 +437,7 @@ fn a_change_of_tiles_reads_only_the_forms_the_renderer_lacks_and_repacks_on_the_
         if repack {
             r.repack_next_update();
         }
-        let swapped = grotto_runtime::stream::swap_tiles(&gpu, &mut r, &mut scene, next, || {
+        let swapped = grotto_runtime::stream::swap_tiles(gpu, &mut r, &mut scene, next, || {
             panic!("the same lights and bounds: swapped in place")
         })
         .unwrap();
@@ -463,17 +463,17 @@ fn a_shadow_budget_spreads_the_redraw_over_frames_and_shows_it_whole() {
     let h = halves();
     let Halves { gpu, half, most, cam, settings: whole, .. } = &h;
     let cam = *cam;
-    let mut batch = Renderer::new(&gpu, &most, whole.clone()).unwrap();
+    let mut batch = Renderer::new(gpu, most, whole.clone()).unwrap();
     batch.settle(|_, _| {}).unwrap();
     let batch_most = batch.render(&cam, W, H).unwrap().0.ldr;
 
     // A budget far under one face's time: each pass draws the one face it must.
     let budgeted = Settings { shadow_frame_ms: 1e-3, ..whole.clone() };
-    let caps = PoolCaps::filling(PoolCaps::of(&most), PoolCaps::of(&most).bytes(false) * 5 / 4, false);
-    let mut r = Renderer::with_pools(&gpu, &half, budgeted, caps).unwrap();
+    let caps = PoolCaps::filling(PoolCaps::of(most), PoolCaps::of(most).bytes(false) * 5 / 4, false);
+    let mut r = Renderer::with_pools(gpu, half, budgeted, caps).unwrap();
     r.settle(|_, _| {}).unwrap();
     assert_eq!(r.take_shadow_faces_drawn(), r.shadow_face_count() as u64, "the first fill draws every face");
-    let u = r.update_scene(&most).unwrap().expect("in place");
+    let u = r.update_scene(most).unwrap().expect("in place");
     assert!(u.shadow_faces >= 2, "the change must leave several faces out of date: {u:?}");
     let mut shown = Vec::new();
     let mut passes = 0;
