@@ -174,11 +174,8 @@ impl Opened {
     /// data whole (pass and light-edit benchmarks).
     pub fn into_whole(mut self) -> Result<Self> {
         if let (Some(st), Some(r)) = (&self.streaming, &self.residency) {
-            let lights = std::mem::take(&mut self.scene.lights);
-            let mut whole = st.load(r, lights, self.scene.headlamp)?;
-            (whole.pois, whole.tours) =
-                (std::mem::take(&mut self.scene.pois), std::mem::take(&mut self.scene.tours));
-            whole.lighting = self.scene.lighting.take();
+            let mut whole = st.load(r, Vec::new(), false)?;
+            whole.take_lights_and_story(&mut self.scene);
             self.scene = whole;
         }
         Ok(self)

@@ -184,11 +184,6 @@ pub(crate) fn merge_runs(mut r: Vec<Range<u32>>) -> Vec<Range<u32>> {
     out
 }
 
-/// Each tile's surfels ([`SceneData::surfel_owners`]).
-pub(crate) fn surfel_owners(scene: &SceneData) -> (Vec<Range<u32>>, bool) {
-    scene.surfel_owners()
-}
-
 impl Pools {
     /// Empty pools of `caps` elements (each at most `u32::MAX`: GPU indices are u32).
     pub(crate) fn new(caps: PoolCaps) -> Result<Self> {
@@ -268,7 +263,7 @@ impl Pools {
     }
 
     /// Gives every tile of `scene` a slot: the forms already resident keep theirs, the others
-    /// get new ones, the forms that left are freed (`owners`: [`surfel_owners`]). Pools that
+    /// get new ones, the forms that left are freed (`owners`: [`SceneData::surfel_owners`]). Pools that
     /// hold nothing yet are filled in scene order, so a scene placed once lies as it was loaded.
     /// An error when the scene needs more than the pools hold (residency keeps within them, so
     /// that is a bug, not a user's mistake).
@@ -409,7 +404,7 @@ mod tests {
     }
 
     fn place(p: &mut Pools, s: &SceneData) -> Result<Placement> {
-        p.place(s, &surfel_owners(s).0)
+        p.place(s, &s.surfel_owners().0)
     }
 
     fn caps(n: u64) -> PoolCaps {
@@ -545,9 +540,9 @@ mod tests {
     #[test]
     fn surfels_of_a_hand_made_scene_belong_to_its_first_tile() {
         let mut s = scene(&[(0, 1, 1, 3), (1, 1, 1, 2)]);
-        assert_eq!(surfel_owners(&s), (vec![0..3, 3..5], true));
+        assert_eq!(s.surfel_owners(), (vec![0..3, 3..5], true));
         s.tile_surfels.clear();
-        assert_eq!(surfel_owners(&s), (vec![0..5, 5..5], false));
+        assert_eq!(s.surfel_owners(), (vec![0..5, 5..5], false));
     }
 
     #[test]

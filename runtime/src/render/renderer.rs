@@ -16,7 +16,7 @@ use crate::light::plan::Pass;
 use crate::light::setup::LightSetup;
 use crate::passes::inject::Inject;
 use crate::passes::{self, gbuffer, shade};
-use crate::render::pool::{Placement, PoolCaps, Pools, surfel_owners};
+use crate::render::pool::{Placement, PoolCaps, Pools};
 use crate::render::targets::{Stills, ViewTargets};
 use crate::render::transport::LightTransport;
 use crate::scene::data::{SceneData, SceneLight};
@@ -302,7 +302,7 @@ pub(super) fn light_setup(scene: &SceneData, settings: &Settings, scene_diag_m: 
 /// tiles may be culled by their boxes.
 fn fresh_pools(scene: &SceneData, caps: PoolCaps) -> Result<(Pools, Placement, bool)> {
     let mut pools = Pools::new(caps)?;
-    let (owners, cull_tiles) = surfel_owners(scene);
+    let (owners, cull_tiles) = scene.surfel_owners();
     let placed = pools.place(scene, &owners)?;
     if placed.tiles != scene.tiles {
         return Err(Error::Internal { what: "pools", message: "fresh pools moved a tile".into() });

@@ -15,7 +15,7 @@ use crate::gpu::upload::{Move, Uploader, move_within};
 use crate::light::setup::LightSetup;
 use crate::passes::splat::SplatRun;
 use crate::passes::{self};
-use crate::render::pool::{PoolCaps, Pools, TileKey, key, merge_runs, surfel_owners};
+use crate::render::pool::{PoolCaps, Pools, TileKey, key, merge_runs};
 use crate::scene::data::SceneData;
 
 use crate::render::chunks::{Chunk, ChunkCache, Viewer};
@@ -67,7 +67,7 @@ impl TilePools {
         up: &Upload,
         index_bytes: Range<u64>,
     ) -> Self {
-        let (owners, _) = surfel_owners(scene);
+        let (owners, _) = scene.surfel_owners();
         let mut chunk_cache = ChunkCache::default();
         let tile_chunks = placed
             .tiles
@@ -190,7 +190,7 @@ impl TilePools {
         scene: &SceneData,
         leaf_size_m: f32,
     ) -> Result<Option<PlacedScene>> {
-        let (owners, exact) = surfel_owners(scene);
+        let (owners, exact) = scene.surfel_owners();
         if !exact || !self.cull_tiles || !self.slots.caps().holds(&PoolCaps::of(scene)) {
             return Ok(None);
         }
@@ -532,7 +532,8 @@ pub(super) fn initial_light(leaves: &[LeafGpu]) -> Vec<LeafLightGpu> {
 /// What [`Renderer::update_scene`] did.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct SceneUpdate {
-    /// Tiles written to the pools (forms new to them), and tiles that kept their slot and light.
+    /// Tiles written to the pools (forms new to them), and tiles that kept their light (in their
+    /// slot, or moved with it by a repack).
     pub uploaded_tiles: usize,
     pub kept_tiles: usize,
     /// Tile forms that left the pools.

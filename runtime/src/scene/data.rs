@@ -682,6 +682,15 @@ impl SceneData {
         Ok(())
     }
 
+    /// Takes `old`'s lights (with their circuits' state), headlamp and story: another residency
+    /// of the same package read anew has the package's, and the view keeps its own.
+    pub(crate) fn take_lights_and_story(&mut self, old: &mut SceneData) {
+        self.lighting = old.lighting.take();
+        self.lights.clone_from(&old.lights);
+        self.headlamp = old.headlamp;
+        (self.pois, self.tours) = (std::mem::take(&mut old.pois), std::mem::take(&mut old.tours));
+    }
+
     /// Lets go of the tiles' nodes, leaves and surfels once a renderer holds them: a viewer keeps
     /// on the CPU nothing its GPU holds. Each tile's summary stays ([`TileSummary`]); a new
     /// renderer needs the scene loaded again (it refuses this one), a change of tiles only the

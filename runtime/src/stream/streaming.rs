@@ -273,13 +273,10 @@ pub fn swap_tiles(
     mut new_scene: SceneData,
     reload: impl FnOnce() -> Result<SceneData>,
 ) -> Result<Swapped> {
-    // The lights are the scene's as they are now, with their circuits' state: a residency asked
-    // for before a circuit was switched arrives with the lights of then.
-    new_scene.lighting = scene.lighting.take();
-    new_scene.lights.clone_from(&scene.lights);
-    new_scene.headlamp = scene.headlamp;
-    // So is the story (a story file's amendments, where the package's was replaced).
-    (new_scene.pois, new_scene.tours) = (std::mem::take(&mut scene.pois), std::mem::take(&mut scene.tours));
+    // The lights are the scene's as they are now, with their circuits' state (a residency asked
+    // for before a circuit was switched arrives with the lights of then), and so is the story (a
+    // story file's amendments).
+    new_scene.take_lights_and_story(scene);
     if let Some(u) = r.update_scene(&new_scene)? {
         *scene = new_scene;
         return Ok(Swapped { carried_leaves: u.carried_leaves, update: Some(u), made_anew: false });
