@@ -173,6 +173,26 @@ impl Package {
         out
     }
 
+    /// Lets go of the fetched bytes that hold none of `keep`'s sections and returns how many: a
+    /// browser's visit then holds what its residency reads, however long it lasts. A piece that
+    /// holds a kept section stays whole; a whole file (mapped or copied) lets go of nothing. A
+    /// section let go is fetched again ([`Package::missing`]) when it is next wanted.
+    pub fn release_fetched(&mut self, keep: impl IntoIterator<Item = SectionInfo>) -> u64 {
+        let keep: Vec<Range<u64>> = keep
+            .into_iter()
+            .filter(|s| s.stored_len > 0)
+            .map(|s| s.offset..s.offset.saturating_add(s.stored_len))
+            .collect();
+        let released = self.backing.release_except(&keep);
+        // A section fetched again is checked again: its first check vouched for bytes let go.
+        for (entry, checked) in self.sections.iter().zip(self.checked.iter_mut()) {
+            if self.backing.range(entry.offset, entry.stored_len).is_none() {
+                checked.take();
+            }
+        }
+        released
+    }
+
     /// Bytes of the file this package holds in memory: the fetched pieces of one made with
     /// [`Package::from_directory`], all of one from bytes, none of a memory-mapped file.
     pub fn held_bytes(&self) -> u64 {

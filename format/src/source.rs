@@ -112,6 +112,18 @@ impl Backing {
         }
     }
 
+    /// Lets go of a sparse backing's pieces that overlap none of `keep` (file byte ranges) and
+    /// returns their bytes; a whole file keeps every byte.
+    pub(crate) fn release_except(&mut self, keep: &[std::ops::Range<u64>]) -> u64 {
+        let Self::Sparse(pieces) = self else { return 0 };
+        let before: u64 = pieces.values().map(|a| a.len as u64).sum();
+        pieces.retain(|&start, piece| {
+            let end = start + piece.len as u64;
+            keep.iter().any(|k| k.start < end && start < k.end)
+        });
+        before - pieces.values().map(|a| a.len as u64).sum::<u64>()
+    }
+
     /// Bytes held in memory (all of a copy, the pieces of a sparse file; a map holds none).
     pub(crate) fn held_bytes(&self) -> u64 {
         match self {

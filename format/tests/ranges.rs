@@ -132,3 +132,50 @@ fn damaged_or_misplaced_fetches_are_refused() {
         Err(Error::Invalid { problem: Problem::TooShort { .. }, .. })
     ));
 }
+
+#[test]
+fn fetched_bytes_outside_what_is_kept_are_let_go_and_checked_again_when_fetched_again() {
+    let bytes = sample_bytes();
+    let whole = Package::from_bytes("w.grotto", &bytes).unwrap();
+    let (mut ranged, _) = directory_only(&bytes);
+    let all = ranged.missing(ranged.sections(), 0);
+    for r in &all {
+        ranged.insert(r.start, &bytes[r.start as usize..r.end as usize]).unwrap();
+    }
+    let held = ranged.held_bytes();
+    let tile0: Vec<SectionInfo> = ranged.tile(0).unwrap().sections().filter(|s| s.stored_len > 0).collect();
+    let others: Vec<SectionInfo> =
+        ranged.sections().filter(|s| s.stored_len > 0 && !tile0.iter().any(|t| t.index == s.index)).collect();
+    assert!(!tile0.is_empty() && !others.is_empty());
+    for s in others.iter().chain(&tile0) {
+        ranged.check(s).unwrap();
+    }
+
+    // Keeping tile 0: its sections stay readable, every other piece is let go.
+    let released = ranged.release_fetched(tile0.iter().copied());
+    assert!(released > 0);
+    assert_eq!(ranged.held_bytes(), held - released);
+    assert!(ranged.missing(tile0.iter().copied(), 0).is_empty());
+    for s in &tile0 {
+        assert_eq!(ranged.read_bytes(s).unwrap(), whole.read_bytes(s).unwrap());
+    }
+    let gone = ranged.missing(others.iter().copied(), 0);
+    assert!(!gone.is_empty());
+    match ranged.read_bytes(&others[0]) {
+        Err(Error::NotFetched { section, .. }) => assert_eq!(section, others[0].index),
+        other => panic!("expected NotFetched, got {other:?}"),
+    }
+    // Fetched again damaged, a section let go is checked again rather than trusted.
+    let s = others.iter().find(|s| s.stored_len > 8).unwrap();
+    let mut bad = bytes[s.offset as usize..(s.offset + s.stored_len) as usize].to_vec();
+    bad[3] ^= 0x40;
+    ranged.insert(s.offset, &bad).unwrap();
+    assert!(ranged.read_bytes(s).is_err(), "a damaged refetch of section {} was trusted", s.index);
+
+    // Keeping nothing lets go of everything; a whole file lets go of nothing.
+    ranged.release_fetched(std::iter::empty());
+    assert_eq!(ranged.held_bytes(), 0);
+    let mut copy = Package::from_bytes("copy.grotto", &bytes).unwrap();
+    assert_eq!(copy.release_fetched(std::iter::empty()), 0);
+    assert_eq!(copy.held_bytes(), bytes.len() as u64);
+}

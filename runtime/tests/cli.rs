@@ -157,6 +157,53 @@ fn negative_vectors_parse_as_written_and_gpu_memory_is_reported() {
     assert!(json["total_bytes"].as_u64().unwrap() > json["bytes"]["surfels"].as_u64().unwrap());
 }
 
+#[test]
+fn one_memory_budget_sets_the_pools_surfels_and_shadow_maps_and_a_knob_given_wins() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = grotto_fixtures::small_cave_package(
+        dir.path(),
+        &grotto_fixtures::SmallCave { points: 5_000, segments: 2, ..Default::default() },
+    )
+    .unwrap();
+    let p = path.to_str().unwrap();
+    let png = dir.path().join("m.png");
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", p, "--size", "32x24", "--bounces", "1", "--lamps", "20", "--software"];
+        args.extend(extra);
+        args.extend(["--json", "-o", png.to_str().unwrap()]);
+        grotto(&args)
+    };
+    let out = render(&["--memory", "phone"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let m = &json["memory"];
+    assert_eq!(m["budget"]["name"], "phone");
+    assert_eq!(m["budget"]["total_bytes"], 512u64 << 20);
+    // 20 lamps' shadow maps at 512 px would take 100 MiB: the phone's quarter of 256 MiB keeps
+    // them for fewer lights, at the preset's size.
+    let lights = m["shadowed_lights"].as_u64().unwrap();
+    assert!((4..16).contains(&lights), "{m}");
+    assert_eq!(json["settings"]["shadowed_lights"].as_u64(), Some(lights));
+    assert_eq!(json["settings"]["shadow_map_size"], m["shadow_map_size"]);
+    let split = ["pool_bytes", "atlas_bytes", "target_bytes"].map(|k| m[k].as_u64().unwrap());
+    assert!(split.iter().sum::<u64>() <= m["gpu_bytes"].as_u64().unwrap(), "{m}");
+    assert!(json["frames"][0]["pool_bytes"].as_u64().unwrap() <= split[0]);
+
+    // A knob given as well wins over the budget's.
+    let out = render(&["--memory", "phone", "--shadowed-lights", "15"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["settings"]["shadowed_lights"], 15);
+
+    // Too small a budget, or no budget at all, is refused before anything is opened.
+    for bad in ["64M", "pocket"] {
+        let out = render(&["--memory", bad]);
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("--memory") && (err.contains("128M") || err.contains("phone")), "{err}");
+    }
+}
+
 /// The one tolerance every image comparison uses (the end-to-end tests' helper, shared by path).
 // Its items are public where the tests crate exports them; here they are this file's.
 #[allow(dead_code, unreachable_pub)]

@@ -28,8 +28,9 @@ use std::cell::RefCell;
 use std::rc::Rc;
 use std::sync::{Arc, Mutex};
 
+use grotto_runtime::engine::memory::MemoryPlan;
 use grotto_runtime::engine::{self, Load, SceneRequest};
-use grotto_runtime::gpu::{Gpu, GpuOptions, PendingRead, default_gpu_memory};
+use grotto_runtime::gpu::{Gpu, GpuOptions, PendingRead};
 use grotto_runtime::guide::{Guide, PickFor};
 use grotto_runtime::light::plan::Pass;
 use grotto_runtime::render::Renderer;
@@ -66,6 +67,8 @@ struct State {
     current: Residency,
     step: Option<Step>,
     step_bytes: u64,
+    /// The memory budget's split (engine/memory.rs).
+    memory: MemoryPlan,
     /// The camera residency last chose for; None: choose again.
     chosen_for: Option<Camera>,
     /// The view wants no other tiles than those resident.
@@ -194,15 +197,17 @@ impl Viewer {
     ) -> Result<Viewer, Error> {
         let opened = Instant::now();
         let o = parse_options(&options)?;
-        let settings = settings_of(&o)?;
+        let mut settings = settings_of(&o)?;
         let rest_ms = page::rest_ms_of(&o, REST_FRAME_MS)?;
         let exposure = settings.exposure;
         let width = o.width.unwrap_or(canvas.width()).clamp(1, 4096);
         let height = o.height.unwrap_or(canvas.height()).clamp(1, 4096);
         canvas.set_width(width);
         canvas.set_height(height);
+        let memory = page::memory_plan(&o, u64::from(width) * u64::from(height), &settings)?;
+        memory.apply(&mut settings);
 
-        let (surface, gpu) = webgpu(canvas).await?;
+        let (surface, gpu) = webgpu(canvas, &memory).await?;
 
         let (mut source, mut pkg) = Source::open(&url).await?;
         // The first frame: every tile at its far level.
@@ -215,8 +220,8 @@ impl Viewer {
             settings: &settings,
             aspect: width as f32 / height as f32,
             budget: Budget {
-                gpu_bytes: o.gpu_memory_mb.map_or_else(|| default_gpu_memory(&gpu), |mb| mb << 20),
-                points: u64::MAX,
+                gpu_bytes: o.gpu_memory_mb.map_or(memory.pool_bytes, |mb| mb << 20),
+                points: memory.points,
                 pools: None,
             },
             relight: page::relight_of(&o)?,
@@ -269,7 +274,8 @@ impl Viewer {
                 source,
                 current,
                 step: None,
-                step_bytes: o.step_mb.unwrap_or(32) << 20,
+                step_bytes: o.step_mb.map_or(memory.step_bytes, |mb| mb << 20),
+                memory,
                 chosen_for: None,
                 settled: false,
                 nav,
@@ -558,6 +564,8 @@ impl State {
         *self.frame_done.lock().map_err(|_| Error::Setting("frame timing poisoned".into()))? = None;
         // Moving, the frame-time target trades scale and detail; at rest they come back.
         let (scale, detail) = self.target.as_ref().map_or((1.0, 1.0), |t| t.for_frame(moving));
+        // The budget's image scale holds at rest too: targets larger would pass their share.
+        let scale = scale * self.memory.pixel_scale;
         self.renderer.set_lod_detail(detail);
         let (w, h) =
             (((self.width as f32 * scale) as u32).max(1), ((self.height as f32 * scale) as u32).max(1));
@@ -697,6 +705,12 @@ impl State {
         stream::swap_tiles(&self.gpu, &mut self.renderer, &mut self.scene, scene, whole)?;
         self.scene.release_tile_data();
         self.current = next;
+        // Fetched bytes beyond the budget's cache: only what the tiles now held read is kept,
+        // so a long visit holds what its view needs, not all it has seen.
+        if self.streaming.package().held_bytes() > self.memory.fetch_cache_bytes {
+            let keep = self.streaming.sections_for(&self.current);
+            self.streaming.package_mut().release_fetched(keep);
+        }
         // Choose again: the step may have been one of several.
         self.chosen_for = None;
         self.settled = false;
@@ -826,13 +840,22 @@ impl State {
             damaged_tiles: self.health.damaged.len(),
             stream_failures: self.health.failures(),
             wasm_bytes: (core::arch::wasm32::memory_size(0) as u64) << 16,
+            budget: self.memory.budget.describe(),
+            budget_bytes: self.memory.budget.total_bytes,
+            budget_gpu_bytes: self.memory.gpu_bytes,
+            held_package_bytes: self.streaming.package().held_bytes(),
         };
         serde_json::to_string(&s).map_err(|e| Error::Setting(e.to_string()))
     }
 }
 
 /// A WebGPU surface on `canvas` and a device on the adapter that can show it.
-async fn webgpu(canvas: web_sys::HtmlCanvasElement) -> Result<(wgpu::Surface<'static>, Gpu), Error> {
+/// The device asks for WebGPU's default limits, and a larger storage binding only where the
+/// adapter has one and the budget's pools could use it (engine/memory.rs).
+async fn webgpu(
+    canvas: web_sys::HtmlCanvasElement,
+    memory: &MemoryPlan,
+) -> Result<(wgpu::Surface<'static>, Gpu), Error> {
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
     desc.backends = wgpu::Backends::BROWSER_WEBGPU;
     let instance = wgpu::Instance::new(desc);
@@ -847,7 +870,10 @@ async fn webgpu(canvas: web_sys::HtmlCanvasElement) -> Result<(wgpu::Surface<'st
         })
         .await
         .map_err(|e| Error::Setting(format!("this browser gives no WebGPU adapter: {e}")))?;
-    let gpu = Gpu::on_adapter(adapter, &GpuOptions::default()).await?;
+    let binding = memory.storage_binding_bytes(adapter.limits().max_storage_buffer_binding_size);
+    let opts =
+        GpuOptions { webgpu_limits: true, max_storage_binding_bytes: Some(binding), ..Default::default() };
+    let gpu = Gpu::on_adapter(adapter, &opts).await?;
     Ok((surface, gpu))
 }
 

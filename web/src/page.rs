@@ -2,6 +2,7 @@
 //! under the address's query and hash) and the status each frame hands back (the panel, the
 //! ready marker, a test's checks).
 
+use grotto_runtime::engine::memory::{DeviceHints, MemoryBudget, MemoryPlan};
 use grotto_runtime::scene::lighting::Relight;
 use grotto_runtime::settings::{Quality, Settings, ViewMode};
 use grotto_runtime::view::frame_target::Traded;
@@ -29,7 +30,15 @@ pub struct Options {
     /// Tile budget on the GPU in MB (default: half the largest buffer the adapter allows, at
     /// most 2 GiB, as natively).
     pub gpu_memory_mb: Option<u64>,
-    /// Most bytes of finer tiles one streaming step uploads (default 32 MB).
+    /// The memory budget, the page's and the GPU's together (engine/memory.rs): `phone`,
+    /// `laptop`, `desktop` or a size (`768M`). Default: picked from `device`. The tile pools,
+    /// surfels drawn, shadow maps, image scale, streaming steps and fetched bytes kept follow
+    /// from it; `gpu_memory_mb` and `step_mb` given as well win.
+    pub budget: Option<String>,
+    /// What the page knows of its device, from which it picks a budget.
+    pub device: Option<DeviceHints>,
+    /// Most bytes of finer tiles one streaming step uploads (default: a sixteenth of the
+    /// budget's share for the page).
     pub step_mb: Option<u64>,
     /// lit, albedo, normals, light, level, scan.
     pub view: Option<String>,
@@ -124,6 +133,12 @@ pub struct Status {
     pub damaged_tiles: usize,
     pub stream_failures: u32,
     pub wasm_bytes: u64,
+    /// The memory budget ("phone (512 MiB)"), its bytes in all and the GPU's share of them, and
+    /// the fetched package bytes the page holds.
+    pub budget: String,
+    pub budget_bytes: u64,
+    pub budget_gpu_bytes: u64,
+    pub held_package_bytes: u64,
 }
 
 pub(crate) fn parse_options(json: &str) -> Result<Options, Error> {
@@ -178,4 +193,14 @@ pub(crate) fn settings_of(o: &Options) -> Result<Settings, Error> {
     s.still_samples = o.samples.unwrap_or(grotto_runtime::passes::resolve::DEFAULT_STILL_SAMPLES);
     s.validate()?;
     Ok(s)
+}
+
+/// The page's memory plan for an image of `pixels`: its `budget`, else the one its device calls
+/// for, split under `settings`.
+pub(crate) fn memory_plan(o: &Options, pixels: u64, settings: &Settings) -> Result<MemoryPlan, Error> {
+    let budget = match &o.budget {
+        Some(b) => MemoryBudget::parse(b).map_err(|e| Error::Setting(format!("budget {b:?}: {e}")))?,
+        None => MemoryBudget::for_device(&o.device.unwrap_or_default()),
+    };
+    Ok(budget.plan(pixels, settings))
 }

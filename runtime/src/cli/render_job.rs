@@ -107,6 +107,9 @@ pub struct RenderSummary {
     pub notes: Vec<String>,
     /// What looks wrong with the image and why: most of it uncovered, or black.
     pub warnings: Vec<String>,
+    /// The memory budget's split (`--memory`), where one was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memory: Option<crate::engine::memory::MemoryPlan>,
     /// Seconds to open the package and load the scene (residency included), before the GPU work.
     pub(crate) load_s: f64,
     pub settle_s: f64,
@@ -320,6 +323,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             opts.width as usize * opts.height as usize,
         ),
         notes,
+        memory: opts.memory,
         load_s,
         settle_s,
         render_s: t1.elapsed().as_secs_f64(),

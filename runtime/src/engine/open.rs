@@ -157,7 +157,7 @@ pub fn open(opts: &RenderOptions, gpu: &Gpu) -> Result<Opened> {
             r.totals.surfels,
             if r.totals.visible_coarse > 0 {
                 format!(
-                    "; {} tiles in view not held in full (raise --gpu-memory or --point-budget)",
+                    "; {} tiles in view not held in full (raise --memory, --gpu-memory or --point-budget)",
                     r.totals.visible_coarse
                 )
             } else {

@@ -68,6 +68,9 @@ pub struct RenderOptions {
     pub gpu_memory: Option<u64>,
     /// Most surfels drawn (`--point-budget`); `None`: no limit.
     pub point_budget: Option<u64>,
+    /// The memory budget's split (`--memory`, engine/memory.rs), where one was given: the pools,
+    /// surfels and shadow maps above follow from it unless given as well. Reported, not applied.
+    pub memory: Option<crate::engine::memory::MemoryPlan>,
     /// Along a path, most bounces run before a frame whose tiles changed (`--frame-bounces`);
     /// the rest runs one bounce per frame, so light converges over frames. `None`: settle.
     pub frame_bounces: Option<u32>,
@@ -132,6 +135,7 @@ impl RenderOptions {
             headlamp: Headlamp::Auto,
             gpu_memory: None,
             point_budget: None,
+            memory: None,
             frame_bounces: None,
             upload_per_frame: None,
             clip_world_m: None,

@@ -72,8 +72,10 @@ pub struct GpuOptions {
     pub prefer_software: bool,
     /// Restrict to these backends; `None` reads `WGPU_BACKEND` or allows all.
     pub backends: Option<wgpu::Backends>,
-    /// Ask the device for at most this storage-buffer binding size (bytes), to see what a smaller
-    /// adapter does with a package (WebGPU's default is 128 MiB).
+    /// Ask the device for this storage-buffer binding size (bytes), at most the adapter's:
+    /// smaller, to see what a smaller adapter does with a package; with `webgpu_limits`, larger
+    /// than WebGPU's default 128 MiB where the adapter offers it and a memory budget's pools
+    /// could use it (engine/memory.rs). Buffers may then be as large as the binding.
     pub max_storage_binding_bytes: Option<u64>,
     /// Ask the device for WebGPU's default limits only (what every browser grants without being
     /// asked for more), to check on a native adapter that the passes fit in a browser.
@@ -187,7 +189,10 @@ impl Gpu {
         let name = format!("{} ({:?})", info.name, info.backend);
         let mut limits = if opts.webgpu_limits { wgpu::Limits::default() } else { adapter.limits() };
         if let Some(b) = opts.max_storage_binding_bytes {
-            limits.max_storage_buffer_binding_size = limits.max_storage_buffer_binding_size.min(b);
+            let offered = adapter.limits();
+            let binding = b.min(offered.max_storage_buffer_binding_size);
+            limits.max_storage_buffer_binding_size = binding;
+            limits.max_buffer_size = limits.max_buffer_size.max(binding).min(offered.max_buffer_size);
         }
         if limits.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS_NEEDED {
             return Err(Error::Unsupported {

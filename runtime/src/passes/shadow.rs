@@ -21,6 +21,12 @@ use crate::gpu::types::SplatUniform;
 /// Distance to the light as a packed f32 (packing.wgsl `pack_f32`): float targets do not render on GL.
 pub(crate) const DISTANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
+/// The near-square grid (columns, rows) the atlas lays `layers` faces out in.
+pub(crate) fn atlas_grid(layers: u32) -> (u32, u32) {
+    let cols = (f64::from(layers).sqrt().ceil() as u32).max(1);
+    (cols, layers.div_ceil(cols))
+}
+
 /// Clear colour whose packed bytes read back as `f32` `v`.
 pub(crate) fn packed_clear(v: f32) -> wgpu::Color {
     let b = v.to_bits().to_le_bytes();
@@ -92,8 +98,7 @@ impl Shadow {
         })];
         let pipeline = splat::pipeline(gpu, "shadow", layout, fetch, ("fs_shadow", &targets), None)?;
         let layers = capacity.max(faces.len()).max(1) as u32;
-        let cols = (f64::from(layers).sqrt().ceil() as u32).max(1);
-        let rows = layers.div_ceil(cols);
+        let (cols, rows) = atlas_grid(layers);
         // The grid's spare cells cost nothing more: they are room for faces an edit adds.
         let layers = if faces.is_empty() { layers } else { cols * rows };
         let max_dim = gpu.device.limits().max_texture_dimension_2d;

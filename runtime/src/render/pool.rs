@@ -112,6 +112,28 @@ impl PoolCaps {
     }
 }
 
+impl PoolCaps {
+    /// These pools shrunk in proportion until each buffer fits a binding of `binding_bytes` (the
+    /// device's largest storage binding: WebGPU's default is 128 MiB), never below `used`: what
+    /// does not fit then is the adapter's limit, which the renderer names.
+    pub fn within_binding(self, used: PoolCaps, binding_bytes: u64, radiance_f16: bool) -> Self {
+        let b = TileBufferBytes::of(self.tiles.max(1), self.nodes, self.leaves, self.surfels, radiance_f16);
+        let largest = [b.nodes, b.leaves, b.leaf_light, b.faces, b.mip_order, b.surfels].into_iter().max();
+        let largest = largest.unwrap_or(0);
+        if largest <= binding_bytes {
+            return self;
+        }
+        let scale = binding_bytes as f64 / largest as f64;
+        let shrink = |n: u64, floor: u64| ((n as f64 * scale).floor() as u64).max(floor);
+        Self {
+            tiles: self.tiles,
+            nodes: shrink(self.nodes, used.nodes),
+            leaves: shrink(self.leaves, used.leaves),
+            surfels: shrink(self.surfels, used.surfels),
+        }
+    }
+}
+
 /// Where one tile form lives in the pools.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub(crate) struct Slot {
@@ -272,7 +294,7 @@ impl Pools {
         if !self.caps.holds(&need) {
             return Err(Error::Budget {
                 what: format!("the scene needs {need:?} pool elements, over the pools' {:?}", self.caps),
-                hint: "raise --gpu-memory".into(),
+                hint: "raise --memory or --gpu-memory (in a page: budget= or gpu_memory_mb=)".into(),
             });
         }
         let keys: Vec<TileKey> = scene.tiles.iter().map(key).collect();
@@ -556,5 +578,25 @@ mod tests {
         assert_eq!(caps.tiles, 10);
         // Over the budget already: the used counts, not less.
         assert_eq!(PoolCaps::filling(used, used_bytes / 2, false), used);
+    }
+
+    #[test]
+    fn pools_shrink_in_the_used_mix_to_fit_a_binding_and_never_below_what_is_used() {
+        let used = PoolCaps { tiles: 10, nodes: 1000, leaves: 500, surfels: 2000 };
+        let big = PoolCaps::filling(used, 1 << 30, false);
+        let largest = |c: PoolCaps| {
+            let b = TileBufferBytes::of(c.tiles, c.nodes, c.leaves, c.surfels, false);
+            [b.nodes, b.leaves, b.leaf_light, b.faces, b.mip_order, b.surfels].into_iter().max().unwrap()
+        };
+        assert!(largest(big) > 128 << 20);
+        let fit = big.within_binding(used, 128 << 20, false);
+        assert!(largest(fit) <= 128 << 20 && largest(fit) > 127 << 20, "{fit:?}");
+        assert!(fit.holds(&used) && big.holds(&fit));
+        // The mix stays: surfels to nodes as before, within rounding.
+        let ratio = |c: PoolCaps| c.surfels as f64 / c.nodes as f64;
+        assert!((ratio(fit) - ratio(big)).abs() < 1e-3 * ratio(big));
+        // Already within: unchanged; a binding smaller than what is used: the used counts.
+        assert_eq!(fit.within_binding(used, 128 << 20, false), fit);
+        assert_eq!(big.within_binding(used, 1024, false), PoolCaps { tiles: 10, ..used });
     }
 }

@@ -47,8 +47,24 @@ impl SceneData {
         let classify_rock = rock.is_none() && stored_rock.is_none();
         let mut hidden_leaves: Vec<LeafGpu> = Vec::new();
         let mut absent = Vec::new();
+        let key_of = |tile: &Tile<'_>, mode: TileMode, origin_leaf: IVec3| {
+            (origin_leaf.to_array(), tile.depth(), mode.leaf_lod(tile.depth()))
+        };
+        // The surfels land in one vector: sized once from the section table, it holds no
+        // doubling's slack and is never copied while it grows (a tile of millions of points
+        // would otherwise cost up to three times its surfels at the moment it grows).
+        let surfels: u64 = (loaded.iter())
+            .filter(|(t, m, o)| held.is_none_or(|h| !h.contains_key(&key_of(t, *m, *o))))
+            .map(|(t, m, _)| match m.leaf_lod(t.depth()) {
+                0 => t.surfel_count_from_table().unwrap_or(0),
+                k => t
+                    .find(SectionKind::CoarseLeaves, k)
+                    .map_or(0, |s| s.raw_len / size_of::<grotto_format::spec::CoarseLeaf>() as u64),
+            })
+            .sum();
+        out.surfels.reserve_exact(usize::try_from(surfels).unwrap_or(0));
         for (tile, mode, origin_leaf) in loaded {
-            let key = (origin_leaf.to_array(), tile.depth(), mode.leaf_lod(tile.depth()));
+            let key = key_of(&tile, mode, origin_leaf);
             if let Some(summary) = held.and_then(|h| h.get(&key)) {
                 out.push_absent(key, summary);
                 absent.push(Some(summary.clone()));

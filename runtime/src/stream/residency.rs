@@ -305,7 +305,7 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
                 crate::gpu::human_bytes(reserve_bytes),
                 crate::gpu::human_bytes(budget.gpu_bytes)
             ),
-            hint: "raise --gpu-memory".into(),
+            hint: "raise --memory or --gpu-memory (in a page: budget= or gpu_memory_mb=)".into(),
         });
     }
     if let Some(t) = tiles.iter().find(|t| t.full.bytes > budget.gpu_bytes) {
@@ -316,8 +316,8 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
                 crate::gpu::human_bytes(t.full.bytes),
                 crate::gpu::human_bytes(budget.gpu_bytes)
             ),
-            hint: "raise --gpu-memory, or build the package with smaller tiles (grotto-pack build \
-                   --max-tile-m) or a larger leaf (--leaf-m)"
+            hint: "raise --memory or --gpu-memory (in a page: budget=), or build the package with \
+                   smaller tiles (grotto-pack build --max-tile-m) or a larger leaf (--leaf-m)"
                 .into(),
         });
     }
@@ -366,7 +366,7 @@ pub fn choose(tiles: &[TileFootprint], view: &View, budget: Budget) -> Result<Re
     if !fits_pools(used.0, used.1, surfels) {
         return Err(Error::Budget {
             what: format!("the far levels of all {} tiles do not fit the renderer's tile pools", tiles.len()),
-            hint: "raise --gpu-memory".into(),
+            hint: "raise --memory or --gpu-memory (in a page: budget= or gpu_memory_mb=)".into(),
         });
     }
     for &k in &order {

@@ -242,7 +242,14 @@ pub fn renderer_for(
         }
     });
     let used = used.at_least(PoolCaps { tiles, ..PoolCaps::of(scene) });
-    let caps = PoolCaps::filling(used, st.pool_bytes(), settings.radiance_f16);
+    // Each pool also fits the device's largest binding (a browser's is often WebGPU's default).
+    let limits = gpu.device.limits();
+    let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    let caps = PoolCaps::filling(used, st.pool_bytes(), settings.radiance_f16).within_binding(
+        used,
+        binding,
+        settings.radiance_f16,
+    );
     let r = Renderer::with_pools(gpu, scene, settings, caps)?;
     st.set_pool_limits(r.pool_caps().less(POOL_HEADROOM));
     Ok(r)

@@ -33,6 +33,7 @@ use serde_json::{Value, json};
 
 mod hostile;
 mod measure;
+mod phone;
 mod room;
 mod site;
 

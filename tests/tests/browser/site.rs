@@ -124,4 +124,21 @@ fn a_browser_without_webgpu_gets_the_picture_and_the_points_of_interest_not_a_bl
     let log = server.log.lock().unwrap().clone();
     assert!(log.iter().all(|s| s.path != "room.grotto"), "the package was fetched: {log:?}");
     assert!(log.iter().any(|s| s.path == publish::PICTURE_FILE && s.status == 200), "{log:?}");
+    drop(browser);
+
+    // With WebGPU, a page that cannot show the cave (here a memory budget that is not one) says
+    // why beside the same picture, never a blank or crashed page.
+    let browser = Browser::start(&chromium, &driver, true);
+    let url = format!("http://127.0.0.1:{}/?budget=tiny", server.port);
+    browser.call("POST", "/url", Some(&json!({"url": url})));
+    let (state, _) = browser.wait_for_marker(READY_LIMIT);
+    assert_eq!(state, "error");
+    let text = browser.eval("return document.getElementById('message').innerText");
+    assert!(text.as_str().unwrap().contains("budget \"tiny\""), "{text}");
+    let shown = browser.wait_for(
+        "const i = document.getElementById('picture'); return i && i.complete && i.naturalWidth ? \
+         JSON.stringify([i.naturalWidth, i.naturalHeight]) : null",
+        Duration::from_secs(30),
+    );
+    assert_eq!(shown, json!([160, 120]));
 }

@@ -169,6 +169,13 @@ pub(crate) struct RenderArgs {
     /// Most surfels drawn (default: no limit); tiles beyond it are drawn from their coarse or far level.
     #[arg(long)]
     pub(crate) point_budget: Option<u64>,
+    /// One memory budget for the viewer, CPU and GPU together: phone (512 MiB), laptop (1.5 GiB),
+    /// desktop (4 GiB) or a size such as 768M (at least 128M). Half goes to the GPU: the shadow
+    /// atlas (fewer lights shadowed, then smaller maps), the image and the tile pools; the
+    /// surfels drawn follow too. --gpu-memory, --point-budget, --shadowed-lights and --shadow-map
+    /// given as well win. The split is printed.
+    #[arg(long, value_parser = grotto_runtime::engine::memory::MemoryBudget::parse)]
+    pub(crate) memory: Option<grotto_runtime::engine::memory::MemoryBudget>,
     /// Along a path, run at most this many bounces before a frame whose tiles changed (default:
     /// settle); the rest runs one bounce per frame, so the light converges over frames. Tiles
     /// resident before and after keep their light either way.
@@ -264,6 +271,21 @@ pub(crate) fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::engine::
     settings.splat_scale = a.splat_scale;
     settings.splat_lod = !a.no_splat_lod;
     settings.splat_blend = !a.no_splat_blend;
+    // The image as asked, supersampled: natively it is drawn at its size, and what its targets
+    // take beyond their share comes out of the pools.
+    let pixels = u64::from(a.size.0) * u64::from(a.size.1) * u64::from(a.supersample.pow(2));
+    let memory = a.memory.map(|m| {
+        let mut asked = settings.clone();
+        asked.shadow_map_size = a.shadow_map.unwrap_or(asked.shadow_map_size);
+        let plan = m.plan(pixels, &asked).with_image_as_asked();
+        if a.shadow_map.is_none() {
+            settings.shadow_map_size = settings.shadow_map_size.min(plan.shadow_map_size);
+        }
+        if a.shadowed_lights.is_none() {
+            settings.shadowed_lights = settings.shadowed_lights.min(plan.shadowed_lights);
+        }
+        plan
+    });
     let camera = match (a.camera.clone(), a.eye, a.look_at) {
         (Some(name), _, _) => CameraChoice::Named(name),
         (None, Some(eye_m), Some(look_at_m)) => {
@@ -288,14 +310,15 @@ pub(crate) fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::engine::
         exposure: a.exposure,
         gpu: grotto_runtime::gpu::GpuOptions {
             prefer_software: a.software,
-            lean_memory: a.gpu_memory.is_some(),
+            lean_memory: a.gpu_memory.is_some() || memory.is_some(),
             ..Default::default()
         },
         lamp_string: a.lamps,
         headlamp: Headlamp::parse(&a.headlamp)
             .ok_or_else(|| anyhow::anyhow!("--headlamp {:?}: use auto, on or off", a.headlamp))?,
-        gpu_memory: a.gpu_memory,
-        point_budget: a.point_budget,
+        gpu_memory: a.gpu_memory.or(memory.map(|m| m.pool_bytes)),
+        point_budget: a.point_budget.or(memory.map(|m| m.points)),
+        memory,
         frame_bounces: a.frame_bounces,
         upload_per_frame: a.upload_per_frame,
         clip_world_m: a.clip,
@@ -326,6 +349,7 @@ pub(crate) fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
             }
         }
         Progress::Frame { done, total } => {
+            crate::trim_heap();
             if total > 1 && !quiet && frame_bar.is_hidden() {
                 frame_bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
                 frame_bar.set_length(u64::from(total));
@@ -349,6 +373,9 @@ pub(crate) fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
     }
     for n in &summary.notes {
         println!("{n}");
+    }
+    if let Some(m) = &summary.memory {
+        println!("{}", m.describe());
     }
     if summary.residency.is_some() && summary.frames.len() > 1 {
         println!(

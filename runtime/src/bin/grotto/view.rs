@@ -47,6 +47,9 @@ pub(crate) fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
         "--supersample is for grotto render (the viewer draws at --render-scale)"
     );
     let mut render = options(&v.render)?;
+    if let Some(m) = &render.memory {
+        eprintln!("{}", m.describe());
+    }
     render.settings.still_samples =
         v.render.samples.unwrap_or(grotto_runtime::passes::resolve::DEFAULT_STILL_SAMPLES);
     render.settings.validate()?;
