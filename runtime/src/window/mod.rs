@@ -77,6 +77,9 @@ pub struct ViewOptions {
     pub frame_target_ms: Option<f64>,
     /// Show the panel (H toggles it).
     pub panel: bool,
+    /// Called after each change of tiles lands: the binary hands the allocator's free pages
+    /// back to the system there (what the change decoded and freed).
+    pub after_swap: Option<fn()>,
 }
 
 /// What a viewing session did.
@@ -373,7 +376,11 @@ impl App {
         let moving = flying || s.last_camera.is_some_and(|c| c != cam);
         s.last_camera = Some(cam);
 
-        self.summary.tile_swaps += u32::from(follow_camera(s, cam)?);
+        let swapped = follow_camera(s, cam)?;
+        self.summary.tile_swaps += u32::from(swapped);
+        if let (true, Some(after)) = (swapped, self.opts.after_swap) {
+            after();
+        }
 
         // Moving, the frame-time target trades scale and detail; at rest they come back.
         let (t_scale, detail) = s.target.as_ref().map_or((1.0, 1.0), |t| t.for_frame(moving));

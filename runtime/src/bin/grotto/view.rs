@@ -75,6 +75,7 @@ pub(crate) fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
         frame_budget_ms: v.frame_budget_ms,
         frame_target_ms: (v.target_fps.is_finite() && v.target_fps > 0.0).then(|| 1000.0 / v.target_fps),
         panel: !v.no_panel,
+        after_swap: Some(crate::trim_heap),
     })?;
     // --json: frames, frame times moving and at rest, frames the light took to converge.
     if v.render.json {
