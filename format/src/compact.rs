@@ -404,6 +404,23 @@ pub fn check(bytes: &[u8], depth: u32) -> Result<Header, String> {
 
 /// Decodes a compact section of a tile with leaves of `leaf_m` and `depth` levels.
 pub fn decode(bytes: &[u8], leaf_m: f64, depth: u32) -> Result<Vec<Surfel>, String> {
+    let mut out = Vec::with_capacity(count(bytes, depth)?);
+    decode_each(bytes, leaf_m, depth, |s| out.push(s))?;
+    Ok(out)
+}
+
+/// How many surfels a section holds (its checked header's count).
+pub fn count(bytes: &[u8], depth: u32) -> Result<usize, String> {
+    Ok(check(bytes, depth)?.surfel_count as usize)
+}
+
+/// [`decode`] one surfel at a time, none of them held: `each` gets them in stored order.
+pub fn decode_each(
+    bytes: &[u8],
+    leaf_m: f64,
+    depth: u32,
+    mut each: impl FnMut(Surfel),
+) -> Result<(), String> {
     let header = check(bytes, depth)?;
     let planes = header.planes().expect("checked by Header::read");
     let (pb, nb) = (header.position_bits, header.normal_bits);
@@ -412,7 +429,6 @@ pub fn decode(bytes: &[u8], leaf_m: f64, depth: u32) -> Result<Vec<Surfel>, Stri
     let mut radii = bytes[planes.radii].iter();
     let mut spreads = bytes[planes.spreads].iter();
     let counts = bytes[planes.counts].chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]]));
-    let mut out = Vec::with_capacity(header.surfel_count as usize);
     let mut morton = 0u64;
     for (d, count) in bytes[planes.runs].chunks_exact(8).zip(counts) {
         morton = morton.wrapping_add(u64::from_le_bytes(d.try_into().expect("chunks of 8")));
@@ -420,7 +436,7 @@ pub fn decode(bytes: &[u8], leaf_m: f64, depth: u32) -> Result<Vec<Surfel>, Stri
         for _ in 0..count {
             let q = [positions.get(pb), positions.get(pb), positions.get(pb)];
             let (u, v) = (normals.get(nb), normals.get(nb));
-            out.push(Surfel {
+            each(Surfel {
                 position_tile_m: dequantise_position(cell, q, leaf_m, pb),
                 radius_m: radius_m(*radii.next().expect("planes sized by the header")),
                 normal: oct_decode(u, v, nb),
@@ -428,7 +444,7 @@ pub fn decode(bytes: &[u8], leaf_m: f64, depth: u32) -> Result<Vec<Surfel>, Stri
             });
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 #[cfg(test)]
@@ -562,6 +578,12 @@ mod tests {
             assert!((a.spread - b.spread).abs() <= 0.5 / 255.0 + 1e-6);
         }
         assert_eq!(check(&bytes, depth).unwrap().surfel_count, 3000);
+        // One at a time, the same surfels in the same order.
+        let mut each = Vec::new();
+        decode_each(&bytes, leaf_m, depth, |s| each.push(s)).unwrap();
+        assert_eq!(bytemuck::cast_slice::<Surfel, u8>(&each), bytemuck::cast_slice::<Surfel, u8>(&back));
+        assert_eq!(count(&bytes, depth), Ok(3000));
+        assert!(decode_each(&bytes[..bytes.len() / 2], leaf_m, depth, |_| {}).is_err());
         // An empty tile, and one leaf holding more than a run.
         assert!(decode(&encode(&[], leaf_m, depth, 0.001).unwrap(), leaf_m, depth).unwrap().is_empty());
         let one = Surfel { position_tile_m: [0.01; 3], radius_m: 0.01, normal: [0.0, 0.0, 1.0], spread: 0.0 };

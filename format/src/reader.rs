@@ -595,6 +595,29 @@ impl<'a> Tile<'a> {
         )
     }
 
+    /// The tile's surfels one at a time, as [`Tile::surfels`] reads them but never all decoded
+    /// at once: a compact section is decoded as it is walked (a full-precision one is read as a
+    /// whole, in place from the map where raw). Returns whether the tile has surfels.
+    pub fn for_each_surfel(&self, each: impl FnMut(&Surfel)) -> Result<bool> {
+        if let Some(full) = self.read::<Surfel>(SectionKind::Surfels)? {
+            full.iter().for_each(each);
+            return Ok(true);
+        }
+        let Some(s) = self.find(SectionKind::SurfelsCompact, 0) else { return Ok(false) };
+        let bytes = self.package.read_bytes(&s)?;
+        let bad = |reason| {
+            self.package.invalid(Problem::BadContent {
+                section: s.index,
+                kind: SectionKind::SurfelsCompact.name().to_owned(),
+                reason,
+            })
+        };
+        let mut each = each;
+        crate::compact::decode_each(&bytes, self.leaf_size_m(), self.depth(), |surfel| each(&surfel))
+            .map_err(bad)?;
+        Ok(true)
+    }
+
     /// How many surfels the tile holds, from the section table alone (no section is read): exact
     /// for full surfels, scan indices or raw colours, and rounded up to 16 from BC1 colours.
     /// `None` when the tile has no surfel section.

@@ -15,6 +15,7 @@ pub mod gbuffer;
 pub mod inject;
 pub mod mip;
 pub mod propagate;
+pub mod rebase;
 pub mod resolve;
 pub mod shade;
 pub mod shadow;

@@ -13,6 +13,7 @@ use crate::gpu::Gpu;
 use crate::gpu::types::{ActiveTile, LeafGpu, LeafLightGpu, NodeGpu, Params, SurfelGpu, TileGpu};
 use crate::gpu::upload::{Move, Uploader, move_within};
 use crate::light::setup::LightSetup;
+use crate::passes::rebase::{Rebase, RebaseJob, rebased};
 use crate::passes::splat::SplatRun;
 use crate::passes::{self};
 use crate::render::pool::{PoolCaps, Pools, TileKey, key, merge_runs};
@@ -250,9 +251,8 @@ impl TilePools {
 
     /// After a repack: the forms that stayed move to their new slots on the GPU (nodes, leaves,
     /// their light, surfels: `gpu::upload::move_within`), and their nodes, which index their
-    /// tile's nodes and leaves by pool position, are re-indexed: from the scene where it holds
-    /// them, else read back (natively; a browser's scenes hold every tile). Returns the bytes
-    /// moved.
+    /// tile's nodes and leaves by pool position, are re-indexed on the GPU (passes/rebase.rs): no
+    /// copy of them on the CPU, no read-back. Returns the bytes moved.
     fn move_stayed(&self, gpu: &Gpu, scene: &SceneData, placed: &Placement) -> Result<u64> {
         let stayed: Vec<(usize, &Slot)> =
             placed.moved.iter().enumerate().filter_map(|(t, m)| Some((t, m.as_ref()?))).collect();
@@ -290,29 +290,22 @@ impl TilePools {
                 bytes += move_within(gpu, buffer, &moves)?;
             }
         }
-        let mut up = Uploader::new(gpu);
-        for (t, old) in stayed {
-            let (tile, at) = (&scene.tiles[t], &placed.tiles[t]);
-            let n = tile.node_count as usize;
-            let (nodes, from) = if scene.absent_tile(t).is_some() {
-                let bytes = gpu.read_range(
-                    &self.nodes_buf,
-                    u64::from(at.node_offset) * size_of::<NodeGpu>() as u64,
-                    (n * size_of::<NodeGpu>()) as u64,
-                )?;
-                let nodes: Vec<NodeGpu> = bytemuck::pod_collect_to_vec(&bytes[..n * size_of::<NodeGpu>()]);
-                (nodes, (old.nodes.start, old.leaves.start))
-            } else {
-                let first = tile.node_offset as usize;
-                (scene.nodes[first..first + n].to_vec(), (tile.node_offset, tile.leaf_offset))
-            };
-            let nodes = rebased(&nodes, tile.depth - tile.leaf_lod, from, (at.node_offset, at.leaf_offset));
-            up.write(
-                &self.nodes_buf,
-                u64::from(at.node_offset) * size_of::<NodeGpu>() as u64,
-                bytemuck::cast_slice(&nodes),
-            )?;
-        }
+        // Re-indexed where they lie, from their old pool offsets to their new ones: a repack
+        // is rare, so its pipeline is made when one happens.
+        let jobs: Vec<RebaseJob> = stayed
+            .iter()
+            .map(|&(t, old)| {
+                let (tile, at) = (&scene.tiles[t], &placed.tiles[t]);
+                RebaseJob {
+                    start: at.node_offset,
+                    count: tile.node_count,
+                    leaf_level: tile.depth - tile.leaf_lod,
+                    from: (old.nodes.start, old.leaves.start),
+                    to: (at.node_offset, at.leaf_offset),
+                }
+            })
+            .collect();
+        Rebase::new(gpu)?.run(gpu, &self.nodes_buf, &jobs)?;
         Ok(bytes)
     }
 
@@ -382,22 +375,6 @@ impl TilePools {
         update.upload_bytes = up.written;
         Ok((update, light_kept))
     }
-}
-
-/// A tile's nodes moved from node and leaf offsets `from` to `to`: the indices inside the tile
-/// move with it, to its nodes for inner nodes and to its leaves for the nodes at its leaf level.
-fn rebased(nodes: &[NodeGpu], leaf_level: u32, from: (u32, u32), to: (u32, u32)) -> Vec<NodeGpu> {
-    nodes
-        .iter()
-        .map(|n| {
-            let first_child = if n.level() == leaf_level {
-                n.first_child.wrapping_sub(from.1).wrapping_add(to.1)
-            } else {
-                n.first_child.wrapping_sub(from.0).wrapping_add(to.0)
-            };
-            NodeGpu { first_child, ..*n }
-        })
-        .collect()
 }
 
 pub(super) const STORAGE: wgpu::BufferUsages =

@@ -282,63 +282,79 @@ pub(crate) fn full_leaves(svo: &SvoData<'_>, depth: u32, origin_leaf: IVec3, lea
 /// the cell's centre a wall on a cell face had its leaf light taken half a leaf off the wall and
 /// its cones started half a leaf nearer to or farther from it than on a wall through the cell's
 /// middle (moving a room by a fraction of a leaf changed its first bounce by 4%).
-/// Leaves with no surfel (none in their cell) keep the cell's centre.
-pub(crate) fn move_leaves_to_surfels(
-    leaves: &mut [LeafGpu],
-    svo: &SvoData<'_>,
-    depth: u32,
-    surfels: &[Surfel],
+/// Leaves with no surfel (none in their cell) keep the cell's centre. Fed one surfel at a time,
+/// so a tile's surfels need never be held whole.
+pub(crate) struct LeafCentroids {
+    /// The tile's leaves by Morton code: (code, leaf index).
+    by_morton: Vec<(u64, usize)>,
+    side: u64,
+    sums: Vec<(DVec3, f64)>,
+    /// The last surfel's leaf (its place in `by_morton`).
+    at: Option<usize>,
     leaf_m: f32,
-    tile_shift_m: DVec3,
-) {
-    let mut by_morton: Vec<(u64, usize)> = svo
-        .nodes
-        .iter()
-        .filter(|n| u32::from(n.level) == depth)
-        .enumerate()
-        .map(|(i, n)| (n.morton, i))
-        .collect();
-    // Leaves are stored in Morton order; sorting is only for a package that is not.
-    if !by_morton.is_sorted() {
-        by_morton.sort_unstable();
+}
+
+impl LeafCentroids {
+    pub(crate) fn new(svo: &SvoData<'_>, depth: u32, leaves: usize, leaf_m: f32) -> Self {
+        let mut by_morton: Vec<(u64, usize)> = svo
+            .nodes
+            .iter()
+            .filter(|n| u32::from(n.level) == depth)
+            .enumerate()
+            .map(|(i, n)| (n.morton, i))
+            .collect();
+        // Leaves are stored in Morton order; sorting is only for a package that is not.
+        if !by_morton.is_sorted() {
+            by_morton.sort_unstable();
+        }
+        Self {
+            by_morton,
+            side: 1u64 << depth.min(21),
+            sums: vec![(DVec3::ZERO, 0.0); leaves],
+            at: None,
+            leaf_m,
+        }
     }
-    let side = 1u64 << depth.min(21);
-    let mut sums = vec![(DVec3::ZERO, 0.0f64); leaves.len()];
-    // Surfels are stored in Morton order too, so a surfel is mostly in the previous one's leaf
-    // or the next: the search runs only when neither is.
-    let mut at: Option<usize> = None;
-    for s in surfels {
+
+    pub(crate) fn add(&mut self, s: &Surfel) {
         let p = DVec3::from_array(s.position_tile_m.map(f64::from));
-        let c = (p / f64::from(leaf_m)).floor();
-        if !c.is_finite() || c.min_element() < 0.0 || c.max_element() >= side as f64 {
-            continue;
+        let c = (p / f64::from(self.leaf_m)).floor();
+        if !c.is_finite() || c.min_element() < 0.0 || c.max_element() >= self.side as f64 {
+            return;
         }
         let m = morton_encode(c.x as u32, c.y as u32, c.z as u32);
-        let found = match at {
+        // Surfels are stored in Morton order too, so a surfel is mostly in the previous one's
+        // leaf or the next: the search runs only when neither is.
+        let by_morton = &self.by_morton;
+        let found = match self.at {
             Some(k) if by_morton[k].0 == m => Some(k),
             Some(k) if by_morton.get(k + 1).is_some_and(|&(n, _)| n == m) => Some(k + 1),
             _ => by_morton.binary_search_by_key(&m, |&(k, _)| k).ok(),
         };
-        let Some(k) = found else { continue };
-        at = Some(k);
-        if let Some(sum) = sums.get_mut(by_morton[k].1) {
+        let Some(k) = found else { return };
+        self.at = Some(k);
+        if let Some(sum) = self.sums.get_mut(by_morton[k].1) {
             let w = f64::from(s.radius_m).powi(2).max(1e-12);
             sum.0 += w * p;
             sum.1 += w;
         }
     }
-    let leaf_m = f64::from(leaf_m);
-    for (l, (sum, w)) in leaves.iter_mut().zip(sums) {
-        if w <= 0.0 {
-            continue;
+
+    /// Each leaf with surfels to their centroid, kept inside its cell.
+    pub(crate) fn move_leaves(self, leaves: &mut [LeafGpu], tile_shift_m: DVec3) {
+        let leaf_m = f64::from(self.leaf_m);
+        for (l, (sum, w)) in leaves.iter_mut().zip(self.sums) {
+            if w <= 0.0 {
+                continue;
+            }
+            let centre = Vec3::from_slice(&l.center_m[..3]).as_dvec3();
+            let low = centre - tile_shift_m - DVec3::splat(0.5 * leaf_m);
+            // Inside the cell, a hair from its faces, so the cell is still `floor(centre / leaf)`.
+            let inset = 1e-3 * leaf_m;
+            let local = (sum / w).clamp(low + inset, low + DVec3::splat(leaf_m - inset));
+            let moved = (local + tile_shift_m).as_vec3();
+            l.center_m[..3].copy_from_slice(&moved.to_array());
         }
-        let centre = Vec3::from_slice(&l.center_m[..3]).as_dvec3();
-        let low = centre - tile_shift_m - DVec3::splat(0.5 * leaf_m);
-        // Inside the cell, a hair from its faces, so the cell is still `floor(centre / leaf)`.
-        let inset = 1e-3 * leaf_m;
-        let local = (sum / w).clamp(low + inset, low + DVec3::splat(leaf_m - inset));
-        let moved = (local + tile_shift_m).as_vec3();
-        l.center_m[..3].copy_from_slice(&moved.to_array());
     }
 }
 

@@ -9,8 +9,8 @@ use crate::error::{Error, Result};
 use crate::gpu::types::{LeafGpu, SurfelGpu, TileGpu};
 use crate::scene::coarse::{CoarseLevel, coarse_level, gpu_tile};
 use crate::scene::data::{
-    HeldTiles, MAX_MATERIALS, SceneCamera, SceneData, SceneMaterial, TileKey, TileMode, TileSummary,
-    frame_of, full_leaves, move_leaves_to_surfels, read_env_chain, tile_colors, tile_scans,
+    HeldTiles, LeafCentroids, MAX_MATERIALS, SceneCamera, SceneData, SceneMaterial, TileKey, TileMode,
+    TileSummary, frame_of, full_leaves, read_env_chain, tile_colors, tile_scans,
 };
 use crate::scene::rock::RockTable;
 
@@ -229,7 +229,9 @@ impl SceneData {
     }
 
     /// A full tile's leaves (moved to where its surfels lie) and its surfels: tile-local f32 to
-    /// frame f32 through the f64 tile offset, with their colours and scans.
+    /// frame f32 through the f64 tile offset, with their colours and scans. The surfels are
+    /// decoded one at a time straight into the scene's, so a tile of millions of points is never
+    /// held twice (decoded, then converted).
     fn push_full_leaves_and_surfels(
         &mut self,
         tile: &Tile<'_>,
@@ -238,25 +240,36 @@ impl SceneData {
         origin_leaf: IVec3,
         scene: &Scene,
     ) -> Result<()> {
-        let surfels = tile.surfels()?;
         let shift = DVec3::from_array(tile.origin_m()) - DVec3::from_array(self.frame_origin_m);
-        if let Some(surfels) = &surfels {
-            // The tile's frame offset as the leaves have it (whole leaves).
-            let leaf_shift = origin_leaf.as_dvec3() * f64::from(self.leaf_size_m);
-            move_leaves_to_surfels(&mut leaves, svo, tile.depth(), surfels, self.leaf_size_m, leaf_shift);
-        }
-        self.leaves.extend(leaves);
-        let Some(surfels) = surfels else { return Ok(()) };
-        let colors = tile_colors(tile, surfels.len())?;
-        let scans = tile_scans(tile, surfels.len(), scene.scans.len()).map_err(|p| self.bad(p))?;
-        for ((s, c), scan) in surfels.iter().zip(colors).zip(scans) {
+        let mut centroids = LeafCentroids::new(svo, tile.depth(), leaves.len(), self.leaf_size_m);
+        let first = self.surfels.len();
+        let surfels = &mut self.surfels;
+        // The load reserved room for every tile's surfels at once (from the section table).
+        let has_surfels = tile.for_each_surfel(|s| {
+            centroids.add(s);
             let p = (DVec3::from_array(s.position_tile_m.map(f64::from)) + shift).as_vec3();
-            self.surfels.push(SurfelGpu {
+            surfels.push(SurfelGpu {
                 position_radius: p.extend(s.radius_m).to_array(),
                 normal_spread: [s.normal[0], s.normal[1], s.normal[2], s.spread],
-                color: [c[0], c[1], c[2], 0],
-                scan,
+                color: [0; 4],
+                scan: 0,
             });
+        })?;
+        if has_surfels {
+            // The tile's frame offset as the leaves have it (whole leaves).
+            let leaf_shift = origin_leaf.as_dvec3() * f64::from(self.leaf_size_m);
+            centroids.move_leaves(&mut leaves, leaf_shift);
+        }
+        self.leaves.extend(leaves);
+        if !has_surfels {
+            return Ok(());
+        }
+        let count = self.surfels.len() - first;
+        let colors = tile_colors(tile, count)?;
+        let scans = tile_scans(tile, count, scene.scans.len()).map_err(|p| self.bad(p))?;
+        for ((g, c), scan) in self.surfels[first..].iter_mut().zip(colors).zip(scans) {
+            g.color = [c[0], c[1], c[2], 0];
+            g.scan = scan;
         }
         Ok(())
     }

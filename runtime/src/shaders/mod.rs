@@ -44,6 +44,7 @@ pub(crate) const PRESENT: &str = include_str!("../render/present.wgsl");
 pub(crate) const SHADE: &str = include_str!("../passes/shade.wgsl");
 pub(crate) const RESOLVE: &str = include_str!("../passes/resolve.wgsl");
 pub(crate) const EXPOSE: &str = include_str!("../passes/expose.wgsl");
+pub(crate) const REBASE: &str = include_str!("../passes/rebase.wgsl");
 
 /// Constants shared with the Rust side, generated from it so the two cannot drift.
 pub(crate) fn constants() -> String {
@@ -150,13 +151,14 @@ pub fn compose(src: &str) -> Result<String> {
 }
 
 /// (name, source) of every shader module the runtime creates, before composing.
-pub(crate) const PASSES: [(&str, &str); 10] = [
+pub(crate) const PASSES: [(&str, &str); 11] = [
     ("env", ENV),
     ("expose", EXPOSE),
     ("inject", INJECT),
     ("inject_tally", INJECT_TALLY),
     ("mip", MIP),
     ("propagate", PROPAGATE),
+    ("rebase", REBASE),
     ("resolve", RESOLVE),
     ("shade", SHADE),
     ("splat", SPLAT),

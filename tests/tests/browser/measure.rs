@@ -195,6 +195,17 @@ fn memory_over_a_tour_loop() {
         std::thread::sleep(Duration::from_secs(10));
         let heap = browser.cdp("Runtime.getHeapUsage", json!({}));
         let s = browser.status();
+        // A page that failed draws no more frames: its figures would be of nothing.
+        let state = browser.eval(
+            "return [document.documentElement.dataset.grotto || '', document.getElementById('message').innerText]",
+        );
+        assert_ne!(
+            state[0],
+            "error",
+            "the page failed after {:.0} s: {}",
+            t0.elapsed().as_secs_f64(),
+            state[1]
+        );
         let loops = browser.eval("return window.grottoLoops").as_u64().unwrap_or(0);
         let mb = |v: &Value| v.as_f64().unwrap_or(0.0) / 1e6;
         let row = (
