@@ -118,14 +118,20 @@ fn export_writes_points_other_tools_read() {
     );
 }
 
-#[test]
-fn negative_vectors_parse_as_written_and_gpu_memory_is_reported() {
+/// A small cave of 5,000 points in two segments, in a folder of its own.
+fn tiny_cave() -> (tempfile::TempDir, std::path::PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let path = grotto_fixtures::small_cave_package(
         dir.path(),
         &grotto_fixtures::SmallCave { points: 5_000, segments: 2, ..Default::default() },
     )
     .unwrap();
+    (dir, path)
+}
+
+#[test]
+fn negative_vectors_parse_as_written_and_gpu_memory_is_reported() {
+    let (dir, path) = tiny_cave();
     let p = path.to_str().unwrap();
     let out_png = dir.path().join("neg.png");
     let out = grotto(&[
@@ -159,12 +165,7 @@ fn negative_vectors_parse_as_written_and_gpu_memory_is_reported() {
 
 #[test]
 fn one_memory_budget_sets_the_pools_surfels_and_shadow_maps_and_a_knob_given_wins() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = grotto_fixtures::small_cave_package(
-        dir.path(),
-        &grotto_fixtures::SmallCave { points: 5_000, segments: 2, ..Default::default() },
-    )
-    .unwrap();
+    let (dir, path) = tiny_cave();
     let p = path.to_str().unwrap();
     let png = dir.path().join("m.png");
     let render = |extra: &[&str]| {
