@@ -204,8 +204,12 @@ impl Viewer {
         let height = o.height.unwrap_or(canvas.height()).clamp(1, 4096);
         canvas.set_width(width);
         canvas.set_height(height);
-        let memory = page::memory_plan(&o, u64::from(width) * u64::from(height), &settings)?;
+        let mut memory = page::memory_plan(&o, u64::from(width) * u64::from(height), &settings)?;
         memory.apply(&mut settings);
+        // Pools given in the address win over the budget's (and size the binding asked for).
+        if let Some(mb) = o.gpu_memory_mb {
+            memory.pool_bytes = mb << 20;
+        }
 
         let (surface, gpu) = webgpu(canvas, &memory).await?;
 
@@ -219,11 +223,7 @@ impl Viewer {
         let request = SceneRequest {
             settings: &settings,
             aspect: width as f32 / height as f32,
-            budget: Budget {
-                gpu_bytes: o.gpu_memory_mb.map_or(memory.pool_bytes, |mb| mb << 20),
-                points: memory.points,
-                pools: None,
-            },
+            budget: Budget { gpu_bytes: memory.pool_bytes, points: memory.points, pools: None },
             relight: page::relight_of(&o)?,
             lamp_string: None,
             story: story::given(&world_scene, o.story.as_ref())?,
