@@ -204,12 +204,7 @@ impl Viewer {
         let height = o.height.unwrap_or(canvas.height()).clamp(1, 4096);
         canvas.set_width(width);
         canvas.set_height(height);
-        let mut memory = page::memory_plan(&o, u64::from(width) * u64::from(height), &settings)?;
-        memory.apply(&mut settings);
-        // Pools given in the address win over the budget's (and size the binding asked for).
-        if let Some(mb) = o.gpu_memory_mb {
-            memory.pool_bytes = mb << 20;
-        }
+        let memory = page::memory_plan(&o, u64::from(width) * u64::from(height), &mut settings)?;
 
         let (surface, gpu) = webgpu(canvas, &memory).await?;
 
@@ -296,10 +291,7 @@ impl Viewer {
                 recent_ms: Vec::new(),
                 slice_leaves: 4096,
                 rest_ms,
-                target: match o.target_fps {
-                    Some(f) if !(f.is_finite() && f > 0.0) => None,
-                    f => Some(FrameTarget::new(1000.0 / f.unwrap_or(60.0))),
-                },
+                target: page::frame_target_of(&o),
                 light_plan: String::new(),
                 auto_exposure: o.exposure.is_none(),
                 bar: o.bar.unwrap_or(true),

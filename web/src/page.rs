@@ -5,7 +5,7 @@
 use grotto_runtime::engine::memory::{DeviceHints, MemoryBudget, MemoryPlan};
 use grotto_runtime::scene::lighting::Relight;
 use grotto_runtime::settings::{Quality, Settings, ViewMode};
-use grotto_runtime::view::frame_target::Traded;
+use grotto_runtime::view::frame_target::{FrameTarget, Traded};
 use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
@@ -197,10 +197,25 @@ pub(crate) fn settings_of(o: &Options) -> Result<Settings, Error> {
 
 /// The page's memory plan for an image of `pixels`: its `budget`, else the one its device calls
 /// for, split under `settings`.
-pub(crate) fn memory_plan(o: &Options, pixels: u64, settings: &Settings) -> Result<MemoryPlan, Error> {
+/// The budget's split, applied to `settings`; pools given in the address (`gpu_memory_mb`) win
+/// over the budget's, and so also size the storage binding the page asks for.
+pub(crate) fn memory_plan(o: &Options, pixels: u64, settings: &mut Settings) -> Result<MemoryPlan, Error> {
     let budget = match &o.budget {
         Some(b) => MemoryBudget::parse(b).map_err(|e| Error::Setting(format!("budget {b:?}: {e}")))?,
         None => MemoryBudget::for_device(&o.device.unwrap_or_default()),
     };
-    Ok(budget.plan(pixels, settings))
+    let mut plan = budget.plan(pixels, settings);
+    plan.apply(settings);
+    if let Some(mb) = o.gpu_memory_mb {
+        plan.pool_bytes = mb << 20;
+    }
+    Ok(plan)
+}
+
+/// The frame-time target while moving: `target_fps` (60 when not given; none when not positive).
+pub(crate) fn frame_target_of(o: &Options) -> Option<FrameTarget> {
+    match o.target_fps {
+        Some(f) if !(f.is_finite() && f > 0.0) => None,
+        f => Some(FrameTarget::new(1000.0 / f.unwrap_or(60.0))),
+    }
 }

@@ -378,38 +378,7 @@ pub(crate) fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
         println!("{}", m.describe());
     }
     if summary.residency.is_some() && summary.frames.len() > 1 {
-        println!(
-            "frame  tile MiB  full  coarse  far  loaded  evicted  surfels  bounces  carried leaves  propagated leaves  \
-             uploaded MiB  repacked  shadow faces  deferred"
-        );
-        for f in &summary.frames {
-            let uploaded = f.update.as_ref().map_or(0, |u| u.upload_bytes);
-            let repacked = if f.update.as_ref().is_some_and(|u| u.repacked) {
-                "yes"
-            } else if f.made_anew {
-                "new"
-            } else {
-                ""
-            };
-            println!(
-                "{:5}  {:8.1}  {:4}  {:6}  {:3}  {:6}  {:7}  {:7}  {:7}  {:14}  {:17}  {:12.1}  {:>8}  {:>12}  {:8}",
-                f.frame,
-                f.tile_bytes as f64 / f64::from(1u32 << 20),
-                f.full_tiles,
-                f.coarse_tiles,
-                f.far_tiles,
-                f.loaded,
-                f.evicted,
-                f.surfels,
-                f.bounces,
-                f.carried_leaves,
-                f.propagated_leaves,
-                uploaded as f64 / f64::from(1u32 << 20),
-                repacked,
-                format!("{} of {}", f.shadow_faces, f.shadow_faces_total),
-                f.deferred
-            );
-        }
+        print_frame_table(&summary.frames);
     }
     if a.explain {
         if let Some(r) = &summary.residency {
@@ -448,6 +417,42 @@ pub(crate) fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
         times.join(", ")
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// The per-frame table of a streamed path: residency, light and uploads by frame.
+fn print_frame_table(frames: &[grotto_runtime::cli::render_job::FrameReport]) {
+    println!(
+        "frame  tile MiB  full  coarse  far  loaded  evicted  surfels  bounces  carried leaves  propagated leaves  \
+         uploaded MiB  repacked  shadow faces  deferred"
+    );
+    for f in frames {
+        let uploaded = f.update.as_ref().map_or(0, |u| u.upload_bytes);
+        let repacked = if f.update.as_ref().is_some_and(|u| u.repacked) {
+            "yes"
+        } else if f.made_anew {
+            "new"
+        } else {
+            ""
+        };
+        println!(
+            "{:5}  {:8.1}  {:4}  {:6}  {:3}  {:6}  {:7}  {:7}  {:7}  {:14}  {:17}  {:12.1}  {:>8}  {:>12}  {:8}",
+            f.frame,
+            f.tile_bytes as f64 / f64::from(1u32 << 20),
+            f.full_tiles,
+            f.coarse_tiles,
+            f.far_tiles,
+            f.loaded,
+            f.evicted,
+            f.surfels,
+            f.bounces,
+            f.carried_leaves,
+            f.propagated_leaves,
+            uploaded as f64 / f64::from(1u32 << 20),
+            repacked,
+            format!("{} of {}", f.shadow_faces, f.shadow_faces_total),
+            f.deferred
+        );
+    }
 }
 
 /// One bounce of `--explain`'s light work: tiles updated of all, why, which (when few), and what changed.
