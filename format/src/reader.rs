@@ -193,6 +193,15 @@ impl Package {
         released
     }
 
+    /// Hands a memory-mapped package's pages back to the kernel once what needed them was read
+    /// (a viewer's change of tiles): the pages a read touched count in the process's resident
+    /// memory until the kernel needs them back. A page is read again from the file when next
+    /// wanted; a package copied or fetched keeps its bytes ([`Package::release_fetched`]).
+    /// Returns whether pages were handed back.
+    pub fn release_mapped(&self) -> bool {
+        self.backing.release_mapped_pages()
+    }
+
     /// Bytes of the file this package holds in memory: the fetched pieces of one made with
     /// [`Package::from_directory`], all of one from bytes, none of a memory-mapped file.
     pub fn held_bytes(&self) -> u64 {

@@ -4,11 +4,12 @@
 //! aligned to at least [`crate::spec::SECTION_ALIGN`] at every 64-aligned file offset, so validated
 //! raw sections can be cast in place.
 //!
-//! This module holds the crate's only `unsafe` (the map). Audit note: a memory map is undefined
-//! behaviour in Rust if another process truncates or rewrites the file while it is mapped. grotto
-//! never modifies a package in place: the writer builds a temp file and renames it over the target,
-//! so a mapped old version keeps its inode. A user who edits a package in place with another tool
-//! while it is open is outside what this can guard against (as with every mmap-based reader).
+//! This module holds the crate's only `unsafe` (the map, and the advice that hands its read pages
+//! back to the kernel). Audit note: a memory map is undefined behaviour in Rust if another process
+//! truncates or rewrites the file while it is mapped. grotto never modifies a package in place:
+//! the writer builds a temp file and renames it over the target, so a mapped old version keeps its
+//! inode. A user who edits a package in place with another tool while it is open is outside what
+//! this can guard against (as with every mmap-based reader).
 #![allow(unsafe_code)]
 
 use std::collections::BTreeMap;
@@ -122,6 +123,22 @@ impl Backing {
             keep.iter().any(|k| k.start < end && start < k.end)
         });
         before - pieces.values().map(|a| a.len as u64).sum::<u64>()
+    }
+
+    /// Hands the pages of a map back to the kernel: they count in the process's resident memory
+    /// once read, until the kernel needs them. Nothing changes for a reader: a page is read from
+    /// the file again (usually from the page cache) when next touched. A copy or pieces keep their
+    /// bytes. Returns whether the pages were handed back.
+    pub(crate) fn release_mapped_pages(&self) -> bool {
+        match self {
+            #[cfg(all(unix, not(target_arch = "wasm32")))]
+            // SAFETY: `MADV_DONTNEED` is unchecked in memmap2 because on a private or anonymous
+            // map it discards writes. This map is shared, read-only and of a file grotto never
+            // changes in place (module note): a page dropped is read back from the file unchanged,
+            // so slices handed out before stay valid and read the same bytes.
+            Self::Mapped(m) => unsafe { m.unchecked_advise(memmap2::UncheckedAdvice::DontNeed).is_ok() },
+            _ => false,
+        }
     }
 
     /// Bytes held in memory (all of a copy, the pieces of a sparse file; a map holds none).

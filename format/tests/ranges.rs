@@ -179,3 +179,41 @@ fn fetched_bytes_outside_what_is_kept_are_let_go_and_checked_again_when_fetched_
     assert_eq!(copy.release_fetched(std::iter::empty()), 0);
     assert_eq!(copy.held_bytes(), bytes.len() as u64);
 }
+
+/// The resident bytes of this process's maps of `path` (Linux's `/proc/self/smaps`).
+#[cfg(target_os = "linux")]
+fn resident_bytes_of_map(path: &std::path::Path) -> u64 {
+    let smaps = std::fs::read_to_string("/proc/self/smaps").unwrap();
+    let name = path.canonicalize().unwrap();
+    let mut ours = false;
+    let mut kb = 0;
+    for line in smaps.lines() {
+        let first = line.split_whitespace().next().unwrap_or("");
+        if first.contains('-') && first.chars().all(|c| c.is_ascii_hexdigit() || c == '-') {
+            ours = line.trim_end().ends_with(name.to_str().unwrap());
+        } else if ours && let Some(v) = line.strip_prefix("Rss:") {
+            kb += v.trim().trim_end_matches("kB").trim().parse::<u64>().unwrap();
+        }
+    }
+    kb * 1024
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn a_mapped_package_hands_its_pages_back_and_reads_the_same_after() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = sample_package(dir.path(), alternating);
+    let bytes = std::fs::read(&path).unwrap();
+    let pkg = Package::open(&path).unwrap();
+    let sections: Vec<SectionInfo> = pkg.sections().filter(|s| s.stored_len > 0).collect();
+    let before: Vec<Vec<u8>> = sections.iter().map(|s| pkg.read_bytes(s).unwrap().to_vec()).collect();
+    assert!(resident_bytes_of_map(&path) > 0, "reading every section touched no page of the map");
+
+    assert!(pkg.release_mapped());
+    assert_eq!(resident_bytes_of_map(&path), 0, "the map's pages still count as resident");
+    for (s, was) in sections.iter().zip(&before) {
+        assert_eq!(&pkg.read_bytes(s).unwrap()[..], &was[..], "section {} reads otherwise", s.index);
+    }
+    // A copy holds its bytes: nothing to hand back.
+    assert!(!Package::from_bytes("copy.grotto", &bytes).unwrap().release_mapped());
+}

@@ -36,6 +36,7 @@ pub(crate) fn start(
             let far = st.far_residency();
             let mut r = streaming::renderer_for(gpu, scene, settings, Some((&mut st, &first)))?;
             scene.release_tile_data();
+            st.package().release_mapped();
             let mut follow = Follow::new(st, far, upload_per_frame);
             follow.fill(gpu, &mut r, scene, &first)?;
             Ok((r, Some(follow)))

@@ -146,6 +146,8 @@ impl Streaming {
     pub fn load(&self, r: &Residency, lights: Vec<SceneLight>, headlamp: bool) -> Result<SceneData> {
         let mut scene = SceneData::from_package_with_rock(&self.pkg, r.mode_of(), self.rock.clone())?;
         (scene.lights, scene.headlamp) = (lights, headlamp);
+        // The scene holds what it read: a map's pages need not count in the process's memory.
+        self.pkg.release_mapped();
         Ok(scene)
     }
 
@@ -161,6 +163,7 @@ impl Streaming {
     ) -> Result<SceneData> {
         let mut scene = SceneData::from_package_with_held(&self.pkg, r.mode_of(), self.rock.clone(), held)?;
         (scene.lights, scene.headlamp) = (lights, headlamp);
+        self.pkg.release_mapped();
         Ok(scene)
     }
 }

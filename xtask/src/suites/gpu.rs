@@ -145,7 +145,7 @@ pub(crate) fn paper(ctx: &Ctx) -> Result<Vec<Figure>> {
 }
 
 /// A synthetic survey built with the defaults.
-fn survey(ctx: &Ctx, points: u64, name: &str) -> Result<std::path::PathBuf> {
+pub(crate) fn survey(ctx: &Ctx, points: u64, name: &str) -> Result<std::path::PathBuf> {
     let manifest = ctx.synth(name, points, &[])?;
     let work = ctx.work.join(format!("build-{name}"));
     ctx.package(name, &manifest, &["--work-dir", work.to_str().context("work folder")?])

@@ -1,4 +1,4 @@
-//! What a viewer's process holds: `grotto render` and `grotto view` of a 10^7-point survey under a
+//! What a viewer's process holds: `grotto render` and `grotto view` of a 10^7- or 10^8-point survey under a
 //! GPU memory budget, their peak resident memory (on a software adapter the GPU's buffers are in
 //! the process too), for one frame, along a path that streams tiles in and out, and over a flight
 //! in the window.
@@ -16,15 +16,21 @@ const MIB: f64 = 1048576.0;
 /// process and the GPU together, 512 MiB: on a software adapter the GPU's buffers are the
 /// process's, as on a phone's shared memory).
 pub(crate) fn render(ctx: &Ctx) -> Result<Vec<Figure>> {
-    let manifest = ctx.synth("survey-1e7", 10_000_000, &[])?;
-    let work = ctx.work.join("build-survey-1e7");
-    let pkg = ctx.package("survey-1e7", &manifest, &["--work-dir", work.to_str().context("work folder")?])?;
+    peaks(ctx, 10_000_000, "1e7")
+}
+
+/// As [`render`], of the 10^8-point survey: the same budgets hold at ten times the points.
+pub(crate) fn render_1e8(ctx: &Ctx) -> Result<Vec<Figure>> {
+    peaks(ctx, 100_000_000, "1e8")
+}
+
+fn peaks(ctx: &Ctx, points: u64, size: &str) -> Result<Vec<Figure>> {
+    let pkg = super::gpu::survey(ctx, points, &format!("survey-{size}"))?;
     let mut table = "| budget | run | frames | tiles full / coarse / far (last frame) | tiles loaded | GPU pools MiB | process peak MiB | wall s |\n|---|---|---:|---|---:|---:|---:|---:|".to_owned();
     let mut figures = Vec::new();
-    for (key, budget) in [
-        ("memory-render-1e7", &["--gpu-memory", "256M"][..]),
-        ("memory-phone-1e7", &["--memory", "phone"][..]),
-    ] {
+    for (key, budget) in
+        [("memory-render", &["--gpu-memory", "256M"][..]), ("memory-phone", &["--memory", "phone"][..])]
+    {
         let flag = budget.join(" ");
         let mut peaks = Vec::new();
         for (name, view) in [
@@ -40,7 +46,7 @@ pub(crate) fn render(ctx: &Ctx) -> Result<Vec<Figure>> {
                 "--json",
                 "-o",
             ]);
-            let label = format!("{}-{}", budget[1], name.replace(' ', "-"));
+            let label = format!("{size}-{}-{}", budget[1], name.replace(' ', "-"));
             cmd.arg(ctx.out.join(format!("{label}.png")));
             let t = std::time::Instant::now();
             let (r, peak) = ctx.json_peak(&format!("render-{label}"), &mut cmd)?;
@@ -63,18 +69,19 @@ pub(crate) fn render(ctx: &Ctx) -> Result<Vec<Figure>> {
         let mut extra = budget.to_vec();
         extra.extend(["--quality", "fast"]);
         let (view, view_peak) =
-            super::window::flight_peak(ctx, &pkg, &format!("view-{}", budget[1]), &extra)?;
+            super::window::flight_peak(ctx, &pkg, &format!("view-{size}-{}", budget[1]), &extra)?;
         let moving = view["log"]["moving_ms"].as_array().map_or(0, Vec::len);
         table += &format!(
             "\n| `{flag}` | `grotto view` 640x480, 40 s of flight | {moving} moving | | {} swaps | | {:.0} | |",
             view["tile_swaps"],
             view_peak as f64 / MIB
         );
+        let points_label = if size == "1e7" { "10^7" } else { "10^8" };
         figures.push(ctx.figure(
-            key,
+            &format!("{key}-{size}"),
             "software",
             &format!(
-                "`grotto render` (320x240) and `grotto view` (640x480, 40 s of flight) of 10^7 points under `{flag}`: process peak"
+                "`grotto render` (320x240) and `grotto view` (640x480, 40 s of flight) of {points_label} points under `{flag}`: process peak"
             ),
             format!(
                 "render {:.0} MiB one frame, {:.0} MiB along a 6-frame path; view {:.0} MiB",

@@ -106,6 +106,13 @@ pub(crate) const SUITES: &[Suite] = &[
         run: memory::render,
     },
     Suite {
+        name: "memory-1e8",
+        about: "as memory, of 10^8 points (builds the 10^8 package once)",
+        needs: Needs::Display,
+        dev_time: "30 min",
+        run: memory::render_1e8,
+    },
+    Suite {
         name: "gpu-demo",
         about: "the demo cave per preset, its splat work, blended splats",
         needs: Needs::Binaries,
