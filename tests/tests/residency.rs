@@ -315,6 +315,62 @@ fn a_fly_through_under_a_tiny_budget_loads_and_evicts_and_never_exceeds_it() {
     }
 }
 
+#[test]
+fn a_tile_that_fails_to_decode_is_named_and_held_back_and_the_rest_still_streams() {
+    let dir = tempfile::tempdir().unwrap();
+    let package = small_tiles_cave();
+    let pkg = Package::open(package).unwrap();
+    let (_, full, reserve, _) = sizes(&pkg);
+    let gpu_memory = reserve + (full - reserve) / 3;
+    let opts = |package: &Path, out: &str| RenderOptions {
+        camera: CameraChoice::Default,
+        path: vec!["entrance".into(), "chamber".into()],
+        frames: 3,
+        ..job(package, dir.path().join(out), gpu_memory)
+    };
+    let whole = render_job::run(&opts(package, "whole.png"), |_| {}).unwrap();
+    let full_tiles = |r: &residency::Residency| -> Vec<usize> {
+        r.decisions.iter().filter(|d| d.mode == TileMode::Full).map(|d| d.tile).collect()
+    };
+    let held_full = full_tiles(whole.residency.as_ref().unwrap());
+    // A tile the path ends with in full, its surfels damaged on disk (one byte).
+    let victim = held_full[0];
+    let surfels = pkg
+        .tile(victim as u32)
+        .unwrap()
+        .sections()
+        .find(|s| {
+            s.stored_len > 16
+                && matches!(
+                    s.kind,
+                    Some(grotto_format::SectionKind::SurfelsCompact | grotto_format::SectionKind::Surfels)
+                )
+        })
+        .expect("the tile stores surfels");
+    let mut bytes = std::fs::read(package).unwrap();
+    bytes[(surfels.offset + surfels.stored_len / 2) as usize] ^= 0x5a;
+    let damaged = dir.path().join("damaged.grotto");
+    std::fs::write(&damaged, &bytes).unwrap();
+
+    let s = render_job::run(&opts(&damaged, "damaged.png"), |_| {}).expect("a damaged tile ends no render");
+    eprintln!("warnings: {:#?}", s.warnings);
+    let named: Vec<&String> =
+        s.warnings.iter().filter(|w| w.contains(&format!("tile {victim} is damaged"))).collect();
+    assert_eq!(named.len(), 1, "the tile is named once: {:?}", s.warnings);
+    assert!(named[0].contains(&format!("section {}", surfels.index)), "{}", named[0]);
+    let r = s.residency.as_ref().unwrap();
+    assert!(!full_tiles(r).contains(&victim), "the damaged tile was held in full");
+    let others: Vec<usize> = held_full.iter().copied().filter(|&t| t != victim).collect();
+    assert!(!others.is_empty());
+    for t in &others {
+        assert!(full_tiles(r).contains(t), "tile {t} did not stream in: {:?}", full_tiles(r));
+    }
+    assert_eq!(s.images.len(), 3);
+    for i in &s.images {
+        assert!(Path::new(i).exists(), "{i}");
+    }
+}
+
 /// `pkg` with its first `full` tiles in full and the rest at their coarse level.
 fn full_first(pkg: &Package, full: usize) -> SceneData {
     SceneData::from_package_with(pkg, |i| if i < full { TileMode::Full } else { TileMode::Coarse }).unwrap()

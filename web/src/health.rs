@@ -7,7 +7,7 @@
 use std::collections::BTreeMap;
 
 use grotto_format::Package;
-use grotto_runtime::scene::data::{SceneData, TileMode};
+use grotto_runtime::scene::data::TileMode;
 use grotto_runtime::stream::residency::Residency;
 use web_time::{Duration, Instant};
 
@@ -96,22 +96,13 @@ impl Health {
     }
 
     /// Loading the step `next` over `current` failed with a package error (`e`): finds the
-    /// tiles at fault by loading each tile `next` makes finer on its own, and holds each at its
-    /// current form. Where no single tile fails (a damaged global section), streaming stops.
+    /// tiles at fault by loading each tile `next` changes on its own
+    /// ([`grotto_runtime::stream::damaged_tiles`]), and holds each at its current form. Where no
+    /// single tile fails (a damaged global section), streaming stops.
     pub(crate) fn damaged_step(&mut self, pkg: &Package, current: &Residency, next: &Residency, e: &Error) {
-        let now = current.modes();
-        let mut found = Vec::new();
-        for (tile, mode) in next.modes().into_iter().enumerate() {
-            let was = now.get(tile).copied().unwrap_or(TileMode::Far);
-            if mode == was || mode == TileMode::Skip {
-                continue;
-            }
-            if let Err(err) =
-                SceneData::from_package_with(pkg, |i| if i == tile { mode } else { TileMode::Skip })
-            {
-                self.damaged.insert(tile, was);
-                found.push(format!("tile {tile} ({err})"));
-            }
+        let found = grotto_runtime::stream::damaged_tiles(pkg, current, next);
+        for d in &found {
+            self.damaged.insert(d.tile, d.was);
         }
         if found.is_empty() {
             self.stopped = true;
@@ -120,7 +111,11 @@ impl Health {
             self.notice = Some(format!(
                 "{} damaged in the package, shown at the form it had: {}",
                 if found.len() == 1 { "a tile is" } else { "tiles are" },
-                found.join("; ")
+                found
+                    .iter()
+                    .map(|d| format!("tile {} ({})", d.tile, d.problem))
+                    .collect::<Vec<_>>()
+                    .join("; ")
             ));
         }
     }

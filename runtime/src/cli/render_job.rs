@@ -250,8 +250,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let mut uncovered_pixels = 0;
     let mut black_pixels = 0;
     let mut frames = Vec::new();
-    // The next frame's tiles are chosen and read from the package on a loader thread while
-    // this frame renders, so a frame waits only for what the loader has not finished.
+    // The next frame's tiles are chosen and read on a loader thread while this frame renders.
     for (i, cam) in cameras.iter().enumerate() {
         let t_frame = Instant::now();
         let mut change = TileChange::default();
@@ -312,7 +311,6 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         exposure,
         uncovered_pixels,
         black_pixels,
-        residency: follow.map(|f| f.current().clone()),
         tile_bytes: scene.tile_bytes(settings.radiance_f16),
         frames,
         warnings: image_warnings(
@@ -321,7 +319,11 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
             if clip.is_some() { 0 } else { uncovered_pixels },
             black_pixels,
             opts.width as usize * opts.height as usize,
-        ),
+        )
+        .into_iter()
+        .chain(follow.as_mut().map(|f| f.take_notices()).unwrap_or_default())
+        .collect(),
+        residency: follow.map(|f| f.current().clone()),
         notes,
         memory: opts.memory,
         load_s,

@@ -4,6 +4,7 @@
 //! --path` waits for each frame's tiles; `grotto view` takes them when they are ready, so flying
 //! never waits for the disk.
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
@@ -13,7 +14,7 @@ use crate::render::Renderer;
 use crate::scene::data::{HeldTiles, SceneData, SceneLight, TileMode};
 use crate::settings::{ClipBox, Settings};
 use crate::stream::residency::{self, Residency};
-use crate::stream::streaming::{self, Streaming};
+use crate::stream::streaming::{self, DamagedTile, Streaming};
 use crate::view::camera::Camera;
 
 /// The renderer for a job's first scene ([`streaming::renderer_for`]), and the loader that keeps its
@@ -56,6 +57,8 @@ pub(crate) struct Arrived {
     pub(crate) residency: Residency,
     pub(crate) scene: Option<SceneData>,
     pub(crate) deferred: usize,
+    /// Tiles found damaged by this load, held at the form they had.
+    damaged: Vec<DamagedTile>,
 }
 
 /// The loader thread and the residency the renderer holds.
@@ -65,12 +68,24 @@ pub(crate) struct Follow {
     current: Residency,
     loading: Option<JoinHandle<Result<Arrived>>>,
     upload_per_frame: Option<u64>,
+    /// Tiles held back as damaged, and the finest form each may take: every later residency
+    /// keeps them there.
+    damaged: BTreeMap<usize, TileMode>,
+    /// What was found damaged and not yet said ([`Follow::take_notices`]).
+    notices: Vec<String>,
 }
 
 impl Follow {
     /// `current`: the residency the renderer was made with.
     pub(crate) fn new(streaming: Streaming, current: Residency, upload_per_frame: Option<u64>) -> Self {
-        Self { streaming: Arc::new(streaming), current, loading: None, upload_per_frame }
+        Self {
+            streaming: Arc::new(streaming),
+            current,
+            loading: None,
+            upload_per_frame,
+            damaged: BTreeMap::new(),
+            notices: Vec::new(),
+        }
     }
 
     pub(crate) fn current(&self) -> &Residency {
@@ -95,20 +110,20 @@ impl Follow {
         if self.loading.is_some() {
             return;
         }
-        let (st, now, cam, limit) =
-            (self.streaming.clone(), self.current.clone(), *cam, self.upload_per_frame);
+        let (st, now, cam, limit, caps) =
+            (self.streaming.clone(), self.current.clone(), *cam, self.upload_per_frame, self.damaged.clone());
         self.loading = Some(std::thread::spawn(move || {
-            let mut next = st.choose(&cam, clip)?;
+            let mut next = residency::cap_modes(st.tiles(), st.choose(&cam, clip)?, &caps);
             let mut deferred = 0;
             if let Some(max) = limit {
                 (next, deferred) = residency::limit_uploads(st.tiles(), &now, next, max);
             }
-            let scene = if next.modes() == now.modes() {
-                None
-            } else {
-                Some(st.load_changes(&next, lights, headlamp, &held)?)
-            };
-            Ok(Arrived { residency: next, scene, deferred })
+            if next.modes() == now.modes() {
+                return Ok(Arrived { residency: next, scene: None, deferred, damaged: Vec::new() });
+            }
+            let (scene, next, damaged) =
+                st.load_changes_holding_damaged(&now, next, (lights, headlamp), &held)?;
+            Ok(Arrived { residency: next, scene: Some(scene), deferred, damaged })
         }));
     }
 
@@ -127,7 +142,21 @@ impl Follow {
             what: "tile loader",
             message: "the loader thread panicked".into(),
         })??;
+        self.hold_back(&arrived.damaged);
         Ok(Some(arrived))
+    }
+
+    /// Keeps `damaged` tiles at the form they had from now on, and says so once.
+    fn hold_back(&mut self, damaged: &[DamagedTile]) {
+        for d in damaged {
+            self.damaged.insert(d.tile, d.was);
+            self.notices.push(d.to_string());
+        }
+    }
+
+    /// What was found damaged since the last call, one line a tile.
+    pub(crate) fn take_notices(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.notices)
     }
 
     /// Gives `scene` (the renderer's, its tile data let go) its tile data again, read from the
@@ -152,7 +181,8 @@ impl Follow {
     /// tiles take their forms in `target`, the others keep theirs, so every step's residency is
     /// within `target`'s pools (a tile held coarser costs no more). `scene` is the renderer's,
     /// with its tile data let go; it ends as `target`'s (its lights and story kept:
-    /// [`streaming::swap_tiles`]). The light is not settled here.
+    /// [`streaming::swap_tiles`]), but for tiles found damaged, which keep the form they had.
+    /// The light is not settled here.
     pub(crate) fn fill(
         &mut self,
         gpu: &Gpu,
@@ -161,6 +191,7 @@ impl Follow {
         target: &Residency,
     ) -> Result<()> {
         let mut step = self.current.clone();
+        let mut before = step.clone();
         let held = step.modes();
         let mut pending = 0u64;
         let changes: Vec<&residency::Decision> = target
@@ -178,11 +209,18 @@ impl Follow {
                 continue;
             }
             pending = 0;
-            let next = self.streaming.load_changes(&step, Vec::new(), false, &scene.held_tiles())?;
-            streaming::swap_tiles(gpu, r, scene, next, || self.streaming.load(&step, Vec::new(), false))?;
+            let (next, loaded, damaged) = self.streaming.load_changes_holding_damaged(
+                &before,
+                step,
+                (Vec::new(), false),
+                &scene.held_tiles(),
+            )?;
+            self.hold_back(&damaged);
+            streaming::swap_tiles(gpu, r, scene, next, || self.streaming.load(&loaded, Vec::new(), false))?;
             scene.release_tile_data();
+            (before, step) = (loaded.clone(), loaded);
         }
-        self.current = target.clone();
+        self.current = step;
         Ok(())
     }
 

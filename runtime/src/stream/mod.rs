@@ -7,4 +7,6 @@ pub mod follow;
 pub mod residency;
 mod streaming;
 
-pub use streaming::{Relit, Streaming, Swapped, relit, renderer_for, sections_for, swap_tiles};
+pub use streaming::{
+    DamagedTile, Relit, Streaming, Swapped, damaged_tiles, relit, renderer_for, sections_for, swap_tiles,
+};

@@ -8,7 +8,7 @@
 use glam::Vec3;
 use grotto_format::{Package, Scope, SectionInfo, SectionKind};
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::render::pool::{POOL_HEADROOM, PoolCaps};
 use crate::render::{Renderer, SceneUpdate};
@@ -166,6 +166,79 @@ impl Streaming {
         self.pkg.release_mapped();
         Ok(scene)
     }
+
+    /// As [`Streaming::load_changes`] of `next` over `current` (the residency the renderer holds),
+    /// where a damaged section fails the load: each tile at fault ([`damaged_tiles`]) keeps the
+    /// form it had and the rest is loaded. Returns the scene, the residency it holds (`next`, its
+    /// damaged tiles held back) and the tiles held back. An error where no one tile is at fault.
+    pub fn load_changes_holding_damaged(
+        &self,
+        current: &Residency,
+        next: Residency,
+        (lights, headlamp): (Vec<SceneLight>, bool),
+        held: &HeldTiles,
+    ) -> Result<(SceneData, Residency, Vec<DamagedTile>)> {
+        match self.load_changes(&next, lights.clone(), headlamp, held) {
+            Ok(scene) => Ok((scene, next, Vec::new())),
+            Err(e @ Error::Package(_)) => {
+                let damaged = damaged_tiles(&self.pkg, current, &next);
+                if damaged.is_empty() {
+                    return Err(e);
+                }
+                let caps = damaged.iter().map(|d| (d.tile, d.was)).collect();
+                let next = residency::cap_modes(&self.tiles, next, &caps);
+                let scene = self.load_changes(&next, lights, headlamp, held)?;
+                Ok((scene, next, damaged))
+            }
+            Err(e) => Err(e),
+        }
+    }
+}
+
+/// A tile whose form in a new residency failed to load on its own (a damaged section): held at
+/// the form it had, the rest of the view streaming on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DamagedTile {
+    pub tile: usize,
+    /// The form it keeps: the one it had.
+    pub was: TileMode,
+    /// What was wrong, as the package reader said it.
+    pub problem: String,
+}
+
+impl std::fmt::Display for DamagedTile {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let form = match self.was {
+            TileMode::Full => "full",
+            TileMode::Coarse => "coarse",
+            TileMode::Far => "far",
+            TileMode::Skip => "absent",
+        };
+        write!(
+            f,
+            "tile {} is damaged in the package ({}); it stays at its {form} form",
+            self.tile, self.problem
+        )
+    }
+}
+
+/// The tiles `next` changes from `current` that fail to load on their own, each with the form
+/// it had and why. A load reads many tiles and its error names a section; loading each changed
+/// tile alone names the tiles to hold back. Empty where each loads alone (the fault is then in a
+/// global section, or not in the package).
+pub fn damaged_tiles(pkg: &Package, current: &Residency, next: &Residency) -> Vec<DamagedTile> {
+    let now = current.modes();
+    let mut found = Vec::new();
+    for (tile, mode) in next.modes().into_iter().enumerate() {
+        let was = now.get(tile).copied().unwrap_or(TileMode::Far);
+        if mode == was || mode == TileMode::Skip {
+            continue;
+        }
+        if let Err(e) = SceneData::from_package_with(pkg, |i| if i == tile { mode } else { TileMode::Skip }) {
+            found.push(DamagedTile { tile, was, problem: e.to_string() });
+        }
+    }
+    found
 }
 
 /// The sections reading `pkg`'s tiles in these modes (indexed by tile; missing: skipped) reads,

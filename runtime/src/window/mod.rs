@@ -94,6 +94,9 @@ pub struct ViewSummary {
     pub tours: Vec<(String, usize)>,
     /// Changes of resident tiles swapped in while flying.
     pub(crate) tile_swaps: u32,
+    /// Tiles found damaged while streaming, each shown at the form it had (also printed to
+    /// stderr as found).
+    pub warnings: Vec<String>,
     /// Frame times while moving and at rest, and how long the light took to converge at rest.
     pub log: FrameLog,
     /// The story's state when the window closed: labels, measurement, tour.
@@ -115,7 +118,7 @@ pub fn run(opts: ViewOptions) -> Result<ViewSummary> {
         // A recording still running when the window closed is kept.
         if let Some(keys) = s.recording.take() {
             app.summary.paths.push(save_path(&app.opts, &keys, &s.scene)?);
-            app.summary.tours.extend(save_tour(&app.opts, &mut s.story, &s.scene)?);
+            app.summary.tours.extend(story::save_tour(&app.opts, &mut s.story, &s.scene)?);
         }
         app.summary.log = std::mem::take(&mut s.log);
         story::answer_clicks(s)?;
@@ -134,36 +137,13 @@ fn save_path(opts: &ViewOptions, keys: &[Camera], scene: &SceneData) -> Result<(
     Ok((file.display().to_string(), keys.len()))
 }
 
-/// Writes the tour stops marked while recording (T) beside the path, as a story file (`grotto
-/// publish --story`, `grotto render --story`); returns it and its stops, None without stops.
-fn save_tour(
-    opts: &ViewOptions,
-    story: &mut story::StoryUi,
-    scene: &SceneData,
-) -> Result<Option<(String, usize)>> {
-    let stops = std::mem::take(&mut story.stops);
-    if stops.is_empty() {
-        return Ok(None);
-    }
-    let file = opts.record_path.as_ref().map_or_else(
-        || next_name("grotto-tour", "toml"),
-        |p| p.with_file_name(format!("{}-tour.toml", p.file_stem().unwrap_or_default().to_string_lossy())),
-    );
-    let text = crate::view::story::tour_toml("recorded", &stops, scene.frame_origin_m, 6.0);
-    crate::cli::export::atomically(&file, |mut f| {
-        std::io::Write::write_all(&mut f, text.as_bytes())
-            .map_err(|e| crate::cli::export::output_error(&file, e))
-    })?;
-    Ok(Some((file.display().to_string(), stops.len())))
-}
-
 /// Where a screenshot goes: `--screenshot`, or the next `grotto-view-N.png`.
 fn shot_path(opts: &ViewOptions) -> PathBuf {
     opts.screenshot.clone().unwrap_or_else(|| next_name("grotto-view", "png"))
 }
 
 /// `stem-N.ext` for the first N whose file does not exist yet.
-fn next_name(stem: &str, ext: &str) -> PathBuf {
+pub(super) fn next_name(stem: &str, ext: &str) -> PathBuf {
     (0..)
         .map(|i| PathBuf::from(format!("{stem}-{i}.{ext}")))
         .find(|p| !p.exists())
@@ -378,6 +358,10 @@ impl App {
 
         let swapped = follow_camera(s, cam)?;
         self.summary.tile_swaps += u32::from(swapped);
+        for n in s.follow.as_mut().map(|f| f.take_notices()).unwrap_or_default() {
+            eprintln!("warning: {n}");
+            self.summary.warnings.push(n);
+        }
         if let (true, Some(after)) = (swapped, self.opts.after_swap) {
             after();
         }
@@ -615,7 +599,7 @@ impl App {
                 Some(keys) => {
                     self.summary.paths.push(save_path(&self.opts, &keys, &s.scene)?);
                     // The stops marked (T) belong to this recording: written beside it now.
-                    self.summary.tours.extend(save_tour(&self.opts, &mut s.story, &s.scene)?);
+                    self.summary.tours.extend(story::save_tour(&self.opts, &mut s.story, &s.scene)?);
                 }
             },
             KeyCode::F11 => {

@@ -22,6 +22,29 @@ use winit::keyboard::KeyCode;
 const DOUBLE_CLICK_S: f32 = 0.35;
 const DOUBLE_CLICK_PX: f64 = 6.0;
 
+/// Writes the tour stops marked while recording (T) beside the path, as a story file (`grotto
+/// publish --story`, `grotto render --story`); returns it and its stops, None without stops.
+pub(super) fn save_tour(
+    opts: &super::ViewOptions,
+    story: &mut StoryUi,
+    scene: &SceneData,
+) -> Result<Option<(String, usize)>> {
+    let stops = std::mem::take(&mut story.stops);
+    if stops.is_empty() {
+        return Ok(None);
+    }
+    let file = opts.record_path.as_ref().map_or_else(
+        || super::next_name("grotto-tour", "toml"),
+        |p| p.with_file_name(format!("{}-tour.toml", p.file_stem().unwrap_or_default().to_string_lossy())),
+    );
+    let text = crate::view::story::tour_toml("recorded", &stops, scene.frame_origin_m, 6.0);
+    crate::cli::export::atomically(&file, |mut f| {
+        std::io::Write::write_all(&mut f, text.as_bytes())
+            .map_err(|e| crate::cli::export::output_error(&file, e))
+    })?;
+    Ok(Some((file.display().to_string(), stops.len())))
+}
+
 pub(super) struct StoryUi {
     pub(super) guide: Guide,
     measuring: bool,
