@@ -155,6 +155,13 @@ pub(crate) const SUITES: &[Suite] = &[
         run: window::soak,
     },
     Suite {
+        name: "soak-phone",
+        about: "the window's memory over 30 minutes of flight, 10^7 points under --memory phone (Xvfb)",
+        needs: Needs::Display,
+        dev_time: "32 min",
+        run: window::soak_phone,
+    },
+    Suite {
         name: "web",
         about: "bytes before the page's first frame; the bundle's size",
         needs: Needs::Browser,

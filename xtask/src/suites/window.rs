@@ -223,10 +223,36 @@ fn memory_mib(pid: u32) -> Option<(u64, u64)> {
 /// largest in the first third against the last third (a viewer that keeps nothing it does not
 /// need grows by nothing). `GROTTO_SOAK_MINUTES` shortens it for a try.
 pub(crate) fn soak(ctx: &Ctx) -> Result<Vec<Figure>> {
-    let minutes: f64 = std::env::var("GROTTO_SOAK_MINUTES").ok().and_then(|m| m.parse().ok()).unwrap_or(30.0);
     let pkg = ctx.demo()?;
+    soak_of(ctx, &pkg, &[], ("view-soak", "the window's memory over a scripted flight (demo cave)", "soak"))
+}
+
+/// As [`soak`], of the 10^7-point survey under `--memory phone`: tiles stream in and out
+/// all along, within one budget of 512 MiB for the process and the GPU together.
+pub(crate) fn soak_phone(ctx: &Ctx) -> Result<Vec<Figure>> {
+    let pkg = super::gpu::survey(ctx, 10_000_000, "survey-1e7")?;
+    soak_of(
+        ctx,
+        &pkg,
+        &["--memory", "phone", "--quality", "fast"],
+        (
+            "view-soak-phone",
+            "the window's memory over a scripted flight (10^7 points, `--memory phone`, tiles streaming)",
+            "soak-phone",
+        ),
+    )
+}
+
+/// The soak of `pkg` with `extra` arguments: (figure key, figure, output name).
+fn soak_of(
+    ctx: &Ctx,
+    pkg: &Path,
+    extra: &[&str],
+    (key, what, name): (&str, &str, &str),
+) -> Result<Vec<Figure>> {
+    let minutes: f64 = std::env::var("GROTTO_SOAK_MINUTES").ok().and_then(|m| m.parse().ok()).unwrap_or(30.0);
     let x = Xvfb::start()?;
-    let mut child = viewer(ctx, &x, &pkg, "soak", &[])?;
+    let mut child = viewer(ctx, &x, pkg, name, extra)?;
     let wid = x.focus_viewer()?;
     let pid = child.id();
     let start = Instant::now();
@@ -282,7 +308,7 @@ pub(crate) fn soak(ctx: &Ctx) -> Result<Vec<Figure>> {
         .chain(samples.iter().map(|(t, l, r, d)| format!("{t:.0},{l},{r},{d}")))
         .collect::<Vec<_>>()
         .join("\n");
-    std::fs::write(ctx.out.join("memory.csv"), csv + "\n")?;
+    std::fs::write(ctx.out.join(format!("{name}-memory.csv")), csv + "\n")?;
     let end = samples.last().context("no memory samples")?.0;
     let max = |from: f64, to: f64| {
         samples.iter().filter(|s| s.0 >= from && s.0 <= to).map(|s| s.2).max().unwrap_or(0)
@@ -294,9 +320,9 @@ pub(crate) fn soak(ctx: &Ctx) -> Result<Vec<Figure>> {
         samples.len()
     ))?;
     Ok(vec![ctx.figure(
-        "view-soak",
+        key,
         SOFTWARE,
-        "the window's memory over a scripted flight (demo cave)",
+        what,
         format!("RSS {last} MiB at the end, {:+} MiB after the first third", last as i64 - first as i64),
         "\"Surfel chunks, level of detail and a frame-time target\"",
     )])
