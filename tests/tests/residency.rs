@@ -371,6 +371,49 @@ fn a_tile_that_fails_to_decode_is_named_and_held_back_and_the_rest_still_streams
     }
 }
 
+#[test]
+fn a_change_of_tiles_written_a_tile_at_a_time_draws_the_frames_of_one_written_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let package = small_tiles_cave();
+    let (_, full, reserve, _) = sizes(&Package::open(package).unwrap());
+    let path = |out: &str| RenderOptions {
+        camera: CameraChoice::Default,
+        path: vec!["entrance".into(), "chamber".into()],
+        frames: 4,
+        ..job(package, dir.path().join(out), reserve + (full - reserve) / 4)
+    };
+    let whole = render_job::run(&path("whole.png"), |_| {}).unwrap();
+    // A budget whose loader reads one tile a step: each change arrives in as many steps as it
+    // has tiles to make finer.
+    let mut memory =
+        grotto_runtime::engine::memory::MemoryBudget::parse("512M").unwrap().plan(64 * 48, &settings());
+    memory.step_bytes = 1;
+    let stepped =
+        render_job::run(&RenderOptions { memory: Some(memory), ..path("stepped.png") }, |_| {}).unwrap();
+    let uploaded = |s: &render_job::RenderSummary| -> Vec<usize> {
+        s.frames.iter().map(|f| f.update.as_ref().map_or(0, |u| u.uploaded_tiles)).collect()
+    };
+    eprintln!("tiles uploaded by frame: whole {:?}, stepped {:?}", uploaded(&whole), uploaded(&stepped));
+    assert!(uploaded(&whole).iter().any(|&n| n > 1), "the path has a change of more than one tile");
+    assert_eq!(uploaded(&whole), uploaded(&stepped), "the steps wrote other tiles");
+    for (a, b) in whole.frames.iter().zip(&stepped.frames) {
+        assert_eq!(
+            (a.full_tiles, a.coarse_tiles, a.far_tiles, a.loaded, a.evicted),
+            (b.full_tiles, b.coarse_tiles, b.far_tiles, b.loaded, b.evicted),
+            "frame {}",
+            a.frame
+        );
+    }
+    for (a, b) in whole.images.iter().zip(&stepped.images) {
+        let px = |p: &String| -> Vec<[u8; 4]> {
+            image::open(p).unwrap().to_rgba8().pixels().map(|p| p.0).collect()
+        };
+        let diff = golden::diff(&px(a), &px(b));
+        eprintln!("{a} against {b}: {diff:?}");
+        assert!(golden::within_tolerance(&diff), "{diff:?}");
+    }
+}
+
 /// `pkg` with its first `full` tiles in full and the rest at their coarse level.
 fn full_first(pkg: &Package, full: usize) -> SceneData {
     SceneData::from_package_with(pkg, |i| if i < full { TileMode::Full } else { TileMode::Coarse }).unwrap()

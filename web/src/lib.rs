@@ -781,15 +781,7 @@ impl State {
 
     fn status(&mut self, moving: bool) -> Result<String, Error> {
         let progress = self.renderer.light_progress();
-        let mut tiles = [0usize; 4];
-        for m in self.current.modes() {
-            tiles[match m {
-                TileMode::Full => 0,
-                TileMode::Coarse => 1,
-                TileMode::Far => 2,
-                TileMode::Skip => 3,
-            }] += 1;
-        }
+        let tiles = page::tile_counts(&self.current.modes());
         // Ready: the image is final, its anti-aliasing samples all in.
         let ready = self.image_final(moving);
         let camera = self.nav.camera();
@@ -827,6 +819,7 @@ impl State {
             tour: self.story.tour_status(),
             link: grotto_runtime::view::story::view_link(&camera, self.scene.frame_origin_m),
             gpu_bytes: self.renderer.gpu_bytes(),
+            binding_bytes: self.gpu.device.limits().max_storage_buffer_binding_size,
             streaming: self.health.state(),
             notice: self.health.notice(),
             damaged_tiles: self.health.damaged.len(),

@@ -3,6 +3,7 @@
 //! ready marker, a test's checks).
 
 use grotto_runtime::engine::memory::{DeviceHints, MemoryBudget, MemoryPlan};
+use grotto_runtime::scene::data::TileMode;
 use grotto_runtime::scene::lighting::Relight;
 use grotto_runtime::settings::{Quality, Settings, ViewMode};
 use grotto_runtime::view::frame_target::{FrameTarget, Traded};
@@ -126,6 +127,9 @@ pub struct Status {
     /// GPU memory the renderer holds, and the viewer's own (wasm) memory: what the page states
     /// and a long visit's benchmark samples.
     pub gpu_bytes: u64,
+    /// The device's largest storage binding: WebGPU's default (128 MiB) unless the budget's pools
+    /// are larger and the adapter offers more.
+    pub binding_bytes: u64,
     /// How streaming fares (health.rs): "ok", "retrying", "stopped" or "replaced"; what the
     /// page tells the visitor of it; tiles held back as damaged; failed steps so far.
     pub streaming: &'static str,
@@ -218,4 +222,18 @@ pub(crate) fn frame_target_of(o: &Options) -> Option<FrameTarget> {
         Some(f) if !(f.is_finite() && f > 0.0) => None,
         f => Some(FrameTarget::new(1000.0 / f.unwrap_or(60.0))),
     }
+}
+
+/// Tiles full, coarse, far and not held, of a residency's modes (the status's `tiles`).
+pub(crate) fn tile_counts(modes: &[TileMode]) -> [usize; 4] {
+    let mut tiles = [0usize; 4];
+    for m in modes {
+        tiles[match m {
+            TileMode::Full => 0,
+            TileMode::Coarse => 1,
+            TileMode::Far => 2,
+            TileMode::Skip => 3,
+        }] += 1;
+    }
+    tiles
 }

@@ -15,8 +15,9 @@ use crate::light::plan::EffectPlan;
 use crate::render::{Frame, SceneUpdate};
 use crate::render::{PassStats, Renderer};
 use crate::scene::data::{SceneData, TileMode};
-use crate::settings::Settings;
+use crate::settings::{ClipBox, Settings};
 use crate::stream::residency::Residency;
+use crate::view::camera::Camera;
 
 /// Largest `--supersample`: 16 samples a pixel; beyond, the G-buffer of a 1080p frame outgrows
 /// what most adapters allow in one texture.
@@ -226,14 +227,9 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     settings.exposure = opts.exposure.unwrap_or(1.0);
     settings.still_samples = opts.samples;
     settings.validate().map_err(as_samples)?;
-    let (mut r, mut follow) = crate::stream::follow::start(
-        &gpu,
-        &mut scene,
-        settings.clone(),
-        streaming,
-        residency,
-        opts.upload_per_frame,
-    )?;
+    let steps = opts.loader_steps();
+    let (mut r, mut follow) =
+        crate::stream::follow::start(&gpu, &mut scene, settings.clone(), streaming, residency, steps)?;
     r.set_clip(clip);
     // The GPU holds the tiles now; a change of tiles brings a scene loaded anew.
     scene.release_tile_data();
@@ -257,7 +253,8 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         if i == 0 {
             change.bounces = r.stats().bounces_done;
         } else if let Some(f) = &mut follow {
-            change = follow_tiles(f, &gpu, &mut r, &mut scene, opts.frame_bounces, &mut progress)?;
+            change =
+                follow_tiles(f, &gpu, &mut r, &mut scene, (cam, clip), opts.frame_bounces, &mut progress)?;
         }
         if let (Some(f), Some(next_cam)) = (&mut follow, cameras.get(i + 1)) {
             f.request(next_cam, clip, (scene.lights.clone(), scene.headlamp), scene.held_tiles());
@@ -362,12 +359,16 @@ struct TileChange {
 
 /// Waits for the residency the loader thread was asked for; where its tiles differ, the new scene
 /// replaces the old one in the renderer's pools (only the new tile forms are written; the others
-/// keep their place and light), and its light is settled again from there.
+/// keep their place and light), and its light is settled again from there. A change larger than
+/// a loader step arrives in steps ([`crate::stream::follow::Arrived::rest`]): the rest is asked
+/// for again for the same view (`view`) and written before the light is settled, so the frame
+/// has every tile its view wants while the CPU holds one step's tiles at a time.
 fn follow_tiles(
     f: &mut crate::stream::follow::Follow,
     gpu: &Gpu,
     r: &mut Renderer,
     scene: &mut SceneData,
+    view: (&Camera, Option<ClipBox>),
     frame_bounces: Option<u32>,
     progress: &mut impl FnMut(Progress),
 ) -> Result<TileChange> {
@@ -376,18 +377,42 @@ fn follow_tiles(
     };
     let mut change = TileChange::default();
     let t_wait = Instant::now();
-    let Some(arrived) = f.wait()? else { return Ok(change) };
+    let Some(mut arrived) = f.wait()? else { return Ok(change) };
     change.load_wait_ms = t_wait.elapsed().as_secs_f64() * 1e3;
     change.deferred = arrived.deferred;
-    if let Some(new_scene) = arrived.scene {
-        let (before, after) = (full(f.current()), full(&arrived.residency));
-        change.loaded = after.difference(&before).count();
-        change.evicted = before.difference(&after).count();
-        let swapped =
-            crate::stream::swap_tiles(gpu, r, scene, new_scene, || f.load_whole(&arrived.residency))?;
-        scene.release_tile_data();
-        (change.update, change.made_anew, change.carried_leaves) =
-            (swapped.update, swapped.made_anew, swapped.carried_leaves);
+    let before = full(f.current());
+    let mut swapped_any = false;
+    loop {
+        if let Some(new_scene) = arrived.scene.take() {
+            let swapped =
+                crate::stream::swap_tiles(gpu, r, scene, new_scene, || f.load_whole(&arrived.residency))?;
+            scene.release_tile_data();
+            if !swapped_any {
+                change.carried_leaves = swapped.carried_leaves;
+            }
+            change.update = match (change.update.take(), swapped.update) {
+                (Some(a), Some(b)) => Some(a.then(b)),
+                (a, b) => b.or(a),
+            };
+            change.made_anew |= swapped.made_anew;
+            swapped_any = true;
+        }
+        let rest = arrived.rest;
+        f.accept(arrived.residency);
+        if rest == 0 {
+            break;
+        }
+        f.request(view.0, view.1, (scene.lights.clone(), scene.headlamp), scene.held_tiles());
+        arrived = f.wait()?.ok_or(Error::Internal {
+            what: "tile loader",
+            message: "a step asked for did not come".into(),
+        })?;
+        change.deferred = arrived.deferred;
+    }
+    let after = full(f.current());
+    change.loaded = after.difference(&before).count();
+    change.evicted = before.difference(&after).count();
+    if swapped_any {
         let budget = r.settings().bounces;
         let report = |done, change| progress(Progress::Bounce { done, budget, change });
         change.bounces = match frame_bounces {
@@ -395,7 +420,6 @@ fn follow_tiles(
             None => r.settle(report)?,
         };
     }
-    f.accept(arrived.residency);
     Ok(change)
 }
 

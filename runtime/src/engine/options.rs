@@ -111,6 +111,13 @@ pub fn clip_in_frame(world_m: [[f64; 3]; 2], frame_origin_m: [f64; 3]) -> Result
 }
 
 impl RenderOptions {
+    /// `--upload-per-frame`, and the tile bytes a loader step reads at most: the memory budget's
+    /// (`MemoryPlan::step_bytes`), else 64 MiB (`stream::follow::FILL_STEP_BYTES`).
+    pub(crate) fn loader_steps(&self) -> (Option<u64>, u64) {
+        let step = self.memory.as_ref().map_or(crate::stream::follow::FILL_STEP_BYTES, |m| m.step_bytes);
+        (self.upload_per_frame, step)
+    }
+
     /// `grotto render PACKAGE -o OUT` with every other option at its command-line default: the
     /// package's first camera or a framed view, 800x600, the balanced preset, automatic exposure
     /// and headlamp, the best adapter.

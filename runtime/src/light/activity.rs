@@ -80,6 +80,9 @@ pub(crate) const LISTED_TILES: usize = 24;
 pub(crate) struct TileActivity {
     /// `leaf_offset`, `leaf_count` of each tile.
     leaves: Vec<(u32, u32)>,
+    /// Each tile form's place and level (origin leaf, depth, leaf level): which tile is which
+    /// across a change of tiles.
+    forms: Vec<([i32; 3], u32, u32)>,
     /// Tiles whose boxes touch (share a face, edge or corner) or overlap, by tile.
     neighbours: Vec<Vec<u32>>,
     /// Why the next bounce updates each tile (`None`: it does not).
@@ -92,8 +95,28 @@ impl TileActivity {
     /// Every tile active (`Why::Start`).
     pub(crate) fn new(tiles: &[TileGpu]) -> Self {
         let leaves = tiles.iter().map(|t| (t.leaf_offset, t.leaf_count)).collect();
+        let forms = tiles.iter().map(|t| (t.origin_leaf, t.depth, t.leaf_lod)).collect();
         let next = vec![Some(Why::Start); tiles.len()];
-        Self { leaves, neighbours: touching(tiles), next, before_edit: None }
+        Self { leaves, forms, neighbours: touching(tiles), next, before_edit: None }
+    }
+
+    /// The activity of `tiles` after a change from this one, where `kept[t]` says tile `t` kept
+    /// its light ([`TileActivity::seed`]). A tile still new here, whose light no bounce has
+    /// spread since it arrived, counts as new there too: a change of tiles written in steps runs
+    /// no bounce between them, and must leave the light work a change written whole leaves.
+    pub(crate) fn after_change(&self, tiles: &[TileGpu], kept: &[bool]) -> Self {
+        let still_new: std::collections::HashSet<&([i32; 3], u32, u32)> = (self.forms.iter())
+            .zip(&self.next)
+            .filter(|(_, why)| **why == Some(Why::New))
+            .map(|(f, _)| f)
+            .collect();
+        let kept: Vec<bool> = (tiles.iter())
+            .zip(kept)
+            .map(|(t, &k)| k && !still_new.contains(&(t.origin_leaf, t.depth, t.leaf_lod)))
+            .collect();
+        let mut next = Self::new(tiles);
+        next.seed(&kept);
+        next
     }
 
     /// Every tile active for `why` (an edit under way is forgotten: everything runs).
@@ -301,6 +324,25 @@ mod tests {
         assert_eq!(n[1], vec![0, 2]);
         assert_eq!(n[3], vec![2]);
         assert!(n[5].is_empty());
+    }
+
+    #[test]
+    fn a_change_in_two_steps_leaves_the_work_of_one_change() {
+        let tiles = row(6);
+        // Whole: tiles 1 and 4 arrive at once.
+        let mut start = TileActivity::new(&tiles);
+        start.seed(&[true; 6]);
+        let whole = start.after_change(&tiles, &[true, false, true, true, false, true]);
+        // In steps: tile 1, then tile 4, no bounce between; the second step keeps tile 1's light.
+        let first = start.after_change(&tiles, &[true, false, true, true, true, true]);
+        let second = first.after_change(&tiles, &[true, true, true, true, false, true]);
+        assert_eq!(second.next, whole.next);
+        assert_eq!(second.next[1], Some(Why::New));
+        // Once a bounce has spread a new tile's light, it is kept as any other.
+        let mut bounced = first.clone();
+        bounced.next.fill(None);
+        let later = bounced.after_change(&tiles, &[true, true, true, true, false, true]);
+        assert_eq!(later.next[1], None);
     }
 
     #[test]

@@ -529,3 +529,21 @@ pub struct SceneUpdate {
     /// catching up from an earlier one): drawn again by the next shadow passes.
     pub shadow_faces: usize,
 }
+
+impl SceneUpdate {
+    /// This update followed by `later`, as one (a change of tiles written in steps): what they
+    /// wrote, moved and freed together; the tiles and leaves kept are the first step's (what the
+    /// change kept of the tiles before it), the shadow faces out of date the last step's.
+    pub fn then(self, later: SceneUpdate) -> SceneUpdate {
+        SceneUpdate {
+            uploaded_tiles: self.uploaded_tiles + later.uploaded_tiles,
+            kept_tiles: self.kept_tiles,
+            freed_tiles: self.freed_tiles + later.freed_tiles,
+            repacked: self.repacked || later.repacked,
+            moved_bytes: self.moved_bytes + later.moved_bytes,
+            upload_bytes: self.upload_bytes + later.upload_bytes,
+            carried_leaves: self.carried_leaves,
+            shadow_faces: later.shadow_faces,
+        }
+    }
+}

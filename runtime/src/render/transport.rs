@@ -95,8 +95,7 @@ impl LightTransport {
 
     /// The tiles are `tiles` now; those `kept` says kept their light start from it.
     pub(super) fn new_tiles(&mut self, tiles: &[TileGpu], kept: &[bool]) {
-        self.activity = TileActivity::new(tiles);
-        self.activity.seed(kept);
+        self.activity = self.activity.after_change(tiles, kept);
         self.active_written = None;
     }
 

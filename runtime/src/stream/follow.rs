@@ -23,14 +23,15 @@ use crate::view::camera::Camera;
 /// scene [`crate::engine::open`] gives: the renderer is made from it, with pools for `first`, and
 /// `first`'s tiles are then read and written a few at a time ([`Follow::fill`]), so the first
 /// residency is never held whole on the CPU. `scene` ends as the first residency's, its tile
-/// data let go.
+/// data let go. `steps`: `--upload-per-frame` and a loader step's bytes
+/// ([`crate::engine::RenderOptions::loader_steps`]).
 pub(crate) fn start(
     gpu: &Gpu,
     scene: &mut SceneData,
     settings: Settings,
     streaming: Option<Streaming>,
     first: Option<Residency>,
-    upload_per_frame: Option<u64>,
+    steps: (Option<u64>, u64),
 ) -> Result<(Renderer, Option<Follow>)> {
     match (streaming, first) {
         (Some(mut st), Some(first)) => {
@@ -38,7 +39,7 @@ pub(crate) fn start(
             let mut r = streaming::renderer_for(gpu, scene, settings, Some((&mut st, &first)))?;
             scene.release_tile_data();
             st.package().release_mapped();
-            let mut follow = Follow::new(st, far, upload_per_frame);
+            let mut follow = Follow::new(st, far, steps);
             follow.fill(gpu, &mut r, scene, &first)?;
             Ok((r, Some(follow)))
         }
@@ -46,8 +47,9 @@ pub(crate) fn start(
     }
 }
 
-/// Tile bytes (as residency counts them) one step of [`Follow::fill`] reads at most, but for a
-/// single tile larger than this: what the CPU holds of a residency while it is written.
+/// Tile bytes (as residency counts them) one loader step reads at most, but for a single tile
+/// larger than this: what the CPU holds of a change of tiles while it is written. A memory
+/// budget (`--memory`) gives its own (`MemoryPlan::step_bytes`).
 pub(crate) const FILL_STEP_BYTES: u64 = 64 << 20;
 
 /// A residency chosen on the loader thread: the scene to swap in where the tiles' forms changed,
@@ -57,6 +59,9 @@ pub(crate) struct Arrived {
     pub(crate) residency: Residency,
     pub(crate) scene: Option<SceneData>,
     pub(crate) deferred: usize,
+    /// Changes left for the same view beyond this step (a loader step's bytes): asked for again,
+    /// they arrive in later steps.
+    pub(crate) rest: usize,
     /// Tiles found damaged by this load, held at the form they had.
     damaged: Vec<DamagedTile>,
 }
@@ -68,6 +73,8 @@ pub(crate) struct Follow {
     current: Residency,
     loading: Option<JoinHandle<Result<Arrived>>>,
     upload_per_frame: Option<u64>,
+    /// Tile bytes a step reads at most, but for one larger tile ([`FILL_STEP_BYTES`]).
+    step_bytes: u64,
     /// Tiles held back as damaged, and the finest form each may take: every later residency
     /// keeps them there.
     damaged: BTreeMap<usize, TileMode>,
@@ -76,13 +83,19 @@ pub(crate) struct Follow {
 }
 
 impl Follow {
-    /// `current`: the residency the renderer was made with.
-    pub(crate) fn new(streaming: Streaming, current: Residency, upload_per_frame: Option<u64>) -> Self {
+    /// `current`: the residency the renderer was made with; `--upload-per-frame` and the bytes of
+    /// a loader step.
+    pub(crate) fn new(
+        streaming: Streaming,
+        current: Residency,
+        (upload_per_frame, step_bytes): (Option<u64>, u64),
+    ) -> Self {
         Self {
             streaming: Arc::new(streaming),
             current,
             loading: None,
             upload_per_frame,
+            step_bytes,
             damaged: BTreeMap::new(),
             notices: Vec::new(),
         }
@@ -110,20 +123,31 @@ impl Follow {
         if self.loading.is_some() {
             return;
         }
-        let (st, now, cam, limit, caps) =
-            (self.streaming.clone(), self.current.clone(), *cam, self.upload_per_frame, self.damaged.clone());
+        let (st, now, cam, limit, caps, step) = (
+            self.streaming.clone(),
+            self.current.clone(),
+            *cam,
+            self.upload_per_frame,
+            self.damaged.clone(),
+            self.step_bytes,
+        );
         self.loading = Some(std::thread::spawn(move || {
             let mut next = residency::cap_modes(st.tiles(), st.choose(&cam, clip)?, &caps);
-            let mut deferred = 0;
-            if let Some(max) = limit {
-                (next, deferred) = residency::limit_uploads(st.tiles(), &now, next, max);
+            let (mut deferred, mut rest) = (0, 0);
+            match limit {
+                // Changes past a frame's upload bound wait for later frames' views.
+                Some(max) => (next, deferred) = residency::limit_uploads(st.tiles(), &now, next, max),
+                // Otherwise a change is read a step at a time, the rest asked for again for the
+                // same view: the CPU holds one step's tiles, not a whole change's (a large
+                // package's change of view may be many tiles of 90 MB).
+                None => (next, rest) = residency::limit_uploads(st.tiles(), &now, next, step),
             }
             if next.modes() == now.modes() {
-                return Ok(Arrived { residency: next, scene: None, deferred, damaged: Vec::new() });
+                return Ok(Arrived { residency: next, scene: None, deferred, rest, damaged: Vec::new() });
             }
             let (scene, next, damaged) =
                 st.load_changes_holding_damaged(&now, next, (lights, headlamp), &held)?;
-            Ok(Arrived { residency: next, scene: Some(scene), deferred, damaged })
+            Ok(Arrived { residency: next, scene: Some(scene), deferred, rest, damaged })
         }));
     }
 
@@ -177,7 +201,7 @@ impl Follow {
     }
 
     /// Brings the renderer from the residency it holds to `target`, reading and writing a few
-    /// tiles at a time (at most [`FILL_STEP_BYTES`] a step, but for one larger tile): each step's
+    /// tiles at a time (a loader step's bytes at most, but for one larger tile): each step's
     /// tiles take their forms in `target`, the others keep theirs, so every step's residency is
     /// within `target`'s pools (a tile held coarser costs no more). `scene` is the renderer's,
     /// with its tile data let go; it ends as `target`'s (its lights and story kept:
@@ -205,7 +229,7 @@ impl Follow {
             }
             let footprint = self.streaming.tiles().iter().find(|t| t.index == d.tile);
             pending += footprint.map_or(0, |t| t.cost(d.mode).bytes);
-            if pending < FILL_STEP_BYTES && k + 1 < changes.len() {
+            if pending < self.step_bytes && k + 1 < changes.len() {
                 continue;
             }
             pending = 0;
@@ -220,7 +244,8 @@ impl Follow {
             scene.release_tile_data();
             (before, step) = (loaded.clone(), loaded);
         }
-        self.current = step;
+        // The target, less what was found damaged (its totals counted again).
+        self.current = residency::cap_modes(self.streaming.tiles(), target.clone(), &self.damaged);
         Ok(())
     }
 

@@ -267,7 +267,7 @@ impl App {
             settings.clone(),
             prepared.streaming,
             prepared.residency,
-            o.upload_per_frame,
+            o.loader_steps(),
         )?;
         renderer.set_clip(prepared.clip);
         let (lo, hi) = prepared.scene.bounds_leaf();
@@ -695,6 +695,10 @@ fn follow_camera(s: &mut State, cam: Camera) -> Result<bool> {
             crate::stream::swap_tiles(&s.gpu, &mut s.renderer, &mut s.scene, new_scene, whole)?;
             s.scene.release_tile_data();
             swapped = true;
+        }
+        if arrived.rest > 0 {
+            // The change came in part: the rest is asked for next.
+            s.chosen_for = None;
         }
         f.accept(arrived.residency);
     }
