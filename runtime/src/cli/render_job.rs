@@ -407,7 +407,6 @@ fn follow_tiles(
             what: "tile loader",
             message: "a step asked for did not come".into(),
         })?;
-        change.deferred = arrived.deferred;
     }
     let after = full(f.current());
     change.loaded = after.difference(&before).count();

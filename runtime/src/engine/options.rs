@@ -112,9 +112,9 @@ pub fn clip_in_frame(world_m: [[f64; 3]; 2], frame_origin_m: [f64; 3]) -> Result
 
 impl RenderOptions {
     /// `--upload-per-frame`, and the tile bytes a loader step reads at most: the memory budget's
-    /// (`MemoryPlan::step_bytes`), else 64 MiB (`stream::follow::FILL_STEP_BYTES`).
+    /// (`MemoryPlan::step_bytes`), else 64 MiB (`stream::follow::STEP_BYTES`).
     pub(crate) fn loader_steps(&self) -> (Option<u64>, u64) {
-        let step = self.memory.as_ref().map_or(crate::stream::follow::FILL_STEP_BYTES, |m| m.step_bytes);
+        let step = self.memory.as_ref().map_or(crate::stream::follow::STEP_BYTES, |m| m.step_bytes);
         (self.upload_per_frame, step)
     }
 

@@ -50,7 +50,7 @@ pub(crate) fn start(
 /// Tile bytes (as residency counts them) one loader step reads at most, but for a single tile
 /// larger than this: what the CPU holds of a change of tiles while it is written. A memory
 /// budget (`--memory`) gives its own (`MemoryPlan::step_bytes`).
-pub(crate) const FILL_STEP_BYTES: u64 = 64 << 20;
+pub(crate) const STEP_BYTES: u64 = 64 << 20;
 
 /// A residency chosen on the loader thread: the scene to swap in where the tiles' forms changed,
 /// and the changes `--upload-per-frame` left for later.
@@ -73,7 +73,7 @@ pub(crate) struct Follow {
     current: Residency,
     loading: Option<JoinHandle<Result<Arrived>>>,
     upload_per_frame: Option<u64>,
-    /// Tile bytes a step reads at most, but for one larger tile ([`FILL_STEP_BYTES`]).
+    /// Tile bytes a step reads at most, but for one larger tile ([`STEP_BYTES`]).
     step_bytes: u64,
     /// Tiles held back as damaged, and the finest form each may take: every later residency
     /// keeps them there.
