@@ -212,6 +212,20 @@ impl Browser {
     /// protocol's touch events (the page sees touch pointer events, as on a phone); the last
     /// step lifts them.
     fn touch(&self, steps: &[&[(f64, f64)]]) {
+        self.touch_at(steps, None);
+    }
+
+    /// Two taps at canvas pixel `(x, y)`, stamped 150 ms apart whatever the driver's delays: a
+    /// loaded machine's round trips must not make them two single taps.
+    fn double_tap(&self, x: f64, y: f64) {
+        let t0 = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_secs_f64();
+        self.touch_at(&[&[(x, y)]], Some((t0, 0.05)));
+        self.touch_at(&[&[(x, y)]], Some((t0 + 0.15, 0.05)));
+    }
+
+    /// Touch steps as [`Browser::touch`], each stamped `(first, step)` seconds since the epoch
+    /// where given (CDP's `timestamp`, the events' `timeStamp` in the page).
+    fn touch_at(&self, steps: &[&[(f64, f64)]], stamps: Option<(f64, f64)>) {
         let r = self.eval(
             "const r = document.getElementById('canvas').getBoundingClientRect(); return [r.left, r.top]",
         );
@@ -219,11 +233,17 @@ impl Browser {
         let points = |s: &[(f64, f64)]| -> Vec<Value> {
             s.iter().enumerate().map(|(i, (x, y))| json!({"x": left + x, "y": top + y, "id": i})).collect()
         };
+        let event = |k: usize, kind: &str, touch_points: Vec<Value>| {
+            let mut e = json!({"type": kind, "touchPoints": touch_points});
+            if let Some((first, step)) = stamps {
+                e["timestamp"] = json!(first + step * k as f64);
+            }
+            self.cdp("Input.dispatchTouchEvent", e);
+        };
         for (k, s) in steps.iter().enumerate() {
-            let kind = if k == 0 { "touchStart" } else { "touchMove" };
-            self.cdp("Input.dispatchTouchEvent", json!({"type": kind, "touchPoints": points(s)}));
+            event(k, if k == 0 { "touchStart" } else { "touchMove" }, points(s));
         }
-        self.cdp("Input.dispatchTouchEvent", json!({"type": "touchEnd", "touchPoints": []}));
+        event(steps.len(), "touchEnd", Vec::new());
     }
 
     /// Waits until `script` (returning a JSON string or null) gives something other than null.

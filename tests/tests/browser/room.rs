@@ -126,8 +126,7 @@ fn a_published_room_labels_measures_shares_and_answers_touch() {
     // A double tap on the far wall flies toward it.
     let before = link_now(&browser);
     let frames = browser.status()["frames"].as_u64().unwrap();
-    browser.touch(&[&[(160.0, 100.0)]]);
-    browser.touch(&[&[(160.0, 100.0)]]);
+    browser.double_tap(160.0, 100.0);
     browser.wait_for_frames(frames + 3, Duration::from_secs(60));
     let (state, status) = browser.wait_for_marker(READY_LIMIT);
     assert_eq!(state, "ready", "{status}");
