@@ -473,7 +473,7 @@ fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer()
     r.settle(|_, _| {}).unwrap();
     let faces = r.shadowed_lights();
     let check = |r: &mut Renderer, to: &SceneData, batch: &[[u8; 4]], what: &str| {
-        let u = r.update_scene(to).unwrap().expect("same lights and bounds: in place");
+        let u = r.update_scene(to, None).unwrap().expect("same lights and bounds: in place");
         let bounces = r.settle(|_, _| {}).unwrap();
         let image = r.render(&cam, W, H).unwrap().0.ldr;
         let d = golden::diff(batch, &image);
@@ -495,7 +495,7 @@ fn a_change_of_tiles_swaps_in_place_and_settles_to_the_image_of_a_new_renderer()
     // A scene the pools cannot hold is refused in place, and the renderer is untouched.
     let full = scene(n);
     if !caps.holds(&PoolCaps::of(&full)) {
-        assert!(r.update_scene(&full).unwrap().is_none());
+        assert!(r.update_scene(&full, None).unwrap().is_none());
         let d = golden::diff(&batch_most, &r.render(&cam, W, H).unwrap().0.ldr);
         assert!(golden::within_tolerance(&d), "{d:?}");
     }
@@ -536,7 +536,7 @@ fn a_change_of_tiles_reads_only_the_forms_the_renderer_lacks_and_repacks_on_the_
         if repack {
             r.repack_next_update();
         }
-        let swapped = grotto_runtime::stream::swap_tiles(gpu, &mut r, &mut scene, next, || {
+        let swapped = grotto_runtime::stream::swap_tiles(gpu, &mut r, &mut scene, (next, pkg), || {
             panic!("the same lights and bounds: swapped in place")
         })
         .unwrap();
@@ -572,7 +572,7 @@ fn a_shadow_budget_spreads_the_redraw_over_frames_and_shows_it_whole() {
     let mut r = Renderer::with_pools(gpu, half, budgeted, caps).unwrap();
     r.settle(|_, _| {}).unwrap();
     assert_eq!(r.take_shadow_faces_drawn(), r.shadow_face_count() as u64, "the first fill draws every face");
-    let u = r.update_scene(most).unwrap().expect("in place");
+    let u = r.update_scene(most, None).unwrap().expect("in place");
     assert!(u.shadow_faces >= 2, "the change must leave several faces out of date: {u:?}");
     let mut shown = Vec::new();
     let mut passes = 0;

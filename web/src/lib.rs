@@ -694,7 +694,8 @@ impl State {
                 Err(e) => return Err(e.into()),
             };
         let whole = || self.streaming.load(&next, Vec::new(), false);
-        stream::swap_tiles(&self.gpu, &mut self.renderer, &mut self.scene, scene, whole)?;
+        let pkg = self.streaming.package();
+        stream::swap_tiles(&self.gpu, &mut self.renderer, &mut self.scene, (scene, pkg), whole)?;
         self.scene.release_tile_data();
         self.current = next;
         // Fetched bytes beyond the budget's cache: only what the tiles now held read is kept,

@@ -384,8 +384,9 @@ fn follow_tiles(
     let mut swapped_any = false;
     loop {
         if let Some(new_scene) = arrived.scene.take() {
-            let swapped =
-                crate::stream::swap_tiles(gpu, r, scene, new_scene, || f.load_whole(&arrived.residency))?;
+            let swapped = crate::stream::swap_tiles(gpu, r, scene, (new_scene, f.package()), || {
+                f.load_whole(&arrived.residency)
+            })?;
             scene.release_tile_data();
             if !swapped_any {
                 change.carried_leaves = swapped.carried_leaves;

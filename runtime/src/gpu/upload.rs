@@ -31,12 +31,14 @@ impl<'g> Uploader<'g> {
     pub(crate) fn write(&mut self, buffer: &wgpu::Buffer, offset: u64, bytes: &[u8]) -> Result<u64> {
         let mut at = offset;
         for piece in bytes.chunks(UPLOAD_PIECE_BYTES) {
+            // Waited for before a piece that would take staging past the bound, not after: writes
+            // a little under the bound each would otherwise hold two pieces' staging at once.
+            if self.pending + piece.len() > UPLOAD_PIECE_BYTES && !cfg!(target_arch = "wasm32") {
+                self.flush()?;
+            }
             self.gpu.queue.write_buffer(buffer, at, piece);
             at += piece.len() as u64;
             self.pending += piece.len();
-            if self.pending >= UPLOAD_PIECE_BYTES && !cfg!(target_arch = "wasm32") {
-                self.flush()?;
-            }
         }
         self.written += bytes.len() as u64;
         Ok(bytes.len() as u64)
@@ -106,6 +108,10 @@ mod tests {
     use super::*;
     use crate::gpu::GpuOptions;
 
+    fn scratch_of(gpu: &Gpu, bytes: usize) -> wgpu::Buffer {
+        gpu.buffer("upload scratch", bytes as u64, wgpu::BufferUsages::COPY_DST).unwrap()
+    }
+
     #[test]
     fn writes_larger_than_a_piece_arrive_whole_and_in_place() {
         let opts = GpuOptions {
@@ -121,7 +127,14 @@ mod tests {
         let buffer = gpu.buffer("upload test", size, usage).unwrap();
         let mut up = Uploader::new(&gpu);
         assert_eq!(up.write(&buffer, 8, bytemuck::cast_slice(&data)).unwrap(), 4 * words as u64);
-        assert!(up.pending < UPLOAD_PIECE_BYTES, "the queue was waited on between pieces");
+        assert!(up.pending <= UPLOAD_PIECE_BYTES, "the queue was waited on between pieces");
+        // Writes each a little under the bound are waited for one by one.
+        let mut apart = Uploader::new(&gpu);
+        let under = vec![0u8; UPLOAD_PIECE_BYTES - 64];
+        for k in 0..3 {
+            apart.write(&scratch_of(&gpu, under.len()), 0, &under).unwrap();
+            assert_eq!(apart.pending, under.len(), "write {k}: no two writes' staging held at once");
+        }
         up.write(&buffer, 8 + 4 * words as u64, bytemuck::cast_slice(&[7u32, 8, 9])).unwrap();
         assert_eq!(up.written, 4 * words as u64 + 12);
         gpu.queue.submit([]);

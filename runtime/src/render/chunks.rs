@@ -152,6 +152,11 @@ impl ChunkCache {
         self.by_key.entry(key).or_insert_with(|| Arc::new(chunks_of(surfels))).clone()
     }
 
+    /// Keeps `chunks` as those of the tile form `key` (built as its surfels were written).
+    pub(crate) fn insert(&mut self, key: TileKey, chunks: Vec<Chunk>) {
+        self.by_key.insert(key, Arc::new(chunks));
+    }
+
     /// Forgets the forms not in `keep`.
     pub(crate) fn retain(&mut self, keep: &std::collections::HashSet<TileKey>) {
         self.by_key.retain(|k, _| keep.contains(k));

@@ -19,10 +19,11 @@ use crate::passes::{self};
 use crate::render::pool::{PoolCaps, Pools, TileKey, key, merge_runs};
 use crate::scene::data::SceneData;
 
-use crate::render::chunks::{Chunk, ChunkCache, Viewer};
+use crate::render::chunks::{CHUNK_SURFELS, Chunk, ChunkCache, Viewer, chunks_of};
 use crate::render::params::Lookup;
 use crate::render::params::tile_box;
 use crate::render::pool::{Placement, Slot};
+use grotto_format::Package;
 
 /// The tile pools on the GPU (tile records, nodes, leaves, leaf light, surfels, and the tile
 /// index in the lookup buffer) and where each resident tile form lives in them ([`Pools`]).
@@ -184,11 +185,11 @@ impl TilePools {
     /// already resident keep their slots and light; only the new forms are written (pool.rs), with
     /// the tile records and the tile index. `None`, with nothing changed, when the scene cannot
     /// replace this one in place (over the pools, tiles put together by hand, a tile index that
-    /// outgrows its room).
+    /// outgrows its room). `pkg`: the package whose surfels `scene` left there (surfels.rs).
     pub(super) fn place(
         &mut self,
         gpu: &Gpu,
-        scene: &SceneData,
+        (scene, pkg): (&SceneData, Option<&Package>),
         leaf_size_m: f32,
     ) -> Result<Option<PlacedScene>> {
         let (owners, exact) = scene.surfel_owners();
@@ -203,7 +204,8 @@ impl TilePools {
         let old_slots = self.slots.slots().clone();
         let placed = self.slots.place(scene, &owners)?;
         let moved_bytes = self.move_stayed(gpu, scene, &placed)?;
-        let (mut update, light_kept) = self.write_tiles(gpu, scene, &owners, &placed, &index)?;
+        let (mut update, light_kept, built) =
+            self.write_tiles(gpu, (scene, pkg), &owners, &placed, &index)?;
         update.moved_bytes = moved_bytes;
         // Tile forms that came or went.
         let new_keys: HashSet<TileKey> = placed.tiles.iter().map(key).collect();
@@ -216,6 +218,9 @@ impl TilePools {
             .collect();
         self.tile_surfels = placed.slots.iter().map(|s| s.surfels.clone()).collect();
         self.chunk_cache.retain(&new_keys);
+        for (k, chunks) in built {
+            self.chunk_cache.insert(k, chunks);
+        }
         self.tile_chunks = placed
             .tiles
             .iter()
@@ -310,20 +315,22 @@ impl TilePools {
     }
 
     /// Writes the forms new to the pools (their nodes re-indexed to their slots, leaves, light and
-    /// surfels), then the tile records and the tile index; returns what was written and, per tile,
-    /// whether its light was kept (in place, or moved with it).
+    /// surfels), then the tile records and the tile index; returns what was written, per tile
+    /// whether its light was kept (in place, or moved with it), and the chunks of the surfels
+    /// decoded from `pkg` as they were written.
     fn write_tiles(
         &self,
         gpu: &Gpu,
-        scene: &SceneData,
+        (scene, pkg): (&SceneData, Option<&Package>),
         owners: &[Range<u32>],
         placed: &Placement,
         index: &crate::scene::tile_index::TileIndex,
-    ) -> Result<(SceneUpdate, Vec<bool>)> {
+    ) -> Result<(SceneUpdate, Vec<bool>, Vec<(TileKey, Vec<Chunk>)>)> {
         let mut up = Uploader::new(gpu);
         let mut update =
             SceneUpdate { repacked: placed.repacked, freed_tiles: placed.freed, ..Default::default() };
         let mut light_kept = placed.kept.clone();
+        let mut built = Vec::new();
         for (i, (t, at)) in scene.tiles.iter().zip(&placed.tiles).enumerate() {
             if placed.kept[i] || placed.moved[i].is_some() {
                 light_kept[i] = true;
@@ -347,7 +354,6 @@ impl TilePools {
             );
             let leaves = &scene.leaves[l0..l0 + t.leaf_count as usize];
             let light = initial_light(leaves);
-            let surfels = &scene.surfels[owners[i].start as usize..owners[i].end as usize];
             let slot = &placed.slots[i];
             up.write(
                 &self.nodes_buf,
@@ -364,18 +370,35 @@ impl TilePools {
                 u64::from(at.leaf_offset) * size_of::<LeafLightGpu>() as u64,
                 bytemuck::cast_slice(&light),
             )?;
-            up.write(
-                &self.surfels,
-                u64::from(slot.surfels.start) * size_of::<SurfelGpu>() as u64,
-                bytemuck::cast_slice(surfels),
-            )?;
+            let surfels_at = u64::from(slot.surfels.start) * size_of::<SurfelGpu>() as u64;
+            if scene.in_package(i).is_some() {
+                let pkg = pkg.ok_or(Error::Internal {
+                    what: "tile pools",
+                    message: format!("tile {i}'s surfels are in a package none was given for"),
+                })?;
+                // Each piece is a whole number of chunks, so its chunks are the tile's from its start.
+                let (mut chunks, mut at) = (Vec::new(), 0u32);
+                scene.surfels_from_package(pkg, i, |piece| {
+                    chunks.extend(chunks_of(piece).into_iter().map(|c| Chunk { first: c.first + at, ..c }));
+                    let offset = surfels_at + u64::from(at) * size_of::<SurfelGpu>() as u64;
+                    at += piece.len() as u32;
+                    up.write(&self.surfels, offset, bytemuck::cast_slice(piece)).map(drop)
+                })?;
+                built.push((key(t), chunks));
+            } else {
+                let surfels = &scene.surfels[owners[i].start as usize..owners[i].end as usize];
+                up.write(&self.surfels, surfels_at, bytemuck::cast_slice(surfels))?;
+            }
         }
         up.write(&self.tiles_buf, 0, bytemuck::cast_slice(&placed.tiles))?;
         up.write(&self.lookup, self.index_bytes.start, bytemuck::cast_slice(&index.words))?;
         update.upload_bytes = up.written;
-        Ok((update, light_kept))
+        Ok((update, light_kept, built))
     }
 }
+
+// A piece decoded from a package is a whole number of chunks (write_tiles).
+const _: () = assert!(crate::scene::surfels::PIECE_SURFELS % CHUNK_SURFELS as usize == 0);
 
 pub(super) const STORAGE: wgpu::BufferUsages =
     wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC).union(wgpu::BufferUsages::COPY_DST);

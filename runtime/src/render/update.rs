@@ -9,6 +9,7 @@ use crate::render::pool::PoolCaps;
 use crate::render::renderer::{Compat, Renderer};
 use crate::render::tiles::SceneUpdate;
 use crate::scene::data::SceneData;
+use grotto_format::Package;
 
 impl Renderer {
     /// Replaces the scene with `scene`, another residency of the same package (the same lights,
@@ -19,12 +20,16 @@ impl Renderer {
     /// scene cannot replace this one in place (other lights or bounds, over the pools, tiles put
     /// together by hand): make a new renderer then. Nothing is changed in that case. The scene may
     /// leave out the tile forms this renderer holds ([`SceneData::absent`]); a form it leaves out
-    /// that the renderer does not hold is an error.
-    pub fn update_scene(&mut self, scene: &SceneData) -> Result<Option<SceneUpdate>> {
+    /// that the renderer does not hold is an error. `pkg`: the package whose surfels the scene
+    /// left there for the renderer to decode as it writes them (a change of tiles read by
+    /// `Streaming::load_changes`); it is needed only then.
+    pub fn update_scene(&mut self, scene: &SceneData, pkg: Option<&Package>) -> Result<Option<SceneUpdate>> {
         if Compat::of(scene) != self.compat {
             return Ok(None);
         }
-        let Some(placed) = self.pools.place(&self.gpu, scene, self.leaf_size_m)? else { return Ok(None) };
+        let Some(placed) = self.pools.place(&self.gpu, (scene, pkg), self.leaf_size_m)? else {
+            return Ok(None);
+        };
         let mut update = placed.update;
         let (by_height, ranges) = scene.nodes_by_height_at(self.pools.tiles());
         self.light.mip.set_order(&self.gpu, &by_height, &ranges)?;

@@ -118,6 +118,12 @@ pub struct SceneData {
     /// ([`SceneData::from_package_with_held`]); a scene lets go of all once a renderer holds them
     /// ([`SceneData::release_tile_data`]).
     pub absent: Vec<Option<TileSummary>>,
+    /// Per tile (empty: none), a full tile whose surfels a change of tiles left in the package
+    /// for the renderer to decode as it writes them (surfels.rs); its `tile_surfels` range is
+    /// empty.
+    pub(crate) in_package: Vec<Option<SurfelsInPackage>>,
+    /// The specular materials' regions in the frame, in slot order (surfels.rs).
+    pub(crate) material_regions: Vec<MaterialRegion>,
 }
 
 /// How many nodes, leaves and surfels a scene's tiles hold.
@@ -185,6 +191,7 @@ impl TileMode {
 pub use crate::scene::summary::{HeldTiles, TileKey, TileSummary};
 pub(crate) use crate::scene::summary::{MAX_MATERIALS, key};
 use crate::scene::summary::{albedo_max, cells_box};
+use crate::scene::surfels::{MaterialRegion, SurfelsInPackage};
 
 /// A specular material as shade uses it.
 #[derive(Clone, Debug, PartialEq)]
@@ -366,30 +373,6 @@ pub(crate) fn frame_of(pkg: &Package) -> Result<Option<([f64; 3], f64)>> {
         .tiles()
         .find(|t| t.find(SectionKind::SvoNodes, 0).is_some_and(|s| s.raw_len > 0))
         .map(|t| (t.origin_m(), t.leaf_size_m())))
-}
-
-/// Each surfel's scan index (format 1.2: the tile's surfel-scans section), or [`NO_SCAN`] for
-/// all where the package has none. A section of another length, or an index past the scene's
-/// scan list, is a damaged package.
-pub(crate) fn tile_scans(
-    tile: &grotto_format::Tile<'_>,
-    surfels: usize,
-    scans: usize,
-) -> std::result::Result<Vec<u32>, String> {
-    let Some(stored) = tile.read::<u16>(SectionKind::SurfelScans).map_err(|e| e.to_string())? else {
-        return Ok(vec![crate::gpu::types::NO_SCAN; surfels]);
-    };
-    if stored.len() != surfels {
-        return Err(format!(
-            "tile {} has {} surfel scan indices for {surfels} surfels",
-            tile.index(),
-            stored.len()
-        ));
-    }
-    if let Some(bad) = stored.iter().find(|&&s| usize::from(s) >= scans) {
-        return Err(format!("tile {} names scan {bad}, but the scene lists {scans} scans", tile.index()));
-    }
-    Ok(stored.iter().map(|&s| u32::from(s)).collect())
 }
 
 impl SceneData {
@@ -602,7 +585,9 @@ impl SceneData {
         SceneCounts {
             nodes: self.nodes.len() + absent.clone().map(|s| s.nodes() as usize).sum::<usize>(),
             leaves: self.leaves.len() + absent.clone().map(|s| s.leaves as usize).sum::<usize>(),
-            surfels: self.surfels.len() + absent.map(|s| s.surfels as usize).sum::<usize>(),
+            surfels: self.surfels.len()
+                + absent.map(|s| s.surfels as usize).sum::<usize>()
+                + self.in_package.iter().flatten().map(|s| s.surfels as usize).sum::<usize>(),
         }
     }
 
@@ -613,7 +598,7 @@ impl SceneData {
 
     /// Whether the scene holds every tile's data (a renderer can be made from it).
     pub fn holds_all_tiles(&self) -> bool {
-        self.absent.iter().all(Option::is_none)
+        self.absent.iter().all(Option::is_none) && self.in_package.iter().all(Option::is_none)
     }
 
     /// An error where some tile's data is not held here: `what` (a renderer made) needs it.
@@ -651,9 +636,10 @@ impl SceneData {
     /// [`SceneData::surfel_owners`]).
     pub(crate) fn tile_elements(&self, owners: &[std::ops::Range<u32>], t: usize) -> (u32, u32, u32) {
         let tile = &self.tiles[t];
-        let surfels = match self.absent_tile(t) {
-            Some(s) => s.surfels,
-            None => owners.get(t).map_or(0, |r| r.len() as u32),
+        let surfels = match (self.absent_tile(t), self.in_package(t)) {
+            (Some(s), _) => s.surfels,
+            (None, Some(left)) => left.surfels,
+            (None, None) => owners.get(t).map_or(0, |r| r.len() as u32),
         };
         (tile.node_count, tile.leaf_count, surfels)
     }
@@ -667,7 +653,12 @@ impl SceneData {
         let nodes = &self.nodes[tile.node_offset as usize..(tile.node_offset + tile.node_count) as usize];
         let leaves = &self.leaves[tile.leaf_offset as usize..(tile.leaf_offset + tile.leaf_count) as usize];
         let surfels = owners.get(t).map_or(&[][..], |r| &self.surfels[r.start as usize..r.end as usize]);
-        TileSummary::of(tile.depth - tile.leaf_lod, nodes, leaves, surfels, self.leaf_size_m)
+        let mut summary =
+            TileSummary::of(tile.depth - tile.leaf_lod, nodes, leaves, surfels, self.leaf_size_m);
+        if let Some(left) = self.in_package(t) {
+            (summary.surfels, summary.material_surfels) = (left.surfels, left.material_surfels);
+        }
+        summary
     }
 
     /// The summary of every tile form, by key: what a load for another residency may leave out
@@ -694,7 +685,7 @@ impl SceneData {
         }
         (self.tiles, self.nodes, self.leaves, self.surfels, self.tile_surfels) =
             (from.tiles, from.nodes, from.leaves, from.surfels, from.tile_surfels);
-        self.absent = Vec::new();
+        (self.absent, self.in_package) = (Vec::new(), Vec::new());
         Ok(())
     }
 
@@ -722,6 +713,7 @@ impl SceneData {
             (t.node_offset, t.leaf_offset, *r) = (0, 0, 0..0);
         }
         (self.nodes, self.leaves, self.surfels) = (Vec::new(), Vec::new(), Vec::new());
+        self.in_package = Vec::new();
     }
 
     /// Node indices ordered by height (0 = leaves) and the range of each height, for the mip pass.

@@ -194,6 +194,11 @@ impl Follow {
         scene.restore_tile_data(again)
     }
 
+    /// The package the tiles are read from.
+    pub(crate) fn package(&self) -> &grotto_format::Package {
+        self.streaming.package()
+    }
+
     /// Reads residency `r` whole (for [`streaming::swap_tiles`] where the renderer must be made
     /// anew).
     pub(crate) fn load_whole(&self, r: &Residency) -> Result<SceneData> {
@@ -240,7 +245,8 @@ impl Follow {
                 &scene.held_tiles(),
             )?;
             self.hold_back(&damaged);
-            streaming::swap_tiles(gpu, r, scene, next, || self.streaming.load(&loaded, Vec::new(), false))?;
+            let whole = || self.streaming.load(&loaded, Vec::new(), false);
+            streaming::swap_tiles(gpu, r, scene, (next, self.streaming.package()), whole)?;
             scene.release_tile_data();
             (before, step) = (loaded.clone(), loaded);
         }

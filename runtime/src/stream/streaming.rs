@@ -346,21 +346,25 @@ pub struct Swapped {
 
 /// Puts `new_scene` into the renderer in place of `scene` (which it replaces): only the new tile
 /// forms are written; tiles resident before and after keep their place and light. `new_scene`
-/// may leave out the forms the renderer holds ([`Streaming::load_changes`]); where the renderer
+/// may leave out the forms the renderer holds ([`Streaming::load_changes`]), and leave its full
+/// tiles' surfels in `pkg`, its package, to be decoded as they are written; where the renderer
 /// must be made anew after all, `reload` reads the residency whole. The light is not settled
 /// here: the caller decides how many bounces to spend.
 pub fn swap_tiles(
     gpu: &Gpu,
     r: &mut Renderer,
     scene: &mut SceneData,
-    mut new_scene: SceneData,
+    (mut new_scene, pkg): (SceneData, &Package),
     reload: impl FnOnce() -> Result<SceneData>,
 ) -> Result<Swapped> {
     // The lights are the scene's as they are now, with their circuits' state (a residency asked
     // for before a circuit was switched arrives with the lights of then), and so is the story (a
     // story file's amendments).
     new_scene.take_lights_and_story(scene);
-    if let Some(u) = r.update_scene(&new_scene)? {
+    let updated = r.update_scene(&new_scene, Some(pkg))?;
+    // The surfels decoded as they were written read the map again.
+    pkg.release_mapped();
+    if let Some(u) = updated {
         *scene = new_scene;
         return Ok(Swapped { carried_leaves: u.carried_leaves, update: Some(u), made_anew: false });
     }

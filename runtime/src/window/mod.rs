@@ -692,7 +692,13 @@ fn follow_camera(s: &mut State, cam: Camera) -> Result<bool> {
     if let Some(arrived) = f.poll()? {
         if let Some(new_scene) = arrived.scene {
             let whole = || f.load_whole(&arrived.residency);
-            crate::stream::swap_tiles(&s.gpu, &mut s.renderer, &mut s.scene, new_scene, whole)?;
+            crate::stream::swap_tiles(
+                &s.gpu,
+                &mut s.renderer,
+                &mut s.scene,
+                (new_scene, f.package()),
+                whole,
+            )?;
             s.scene.release_tile_data();
             swapped = true;
         }
