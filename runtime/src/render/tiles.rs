@@ -325,7 +325,7 @@ impl TilePools {
         owners: &[Range<u32>],
         placed: &Placement,
         index: &crate::scene::tile_index::TileIndex,
-    ) -> Result<(SceneUpdate, Vec<bool>, Vec<(TileKey, Vec<Chunk>)>)> {
+    ) -> Result<(SceneUpdate, Vec<bool>, BuiltChunks)> {
         let mut up = Uploader::new(gpu);
         let mut update =
             SceneUpdate { repacked: placed.repacked, freed_tiles: placed.freed, ..Default::default() };
@@ -397,8 +397,11 @@ impl TilePools {
     }
 }
 
+/// The chunks of tile forms built as their surfels were written.
+type BuiltChunks = Vec<(TileKey, Vec<Chunk>)>;
+
 // A piece decoded from a package is a whole number of chunks (write_tiles).
-const _: () = assert!(crate::scene::surfels::PIECE_SURFELS % CHUNK_SURFELS as usize == 0);
+const _: () = assert!(crate::scene::surfels::PIECE_SURFELS.is_multiple_of(CHUNK_SURFELS as usize));
 
 pub(super) const STORAGE: wgpu::BufferUsages =
     wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_SRC).union(wgpu::BufferUsages::COPY_DST);

@@ -121,9 +121,9 @@ pub struct SceneData {
     /// Per tile (empty: none), a full tile whose surfels a change of tiles left in the package
     /// for the renderer to decode as it writes them (surfels.rs); its `tile_surfels` range is
     /// empty.
-    pub(crate) in_package: Vec<Option<SurfelsInPackage>>,
+    pub in_package: Vec<Option<SurfelsInPackage>>,
     /// The specular materials' regions in the frame, in slot order (surfels.rs).
-    pub(crate) material_regions: Vec<MaterialRegion>,
+    pub material_regions: Vec<MaterialRegion>,
 }
 
 /// How many nodes, leaves and surfels a scene's tiles hold.

@@ -92,7 +92,8 @@ impl SceneData {
             let load = TileLoad { classify_rock, defer_surfels };
             let left = out.push_tile(&tile, mode, origin_leaf, load, &mut hidden_leaves, &scene)?;
             if out.tiles.len() > before {
-                (absent.push(None), in_package.push(left));
+                absent.push(None);
+                in_package.push(left);
             }
         }
         if absent.iter().any(Option::is_some) {
@@ -538,10 +539,10 @@ mod tests {
     }
 
     fn surfels_left_in_the_package_decode_as_a_whole_load(pkg: &Package) {
-        let whole = SceneData::from_package(&pkg).unwrap();
+        let whole = SceneData::from_package(pkg).unwrap();
         let modes = |_| TileMode::Full;
         let left =
-            SceneData::from_package_with_held(&pkg, modes, whole.rock.clone(), &HeldTiles::new()).unwrap();
+            SceneData::from_package_with_held(pkg, modes, whole.rock.clone(), &HeldTiles::new()).unwrap();
         assert!(whole.tiles.len() > 2 && left.surfels.is_empty() && !left.holds_all_tiles());
         assert!(whole.surfels.iter().any(|s| s.color[3] > 0), "the wet cave assigns materials");
         assert!(whole.surfels.iter().any(|s| s.scan != NO_SCAN && s.scan > 0), "and has scans");
@@ -555,8 +556,9 @@ mod tests {
         );
         for t in 0..whole.tiles.len() {
             let (mut got, mut pieces) = (Vec::new(), Vec::new());
-            left.surfels_from_package_by(&pkg, t, 1000, |p| {
-                (got.extend_from_slice(p), pieces.push(p.len()));
+            left.surfels_from_package_by(pkg, t, 1000, |p| {
+                got.extend_from_slice(p);
+                pieces.push(p.len());
                 Ok(())
             })
             .unwrap();
@@ -566,10 +568,10 @@ mod tests {
         }
         assert!(whole.surfels.len() > 3000, "several pieces a tile");
         let stop = left
-            .surfels_from_package(&pkg, 0, |_| Err(Error::Internal { what: "test", message: "full".into() }));
+            .surfels_from_package(pkg, 0, |_| Err(Error::Internal { what: "test", message: "full".into() }));
         assert!(matches!(stop, Err(Error::Internal { what: "test", .. })), "a piece's error ends the decode");
         assert!(
-            whole.surfels_from_package(&pkg, 0, |_| Ok(())).is_err(),
+            whole.surfels_from_package(pkg, 0, |_| Ok(())).is_err(),
             "a tile whose surfels are held here"
         );
     }

@@ -11,5 +11,5 @@ mod load;
 pub mod rock;
 pub mod story;
 mod summary;
-pub(crate) mod surfels;
+pub mod surfels;
 pub mod tile_index;

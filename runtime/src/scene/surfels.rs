@@ -22,7 +22,7 @@ const _: () = assert!(PIECE_SURFELS * size_of::<SurfelGpu>() <= 8 << 20);
 
 /// A specular material's region in the frame, with the least normal z a surfel in it needs.
 #[derive(Clone, Debug, PartialEq)]
-pub(crate) struct MaterialRegion {
+pub struct MaterialRegion {
     lo_m: DVec3,
     hi_m: DVec3,
     min_normal_z: f32,
@@ -32,7 +32,7 @@ pub(crate) struct MaterialRegion {
 /// surfels it has, and how many of them each specular material takes (counted as the load read
 /// them once to place the tile's leaves).
 #[derive(Clone, Debug, Default, PartialEq)]
-pub(crate) struct SurfelsInPackage {
+pub struct SurfelsInPackage {
     pub(crate) tile: u32,
     pub(crate) surfels: u32,
     pub(crate) material_surfels: [u32; MAX_MATERIALS],
