@@ -846,12 +846,5 @@ impl SceneData {
 
 /// sRGB colour of each of a tile's `n` surfels (BC1 or raw; grey where the package has none).
 pub(crate) fn tile_colors(tile: &grotto_format::Tile<'_>, n: usize) -> Result<Vec<[u8; 3]>> {
-    use grotto_format::spec::Bc1Block;
-    if let Some(bc1) = tile.read::<Bc1Block>(SectionKind::SurfelColorsBc1)? {
-        return Ok(grotto_format::color::decode_bc1(&bc1, n));
-    }
-    if let Some(raw) = tile.read::<Rgba8>(SectionKind::SurfelColorsRaw)? {
-        return Ok(raw.iter().take(n).map(|c| [c.0[0], c.0[1], c.0[2]]).collect());
-    }
-    Ok(vec![[180; 3]; n])
+    Ok(crate::scene::surfels::SurfelColors::of(tile)?.run(0, n))
 }

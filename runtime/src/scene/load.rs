@@ -36,7 +36,7 @@ impl SceneData {
     /// `held`: tile forms a renderer holds already, left out (with the rock given: it is
     /// classified from every tile's leaves otherwise). A change of tiles (`held` given) leaves
     /// its full tiles' surfels in the package for the renderer to decode as it writes them
-    /// ([`SceneData::surfels_in_package`]).
+    /// ([`SceneData::in_package`]).
     pub(crate) fn load(
         pkg: &Package,
         mode_of: impl Fn(usize) -> TileMode,
@@ -437,7 +437,7 @@ impl SceneData {
         self.in_package.get(t).and_then(Option::as_ref)
     }
 
-    /// Tile `t`'s surfels that this scene left in `pkg` ([`SceneData::surfels_in_package`]),
+    /// Tile `t`'s surfels that this scene left in `pkg` ([`SceneData::in_package`]),
     /// decoded as a load would decode them and handed to `each` in order, at most
     /// [`PIECE_SURFELS`] at a time (every piece but the last holds exactly that many). A package
     /// that now reads otherwise than it did at load (another count) is an error.
