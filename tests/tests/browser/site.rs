@@ -135,10 +135,33 @@ fn a_browser_without_webgpu_gets_the_picture_and_the_points_of_interest_not_a_bl
     assert_eq!(state, "error");
     let text = browser.eval("return document.getElementById('message').innerText");
     assert!(text.as_str().unwrap().contains("budget \"tiny\""), "{text}");
-    let shown = browser.wait_for(
-        "const i = document.getElementById('picture'); return i && i.complete && i.naturalWidth ? \
-         JSON.stringify([i.naturalWidth, i.naturalHeight]) : null",
-        Duration::from_secs(30),
-    );
-    assert_eq!(shown, json!([160, 120]));
+    let picture_shown = |browser: &Browser| {
+        browser.wait_for(
+            "const i = document.getElementById('picture'); return i && i.complete && i.naturalWidth ? \
+             JSON.stringify([i.naturalWidth, i.naturalHeight]) : null",
+            Duration::from_secs(30),
+        )
+    };
+    assert_eq!(picture_shown(&browser), json!([160, 120]));
+
+    // Tile pools smaller than every tile at its coarsest level: the page says what the far levels
+    // need and what to raise, beside the picture.
+    let far_bytes: u64 = grotto_runtime::stream::residency::footprints(
+        &grotto_format::Package::open(&package).unwrap(),
+        false,
+    )
+    .unwrap()
+    .iter()
+    .map(|t| t.far.bytes)
+    .sum();
+    assert!(far_bytes > 0);
+    let mb = (far_bytes - 1) >> 20;
+    let url = format!("http://127.0.0.1:{}/?gpu_memory_mb={mb}", server.port);
+    browser.call("POST", "/url", Some(&json!({"url": url})));
+    let (state, _) = browser.wait_for_marker(READY_LIMIT);
+    assert_eq!(state, "error");
+    let text = browser.eval("return document.getElementById('message').innerText");
+    let text = text.as_str().unwrap();
+    assert!(text.contains("far levels") && text.contains("gpu_memory_mb="), "{text}");
+    assert_eq!(picture_shown(&browser), json!([160, 120]));
 }
