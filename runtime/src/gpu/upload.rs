@@ -9,8 +9,11 @@
 use crate::error::Result;
 use crate::gpu::Gpu;
 
-/// Staging held at most between two waits, natively.
-pub(crate) const UPLOAD_PIECE_BYTES: usize = 16 << 20;
+/// Staging held at most between two waits, natively. One piece of a tile's surfels
+/// (scene/surfels.rs): the driver's allocator keeps a freed staging block for the next, so twice
+/// this is what staging costs at a change of tiles (heaptrack of `grotto view` under
+/// `--gpu-memory 256M`: 33.5 MB of staging at its peak with 16 MiB, docs/benchmarks.md).
+pub(crate) const UPLOAD_PIECE_BYTES: usize = 8 << 20;
 
 /// Writes into buffers, waiting for the queue every [`UPLOAD_PIECE_BYTES`].
 #[derive(Debug)]

@@ -388,7 +388,9 @@ impl SceneData {
         leaf_offset: u32,
     ) {
         let mut leaf = leaf_offset;
-        for n in nodes.iter().take_while(|n| u32::from(n.level) <= leaf_level) {
+        let within = |n: &&SvoNode| u32::from(n.level) <= leaf_level;
+        self.nodes.reserve_exact(nodes.iter().take_while(within).count());
+        for n in nodes.iter().take_while(within) {
             let (first_child, mask) = if u32::from(n.level) == leaf_level {
                 leaf += 1;
                 (leaf - 1, 0)

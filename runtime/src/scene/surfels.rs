@@ -14,11 +14,11 @@ use grotto_format::spec::{Bc1Block, Rgba8, Surfel};
 use crate::gpu::types::{NO_SCAN, SurfelGpu};
 use crate::scene::summary::MAX_MATERIALS;
 
-/// Surfels a piece of `SceneData::surfels_from_package` holds at most: 8 MiB of them, a whole
-/// number of the renderer's surfel chunks (render/chunks.rs). Each piece is held twice while it
-/// is written (decoded here, and as the upload's staging copy).
+/// Surfels a piece of `SceneData::surfels_from_package` holds at most: an upload's piece of them
+/// (gpu/upload.rs), a whole number of the renderer's surfel chunks (render/chunks.rs). Each piece
+/// is held twice while it is written (decoded here, and as the upload's staging copy).
 pub(crate) const PIECE_SURFELS: usize = 200 * 1024;
-const _: () = assert!(PIECE_SURFELS * size_of::<SurfelGpu>() <= 8 << 20);
+const _: () = assert!(PIECE_SURFELS * size_of::<SurfelGpu>() <= crate::gpu::upload::UPLOAD_PIECE_BYTES);
 
 /// A specular material's region in the frame, with the least normal z a surfel in it needs.
 #[derive(Clone, Debug, PartialEq)]
