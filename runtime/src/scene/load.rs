@@ -10,7 +10,7 @@ use crate::gpu::types::{LeafGpu, SurfelGpu, TileGpu};
 use crate::scene::coarse::{CoarseLevel, coarse_level, gpu_tile};
 use crate::scene::data::{
     HeldTiles, LeafCentroids, MAX_MATERIALS, SceneCamera, SceneData, SceneMaterial, TileKey, TileMode,
-    TileSummary, frame_of, full_leaves, read_env_chain, tile_colors,
+    TileSummary, frame_of, full_leaves, grow_for, read_env_chain, tile_colors,
 };
 use crate::scene::rock::RockTable;
 use crate::scene::surfels::{
@@ -212,15 +212,11 @@ impl SceneData {
             self.push_nodes(&level.nodes, depth - leaf_lod, node_offset, leaf_offset);
             let tile_origin_m = origin_leaf.as_vec3() * self.leaf_size_m;
             let coarse = gpu_tile(&level.leaves, leaf_lod, self.leaf_size_m, tile_origin_m);
-            // The scene's vectors grow by exactly what a tile adds, never by doubling: a doubled
-            // vector of leaves was 14.6 MB at a change of tiles' peak (heaptrack of `grotto
-            // view`). Blocks past the allocator's mmap threshold grow by mremap, so exact steps copy
-            // nothing.
-            self.leaves.reserve_exact(coarse.leaves.len());
+            grow_for(&mut self.leaves, coarse.leaves.len());
             self.leaves.extend(coarse.leaves);
             let regions = &self.material_regions;
             // A level the package does not store was not in the load's count of surfels.
-            self.surfels.reserve_exact(coarse.splats.len());
+            grow_for(&mut self.surfels, coarse.splats.len());
             self.surfels.extend(coarse.splats.into_iter().map(|mut s| {
                 s.color[3] = material_slot(regions, &s);
                 s
@@ -306,7 +302,7 @@ impl SceneData {
             let leaf_shift = origin_leaf.as_dvec3() * f64::from(self.leaf_size_m);
             centroids.move_leaves(&mut leaves, leaf_shift);
         }
-        self.leaves.reserve_exact(leaves.len());
+        grow_for(&mut self.leaves, leaves.len());
         self.leaves.extend(leaves);
         if !has_surfels {
             return Ok(None);

@@ -115,12 +115,14 @@ fn a_browser_without_webgpu_gets_the_picture_and_the_points_of_interest_not_a_bl
         "{text}"
     );
     // The picture arrived and shows (decoded at its size).
-    let shown = browser.wait_for(
-        "const i = document.getElementById('picture'); return i && i.complete && i.naturalWidth ? \
-         JSON.stringify([i.naturalWidth, i.naturalHeight]) : null",
-        Duration::from_secs(30),
-    );
-    assert_eq!(shown, json!([160, 120]));
+    let picture_shown = |browser: &Browser| {
+        browser.wait_for(
+            "const i = document.getElementById('picture'); return i && i.complete && i.naturalWidth ? \
+             JSON.stringify([i.naturalWidth, i.naturalHeight]) : null",
+            Duration::from_secs(30),
+        )
+    };
+    assert_eq!(picture_shown(&browser), json!([160, 120]));
     let log = server.log.lock().unwrap().clone();
     assert!(log.iter().all(|s| s.path != "room.grotto"), "the package was fetched: {log:?}");
     assert!(log.iter().any(|s| s.path == publish::PICTURE_FILE && s.status == 200), "{log:?}");
@@ -135,13 +137,6 @@ fn a_browser_without_webgpu_gets_the_picture_and_the_points_of_interest_not_a_bl
     assert_eq!(state, "error");
     let text = browser.eval("return document.getElementById('message').innerText");
     assert!(text.as_str().unwrap().contains("budget \"tiny\""), "{text}");
-    let picture_shown = |browser: &Browser| {
-        browser.wait_for(
-            "const i = document.getElementById('picture'); return i && i.complete && i.naturalWidth ? \
-             JSON.stringify([i.naturalWidth, i.naturalHeight]) : null",
-            Duration::from_secs(30),
-        )
-    };
     assert_eq!(picture_shown(&browser), json!([160, 120]));
 
     // Tile pools smaller than every tile at its coarsest level: the page says what the far levels
