@@ -674,6 +674,81 @@ fn a_scan_given_to_render_is_packed_once_then_rendered() {
     assert!(again.status.success(), "{err}");
     assert!(err.contains("packed from it before"), "{err}");
     assert_eq!(packed(), 1, "packed once");
+    let summary: serde_json::Value = serde_json::from_slice(&again.stdout).unwrap();
+    assert!(summary.get("time_budget").is_none(), "a preset asked for is kept: {summary}");
+
+    // With no preset asked for, a scan's light is bought with the default time.
+    let default = Command::new(env!("CARGO_BIN_EXE_grotto"))
+        .args(["render", scan, "--out", png.to_str().unwrap(), "--size", "64x48", "--software", "--json"])
+        .env("GROTTO_CACHE_DIR", &cache)
+        .output()
+        .unwrap();
+    assert!(default.status.success(), "{}", String::from_utf8_lossy(&default.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&default.stdout).unwrap();
+    assert_eq!(summary["time_budget"]["budget_s"].as_f64(), Some(30.0), "{summary}");
+}
+
+/// `--time-budget`: a generous budget buys the most accurate preset, one too small for any renders
+/// the cheapest light and says so, and a budget that is no time is refused before any work.
+#[test]
+fn a_time_budget_buys_the_best_preset_that_fits_and_nonsense_is_refused() {
+    let (dir, path) = tiny_cave();
+    let p = path.to_str().unwrap();
+    let png = dir.path().join("budget.png");
+    let render = |extra: &[&str]| {
+        let mut args =
+            vec!["render", p, "--size", "32x24", "--software", "--json", "-o", png.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        grotto(&args)
+    };
+    let json = |out: &std::process::Output| -> serde_json::Value {
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+
+    let tiny = render(&["--time-budget", "0.000001"]);
+    let summary = json(&tiny);
+    let choice = &summary["time_budget"];
+    assert_eq!(choice["too_small"], true, "{summary}");
+    assert_eq!((choice["chosen"].as_str(), choice["bounces"].as_u64()), (Some("fast"), Some(1)), "{choice}");
+    assert_eq!(summary["bounces"].as_u64(), Some(1), "the cheapest light: one bounce");
+    assert_eq!(summary["settings"]["cones"].as_u64(), Some(4), "fast's cones");
+    let err = String::from_utf8_lossy(&tiny.stderr);
+    assert!(err.contains("warning: time budget") && err.contains("too small for any preset"), "{err}");
+
+    let generous = json(&render(&["--time-budget", "100000"]));
+    let choice = &generous["time_budget"];
+    assert_eq!(
+        (choice["chosen"].as_str(), choice["too_small"].as_bool()),
+        (Some("high"), Some(false)),
+        "{choice}"
+    );
+    assert_eq!(choice["made_anew"], true);
+    assert_eq!(generous["settings"]["cones"].as_u64(), Some(16), "high's cones");
+    assert!(choice["predicted_s"].as_f64().unwrap() > choice["probe_s"].as_f64().unwrap());
+
+    let text = grotto(&[
+        "render",
+        p,
+        "--size",
+        "32x24",
+        "--software",
+        "--time-budget",
+        "100000",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&text.stdout);
+    assert!(text.status.success() && said.contains("time budget 100000.0 s: high"), "{said}");
+
+    for bad in ["NaN", "-1", "0", "inf", "soon"] {
+        let out = render(&["--time-budget", bad]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "--time-budget {bad} was taken");
+        assert!(err.contains("--time-budget") && !err.contains("panicked"), "{bad}: {err}");
+    }
+    let both = render(&["--time-budget", "5", "--quality", "high"]);
+    assert!(String::from_utf8_lossy(&both.stderr).contains("cannot be used with"), "a preset and a budget");
 }
 
 /// The subcommands `help` lists (the lines under "Commands:", `help` itself left out).

@@ -8,14 +8,14 @@ use web_time::Instant;
 use serde::Serialize;
 
 use crate::cli::{image_out, labels};
-use crate::engine::{Opened, RenderOptions};
+use crate::engine::{Opened, RenderOptions, time_budget};
 use crate::error::{Error, Result};
 use crate::gpu::Gpu;
 use crate::light::plan::EffectPlan;
 use crate::render::{Frame, SceneUpdate};
 use crate::render::{PassStats, Renderer};
 use crate::scene::data::{SceneData, TileMode};
-use crate::settings::{ClipBox, Settings};
+use crate::settings::{ClipBox, Quality, Settings};
 use crate::stream::residency::Residency;
 use crate::view::camera::Camera;
 
@@ -119,6 +119,9 @@ pub struct RenderSummary {
     pub last_plan: EffectPlan,
     pub stats: PassStats,
     pub(crate) settings: Settings,
+    /// What `--time-budget` chose and gave up, where one was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time_budget: Option<time_budget::BudgetChoice>,
 }
 
 /// Progress events for the binary's bars.
@@ -205,6 +208,9 @@ fn check_options(opts: &RenderOptions) -> Result<()> {
             problem: format!("{} is outside 1..={MAX_SUPERSAMPLE}", opts.supersample),
         });
     }
+    if let Some(b) = opts.time_budget_s {
+        time_budget::check_budget(b)?;
+    }
     if opts.labels && kind == image_out::ImageKind::Exr {
         return Err(Error::Setting {
             name: "labels",
@@ -221,21 +227,43 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let (w_px, h_px) = (opts.width * opts.supersample, opts.height * opts.supersample);
     let gpu = Gpu::new(&opts.gpu)?;
     let t_load = Instant::now();
-    let Opened { mut scene, cameras, notes, residency, streaming, clip } = crate::engine::open(opts, &gpu)?;
+    let Opened { mut scene, cameras, mut notes, residency, streaming, clip } =
+        crate::engine::open(opts, &gpu)?;
     let load_s = t_load.elapsed().as_secs_f64();
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
     settings.still_samples = opts.samples;
     settings.validate().map_err(as_samples)?;
     let steps = opts.loader_steps();
+    let shadow_cap = opts.memory.map(|m| m.shadow_map_size);
+    // A time budget probes the light at the cheapest preset first.
+    if opts.time_budget_s.is_some() {
+        settings = time_budget::rung_settings(&settings, Quality::Fast, shadow_cap);
+    }
     let (mut r, mut follow) =
         crate::stream::follow::start(&gpu, &mut scene, settings.clone(), streaming, residency, steps)?;
     r.set_clip(clip);
+    let mut first_plan = r.plan(Some((&cameras[0], w_px, h_px)));
+    let t0 = Instant::now();
+    let mut budget_choice = None;
+    if let Some(budget_s) = opts.time_budget_s {
+        let budget = settings.bounces;
+        let probe = time_budget::Probe::run(&gpu, &mut r, |done, change| {
+            progress(Progress::Bounce { done, budget, change })
+        })?;
+        let choice = time_budget::choose(budget_s, &probe);
+        if choice.made_anew {
+            settings = time_budget::rung_settings(&settings, choice.chosen, shadow_cap);
+            r = remake(&gpu, r, &mut scene, follow.as_ref(), settings.clone())?;
+            first_plan = r.plan(Some((&cameras[0], w_px, h_px)));
+        } else {
+            r.set_bounces(choice.bounces);
+        }
+        budget_choice = Some(choice);
+    }
     // The GPU holds the tiles now; a change of tiles brings a scene loaded anew.
     scene.release_tile_data();
-    let first_plan = r.plan(Some((&cameras[0], w_px, h_px)));
-    let t0 = Instant::now();
-    let budget = settings.bounces;
+    let budget = r.settings().bounces;
     r.settle(|done, change| progress(Progress::Bounce { done, budget, change }))?;
     let settle_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
@@ -319,9 +347,13 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         )
         .into_iter()
         .chain(follow.as_mut().map(|f| f.take_notices()).unwrap_or_default())
+        .chain(budget_choice.as_ref().filter(|c| c.too_small).map(time_budget::BudgetChoice::describe))
         .collect(),
         residency: follow.map(|f| f.current().clone()),
-        notes,
+        notes: notes
+            .into_iter()
+            .chain(budget_choice.as_ref().filter(|c| !c.too_small).map(time_budget::BudgetChoice::describe))
+            .collect(),
         memory: opts.memory,
         load_s,
         settle_s,
@@ -330,7 +362,31 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
         last_plan,
         stats: r.stats().clone(),
         settings: r.settings().clone(),
+        time_budget: budget_choice,
     })
+}
+
+/// A renderer with `settings` for the scene `old` renders, made after `old` has let go of its
+/// GPU memory: its pools sized as `old`'s were, its clip box kept, its light from dark. Where tiles
+/// follow the camera, the scene gets its tile data again for it (`Follow::reload_into`).
+fn remake(
+    gpu: &Gpu,
+    old: Renderer,
+    scene: &mut SceneData,
+    follow: Option<&crate::stream::follow::Follow>,
+    settings: Settings,
+) -> Result<Renderer> {
+    let (caps, clip) = (old.pool_caps(), old.clip());
+    drop(old);
+    let mut r = match follow {
+        Some(f) => {
+            f.reload_into(scene)?;
+            Renderer::with_pools(gpu, scene, settings, caps)?
+        }
+        None => Renderer::new(gpu, scene, settings)?,
+    };
+    r.set_clip(clip);
+    Ok(r)
 }
 
 /// Auto exposure from `frame`, the first, kept for the sequence so it does not flicker; a frame of

@@ -17,6 +17,8 @@ mod options;
 pub mod scene;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod story_file;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod time_budget;
 
 #[cfg(not(target_arch = "wasm32"))]
 pub use open::{Opened, load_scene, open};

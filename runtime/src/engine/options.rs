@@ -89,6 +89,9 @@ pub struct RenderOptions {
     /// Draw the labels of the points of interest in view into the image (`--labels`, as the
     /// page shows them; cli/labels.rs). PNG and JPEG only.
     pub labels: bool,
+    /// Seconds the first picture's light may take (`--time-budget`, engine/time_budget.rs): the
+    /// most accurate preset that fits on this device, over the preset in `settings`.
+    pub time_budget_s: Option<f64>,
 }
 
 /// A box in world metres `[min, max]` in a scene's frame; an error where it is empty or not
@@ -149,6 +152,7 @@ impl RenderOptions {
             supersample: 1,
             samples: 1,
             labels: false,
+            time_budget_s: None,
         }
     }
 }

@@ -24,6 +24,10 @@ pub(crate) fn bench(b: BenchArgs) -> anyhow::Result<ExitCode> {
         b.render.supersample == 1,
         "--supersample is for grotto render (bench the larger --size instead)"
     );
+    anyhow::ensure!(
+        b.render.time_budget.is_none(),
+        "--time-budget is for grotto render; bench times a preset's passes (--quality)"
+    );
     let opts = options(&b.render)?;
     if let Some(file) = &b.edit_lights {
         return bench_edits(&opts, file, (b.render.json, b.render.explain));

@@ -65,9 +65,17 @@ pub(crate) struct RenderArgs {
     #[arg(long, short, default_value = "render.png")]
     pub(crate) out: PathBuf,
     /// Quality preset: fast, balanced or high (measured error and time: docs/accuracy.md); the
-    /// knob options below override single settings of it.
-    #[arg(long, default_value = "balanced")]
-    pub(crate) quality: String,
+    /// knob options below override single settings of it. Default: balanced for a package; for a
+    /// scan given where a package is expected, a time budget of 30 s for the light.
+    #[arg(long)]
+    pub(crate) quality: Option<String>,
+    /// grotto render: seconds the light may take. The first bounce is timed at the fast preset on
+    /// this device, and the most accurate preset whose light is predicted to fit is rendered
+    /// (predictions from the passes' costs in docs/accuracy.md); what was chosen and given up is
+    /// printed. A budget too small for any preset renders the cheapest light and says so.
+    #[arg(long, value_parser = parse_seconds, allow_hyphen_values = true,
+          conflicts_with_all = ["quality", "bounces", "cones", "aperture", "step", "shadow_map"])]
+    pub(crate) time_budget: Option<f64>,
     /// Bounce budget (propagation passes; stops earlier once converged).
     #[arg(long)]
     pub(crate) bounces: Option<u32>,
@@ -218,6 +226,22 @@ fn parse_floats<const N: usize>(s: &str, expected: &str) -> Result<[f64; N], Str
     }
 }
 
+/// A time in seconds: finite and above zero.
+fn parse_seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|e| format!("{s:?}: {e}"))?;
+    grotto_runtime::engine::time_budget::check_budget(v).map_err(|e| e.to_string())
+}
+
+/// Whether a knob of the light's march (beyond the preset) was given.
+pub(crate) fn march_knobs_set(a: &RenderArgs) -> bool {
+    a.bounces.is_some()
+        || a.cones.is_some()
+        || a.aperture.is_some()
+        || a.step.is_some()
+        || a.shadow_map.is_some()
+        || a.indirect.is_some()
+}
+
 fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
     parse_floats(s, "x,y,z")
 }
@@ -231,8 +255,12 @@ pub(crate) fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::engine::
     use grotto_runtime::engine::{Headlamp, RenderOptions};
     use grotto_runtime::settings::{IndirectFilter, Quality, Settings, ShadowFallback};
     use grotto_runtime::view::framing::CameraChoice;
-    let quality = Quality::parse(&a.quality)
-        .ok_or_else(|| anyhow::anyhow!("--quality {:?}: use fast, balanced or high", a.quality))?;
+    let quality = match &a.quality {
+        Some(q) => {
+            Quality::parse(q).ok_or_else(|| anyhow::anyhow!("--quality {q:?}: use fast, balanced or high"))?
+        }
+        None => Quality::Balanced,
+    };
     let mut settings = Settings::preset(quality);
     if let Some(i) = &a.indirect {
         settings.indirect = match i.as_str() {
@@ -293,7 +321,14 @@ pub(crate) fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::engine::
         }
         _ => CameraChoice::Default,
     };
+    // A scan's first look is bought with time, unless the user chose the light's knobs.
+    let is_scan = grotto_runtime::cli::scan_input::scan_kind(&a.package).ok().flatten().is_some();
+    let time_budget_s = a.time_budget.or_else(|| {
+        (is_scan && a.quality.is_none() && !march_knobs_set(a))
+            .then_some(grotto_runtime::engine::time_budget::SCAN_DEFAULT_BUDGET_S)
+    });
     Ok(RenderOptions {
+        time_budget_s,
         package: grotto_runtime::cli::scan_input::package_for(&a.package, |m| eprintln!("{m}"))?,
         camera,
         path: a.path.clone(),

@@ -46,7 +46,13 @@ pub(crate) fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
         v.render.supersample == 1,
         "--supersample is for grotto render (the viewer draws at --render-scale)"
     );
+    anyhow::ensure!(
+        v.render.time_budget.is_none(),
+        "--time-budget is for grotto render's picture; the viewer converges its light over frames (--quality)"
+    );
     let mut render = options(&v.render)?;
+    // A scan's default budget is render's: the viewer starts at its preset and converges over frames.
+    render.time_budget_s = None;
     if let Some(m) = &render.memory {
         eprintln!("{}", m.describe());
     }
@@ -58,13 +64,9 @@ pub(crate) fn view(v: ViewArgs) -> anyhow::Result<ExitCode> {
     render.settings.light_room_faces = 6;
     let a = &v.render;
     // The panel names the preset only where no knob changed it.
-    let knobs_set = a.bounces.is_some()
-        || a.cones.is_some()
-        || a.aperture.is_some()
-        || a.step.is_some()
-        || a.shadow_map.is_some()
-        || a.indirect.is_some();
-    let quality = grotto_runtime::settings::Quality::parse(&a.quality).filter(|_| !knobs_set);
+    let knobs_set = crate::render::march_knobs_set(a);
+    let quality = grotto_runtime::settings::Quality::parse(a.quality.as_deref().unwrap_or("balanced"))
+        .filter(|_| !knobs_set);
     let summary = grotto_runtime::window::run(grotto_runtime::window::ViewOptions {
         render,
         quality,
