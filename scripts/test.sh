@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # The test suite. Installs what the tests need on a fresh Debian machine (Mesa's software Vulkan
 # driver lavapipe, EGL + llvmpipe for wgpu's GL backend, and Xvfb and xdotool for the window of
-# `grotto view`), and Chromium with its WebDriver for the browser viewer's test, builds that viewer
+# `grotto view`), Chromium with its WebDriver for the browser viewer's test, and Survex (its `cavern`
+# compiles the survey tests' .svx files), builds that viewer
 # (scripts/build-web.sh, into target/web), then runs every test of the workspace. Tests that read third-party files expect ../shared/data beside the repository (or
 # GROTTO_SHARED_DATA) and fail without it; GROTTO_SKIP_SHARED_DATA=1 skips them instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-packages=(mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri xvfb xauth xdotool chromium chromium-driver)
+packages=(mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri xvfb xauth xdotool chromium chromium-driver survex)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -24,6 +24,7 @@ mod section;
 mod source;
 pub mod spec;
 pub mod story;
+pub mod survey;
 mod summary;
 pub mod svo;
 mod validate;

@@ -145,6 +145,20 @@ pub fn configs() -> Vec<Config> {
     // Each gather cone followed as rays that end at the first surface; with the fast and
     // high presets too, to show whether presets with rays would keep their order.
     add("cone rays", "cone rays".into(), Settings { cone_rays: true, ..base.clone() });
+    // Rays spread over their cone's whole footprint: at the balanced preset's narrowed aperture
+    // the rays of 8 cones leave gaps between cones that no filtering fills.
+    for a in [0.7f32, 1.0] {
+        add(
+            "cone rays",
+            format!("cone rays, aperture {a}"),
+            Settings { cone_rays: true, cone_aperture_scale: a, ..base.clone() },
+        );
+    }
+    add(
+        "cone rays",
+        "high, cone rays, aperture 1".into(),
+        Settings { cone_rays: true, cone_aperture_scale: 1.0, ..Settings::preset(Quality::High) },
+    );
     for q in [Quality::Fast, Quality::High] {
         add(
             "cone rays",

@@ -227,8 +227,7 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     let (w_px, h_px) = (opts.width * opts.supersample, opts.height * opts.supersample);
     let gpu = Gpu::new(&opts.gpu)?;
     let t_load = Instant::now();
-    let Opened { mut scene, cameras, mut notes, residency, streaming, clip } =
-        crate::engine::open(opts, &gpu)?;
+    let Opened { mut scene, cameras, notes, residency, streaming, clip } = crate::engine::open(opts, &gpu)?;
     let load_s = t_load.elapsed().as_secs_f64();
     let mut settings = opts.settings.clone();
     settings.exposure = opts.exposure.unwrap_or(1.0);
