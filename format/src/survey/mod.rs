@@ -7,7 +7,6 @@
 //! them: [`Survey::crs`] names their system where the file does.
 
 use std::collections::HashMap;
-use std::path::Path;
 
 use serde::Serialize;
 
@@ -111,7 +110,7 @@ pub fn survey_format(first_bytes: &[u8]) -> Option<&'static str> {
 
 /// Reads a survey file, Survex `.3d` or Compass `.plt` by its contents.
 #[cfg(not(target_arch = "wasm32"))]
-pub fn read(path: &Path) -> Result<Survey, SurveyError> {
+pub fn read(path: &std::path::Path) -> Result<Survey, SurveyError> {
     let bytes = std::fs::read(path).map_err(|e| SurveyError {
         path: path.display().to_string(),
         problem: format!("cannot read it: {e}"),
