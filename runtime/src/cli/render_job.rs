@@ -16,6 +16,8 @@ use crate::render::{Frame, SceneUpdate};
 use crate::render::{PassStats, Renderer};
 use crate::scene::data::{SceneData, TileMode};
 use crate::settings::{ClipBox, Quality, Settings};
+use crate::stream::Streaming;
+use crate::stream::follow::Follow;
 use crate::stream::residency::Residency;
 use crate::view::camera::Camera;
 
@@ -233,38 +235,16 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     settings.exposure = opts.exposure.unwrap_or(1.0);
     settings.still_samples = opts.samples;
     settings.validate().map_err(as_samples)?;
-    let steps = opts.loader_steps();
-    let shadow_cap = opts.memory.map(|m| m.shadow_map_size);
-    // A time budget probes the light at the cheapest preset first.
-    if opts.time_budget_s.is_some() {
-        settings = time_budget::rung_settings(&settings, Quality::Fast, shadow_cap);
-    }
-    let (mut r, mut follow) =
-        crate::stream::follow::start(&gpu, &mut scene, settings.clone(), streaming, residency, steps)?;
-    r.set_clip(clip);
-    let mut first_plan = r.plan(Some((&cameras[0], w_px, h_px)));
+    let first_cam = (&cameras[0], w_px, h_px);
+    let Started { mut r, mut follow, first_plan, budget_choice } =
+        start(opts, &gpu, &mut scene, &mut settings, (streaming, residency, clip), first_cam, &mut progress)?;
     let t0 = Instant::now();
-    let mut budget_choice = None;
-    if let Some(budget_s) = opts.time_budget_s {
-        let budget = settings.bounces;
-        let probe = time_budget::Probe::run(&gpu, &mut r, |done, change| {
-            progress(Progress::Bounce { done, budget, change })
-        })?;
-        let choice = time_budget::choose(budget_s, &probe);
-        if choice.made_anew {
-            settings = time_budget::rung_settings(&settings, choice.chosen, shadow_cap);
-            r = remake(&gpu, r, &mut scene, follow.as_ref(), settings.clone())?;
-            first_plan = r.plan(Some((&cameras[0], w_px, h_px)));
-        } else {
-            r.set_bounces(choice.bounces);
-        }
-        budget_choice = Some(choice);
-    }
     // The GPU holds the tiles now; a change of tiles brings a scene loaded anew.
     scene.release_tile_data();
     let budget = r.settings().bounces;
     r.settle(|done, change| progress(Progress::Bounce { done, budget, change }))?;
-    let settle_s = t0.elapsed().as_secs_f64();
+    // The probe of a time budget was the light's first update.
+    let settle_s = t0.elapsed().as_secs_f64() + budget_choice.as_ref().map_or(0.0, |c| c.probe_s);
     let t1 = Instant::now();
     let mut images = Vec::new();
     let mut exposure = settings.exposure;
@@ -365,6 +345,59 @@ pub fn run(opts: &RenderOptions, mut progress: impl FnMut(Progress)) -> Result<R
     })
 }
 
+/// The renderer a job starts with, its tiles following the camera where the package is over
+/// budget, and what `--time-budget` chose.
+struct Started {
+    r: Renderer,
+    follow: Option<Follow>,
+    first_plan: EffectPlan,
+    budget_choice: Option<time_budget::BudgetChoice>,
+}
+
+/// Makes the job's renderer for `settings`. With a time budget, the light is first probed at the
+/// fast preset and a preset chosen from it: where that is another, the renderer is made anew for
+/// it (`settings` become its), else the probe's goes on with its bounces cut to what fits.
+fn start(
+    opts: &RenderOptions,
+    gpu: &Gpu,
+    scene: &mut SceneData,
+    settings: &mut Settings,
+    (streaming, residency, clip): (Option<Streaming>, Option<Residency>, Option<ClipBox>),
+    first_cam: (&Camera, u32, u32),
+    progress: &mut impl FnMut(Progress),
+) -> Result<Started> {
+    let shadow_cap = opts.memory.map(|m| m.shadow_map_size);
+    if opts.time_budget_s.is_some() {
+        *settings = time_budget::rung_settings(settings, Quality::Fast, shadow_cap);
+    }
+    let (mut r, follow) = crate::stream::follow::start(
+        gpu,
+        scene,
+        settings.clone(),
+        streaming,
+        residency,
+        opts.loader_steps(),
+    )?;
+    r.set_clip(clip);
+    let mut first_plan = r.plan(Some(first_cam));
+    let Some(budget_s) = opts.time_budget_s else {
+        return Ok(Started { r, follow, first_plan, budget_choice: None });
+    };
+    let budget = settings.bounces;
+    let probe = time_budget::Probe::run(gpu, &mut r, |done, change| {
+        progress(Progress::Bounce { done, budget, change })
+    })?;
+    let choice = time_budget::choose(budget_s, &probe);
+    if choice.made_anew {
+        *settings = time_budget::rung_settings(settings, choice.chosen, shadow_cap);
+        r = remake(gpu, r, scene, follow.as_ref(), settings.clone())?;
+        first_plan = r.plan(Some(first_cam));
+    } else {
+        r.set_bounces(choice.bounces);
+    }
+    Ok(Started { r, follow, first_plan, budget_choice: Some(choice) })
+}
+
 /// A renderer with `settings` for the scene `old` renders, made after `old` has let go of its
 /// GPU memory: its pools sized as `old`'s were, its clip box kept, its light from dark. Where tiles
 /// follow the camera, the scene gets its tile data again for it (`Follow::reload_into`).
@@ -372,7 +405,7 @@ fn remake(
     gpu: &Gpu,
     old: Renderer,
     scene: &mut SceneData,
-    follow: Option<&crate::stream::follow::Follow>,
+    follow: Option<&Follow>,
     settings: Settings,
 ) -> Result<Renderer> {
     let (caps, clip) = (old.pool_caps(), old.clip());
@@ -419,7 +452,7 @@ struct TileChange {
 /// for again for the same view (`view`) and written before the light is settled, so the frame
 /// has every tile its view wants while the CPU holds one step's tiles at a time.
 fn follow_tiles(
-    f: &mut crate::stream::follow::Follow,
+    f: &mut Follow,
     gpu: &Gpu,
     r: &mut Renderer,
     scene: &mut SceneData,

@@ -198,8 +198,22 @@ pub(crate) fn choose(budget_s: f64, probe: &Probe) -> BudgetChoice {
             probe.wall_s + probe.predict_s(rung, bounces)
         }
     };
+    if probe.bounces == 0 {
+        // No light to propagate (a view without light): no preset buys a better picture.
+        return BudgetChoice {
+            budget_s,
+            probe_s: probe.wall_s,
+            chosen: Quality::Fast,
+            bounces: fast_bounces,
+            predicted_s: probe.wall_s,
+            mean_error: fast.mean_error,
+            gave_up: Vec::new(),
+            too_small: false,
+            made_anew: false,
+        };
+    }
     let times: Vec<f64> = LADDER.iter().map(predicted).collect();
-    let fits = |k: usize| times[k] <= budget_s || probe.bounces == 0;
+    let fits = |k: usize| times[k] <= budget_s;
     let gave_up = |k: usize| -> Vec<(Quality, f64)> {
         LADDER.iter().zip(&times).skip(k + 1).map(|(r, t)| (r.quality, *t)).collect()
     };
@@ -281,6 +295,9 @@ mod tests {
             assert!(matches!(e, Error::Setting { name: "time_budget", .. }), "{e}");
         }
         assert_eq!(check_budget(2.5).unwrap(), 2.5);
+        // Nothing to propagate: the probe's renderer is kept, whatever the budget.
+        let dark = choose(1e6, &Probe { bounces: 0, ..probe(0.2) });
+        assert_eq!((dark.chosen, dark.made_anew, dark.too_small), (Quality::Fast, false, false));
     }
 
     #[test]
