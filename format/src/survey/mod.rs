@@ -158,10 +158,7 @@ impl Survey {
         self.legs
             .iter()
             .filter(|l| !(l.flags.splay || l.flags.duplicate || l.flags.surface))
-            .map(|l| {
-                let d: Vec<f64> = (0..3).map(|a| l.to_m[a] - l.from_m[a]).collect();
-                (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
-            })
+            .map(|l| (0..3).map(|a| (l.to_m[a] - l.from_m[a]).powi(2)).sum::<f64>().sqrt())
             .sum()
     }
 }

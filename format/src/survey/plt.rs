@@ -56,11 +56,11 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Survey, String> {
                 let (mut station, mut lrud, mut flags) = (None, [None; 4], LegFlags::default());
                 while let Some(field) = f.next() {
                     let Some(letter) = field.chars().next() else { continue };
-                    match (letter.to_string().as_str(), &field[letter.len_utf8()..]) {
-                        ("S", rest) => {
+                    match (letter, &field[letter.len_utf8()..]) {
+                        ('S', rest) => {
                             station = Some(if rest.is_empty() { f.next().unwrap_or("") } else { rest })
                         }
-                        ("P", rest) => {
+                        ('P', rest) => {
                             let first = if rest.is_empty() { f.next() } else { Some(rest) };
                             // Left, up, down, right in the file; left, right, up, down here.
                             let mut luds = [None; 4];
@@ -72,7 +72,7 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Survey, String> {
                             }
                             lrud = [luds[0], luds[3], luds[1], luds[2]].map(|v| v.map(|v| v * FOOT_M));
                         }
-                        ("F", rest) => {
+                        ('F', rest) => {
                             let fl = if rest.is_empty() { f.next().unwrap_or("") } else { rest };
                             flags.splay = fl.contains('S');
                             flags.duplicate = fl.contains('L') || fl.contains('X');

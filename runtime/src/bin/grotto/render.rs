@@ -321,15 +321,17 @@ pub(crate) fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::engine::
         }
         _ => CameraChoice::Default,
     };
-    // A scan's first look is bought with time, unless the user chose the light's knobs.
-    let is_scan = grotto_runtime::cli::scan_input::scan_kind(&a.package).ok().flatten().is_some();
+    // A scan is packed into the cache (a package is opened where it is), and its first look is
+    // bought with time unless the user chose the light's knobs.
+    let package = grotto_runtime::cli::scan_input::package_for(&a.package, |m| eprintln!("{m}"))?;
+    let is_scan = package != a.package;
     let time_budget_s = a.time_budget.or_else(|| {
         (is_scan && a.quality.is_none() && !march_knobs_set(a))
             .then_some(grotto_runtime::engine::time_budget::SCAN_DEFAULT_BUDGET_S)
     });
     Ok(RenderOptions {
         time_budget_s,
-        package: grotto_runtime::cli::scan_input::package_for(&a.package, |m| eprintln!("{m}"))?,
+        package,
         camera,
         path: a.path.clone(),
         tour: a.tour.clone(),
