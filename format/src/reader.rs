@@ -399,6 +399,11 @@ impl Package {
         self.find(SectionKind::Provenance, Scope::Global, 0).map(|s| self.read_json(&s)).transpose()
     }
 
+    /// The surveyors' centreline stored with the package (`[survey]` in its manifest), if any.
+    pub fn survey(&self) -> Result<Option<crate::survey::Survey>> {
+        self.find(SectionKind::Survey, Scope::Global, 0).map(|s| self.read_json(&s)).transpose()
+    }
+
     fn read_json<T: serde::de::DeserializeOwned>(&self, s: &SectionInfo) -> Result<T> {
         let bytes = self.read_bytes(s)?;
         // Content (including this parse) was checked by read_bytes; a failure here is impossible

@@ -191,6 +191,10 @@ pub enum SectionKind {
     /// Per tile (format 2.0): the tile's surfels in the compact encoding of [`crate::compact`],
     /// bytes; a tile has this or [`SectionKind::Surfels`], not both.
     SurfelsCompact = 18,
+    /// Global: UTF-8 JSON [`crate::survey::Survey`], the surveyors' centreline the package was
+    /// built with (stations, legs, passage dimensions), in the package's world coordinates.
+    /// Readers that do not know it skip it, as every unknown kind.
+    Survey = 19,
 }
 
 /// The Rust type of one element of a section, used to check casts.
@@ -238,7 +242,7 @@ impl ElementType {
 
 impl SectionKind {
     /// Every section kind the spec defines, in numbering order.
-    pub const ALL: [SectionKind; 18] = [
+    pub const ALL: [SectionKind; 19] = [
         Self::SvoNodes,
         Self::LeafOpacity,
         Self::LeafAlbedo,
@@ -257,6 +261,7 @@ impl SectionKind {
         Self::RockBricks,
         Self::SurfelScans,
         Self::SurfelsCompact,
+        Self::Survey,
     ];
 
     /// The kind stored as `v`, or `None` for a value the spec does not define.
@@ -285,6 +290,7 @@ impl SectionKind {
             Self::RockBricks => "rock-bricks",
             Self::SurfelScans => "surfel-scans",
             Self::SurfelsCompact => "surfels-compact",
+            Self::Survey => "survey",
         }
     }
 
@@ -305,13 +311,21 @@ impl SectionKind {
             Self::RockBricks => ElementType::RockBrick,
             Self::SurfelScans => ElementType::U16,
             Self::SurfelsCompact => ElementType::Bytes,
-            Self::Scene | Self::Provenance => ElementType::Utf8Json,
+            Self::Scene | Self::Provenance | Self::Survey => ElementType::Utf8Json,
         }
     }
 
     /// Whether the kind belongs to a tile (true) or to the whole package (false).
     pub fn is_per_tile(self) -> bool {
-        !matches!(self, Self::EnvSh9 | Self::EnvMipLevels | Self::EnvMipBc6h | Self::Scene | Self::Provenance)
+        !matches!(
+            self,
+            Self::EnvSh9
+                | Self::EnvMipLevels
+                | Self::EnvMipBc6h
+                | Self::Scene
+                | Self::Provenance
+                | Self::Survey
+        )
     }
 }
 

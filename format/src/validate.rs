@@ -449,6 +449,10 @@ pub(crate) fn check_content(kind: SectionKind, data: &[u8], depth: u32) -> Resul
         SectionKind::Provenance => {
             serde_json::from_slice::<Provenance>(data).map(drop).map_err(|e| e.to_string())
         }
+        SectionKind::Survey => {
+            let survey: crate::survey::Survey = serde_json::from_slice(data).map_err(|e| e.to_string())?;
+            survey.check()
+        }
         SectionKind::LeafAlbedo
         | SectionKind::SurfelColorsRaw
         | SectionKind::SurfelColorsBc1

@@ -282,6 +282,13 @@ impl PackageWriter {
         self.add_section(SectionKind::Provenance, Scope::Global, 0, &json, Compression::Auto(3))
     }
 
+    /// Adds the survey's centreline (JSON); returns its section index.
+    pub fn add_survey(&mut self, survey: &crate::survey::Survey) -> Result<u32> {
+        survey.check().map_err(|r| self.refuse(format!("survey: {r}")))?;
+        let json = serde_json::to_vec(survey).map_err(|e| self.refuse(format!("survey: {e}")))?;
+        self.add_section(SectionKind::Survey, Scope::Global, 0, &json, Compression::Auto(3))
+    }
+
     /// Writes the table, directory and header, syncs, and atomically moves the package into place.
     pub fn finish(mut self) -> Result<PathBuf> {
         // The table lists global sections first, then each tile's run; file order stays as written.

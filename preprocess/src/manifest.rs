@@ -32,6 +32,11 @@ pub struct Manifest {
     pub(crate) pois: Vec<PoiSpec>,
     #[serde(default, rename = "tour")]
     pub(crate) tours: Vec<TourSpec>,
+    /// The surveyors' centreline (docs/manifest.md, `[survey]`).
+    pub survey: Option<SurveySpec>,
+    /// The survey read and moved into the scans' world, once the manifest is loaded.
+    #[serde(skip)]
+    pub(crate) survey_data: Option<grotto_format::survey::Survey>,
     /// Directory relative paths are resolved against (the manifest's own directory).
     #[serde(skip)]
     pub(crate) base_dir: PathBuf,
@@ -185,6 +190,35 @@ pub struct ResolvedScan {
     pub(crate) seen_from: SeenFrom,
 }
 
+/// The survey a package is built with: a Survex `.3d` or Compass `.plt` file, and where its
+/// coordinates lie in the scans' world.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SurveySpec {
+    pub(crate) path: PathBuf,
+    /// Added to every survey position (metres, east north up) to put it in the scans'
+    /// coordinates: for a survey kept in a local grid.
+    pub(crate) translation: Option<[f64; 3]>,
+}
+
+impl SurveySpec {
+    /// The survey at `path` (resolved), moved by `translation`.
+    pub(crate) fn read(&self, path: &Path) -> Result<grotto_format::survey::Survey> {
+        let mut survey = grotto_format::survey::read(path).map_err(|e| Error::Read {
+            path: path.to_path_buf(),
+            format: "survey",
+            reason: e.problem,
+        })?;
+        if let Some(t) = self.translation {
+            if !t.iter().all(|v| v.is_finite()) {
+                return Err(manifest_error(path, format!("[survey] translation {t:?} is not finite")));
+            }
+            survey.translate(t);
+        }
+        Ok(survey)
+    }
+}
+
 fn manifest_error(path: &Path, reason: impl std::fmt::Display) -> Error {
     Error::Manifest { path: path.to_path_buf(), reason: reason.to_string() }
 }
@@ -197,6 +231,10 @@ impl Manifest {
         m.base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
         if m.scans.is_empty() {
             return Err(manifest_error(path, "lists no [[scan]]"));
+        }
+        // Read now, so a survey that cannot be used stops the build before its scans are read.
+        if let Some(spec) = &m.survey {
+            m.survey_data = Some(spec.read(&m.resolve_path(&spec.path))?);
         }
         Ok(m)
     }

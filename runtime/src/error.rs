@@ -52,6 +52,10 @@ pub enum Error {
     Lighting { path: String, line: Option<usize>, problem: String },
     #[error("setting {name}: {problem}")]
     Setting { name: &'static str, problem: String },
+    /// A cave survey (`--survey`, or the one a package holds) that does not read or does not fit
+    /// the scans.
+    #[error("{path}: {problem}")]
+    Survey { path: String, problem: String },
     /// `grotto view` found no display to open its window on.
     #[error(
         "no display to open a window on ({0}); set DISPLAY or WAYLAND_DISPLAY (under Xvfb: \

@@ -54,8 +54,9 @@ pub struct Settings {
     /// Gather cones are followed as seven rays spread evenly over each cone, each ending where it
     /// enters rock or goes behind a leaf's surface and bringing the radiance there; the cone is
     /// covered by the share of its rays that ended. The composited march counts a surface a
-    /// cone runs along at every step (the closed rooms' excess). Off by default until
-    /// the accuracy report (knob "cone rays") shows it pays for its time.
+    /// cone runs along at every step (the closed rooms' excess); the balanced and high presets
+    /// use rays at aperture 1, where the seven rays spread over the cone's whole share of the
+    /// hemisphere (docs/accuracy.md, knob "composited march").
     pub cone_rays: bool,
     pub shadows: bool,
     pub shadow_map_size: u32,
@@ -337,25 +338,31 @@ impl Settings {
             Quality::Fast => Settings { cones: 4, step_scale: 1.0, bounces: 2, shadow_map_size: 256, ..d },
             // 8 interleaved cones: 10 were 0.0025 better on the demo cave, 20-30% slower, and put
             // the colour box at the edge of its time budget (docs/runtime.md).
+            // Rays at aperture 1: on the scanned rooms the composited march counted a wall a cone
+            // runs along at every step (colour box 0.091 -> 0.032, dogleg 0.068 -> 0.048,
+            // passage 0.065 -> 0.022; docs/reference.md "Judged on scans"), for light time
+            // within 15% of the march's. Fast keeps the march: with two bounces its excess is
+            // smaller, and it stays the cheapest.
             Quality::Balanced => Settings {
                 cones: 8,
-                cone_aperture_scale: 0.5,
+                cone_aperture_scale: 1.0,
+                cone_rays: true,
                 step_scale: 0.5,
                 bounces: 3,
                 shadow_map_size: 512,
                 ..d
             },
-            // Chosen from the measured front (docs/accuracy.md): with interleaved cone
-            // sets the trilinear path's wide filter beat tricubic on the dogleg (0.194 against
-            // 0.208); step 0.35 bought 0.0002 on the caves and 0.007 on the dogleg for 25-30%
-            // more time, which took the colour box within 2% of its time budget.
+            // Balanced's rays with more bounces and a finer shadow map. 8 cones, not 16: with
+            // rays, 12 and 16 cones erred more on the scanned dogleg (0.0462 and 0.0435 against
+            // 0.0404) and the passage (0.0348, 0.0326 against 0.0313) than 8 did, at up to twice
+            // the time (docs/reference.md "Judged on scans").
             Quality::High => Settings {
-                cones: 16,
-                cone_aperture_scale: 0.5,
+                cones: 8,
+                cone_aperture_scale: 1.0,
+                cone_rays: true,
                 step_scale: 0.5,
                 bounces: 8,
                 shadow_map_size: 1024,
-                indirect: IndirectFilter::Trilinear,
                 ..d
             },
         }
@@ -370,6 +377,8 @@ impl Settings {
             cone_aperture_scale: p.cone_aperture_scale,
             step_scale: p.step_scale,
             max_steps: p.max_steps,
+            cone_rays: p.cone_rays,
+            cone_planes: p.cone_planes,
             bounces: p.bounces,
             shadow_map_size: p.shadow_map_size,
             indirect: p.indirect,

@@ -8,13 +8,13 @@
 
 use std::collections::HashMap;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 pub mod plt;
 pub mod svx3d;
 
 /// A survey station.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Station {
     /// The full name, as the survey gives it (Survex: `cave.entrance.1`).
     pub name: String,
@@ -24,7 +24,7 @@ pub struct Station {
 }
 
 /// What a survey says about a station.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct StationFlags {
     /// On a leg above ground.
     pub surface: bool,
@@ -43,7 +43,7 @@ pub struct StationFlags {
 }
 
 /// What a survey says about a leg.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct LegFlags {
     /// Above ground.
     pub surface: bool,
@@ -54,7 +54,7 @@ pub struct LegFlags {
 }
 
 /// A leg of the centreline: a straight line between two positions.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Leg {
     pub from_m: [f64; 3],
     pub to_m: [f64; 3],
@@ -68,7 +68,7 @@ pub struct Leg {
 
 /// Passage dimensions measured at a station: left, right, up, down, metres (`None`: not
 /// measured).
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CrossSection {
     pub station: String,
     pub lrud_m: [Option<f64>; 4],
@@ -77,7 +77,7 @@ pub struct CrossSection {
 }
 
 /// A survey: its stations, legs and measured passage dimensions.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Survey {
     pub title: String,
     /// The coordinate system as the file names it (a PROJ string, `EPSG:n`), where it does.
@@ -144,6 +144,39 @@ impl Survey {
         for leg in &mut self.legs {
             leg.from = at.get(&key(leg.from_m)).copied();
             leg.to = at.get(&key(leg.to_m)).copied();
+        }
+    }
+
+    /// A reason the survey cannot be stored or used: a position not finite, a leg naming a
+    /// station that is not there.
+    pub fn check(&self) -> Result<(), String> {
+        let finite = |p: &[f64; 3]| p.iter().all(|v| v.is_finite());
+        if let Some(s) = self.stations.iter().find(|s| !finite(&s.position_m)) {
+            return Err(format!("station {} has position {:?}", s.name, s.position_m));
+        }
+        for (i, leg) in self.legs.iter().enumerate() {
+            if !finite(&leg.from_m) || !finite(&leg.to_m) {
+                return Err(format!("leg {i} runs {:?} -> {:?}", leg.from_m, leg.to_m));
+            }
+            if [leg.from, leg.to].into_iter().flatten().any(|k| k >= self.stations.len()) {
+                return Err(format!("leg {i} names a station past the {} there are", self.stations.len()));
+            }
+        }
+        if let Some(c) =
+            self.cross_sections.iter().find(|c| c.lrud_m.iter().flatten().any(|v| !v.is_finite()))
+        {
+            return Err(format!("the passage dimensions at {} are {:?}", c.station, c.lrud_m));
+        }
+        Ok(())
+    }
+
+    /// Moves every position by `offset_m` (east, north, up).
+    pub fn translate(&mut self, offset_m: [f64; 3]) {
+        let add = |p: &mut [f64; 3]| (0..3).for_each(|a| p[a] += offset_m[a]);
+        self.stations.iter_mut().for_each(|s| add(&mut s.position_m));
+        for leg in &mut self.legs {
+            add(&mut leg.from_m);
+            add(&mut leg.to_m);
         }
     }
 

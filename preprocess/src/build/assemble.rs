@@ -108,6 +108,10 @@ pub(crate) fn assemble_plan(
         profile.lap(Stage::Environment, &mut clock);
     }
     writer.add_scene(&Scene { scans: scan_infos(scans), ..scene.clone() })?;
+    if let (Some(spec), Some(survey)) = (&manifest.survey, &manifest.survey_data) {
+        writer.add_survey(survey)?;
+        inputs.push(hash_file(&manifest.resolve_path(&spec.path))?);
+    }
     inputs.extend(hash_scans(scans)?);
     profile.lap(Stage::HashInputs, &mut clock);
     writer.add_provenance(&Provenance {

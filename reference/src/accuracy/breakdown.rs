@@ -75,6 +75,11 @@ pub enum BreakdownScene {
     /// The closed box with red and green walls and one lamp under the ceiling
     /// ([`testscenes::colour_box`]), face by face, the ceiling near the lamp apart.
     ColourBox,
+    /// The dogleg as a survey delivers it: its rock faces scanned and built by grotto-pack
+    /// (the accuracy report's "dogleg (scanned)").
+    DoglegScanned,
+    /// The colour box as a survey delivers it (the accuracy report's "colour box (scanned)").
+    ColourBoxScanned,
 }
 
 /// Where the long passage's regions end along its centreline, metres from the lit end: 6 m
@@ -87,15 +92,32 @@ const COLOUR_BOX_REGIONS: [&str; 7] =
     ["ceiling near the lamp", "ceiling, rest", "floor", "red wall", "green wall", "back wall", "front wall"];
 
 /// Which of [`COLOUR_BOX_REGIONS`] a rock cell of the colour box belongs to: its face
-/// ([`testscenes::colour_box_face`]), the ceiling split at 0.5 m from the point above the lamp.
-fn colour_box_region(scene: &SceneData, c: glam::IVec3) -> Option<usize> {
+/// ([`testscenes::colour_box_face`]), the ceiling split at 0.5 m from the point above the lamp
+/// (`lamp_m` in the carved scene's frame).
+fn colour_box_region(lamp_m: glam::Vec3, c: glam::IVec3) -> Option<usize> {
     let face = testscenes::colour_box_face(c)?;
     if face > 0 {
         return Some(face + 1);
     }
-    let lamp_m = scene.lights.first()?.position_m;
-    let centre_m = (c.as_vec3() + 0.5) * scene.leaf_size_m;
+    let centre_m = (c.as_vec3() + 0.5) * testscenes::colour_box().leaf_size_m;
     Some(if (centre_m.truncate() - lamp_m.truncate()).length() < 0.5 { 0 } else { 1 })
+}
+
+/// The carved scene's cell a scanned leaf belongs to: a quarter of the carved cell behind its
+/// surface, in the carved scene's frame (`scanned_carved::ORIGIN_M`), so a leaf on a face finds
+/// the rock cell whose face it is.
+fn carved_cell(
+    scene: &SceneData,
+    leaf: &grotto_runtime::gpu::types::LeafGpu,
+    carved_leaf_m: f32,
+) -> glam::IVec3 {
+    use glam::{DVec3, Vec3};
+    let shift = (DVec3::from_array(scene.frame_origin_m)
+        - DVec3::from_array(grotto_fixtures::scanned_carved::ORIGIN_M))
+    .as_vec3();
+    let p = Vec3::from_slice(&leaf.center_m[..3])
+        - Vec3::from_slice(&leaf.normal_mean[..3]) * 0.25 * carved_leaf_m;
+    ((p + shift) / carved_leaf_m).floor().as_ivec3()
 }
 
 impl BreakdownScene {
@@ -104,6 +126,8 @@ impl BreakdownScene {
             Self::Dogleg => "dogleg",
             Self::Passage => "passage",
             Self::ColourBox => "colour box",
+            Self::DoglegScanned => "dogleg (scanned)",
+            Self::ColourBoxScanned => "colour box (scanned)",
         }
     }
 
@@ -113,6 +137,8 @@ impl BreakdownScene {
             Self::Dogleg => "docs/accuracy-passages.md",
             Self::Passage => "docs/accuracy-passage-long.md",
             Self::ColourBox => "docs/accuracy-colour-box.md",
+            Self::DoglegScanned => "docs/accuracy-passages-scanned.md",
+            Self::ColourBoxScanned => "docs/accuracy-colour-box-scanned.md",
         }
     }
 
@@ -128,6 +154,12 @@ impl BreakdownScene {
             Self::ColourBox => {
                 "each face of the colour box (`testscenes::colour_box`, 2.4 m inside, the lamp 0.3 m under the ceiling's middle), the ceiling within 0.5 m of the point above the lamp apart from the rest of it"
             }
+            Self::DoglegScanned => {
+                "each region of the dogleg as a survey delivers it (its rock faces scanned and built by grotto-pack, `grotto_fixtures::scanned_carved`; a leaf belongs to the region of the carved cell a quarter cell behind it): the lit room, the three corridors in the order light reaches them, and the chamber behind them"
+            }
+            Self::ColourBoxScanned => {
+                "each face of the colour box as a survey delivers it (scanned and built by grotto-pack with 0.125 m leaves, `grotto_fixtures::scanned_carved`; a leaf belongs to the face of the carved cell a quarter cell behind it), the ceiling within 0.5 m of the point above the lamp apart from the rest of it"
+            }
         }
     }
 
@@ -137,6 +169,9 @@ impl BreakdownScene {
             Self::Dogleg => Ok(testscenes::dogleg()),
             Self::Passage => crate::accuracy::scanned_passage(),
             Self::ColourBox => Ok(testscenes::colour_box()),
+            Self::DoglegScanned | Self::ColourBoxScanned => {
+                crate::accuracy::scanned_carved(self.name()).map(|(_, data)| data)
+            }
         }
     }
 
@@ -144,10 +179,22 @@ impl BreakdownScene {
     /// stretches by distance along its centreline.
     pub fn regions(self, scene: &SceneData) -> Vec<(String, Vec<usize>)> {
         let names: Vec<&str> = match self {
-            Self::Dogleg => testscenes::DOGLEG_REGIONS.iter().map(|(name, _, _)| *name).collect(),
+            Self::Dogleg | Self::DoglegScanned => {
+                testscenes::DOGLEG_REGIONS.iter().map(|(name, _, _)| *name).collect()
+            }
             Self::Passage => PASSAGE_REGION_ENDS_M.iter().map(|(name, _)| *name).collect(),
-            Self::ColourBox => COLOUR_BOX_REGIONS.to_vec(),
+            Self::ColourBox | Self::ColourBoxScanned => COLOUR_BOX_REGIONS.to_vec(),
         };
+        let carved = match self {
+            Self::DoglegScanned => testscenes::dogleg().leaf_size_m,
+            _ => testscenes::colour_box().leaf_size_m,
+        };
+        // The lamp in the carved scene's frame.
+        let lamp_m = scene.lights.first().map_or(glam::Vec3::ZERO, |l| {
+            let shift = glam::DVec3::from_array(scene.frame_origin_m)
+                - glam::DVec3::from_array(grotto_fixtures::scanned_carved::ORIGIN_M);
+            if self == Self::ColourBoxScanned { l.position_m + shift.as_vec3() } else { l.position_m }
+        });
         let mut regions: Vec<(String, Vec<usize>)> =
             names.iter().map(|n| ((*n).to_owned(), Vec::new())).collect();
         for (i, leaf) in scene.leaves.iter().enumerate() {
@@ -161,7 +208,9 @@ impl BreakdownScene {
                     let along_m = testscenes::passage_position_m(own).1;
                     PASSAGE_REGION_ENDS_M.iter().position(|(_, end)| along_m < *end)
                 }
-                Self::ColourBox => colour_box_region(scene, leaf.cell(scene.leaf_size_m)),
+                Self::ColourBox => colour_box_region(lamp_m, leaf.cell(scene.leaf_size_m)),
+                Self::DoglegScanned => testscenes::dogleg_region(carved_cell(scene, leaf, carved)),
+                Self::ColourBoxScanned => colour_box_region(lamp_m, carved_cell(scene, leaf, carved)),
             };
             if let Some(r) = region {
                 regions[r].1.push(i);
@@ -224,6 +273,9 @@ pub struct BreakdownOptions {
     pub cone_planes: bool,
     /// Every runtime configuration with [`Settings::cone_rays`] on.
     pub cone_rays: bool,
+    /// Every runtime configuration with the composited cone march at aperture 0.5, the balanced
+    /// and high presets' gather before they followed rays (what rays changed).
+    pub composited: bool,
     /// The reference's discs cut to their leaf cells (`SurfelScene::clip_discs_to_cells`; a
     /// hand-built scene's carved faces; hand-built scenes only).
     pub clip_discs: bool,
@@ -250,11 +302,16 @@ pub fn breakdown(
     options: BreakdownOptions,
     progress: impl Fn(&str),
 ) -> grotto_runtime::Result<Breakdown> {
-    let BreakdownOptions { paths, leaves_on_surfels, cone_planes, cone_rays, clip_discs } = options;
+    let BreakdownOptions { paths, leaves_on_surfels, cone_planes, cone_rays, composited, clip_discs } =
+        options;
     let mut data = which
         .data()
         .map_err(|problem| grotto_runtime::Error::Scene { package: which.name().into(), problem })?;
-    if which == BreakdownScene::Passage && (leaves_on_surfels || clip_discs) {
+    let built = matches!(
+        which,
+        BreakdownScene::Passage | BreakdownScene::DoglegScanned | BreakdownScene::ColourBoxScanned
+    );
+    if built && (leaves_on_surfels || clip_discs) {
         return Err(grotto_runtime::Error::Scene {
             package: which.name().into(),
             problem: "--leaves-on-surfels and --clip-discs are for the hand-built scenes, whose surfels lie one on each face of a rock cell; a package's leaves already lie on their surfels".into(),
@@ -264,10 +321,13 @@ pub fn breakdown(
         testscenes::leaves_on_surfels(&mut data);
     }
     let regions = which.regions(&data);
-    let planes = |s: Settings| Settings {
-        cone_planes: s.cone_planes || cone_planes,
-        cone_rays: s.cone_rays || cone_rays,
-        ..s
+    let planes = |s: Settings| {
+        let s = if composited && s.cone_rays {
+            Settings { cone_rays: false, cone_aperture_scale: 0.5, ..s }
+        } else {
+            s
+        };
+        Settings { cone_planes: s.cone_planes || cone_planes, cone_rays: s.cone_rays || cone_rays, ..s }
     };
     let base = planes(Settings::preset(Quality::Balanced));
     let mut scene = SurfelScene::from_scene(&data, base.splat_scale);

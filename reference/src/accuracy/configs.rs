@@ -132,39 +132,23 @@ pub fn configs() -> Vec<Config> {
     add("tail", "no tail".into(), Settings { bounce_tail: false, ..base.clone() });
     // What interleaved cone sets buy: every leaf with the same set, as before they came.
     add("interleave", "no interleave".into(), Settings { cone_interleave: false, ..base.clone() });
-    // Leaves as the half-spaces behind their surfaces at the finest levels.
-    add("cone planes", "cone planes".into(), Settings { cone_planes: true, ..base.clone() });
-    // With the fast and high presets too, to show whether presets with planes keep their order.
-    for q in [Quality::Fast, Quality::High] {
-        add(
-            "cone planes",
-            format!("{}, cone planes", q.name()),
-            Settings { cone_planes: true, ..Settings::preset(q) },
-        );
-    }
-    // Each gather cone followed as rays that end at the first surface; with the fast and
-    // high presets too, to show whether presets with rays would keep their order.
-    add("cone rays", "cone rays".into(), Settings { cone_rays: true, ..base.clone() });
-    // Rays spread over their cone's whole footprint: at the balanced preset's narrowed aperture
-    // the rays of 8 cones leave gaps between cones that no filtering fills.
-    for a in [0.7f32, 1.0] {
-        add(
-            "cone rays",
-            format!("cone rays, aperture {a}"),
-            Settings { cone_rays: true, cone_aperture_scale: a, ..base.clone() },
-        );
-    }
+    // The gather the balanced and high presets replaced: the composited cone march at the
+    // aperture it had (0.5), to show what rays buy on each scene.
+    let march = Settings { cone_rays: false, cone_aperture_scale: 0.5, ..base.clone() };
+    let high_march =
+        Settings { cone_rays: false, cone_aperture_scale: 0.5, ..Settings::preset(Quality::High) };
+    add("composited march", "composited march".into(), march.clone());
+    add("composited march", "high, composited march".into(), high_march.clone());
+    // Fast keeps the march; with rays it would be cheaper than balanced still.
     add(
-        "cone rays",
-        "high, cone rays, aperture 1".into(),
-        Settings { cone_rays: true, cone_aperture_scale: 1.0, ..Settings::preset(Quality::High) },
+        "composited march",
+        "fast, cone rays".into(),
+        Settings { cone_rays: true, ..Settings::preset(Quality::Fast) },
     );
-    for q in [Quality::Fast, Quality::High] {
-        add(
-            "cone rays",
-            format!("{}, cone rays", q.name()),
-            Settings { cone_rays: true, ..Settings::preset(q) },
-        );
+    // The march with leaves as the half-spaces behind their surfaces at the finest levels.
+    add("cone planes", "cone planes".into(), Settings { cone_planes: true, ..march });
+    for (q, marched) in [(Quality::Fast, Settings::preset(Quality::Fast)), (Quality::High, high_march)] {
+        add("cone planes", format!("{}, cone planes", q.name()), Settings { cone_planes: true, ..marched });
     }
     for b in TRUNCATED_BOUNCES {
         add(

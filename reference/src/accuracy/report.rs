@@ -231,6 +231,66 @@ fn report_presets(s: &mut String, scenes: &[SweepScene], rows: &[Row]) {
          where both are within {NOISE_FLOOR} times the reference's own noise): {}\n",
         if monotone.is_empty() { "yes".to_string() } else { format!("**no** ({})", monotone.join(", ")) }
     );
+    report_yardstick(s, scenes, rows);
+}
+
+/// The balanced preset's error beyond the reference's own noise, at most this on every scene.
+pub(crate) const YARDSTICK_ERROR: f64 = 0.05;
+
+/// The balanced preset's bias, within plus or minus this on every scene.
+pub(crate) const YARDSTICK_BIAS: f64 = 0.03;
+
+/// An error with the reference's own noise taken out: sqrt(rmse^2 - noise^2), 0 where the noise
+/// is larger.
+pub(crate) fn beyond_noise(rel_rmse: f64, noise: f64) -> f64 {
+    (rel_rmse * rel_rmse - noise * noise).max(0.0).sqrt()
+}
+
+/// The balanced preset against the yardstick, per scene.
+fn report_yardstick(s: &mut String, scenes: &[SweepScene], rows: &[Row]) {
+    let balanced: Vec<Option<&Row>> = scenes
+        .iter()
+        .map(|sc| rows.iter().find(|r| r.scene == sc.name && r.knob == "preset" && r.config == "balanced"))
+        .collect();
+    if balanced.iter().all(Option::is_none) {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "The yardstick: the balanced preset's error beyond the reference's own noise, \
+         sqrt(rmse^2 - noise^2), at most {YARDSTICK_ERROR} on every scene, and its bias within \
+         +-{:.0}%.\n",
+        100.0 * YARDSTICK_BIAS
+    );
+    let _ = writeln!(
+        s,
+        "| balanced | {} |",
+        scenes.iter().map(|sc| sc.name.as_str()).collect::<Vec<_>>().join(" | ")
+    );
+    let _ = writeln!(s, "|---|{}", "---:|".repeat(scenes.len()));
+    let line = |what: &str, cell: &dyn Fn(&Row) -> String| {
+        let cells: Vec<String> = balanced.iter().map(|r| r.map_or("-".into(), cell)).collect();
+        format!("| {what} | {} |\n", cells.join(" | "))
+    };
+    s.push_str(&line("error beyond noise", &|r| {
+        format!("{:.4}", beyond_noise(r.rel_rmse, r.reference_noise))
+    }));
+    s.push_str(&line("reference noise", &|r| format!("{:.4}", r.reference_noise)));
+    s.push_str(&line("bias", &|r| format!("{:+.1}%", 100.0 * r.bias)));
+    s.push_str(&line("met", &|r| yardstick_verdict(r).into()));
+    s.push('\n');
+}
+
+/// Whether a balanced row meets the yardstick, and if not which half it fails.
+pub(crate) fn yardstick_verdict(r: &Row) -> &'static str {
+    let error = beyond_noise(r.rel_rmse, r.reference_noise) <= YARDSTICK_ERROR;
+    let bias = r.bias.abs() <= YARDSTICK_BIAS;
+    match (error, bias) {
+        (true, true) => "yes",
+        (false, true) => "**no** (error)",
+        (true, false) => "**no** (bias)",
+        (false, false) => "**no** (error, bias)",
+    }
 }
 
 /// The comparison's own error: the balanced preset at several supersampling rates.
@@ -505,6 +565,17 @@ mod tests {
             pass_ms: BTreeMap::new(),
             supersample_errors: Vec::new(),
         }
+    }
+
+    #[test]
+    fn the_yardstick_takes_the_references_noise_out_and_names_what_failed() {
+        assert!((beyond_noise(0.05, 0.03) - 0.04).abs() < 1e-12);
+        assert_eq!(beyond_noise(0.02, 0.03), 0.0);
+        // The rows' reference noise is 0.01: 0.0509 is 0.05 beyond it.
+        assert_eq!(yardstick_verdict(&row("balanced", "preset", 0.0509, 0.03, None)), "yes");
+        assert_eq!(yardstick_verdict(&row("balanced", "preset", 0.052, -0.01, None)), "**no** (error)");
+        assert_eq!(yardstick_verdict(&row("balanced", "preset", 0.02, -0.031, None)), "**no** (bias)");
+        assert_eq!(yardstick_verdict(&row("balanced", "preset", 0.06, 0.04, None)), "**no** (error, bias)");
     }
 
     #[test]

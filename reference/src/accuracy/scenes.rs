@@ -53,7 +53,7 @@ impl SweepScene {
 /// hidden-chamber dogleg, and the scanned long passage (also rendered by Mitsuba 3 to check the
 /// reference: mitsuba.rs).
 pub fn closed_scenes() -> Vec<(&'static str, &'static str, SceneData)> {
-    closed_scenes_named(None)
+    closed_scenes_named(None, true)
 }
 
 /// One accuracy scene's data by its report name (the closed scenes, "bunny", "demo cave" with raw
@@ -63,7 +63,7 @@ pub fn scene_named(name: &str) -> Result<SceneData, String> {
         "bunny" => bunny(),
         "passage" => scanned_passage(),
         "demo cave" => demo_cave(ColorCodec::Raw, SurfelCodec::Full, 0.25, None, false),
-        other => closed_scenes_named(Some(other))
+        other => closed_scenes_named(Some(other), false)
             .into_iter()
             .find(|s| s.0 == other)
             .map(|s| s.2)
@@ -71,9 +71,11 @@ pub fn scene_named(name: &str) -> Result<SceneData, String> {
     }
 }
 
-/// [`closed_scenes`], or only the one named `only`: the passage is built through the
-/// preprocessor, which a run for another scene should not wait for.
-fn closed_scenes_named(only: Option<&str>) -> Vec<(&'static str, &'static str, SceneData)> {
+/// The closed scenes, or only the one named `only`: the furnace, the colour box and the dogleg
+/// hand-built (`hand_built`, or named) or as a survey delivers them (the report's), and the
+/// passage. The scanned scenes are built through the preprocessor, which a run for another scene
+/// should not wait for.
+fn closed_scenes_named(only: Option<&str>, hand_built: bool) -> Vec<(&'static str, &'static str, SceneData)> {
     let mut furnace = testscenes::furnace_sphere(5, 11.0, 0.8, 1.0);
     let c = Vec3::splat(1.6);
     furnace.cameras.push(grotto_runtime::scene::data::SceneCamera {
@@ -83,19 +85,32 @@ fn closed_scenes_named(only: Option<&str>) -> Vec<(&'static str, &'static str, S
         up: Vec3::Z,
         fov_y_deg: 70.0,
     });
-    let mut scenes = vec![
-        ("furnace", "closed shell, emission 1, albedo 0.8 (exact radiance 5 everywhere)", furnace),
-        (
+    let mut scenes =
+        vec![("furnace", "closed shell, emission 1, albedo 0.8 (exact radiance 5 everywhere)", furnace)];
+    let named = |name: &str| only == Some(name);
+    if hand_built || named("colour box") {
+        scenes.push((
             "colour box",
-            "closed box, red and green walls, one 30 W lamp: colour bleeding",
+            "closed box, red and green walls, one 30 W lamp: colour bleeding; hand-built (leaves at their cells' centres)",
             testscenes::colour_box(),
-        ),
-        (
+        ));
+    }
+    if hand_built || named("dogleg") {
+        scenes.push((
             "dogleg",
-            "rock, a lit room and a chamber behind three right-angle corridors, one 200 W lamp",
+            "rock, a lit room and a chamber behind three right-angle corridors, one 200 W lamp; hand-built (leaves at their cells' centres)",
             testscenes::dogleg(),
-        ),
-    ];
+        ));
+    }
+    // Built through the preprocessor: the report's rooms, as a survey delivers them.
+    for name in SCANNED_CARVED_SCENES {
+        if (!hand_built && only.is_none()) || named(name) {
+            match scanned_carved(name) {
+                Ok((description, data)) => scenes.push((name, description, data)),
+                Err(e) => eprintln!("{name} scene skipped: {e}"),
+            }
+        }
+    }
     match only.is_none_or(|o| o == "passage").then(scanned_passage) {
         None => {}
         Some(Ok(data)) => scenes.push((
@@ -104,13 +119,6 @@ fn closed_scenes_named(only: Option<&str>) -> Vec<(&'static str, &'static str, S
             data,
         )),
         Some(Err(e)) => eprintln!("passage scene skipped: {e}"),
-    }
-    // Built through the preprocessor only when asked for by name (`accuracy --scanned`).
-    if let Some(name) = SCANNED_CARVED_SCENES.into_iter().find(|s| only == Some(*s)) {
-        match scanned_carved(name) {
-            Ok((description, data)) => scenes.push((name, description, data)),
-            Err(e) => eprintln!("{name} scene skipped: {e}"),
-        }
     }
     scenes.retain(|d| only.is_none_or(|o| o == d.0));
     scenes
@@ -172,8 +180,10 @@ pub fn scanned_carved(name: &str) -> Result<(&'static str, SceneData), String> {
     Ok((description, SceneData::from_package(&pkg).map_err(|e| e.to_string())?))
 }
 
-/// The built-in scenes: the furnace shell, the colour box, the hidden-chamber dogleg and the
-/// synthetic demo cave; `only` keeps the one with that name.
+/// The report's scenes: the furnace shell, the colour box and the hidden-chamber dogleg as a
+/// survey delivers them, the scanned passage, the bunny and the synthetic demo cave with and
+/// without sky; `only` keeps the one with that name (the hand-built "colour box" and "dogleg"
+/// too).
 pub fn scenes(width: u32, height: u32, spp: u32, only: Option<&str>) -> Vec<SweepScene> {
     scenes_cached(width, height, spp, only, None)
 }
@@ -191,7 +201,7 @@ pub fn scenes_cached(
     cache: Option<&std::path::Path>,
 ) -> Vec<SweepScene> {
     let mut out = Vec::new();
-    let defs = closed_scenes_named(only);
+    let defs = closed_scenes_named(only, false);
     let mut defs: Vec<_> = defs.into_iter().map(|(a, b, c)| (a, b, c, Vec::new())).collect();
     if only.is_none_or(|o| o == "bunny") {
         match bunny() {

@@ -8,6 +8,7 @@ pub mod export;
 pub mod image_out;
 pub mod inspect;
 pub mod labels;
+pub mod map;
 pub mod publish;
 pub mod render_job;
 pub mod scan_input;

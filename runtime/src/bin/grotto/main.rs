@@ -3,6 +3,7 @@
 //! library's options and draws progress; the work is the library's.
 
 mod bench;
+mod map;
 mod publish;
 mod render;
 mod view;
@@ -15,6 +16,7 @@ use grotto_format::Package;
 use grotto_runtime::cli::inspect;
 
 use bench::BenchArgs;
+use map::MapArgs;
 use publish::PublishArgs;
 use render::RenderArgs;
 use view::ViewArgs;
@@ -74,6 +76,9 @@ enum Command {
     /// (directory first, then the tiles the view needs), so any static host that answers ranges
     /// serves it (docs/web.md). Needs the viewer bundle scripts/build-web.sh builds.
     Publish(Box<PublishArgs>),
+    /// Draw survey maps: plan, extended elevation, cross-sections and passage dimensions from the
+    /// scans and a cave survey (Survex .3d, Compass .plt).
+    Map(Box<MapArgs>),
     /// Check a package's structure and every checksum and section; exits non-zero on any problem.
     Verify {
         package: PathBuf,
@@ -204,6 +209,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Bench(args) => bench::bench(*args),
         Command::View(args) => view::view(*args),
         Command::Publish(args) => publish::publish(*args),
+        Command::Map(args) => map::run(*args),
         Command::Verify { package, json } => {
             let report = match Package::open(&package) {
                 Ok(pkg) => inspect::verify(&pkg),

@@ -74,7 +74,7 @@ pub(crate) struct RenderArgs {
     /// (predictions from the passes' costs in docs/accuracy.md); what was chosen and given up is
     /// printed. A budget too small for any preset renders the cheapest light and says so.
     #[arg(long, value_parser = parse_seconds, allow_hyphen_values = true,
-          conflicts_with_all = ["quality", "bounces", "cones", "aperture", "step", "shadow_map"])]
+          conflicts_with_all = ["quality", "bounces", "cones", "aperture", "step", "shadow_map", "gather"])]
     pub(crate) time_budget: Option<f64>,
     /// Bounce budget (propagation passes; stops earlier once converged).
     #[arg(long)]
@@ -107,12 +107,12 @@ pub(crate) struct RenderArgs {
     /// Give every leaf the same cone set, not one turned by its cell's parity (which averages misses).
     #[arg(long)]
     pub(crate) no_cone_interleave: bool,
-    /// Cones see the finest leaves as half-spaces behind their surface, not cubes (knob "cone planes").
-    #[arg(long)]
-    pub(crate) cone_planes: bool,
-    /// Follow each gather cone as rays that end at the first surface (knob "cone rays").
-    #[arg(long)]
-    pub(crate) cone_rays: bool,
+    /// How gather cones meet the rock: rays (seven rays a cone, each ending at the first surface;
+    /// the balanced and high presets), march (the composited cone march of voxel cone tracing;
+    /// fast) or planes (the march, seeing the finest leaves as half-spaces behind their surface).
+    /// Default: the preset's.
+    #[arg(long, value_parser = ["rays", "march", "planes"])]
+    pub(crate) gather: Option<String>,
     /// Milliseconds a frame may spend redrawing shadow faces out of date (after a change of tiles or
     /// lights), at the measured surfels per millisecond; the rest follow over the next frames and show
     /// together when the last is drawn, so no frame stalls on the whole atlas (0, the default for render
@@ -240,6 +240,7 @@ pub(crate) fn march_knobs_set(a: &RenderArgs) -> bool {
         || a.step.is_some()
         || a.shadow_map.is_some()
         || a.indirect.is_some()
+        || a.gather.is_some()
 }
 
 fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
@@ -281,8 +282,13 @@ pub(crate) fn options(a: &RenderArgs) -> anyhow::Result<grotto_runtime::engine::
     settings.shadow_frame_ms = a.shadow_ms.unwrap_or(0.0);
     settings.bounce_tail = !a.no_bounce_tail;
     settings.cone_interleave = !a.no_cone_interleave;
-    settings.cone_planes = a.cone_planes;
-    settings.cone_rays = a.cone_rays;
+    if let Some(g) = &a.gather {
+        (settings.cone_rays, settings.cone_planes) = match g.as_str() {
+            "rays" => (true, false),
+            "march" => (false, false),
+            _ => (false, true),
+        };
+    }
     settings.shadowed_lights = a.shadowed_lights.unwrap_or(settings.shadowed_lights);
     settings.shadow_fallback = ShadowFallback::parse(&a.shadow_fallback)
         .ok_or_else(|| anyhow::anyhow!("--shadow-fallback {:?}: use cone or none", a.shadow_fallback))?;
