@@ -105,3 +105,26 @@ fn truncated_damaged_and_foreign_files_are_errors_naming_the_file() {
     let e = survey::read(&dir.path().join("missing.3d")).unwrap_err().to_string();
     assert!(e.contains("missing.3d") && e.contains("cannot read"), "{e}");
 }
+
+#[test]
+fn a_package_keeps_its_survey_and_one_without_a_survey_has_none() {
+    use grotto_format::{Package, PackageWriter, SectionKind};
+    let dir = tempfile::tempdir().unwrap();
+    let s = read(&cavern(dir.path(), SVX));
+    let with = dir.path().join("with.grotto");
+    let mut w = PackageWriter::create(&with).unwrap();
+    w.add_survey(&s).unwrap();
+    let pkg = Package::open(w.finish().unwrap()).unwrap();
+    assert!(pkg.verify().is_empty(), "{:?}", pkg.verify());
+    assert_eq!(pkg.survey().unwrap().as_ref(), Some(&s));
+    assert_eq!(pkg.sections().filter(|x| x.kind == Some(SectionKind::Survey)).count(), 1);
+    let without = dir.path().join("without.grotto");
+    let pkg = Package::open(PackageWriter::create(&without).unwrap().finish().unwrap()).unwrap();
+    assert_eq!(pkg.survey().unwrap(), None);
+    // A survey whose positions are not finite is refused when written, naming the station.
+    let mut bad = s.clone();
+    bad.stations[1].position_m[2] = f64::NAN;
+    let mut w = PackageWriter::create(dir.path().join("bad.grotto")).unwrap();
+    let e = w.add_survey(&bad).unwrap_err().to_string();
+    assert!(e.contains(&bad.stations[1].name), "{e}");
+}

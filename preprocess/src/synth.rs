@@ -81,6 +81,8 @@ pub struct SynthCave {
     pub chambers: Vec<[f64; 3]>,
     /// Points along the main passage (for lamp strings and cameras).
     pub path: Vec<[f64; 3]>,
+    /// Points along the side passage, from the chamber it leaves.
+    pub branch: Vec<[f64; 3]>,
 }
 
 const CELL_M: f64 = 4.0;
@@ -200,6 +202,7 @@ impl SynthCave {
         let mut columns = Vec::new();
         let mut chambers = Vec::new();
         let mut path = Vec::new();
+        let mut branch_path = Vec::new();
         let mut stations = Vec::new();
         let mut walk = |start: [f64; 3], heading: f64, segments: usize, rng: &mut Rng, main: bool| {
             let (mut p, mut h, mut r) = (start, heading, 2.0);
@@ -212,7 +215,9 @@ impl SynthCave {
                 let floor_z = p[2].min(q[2]) - 0.55 * r.min(r_next);
                 shapes.push(Shape::Capsule { a: p, b: q, ra: r, rb: r_next, floor_z });
                 if main {
-                    path.push(p);
+                    path.push(p)
+                } else {
+                    branch_path.push(p)
                 }
                 if s % 2 == 0 {
                     stations.push([p[0], p[1], floor_z + 1.5_f64.min(0.9 * r)]);
@@ -240,7 +245,9 @@ impl SynthCave {
                 r = r_next;
             }
             if main {
-                path.push(p);
+                path.push(p)
+            } else {
+                branch_path.push(p)
             }
             branch_from
         };
@@ -248,8 +255,16 @@ impl SynthCave {
         if let Some((c, h)) = branch {
             walk(c, h, (params.segments / 3).max(2), &mut rng, false);
         }
-        let mut cave =
-            SynthCave { shapes, columns, grid: HashMap::new(), seed: params.seed, stations, chambers, path };
+        let mut cave = SynthCave {
+            shapes,
+            columns,
+            grid: HashMap::new(),
+            seed: params.seed,
+            stations,
+            chambers,
+            path,
+            branch: branch_path,
+        };
         cave.build_grid();
         // Keep stations that are well inside open space and clear of columns.
         let keep: Vec<[f64; 3]> = cave.stations.iter().copied().filter(|s| cave.eval(*s) < -0.4).collect();
@@ -528,6 +543,52 @@ mod tests {
     }
 }
 
+/// The cave's centreline as a surveyor would enter it in Survex (`.svx`): stations on the
+/// passages' axes (the main passage from its entrance, the side passage from the main station
+/// nearest its start), each leg's tape, compass and clino read with the noise of a careful
+/// survey (tape 1 cm, compass and clino 0.5 degrees, one standard deviation, seeded), the
+/// entrance fixed at its world position. `cavern` compiles it into the `.3d` file `grotto map`
+/// reads; the noise makes the computed stations wander from the scanned passage as a real
+/// traverse does.
+pub fn survey_svx(cave: &SynthCave, params: &SynthParams) -> String {
+    use std::fmt::Write as _;
+    let mut rng = Rng(params.seed ^ 0x5eed_5eed);
+    let mut reading = |from: &str, to: &str, a: [f64; 3], b: [f64; 3], out: &mut String| {
+        let d = sub(b, a);
+        let horizontal = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        let tape = len(d) + 0.01 * rng.gauss();
+        let compass = (d[0].atan2(d[1]).to_degrees() + 0.5 * rng.gauss()).rem_euclid(360.0);
+        let clino = d[2].atan2(horizontal).to_degrees() + 0.5 * rng.gauss();
+        let _ = writeln!(out, "{from} {to} {tape:.2} {compass:.1} {clino:.1}");
+    };
+    let o = params.offset_m;
+    let mut s = String::from(
+        "; The synthetic cave's centreline, written by `grotto-pack synth` with the reading noise of a\n\
+         ; careful survey (tape 1 cm, compass and clino 0.5 degrees). Compile with cavern.\n",
+    );
+    let _ = writeln!(s, "*begin synth\n*title \"Synthetic cave\"");
+    if let Some(e) = cave.path.first() {
+        let _ = writeln!(s, "*fix m0 {:.3} {:.3} {:.3}", e[0] + o[0], e[1] + o[1], e[2] + o[2]);
+        let _ = writeln!(s, "*entrance m0");
+    }
+    let _ = writeln!(s, "*data normal from to tape compass clino");
+    for (k, w) in cave.path.windows(2).enumerate() {
+        reading(&format!("m{k}"), &format!("m{}", k + 1), w[0], w[1], &mut s);
+    }
+    if let Some(b0) = cave.branch.first() {
+        let nearest = (0..cave.path.len())
+            .min_by(|&i, &j| len(sub(cave.path[i], *b0)).total_cmp(&len(sub(cave.path[j], *b0))));
+        if let Some(m) = nearest {
+            reading(&format!("m{m}"), "b0", cave.path[m], *b0, &mut s);
+        }
+        for (k, w) in cave.branch.windows(2).enumerate() {
+            reading(&format!("b{k}"), &format!("b{}", k + 1), w[0], w[1], &mut s);
+        }
+    }
+    let _ = writeln!(s, "*end synth");
+    s
+}
+
 /// What `write_dataset` wrote.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct SynthSummary {
@@ -682,6 +743,8 @@ pub fn write_dataset(
     story(&cave, &mut manifest, &world);
     let manifest_path = dir.join("manifest.toml");
     std::fs::write(&manifest_path, manifest).map_err(io)?;
+    std::fs::write(dir.join("cave.svx"), survey_svx(&cave, params)).map_err(io)?;
+    files.push("cave.svx".into());
     std::fs::write(dir.join("synth.json"), serde_json::to_string_pretty(params).unwrap_or_default())
         .map_err(io)?;
     Ok(SynthSummary {

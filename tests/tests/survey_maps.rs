@@ -80,7 +80,8 @@ fn write_scans(dir: &Path) -> String {
             let s = (r as f64 + 0.5) * LENGTH_M / rings as f64;
             for k in 0..ring {
                 let t = (k as f64 + 0.5) / ring as f64 * std::f64::consts::TAU;
-                let p = start + a * s + side * (HALF_WIDTH_M * t.cos()) + DVec3::Z * (HALF_HEIGHT_M * t.sin());
+                let p =
+                    start + a * s + side * (HALF_WIDTH_M * t.cos()) + DVec3::Z * (HALF_HEIGHT_M * t.sin());
                 xyz.push(p.to_array());
                 rgb.push([150, 130, 110]);
             }
@@ -98,7 +99,8 @@ fn write_scans(dir: &Path) -> String {
 fn pack(dir: &Path, scans: &str, survey: &Path) -> PathBuf {
     use grotto_preprocess::build::{self, BuildParams};
     let manifest_path = dir.join("tube.toml");
-    std::fs::write(&manifest_path, format!("{scans}[survey]\npath = {:?}\n", survey.display().to_string())).unwrap();
+    std::fs::write(&manifest_path, format!("{scans}[survey]\npath = {:?}\n", survey.display().to_string()))
+        .unwrap();
     let m = grotto_preprocess::manifest::Manifest::load(&manifest_path).unwrap();
     let out = dir.join("tube.grotto");
     let params = BuildParams {
@@ -132,9 +134,13 @@ fn a_passage_of_known_section_maps_to_its_width_height_area_and_scale() {
     let area = std::f64::consts::PI * HALF_WIDTH_M * HALF_HEIGHT_M;
     for k in 1..=5 {
         let name = format!("tube.s{k}");
-        let s = summary.stations.iter().find(|s| s.station == name).unwrap_or_else(|| panic!("{name} mapped"));
+        let s =
+            summary.stations.iter().find(|s| s.station == name).unwrap_or_else(|| panic!("{name} mapped"));
         let (w, h, a) = (s.width_m.unwrap(), s.height_m.unwrap(), s.area_m2.unwrap());
-        eprintln!("{name}: width {w:.3} m, height {h:.3} m, area {a:.3} m2, {:.3} m from the middle", s.from_middle_m.unwrap());
+        eprintln!(
+            "{name}: width {w:.3} m, height {h:.3} m, area {a:.3} m2, {:.3} m from the middle",
+            s.from_middle_m.unwrap()
+        );
         assert!((w / (2.0 * HALF_WIDTH_M) - 1.0).abs() < 0.02, "{name}: width {w}");
         assert!((h / (2.0 * HALF_HEIGHT_M) - 1.0).abs() < 0.02, "{name}: height {h}");
         assert!((a / area - 1.0).abs() < 0.02, "{name}: area {a} against {area}");

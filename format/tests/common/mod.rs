@@ -125,6 +125,29 @@ pub(crate) fn content(kind: SectionKind, seed: u32) -> Vec<u8> {
             parameters: [("depth".to_string(), serde_json::json!(7))].into(),
         })
         .unwrap(),
+        SectionKind::Survey => serde_json::to_vec(&sample_survey(seed)).unwrap(),
+    }
+}
+
+/// A centreline of two stations and a leg between them.
+pub(crate) fn sample_survey(seed: u32) -> survey::Survey {
+    use grotto_format::survey::{Leg, Station, Survey};
+    let a = [400_000.0, 5_000_000.0, 500.0 + f64::from(seed)];
+    let b = [400_010.0, 5_000_000.0, 499.0];
+    Survey {
+        title: "sample".into(),
+        stations: [("cave.1", a), ("cave.2", b)]
+            .map(|(name, position_m)| Station { name: name.into(), position_m, flags: Default::default() })
+            .to_vec(),
+        legs: vec![Leg {
+            from_m: a,
+            to_m: b,
+            from: Some(0),
+            to: Some(1),
+            survey: "cave".into(),
+            flags: Default::default(),
+        }],
+        ..Default::default()
     }
 }
 

@@ -3,6 +3,7 @@
 
 mod frames;
 mod gpu;
+mod maps;
 mod memory;
 mod package;
 mod web;
@@ -111,6 +112,13 @@ pub(crate) const SUITES: &[Suite] = &[
         needs: Needs::Display,
         dev_time: "30 min",
         run: memory::render_1e8,
+    },
+    Suite {
+        name: "map",
+        about: "grotto map of the 10^7- and 10^8-point surveys (needs cavern)",
+        needs: Needs::Binaries,
+        dev_time: "30 min, 15 GB",
+        run: maps::survey,
     },
     Suite {
         name: "gpu-demo",
