@@ -195,3 +195,48 @@ fn a_passage_of_known_section_maps_to_its_width_height_area_and_scale() {
     let e = map(&pkg, &survey, "local.3d", &opts, &|_, _| {}).unwrap_err().to_string();
     assert!(e.contains("local.3d") && e.contains("another coordinate system"), "{e}");
 }
+
+/// The synthetic cave's centreline (`cave.svx`, with a careful survey's reading noise) compiled by
+/// cavern fits its scans: the drift a real traverse has, not more.
+#[test]
+fn the_synthetic_caves_survey_compiles_and_fits_its_scans() {
+    use grotto_preprocess::synth::{self, SynthParams};
+    let dir = tempfile::tempdir().unwrap();
+    let params = SynthParams { points: 150_000, segments: 12, ..SynthParams::default() };
+    let scans = dir.path().join("scans");
+    let summary = synth::write_dataset(&scans, &params, &[ScanFormat::Las], &|_, _| {}).unwrap();
+    let svx = std::fs::read_to_string(scans.join("cave.svx")).unwrap();
+    let compiled = cavern(dir.path(), "cave", &svx);
+    // Packed with the survey named in the manifest.
+    let manifest_path = PathBuf::from(&summary.manifest);
+    let mut text = std::fs::read_to_string(&manifest_path).unwrap();
+    text += &format!("[survey]\npath = {:?}\n", compiled.display().to_string());
+    std::fs::write(&manifest_path, text).unwrap();
+    let manifest = grotto_preprocess::manifest::Manifest::load(&manifest_path).unwrap();
+    let out = dir.path().join("cave.grotto");
+    let bp = grotto_tests::small_build(&dir.path().join("work"), 2.0, 32.0, 0.25);
+    grotto_preprocess::build::build(&manifest, &manifest_path, &out, &bp, &|_| {}).unwrap();
+    let pkg = Package::open(&out).unwrap();
+    let survey = pkg.survey().unwrap().expect("built with [survey]");
+    let opts = MapOptions { out_dir: dir.path().join("map"), ..MapOptions::default() };
+    let summary = map(&pkg, &survey, "cave.3d", &opts, &|_, _| {}).unwrap();
+    let stations = &summary.stations;
+    let traced: Vec<_> = stations.iter().filter(|s| s.section.is_some()).collect();
+    let inside = traced.iter().filter(|s| s.inside == Some(true)).count();
+    eprintln!(
+        "{} stations, {} traced, {inside} inside; warnings {:?}",
+        stations.len(),
+        traced.len(),
+        summary.warnings
+    );
+    assert!(stations.len() >= 12 && traced.len() * 10 >= stations.len() * 8, "{stations:?}");
+    assert!(inside * 10 >= traced.len() * 9, "{inside} of {} stations in the passage", traced.len());
+    // Passages 2.6-6 m across (capsules of radius 1.3-3 m, chambers wider).
+    for s in &traced {
+        let w = s.width_m.unwrap();
+        assert!((1.5..=20.0).contains(&w), "{}: width {w}", s.station);
+    }
+    // The surveyed length is the legs' (4 m each, read with noise).
+    let legs = survey.legs.len() as f64;
+    assert!((summary.surveyed_length_m / legs - 4.0).abs() < 0.5, "{}", summary.surveyed_length_m);
+}

@@ -106,6 +106,14 @@ pub(crate) fn run(a: MapArgs) -> anyhow::Result<ExitCode> {
         for w in &summary.warnings {
             eprintln!("warning: {w}");
         }
+        let untraced: Vec<_> =
+            summary.stations.iter().filter_map(|s| Some((&s.station, s.no_section.as_ref()?))).collect();
+        for (name, why) in untraced.iter().take(10) {
+            println!("no cross-section at {name}: {why}");
+        }
+        if untraced.len() > 10 {
+            println!("... and at {} more stations (--json has each)", untraced.len() - 10);
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -75,6 +75,8 @@ pub struct StationReport {
     pub position_m: [f64; 3],
     /// The cross-section's file, where the scans saw enough of the passage there.
     pub section: Option<String>,
+    /// Why there is none, where there is none.
+    pub no_section: Option<String>,
     pub width_m: Option<f64>,
     pub height_m: Option<f64>,
     pub area_m2: Option<f64>,
@@ -197,12 +199,35 @@ fn choose_scale(opts: &MapOptions, size_m: [f64; 2]) -> Result<(u32, f64)> {
 /// Points of the cross-sections, per station; stations without one have `None`.
 struct Sections {
     points: Vec<Option<Vec<[f32; 2]>>>,
+    /// Points offered to each station's slab so far (for the reservoir).
+    offered: Vec<u64>,
     nearest_m: Vec<f64>,
 }
 
-/// Most points a cross-section keeps: past it, every other point (a dense scan's slab holds far
-/// more than an outline of 180 bins needs).
-const SECTION_POINTS: usize = 200_000;
+/// Most points a cross-section keeps, a uniform sample of its slab's (reservoir sampling): an
+/// outline of 180 bins needs far fewer than a dense scan's slab holds, and a survey of ten
+/// thousand stations then holds at most 640 MiB of them.
+const SECTION_POINTS: usize = 8192;
+
+impl Sections {
+    /// Offers `uv` to station `k`'s cross-section.
+    fn offer(&mut self, k: usize, uv: [f32; 2]) {
+        let Some(list) = self.points[k].as_mut() else { return };
+        let seen = self.offered[k];
+        self.offered[k] += 1;
+        if list.len() < SECTION_POINTS {
+            list.push(uv);
+        } else {
+            // Algorithm R with a hash of the count for its random index: the same maps each run.
+            let mut h = seen.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (k as u64);
+            h ^= h >> 29;
+            let j = (h % (seen + 1)) as usize;
+            if j < SECTION_POINTS {
+                list[j] = uv;
+            }
+        }
+    }
+}
 
 /// Draws the maps of `pkg` with `survey` (named `survey_from` in messages) into
 /// `opts.out_dir`; `progress` gets (tiles read, tiles).
@@ -224,6 +249,22 @@ pub fn map(
     if line.legs.is_empty() {
         return Err(survey_error(survey_from, "has no underground legs to map".into()));
     }
+    // The map covers the surveyed cave: the stations' box grown by the reach, within the scans'.
+    // Tiles are cubes tens of metres wide, most of them rock; scanned passages no leg reaches
+    // are left off the pictures (they are not surveyed) but not off the stations' fit.
+    let (lo, hi) = {
+        let mut s_lo = DVec3::splat(f64::INFINITY);
+        let mut s_hi = DVec3::splat(f64::NEG_INFINITY);
+        for l in &line.legs {
+            s_lo = s_lo.min(l.from_m).min(l.to_m);
+            s_hi = s_hi.max(l.from_m).max(l.to_m);
+        }
+        let reach = DVec3::splat(opts.reach_m);
+        ((s_lo - reach).max(lo), (s_hi + reach).min(hi))
+    };
+    if !(lo.cmplt(hi).all()) {
+        return Err(survey_error(survey_from, "its legs lie outside the scanned tiles".into()));
+    }
     let (scale, m_per_px) = choose_scale(opts, [hi.x - lo.x, hi.y - lo.y])?;
     let plan_frame = Frame2::covering([lo.x, lo.y], [hi.x, hi.y], m_per_px, 48);
     let elevation_frame = Frame2::covering([0.0, lo.z], [line.extended_m.max(m_per_px), hi.z], m_per_px, 48);
@@ -244,6 +285,7 @@ pub fn map(
             .enumerate()
             .map(|(i, s)| (!s.flags.anonymous && line.direction[i].is_some()).then(Vec::new))
             .collect(),
+        offered: vec![0; survey.stations.len()],
         nearest_m: vec![f64::INFINITY; survey.stations.len()],
     };
     let mut points = 0u64;
@@ -273,15 +315,10 @@ pub fn map(
                 if d < sections.nearest_m[station] {
                     sections.nearest_m[station] = d;
                 }
-                let (Some(dir), Some(list)) = (line.direction[station], sections.points[station].as_mut())
-                else {
-                    continue;
-                };
+                let Some(dir) = line.direction[station] else { continue };
                 if q.dot(dir).abs() <= opts.slab_m && d <= opts.reach_m {
                     let right = DVec3::new(dir.y, -dir.x, 0.0);
-                    if list.len() < SECTION_POINTS || points % 2 == 0 {
-                        list.push([q.dot(right) as f32, q.z as f32]);
-                    }
+                    sections.offer(station, [q.dot(right) as f32, q.z as f32]);
                 }
             }
         }
@@ -337,7 +374,10 @@ fn write_sections(
                 s.name
             ));
         }
-        let outline = section::outline(points);
+        let (outline, no_section) = match section::outline(points) {
+            Ok(o) => (Some(o), None),
+            Err(why) => (None, Some(why)),
+        };
         let mut file = None;
         if let Some(o) = &outline {
             let path = dir.join("sections").join(format!("{}.svg", file_name(&s.name)));
@@ -354,6 +394,7 @@ fn write_sections(
             station: s.name.clone(),
             position_m: s.position_m,
             section: file,
+            no_section,
             width_m: outline.as_ref().map(|o| o.width_m),
             height_m: outline.as_ref().map(|o| o.height_m),
             area_m2: outline.as_ref().map(|o| o.area_m2),

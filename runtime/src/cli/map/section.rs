@@ -35,10 +35,10 @@ pub(crate) struct Outline {
     pub seen: f64,
 }
 
-/// The outline of `points` (u, v), or `None` where the scans saw too little of it.
-pub(crate) fn outline(points: &[[f32; 2]]) -> Option<Outline> {
+/// The outline of `points` (u, v), or why the scans saw too little of it to trace one.
+pub(crate) fn outline(points: &[[f32; 2]]) -> Result<Outline, String> {
     if points.len() < BINS / 4 {
-        return None;
+        return Err(format!("{} scanned points in its slab, fewer than {}", points.len(), BINS / 4));
     }
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for p in points {
@@ -67,8 +67,15 @@ pub(crate) fn outline(points: &[[f32; 2]]) -> Option<Outline> {
         .collect();
     let filled = radius.iter().flatten().count();
     let seen = filled as f64 / BINS as f64;
-    if seen < MIN_FILLED || widest_gap(&radius) > MAX_GAP_BINS {
-        return None;
+    let gap = widest_gap(&radius);
+    if seen < MIN_FILLED || gap > MAX_GAP_BINS {
+        return Err(format!(
+            "the scans saw {:.0}% of the way round it, with a gap of {} degrees (at least {:.0}%, gaps up to {} degrees)",
+            100.0 * seen,
+            gap * 360 / BINS,
+            100.0 * MIN_FILLED,
+            MAX_GAP_BINS * 360 / BINS
+        ));
     }
     let polygon: Vec<[f64; 2]> = (0..BINS)
         .map(|k| {
@@ -83,7 +90,7 @@ pub(crate) fn outline(points: &[[f32; 2]]) -> Option<Outline> {
         h - l
     };
     let (area_m2, centroid) = area_and_centroid(&polygon);
-    Some(Outline {
+    Ok(Outline {
         width_m: extent(0),
         height_m: extent(1),
         area_m2,
@@ -226,6 +233,7 @@ mod tests {
         assert!(o.inside && (o.from_middle_m - (0.09f64 + 0.5625).sqrt()).abs() < 0.02);
         // Half of it unseen: no outline.
         let half: Vec<[f32; 2]> = pts.iter().copied().filter(|p| p[1] > centre[1] as f32 + 0.4).collect();
-        assert!(outline(&half).is_none());
+        let why = outline(&half).unwrap_err();
+        assert!(why.contains("gap"), "{why}");
     }
 }
