@@ -92,8 +92,8 @@ fn blend(img: &mut RgbImage, x: i64, y: i64, rgb: [u8; 3], alpha: f32) {
     }
     let p = img.get_pixel_mut(x as u32, y as u32);
     let a = alpha.min(1.0);
-    for c in 0..3 {
-        p.0[c] = (f32::from(rgb[c]) * a + f32::from(p.0[c]) * (1.0 - a)).round() as u8;
+    for (out, ink) in p.0.iter_mut().zip(rgb) {
+        *out = (f32::from(ink) * a + f32::from(*out) * (1.0 - a)).round() as u8;
     }
 }
 
