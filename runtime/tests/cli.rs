@@ -724,7 +724,9 @@ fn a_time_budget_buys_the_best_preset_that_fits_and_nonsense_is_refused() {
         "{choice}"
     );
     assert_eq!(choice["made_anew"], true);
-    assert_eq!(generous["settings"]["cones"].as_u64(), Some(16), "high's cones");
+    let high = grotto_runtime::settings::Settings::preset(grotto_runtime::settings::Quality::High);
+    assert_eq!(generous["settings"]["bounces"].as_u64(), Some(u64::from(high.bounces)), "high's bounces");
+    assert_eq!(generous["settings"]["shadow_map_size"].as_u64(), Some(u64::from(high.shadow_map_size)));
     assert!(choice["predicted_s"].as_f64().unwrap() > choice["probe_s"].as_f64().unwrap());
 
     let text = grotto(&[
