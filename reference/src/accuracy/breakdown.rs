@@ -295,15 +295,8 @@ fn runtime_leaves(gpu: &Gpu, data: &SceneData, settings: Settings) -> grotto_run
     Ok(light.iter().zip(&data.leaves).map(|(l, leaf)| luminance(l.shown(leaf))).collect())
 }
 
-/// A scene's breakdown as `options` say. `progress` gets each step.
-pub fn breakdown(
-    gpu: &Gpu,
-    which: BreakdownScene,
-    options: BreakdownOptions,
-    progress: impl Fn(&str),
-) -> grotto_runtime::Result<Breakdown> {
-    let BreakdownOptions { paths, leaves_on_surfels, cone_planes, cone_rays, composited, clip_discs } =
-        options;
+/// The scene of a breakdown, its leaves moved where `options` say.
+fn breakdown_scene(which: BreakdownScene, options: &BreakdownOptions) -> grotto_runtime::Result<SceneData> {
     let mut data = which
         .data()
         .map_err(|problem| grotto_runtime::Error::Scene { package: which.name().into(), problem })?;
@@ -311,24 +304,43 @@ pub fn breakdown(
         which,
         BreakdownScene::Passage | BreakdownScene::DoglegScanned | BreakdownScene::ColourBoxScanned
     );
-    if built && (leaves_on_surfels || clip_discs) {
+    if built && (options.leaves_on_surfels || options.clip_discs) {
         return Err(grotto_runtime::Error::Scene {
             package: which.name().into(),
             problem: "--leaves-on-surfels and --clip-discs are for the hand-built scenes, whose surfels lie one on each face of a rock cell; a package's leaves already lie on their surfels".into(),
         });
     }
-    if leaves_on_surfels {
+    if options.leaves_on_surfels {
         testscenes::leaves_on_surfels(&mut data);
     }
-    let regions = which.regions(&data);
-    let planes = |s: Settings| {
-        let s = if composited && s.cone_rays {
-            Settings { cone_rays: false, cone_aperture_scale: 0.5, ..s }
-        } else {
-            s
-        };
-        Settings { cone_planes: s.cone_planes || cone_planes, cone_rays: s.cone_rays || cone_rays, ..s }
+    Ok(data)
+}
+
+/// A runtime configuration with the gather `options` ask for every run to use.
+fn with_gather(s: Settings, options: &BreakdownOptions) -> Settings {
+    let s = if options.composited && s.cone_rays {
+        Settings { cone_rays: false, cone_aperture_scale: 0.5, ..s }
+    } else {
+        s
     };
+    Settings {
+        cone_planes: s.cone_planes || options.cone_planes,
+        cone_rays: s.cone_rays || options.cone_rays,
+        ..s
+    }
+}
+
+/// A scene's breakdown as `options` say. `progress` gets each step.
+pub fn breakdown(
+    gpu: &Gpu,
+    which: BreakdownScene,
+    options: BreakdownOptions,
+    progress: impl Fn(&str),
+) -> grotto_runtime::Result<Breakdown> {
+    let (paths, clip_discs) = (options.paths, options.clip_discs);
+    let data = breakdown_scene(which, &options)?;
+    let regions = which.regions(&data);
+    let planes = |s: Settings| with_gather(s, &options);
     let base = planes(Settings::preset(Quality::Balanced));
     let mut scene = SurfelScene::from_scene(&data, base.splat_scale);
     if clip_discs {
