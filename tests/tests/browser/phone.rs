@@ -132,7 +132,13 @@ fn ten_million_points_open_draw_and_stream_on_webgpus_default_limits() {
         assert!(t0.elapsed() < Duration::from_secs(60), "Tab went to no other camera");
         std::thread::sleep(Duration::from_millis(200));
     }
-    std::thread::sleep(Duration::from_secs(2));
+    // A frame on SwiftShader takes seconds: wait until the page has drawn the new view twice, so
+    // that its tiles were asked for, before waiting for them to settle.
+    let t0 = Instant::now();
+    while n(&browser.status(), "frames") < n(&entrance, "frames") + 2 {
+        assert!(t0.elapsed() < READY_LIMIT, "the page drew no frame of the new view in {READY_LIMIT:?}");
+        std::thread::sleep(Duration::from_millis(500));
+    }
     let next = settled("the next camera");
     eprintln!("next camera: {next}");
     assert!(n(&next, "fetched_bytes") > n(&entrance, "fetched_bytes"), "no tiles fetched for the new view");
