@@ -213,17 +213,12 @@ fn drawn_stations<'a>(
 fn write_picture(dir: &Path, name: &str, raster: &Raster, marks: &[Mark]) -> Result<Picture> {
     let f = raster.frame;
     let mut img = raster.image();
-    let bare = img.clone();
+    // The bare picture first, then the overlay drawn into the same pixels: no copy of either.
+    let bare_png = dir.join(format!("{name}-image.png"));
+    write_png(&bare_png, &img)?;
     draw::draw(&mut img, marks);
     let png = dir.join(format!("{name}.png"));
-    let bare_png = dir.join(format!("{name}-image.png"));
-    for (path, image) in [(&png, &img), (&bare_png, &bare)] {
-        let mut bytes = Vec::new();
-        image::DynamicImage::ImageRgb8(image.clone())
-            .write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
-            .map_err(|e| crate::cli::export::output_error(path, e))?;
-        crate::cli::export::write_atomically(path, &bytes)?;
-    }
+    write_png(&png, &img)?;
     let svg = dir.join(format!("{name}.svg"));
     let text = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" xmlns:xlink=\"http://www.w3.org/1999/xlink\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\">\n<image href=\"{}\" x=\"0\" y=\"0\" width=\"{w}\" height=\"{h}\"/>\n{}</svg>\n",
@@ -239,5 +234,15 @@ fn write_picture(dir: &Path, name: &str, raster: &Raster, marks: &[Mark]) -> Res
         width_px: f.width_px,
         height_px: f.height_px,
         surfels_drawn: raster.drawn,
+    })
+}
+
+/// Streams `img` into `path` as PNG, atomically.
+fn write_png(path: &Path, img: &image::RgbImage) -> Result<()> {
+    use image::ImageEncoder;
+    crate::cli::export::atomically(path, |file| {
+        image::codecs::png::PngEncoder::new(std::io::BufWriter::new(file))
+            .write_image(img.as_raw(), img.width(), img.height(), image::ExtendedColorType::Rgb8)
+            .map_err(|e| crate::cli::export::output_error(path, e))
     })
 }
