@@ -94,12 +94,12 @@ const COLOUR_BOX_REGIONS: [&str; 7] =
 /// Which of [`COLOUR_BOX_REGIONS`] a rock cell of the colour box belongs to: its face
 /// ([`testscenes::colour_box_face`]), the ceiling split at 0.5 m from the point above the lamp
 /// (`lamp_m` in the carved scene's frame).
-fn colour_box_region(lamp_m: glam::Vec3, c: glam::IVec3) -> Option<usize> {
+fn colour_box_region(lamp_m: glam::Vec3, cell_m: f32, c: glam::IVec3) -> Option<usize> {
     let face = testscenes::colour_box_face(c)?;
     if face > 0 {
         return Some(face + 1);
     }
-    let centre_m = (c.as_vec3() + 0.5) * testscenes::colour_box().leaf_size_m;
+    let centre_m = (c.as_vec3() + 0.5) * cell_m;
     Some(if (centre_m.truncate() - lamp_m.truncate()).length() < 0.5 { 0 } else { 1 })
 }
 
@@ -185,9 +185,11 @@ impl BreakdownScene {
             Self::Passage => PASSAGE_REGION_ENDS_M.iter().map(|(name, _)| *name).collect(),
             Self::ColourBox | Self::ColourBoxScanned => COLOUR_BOX_REGIONS.to_vec(),
         };
+        // The carved scene's cell, built once (not per leaf).
         let carved = match self {
-            Self::DoglegScanned => testscenes::dogleg().leaf_size_m,
-            _ => testscenes::colour_box().leaf_size_m,
+            Self::Dogleg | Self::DoglegScanned => testscenes::dogleg().leaf_size_m,
+            Self::ColourBox | Self::ColourBoxScanned => testscenes::colour_box().leaf_size_m,
+            Self::Passage => 0.0,
         };
         // The lamp in the carved scene's frame.
         let lamp_m = scene.lights.first().map_or(glam::Vec3::ZERO, |l| {
@@ -208,9 +210,9 @@ impl BreakdownScene {
                     let along_m = testscenes::passage_position_m(own).1;
                     PASSAGE_REGION_ENDS_M.iter().position(|(_, end)| along_m < *end)
                 }
-                Self::ColourBox => colour_box_region(lamp_m, leaf.cell(scene.leaf_size_m)),
+                Self::ColourBox => colour_box_region(lamp_m, carved, leaf.cell(scene.leaf_size_m)),
                 Self::DoglegScanned => testscenes::dogleg_region(carved_cell(scene, leaf, carved)),
-                Self::ColourBoxScanned => colour_box_region(lamp_m, carved_cell(scene, leaf, carved)),
+                Self::ColourBoxScanned => colour_box_region(lamp_m, carved, carved_cell(scene, leaf, carved)),
             };
             if let Some(r) = region {
                 regions[r].1.push(i);
