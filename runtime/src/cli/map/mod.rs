@@ -182,15 +182,10 @@ fn choose_scale(opts: &MapOptions, size_m: [f64; 2]) -> Result<(u32, f64)> {
                 .into(),
         }),
         None => {
-            let n = STANDARD_SCALES
-                .into_iter()
-                .find(|&n| fits(n))
-                .unwrap_or(*STANDARD_SCALES.last().unwrap_or(&50_000));
-            let n = if fits(n) {
-                n
-            } else {
+            // Past the largest standard scale: the scale that just fits.
+            let n = STANDARD_SCALES.into_iter().find(|&n| fits(n)).unwrap_or_else(|| {
                 (size_m[0].max(size_m[1]) / (f64::from(opts.max_px) - 64.0) / 0.0254 * opts.dpi).ceil() as u32
-            };
+            });
             Ok((n, m_per_px(n)))
         }
     }
